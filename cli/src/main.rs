@@ -1,0 +1,77 @@
+//! The `vdbcook` binary: flags in, library calls, human or JSON text out.
+
+mod inspect;
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Exit codes (documented in the README and in --help).
+pub mod exit {
+    pub const SUCCESS: u8 = 0;
+    /// Unreadable or invalid input, I/O failure.
+    pub const FAILURE: u8 = 1;
+    /// Bad command line (clap exits with 2 itself).
+    pub const USAGE: u8 = 2;
+    /// A quality gate (`validate --max-rmse`) failed.
+    #[allow(dead_code)]
+    pub const QUALITY_GATE: u8 = 3;
+}
+
+const AFTER_HELP: &str = "\
+Exit codes:
+  0  success
+  1  failure: unreadable or invalid input, I/O error
+  2  usage error (bad flags or arguments)
+  3  quality gate failed (reserved for validate --max-rmse)";
+
+#[derive(Parser)]
+#[command(name = "vdbcook", version, about = "Cook OpenVDB volume sequences into compact GPU-ready assets", after_help = AFTER_HELP)]
+struct Cli {
+    /// Worker threads (default: all cores). Results do not depend on it.
+    #[arg(short = 'j', long, global = true, value_name = "N")]
+    threads: Option<usize>,
+    /// Print nothing but errors.
+    #[arg(short, long, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Describe .vdb files: header, grids, transforms, active voxels, value ranges.
+    #[command(after_help = inspect::AFTER_HELP)]
+    Inspect {
+        /// .vdb files to describe.
+        #[arg(required = true, value_name = "FILE")]
+        files: Vec<PathBuf>,
+        /// Print one JSON document on stdout (schema: docs/inspect-json.md).
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    if let Some(n) = cli.threads {
+        if n == 0 {
+            eprintln!("vdbcook: error: --threads must be at least 1");
+            return ExitCode::from(exit::USAGE);
+        }
+        if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n).build_global() {
+            eprintln!("vdbcook: error: cannot start {n} threads: {e}");
+            return ExitCode::from(exit::FAILURE);
+        }
+    }
+    let code = match cli.command {
+        Command::Inspect { files, json } => inspect::run(&files, json, cli.quiet),
+    };
+    ExitCode::from(code)
+}
+
+/// Prints an error the house way: one line, prefixed, causes joined by ": ".
+pub fn report_error(err: &anyhow::Error) {
+    let msg = format!("{err:#}").replace('\n', " ");
+    eprintln!("vdbcook: error: {msg}");
+}

@@ -1,0 +1,86 @@
+//! Helpers shared by the CLI integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").canonicalize().unwrap()
+}
+
+pub fn vdbcook(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vdbcook")).args(args).current_dir(root()).output().expect("run vdbcook")
+}
+
+/// Every .vdb below `dir`, sorted.
+pub fn vdb_files(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(rd) = std::fs::read_dir(&d) else { continue };
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == "vdb") {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+/// The real-world corpus beside the checkout; required in CI.
+pub fn shared_samples() -> Option<PathBuf> {
+    let p = root().join("../shared/vdb-samples");
+    if p.is_dir() {
+        Some(p)
+    } else {
+        assert!(!in_ci(), "CI=true but ../shared/vdb-samples is missing");
+        eprintln!("note: ../shared/vdb-samples not found; testing fixtures only");
+        None
+    }
+}
+
+/// True when OpenVDB's Python module (the oracle) can be used.  In CI its
+/// absence is a failure, never a skip.
+pub fn oracle_available() -> bool {
+    let ok = Command::new("/usr/bin/python3").args(["-c", "import pyopenvdb"]).output().is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(!in_ci(), "CI=true but /usr/bin/python3 cannot import pyopenvdb (scripts/test.sh installs python3-openvdb)");
+        eprintln!("note: pyopenvdb not available; skipping differential checks (run scripts/test.sh)");
+    }
+    ok
+}
+
+/// Runs the oracle on `file`; `None` when OpenVDB itself cannot read the file.
+pub fn oracle(file: &Path, voxels: Option<&Path>) -> Option<serde_json::Value> {
+    let mut cmd = Command::new("/usr/bin/python3");
+    cmd.arg(root().join("scripts/openvdb_oracle.py")).arg(file);
+    if let Some(v) = voxels {
+        cmd.arg("--voxels").arg(v);
+    }
+    let out = cmd.output().expect("run oracle");
+    if !out.status.success() {
+        eprintln!("note: OpenVDB cannot read {}: {}", file.display(), String::from_utf8_lossy(&out.stderr).trim());
+        return None;
+    }
+    Some(serde_json::from_slice(&out.stdout).expect("oracle JSON"))
+}
+
+/// Runs `f` over `items` on two threads, keeping the input order in the result.
+pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let half = items.len().div_ceil(2);
+    std::thread::scope(|s| {
+        let (a, b) = items.split_at(half);
+        let h = s.spawn(|| b.iter().map(&f).collect::<Vec<_>>());
+        let mut r: Vec<R> = a.iter().map(&f).collect();
+        r.extend(h.join().unwrap());
+        r
+    })
+}

@@ -1,0 +1,247 @@
+//! The 5-4-3 tree: topology (root, internal nodes with their tiles, leaf
+//! masks) and then the leaf value buffers.
+//!
+//! ```text
+//! topology:
+//!   i32 buffer count (1)
+//!   root:  value background, u32 tile count, u32 child count,
+//!          tiles  × (i32 x, y, z, value, u8 active),
+//!          children × (i32 x, y, z, internal32)
+//!   internal32 (32³ slots of 128³ voxels): child mask (4096 B), value mask (4096 B),
+//!          value buffer of 32768 tile values, then each child internal16 in mask order
+//!   internal16 (16³ slots of 8³ voxels): child mask (512 B), value mask (512 B),
+//!          value buffer of 4096 tile values, then each child leaf mask (64 B) in mask order
+//! buffers, for every leaf (root children in coordinate order, then mask order):
+//!   leaf mask (64 B), [v < 222: i32 x, y, z origin, i8 buffer count], value buffer of 512 values
+//! ```
+//! Everything is read sequentially by [`scan`], which records each leaf's
+//! value buffer; [`TreeLayout::decode`] then inflates the leaves in parallel.
+
+use crate::cursor::Cursor;
+use crate::values::{self, Ctx, ValueBlock, COMPRESS_ZIP, VERSION_NODE_MASK_COMPRESSION};
+use crate::Error;
+use rayon::prelude::*;
+use std::sync::Mutex;
+use vdbcook_grid::{Coord, Leaf, LeafMask, Tile, LEAF_VOXELS};
+
+struct LeafTopo<'a> {
+    origin: Coord,
+    mask: LeafMask,
+    values: Option<ValueBlock<'a>>,
+}
+
+/// A scanned tree: tiles decoded, leaf buffers located.
+pub(crate) struct TreeLayout<'a> {
+    pub background: f32,
+    pub tiles: Vec<Tile>,
+    leaves: Vec<LeafTopo<'a>>,
+    ctx: Ctx,
+}
+
+/// Bytes one node of each kind occupies in the topology at the very least,
+/// used to refuse counts the file cannot hold before allocating for them.
+const MIN_LEAF_BYTES: u64 = 64;
+const MIN_INTERNAL16_BYTES: u64 = 1024 + 1;
+const MIN_INTERNAL32_BYTES: u64 = 8192 + 1;
+
+fn bit(words: &[u64], i: usize) -> bool {
+    words.get(i >> 6).is_some_and(|w| (w >> (i & 63)) & 1 == 1)
+}
+
+fn ones(words: &[u64]) -> u64 {
+    words.iter().map(|w| u64::from(w.count_ones())).sum()
+}
+
+/// Offsets of the set bits, in increasing order.
+fn iter_on(words: &[u64]) -> impl Iterator<Item = usize> + '_ {
+    words.iter().enumerate().flat_map(|(wi, &w)| {
+        let mut bits = w;
+        std::iter::from_fn(move || {
+            if bits == 0 {
+                return None;
+            }
+            let b = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            Some(wi * 64 + b)
+        })
+    })
+}
+
+/// Origin of slot `i` in an internal node with `2^log2dim` slots per axis of `child_dim` voxels.
+fn slot_origin(origin: Coord, i: usize, log2dim: u32, child_dim: i32) -> Coord {
+    let m = (1usize << log2dim) - 1;
+    let x = ((i >> (2 * log2dim)) & m) as i32;
+    let y = ((i >> log2dim) & m) as i32;
+    let z = (i & m) as i32;
+    origin.offset(x * child_dim, y * child_dim, z * child_dim)
+}
+
+struct Scanner<'c, 'a> {
+    cur: &'c mut Cursor<'a>,
+    ctx: Ctx,
+    tiles: Vec<Tile>,
+}
+
+impl<'a> Scanner<'_, 'a> {
+    fn tile(&mut self, origin: Coord, dim: u32, value: f32, active: bool) {
+        if active || value != self.ctx.background {
+            self.tiles.push(Tile { origin, dim, value, active });
+        }
+    }
+
+    /// Reads an internal node's masks and tile values; returns the child mask.
+    fn internal(&mut self, origin: Coord, log2dim: u32, child_dim: i32) -> Result<Vec<u64>, Error> {
+        let slots = 1usize << (3 * log2dim);
+        let child_mask = self.cur.mask(slots / 64, "internal node child mask")?;
+        let value_mask = self.cur.mask(slots / 64, "internal node value mask")?;
+        // Before version 222 only the slots without a child store a value.
+        let packed = self.ctx.version < VERSION_NODE_MASK_COMPRESSION;
+        let count = if packed { slots - ones(&child_mask) as usize } else { slots };
+        let blk = values::scan(self.cur, &self.ctx, count, &value_mask)?;
+        let mut vals = vec![0.0f32; count];
+        blk.decode(&self.ctx, &value_mask, &mut vals)?;
+        let mut next = 0;
+        for i in 0..slots {
+            if bit(&child_mask, i) {
+                continue;
+            }
+            let v = if packed { vals.get(next).copied().unwrap_or(0.0) } else { vals[i] };
+            next += 1;
+            self.tile(slot_origin(origin, i, log2dim, child_dim), child_dim as u32, v, bit(&value_mask, i));
+        }
+        Ok(child_mask)
+    }
+
+    fn internal32(&mut self, origin: Coord, leaves: &mut Vec<LeafTopo<'a>>) -> Result<(), Error> {
+        let child_mask = self.internal(origin, 5, 128)?;
+        self.cur.check_count("internal node count", ones(&child_mask), MIN_INTERNAL16_BYTES)?;
+        for i in iter_on(&child_mask) {
+            let o16 = slot_origin(origin, i, 5, 128);
+            let leaf_mask = self.internal(o16, 4, 8)?;
+            self.cur.check_count("leaf count", ones(&leaf_mask), MIN_LEAF_BYTES)?;
+            for j in iter_on(&leaf_mask) {
+                let words = self.cur.mask(8, "leaf mask")?;
+                let mut mask = LeafMask::default();
+                mask.0.copy_from_slice(&words);
+                leaves.push(LeafTopo { origin: slot_origin(o16, j, 4, 8), mask, values: None });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Reads topology and locates every leaf buffer, leaving the cursor at the
+/// end of the tree.  `ctx.background` is filled in from the root.
+pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<'a>, Error> {
+    let _buffer_count = cur.i32("tree buffer count")?;
+    ctx.background = ctx.read_value(cur, "background value")?;
+    let num_tiles = cur.u32("root tile count")?;
+    let num_children = cur.u32("root child count")?;
+    let tile_bytes = 12 + ctx.value.size() as u64 + 1;
+    cur.check_count("root tile count", u64::from(num_tiles), tile_bytes)?;
+    cur.check_count("root child count", u64::from(num_children), 12 + MIN_INTERNAL32_BYTES)?;
+
+    let mut sc = Scanner { cur, ctx, tiles: Vec::new() };
+    let mut roots: Vec<(Coord, Vec<LeafTopo<'a>>)> = Vec::with_capacity(num_children as usize);
+    let mut origins = Vec::with_capacity((num_tiles + num_children) as usize);
+    for _ in 0..num_tiles {
+        let at = sc.cur.pos();
+        let origin = sc.cur.coord("root tile")?;
+        let value = ctx.read_value(sc.cur, "root tile")?;
+        let active = sc.cur.u8("root tile")? != 0;
+        if !origin.is_aligned(4096) {
+            return Err(Error::invalid("root tile", at, format!("origin {:?} is not a multiple of 4096", origin.to_array())));
+        }
+        origins.push((origin, at));
+        sc.tile(origin, 4096, value, active);
+    }
+    for _ in 0..num_children {
+        let at = sc.cur.pos();
+        let origin = sc.cur.coord("root child")?;
+        if !origin.is_aligned(4096) {
+            return Err(Error::invalid("root child", at, format!("origin {:?} is not a multiple of 4096", origin.to_array())));
+        }
+        origins.push((origin, at));
+        let mut leaves = Vec::new();
+        sc.internal32(origin, &mut leaves)?;
+        roots.push((origin, leaves));
+    }
+    origins.sort();
+    if let Some(w) = origins.windows(2).find(|w| w[0].0 == w[1].0) {
+        return Err(Error::invalid("root node", w[1].1, format!("two entries at origin {:?}", w[1].0.to_array())));
+    }
+    let tiles = sc.tiles;
+
+    // OpenVDB writes (and reads) leaf buffers in the root's coordinate order.
+    roots.sort_by_key(|(o, _)| *o);
+    let mut leaves: Vec<LeafTopo<'a>> = roots.into_iter().flat_map(|(_, l)| l).collect();
+    for leaf in leaves.iter_mut() {
+        cur.take(64, "leaf buffer mask")?;
+        let mut num_buffers = 1i8;
+        if ctx.version < VERSION_NODE_MASK_COMPRESSION {
+            cur.take(12, "leaf buffer origin")?;
+            num_buffers = cur.u8("leaf buffer count")? as i8;
+        }
+        leaf.values = Some(values::scan(cur, &ctx, LEAF_VOXELS, &leaf.mask.0)?);
+        // Files from before 222 could hold auxiliary buffers; they are
+        // stored whole (never mask-compressed) and are skipped.
+        let aux = Ctx { compression: ctx.compression & COMPRESS_ZIP, version: 0, ..ctx };
+        for _ in 1..num_buffers.max(1) {
+            values::scan(cur, &aux, LEAF_VOXELS, &leaf.mask.0)?;
+        }
+    }
+    Ok(TreeLayout { background: ctx.background, tiles, leaves, ctx })
+}
+
+impl TreeLayout<'_> {
+    /// Decodes every leaf (in parallel) and returns them sorted by origin.
+    pub fn decode(mut self) -> Result<(Vec<Tile>, Vec<Leaf>), Error> {
+        let ctx = self.ctx;
+        // Sort the (small) descriptions first so the decoded leaves are
+        // written once, in place, in their final order.
+        self.leaves.sort_unstable_by_key(|l| l.origin);
+        // The first failing leaf (in leaf order, whatever the thread count).
+        let failure: Mutex<Option<(usize, Error)>> = Mutex::new(None);
+        let mut leaves = Vec::new();
+        self.leaves
+            .par_iter()
+            .enumerate()
+            .map(|(i, t)| {
+                let mut leaf = Leaf { origin: t.origin, mask: t.mask, values: [0.0f32; LEAF_VOXELS] };
+                if let Some(Err(e)) = t.values.as_ref().map(|blk| blk.decode(&ctx, &t.mask.0, &mut leaf.values)) {
+                    let mut f = failure.lock().unwrap_or_else(|p| p.into_inner());
+                    if f.as_ref().is_none_or(|(j, _)| i < *j) {
+                        *f = Some((i, e));
+                    }
+                }
+                leaf
+            })
+            .collect_into_vec(&mut leaves);
+        match failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            Some((_, e)) => Err(e),
+            None => Ok((self.tiles, leaves)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slot_origins_follow_openvdb_order() {
+        let o = Coord::new(-4096, 0, 4096);
+        assert_eq!(slot_origin(o, 0, 5, 128), o);
+        assert_eq!(slot_origin(o, 1, 5, 128), Coord::new(-4096, 0, 4096 + 128));
+        assert_eq!(slot_origin(o, 32, 5, 128), Coord::new(-4096, 128, 4096));
+        assert_eq!(slot_origin(o, 1024, 5, 128), Coord::new(-4096 + 128, 0, 4096));
+        assert_eq!(slot_origin(Coord::new(0, 0, 0), (3 << 8) | (2 << 4) | 1, 4, 8), Coord::new(24, 16, 8));
+    }
+
+    #[test]
+    fn mask_iteration() {
+        let w = [0b1001u64, 1 << 63];
+        assert_eq!(iter_on(&w).collect::<Vec<_>>(), vec![0, 3, 127]);
+        assert_eq!(ones(&w), 3);
+    }
+}

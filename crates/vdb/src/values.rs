@@ -1,0 +1,340 @@
+//! Node value buffers (OpenVDB's `readCompressedValues`).
+//!
+//! ```text
+//! [u8 metadata]                       file version >= 222 only, 0..=6 (see below)
+//! [value inactive0 [value inactive1]] metadata 2, 4: one value; 5: two (full precision)
+//! [node mask: selection]              metadata 3, 4, 5 (which inactive value each voxel takes)
+//! payload                             the stored values, `stored` of them:
+//!    blosc / zip:  i64 n; n > 0: n compressed bytes; n <= 0: -n raw bytes
+//!    none:         raw values
+//! ```
+//! With active-mask compression and metadata != 6, only the active values are
+//! stored; inactive ones are rebuilt from the selection mask and the inactive
+//! values (background and its negation by default).  Values are half floats
+//! when the grid was saved as half, else the tree's own value type.
+//!
+//! Reading is split in two: [`scan`] walks the headers sequentially and
+//! records where the payload is; [`ValueBlock::decode`] inflates it and can
+//! run on any thread.
+
+use crate::cursor::Cursor;
+use crate::Error;
+
+pub(crate) const COMPRESS_ZIP: u32 = 0x1;
+pub(crate) const COMPRESS_ACTIVE_MASK: u32 = 0x2;
+pub(crate) const COMPRESS_BLOSC: u32 = 0x4;
+
+const NO_MASK_OR_INACTIVE_VALS: u8 = 0;
+const NO_MASK_AND_ONE_INACTIVE_VAL: u8 = 2;
+const MASK_AND_NO_INACTIVE_VALS: u8 = 3;
+const MASK_AND_ONE_INACTIVE_VAL: u8 = 4;
+const MASK_AND_TWO_INACTIVE_VALS: u8 = 5;
+const NO_MASK_AND_ALL_VALS: u8 = 6;
+
+/// File version from which per-node metadata and per-grid compression exist.
+pub(crate) const VERSION_NODE_MASK_COMPRESSION: u32 = 222;
+
+/// The scalar type a tree stores.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScalarType {
+    Half,
+    Float,
+    Double,
+}
+
+impl ScalarType {
+    pub fn size(self) -> usize {
+        match self {
+            ScalarType::Half => 2,
+            ScalarType::Float => 4,
+            ScalarType::Double => 8,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            ScalarType::Half => "half",
+            ScalarType::Float => "float",
+            ScalarType::Double => "double",
+        }
+    }
+
+    /// Decodes one little-endian value (`b.len() == self.size()`).
+    pub(crate) fn decode(self, b: &[u8]) -> f32 {
+        match self {
+            ScalarType::Half => half::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32(),
+            ScalarType::Float => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            ScalarType::Double => f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32,
+        }
+    }
+}
+
+/// What every buffer of one grid shares.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Ctx {
+    pub version: u32,
+    pub compression: u32,
+    pub value: ScalarType,
+    /// Values are stored as half floats (`_HalfFloat` grids).
+    pub from_half: bool,
+    pub background: f32,
+}
+
+impl Ctx {
+    fn stored_type(&self) -> ScalarType {
+        if self.from_half {
+            ScalarType::Half
+        } else {
+            self.value
+        }
+    }
+
+    pub fn read_value(&self, cur: &mut Cursor<'_>, what: &'static str) -> Result<f32, Error> {
+        Ok(self.value.decode(cur.take(self.value.size(), what)?))
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Payload<'a> {
+    Raw(&'a [u8]),
+    Zip(&'a [u8]),
+    Blosc(&'a [u8]),
+}
+
+/// One node's value buffer, located but not yet decoded.
+#[derive(Clone, Debug)]
+pub(crate) struct ValueBlock<'a> {
+    inactive: [f32; 2],
+    selection: Option<&'a [u8]>,
+    /// Number of values in the payload (all, or only the active ones).
+    stored: usize,
+    payload: Payload<'a>,
+    offset: usize,
+}
+
+/// Reads the header of a buffer of `count` values whose active mask is
+/// `mask` (`count / 64` words), leaving the cursor after the payload.
+pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, ctx: &Ctx, count: usize, mask: &[u64]) -> Result<ValueBlock<'a>, Error> {
+    let offset = cur.pos();
+    let mut meta = NO_MASK_AND_ALL_VALS;
+    if ctx.version >= VERSION_NODE_MASK_COMPRESSION {
+        meta = cur.u8("node compression metadata")?;
+        if meta > NO_MASK_AND_ALL_VALS {
+            return Err(Error::invalid("node compression metadata", offset, format!("{meta} (expected 0 to 6)")));
+        }
+    }
+    let bg = ctx.background;
+    let mut inactive = [if meta == NO_MASK_OR_INACTIVE_VALS { bg } else { -bg }, bg];
+    if matches!(meta, NO_MASK_AND_ONE_INACTIVE_VAL | MASK_AND_ONE_INACTIVE_VAL | MASK_AND_TWO_INACTIVE_VALS) {
+        inactive[0] = ctx.read_value(cur, "inactive value")?;
+        if meta == MASK_AND_TWO_INACTIVE_VALS {
+            inactive[1] = ctx.read_value(cur, "inactive value")?;
+        }
+    }
+    let selection = if matches!(meta, MASK_AND_NO_INACTIVE_VALS | MASK_AND_ONE_INACTIVE_VAL | MASK_AND_TWO_INACTIVE_VALS) {
+        Some(cur.take(count / 8, "selection mask")?)
+    } else {
+        None
+    };
+    let mask_compressed = ctx.compression & COMPRESS_ACTIVE_MASK != 0
+        && meta != NO_MASK_AND_ALL_VALS
+        && ctx.version >= VERSION_NODE_MASK_COMPRESSION;
+    let stored = if mask_compressed { mask.iter().map(|w| w.count_ones() as usize).sum() } else { count };
+    let bytes = stored * ctx.stored_type().size();
+    let payload_at = cur.pos();
+    let payload = if stored == 0 && ctx.from_half {
+        // OpenVDB's half reader returns before touching the stream when
+        // there is nothing to read: no size prefix, no payload.
+        Payload::Raw(&[])
+    } else if ctx.compression & (COMPRESS_BLOSC | COMPRESS_ZIP) != 0 {
+        let n = cur.i64("compressed chunk size")?;
+        if n <= 0 {
+            let raw = n.unsigned_abs();
+            if raw != bytes as u64 {
+                return Err(Error::invalid("value buffer", payload_at, format!("uncompressed chunk of {raw} bytes, expected {bytes}")));
+            }
+            Payload::Raw(cur.take(bytes, "value buffer")?)
+        } else {
+            let n = usize::try_from(n).unwrap_or(usize::MAX);
+            let data = cur.take(n, "compressed value buffer")?;
+            if ctx.compression & COMPRESS_BLOSC != 0 {
+                Payload::Blosc(data)
+            } else {
+                Payload::Zip(data)
+            }
+        }
+    } else {
+        Payload::Raw(cur.take(bytes, "value buffer")?)
+    };
+    Ok(ValueBlock { inactive, selection, stored, payload, offset: payload_at })
+}
+
+fn inflate(src: &[u8], out: &mut [u8], offset: usize) -> Result<(), Error> {
+    let expected = out.len();
+    let mut z = flate2::Decompress::new(true);
+    let status = z
+        .decompress(src, out, flate2::FlushDecompress::Finish)
+        .map_err(|e| Error::Zip { offset: offset as u64, detail: e.to_string() })?;
+    if status != flate2::Status::StreamEnd || z.total_out() != expected as u64 {
+        return Err(Error::Zip {
+            offset: offset as u64,
+            detail: format!("inflated to at least {} bytes, expected exactly {expected}", z.total_out()),
+        });
+    }
+    Ok(())
+}
+
+/// Buffers up to this size (a leaf of doubles) are inflated on the stack.
+const STACK_BYTES: usize = 512 * 8;
+
+impl ValueBlock<'_> {
+    /// Decodes into `out` (the node's full value count), rebuilding inactive
+    /// values where only active ones were stored.
+    pub fn decode(&self, ctx: &Ctx, mask: &[u64], out: &mut [f32]) -> Result<(), Error> {
+        let st = ctx.stored_type();
+        let expected = self.stored * st.size();
+        let mut stack = [0u8; STACK_BYTES];
+        let mut heap = Vec::new();
+        let scratch: &mut [u8] = if expected <= STACK_BYTES {
+            &mut stack[..expected]
+        } else {
+            heap.resize(expected, 0);
+            &mut heap
+        };
+        let bytes: &[u8] = match self.payload {
+            Payload::Raw(b) => b,
+            Payload::Zip(b) => {
+                inflate(b, scratch, self.offset)?;
+                scratch
+            }
+            Payload::Blosc(b) => {
+                vdbcook_blosc::decompress_into(b, scratch).map_err(|error| Error::Blosc { offset: self.offset as u64, error })?;
+                scratch
+            }
+        };
+        if bytes.len() != expected {
+            return Err(Error::invalid("value buffer", self.offset, format!("{} bytes, expected {expected}", bytes.len())));
+        }
+        if self.stored == out.len() {
+            match st {
+                ScalarType::Float => {
+                    for (o, b) in out.iter_mut().zip(bytes.chunks_exact(4)) {
+                        *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                    }
+                }
+                _ => {
+                    for (o, b) in out.iter_mut().zip(bytes.chunks_exact(st.size())) {
+                        *o = st.decode(b);
+                    }
+                }
+            }
+            return Ok(());
+        }
+        let mut vals = bytes.chunks_exact(st.size()).map(|b| st.decode(b));
+        for (i, o) in out.iter_mut().enumerate() {
+            let bit = |m: &[u64]| m.get(i >> 6).is_some_and(|w| (w >> (i & 63)) & 1 == 1);
+            *o = if bit(mask) {
+                vals.next().unwrap_or(0.0)
+            } else {
+                let sel = self.selection.is_some_and(|s| s.get(i >> 3).is_some_and(|b| (b >> (i & 7)) & 1 == 1));
+                self.inactive[usize::from(sel)]
+            };
+        }
+        Ok(())
+    }
+
+    /// Number of values the payload holds.
+    #[cfg(test)]
+    pub fn stored(&self) -> usize {
+        self.stored
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ctx(compression: u32) -> Ctx {
+        Ctx { version: 224, compression, value: ScalarType::Float, from_half: false, background: 0.5 }
+    }
+
+    #[test]
+    fn mask_compressed_values_rebuild_inactive_from_selection() {
+        // 64 values, active: 0 and 5; selection picks inactive1 at 1.
+        let mask = [0b100001u64];
+        let mut b = vec![MASK_AND_TWO_INACTIVE_VALS];
+        b.extend(7.0f32.to_le_bytes());
+        b.extend(9.0f32.to_le_bytes());
+        b.extend([0b10, 0, 0, 0, 0, 0, 0, 0]);
+        b.extend(1.0f32.to_le_bytes());
+        b.extend(2.0f32.to_le_bytes());
+        let c = ctx(COMPRESS_ACTIVE_MASK);
+        let mut cur = Cursor::new(&b);
+        let blk = scan(&mut cur, &c, 64, &mask).unwrap();
+        assert_eq!(cur.remaining(), 0);
+        assert_eq!(blk.stored(), 2);
+        let mut out = vec![0.0; 64];
+        blk.decode(&c, &mask, &mut out).unwrap();
+        assert_eq!(&out[..7], &[1.0, 9.0, 7.0, 7.0, 7.0, 2.0, 7.0]);
+    }
+
+    #[test]
+    fn default_inactive_values_are_background_and_its_negation() {
+        let mask = [1u64];
+        for (meta, want) in [(0u8, 0.5f32), (1, -0.5)] {
+            let mut b = vec![meta];
+            b.extend(3.0f32.to_le_bytes());
+            let c = ctx(COMPRESS_ACTIVE_MASK);
+            let blk = scan(&mut Cursor::new(&b), &c, 64, &mask).unwrap();
+            let mut out = vec![0.0; 64];
+            blk.decode(&c, &mask, &mut out).unwrap();
+            assert_eq!((out[0], out[1]), (3.0, want));
+        }
+    }
+
+    #[test]
+    fn zip_chunks_inflate_and_negative_sizes_mean_raw() {
+        use std::io::Write;
+        let vals: Vec<u8> = (0..64).flat_map(|i| (i as f32).to_le_bytes()).collect();
+        let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        enc.write_all(&vals).unwrap();
+        let z = enc.finish().unwrap();
+        let mut b = vec![NO_MASK_AND_ALL_VALS];
+        b.extend((z.len() as i64).to_le_bytes());
+        b.extend(&z);
+        b.push(NO_MASK_AND_ALL_VALS);
+        b.extend((-(vals.len() as i64)).to_le_bytes());
+        b.extend(&vals);
+        let c = ctx(COMPRESS_ZIP);
+        let mut cur = Cursor::new(&b);
+        for _ in 0..2 {
+            let blk = scan(&mut cur, &c, 64, &[0]).unwrap();
+            let mut out = vec![0.0; 64];
+            blk.decode(&c, &[0], &mut out).unwrap();
+            assert_eq!(out[63], 63.0);
+        }
+        assert_eq!(cur.remaining(), 0);
+    }
+
+    #[test]
+    fn wrong_raw_size_and_bad_metadata_are_errors() {
+        let c = ctx(COMPRESS_BLOSC);
+        let mut b = vec![NO_MASK_AND_ALL_VALS];
+        b.extend((-12i64).to_le_bytes());
+        b.extend([0; 12]);
+        assert!(scan(&mut Cursor::new(&b), &c, 64, &[0]).is_err());
+        assert!(scan(&mut Cursor::new(&[7u8]), &c, 64, &[0]).is_err());
+        let mut huge = vec![NO_MASK_AND_ALL_VALS];
+        huge.extend(i64::MAX.to_le_bytes());
+        assert!(matches!(scan(&mut Cursor::new(&huge), &c, 64, &[0]), Err(Error::Truncated { .. })));
+    }
+
+    #[test]
+    fn half_values_decode() {
+        let c = Ctx { from_half: true, ..ctx(0) };
+        let b: Vec<u8> = [6u8].into_iter().chain((0..64).flat_map(|i| half::f16::from_f32(i as f32 * 0.5).to_bits().to_le_bytes())).collect();
+        let blk = scan(&mut Cursor::new(&b), &c, 64, &[0]).unwrap();
+        let mut out = vec![0.0; 64];
+        blk.decode(&c, &[0], &mut out).unwrap();
+        assert_eq!(out[3], 1.5);
+    }
+}

@@ -1,0 +1,135 @@
+//! Truncated and bit-flipped files: the reader must return an error (or, for
+//! a flip that happens to keep the file valid, a result), never panic, and
+//! never make an allocation that the file's size cannot justify.
+//!
+//! One test function only: the allocation high-water mark is global to the
+//! test binary.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+struct Tracking;
+static LARGEST: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Tracking {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        LARGEST.fetch_max(l.size(), Ordering::Relaxed);
+        System.alloc(l)
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        System.dealloc(p, l)
+    }
+    unsafe fn alloc_zeroed(&self, l: Layout) -> *mut u8 {
+        LARGEST.fetch_max(l.size(), Ordering::Relaxed);
+        System.alloc_zeroed(l)
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        LARGEST.fetch_max(n, Ordering::Relaxed);
+        System.realloc(p, l, n)
+    }
+}
+
+#[global_allocator]
+static A: Tracking = Tracking;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Reads everything the reader can read; `Ok` carries a checksum of the result.
+fn read_all(bytes: Vec<u8>) -> Result<f64, vdbcook_vdb::Error> {
+    let file = vdbcook_vdb::VdbFile::parse(bytes)?;
+    let mut acc = 0.0;
+    for i in 0..file.grids.len() {
+        if file.grids[i].is_readable_scalar() {
+            let g = file.read_grid(i)?;
+            acc += g.stats().sum;
+        }
+    }
+    Ok(acc)
+}
+
+/// A small deterministic generator (xorshift64*).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+}
+
+fn inputs() -> Vec<PathBuf> {
+    let mut v = Vec::new();
+    for name in [
+        "fog_blosc.vdb",
+        "fog_zip.vdb",
+        "fog_none.vdb",
+        "fog_activemask.vdb",
+        "fog_half_blosc.vdb",
+        "fog_half_zip.vdb",
+        "multi_grid.vdb",
+        "tiles.vdb",
+        "instanced.vdb",
+        "levelset_half.vdb",
+        "empty.vdb",
+    ] {
+        let p = root().join("fixtures").join(name);
+        assert!(p.exists(), "fixture {} is missing (run `just fixtures`)", p.display());
+        v.push(p);
+    }
+    // Small files written by other tools, when the shared corpus is present.
+    let shared = root().join("../shared/vdb-samples");
+    for name in ["bwproject/cloud.vdb", "hsim/test.vdb", "vfx-toolkit-embergen/embergen_fire_a_0.vdb", "elyg-visualizer/fogTommy.vdb", "arnold-usd/torus01.vdb", "plasmadxr/fluid_data_0001.vdb"] {
+        let p = shared.join(name);
+        if p.exists() {
+            v.push(p);
+        }
+    }
+    v
+}
+
+#[test]
+fn truncated_and_bit_flipped_files_fail_cleanly() {
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut runs = 0usize;
+    for path in inputs() {
+        let original = std::fs::read(&path).unwrap();
+        let len = original.len();
+        read_all(original.clone()).unwrap_or_else(|e| panic!("{}: the intact file must read: {e}", path.display()));
+        // Anything above this is an allocation sized by the file's contents
+        // rather than its size: a 5-node's values are 32768 doubles at most.
+        let budget = 8 * len + (1 << 20);
+        LARGEST.store(0, Ordering::Relaxed);
+
+        // Truncations: every length for small files, a spread for larger ones.
+        let step = (len / 400).max(1);
+        let mut cuts: Vec<usize> = (0..len.min(600)).chain((600..len).step_by(step)).collect();
+        cuts.push(len - 1);
+        for cut in cuts {
+            let data = original[..cut].to_vec();
+            let r = std::panic::catch_unwind(|| read_all(data));
+            match r {
+                Err(_) => panic!("{}: panic reading the first {cut} bytes", path.display()),
+                Ok(Ok(_)) => panic!("{}: the first {cut} of {len} bytes read without error", path.display()),
+                Ok(Err(e)) => assert!(!e.to_string().contains('\n'), "multi-line error: {e}"),
+            }
+            runs += 1;
+        }
+        // Single bit flips anywhere in the file.
+        for _ in 0..1500 {
+            let mut data = original.clone();
+            let bit = (rng.next() % (len as u64 * 8)) as usize;
+            data[bit / 8] ^= 1 << (bit % 8);
+            if std::panic::catch_unwind(|| read_all(data)).is_err() {
+                panic!("{}: panic after flipping bit {bit}", path.display());
+            }
+            runs += 1;
+        }
+        let largest = LARGEST.load(Ordering::Relaxed);
+        assert!(largest <= budget, "{}: an allocation of {largest} bytes for a {len}-byte file", path.display());
+    }
+    assert!(runs > 5000, "only {runs} corrupted reads");
+}
