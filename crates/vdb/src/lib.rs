@@ -271,6 +271,14 @@ impl VdbFile {
 
         let mut g = if self.has_grid_offsets {
             let ok = |p: i64| p >= 0 && (p as u64) <= len as u64;
+            if grid_pos >= 0 && end_pos >= grid_pos && ok(grid_pos) && !ok(end_pos) {
+                return Err(ctx_err(Error::Truncated {
+                    what: "grid data",
+                    offset: grid_pos as u64,
+                    need: (end_pos - grid_pos) as u64,
+                    have: (len as u64).saturating_sub(grid_pos as u64),
+                }));
+            }
             if !ok(grid_pos) || !ok(end_pos) || end_pos < grid_pos {
                 return Err(ctx_err(Error::invalid("grid descriptor", at, format!("grid offsets {grid_pos}..{end_pos} do not fit in the file ({len} bytes)"))));
             }

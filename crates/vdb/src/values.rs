@@ -61,9 +61,41 @@ impl ScalarType {
     /// Decodes one little-endian value (`b.len() == self.size()`).
     pub(crate) fn decode(self, b: &[u8]) -> f32 {
         match self {
-            ScalarType::Half => half::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32(),
+            ScalarType::Half => half_to_f32(u16::from_le_bytes([b[0], b[1]])),
             ScalarType::Float => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
             ScalarType::Double => f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32,
+        }
+    }
+}
+
+/// Every half's float value, built once (256 KiB; exact, since every half is a float).
+fn half_table() -> &'static [f32] {
+    static TABLE: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| (0..=u16::MAX).map(|h| half::f16::from_bits(h).to_f32()).collect())
+}
+
+fn half_to_f32(bits: u16) -> f32 {
+    half_table().get(usize::from(bits)).copied().unwrap_or(0.0)
+}
+
+/// Decodes little-endian values of type `st` from `bytes` into `out`, one loop per type.
+fn convert(st: ScalarType, bytes: &[u8], out: &mut [f32]) {
+    match st {
+        ScalarType::Half => {
+            let table = half_table();
+            for (o, b) in out.iter_mut().zip(bytes.chunks_exact(2)) {
+                *o = table.get(usize::from(u16::from_le_bytes([b[0], b[1]]))).copied().unwrap_or(0.0);
+            }
+        }
+        ScalarType::Float => {
+            for (o, b) in out.iter_mut().zip(bytes.chunks_exact(4)) {
+                *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+            }
+        }
+        ScalarType::Double => {
+            for (o, b) in out.iter_mut().zip(bytes.chunks_exact(8)) {
+                *o = f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32;
+            }
         }
     }
 }
@@ -215,25 +247,23 @@ impl ValueBlock<'_> {
             return Err(Error::invalid("value buffer", self.offset, format!("{} bytes, expected {expected}", bytes.len())));
         }
         if self.stored == out.len() {
-            match st {
-                ScalarType::Float => {
-                    for (o, b) in out.iter_mut().zip(bytes.chunks_exact(4)) {
-                        *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-                    }
-                }
-                _ => {
-                    for (o, b) in out.iter_mut().zip(bytes.chunks_exact(st.size())) {
-                        *o = st.decode(b);
-                    }
-                }
-            }
+            convert(st, bytes, out);
             return Ok(());
         }
-        let mut vals = bytes.chunks_exact(st.size()).map(|b| st.decode(b));
+        let mut stack = [0.0f32; 512];
+        let mut heap = Vec::new();
+        let vals: &mut [f32] = if self.stored <= stack.len() {
+            &mut stack[..self.stored]
+        } else {
+            heap.resize(self.stored, 0.0);
+            &mut heap
+        };
+        convert(st, bytes, vals);
+        let mut next = vals.iter().copied();
         for (i, o) in out.iter_mut().enumerate() {
             let bit = |m: &[u64]| m.get(i >> 6).is_some_and(|w| (w >> (i & 63)) & 1 == 1);
             *o = if bit(mask) {
-                vals.next().unwrap_or(0.0)
+                next.next().unwrap_or(0.0)
             } else {
                 let sel = self.selection.is_some_and(|s| s.get(i >> 3).is_some_and(|b| (b >> (i & 7)) & 1 == 1));
                 self.inactive[usize::from(sel)]
