@@ -27,10 +27,12 @@ mod map;
 mod meta;
 mod tree;
 mod values;
+mod write;
 
 pub use error::Error;
 pub use meta::{MetaMap, MetaValue};
 pub use values::ScalarType;
+pub use write::{write_vdb, WriteOptions};
 
 use cursor::Cursor;
 use std::path::Path;
