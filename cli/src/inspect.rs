@@ -1,6 +1,6 @@
 //! `vdbcook inspect`: what a .vdb file holds, as text or JSON.
 
-use crate::{exit, report_error};
+use crate::{exit, report_error, write_stdout};
 use anyhow::Context;
 use serde_json::{json, Map, Value};
 use std::path::Path;
@@ -8,12 +8,23 @@ use vdbcook_grid::Stats;
 use vdbcook_vdb::{GridInfo, MetaMap, MetaValue, VdbFile};
 
 pub const AFTER_HELP: &str = "\
-Every grid is listed. Float, double and half grids are read in full: active
+For a .vpak asset: its sections with sizes, the node and brick counts and bytes
+(L1, L2, L3, bricks), format, frames, settings and sources; every section checksum
+is verified (a mismatch is an error, exit code 1).
+
+For a .vdb file, every grid is listed. Float, double and half grids are read in full: active
 voxel count (tile voxels included), inclusive index-space bbox, leaf count,
 active tile count, and min / max / sum of the active values. Grids of other
 types (vec3s, int32, points, ...) are listed with the reason they are skipped.
 A file that cannot be read prints one error line and makes the exit code 1;
 the other files are still described.";
+
+/// True when the file starts with the .vpak magic.
+fn is_vpak(path: &Path) -> bool {
+    use std::io::Read;
+    let mut magic = [0u8; 8];
+    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && magic == vdbcook_vpak::MAGIC
+}
 
 /// One grid's figures, or why it was skipped.
 struct GridReport<'a> {
@@ -42,6 +53,21 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
     let mut code = exit::SUCCESS;
     let mut docs = Vec::new();
     for path in files {
+        if is_vpak(path) {
+            match crate::inspect_vpak::describe(path, as_json) {
+                Ok(crate::inspect_vpak::Described::Text(t)) => {
+                    if !quiet && write_stdout(&t).is_err() {
+                        return code;
+                    }
+                }
+                Ok(crate::inspect_vpak::Described::Json(v)) => docs.push(v),
+                Err(e) => {
+                    report_error(&e);
+                    code = exit::FAILURE;
+                }
+            }
+            continue;
+        }
         let result = vdbcook_vdb::open(path)
             .with_context(|| path.display().to_string())
             .and_then(|file| {
@@ -68,13 +94,7 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
     code
 }
 
-/// Writes to stdout; a closed pipe (`| head`) just ends the output.
-fn write_stdout(text: &str) -> std::io::Result<()> {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    out.write_all(text.as_bytes())?;
-    out.flush()
-}
+
 
 /// `%g`-style number: `digits` significant digits, trailing zeros dropped.
 fn fmt_g(x: f64, digits: i32) -> String {
@@ -220,6 +240,7 @@ fn file_json(path: &Path, file: &VdbFile, grids: &[GridReport<'_>]) -> Value {
         .collect();
     json!({
         "path": path.display().to_string(),
+        "kind": "vdb",
         "file_version": file.file_version,
         "library_version": format!("{}.{}", file.library_version.0, file.library_version.1),
         "uuid": file.uuid,

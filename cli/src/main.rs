@@ -1,6 +1,11 @@
 //! The `vdbcook` binary: flags in, library calls, human or JSON text out.
 
+mod cook;
+mod inputs;
 mod inspect;
+mod inspect_vpak;
+mod progress;
+mod unpack;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -40,16 +45,41 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Describe .vdb files: header, grids, transforms, active voxels, value ranges.
+    /// Describe .vdb files (grids, transforms, active voxels, value ranges) and .vpak assets (sections, nodes, checksums).
     #[command(after_help = inspect::AFTER_HELP)]
     Inspect {
-        /// .vdb files to describe.
+        /// .vdb or .vpak files to describe.
         #[arg(required = true, value_name = "FILE")]
         files: Vec<PathBuf>,
         /// Print one JSON document on stdout (schema: docs/inspect-json.md).
         #[arg(long)]
         json: bool,
     },
+    /// Cook a VDB sequence into one packed .vpak asset.
+    #[command(after_help = cook::AFTER_HELP)]
+    Cook(cook::CookArgs),
+    /// Decode one frame of a .vpak asset into a .vdb file that OpenVDB reads.
+    Unpack(unpack::UnpackArgs),
+}
+
+/// A usage problem found after parsing (exit code 2).
+#[derive(Debug)]
+pub struct Usage(pub String);
+
+impl std::fmt::Display for Usage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Usage {}
+
+/// Writes to stdout; a closed pipe (`| head`) just ends the output.
+pub fn write_stdout(text: &str) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())?;
+    out.flush()
 }
 
 fn main() -> ExitCode {
@@ -66,6 +96,8 @@ fn main() -> ExitCode {
     }
     let code = match cli.command {
         Command::Inspect { files, json } => inspect::run(&files, json, cli.quiet),
+        Command::Cook(args) => cook::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
+        Command::Unpack(args) => unpack::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
     };
     ExitCode::from(code)
 }

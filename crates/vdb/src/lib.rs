@@ -342,6 +342,11 @@ impl VdbFile {
         Ctx { version: self.file_version, compression: g.compression, value, from_half: g.half_float && value != ScalarType::Half, background: 0.0 }
     }
 
+    /// The whole file's bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &self.data
+    }
+
     /// Names of all grids, for error messages.
     pub fn grid_names(&self) -> String {
         let names: Vec<String> = self.grids.iter().map(|g| format!("{} ({})", g.display_name(), g.value_type.name())).collect();

@@ -1,0 +1,220 @@
+//! `vdbcook cook`: a VDB sequence into one .vpak asset.
+
+use crate::inputs::{self, FrameFile, FrameRange};
+use crate::progress::Bars;
+use crate::{exit, report_error, Usage};
+use anyhow::{anyhow, Context, Result};
+use std::path::PathBuf;
+use std::time::Instant;
+use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress};
+use vdbcook_grid::Grid;
+use vdbcook_vpak::SourceFile;
+
+pub const AFTER_HELP: &str = "\
+INPUT is a .vdb file, a directory (every .vdb inside), a glob (\"smoke_*.vdb\") or a
+frame pattern (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb) expanded over --frames.
+Several files are one animation; files, directories and globs are taken in natural
+order (frame_2 before frame_10), pattern frames in --frames order.
+
+Formats (bytes per voxel in the brick atlas):
+  f32     4    exact
+  f16     2    IEEE half (default)
+  unorm8  1    8 bits over each brick's own [min, max]
+
+Frames are streamed: at most two source frames are held at once. Identical bricks,
+L3 and L2 nodes and frames are stored once. The output is written to a temporary
+file and renamed; an existing OUT is replaced only with --force.";
+
+#[derive(clap::Args)]
+pub struct CookArgs {
+    /// Frame files, directories, globs or frame patterns.
+    #[arg(required = true, value_name = "INPUT")]
+    pub inputs: Vec<String>,
+    /// The asset to write.
+    #[arg(short, long, value_name = "OUT.vpak")]
+    pub output: PathBuf,
+    /// Frames of a frame pattern: A-B or A-B:STEP (e.g. 1-120:2).
+    #[arg(long, value_name = "RANGE")]
+    pub frames: Option<FrameRange>,
+    /// Grid to cook (default: "density", else the first float grid).
+    #[arg(long, value_name = "NAME")]
+    pub grid: Option<String>,
+    /// A frame whose file or grid is missing becomes an empty frame instead of an error.
+    #[arg(long)]
+    pub allow_missing: bool,
+    /// Voxel format of the brick atlas.
+    #[arg(long, default_value = "f16", value_parser = ["f32", "f16", "unorm8"])]
+    pub format: String,
+    /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
+    #[arg(long, default_value_t = 2048, value_name = "TEXELS", value_parser = clap::value_parser!(u32).range(8..=16384))]
+    pub max_texture_dim: u32,
+    /// Replace OUT if it exists.
+    #[arg(long)]
+    pub force: bool,
+    /// Print the summary as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One frame as read by the reader thread.
+struct Frame {
+    file: FrameFile,
+    grid: Option<Grid>,
+    source: Option<SourceFile>,
+}
+
+fn hash_hex(bytes: &[u8]) -> String {
+    format!("{:032x}", xxhash_rust::xxh3::xxh3_128(bytes))
+}
+
+/// Reads one frame; `grid_name` is fixed by the first frame that has a grid.
+fn read_frame(file: FrameFile, grid_name: &mut Option<String>, allow_missing: bool) -> Result<Frame> {
+    let p = file.path.display().to_string();
+    if !file.path.exists() {
+        if allow_missing {
+            return Ok(Frame { file, grid: None, source: None });
+        }
+        return Err(anyhow!("{p}: no such file (use --allow-missing to cook it as an empty frame)"));
+    }
+    let vdb = vdbcook_vdb::open(&file.path).with_context(|| p.clone())?;
+    let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(vdb.bytes()) };
+    let index = match vdb.select(grid_name.as_deref()) {
+        Ok(i) => i,
+        Err(e) if allow_missing => {
+            let _ = e;
+            return Ok(Frame { file, grid: None, source: Some(source) });
+        }
+        Err(e) => return Err(anyhow!(e).context(p)),
+    };
+    let grid = vdb.read_grid(index).with_context(|| p.clone())?;
+    if grid_name.is_none() {
+        *grid_name = Some(vdb.grids[index].name.clone());
+    }
+    Ok(Frame { file, grid: Some(grid), source: Some(source) })
+}
+
+pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
+    if args.output.exists() && !args.force {
+        return Err(anyhow!("{} already exists (use --force to replace it)", args.output.display()));
+    }
+    let format = Format::parse(&args.format).ok_or_else(|| Usage(format!("unknown format {}", args.format)))?;
+    let files = inputs::expand(&args.inputs, args.frames)?;
+    let started = Instant::now();
+    let bars = Bars::new(quiet);
+
+    let settings = vec![
+        ("format".to_string(), format.name().to_string()),
+        ("grid".to_string(), args.grid.clone().unwrap_or_default()),
+        ("frames".to_string(), args.frames.map(|f| format!("{}-{}:{}", f.first, f.last, f.step)).unwrap_or_default()),
+        ("allow_missing".to_string(), args.allow_missing.to_string()),
+        ("max_texture_dim".to_string(), args.max_texture_dim.to_string()),
+        ("inputs".to_string(), args.inputs.join(" ")),
+    ];
+    let mut cooker = Cooker::new(CookOptions { format, max_texture_dim: args.max_texture_dim, settings });
+
+    // A reader thread stays one frame ahead: at most two source frames live at once.
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Frame>>(0);
+    let allow_missing = args.allow_missing;
+    let mut grid_name = args.grid.clone();
+    let total = files.len() as u64;
+    let reader = std::thread::spawn(move || {
+        for f in files {
+            let r = read_frame(f, &mut grid_name, allow_missing);
+            let stop = r.is_err();
+            if tx.send(r).is_err() || stop {
+                break;
+            }
+        }
+        grid_name
+    });
+    bars.start("reading frames", total);
+    let mut read_secs = 0.0;
+    let mut wait = Instant::now();
+    let mut failure = None;
+    for r in rx {
+        read_secs += wait.elapsed().as_secs_f64();
+        match r {
+            Ok(frame) => {
+                let n = cooker.frame_count();
+                let res = match &frame.grid {
+                    Some(g) => cooker.push(g, frame.source).with_context(|| format!("{}: frame {n}", frame.file.path.display())),
+                    None => {
+                        cooker.push_empty(frame.source);
+                        Ok(())
+                    }
+                };
+                if let Err(e) = res {
+                    failure = Some(e);
+                    break;
+                }
+                bars.advance(1);
+            }
+            Err(e) => {
+                failure = Some(e);
+                break;
+            }
+        }
+        wait = Instant::now();
+    }
+    bars.finish();
+    let grid_name = reader.join().map_err(|_| anyhow!("the frame reader thread panicked"))?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    if cooker.frame_count() == 0 {
+        return Err(anyhow!("no frames to cook"));
+    }
+    let (bytes, mut report) = cooker.finish(&bars).map_err(|e| anyhow!(e))?;
+    report.timings.insert(0, ("read".into(), read_secs));
+    let t0 = Instant::now();
+    vdbcook_vpak::write_atomic(&args.output, &bytes, args.force).with_context(|| args.output.display().to_string())?;
+    report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
+    report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
+    if !quiet {
+        let text = if args.json { summary_json(&args, grid_name.as_deref(), &report) } else { summary_text(&args, grid_name.as_deref(), &report) };
+        crate::write_stdout(&text).ok();
+    }
+    Ok(exit::SUCCESS)
+}
+
+fn mb(b: u64) -> String {
+    format!("{:.2} MB", b as f64 / 1e6)
+}
+
+fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "cooked {} frame{} of grid \"{}\" into {} ({}, {})", r.frames, if r.frames == 1 { "" } else { "s" }, grid.unwrap_or(""), args.output.display(), r.format, mb(r.file_bytes));
+    let _ = writeln!(s, "  active voxels   {} ({:.3} bits per active voxel)", r.active_voxels, r.bits_per_active_voxel);
+    let _ = writeln!(s, "  bricks          {} leaves -> {} unique -> {} stored in {} atlas{}", r.bricks, r.unique_bricks, r.stored_bricks, r.atlases, if r.atlases == 1 { "" } else { "es" });
+    let _ = writeln!(s, "  nodes           L1 {}, L2 {}, L3 {}, tiles {}; tree {} (thesis layout: {})", r.l1_nodes, r.l2_nodes, r.l3_nodes, r.tiles, mb(r.tree_bytes), mb(r.thesis_tree_bytes));
+    let _ = writeln!(s, "  voxel error     rmse {:.3e}, psnr {:.1} dB, max {:.3e}", r.voxel_rmse, r.voxel_psnr, r.voxel_max_error);
+    let t: Vec<String> = r.timings.iter().map(|(k, v)| format!("{k} {v:.2}s")).collect();
+    let _ = writeln!(s, "  time            {}", t.join(", "));
+    s
+}
+
+fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
+    let mut v = serde_json::to_value(r).unwrap_or_default();
+    if let Some(o) = v.as_object_mut() {
+        o.insert("output".into(), serde_json::json!(args.output.display().to_string()));
+        o.insert("grid".into(), serde_json::json!(grid));
+        o.insert("sections".into(), serde_json::json!(r.sections.iter().map(|(n, b)| serde_json::json!({"name": n, "bytes": b})).collect::<Vec<_>>()));
+        o.insert("timings".into(), serde_json::json!(r.timings.iter().map(|(n, s)| (n.clone(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>()));
+        o.insert("frame_errors".into(), serde_json::json!(r.frame_errors.iter().enumerate().map(|(i, (rmse, max))| serde_json::json!({"frame": i, "rmse": rmse, "max_error": max})).collect::<Vec<_>>()));
+        if !r.voxel_psnr.is_finite() {
+            o.insert("voxel_psnr".into(), serde_json::Value::Null);
+        }
+    }
+    format!("{}\n", serde_json::to_string_pretty(&v).unwrap_or_default())
+}
+
+/// Reports a cook failure.
+pub fn fail(e: &anyhow::Error) -> u8 {
+    report_error(e);
+    if e.downcast_ref::<Usage>().is_some() {
+        exit::USAGE
+    } else {
+        exit::FAILURE
+    }
+}

@@ -1,0 +1,224 @@
+//! Turning INPUT arguments into an ordered list of frame files.
+//!
+//! An INPUT is a file, a directory (every `.vdb` directly inside), a glob
+//! (`smoke_*.vdb`), or a frame pattern (`smoke_####.vdb`, `smoke_%04d.vdb`,
+//! `smoke_$F4.vdb`) expanded over `--frames A-B[:STEP]`.  Files, directories
+//! and globs are put in natural order (`frame_2` before `frame_10`); pattern
+//! frames keep the order of `--frames`.
+
+use crate::Usage;
+use anyhow::{bail, Context, Result};
+use std::cmp::Ordering;
+use std::path::{Path, PathBuf};
+
+/// An inclusive frame range with a step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameRange {
+    pub first: i64,
+    pub last: i64,
+    pub step: i64,
+}
+
+impl std::str::FromStr for FrameRange {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("invalid frame range \"{s}\" (expected A-B or A-B:STEP, e.g. 1-120:2)");
+        let (range, step) = match s.split_once(':') {
+            Some((r, st)) => (r, st.parse::<i64>().map_err(|_| bad())?),
+            None => (s, 1),
+        };
+        // Allow negative frame numbers: split on the '-' that follows the first number.
+        let cut = range.char_indices().skip(1).find(|&(_, c)| c == '-').map(|(i, _)| i);
+        let (a, b) = match cut {
+            Some(i) => (&range[..i], &range[i + 1..]),
+            None => (range, range),
+        };
+        let (first, last) = (a.trim().parse::<i64>().map_err(|_| bad())?, b.trim().parse::<i64>().map_err(|_| bad())?);
+        if step < 1 || last < first {
+            return Err(bad());
+        }
+        if (last - first) / step > 1_000_000 {
+            return Err(format!("frame range \"{s}\" has more than a million frames"));
+        }
+        Ok(FrameRange { first, last, step })
+    }
+}
+
+impl FrameRange {
+    pub fn frames(&self) -> impl Iterator<Item = i64> + '_ {
+        (self.first..=self.last).step_by(self.step as usize)
+    }
+}
+
+/// One frame to cook: its file, and whether a missing file is allowed to be an empty frame.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FrameFile {
+    pub path: PathBuf,
+    /// From a frame pattern: the file may legitimately be absent (`--allow-missing`).
+    pub from_pattern: bool,
+}
+
+/// A frame pattern's pieces: prefix, zero-padded width, suffix.
+fn parse_pattern(s: &str) -> Option<(String, usize, String)> {
+    // ####
+    if let Some(start) = s.find('#') {
+        let width = s[start..].chars().take_while(|&c| c == '#').count();
+        return Some((s[..start].to_string(), width, s[start + width..].to_string()));
+    }
+    // %04d, %4d, %d
+    if let Some(start) = s.find('%') {
+        let rest = &s[start + 1..];
+        let digits: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
+        if rest[digits.len()..].starts_with('d') {
+            let width = digits.trim_start_matches('0').parse().unwrap_or(if digits.is_empty() { 0 } else { 1 });
+            return Some((s[..start].to_string(), width, rest[digits.len() + 1..].to_string()));
+        }
+    }
+    // $F, $F4
+    if let Some(start) = s.find("$F") {
+        let rest = &s[start + 2..];
+        let digits: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
+        let width = digits.parse().unwrap_or(0);
+        return Some((s[..start].to_string(), width, rest[digits.len()..].to_string()));
+    }
+    None
+}
+
+fn format_frame(n: i64, width: usize) -> String {
+    if n < 0 {
+        format!("-{:0width$}", -n, width = width.saturating_sub(1))
+    } else {
+        format!("{n:0width$}")
+    }
+}
+
+/// Compares names the way people count: digit runs by value.
+pub fn natural_cmp(a: &str, b: &str) -> Ordering {
+    let (mut x, mut y) = (a.chars().peekable(), b.chars().peekable());
+    loop {
+        match (x.peek().copied(), y.peek().copied()) {
+            (None, None) => return a.cmp(b),
+            (None, Some(_)) => return Ordering::Less,
+            (Some(_), None) => return Ordering::Greater,
+            (Some(c), Some(d)) if c.is_ascii_digit() && d.is_ascii_digit() => {
+                let mut n1 = String::new();
+                while let Some(c) = x.next_if(|c| c.is_ascii_digit()) {
+                    n1.push(c);
+                }
+                let mut n2 = String::new();
+                while let Some(d) = y.next_if(|c| c.is_ascii_digit()) {
+                    n2.push(d);
+                }
+                let (t1, t2) = (n1.trim_start_matches('0'), n2.trim_start_matches('0'));
+                let o = t1.len().cmp(&t2.len()).then_with(|| t1.cmp(t2));
+                if o != Ordering::Equal {
+                    return o;
+                }
+            }
+            (Some(c), Some(d)) => {
+                if c != d {
+                    return c.cmp(&d);
+                }
+                x.next();
+                y.next();
+            }
+        }
+    }
+}
+
+fn natural_sort(v: &mut [PathBuf]) {
+    v.sort_by(|a, b| natural_cmp(&a.to_string_lossy(), &b.to_string_lossy()));
+}
+
+fn is_glob(s: &str) -> bool {
+    s.contains(['*', '?', '['])
+}
+
+/// Expands INPUT arguments into frames, in order.
+pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<FrameFile>> {
+    let mut out = Vec::new();
+    let mut plain: Vec<PathBuf> = Vec::new();
+    let mut used_range = false;
+    for input in inputs {
+        let path = Path::new(input);
+        if path.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(path)
+                .with_context(|| format!("{input}: cannot list the directory"))?
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| p.is_file() && p.extension().is_some_and(|x| x.eq_ignore_ascii_case("vdb")))
+                .collect();
+            if found.is_empty() {
+                bail!("{input}: the directory holds no .vdb files");
+            }
+            natural_sort(&mut found);
+            plain.extend(found);
+        } else if path.exists() {
+            plain.push(path.to_path_buf());
+        } else if let Some((pre, width, post)) = parse_pattern(input) {
+            let Some(range) = frames else {
+                return Err(Usage(format!("{input}: a frame pattern needs --frames A-B[:STEP]")).into());
+            };
+            used_range = true;
+            flush(&mut plain, &mut out);
+            for n in range.frames() {
+                out.push(FrameFile { path: PathBuf::from(format!("{pre}{}{post}", format_frame(n, width))), from_pattern: true });
+            }
+        } else if is_glob(input) {
+            let mut found: Vec<PathBuf> = glob::glob(input).with_context(|| format!("{input}: invalid glob"))?.flatten().filter(|p| p.is_file()).collect();
+            if found.is_empty() {
+                bail!("{input}: no file matches");
+            }
+            natural_sort(&mut found);
+            plain.extend(found);
+        } else {
+            bail!("{input}: no such file or directory");
+        }
+    }
+    if frames.is_some() && !used_range {
+        return Err(Usage("--frames applies to frame patterns (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb), and no INPUT is one".into()).into());
+    }
+    flush(&mut plain, &mut out);
+    Ok(out)
+}
+
+/// Moves the plain files gathered so far, in natural order, to the frame list.
+fn flush(plain: &mut Vec<PathBuf>, out: &mut Vec<FrameFile>) {
+    natural_sort(plain);
+    out.extend(plain.drain(..).map(|path| FrameFile { path, from_pattern: false }));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn natural_order() {
+        let mut v: Vec<PathBuf> = ["f_10.vdb", "f_2.vdb", "f_1.vdb", "g.vdb", "f_02.vdb"].iter().map(PathBuf::from).collect();
+        natural_sort(&mut v);
+        let names: Vec<String> = v.iter().map(|p| p.display().to_string()).collect();
+        assert_eq!(names, ["f_1.vdb", "f_02.vdb", "f_2.vdb", "f_10.vdb", "g.vdb"]);
+    }
+
+    #[test]
+    fn frame_ranges() {
+        assert_eq!("1-120:2".parse::<FrameRange>().unwrap(), FrameRange { first: 1, last: 120, step: 2 });
+        assert_eq!("5".parse::<FrameRange>().unwrap(), FrameRange { first: 5, last: 5, step: 1 });
+        assert_eq!("-3-2".parse::<FrameRange>().unwrap().frames().collect::<Vec<_>>(), vec![-3, -2, -1, 0, 1, 2]);
+        assert!("9-1".parse::<FrameRange>().is_err());
+        assert!("1-9:0".parse::<FrameRange>().is_err());
+        assert!("a-b".parse::<FrameRange>().is_err());
+    }
+
+    #[test]
+    fn patterns() {
+        let r = Some("8-10".parse().unwrap());
+        for (p, want) in [("s_####.vdb", "s_0009.vdb"), ("s_%04d.vdb", "s_0009.vdb"), ("s_%d.vdb", "s_9.vdb"), ("s_$F4.vdb", "s_0009.vdb"), ("s_$F.vdb", "s_9.vdb")] {
+            let f = expand(&[p.to_string()], r).unwrap();
+            assert_eq!(f.len(), 3);
+            assert_eq!(f[1].path, PathBuf::from(want), "{p}");
+            assert!(f[1].from_pattern);
+        }
+        assert!(expand(&["s_####.vdb".into()], None).is_err());
+    }
+}

@@ -1,0 +1,84 @@
+//! `vdbcook inspect ASSET.vpak`: sections, node counts, settings; checksums verified.
+
+use anyhow::{Context, Result};
+use serde_json::{json, Value};
+use std::path::Path;
+use vdbcook_flipbook::{L1_WORDS, L2_WORDS, L3_WORDS};
+use vdbcook_vpak::{kind, Asset};
+
+pub enum Described {
+    Text(String),
+    Json(Value),
+}
+
+pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
+    let name = path.display().to_string();
+    let asset = Asset::open(path).with_context(|| name.clone())?;
+    let meta = asset.metadata().with_context(|| name.clone())?;
+    let size = |k: u32| asset.sections.iter().filter(|s| s.kind == k).map(|s| s.size).sum::<u64>();
+    let l1 = size(kind::L1_NODES) / (L1_WORDS as u64 * 4);
+    let l2 = size(kind::L2_NODES) / (L2_WORDS as u64 * 4);
+    let l3 = size(kind::L3_NODES) / (L3_WORDS as u64 * 4);
+    let atlas_bytes = size(kind::ATLAS);
+    let file_bytes = asset.bytes().len() as u64;
+    let active: u64 = meta.frames.iter().map(|f| f.active_voxels).sum();
+    let nodes = [
+        ("l1", l1, size(kind::L1_NODES) + size(kind::L1_ENTRIES)),
+        ("l2", l2, size(kind::L2_NODES) + size(kind::L2_ENTRIES)),
+        ("l3", l3, size(kind::L3_NODES)),
+        ("bricks", u64::from(meta.brick_count), atlas_bytes + size(kind::BRICK_RANGES)),
+    ];
+    if as_json {
+        return Ok(Described::Json(json!({
+            "path": name,
+            "kind": "vpak",
+            "checksums_ok": true,
+            "tool": meta.tool,
+            "format": meta.format,
+            "frames": meta.frame_count,
+            "grid": meta.grid_name,
+            "class": meta.grid_class,
+            "map_type": meta.map_type,
+            "transform": meta.transform,
+            "index_offset": meta.index_offset,
+            "index_bbox": meta.index_bbox.map(|(a, b)| json!({"min": a, "max": b})),
+            "background": meta.background,
+            "value_range": meta.value_range,
+            "active_voxels": active,
+            "file_bytes": file_bytes,
+            "bits_per_active_voxel": if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 },
+            "nodes": nodes.iter().map(|(n, c, b)| (n.to_string(), json!({"count": c, "bytes": b}))).collect::<serde_json::Map<_, _>>(),
+            "atlases": meta.atlases.iter().map(|a| json!({"bricks": a.bricks, "texels": a.texels, "first_brick": a.first_brick, "count": a.count})).collect::<Vec<_>>(),
+            "sections": asset.sections.iter().map(|s| json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": s.offset, "bytes": s.size, "checksum": format!("{:016x}", s.checksum)})).collect::<Vec<_>>(),
+            "settings": meta.settings.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
+            "sources": meta.sources.iter().map(|s| json!({"path": s.path, "bytes": s.bytes, "xxh3_128": s.xxh3_128})).collect::<Vec<_>>(),
+            "frame_info": meta.frames.iter().map(|f| json!({"source": f.source, "active_voxels": f.active_voxels, "leaves": f.leaves, "tiles": f.tiles})).collect::<Vec<_>>(),
+        })));
+    }
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "{name}: vpak v{}, {}, {} frame{}, grid \"{}\" ({}), checksums ok", vdbcook_vpak::VERSION, meta.format, meta.frame_count, if meta.frame_count == 1 { "" } else { "s" }, meta.grid_name, meta.grid_class);
+    let _ = writeln!(s, "  written by     {}", meta.tool);
+    let _ = writeln!(s, "  transform      {}, index offset {:?}", meta.map_type, meta.index_offset);
+    if let Some((a, b)) = meta.index_bbox {
+        let _ = writeln!(s, "  index bbox     {a:?} .. {b:?}");
+    }
+    let _ = writeln!(s, "  values         [{}, {}], background {}", meta.value_range[0], meta.value_range[1], meta.background);
+    let _ = writeln!(s, "  size           {} bytes, {} active voxels, {:.3} bits per active voxel", file_bytes, active, if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 });
+    let _ = writeln!(s, "  {:<12} {:>10} {:>14}", "level", "count", "bytes");
+    for (n, c, b) in nodes {
+        let _ = writeln!(s, "  {n:<12} {c:>10} {b:>14}");
+    }
+    let _ = writeln!(s, "  sections:");
+    for e in &asset.sections {
+        let label = if e.kind == kind::ATLAS { format!("{} {}", kind::name(e.kind), e.index) } else { kind::name(e.kind).to_string() };
+        let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}", e.size, e.offset, e.checksum);
+    }
+    for a in &meta.atlases {
+        let _ = writeln!(s, "  atlas          {} bricks from #{}, {}×{}×{} texels", a.count, a.first_brick, a.texels[0], a.texels[1], a.texels[2]);
+    }
+    let set: Vec<String> = meta.settings.iter().filter(|(_, v)| !v.is_empty()).map(|(k, v)| format!("{k}={v}")).collect();
+    let _ = writeln!(s, "  settings       {}", set.join(" "));
+    let _ = writeln!(s, "  sources        {} file{}", meta.sources.len(), if meta.sources.len() == 1 { "" } else { "s" });
+    Ok(Described::Text(s))
+}

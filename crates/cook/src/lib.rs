@@ -1,0 +1,352 @@
+//! The cooking pipeline, free of I/O and terminals: frames are pushed in one
+//! at a time ([`Cooker::push`]), and [`Cooker::finish`] returns the bytes of
+//! a `.vpak` asset and a [`CookReport`].  [`unpack_frame`] turns a frame of an
+//! asset back into a [`Grid`].
+//!
+//! ```text
+//! push(frame) ─▶ flipbook::Builder (exact brick dedup, L3 interning)
+//! finish ─▶ encode bricks (parallel) ─▶ dedup encoded bricks ─▶ node arrays
+//!        ─▶ atlases ─▶ vpak sections ─▶ bytes
+//! ```
+
+mod unpack;
+
+pub use unpack::{load_nodes, unpack_frame};
+pub use vdbcook_encode::Format;
+
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::time::Instant;
+use vdbcook_encode::{EncodedBrick, ErrorStats};
+use vdbcook_flipbook::{Builder, Built, Nodes};
+use vdbcook_grid::{Grid, Transform};
+use vdbcook_vpak::{kind, AtlasInfo, FrameInfo, Metadata, Section, SourceFile};
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error(transparent)]
+    Tree(#[from] vdbcook_flipbook::Error),
+    #[error(transparent)]
+    Asset(#[from] vdbcook_vpak::Error),
+    #[error("frame {frame}: transform differs from the first frame's ({found} vs {expected})")]
+    Transform { frame: usize, found: String, expected: String },
+    #[error("the asset is inconsistent: {0}")]
+    Corrupt(String),
+    #[error("frame {frame} is out of range (the asset has {count} frames, numbered from 0)")]
+    NoFrame { frame: usize, count: usize },
+    #[error("unsupported voxel format \"{0}\"")]
+    Format(String),
+}
+
+/// Receives progress from long stages; every method does nothing by default.
+pub trait Progress: Sync {
+    fn start(&self, _stage: &str, _total: u64) {}
+    fn advance(&self, _n: u64) {}
+    fn finish(&self) {}
+}
+
+/// A [`Progress`] that reports nothing.
+pub struct NoProgress;
+impl Progress for NoProgress {}
+
+#[derive(Clone, Debug)]
+pub struct CookOptions {
+    pub format: Format,
+    /// Largest 3D texture edge an atlas may use (wgpu's default limit is 2048).
+    pub max_texture_dim: u32,
+    /// Every setting, recorded verbatim in the asset's metadata.
+    pub settings: Vec<(String, String)>,
+}
+
+impl Default for CookOptions {
+    fn default() -> Self {
+        CookOptions { format: Format::F16, max_texture_dim: 2048, settings: Vec::new() }
+    }
+}
+
+/// What a cook did, for people and for `--json`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CookReport {
+    pub format: String,
+    pub frames: usize,
+    pub empty_frames: usize,
+    pub active_voxels: u64,
+    /// Leaves over all frames: the bricks a cooker without deduplication would store.
+    pub bricks: u64,
+    /// Distinct bricks after exact deduplication of the source values.
+    pub unique_bricks: usize,
+    /// Bricks stored in the atlases (after deduplicating encoded bricks too).
+    pub stored_bricks: usize,
+    pub l1_nodes: usize,
+    pub l2_nodes: usize,
+    pub l3_nodes: usize,
+    pub tiles: usize,
+    pub atlases: usize,
+    /// (section name, bytes) in file order.
+    pub sections: Vec<(String, u64)>,
+    pub file_bytes: u64,
+    /// Node arrays (frames, L1, L2, L3, entries, tiles) in bytes.
+    pub tree_bytes: u64,
+    /// What the seed thesis's layout needs for the same frames.
+    pub thesis_tree_bytes: u64,
+    pub bits_per_active_voxel: f64,
+    pub value_range: [f32; 2],
+    /// Voxel-domain error of the stored values against the source, over active voxels.
+    pub voxel_rmse: f64,
+    pub voxel_psnr: f64,
+    pub voxel_max_error: f64,
+    /// Per frame: (rmse, max error).
+    pub frame_errors: Vec<(f64, f64)>,
+    /// (stage, seconds).
+    pub timings: Vec<(String, f64)>,
+}
+
+/// Streams frames into an asset.
+pub struct Cooker {
+    opts: CookOptions,
+    builder: Builder,
+    first: Option<(String, String, Transform)>,
+    frames: Vec<FrameInfo>,
+    sources: Vec<SourceFile>,
+    range: [f32; 2],
+    build_secs: f64,
+}
+
+fn transform_text(t: &Transform) -> String {
+    format!("{} {:?}", t.map_type.vdb_name(), t.matrix)
+}
+
+impl Cooker {
+    pub fn new(opts: CookOptions) -> Cooker {
+        Cooker { opts, builder: Builder::new(), first: None, frames: Vec::new(), sources: Vec::new(), range: [f32::INFINITY, f32::NEG_INFINITY], build_secs: 0.0 }
+    }
+
+    /// Records a source file once (a file listed twice is one source).
+    fn add_source(&mut self, source: Option<SourceFile>) -> Option<u32> {
+        source.map(|s| match self.sources.iter().position(|o| *o == s) {
+            Some(i) => i as u32,
+            None => {
+                self.sources.push(s);
+                (self.sources.len() - 1) as u32
+            }
+        })
+    }
+
+    /// Adds the next frame.
+    pub fn push(&mut self, grid: &Grid, source: Option<SourceFile>) -> Result<(), Error> {
+        let t0 = Instant::now();
+        let frame = self.frames.len();
+        match &self.first {
+            None => self.first = Some((grid.name.clone(), grid.class.vdb_name().to_string(), grid.transform)),
+            Some((_, _, t)) if *t != grid.transform => {
+                return Err(Error::Transform { frame, found: transform_text(&grid.transform), expected: transform_text(t) });
+            }
+            Some(_) => {}
+        }
+        let st = grid.stats();
+        if let (Some(lo), Some(hi)) = (st.min, st.max) {
+            self.range = [self.range[0].min(lo as f32), self.range[1].max(hi as f32)];
+        }
+        let fs = self.builder.push(grid)?;
+        let source = self.add_source(source);
+        self.frames.push(FrameInfo { source, active_voxels: fs.active_voxels, leaves: fs.leaves as u32, tiles: fs.tiles as u32 });
+        self.build_secs += t0.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Adds an empty frame (a source without the grid, with `--allow-missing`).
+    pub fn push_empty(&mut self, source: Option<SourceFile>) {
+        self.builder.push_empty();
+        let source = self.add_source(source);
+        self.frames.push(FrameInfo { source, active_voxels: 0, leaves: 0, tiles: 0 });
+    }
+
+    pub fn frame_count(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Encodes, lays out and serialises the asset.
+    pub fn finish(self, progress: &dyn Progress) -> Result<(Vec<u8>, CookReport), Error> {
+        let mut timings = vec![("build".to_string(), self.build_secs)];
+        let format = self.opts.format;
+        let built = self.builder.finish()?;
+
+        // Encode every distinct brick, then store identical encodings once.
+        let t0 = Instant::now();
+        let pool = built.pool.bricks();
+        progress.start("encoding", pool.len() as u64);
+        let encoded: Vec<EncodedBrick> = pool
+            .par_chunks(1024)
+            .flat_map_iter(|chunk| {
+                let out: Vec<EncodedBrick> = chunk.iter().map(|b| vdbcook_encode::encode_brick(format, b)).collect();
+                progress.advance(chunk.len() as u64);
+                out
+            })
+            .collect();
+        progress.finish();
+        let (stored, remap) = dedup_encoded(encoded);
+        timings.push(("encode".into(), t0.elapsed().as_secs_f64()));
+
+        // Node arrays over the final brick ids.
+        let t0 = Instant::now();
+        progress.start("building nodes", built.frames.len() as u64);
+        let nodes = built.nodes(|b| remap.get(b as usize).copied().unwrap_or(0))?;
+        progress.finish();
+        timings.push(("nodes".into(), t0.elapsed().as_secs_f64()));
+
+        // Voxel-domain error of what is stored, per frame.
+        let t0 = Instant::now();
+        let frame_err = voxel_errors(&built, &stored, &remap, format);
+        let mut total = ErrorStats::default();
+        for e in &frame_err {
+            total.merge(e);
+        }
+        timings.push(("error".into(), t0.elapsed().as_secs_f64()));
+
+        let t0 = Instant::now();
+        let layouts = vdbcook_encode::plan_atlases(stored.len() as u32, self.opts.max_texture_dim);
+        let mut sections = node_sections(&nodes);
+        sections.push(Section { kind: kind::BRICK_RANGES, index: 0, data: stored.iter().flat_map(|b| b.range.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>()).collect() });
+        for (i, l) in layouts.iter().enumerate() {
+            sections.push(Section { kind: kind::ATLAS, index: i as u32, data: vdbcook_encode::pack_atlas(l, &stored, format) });
+        }
+        let (grid_name, grid_class, transform) = self.first.clone().unwrap_or_else(|| (String::new(), "unknown".into(), Transform::identity()));
+        let range = if self.range[0] <= self.range[1] { self.range } else { [built.background; 2] };
+        let meta = Metadata {
+            tool: concat!("vdbcook ", env!("CARGO_PKG_VERSION")).to_string(),
+            format: format.name().to_string(),
+            frame_count: self.frames.len() as u32,
+            grid_name,
+            grid_class,
+            map_type: transform.map_type.vdb_name().to_string(),
+            transform: transform.matrix,
+            index_offset: nodes.offset.to_array(),
+            index_bbox: built.bbox.map(|b| (b.min.to_array(), b.max.to_array())),
+            background: built.background,
+            value_range: range,
+            brick_count: stored.len() as u32,
+            atlases: layouts.iter().map(|l| AtlasInfo { bricks: l.bricks, texels: l.texels(), first_brick: l.first_brick, count: l.count }).collect(),
+            settings: self.opts.settings.clone(),
+            sources: self.sources.clone(),
+            frames: self.frames.clone(),
+        };
+        sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()? });
+        let report_sections: Vec<(String, u64)> = sections
+            .iter()
+            .map(|s| (if s.kind == kind::ATLAS { format!("{} {}", kind::name(s.kind), s.index) } else { kind::name(s.kind).to_string() }, s.data.len() as u64))
+            .collect();
+        let bytes = vdbcook_vpak::assemble(&sections);
+        timings.push(("serialise".into(), t0.elapsed().as_secs_f64()));
+
+        let tree_bytes: u64 = nodes.byte_sizes().iter().map(|(_, b)| *b as u64).sum();
+        let active: u64 = self.frames.iter().map(|f| f.active_voxels).sum();
+        let peak = f64::from(range[1] - range[0]);
+        let report = CookReport {
+            format: format.name().into(),
+            frames: self.frames.len(),
+            empty_frames: self.frames.iter().filter(|f| f.leaves == 0 && f.tiles == 0).count(),
+            active_voxels: active,
+            bricks: built.leaves_in,
+            unique_bricks: built.pool.len(),
+            stored_bricks: stored.len(),
+            l1_nodes: nodes.l1_count(),
+            l2_nodes: nodes.l2_count(),
+            l3_nodes: nodes.l3_count(),
+            tiles: nodes.tiles.len() / 2,
+            atlases: layouts.len(),
+            sections: report_sections,
+            file_bytes: bytes.len() as u64,
+            tree_bytes,
+            thesis_tree_bytes: vdbcook_flipbook::thesis_tree_bytes(self.frames.len(), built.leaves_in),
+            bits_per_active_voxel: if active > 0 { bytes.len() as f64 * 8.0 / active as f64 } else { 0.0 },
+            value_range: range,
+            voxel_rmse: total.rmse(),
+            voxel_psnr: total.psnr(if peak > 0.0 { peak } else { 1.0 }),
+            voxel_max_error: total.max_abs,
+            frame_errors: frame_err.iter().map(|e| (e.rmse(), e.max_abs)).collect(),
+            timings,
+        };
+        Ok((bytes, report))
+    }
+}
+
+/// Stores each distinct encoding once; returns the stored bricks and, per
+/// pool brick, its stored index.
+fn dedup_encoded(encoded: Vec<EncodedBrick>) -> (Vec<EncodedBrick>, Vec<u32>) {
+    let mut index: HashMap<(u64, [u32; 2]), Vec<u32>> = HashMap::new();
+    let mut stored: Vec<EncodedBrick> = Vec::new();
+    let mut remap = Vec::with_capacity(encoded.len());
+    for e in encoded {
+        let key = (xxhash_rust::xxh3::xxh3_64(&e.data), e.range.map(f32::to_bits));
+        let ids = index.entry(key).or_default();
+        let found = ids.iter().copied().find(|&i| stored[i as usize].data == e.data);
+        let id = match found {
+            Some(i) => i,
+            None => {
+                let i = stored.len() as u32;
+                ids.push(i);
+                stored.push(e);
+                i
+            }
+        };
+        remap.push(id);
+    }
+    (stored, remap)
+}
+
+/// Error of the stored (decoded) values against the source over each frame's active voxels.
+fn voxel_errors(built: &Built, stored: &[EncodedBrick], remap: &[u32], format: Format) -> Vec<ErrorStats> {
+    // Per L3 node: its error over its own active voxels.
+    let per_l3: Vec<ErrorStats> = built
+        .l3
+        .par_iter()
+        .map(|l| {
+            let mut e = ErrorStats::default();
+            let src = &built.pool.bricks()[l.brick as usize];
+            let Some(enc) = remap.get(l.brick as usize).and_then(|&i| stored.get(i as usize)) else { return e };
+            let dec = vdbcook_encode::decode_brick(format, enc.range, &enc.data);
+            for (w, &word) in l.mask.iter().enumerate() {
+                let mut bits = word;
+                while bits != 0 {
+                    let i = w * 64 + bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    e.add(src[i], dec[i]);
+                }
+            }
+            e
+        })
+        .collect();
+    built
+        .frames
+        .iter()
+        .map(|f| {
+            let mut e = ErrorStats::default();
+            for &(_, id) in &f.leaves {
+                e.merge(&per_l3[id as usize]);
+            }
+            e
+        })
+        .collect()
+}
+
+fn words(v: &[u32]) -> Vec<u8> {
+    v.iter().flat_map(|w| w.to_le_bytes()).collect()
+}
+
+fn node_sections(n: &Nodes) -> Vec<Section> {
+    [
+        (kind::FRAMES, &n.frames),
+        (kind::L1_NODES, &n.l1),
+        (kind::L1_ENTRIES, &n.l1_entries),
+        (kind::L2_NODES, &n.l2),
+        (kind::L2_ENTRIES, &n.l2_entries),
+        (kind::L3_NODES, &n.l3),
+        (kind::TILES, &n.tiles),
+    ]
+    .into_iter()
+    .map(|(k, v)| Section { kind: k, index: 0, data: words(v) })
+    .collect()
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,89 @@
+use super::*;
+use vdbcook_grid::{Coord, GridClass, Leaf, LeafMask, Tile};
+use vdbcook_vpak::Asset;
+
+fn frame(shift: i32) -> Grid {
+    let mut leaves = Vec::new();
+    for i in 0..40 {
+        let mut mask = LeafMask::default();
+        let mut values = [0.0f32; 512];
+        for v in 0..512 {
+            if (v + i) % 3 != 0 {
+                mask.set(v, true);
+                values[v] = (((v * 7 + i * 13) as f32) * 0.01 + shift as f32).sin().abs() * 0.1;
+            }
+        }
+        leaves.push(Leaf { origin: Coord::new((i as i32 % 5) * 8 - 64, (i as i32 / 5) * 8 + shift * 8, 0), mask, values });
+    }
+    leaves.sort_by_key(|l| l.origin);
+    Grid { name: "density".into(), class: GridClass::FogVolume, background: 0.0, transform: Transform::identity(), leaves, tiles: vec![Tile { origin: Coord::new(128, 0, 0), dim: 8, value: 0.5, active: true }] }
+}
+
+fn cook(format: Format, frames: &[Grid], max_dim: u32) -> (Vec<u8>, CookReport) {
+    let mut c = Cooker::new(CookOptions { format, max_texture_dim: max_dim, settings: vec![("format".into(), format.name().into())] });
+    for f in frames {
+        c.push(f, None).unwrap();
+    }
+    c.finish(&NoProgress).unwrap()
+}
+
+#[test]
+fn f32_round_trip_is_exact() {
+    let frames = [frame(0), frame(1), frame(2)];
+    let (bytes, report) = cook(Format::F32, &frames, 2048);
+    assert_eq!(report.voxel_rmse, 0.0);
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    asset.verify().unwrap();
+    for (i, f) in frames.iter().enumerate() {
+        let g = unpack_frame(&asset, i).unwrap();
+        assert_eq!(g.leaves, f.leaves.iter().map(|l| { let mut l = l.clone(); for v in 0..512 { if !l.mask.is_on(v) { l.values[v] = 0.0; } } l }).collect::<Vec<_>>());
+        assert_eq!(g.tiles, f.tiles);
+    }
+    assert!(matches!(unpack_frame(&asset, 3), Err(Error::NoFrame { .. })));
+}
+
+#[test]
+fn small_texture_limit_splits_atlases_and_still_round_trips() {
+    let frames = [frame(0), frame(3)];
+    let (bytes, report) = cook(Format::F16, &frames, 16);
+    assert!(report.atlases > 1, "{report:?}");
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    let g = unpack_frame(&asset, 1).unwrap();
+    for (a, b) in g.leaves.iter().zip(&frames[1].leaves) {
+        for v in b.mask.iter_on() {
+            assert!((a.values[v] - b.values[v]).abs() <= b.values[v].abs() * 1e-3 + 1e-7);
+        }
+    }
+}
+
+#[test]
+fn unorm8_error_is_reported_and_bounded() {
+    let frames = [frame(0)];
+    let (_, report) = cook(Format::Unorm8, &frames, 2048);
+    assert!(report.voxel_rmse > 0.0);
+    assert!(report.voxel_max_error <= 0.1 / 255.0 * 0.5 + 1e-6, "{}", report.voxel_max_error);
+}
+
+#[test]
+fn an_unchanging_sequence_costs_about_one_frame() {
+    let one = cook(Format::F16, &[frame(0)], 2048).0.len();
+    let hundred = cook(Format::F16, &vec![frame(0); 100], 2048).0.len();
+    assert!((hundred as f64) < one as f64 * 1.05, "{one} vs {hundred}");
+}
+
+#[test]
+fn output_is_identical_on_any_thread_count() {
+    let frames = [frame(0), frame(1), frame(5)];
+    let run = |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| cook(Format::Unorm8, &frames, 2048).0);
+    assert_eq!(run(1), run(2));
+    assert_eq!(run(1), run(3));
+}
+
+#[test]
+fn changing_transform_is_an_error() {
+    let mut c = Cooker::new(CookOptions::default());
+    c.push(&frame(0), None).unwrap();
+    let mut f = frame(1);
+    f.transform = Transform::scale_translate(vdbcook_grid::MapType::UniformScale, [2.0; 3], [0.0; 3]);
+    assert!(matches!(c.push(&f, None), Err(Error::Transform { frame: 1, .. })));
+}

@@ -1,0 +1,76 @@
+//! A frame of an asset back to a [`Grid`].
+
+use crate::{Error, Format};
+use vdbcook_encode::AtlasLayout;
+use vdbcook_flipbook::{Nodes, L1_WORDS, L2_WORDS, L3_WORDS};
+use vdbcook_grid::{Coord, Grid, GridClass, Leaf, LeafMask, MapType, Tile, Transform, LEAF_VOXELS};
+use vdbcook_vpak::{kind, Asset, Metadata};
+
+fn need_multiple(name: &str, v: &[u32], unit: usize) -> Result<(), Error> {
+    if v.len() % unit != 0 {
+        return Err(Error::Corrupt(format!("{name} holds {} words, not a multiple of {unit}", v.len())));
+    }
+    Ok(())
+}
+
+/// Copies the node arrays out of an asset.
+pub fn load_nodes(asset: &Asset, meta: &Metadata) -> Result<Nodes, Error> {
+    let n = Nodes {
+        offset: Coord::new(meta.index_offset[0], meta.index_offset[1], meta.index_offset[2]),
+        frames: asset.u32s(kind::FRAMES)?.to_vec(),
+        l1: asset.u32s(kind::L1_NODES)?.to_vec(),
+        l1_entries: asset.u32s(kind::L1_ENTRIES)?.to_vec(),
+        l2: asset.u32s(kind::L2_NODES)?.to_vec(),
+        l2_entries: asset.u32s(kind::L2_ENTRIES)?.to_vec(),
+        l3: asset.u32s(kind::L3_NODES)?.to_vec(),
+        tiles: asset.u32s(kind::TILES)?.to_vec(),
+    };
+    need_multiple("l1 nodes", &n.l1, L1_WORDS)?;
+    need_multiple("l2 nodes", &n.l2, L2_WORDS)?;
+    need_multiple("l3 nodes", &n.l3, L3_WORDS)?;
+    need_multiple("tiles", &n.tiles, 2)?;
+    Ok(n)
+}
+
+/// Decodes frame `frame` (counted from 0) of an opened asset.
+pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Grid, Error> {
+    let meta = asset.metadata()?;
+    if frame >= meta.frame_count as usize {
+        return Err(Error::NoFrame { frame, count: meta.frame_count as usize });
+    }
+    let format = Format::parse(&meta.format).ok_or_else(|| Error::Format(meta.format.clone()))?;
+    let nodes = load_nodes(asset, &meta)?;
+    let ranges = asset.f32s(kind::BRICK_RANGES)?;
+    let (leaves, tiles) = nodes.frame_contents(frame);
+    let mut out = Vec::with_capacity(leaves.len());
+    for (origin, mask, brick) in leaves {
+        let info = meta
+            .atlases
+            .iter()
+            .enumerate()
+            .find(|(_, a)| brick >= a.first_brick && brick - a.first_brick < a.count)
+            .ok_or_else(|| Error::Corrupt(format!("brick {brick} is in no atlas")))?;
+        let layout = AtlasLayout { bricks: info.1.bricks, first_brick: info.1.first_brick, count: info.1.count };
+        let atlas = asset.section(kind::ATLAS, info.0 as u32)?;
+        let data = vdbcook_encode::unpack_brick(&layout, atlas, brick - layout.first_brick, format).ok_or_else(|| Error::Corrupt(format!("atlas {} is too small for its bricks", info.0)))?;
+        let b = brick as usize;
+        let range = [*ranges.get(2 * b).ok_or_else(|| Error::Corrupt(format!("no range for brick {brick}")))?, ranges.get(2 * b + 1).copied().unwrap_or(0.0)];
+        let decoded = vdbcook_encode::decode_brick(format, range, &data);
+        let mask = LeafMask(mask);
+        let mut values = [meta.background; LEAF_VOXELS];
+        for i in mask.iter_on() {
+            values[i] = decoded[i];
+        }
+        out.push(Leaf { origin, mask, values });
+    }
+    out.sort_by_key(|l| l.origin);
+    let map_type = MapType::from_vdb_name(&meta.map_type).unwrap_or(MapType::Affine);
+    Ok(Grid {
+        name: meta.grid_name.clone(),
+        class: GridClass::from_vdb_name(&meta.grid_class),
+        background: meta.background,
+        transform: Transform { map_type, matrix: meta.transform },
+        leaves: out,
+        tiles: tiles.into_iter().map(|(origin, dim, value)| Tile { origin, dim, value, active: true }).collect(),
+    })
+}

@@ -1,0 +1,539 @@
+//! The flip-book tree: one L1 node per frame over shared L2/L3 nodes and one
+//! shared pool of 8³ bricks.
+//!
+//! Frames stream in through [`Builder::push`], which keeps only what the
+//! output needs: every distinct brick once ([`BrickPool`], exact
+//! deduplication by content hash then byte compare), every distinct L3 node
+//! (active mask + brick) once, and per frame the list of its leaves and tiles.
+//! [`Built::nodes`] then lays out the node arrays ([`Nodes`]), once the union
+//! bounding box of all frames is known, after the caller has remapped bricks
+//! (clustering, encoded-brick deduplication).
+//!
+//! # Node layout (all `u32`, little-endian; also the GPU layout)
+//!
+//! Index space is translated by [`Nodes::offset`] (a multiple of 128) so
+//! that every frame fits one L1 node: 4096³ voxels.
+//!
+//! ```text
+//! L1 node  (32³ slots of 128³ voxels)  L1_WORDS = 1024 + 512 + 1
+//!   [0, 1024)     occupancy mask: bit s of word s/32 set when slot s holds a child or a tile
+//!   [1024, 1536)  prefix counts: u16 pairs, count k = set bits in mask words [0, k)
+//!                 (word 1024 + k/2, bits 16·(k%2)..)
+//!   1536          first entry: index into l1_entries of slot rank 0
+//! L2 node  (16³ slots of 8³ voxels)    L2_WORDS = 128 + 64 + 1, same shape, entries in l2_entries
+//! entry    bit 31 clear: child index (L2 node for L1 entries, L3 node for L2 entries)
+//!          bit 31 set:   tile index (low 31 bits) into `tiles`
+//! L3 node  L3_WORDS = 16 + 1: active mask (512 bits, bit i = voxel x·64 + y·8 + z), brick index
+//! tile     2 words: value (f32 bits), flags (bit 0: active)
+//! ```
+//! A slot's entry is `entries[first + prefix(word) + popcount(mask[word] & below(bit))]`:
+//! O(1) on the GPU, and only occupied slots cost memory.  Identical L3, L2
+//! and L1 nodes are stored once (hash-consing, bottom-up), so the parts of an
+//! animation that do not change cost nothing per frame.
+
+use std::collections::{BTreeMap, HashMap};
+use vdbcook_grid::{Bbox, Coord, Grid, LEAF_VOXELS};
+
+pub const L1_LOG2: u32 = 5;
+pub const L2_LOG2: u32 = 4;
+pub const L1_SLOTS: usize = 1 << (3 * L1_LOG2);
+pub const L2_SLOTS: usize = 1 << (3 * L2_LOG2);
+pub const L1_MASK_WORDS: usize = L1_SLOTS / 32;
+pub const L2_MASK_WORDS: usize = L2_SLOTS / 32;
+pub const L1_WORDS: usize = L1_MASK_WORDS + L1_MASK_WORDS / 2 + 1;
+pub const L2_WORDS: usize = L2_MASK_WORDS + L2_MASK_WORDS / 2 + 1;
+pub const L3_WORDS: usize = 16 + 1;
+pub const TILE_FLAG: u32 = 1 << 31;
+/// Edge of the index space one L1 node covers.
+pub const L1_DIM: i64 = 4096;
+/// Voxel edge of an L1 slot (an L2 node or a tile).
+pub const L1_CHILD_DIM: i32 = 128;
+
+/// A brick: the 512 values of one leaf, inactive voxels set to the background.
+pub type Brick = [f32; LEAF_VOXELS];
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("the frames span {extent} voxels along {axis} (index {min} to {max}); one L1 node holds 4096 voxels starting at a multiple of 128")]
+    TooWide { axis: char, extent: i64, min: i64, max: i64 },
+    #[error("frame {frame} has background {found}, earlier frames {expected}")]
+    Background { frame: usize, found: f32, expected: f32 },
+    #[error("more than 2^31 {what}")]
+    Overflow { what: &'static str },
+}
+
+fn hash_words(words: &[u32]) -> u64 {
+    let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+    xxhash_rust::xxh3::xxh3_64(&bytes)
+}
+
+/// Brick content key: the exact bits of every value (so -0.0 and 0.0, or two
+/// NaN payloads, stay distinct).
+fn brick_bits(b: &Brick) -> [u32; LEAF_VOXELS] {
+    b.map(f32::to_bits)
+}
+
+/// Distinct bricks, each stored once.
+#[derive(Default)]
+pub struct BrickPool {
+    bricks: Vec<Brick>,
+    index: HashMap<u64, Vec<u32>>,
+}
+
+impl BrickPool {
+    /// Returns the id of `brick`, adding it if it is new.
+    pub fn insert(&mut self, brick: &Brick) -> Result<u32, Error> {
+        let bits = brick_bits(brick);
+        let h = hash_words(&bits);
+        let ids = self.index.entry(h).or_default();
+        for &id in ids.iter() {
+            if self.bricks.get(id as usize).is_some_and(|b| brick_bits(b) == bits) {
+                return Ok(id);
+            }
+        }
+        let id = u32::try_from(self.bricks.len()).ok().filter(|&i| i < TILE_FLAG).ok_or(Error::Overflow { what: "bricks" })?;
+        self.bricks.push(*brick);
+        ids.push(id);
+        Ok(id)
+    }
+
+    pub fn len(&self) -> usize {
+        self.bricks.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.bricks.is_empty()
+    }
+
+    pub fn bricks(&self) -> &[Brick] {
+        &self.bricks
+    }
+
+    pub fn into_bricks(self) -> Vec<Brick> {
+        self.bricks
+    }
+}
+
+/// Hash-consing table for variable-length `u32` keys.
+#[derive(Default)]
+struct Interner {
+    ids: HashMap<Vec<u32>, u32>,
+    count: u32,
+}
+
+impl Interner {
+    /// Returns `(id, new)`.
+    fn intern(&mut self, key: Vec<u32>) -> (u32, bool) {
+        let next = self.count;
+        let id = *self.ids.entry(key).or_insert(next);
+        if id == next {
+            self.count += 1;
+            (id, true)
+        } else {
+            (id, false)
+        }
+    }
+}
+
+/// A distinct L3 node: active mask and brick id.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct L3 {
+    pub mask: [u64; 8],
+    pub brick: u32,
+}
+
+/// What one frame holds, in source index space.
+#[derive(Clone, Debug, Default)]
+pub struct FrameLeaves {
+    /// (leaf origin, L3 id), sorted by origin.
+    pub leaves: Vec<(Coord, u32)>,
+    /// Active tiles: origin, edge (8, 128 or 4096), value.
+    pub tiles: Vec<(Coord, u32, f32)>,
+    pub active_voxels: u64,
+}
+
+/// Per-frame figures reported by [`Builder::push`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameStats {
+    pub leaves: usize,
+    pub tiles: usize,
+    pub active_voxels: u64,
+    pub new_bricks: usize,
+}
+
+/// Streams frames into a brick pool and per-frame leaf lists.
+#[derive(Default)]
+pub struct Builder {
+    background: Option<f32>,
+    pool: BrickPool,
+    l3: Vec<L3>,
+    l3_index: HashMap<L3, u32>,
+    frames: Vec<FrameLeaves>,
+    bbox: Option<Bbox>,
+    leaves_in: u64,
+}
+
+impl Builder {
+    pub fn new() -> Builder {
+        Builder::default()
+    }
+
+    /// Adds one frame.  Only active values are kept: inactive voxels take the
+    /// background, inactive tiles are dropped, leaves with no active voxel vanish.
+    pub fn push(&mut self, grid: &Grid) -> Result<FrameStats, Error> {
+        let frame = self.frames.len();
+        match self.background {
+            None => self.background = Some(grid.background),
+            Some(bg) if bg.to_bits() != grid.background.to_bits() => {
+                return Err(Error::Background { frame, found: grid.background, expected: bg });
+            }
+            Some(_) => {}
+        }
+        let bg = grid.background;
+        let before = self.pool.len();
+        let mut fl = FrameLeaves::default();
+        for leaf in &grid.leaves {
+            let n = leaf.mask.count_on();
+            if n == 0 {
+                continue;
+            }
+            let mut brick = [bg; LEAF_VOXELS];
+            for i in leaf.mask.iter_on() {
+                brick[i] = leaf.values[i];
+            }
+            let brick = self.pool.insert(&brick)?;
+            let key = L3 { mask: leaf.mask.0, brick };
+            let next = u32::try_from(self.l3.len()).map_err(|_| Error::Overflow { what: "L3 nodes" })?;
+            let id = *self.l3_index.entry(key).or_insert(next);
+            if id == next {
+                self.l3.push(key);
+            }
+            fl.leaves.push((leaf.origin, id));
+            fl.active_voxels += u64::from(n);
+            let d = 7;
+            self.grow(Bbox::new(leaf.origin, leaf.origin.offset(d, d, d)));
+        }
+        for t in grid.tiles.iter().filter(|t| t.active) {
+            fl.tiles.push((t.origin, t.dim, t.value));
+            fl.active_voxels += t.voxel_count();
+            self.grow(t.bbox());
+        }
+        fl.leaves.sort_by_key(|l| l.0);
+        self.leaves_in += fl.leaves.len() as u64;
+        let stats = FrameStats { leaves: fl.leaves.len(), tiles: fl.tiles.len(), active_voxels: fl.active_voxels, new_bricks: self.pool.len() - before };
+        self.frames.push(fl);
+        Ok(stats)
+    }
+
+    /// Adds a frame with nothing in it (a missing grid with `--allow-missing`).
+    pub fn push_empty(&mut self) {
+        self.frames.push(FrameLeaves::default());
+    }
+
+    fn grow(&mut self, b: Bbox) {
+        self.bbox = Some(match self.bbox {
+            None => b,
+            Some(a) => a.union(b),
+        });
+    }
+
+    pub fn frame_count(&self) -> usize {
+        self.frames.len()
+    }
+
+    pub fn pool(&self) -> &BrickPool {
+        &self.pool
+    }
+
+    /// Ends the stream.  Fails when the frames do not fit one L1 node.
+    pub fn finish(self) -> Result<Built, Error> {
+        let offset = match self.bbox {
+            None => Coord::new(0, 0, 0),
+            Some(b) => {
+                let floor = |v: i32| v & !(L1_CHILD_DIM - 1);
+                let offset = Coord::new(floor(b.min.x), floor(b.min.y), floor(b.min.z));
+                for (axis, min, lo, hi) in [('x', b.min.x, offset.x, b.max.x), ('y', b.min.y, offset.y, b.max.y), ('z', b.min.z, offset.z, b.max.z)] {
+                    if i64::from(hi) - i64::from(lo) + 1 > L1_DIM {
+                        return Err(Error::TooWide { axis, extent: i64::from(hi) - i64::from(min) + 1, min: i64::from(min), max: i64::from(hi) });
+                    }
+                }
+                offset
+            }
+        };
+        Ok(Built { background: self.background.unwrap_or(0.0), pool: self.pool, l3: self.l3, frames: self.frames, bbox: self.bbox, offset, leaves_in: self.leaves_in })
+    }
+}
+
+/// Everything the builder kept, ready to be laid out.
+pub struct Built {
+    pub background: f32,
+    pub pool: BrickPool,
+    pub l3: Vec<L3>,
+    pub frames: Vec<FrameLeaves>,
+    /// Union of every frame's active bbox (leaf- and tile-granular), in source index space.
+    pub bbox: Option<Bbox>,
+    /// Source index of the L1 node's origin.
+    pub offset: Coord,
+    /// Leaves pushed over all frames (before deduplication).
+    pub leaves_in: u64,
+}
+
+/// The node arrays of a flip-book.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Nodes {
+    /// Source index-space position of the L1 nodes' origin.
+    pub offset: Coord,
+    /// L1 node of each frame.
+    pub frames: Vec<u32>,
+    pub l1: Vec<u32>,
+    pub l1_entries: Vec<u32>,
+    pub l2: Vec<u32>,
+    pub l2_entries: Vec<u32>,
+    pub l3: Vec<u32>,
+    /// Pairs of (value bits, flags).
+    pub tiles: Vec<u32>,
+}
+
+/// Slot of the (translated) coordinate `p` in a node of `2^log2` slots per axis of `2^child_log2` voxels.
+fn slot(p: Coord, log2: u32, child_log2: u32) -> usize {
+    let m = (1i32 << log2) - 1;
+    let (x, y, z) = (((p.x >> child_log2) & m) as usize, ((p.y >> child_log2) & m) as usize, ((p.z >> child_log2) & m) as usize);
+    (x << (2 * log2)) | (y << log2) | z
+}
+
+/// Occupancy mask, prefix counts and first entry of a node with `slots` slots.
+fn node_words(occupied: &[usize], slots: usize, first: u32) -> Vec<u32> {
+    let mw = slots / 32;
+    let mut words = vec![0u32; mw + mw / 2 + 1];
+    for &s in occupied {
+        words[s / 32] |= 1 << (s % 32);
+    }
+    let mut count = 0u32;
+    for k in 0..mw {
+        words[mw + k / 2] |= (count & 0xffff) << (16 * (k % 2));
+        count += words[k].count_ones();
+    }
+    words[mw + mw / 2] = first;
+    words
+}
+
+/// Interns a node given its occupied slots (ascending) and their entries.
+fn intern_node(table: &mut Interner, nodes: &mut Vec<u32>, entries: &mut Vec<u32>, slots: usize, occupied: &[(usize, u32)]) -> Result<u32, Error> {
+    // The key is the node's shape and content; `first` is assigned only when new.
+    let mut key: Vec<u32> = Vec::with_capacity(occupied.len() * 2);
+    for &(s, e) in occupied {
+        key.push(s as u32);
+        key.push(e);
+    }
+    let (id, new) = table.intern(key);
+    if new {
+        let first = u32::try_from(entries.len()).map_err(|_| Error::Overflow { what: "node entries" })?;
+        entries.extend(occupied.iter().map(|&(_, e)| e));
+        let slots_on: Vec<usize> = occupied.iter().map(|&(s, _)| s).collect();
+        nodes.extend(node_words(&slots_on, slots, first));
+    }
+    if id >= TILE_FLAG {
+        return Err(Error::Overflow { what: "nodes" });
+    }
+    Ok(id)
+}
+
+impl Built {
+    /// Lays out the node arrays; `brick_of(l3.brick)` gives each brick's final id.
+    pub fn nodes(&self, brick_of: impl Fn(u32) -> u32) -> Result<Nodes, Error> {
+        let mut n = Nodes { offset: self.offset, ..Nodes::default() };
+        // L3 nodes, re-interned after the brick remap (two L3s may now be equal).
+        let mut l3_table = Interner::default();
+        let mut l3_id = Vec::with_capacity(self.l3.len());
+        for l in &self.l3 {
+            let brick = brick_of(l.brick);
+            let mut words: Vec<u32> = l.mask.iter().flat_map(|w| [*w as u32, (*w >> 32) as u32]).collect();
+            words.push(brick);
+            let (id, new) = l3_table.intern(words.clone());
+            if new {
+                n.l3.extend(words);
+            }
+            l3_id.push(id);
+        }
+        let mut tile_table = Interner::default();
+        let mut tile = |value: f32, n: &mut Nodes| -> u32 {
+            let key = vec![value.to_bits(), 1];
+            let (id, new) = tile_table.intern(key.clone());
+            if new {
+                n.tiles.extend(key);
+            }
+            id | TILE_FLAG
+        };
+        let mut l2_table = Interner::default();
+        let mut l1_table = Interner::default();
+        let off = self.offset;
+        let local = |c: Coord| Coord::new(c.x.wrapping_sub(off.x), c.y.wrapping_sub(off.y), c.z.wrapping_sub(off.z));
+        for fl in &self.frames {
+            // l1 slot -> (l2 slot -> entry), or a tile for the whole slot.
+            let mut l2s: BTreeMap<usize, BTreeMap<usize, u32>> = BTreeMap::new();
+            let mut l1_tiles: BTreeMap<usize, u32> = BTreeMap::new();
+            for &(o, id) in &fl.leaves {
+                let p = local(o);
+                l2s.entry(slot(p, L1_LOG2, 7)).or_default().insert(slot(p, L2_LOG2, 3), l3_id[id as usize]);
+            }
+            for &(o, dim, value) in &fl.tiles {
+                let t = tile(value, &mut n);
+                match dim {
+                    8 => {
+                        let p = local(o);
+                        l2s.entry(slot(p, L1_LOG2, 7)).or_default().insert(slot(p, L2_LOG2, 3), t);
+                    }
+                    128 => {
+                        l1_tiles.insert(slot(local(o), L1_LOG2, 7), t);
+                    }
+                    _ => {
+                        // A root tile: every 128³ slot of the L1 region inside it.
+                        let span = i64::from(dim);
+                        for s in 0..L1_SLOTS {
+                            let (x, y, z) = ((s >> 10) as i64 * 128, ((s >> 5) & 31) as i64 * 128, (s & 31) as i64 * 128);
+                            let w = [i64::from(off.x) + x, i64::from(off.y) + y, i64::from(off.z) + z];
+                            let o = [i64::from(o.x), i64::from(o.y), i64::from(o.z)];
+                            if (0..3).all(|a| w[a] >= o[a] && w[a] < o[a] + span) {
+                                l1_tiles.insert(s, t);
+                            }
+                        }
+                    }
+                }
+            }
+            let mut l1_occ: Vec<(usize, u32)> = Vec::with_capacity(l2s.len() + l1_tiles.len());
+            for (s1, l2) in &l2s {
+                let occ: Vec<(usize, u32)> = l2.iter().map(|(&s, &e)| (s, e)).collect();
+                let id = intern_node(&mut l2_table, &mut n.l2, &mut n.l2_entries, L2_SLOTS, &occ)?;
+                l1_occ.push((*s1, id));
+            }
+            for (&s, &t) in &l1_tiles {
+                if !l2s.contains_key(&s) {
+                    l1_occ.push((s, t));
+                }
+            }
+            l1_occ.sort_unstable_by_key(|e| e.0);
+            let id = intern_node(&mut l1_table, &mut n.l1, &mut n.l1_entries, L1_SLOTS, &l1_occ)?;
+            n.frames.push(id);
+        }
+        Ok(n)
+    }
+}
+
+/// What a slot of a node holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Slot {
+    Empty,
+    Child(u32),
+    Tile { value: f32, active: bool },
+}
+
+impl Nodes {
+    fn lookup(node: &[u32], entries: &[u32], tiles: &[u32], mask_words: usize, s: usize) -> Slot {
+        let (w, b) = (s / 32, s % 32);
+        let Some(&word) = node.get(w) else { return Slot::Empty };
+        if word >> b & 1 == 0 {
+            return Slot::Empty;
+        }
+        let prefix = node.get(mask_words + w / 2).map_or(0, |p| (p >> (16 * (w % 2))) & 0xffff);
+        let first = node.get(mask_words + mask_words / 2).copied().unwrap_or(0);
+        let below = (word & ((1u32 << b) - 1)).count_ones();
+        let e = entries.get((first + prefix + below) as usize).copied().unwrap_or(0);
+        if e & TILE_FLAG != 0 {
+            let t = ((e & !TILE_FLAG) * 2) as usize;
+            Slot::Tile { value: f32::from_bits(tiles.get(t).copied().unwrap_or(0)), active: tiles.get(t + 1).is_some_and(|f| f & 1 == 1) }
+        } else {
+            Slot::Child(e)
+        }
+    }
+
+    /// Slot `s` of L1 node `id`.
+    pub fn l1_slot(&self, id: u32, s: usize) -> Slot {
+        let node = self.l1.get(id as usize * L1_WORDS..(id as usize + 1) * L1_WORDS).unwrap_or(&[]);
+        Nodes::lookup(node, &self.l1_entries, &self.tiles, L1_MASK_WORDS, s)
+    }
+
+    /// Slot `s` of L2 node `id`.
+    pub fn l2_slot(&self, id: u32, s: usize) -> Slot {
+        let node = self.l2.get(id as usize * L2_WORDS..(id as usize + 1) * L2_WORDS).unwrap_or(&[]);
+        Nodes::lookup(node, &self.l2_entries, &self.tiles, L2_MASK_WORDS, s)
+    }
+
+    /// Active mask and brick of L3 node `id`.
+    pub fn l3_node(&self, id: u32) -> Option<([u64; 8], u32)> {
+        let w = self.l3.get(id as usize * L3_WORDS..(id as usize + 1) * L3_WORDS)?;
+        let mut mask = [0u64; 8];
+        for (k, m) in mask.iter_mut().enumerate() {
+            *m = u64::from(w[2 * k]) | (u64::from(w[2 * k + 1]) << 32);
+        }
+        Some((mask, w[16]))
+    }
+
+    /// Every leaf (source origin, mask, brick) and active tile (source origin, edge, value) of a frame.
+    pub fn frame_contents(&self, frame: usize) -> (Vec<(Coord, [u64; 8], u32)>, Vec<(Coord, u32, f32)>) {
+        let mut leaves = Vec::new();
+        let mut tiles = Vec::new();
+        let Some(&l1) = self.frames.get(frame) else { return (leaves, tiles) };
+        let node = self.l1.get(l1 as usize * L1_WORDS..(l1 as usize + 1) * L1_WORDS).unwrap_or(&[]);
+        let o = self.offset;
+        for w in 0..L1_MASK_WORDS {
+            let mut bits = node.get(w).copied().unwrap_or(0);
+            while bits != 0 {
+                let s1 = w * 32 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let c1 = o.offset(((s1 >> 10) & 31) as i32 * 128, ((s1 >> 5) & 31) as i32 * 128, (s1 & 31) as i32 * 128);
+                match self.l1_slot(l1, s1) {
+                    Slot::Tile { value, active: true } => tiles.push((c1, 128, value)),
+                    Slot::Child(l2) => {
+                        for s2 in 0..L2_SLOTS {
+                            let c2 = c1.offset(((s2 >> 8) & 15) as i32 * 8, ((s2 >> 4) & 15) as i32 * 8, (s2 & 15) as i32 * 8);
+                            match self.l2_slot(l2, s2) {
+                                Slot::Tile { value, active: true } => tiles.push((c2, 8, value)),
+                                Slot::Child(l3) => {
+                                    if let Some((mask, brick)) = self.l3_node(l3) {
+                                        leaves.push((c2, mask, brick));
+                                    }
+                                }
+                                _ => {}
+                            }
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+        (leaves, tiles)
+    }
+
+    /// Bytes of each node array, for reports.
+    pub fn byte_sizes(&self) -> [(&'static str, usize); 7] {
+        [
+            ("frames", self.frames.len() * 4),
+            ("l1", self.l1.len() * 4),
+            ("l1_entries", self.l1_entries.len() * 4),
+            ("l2", self.l2.len() * 4),
+            ("l2_entries", self.l2_entries.len() * 4),
+            ("l3", self.l3.len() * 4),
+            ("tiles", self.tiles.len() * 4),
+        ]
+    }
+
+    pub fn l1_count(&self) -> usize {
+        self.l1.len() / L1_WORDS
+    }
+    pub fn l2_count(&self) -> usize {
+        self.l2.len() / L2_WORDS
+    }
+    pub fn l3_count(&self) -> usize {
+        self.l3.len() / L3_WORDS
+    }
+}
+
+/// Bytes the thesis's layout would take for the same frames: every L1
+/// allocates all 32768 L2 children (4100 B per L1, 516 B per L2), and every
+/// leaf of every frame is its own 68-byte L3.
+pub fn thesis_tree_bytes(frames: usize, leaves: u64) -> u64 {
+    frames as u64 * (4100 + 32768 * 516) + leaves * 68
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,143 @@
+use super::*;
+use vdbcook_grid::{GridClass, Leaf, LeafMask, Tile, Transform};
+
+fn grid(leaves: Vec<Leaf>, tiles: Vec<Tile>) -> Grid {
+    Grid { name: "density".into(), class: GridClass::FogVolume, background: 0.0, transform: Transform::identity(), leaves, tiles }
+}
+
+fn leaf(origin: Coord, seed: u32, active: usize) -> Leaf {
+    let mut mask = LeafMask::default();
+    let mut values = [0.0f32; 512];
+    for i in 0..active {
+        mask.set(i, true);
+        values[i] = (seed as f32 + i as f32 * 0.001).sin().abs();
+    }
+    // An inactive value that must not leak into the brick.
+    values[511] = 9.0;
+    Leaf { origin, mask, values }
+}
+
+#[test]
+fn pool_stores_identical_bricks_once() {
+    let mut p = BrickPool::default();
+    let a = [0.5f32; 512];
+    let mut b = a;
+    b[3] = -0.0;
+    let mut c = a;
+    c[3] = 0.0;
+    assert_eq!(p.insert(&a).unwrap(), 0);
+    assert_eq!(p.insert(&b).unwrap(), 1);
+    assert_eq!(p.insert(&c).unwrap(), 2);
+    assert_eq!(p.insert(&a).unwrap(), 0);
+    assert_eq!(p.len(), 3);
+}
+
+#[test]
+fn unchanging_frames_share_every_node() {
+    let g = grid(vec![leaf(Coord::new(-8, 0, 16), 1, 300), leaf(Coord::new(200, 8, 0), 2, 512)], vec![Tile { origin: Coord::new(128, 128, 0), dim: 128, value: 0.25, active: true }]);
+    let mut b = Builder::new();
+    for _ in 0..100 {
+        b.push(&g).unwrap();
+    }
+    let built = b.finish().unwrap();
+    let n = built.nodes(|id| id).unwrap();
+    assert_eq!(n.frames, vec![0; 100]);
+    assert_eq!((n.l1_count(), n.l2_count(), n.l3_count()), (1, 2, 2));
+    assert_eq!(built.pool.len(), 2);
+    assert_eq!(built.leaves_in, 200);
+}
+
+#[test]
+fn nodes_give_back_every_leaf_and_tile() {
+    let leaves = vec![leaf(Coord::new(-136, 5 * 8, 64), 1, 512), leaf(Coord::new(0, 0, 0), 2, 17), leaf(Coord::new(1000, -304, 8), 3, 64)];
+    let tiles = vec![Tile { origin: Coord::new(256, 0, 0), dim: 128, value: 0.5, active: true }, Tile { origin: Coord::new(8, 8, 8), dim: 8, value: 0.75, active: true }, Tile { origin: Coord::new(16, 8, 8), dim: 8, value: 2.0, active: false }];
+    let g = grid(leaves.clone(), tiles);
+    let mut b = Builder::new();
+    b.push(&g).unwrap();
+    b.push_empty();
+    let built = b.finish().unwrap();
+    assert_eq!(built.offset, Coord::new(-256, -384, 0));
+    let n = built.nodes(|id| id).unwrap();
+    let (got, got_tiles) = n.frame_contents(0);
+    let mut want: Vec<(Coord, [u64; 8])> = leaves.iter().map(|l| (l.origin, l.mask.0)).collect();
+    want.sort_by_key(|w| w.0);
+    let mut have: Vec<(Coord, [u64; 8])> = got.iter().map(|l| (l.0, l.1)).collect();
+    have.sort_by_key(|w| w.0);
+    assert_eq!(have, want);
+    for (o, _, brick) in &got {
+        let src = leaves.iter().find(|l| l.origin == *o).unwrap();
+        let b = &built.pool.bricks()[*brick as usize];
+        for i in 0..512 {
+            let want = if src.mask.is_on(i) { src.values[i] } else { 0.0 };
+            assert_eq!(b[i], want);
+        }
+    }
+    let mut t = got_tiles.clone();
+    t.sort_by_key(|t| t.0);
+    assert_eq!(t, vec![(Coord::new(8, 8, 8), 8, 0.75), (Coord::new(256, 0, 0), 128, 0.5)]);
+    assert_eq!(n.frame_contents(1), (vec![], vec![]));
+}
+
+#[test]
+fn prefix_counts_make_lookup_match_a_scan() {
+    let mut leaves = Vec::new();
+    for i in 0..300 {
+        leaves.push(leaf(Coord::new((i * 37 % 40) * 8, (i * 11 % 30) * 8, (i % 16) * 8), i as u32, 100 + i as usize % 400));
+    }
+    leaves.sort_by_key(|l| l.origin);
+    leaves.dedup_by_key(|l| l.origin);
+    let mut b = Builder::new();
+    b.push(&grid(leaves.clone(), vec![])).unwrap();
+    let built = b.finish().unwrap();
+    let n = built.nodes(|id| id).unwrap();
+    let (got, _) = n.frame_contents(0);
+    assert_eq!(got.len(), leaves.len());
+}
+
+#[test]
+fn root_tiles_fill_the_l1_slots_they_cover() {
+    let g = grid(vec![leaf(Coord::new(0, 0, 0), 1, 5)], vec![Tile { origin: Coord::new(0, 0, 0), dim: 4096, value: 1.0, active: true }]);
+    let mut b = Builder::new();
+    b.push(&g).unwrap();
+    let n = b.finish().unwrap().nodes(|id| id).unwrap();
+    let (leaves, tiles) = n.frame_contents(0);
+    assert_eq!(leaves.len(), 1);
+    // Slot 0 holds the leaf's L2 node; the other 32767 slots are the tile.
+    assert_eq!(tiles.len(), 32767);
+    assert!(matches!(n.l1_slot(n.frames[0], 0), Slot::Child(_)));
+    assert_eq!(n.l1_slot(n.frames[0], 5), Slot::Tile { value: 1.0, active: true });
+}
+
+#[test]
+fn too_wide_sequences_are_refused() {
+    let mut b = Builder::new();
+    b.push(&grid(vec![leaf(Coord::new(0, 0, 0), 1, 5)], vec![])).unwrap();
+    b.push(&grid(vec![leaf(Coord::new(0, 4096, 0), 1, 5)], vec![])).unwrap();
+    let e = b.finish().err().unwrap().to_string();
+    assert!(e.contains("4104 voxels along y"), "{e}");
+}
+
+#[test]
+fn a_changed_background_is_an_error() {
+    let mut b = Builder::new();
+    b.push(&grid(vec![], vec![])).unwrap();
+    let mut g = grid(vec![], vec![]);
+    g.background = 1.0;
+    assert!(b.push(&g).is_err());
+}
+
+#[test]
+fn brick_remap_merges_l3_nodes() {
+    let g = grid(vec![leaf(Coord::new(0, 0, 0), 1, 512), leaf(Coord::new(8, 0, 0), 2, 512)], vec![]);
+    let mut b = Builder::new();
+    b.push(&g).unwrap();
+    let built = b.finish().unwrap();
+    assert_eq!(built.nodes(|id| id).unwrap().l3_count(), 2);
+    assert_eq!(built.nodes(|_| 0).unwrap().l3_count(), 1);
+}
+
+#[test]
+fn thesis_layout_size() {
+    assert_eq!(thesis_tree_bytes(1, 0), 4100 + 32768 * 516);
+    assert_eq!(thesis_tree_bytes(2, 10), 2 * (4100 + 32768 * 516) + 680);
+}

@@ -1,0 +1,456 @@
+//! The `.vpak` asset: everything an engine needs to sample a cooked volume
+//! sequence, laid out to be memory-mapped and uploaded without parsing.
+//! Specified in `docs/format.md`.
+//!
+//! ```text
+//! offset  size   field
+//! 0       8      magic "VPAK\r\n\x1a\n"
+//! 8       4      format version (1)
+//! 12      4      flags (0; reserved)
+//! 16      4      section count n
+//! 20      4      reserved (0)
+//! 24      8      file size in bytes
+//! 32      8      header checksum: XXH3-64 of bytes [0, 32) followed by the section table
+//! 40      24     reserved (0)
+//! 64      32·n   section table, per section:
+//!                  u32 kind, u32 index, u64 offset, u64 size, u64 XXH3-64 of the section's bytes
+//! ...            sections, each at an offset that is a multiple of 256, zero padding between
+//! ```
+//! All integers are little-endian.  This crate has no CLI or GPU dependency.
+
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
+pub const VERSION: u32 = 1;
+pub const HEADER_LEN: usize = 64;
+pub const ENTRY_LEN: usize = 32;
+/// Every section starts at a multiple of this (GPU upload and mmap friendly).
+pub const ALIGN: usize = 256;
+/// Refuse section tables larger than this (a sanity bound, not a format limit).
+const MAX_SECTIONS: u32 = 1 << 16;
+
+/// Section kinds.
+pub mod kind {
+    /// bincode-2 (standard config) serialisation of [`super::Metadata`].
+    pub const METADATA: u32 = 1;
+    /// u32 per frame: its L1 node.
+    pub const FRAMES: u32 = 2;
+    pub const L1_NODES: u32 = 3;
+    pub const L1_ENTRIES: u32 = 4;
+    pub const L2_NODES: u32 = 5;
+    pub const L2_ENTRIES: u32 = 6;
+    pub const L3_NODES: u32 = 7;
+    /// (f32 value, u32 flags) per tile.
+    pub const TILES: u32 = 8;
+    /// (f32 min, f32 max) per brick.
+    pub const BRICK_RANGES: u32 = 9;
+    /// One brick atlas (a 3D texture); `index` numbers the atlases.
+    pub const ATLAS: u32 = 10;
+
+    pub fn name(k: u32) -> &'static str {
+        match k {
+            METADATA => "metadata",
+            FRAMES => "frames",
+            L1_NODES => "l1 nodes",
+            L1_ENTRIES => "l1 entries",
+            L2_NODES => "l2 nodes",
+            L2_ENTRIES => "l2 entries",
+            L3_NODES => "l3 nodes",
+            TILES => "tiles",
+            BRICK_RANGES => "brick ranges",
+            ATLAS => "brick atlas",
+            _ => "unknown",
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+    #[error("not a .vpak file (bad magic)")]
+    Magic,
+    #[error("unsupported .vpak version {0} (this build reads version {VERSION})")]
+    Version(u32),
+    #[error("truncated: the header says {expected} bytes, the file has {actual}")]
+    Size { expected: u64, actual: u64 },
+    #[error("header checksum mismatch (stored {stored:#018x}, computed {computed:#018x})")]
+    HeaderChecksum { stored: u64, computed: u64 },
+    #[error("implausible section count {0}")]
+    SectionCount(u32),
+    #[error("section {kind} #{index} ({name}) at {offset}+{size} is outside the file or misaligned", name = kind::name(*kind))]
+    SectionBounds { kind: u32, index: u32, offset: u64, size: u64 },
+    #[error("section {name} #{index} checksum mismatch (stored {stored:#018x}, computed {computed:#018x})", name = kind::name(*kind))]
+    SectionChecksum { kind: u32, index: u32, stored: u64, computed: u64 },
+    #[error("missing section {name} #{index}", name = kind::name(*kind))]
+    Missing { kind: u32, index: u32 },
+    #[error("section {name} is {size} bytes, not a whole number of {unit}-byte items", name = kind::name(*kind))]
+    Shape { kind: u32, size: usize, unit: usize },
+    #[error("metadata: {0}")]
+    Metadata(String),
+    #[error("{0} already exists (use --force to replace it)")]
+    Exists(String),
+}
+
+/// A brick atlas, as recorded in the metadata.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AtlasInfo {
+    /// Bricks along x, y, z.
+    pub bricks: [u32; 3],
+    /// Texture size in texels.
+    pub texels: [u32; 3],
+    pub first_brick: u32,
+    pub count: u32,
+}
+
+/// A source file and its content hash.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SourceFile {
+    pub path: String,
+    pub bytes: u64,
+    /// XXH3-128 of the file's bytes, hex.
+    pub xxh3_128: String,
+}
+
+/// Per-frame figures.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameInfo {
+    /// Index into `sources`, or `None` for an empty (missing) frame.
+    pub source: Option<u32>,
+    pub active_voxels: u64,
+    pub leaves: u32,
+    pub tiles: u32,
+}
+
+/// Everything about the asset that is not a GPU array.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Metadata {
+    /// "vdbcook x.y.z".
+    pub tool: String,
+    /// Voxel format name: "f32", "f16", "unorm8", ...
+    pub format: String,
+    pub frame_count: u32,
+    pub grid_name: String,
+    pub grid_class: String,
+    /// OpenVDB map type of the source transform.
+    pub map_type: String,
+    /// Index-to-world matrix of the source grid (row-vector convention: world = [i j k 1] · M).
+    pub transform: [[f64; 4]; 4],
+    /// Source index of the L1 node origin: source index = asset index + offset.
+    pub index_offset: [i32; 3],
+    /// Union of every frame's active bbox in source index space (inclusive), if any.
+    pub index_bbox: Option<([i32; 3], [i32; 3])>,
+    pub background: f32,
+    /// Smallest and largest stored value over all bricks and tiles.
+    pub value_range: [f32; 2],
+    pub brick_count: u32,
+    pub atlases: Vec<AtlasInfo>,
+    /// Every cook setting, as (name, value) text pairs.
+    pub settings: Vec<(String, String)>,
+    pub sources: Vec<SourceFile>,
+    pub frames: Vec<FrameInfo>,
+}
+
+impl Metadata {
+    pub fn to_bytes(&self) -> Result<Vec<u8>, Error> {
+        bincode::serde::encode_to_vec(self, bincode::config::standard()).map_err(|e| Error::Metadata(e.to_string()))
+    }
+    pub fn from_bytes(b: &[u8]) -> Result<Metadata, Error> {
+        // The limit keeps a hostile length prefix from allocating more than the section holds.
+        let cfg = bincode::config::standard().with_limit::<{ 1 << 30 }>();
+        let (m, _) = bincode::serde::decode_from_slice(b, cfg).map_err(|e| Error::Metadata(e.to_string()))?;
+        Ok(m)
+    }
+}
+
+/// A section to write.
+pub struct Section {
+    pub kind: u32,
+    pub index: u32,
+    pub data: Vec<u8>,
+}
+
+fn checksum(b: &[u8]) -> u64 {
+    xxhash_rust::xxh3::xxh3_64(b)
+}
+
+fn align(n: usize) -> usize {
+    n.div_ceil(ALIGN) * ALIGN
+}
+
+/// Assembles a complete file.
+pub fn assemble(sections: &[Section]) -> Vec<u8> {
+    let table_end = HEADER_LEN + ENTRY_LEN * sections.len();
+    let mut offsets = Vec::with_capacity(sections.len());
+    let mut pos = align(table_end);
+    for s in sections {
+        offsets.push(pos);
+        pos = align(pos + s.data.len());
+    }
+    let total = offsets.last().map_or(align(table_end), |&o| o + sections.last().map_or(0, |s| s.data.len()));
+    let mut out = vec![0u8; total];
+    out[..8].copy_from_slice(&MAGIC);
+    out[8..12].copy_from_slice(&VERSION.to_le_bytes());
+    out[16..20].copy_from_slice(&(sections.len() as u32).to_le_bytes());
+    out[24..32].copy_from_slice(&(total as u64).to_le_bytes());
+    for (i, (s, &off)) in sections.iter().zip(&offsets).enumerate() {
+        let e = HEADER_LEN + i * ENTRY_LEN;
+        out[e..e + 4].copy_from_slice(&s.kind.to_le_bytes());
+        out[e + 4..e + 8].copy_from_slice(&s.index.to_le_bytes());
+        out[e + 8..e + 16].copy_from_slice(&(off as u64).to_le_bytes());
+        out[e + 16..e + 24].copy_from_slice(&(s.data.len() as u64).to_le_bytes());
+        out[e + 24..e + 32].copy_from_slice(&checksum(&s.data).to_le_bytes());
+        out[off..off + s.data.len()].copy_from_slice(&s.data);
+    }
+    let h = header_checksum(&out[..32], &out[HEADER_LEN..table_end]);
+    out[32..40].copy_from_slice(&h.to_le_bytes());
+    out
+}
+
+fn header_checksum(head: &[u8], table: &[u8]) -> u64 {
+    let mut h = xxhash_rust::xxh3::Xxh3::new();
+    h.update(head);
+    h.update(table);
+    h.digest()
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file beside it, then a
+/// rename.  Without `overwrite`, an existing `path` is never replaced.
+pub fn write_atomic(path: &Path, bytes: &[u8], overwrite: bool) -> Result<(), Error> {
+    use std::io::Write;
+    if !overwrite && path.exists() {
+        return Err(Error::Exists(path.display().to_string()));
+    }
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let result = (|| -> Result<(), Error> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        if overwrite {
+            std::fs::rename(&tmp, path)?;
+        } else {
+            // A hard link fails if `path` appeared meanwhile: no clobbering, even racing.
+            std::fs::hard_link(&tmp, path).map_err(|e| if e.kind() == std::io::ErrorKind::AlreadyExists { Error::Exists(path.display().to_string()) } else { Error::Io(e) })?;
+            std::fs::remove_file(&tmp)?;
+        }
+        Ok(())
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// One entry of the section table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SectionEntry {
+    pub kind: u32,
+    pub index: u32,
+    pub offset: u64,
+    pub size: u64,
+    pub checksum: u64,
+}
+
+enum Bytes {
+    Mapped(memmap2::Mmap),
+    /// Owned bytes in 8-byte-aligned storage, `len` of them.
+    Owned(Vec<u64>, usize),
+}
+
+/// An opened asset: header checked, sections located (and, with
+/// [`Asset::verify`], checksummed).  Slices point into the file's mapping.
+pub struct Asset {
+    bytes: Bytes,
+    pub sections: Vec<SectionEntry>,
+}
+
+impl Asset {
+    /// Maps a file and checks its header, section table and every section checksum.
+    pub fn open(path: &Path) -> Result<Asset, Error> {
+        let a = Asset::open_unverified(path)?;
+        a.verify()?;
+        Ok(a)
+    }
+
+    /// Maps a file and checks its header and section table only.
+    pub fn open_unverified(path: &Path) -> Result<Asset, Error> {
+        let f = std::fs::File::open(path)?;
+        if f.metadata()?.len() < HEADER_LEN as u64 {
+            return Err(Error::Magic);
+        }
+        // SAFETY: read-only mapping; the asset is assumed not to change while open.
+        let map = unsafe { memmap2::Mmap::map(&f)? };
+        Asset::parse(Bytes::Mapped(map))
+    }
+
+    /// Parses owned bytes (checks the header; call [`Asset::verify`] for checksums).
+    pub fn from_bytes(b: &[u8]) -> Result<Asset, Error> {
+        let mut words = vec![0u64; b.len().div_ceil(8)];
+        bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..b.len()].copy_from_slice(b);
+        Asset::parse(Bytes::Owned(words, b.len()))
+    }
+
+    pub fn bytes(&self) -> &[u8] {
+        match &self.bytes {
+            Bytes::Mapped(m) => m,
+            Bytes::Owned(w, len) => &bytemuck::cast_slice(w)[..*len],
+        }
+    }
+
+    fn parse(bytes: Bytes) -> Result<Asset, Error> {
+        let mut a = Asset { bytes, sections: Vec::new() };
+        let b = a.bytes();
+        if b.len() < HEADER_LEN || b[..8] != MAGIC {
+            return Err(Error::Magic);
+        }
+        let u32_at = |o: usize| u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
+        let u64_at = |o: usize| u64::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3], b[o + 4], b[o + 5], b[o + 6], b[o + 7]]);
+        let version = u32_at(8);
+        if version != VERSION {
+            return Err(Error::Version(version));
+        }
+        let size = u64_at(24);
+        if size != b.len() as u64 {
+            return Err(Error::Size { expected: size, actual: b.len() as u64 });
+        }
+        let n = u32_at(16);
+        let table_end = (n as usize).checked_mul(ENTRY_LEN).and_then(|t| t.checked_add(HEADER_LEN)).filter(|&e| n <= MAX_SECTIONS && e <= b.len()).ok_or(Error::SectionCount(n))?;
+        let computed = header_checksum(&b[..32], &b[HEADER_LEN..table_end]);
+        let stored = u64_at(32);
+        if stored != computed {
+            return Err(Error::HeaderChecksum { stored, computed });
+        }
+        let mut sections = Vec::with_capacity(n as usize);
+        for i in 0..n as usize {
+            let e = HEADER_LEN + i * ENTRY_LEN;
+            let s = SectionEntry { kind: u32_at(e), index: u32_at(e + 4), offset: u64_at(e + 8), size: u64_at(e + 16), checksum: u64_at(e + 24) };
+            let end = s.offset.checked_add(s.size);
+            if s.offset % ALIGN as u64 != 0 || s.offset < table_end as u64 || end.is_none_or(|e| e > b.len() as u64) {
+                return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
+            }
+            sections.push(s);
+        }
+        a.sections = sections;
+        Ok(a)
+    }
+
+    /// Checks every section's checksum; the first mismatch is the error.
+    pub fn verify(&self) -> Result<(), Error> {
+        for s in &self.sections {
+            let computed = checksum(self.raw(s));
+            if computed != s.checksum {
+                return Err(Error::SectionChecksum { kind: s.kind, index: s.index, stored: s.checksum, computed });
+            }
+        }
+        Ok(())
+    }
+
+    fn raw(&self, s: &SectionEntry) -> &[u8] {
+        &self.bytes()[s.offset as usize..(s.offset + s.size) as usize]
+    }
+
+    /// Bytes of section (`kind`, `index`).
+    pub fn section(&self, kind: u32, index: u32) -> Result<&[u8], Error> {
+        self.sections.iter().find(|s| s.kind == kind && s.index == index).map(|s| self.raw(s)).ok_or(Error::Missing { kind, index })
+    }
+
+    /// Section (`kind`, 0) as `u32`s, without copying.
+    pub fn u32s(&self, kind: u32) -> Result<&[u32], Error> {
+        let b = self.section(kind, 0)?;
+        bytemuck::try_cast_slice(b).map_err(|_| Error::Shape { kind, size: b.len(), unit: 4 })
+    }
+
+    /// Section (`kind`, 0) as `f32`s, without copying.
+    pub fn f32s(&self, kind: u32) -> Result<&[f32], Error> {
+        let b = self.section(kind, 0)?;
+        bytemuck::try_cast_slice(b).map_err(|_| Error::Shape { kind, size: b.len(), unit: 4 })
+    }
+
+    pub fn metadata(&self) -> Result<Metadata, Error> {
+        Metadata::from_bytes(self.section(kind::METADATA, 0)?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Vec<u8> {
+        let meta = Metadata {
+            tool: "t".into(),
+            format: "f32".into(),
+            frame_count: 1,
+            grid_name: "density".into(),
+            grid_class: "fog volume".into(),
+            map_type: "UniformScaleMap".into(),
+            transform: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+            index_offset: [0, -128, 0],
+            index_bbox: None,
+            background: 0.0,
+            value_range: [0.0, 1.0],
+            brick_count: 0,
+            atlases: vec![],
+            settings: vec![("format".into(), "f32".into())],
+            sources: vec![],
+            frames: vec![],
+        };
+        assemble(&[
+            Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap() },
+            Section { kind: kind::FRAMES, index: 0, data: [7u32, 9].iter().flat_map(|v| v.to_le_bytes()).collect() },
+        ])
+    }
+
+    #[test]
+    fn round_trip_and_typed_slices() {
+        let b = sample();
+        let a = Asset::from_bytes(&b).unwrap();
+        a.verify().unwrap();
+        assert_eq!(a.u32s(kind::FRAMES).unwrap(), &[7, 9]);
+        assert_eq!(a.metadata().unwrap().index_offset, [0, -128, 0]);
+        assert!(a.sections.iter().all(|s| s.offset % 256 == 0));
+        assert!(matches!(a.u32s(kind::L1_NODES), Err(Error::Missing { .. })));
+    }
+
+    #[test]
+    fn every_flipped_byte_is_caught() {
+        let b = sample();
+        for i in 0..b.len() {
+            let mut c = b.clone();
+            c[i] ^= 0x10;
+            let r = Asset::from_bytes(&c).and_then(|a| a.verify().map(|_| a));
+            // Padding bytes are not covered by any checksum; everything else is.
+            let covered = i < 40 || (HEADER_LEN..HEADER_LEN + 2 * ENTRY_LEN).contains(&i) || {
+                let a = Asset::from_bytes(&b).unwrap();
+                a.sections.iter().any(|s| (s.offset as usize..(s.offset + s.size) as usize).contains(&i))
+            };
+            assert_eq!(r.is_err(), covered, "byte {i}");
+        }
+    }
+
+    #[test]
+    fn truncation_is_an_error() {
+        let b = sample();
+        for n in 0..b.len() {
+            assert!(Asset::from_bytes(&b[..n]).is_err());
+        }
+    }
+
+    #[test]
+    fn atomic_write_never_clobbers() {
+        let dir = std::env::temp_dir().join(format!("vpak-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("a.vpak");
+        write_atomic(&p, b"one", false).unwrap();
+        assert!(matches!(write_atomic(&p, b"two", false), Err(Error::Exists(_))));
+        assert_eq!(std::fs::read(&p).unwrap(), b"one");
+        write_atomic(&p, b"three", true).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"three");
+        let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).collect();
+        assert!(leftovers.is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
