@@ -164,10 +164,10 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     if cooker.frame_count() == 0 {
         return Err(anyhow!("no frames to cook"));
     }
-    let (bytes, mut report) = cooker.finish(&bars).map_err(|e| anyhow!(e))?;
+    let (sections, mut report) = cooker.finish(&bars).map_err(|e| anyhow!(e))?;
     report.timings.insert(0, ("read".into(), read_secs));
     let t0 = Instant::now();
-    vdbcook_vpak::write_atomic(&args.output, &bytes, args.force).with_context(|| args.output.display().to_string())?;
+    vdbcook_vpak::write_file(&args.output, &sections, args.force).with_context(|| args.output.display().to_string())?;
     report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
     report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
     if !quiet {

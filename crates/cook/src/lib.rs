@@ -166,10 +166,11 @@ impl Cooker {
     }
 
     /// Encodes, lays out and serialises the asset.
-    pub fn finish(self, progress: &dyn Progress) -> Result<(Vec<u8>, CookReport), Error> {
+    /// Returns the asset's sections (write them with `vdbcook_vpak::write_file`) and the report.
+    pub fn finish(self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
         let mut timings = vec![("build".to_string(), self.build_secs)];
         let format = self.opts.format;
-        let built = self.builder.finish()?;
+        let mut built = self.builder.finish()?;
 
         // Encode every distinct brick, then store identical encodings once.
         let t0 = Instant::now();
@@ -203,6 +204,10 @@ impl Cooker {
         }
         timings.push(("error".into(), t0.elapsed().as_secs_f64()));
 
+        // The source-precision bricks are not needed any more.
+        let unique_bricks = built.pool.len();
+        drop(std::mem::take(&mut built.pool));
+
         let t0 = Instant::now();
         let layouts = vdbcook_encode::plan_atlases(stored.len() as u32, self.opts.max_texture_dim);
         let mut sections = node_sections(&nodes);
@@ -210,6 +215,8 @@ impl Cooker {
         for (i, l) in layouts.iter().enumerate() {
             sections.push(Section { kind: kind::ATLAS, index: i as u32, data: vdbcook_encode::pack_atlas(l, &stored, format) });
         }
+        let stored_bricks = stored.len();
+        drop(stored);
         let (grid_name, grid_class, transform) = self.first.clone().unwrap_or_else(|| (String::new(), "unknown".into(), Transform::identity()));
         let range = if self.range[0] <= self.range[1] { self.range } else { [built.background; 2] };
         let meta = Metadata {
@@ -224,7 +231,7 @@ impl Cooker {
             index_bbox: built.bbox.map(|b| (b.min.to_array(), b.max.to_array())),
             background: built.background,
             value_range: range,
-            brick_count: stored.len() as u32,
+            brick_count: stored_bricks as u32,
             atlases: layouts.iter().map(|l| AtlasInfo { bricks: l.bricks, texels: l.texels(), first_brick: l.first_brick, count: l.count }).collect(),
             settings: self.opts.settings.clone(),
             sources: self.sources.clone(),
@@ -235,8 +242,8 @@ impl Cooker {
             .iter()
             .map(|s| (if s.kind == kind::ATLAS { format!("{} {}", kind::name(s.kind), s.index) } else { kind::name(s.kind).to_string() }, s.data.len() as u64))
             .collect();
-        let bytes = vdbcook_vpak::assemble(&sections);
-        timings.push(("serialise".into(), t0.elapsed().as_secs_f64()));
+        let file_bytes = vdbcook_vpak::file_len(&sections);
+        timings.push(("layout".into(), t0.elapsed().as_secs_f64()));
 
         let tree_bytes: u64 = nodes.byte_sizes().iter().map(|(_, b)| *b as u64).sum();
         let active: u64 = self.frames.iter().map(|f| f.active_voxels).sum();
@@ -247,18 +254,18 @@ impl Cooker {
             empty_frames: self.frames.iter().filter(|f| f.leaves == 0 && f.tiles == 0).count(),
             active_voxels: active,
             bricks: built.leaves_in,
-            unique_bricks: built.pool.len(),
-            stored_bricks: stored.len(),
+            unique_bricks,
+            stored_bricks,
             l1_nodes: nodes.l1_count(),
             l2_nodes: nodes.l2_count(),
             l3_nodes: nodes.l3_count(),
             tiles: nodes.tiles.len() / 2,
             atlases: layouts.len(),
             sections: report_sections,
-            file_bytes: bytes.len() as u64,
+            file_bytes,
             tree_bytes,
             thesis_tree_bytes: vdbcook_flipbook::thesis_tree_bytes(self.frames.len(), built.leaves_in),
-            bits_per_active_voxel: if active > 0 { bytes.len() as f64 * 8.0 / active as f64 } else { 0.0 },
+            bits_per_active_voxel: if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 },
             value_range: range,
             voxel_rmse: total.rmse(),
             voxel_psnr: total.psnr(if peak > 0.0 { peak } else { 1.0 }),
@@ -266,7 +273,7 @@ impl Cooker {
             frame_errors: frame_err.iter().map(|e| (e.rmse(), e.max_abs)).collect(),
             timings,
         };
-        Ok((bytes, report))
+        Ok((sections, report))
     }
 }
 

@@ -24,7 +24,10 @@ fn cook(format: Format, frames: &[Grid], max_dim: u32) -> (Vec<u8>, CookReport) 
     for f in frames {
         c.push(f, None).unwrap();
     }
-    c.finish(&NoProgress).unwrap()
+    let (sections, report) = c.finish(&NoProgress).unwrap();
+    let bytes = vdbcook_vpak::assemble(&sections);
+    assert_eq!(bytes.len() as u64, report.file_bytes);
+    (bytes, report)
 }
 
 #[test]

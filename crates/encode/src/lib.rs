@@ -15,6 +15,7 @@
 //! Every format records each brick's [min, max] (the brick range): unorm8
 //! needs it to decode, and a renderer can use it to skip empty bricks.
 
+use half::slice::HalfFloatSliceExt;
 use rayon::prelude::*;
 
 /// Voxels per brick.
@@ -67,18 +68,31 @@ fn range_of(values: &[f32; BRICK_VOXELS]) -> [f32; 2] {
 
 pub fn encode_brick(format: Format, values: &[f32; BRICK_VOXELS]) -> EncodedBrick {
     let range = range_of(values);
-    let data = match format {
-        Format::F32 => values.iter().flat_map(|v| v.to_le_bytes()).collect(),
-        Format::F16 => values.iter().flat_map(|&v| half::f16::from_f32(v).to_bits().to_le_bytes()).collect(),
+    let mut data = Vec::with_capacity(BRICK_VOXELS * format.bytes_per_voxel());
+    match format {
+        Format::F32 => {
+            for v in values {
+                data.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        Format::F16 => {
+            let mut h = [half::f16::ZERO; BRICK_VOXELS];
+            h.convert_from_f32_slice(values);
+            for v in h {
+                data.extend_from_slice(&v.to_bits().to_le_bytes());
+            }
+        }
         Format::Unorm8 => {
             let [lo, hi] = range;
             let span = hi - lo;
-            values
-                .iter()
-                .map(|&v| if span > 0.0 && span.is_finite() { (((v - lo) / span) * 255.0).round().clamp(0.0, 255.0) as u8 } else { 0 })
-                .collect()
+            if span > 0.0 && span.is_finite() {
+                let scale = 255.0 / span;
+                data.extend(values.iter().map(|&v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8));
+            } else {
+                data.resize(BRICK_VOXELS, 0);
+            }
         }
-    };
+    }
     EncodedBrick { range, data }
 }
 
@@ -163,25 +177,41 @@ pub fn plan_atlases(count: u32, max_dim: u32) -> Vec<AtlasLayout> {
     out
 }
 
-/// Lays the bricks of one atlas out as texture bytes.
+/// Lays the bricks of one atlas out as texture bytes (in parallel over layers of bricks).
 pub fn pack_atlas(layout: &AtlasLayout, bricks: &[EncodedBrick], format: Format) -> Vec<u8> {
-    let bpv = format.bytes_per_voxel();
-    let mut out = vec![0u8; layout.byte_len(bpv)];
-    for (i, b) in bricks.iter().enumerate().skip(layout.first_brick as usize).take(layout.count as usize) {
-        let [px, py, pz] = layout.position(i as u32 - layout.first_brick);
-        for x in 0..8u32 {
-            for y in 0..8u32 {
-                // z runs along a brick row in the source, along slices in the texture.
-                for z in 0..8u32 {
-                    let src = ((x * 64 + y * 8 + z) as usize) * bpv;
-                    let dst = layout.texel_offset(px * 8 + x, py * 8 + y, pz * 8 + z, bpv);
-                    if let (Some(d), Some(s)) = (out.get_mut(dst..dst + bpv), b.data.get(src..src + bpv)) {
-                        d.copy_from_slice(s);
-                    }
+    match format.bytes_per_voxel() {
+        1 => pack_atlas_n::<1>(layout, bricks),
+        2 => pack_atlas_n::<2>(layout, bricks),
+        _ => pack_atlas_n::<4>(layout, bricks),
+    }
+}
+
+/// [`pack_atlas`] for `N` bytes per voxel (a constant, so each copy is one move).
+fn pack_atlas_n<const N: usize>(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
+    let mut out = vec![0u8; layout.byte_len(N)];
+    let [bx, by, _] = layout.bricks;
+    let [w, h, _] = layout.texels().map(|t| t as usize);
+    let layer_bytes = w * h * 8 * N;
+    let per_layer = (bx * by) as usize;
+    let first = layout.first_brick as usize;
+    let end = first + layout.count as usize;
+    let slice = w * h * N;
+    out.par_chunks_mut(layer_bytes.max(1)).enumerate().for_each(|(layer, chunk)| {
+        let start = first + layer * per_layer;
+        for (k, b) in bricks.get(start..end.min(start + per_layer)).unwrap_or(&[]).iter().enumerate() {
+            if b.data.len() != BRICK_VOXELS * N {
+                continue;
+            }
+            let (px, py) = (k % bx as usize, k / bx as usize);
+            for (src, voxel) in b.data.chunks_exact(N).enumerate() {
+                let (x, y, z) = (src >> 6, (src >> 3) & 7, src & 7);
+                let dst = z * slice + ((py * 8 + y) * w + px * 8 + x) * N;
+                if let Some(d) = chunk.get_mut(dst..dst + N) {
+                    d.copy_from_slice(voxel);
                 }
             }
         }
-    }
+    });
     out
 }
 

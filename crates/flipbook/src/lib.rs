@@ -31,6 +31,7 @@
 //! and L1 nodes are stored once (hash-consing, bottom-up), so the parts of an
 //! animation that do not change cost nothing per frame.
 
+use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 use vdbcook_grid::{Bbox, Coord, Grid, LEAF_VOXELS};
 
@@ -62,15 +63,14 @@ pub enum Error {
     Overflow { what: &'static str },
 }
 
-fn hash_words(words: &[u32]) -> u64 {
-    let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-    xxhash_rust::xxh3::xxh3_64(&bytes)
+/// Content hash of a brick: the exact bits of every value (so -0.0 and 0.0,
+/// or two NaN payloads, stay distinct).
+pub fn brick_hash(b: &Brick) -> u64 {
+    xxhash_rust::xxh3::xxh3_64(bytemuck::cast_slice(b))
 }
 
-/// Brick content key: the exact bits of every value (so -0.0 and 0.0, or two
-/// NaN payloads, stay distinct).
-fn brick_bits(b: &Brick) -> [u32; LEAF_VOXELS] {
-    b.map(f32::to_bits)
+fn same_bits(a: &Brick, b: &Brick) -> bool {
+    bytemuck::cast_slice::<f32, u32>(a) == bytemuck::cast_slice::<f32, u32>(b)
 }
 
 /// Distinct bricks, each stored once.
@@ -83,11 +83,14 @@ pub struct BrickPool {
 impl BrickPool {
     /// Returns the id of `brick`, adding it if it is new.
     pub fn insert(&mut self, brick: &Brick) -> Result<u32, Error> {
-        let bits = brick_bits(brick);
-        let h = hash_words(&bits);
+        self.insert_hashed(brick, brick_hash(brick))
+    }
+
+    /// [`BrickPool::insert`] with the brick's [`brick_hash`] already computed.
+    pub fn insert_hashed(&mut self, brick: &Brick, h: u64) -> Result<u32, Error> {
         let ids = self.index.entry(h).or_default();
         for &id in ids.iter() {
-            if self.bricks.get(id as usize).is_some_and(|b| brick_bits(b) == bits) {
+            if self.bricks.get(id as usize).is_some_and(|b| same_bits(b, brick)) {
                 return Ok(id);
             }
         }
@@ -192,16 +195,24 @@ impl Builder {
         let bg = grid.background;
         let before = self.pool.len();
         let mut fl = FrameLeaves::default();
-        for leaf in &grid.leaves {
-            let n = leaf.mask.count_on();
-            if n == 0 {
-                continue;
-            }
-            let mut brick = [bg; LEAF_VOXELS];
-            for i in leaf.mask.iter_on() {
-                brick[i] = leaf.values[i];
-            }
-            let brick = self.pool.insert(&brick)?;
+        // Bricks and their hashes in parallel (in leaf order), pooled in order.
+        let bricks: Vec<(usize, Brick, u64)> = grid
+            .leaves
+            .par_iter()
+            .enumerate()
+            .filter(|(_, l)| !l.mask.is_empty())
+            .map(|(i, leaf)| {
+                let mut brick = [bg; LEAF_VOXELS];
+                for v in leaf.mask.iter_on() {
+                    brick[v] = leaf.values[v];
+                }
+                let h = brick_hash(&brick);
+                (i, brick, h)
+            })
+            .collect();
+        for (i, brick, h) in &bricks {
+            let leaf = &grid.leaves[*i];
+            let brick = self.pool.insert_hashed(brick, *h)?;
             let key = L3 { mask: leaf.mask.0, brick };
             let next = u32::try_from(self.l3.len()).map_err(|_| Error::Overflow { what: "L3 nodes" })?;
             let id = *self.l3_index.entry(key).or_insert(next);
@@ -209,9 +220,8 @@ impl Builder {
                 self.l3.push(key);
             }
             fl.leaves.push((leaf.origin, id));
-            fl.active_voxels += u64::from(n);
-            let d = 7;
-            self.grow(Bbox::new(leaf.origin, leaf.origin.offset(d, d, d)));
+            fl.active_voxels += u64::from(leaf.mask.count_on());
+            self.grow(Bbox::new(leaf.origin, leaf.origin.offset(7, 7, 7)));
         }
         for t in grid.tiles.iter().filter(|t| t.active) {
             fl.tiles.push((t.origin, t.dim, t.value));

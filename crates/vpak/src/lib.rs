@@ -179,32 +179,59 @@ fn align(n: usize) -> usize {
     n.div_ceil(ALIGN) * ALIGN
 }
 
-/// Assembles a complete file.
-pub fn assemble(sections: &[Section]) -> Vec<u8> {
+/// Offsets of each section, the table's end and the file's length.
+fn plan(sections: &[Section]) -> (Vec<usize>, usize, usize) {
     let table_end = HEADER_LEN + ENTRY_LEN * sections.len();
     let mut offsets = Vec::with_capacity(sections.len());
     let mut pos = align(table_end);
+    let mut end = pos;
     for s in sections {
         offsets.push(pos);
-        pos = align(pos + s.data.len());
+        end = pos + s.data.len();
+        pos = align(end);
     }
-    let total = offsets.last().map_or(align(table_end), |&o| o + sections.last().map_or(0, |s| s.data.len()));
-    let mut out = vec![0u8; total];
-    out[..8].copy_from_slice(&MAGIC);
-    out[8..12].copy_from_slice(&VERSION.to_le_bytes());
-    out[16..20].copy_from_slice(&(sections.len() as u32).to_le_bytes());
-    out[24..32].copy_from_slice(&(total as u64).to_le_bytes());
+    (offsets, table_end, end)
+}
+
+/// Length of the file `sections` make.
+pub fn file_len(sections: &[Section]) -> u64 {
+    plan(sections).2 as u64
+}
+
+/// Writes a complete file to `w`, section by section (no copy of the whole file).
+pub fn write_to<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section]) -> std::io::Result<()> {
+    let (offsets, table_end, total) = plan(sections);
+    let mut head = vec![0u8; table_end];
+    head[..8].copy_from_slice(&MAGIC);
+    head[8..12].copy_from_slice(&VERSION.to_le_bytes());
+    head[16..20].copy_from_slice(&(sections.len() as u32).to_le_bytes());
+    head[24..32].copy_from_slice(&(total as u64).to_le_bytes());
     for (i, (s, &off)) in sections.iter().zip(&offsets).enumerate() {
         let e = HEADER_LEN + i * ENTRY_LEN;
-        out[e..e + 4].copy_from_slice(&s.kind.to_le_bytes());
-        out[e + 4..e + 8].copy_from_slice(&s.index.to_le_bytes());
-        out[e + 8..e + 16].copy_from_slice(&(off as u64).to_le_bytes());
-        out[e + 16..e + 24].copy_from_slice(&(s.data.len() as u64).to_le_bytes());
-        out[e + 24..e + 32].copy_from_slice(&checksum(&s.data).to_le_bytes());
-        out[off..off + s.data.len()].copy_from_slice(&s.data);
+        head[e..e + 4].copy_from_slice(&s.kind.to_le_bytes());
+        head[e + 4..e + 8].copy_from_slice(&s.index.to_le_bytes());
+        head[e + 8..e + 16].copy_from_slice(&(off as u64).to_le_bytes());
+        head[e + 16..e + 24].copy_from_slice(&(s.data.len() as u64).to_le_bytes());
+        head[e + 24..e + 32].copy_from_slice(&checksum(&s.data).to_le_bytes());
     }
-    let h = header_checksum(&out[..32], &out[HEADER_LEN..table_end]);
-    out[32..40].copy_from_slice(&h.to_le_bytes());
+    let h = header_checksum(&head[..32], &head[HEADER_LEN..table_end]);
+    head[32..40].copy_from_slice(&h.to_le_bytes());
+    w.write_all(&head)?;
+    let mut pos = table_end;
+    let zeros = [0u8; ALIGN];
+    for (s, &off) in sections.iter().zip(&offsets) {
+        w.write_all(&zeros[..off - pos])?;
+        w.write_all(&s.data)?;
+        pos = off + s.data.len();
+    }
+    Ok(())
+}
+
+/// Assembles a complete file in memory.
+pub fn assemble(sections: &[Section]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(file_len(sections) as usize);
+    // Writing to a Vec cannot fail.
+    let _ = write_to(&mut out, sections);
     out
 }
 
@@ -215,9 +242,20 @@ fn header_checksum(head: &[u8], table: &[u8]) -> u64 {
     h.digest()
 }
 
-/// Writes `bytes` to `path` atomically: a temporary file beside it, then a
-/// rename.  Without `overwrite`, an existing `path` is never replaced.
+/// Writes `bytes` to `path` atomically (see [`write_atomic_with`]).
 pub fn write_atomic(path: &Path, bytes: &[u8], overwrite: bool) -> Result<(), Error> {
+    write_atomic_with(path, overwrite, |w| w.write_all(bytes))
+}
+
+/// Writes `sections` as a .vpak file at `path` atomically.
+pub fn write_file(path: &Path, sections: &[Section], overwrite: bool) -> Result<(), Error> {
+    write_atomic_with(path, overwrite, |w| write_to(w, sections))
+}
+
+/// Writes to a temporary file beside `path`, then renames it into place.
+/// Without `overwrite`, an existing `path` is never replaced; on any failure
+/// the temporary file is removed and `path` is untouched.
+pub fn write_atomic_with(path: &Path, overwrite: bool, fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<(), Error> {
     use std::io::Write;
     if !overwrite && path.exists() {
         return Err(Error::Exists(path.display().to_string()));
@@ -226,8 +264,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8], overwrite: bool) -> Result<(), Er
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
     let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
     let result = (|| -> Result<(), Error> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
+        let mut f = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&tmp)?);
+        fill(&mut f)?;
+        f.flush()?;
+        let f = f.into_inner().map_err(|e| Error::Io(e.into_error()))?;
         f.sync_all()?;
         drop(f);
         if overwrite {
