@@ -1,16 +1,18 @@
 # Recipes by name; each is a plain command you can also run without `just`.
 
-# Describe the bundled smoke fixture (the main job until `cook` exists).
+# Cook the bundled 4-frame smoke sequence into smoke.vpak.
 run:
-    cargo run --release -- inspect fixtures/fog_blosc.vdb
+    cargo run --release -- cook fixtures/smoke_seq -o smoke.vpak --force
 
 # The whole test suite (installs the Debian packages the tests need).
 test:
     scripts/test.sh
 
-# Read throughput against OpenVDB (pyopenvdb) on a 24M-voxel fog volume.
+# Benchmarks against peers in the same run: read throughput against OpenVDB,
+# tree sizes against the thesis layout, cook throughput against nanovdb_convert, memory.
 bench:
     /usr/bin/python3 scripts/bench_read.py
+    /usr/bin/python3 scripts/bench_cook.py
 
 # Regenerate fixtures/ with OpenVDB itself (byte-identical output).
 fixtures:
