@@ -211,7 +211,8 @@ impl Cooker {
         let t0 = Instant::now();
         let layouts = vdbcook_encode::plan_atlases(stored.len() as u32, self.opts.max_texture_dim);
         let mut sections = node_sections(&nodes);
-        sections.push(Section { kind: kind::BRICK_RANGES, index: 0, data: stored.iter().flat_map(|b| b.range.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>()).collect() });
+        let ranges: Vec<u32> = stored.iter().flat_map(|b| b.range.map(f32::to_bits)).collect();
+        sections.push(Section { kind: kind::BRICK_RANGES, index: 0, data: words(&ranges) });
         for (i, l) in layouts.iter().enumerate() {
             sections.push(Section { kind: kind::ATLAS, index: i as u32, data: vdbcook_encode::pack_atlas(l, &stored, format) });
         }
@@ -336,8 +337,13 @@ fn voxel_errors(built: &Built, stored: &[EncodedBrick], remap: &[u32], format: F
         .collect()
 }
 
+/// Little-endian bytes of `u32`s (a plain copy on little-endian machines).
 fn words(v: &[u32]) -> Vec<u8> {
-    v.iter().flat_map(|w| w.to_le_bytes()).collect()
+    if cfg!(target_endian = "little") {
+        bytemuck::cast_slice(v).to_vec()
+    } else {
+        v.iter().flat_map(|w| w.to_le_bytes()).collect()
+    }
 }
 
 fn node_sections(n: &Nodes) -> Vec<Section> {

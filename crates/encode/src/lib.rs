@@ -63,7 +63,16 @@ pub struct EncodedBrick {
 }
 
 fn range_of(values: &[f32; BRICK_VOXELS]) -> [f32; 2] {
-    values.iter().fold([f32::INFINITY, f32::NEG_INFINITY], |[lo, hi], &v| [lo.min(v), hi.max(v)])
+    // Eight independent lanes, so the compiler can vectorise.
+    let mut lo = [f32::INFINITY; 8];
+    let mut hi = [f32::NEG_INFINITY; 8];
+    for c in values.chunks_exact(8) {
+        for k in 0..8 {
+            lo[k] = lo[k].min(c[k]);
+            hi[k] = hi[k].max(c[k]);
+        }
+    }
+    [lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max)]
 }
 
 pub fn encode_brick(format: Format, values: &[f32; BRICK_VOXELS]) -> EncodedBrick {
@@ -187,27 +196,29 @@ pub fn pack_atlas(layout: &AtlasLayout, bricks: &[EncodedBrick], format: Format)
 }
 
 /// [`pack_atlas`] for `N` bytes per voxel (a constant, so each copy is one move).
+/// The output is written strictly in order: slice by slice, row by row, and
+/// along a row eight texels from each brick in turn.
 fn pack_atlas_n<const N: usize>(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
     let mut out = vec![0u8; layout.byte_len(N)];
-    let [bx, by, _] = layout.bricks;
+    let [bx, by, _] = layout.bricks.map(|b| b as usize);
     let [w, h, _] = layout.texels().map(|t| t as usize);
-    let layer_bytes = w * h * 8 * N;
-    let per_layer = (bx * by) as usize;
+    let row = w * N;
     let first = layout.first_brick as usize;
     let end = first + layout.count as usize;
-    let slice = w * h * N;
-    out.par_chunks_mut(layer_bytes.max(1)).enumerate().for_each(|(layer, chunk)| {
-        let start = first + layer * per_layer;
-        for (k, b) in bricks.get(start..end.min(start + per_layer)).unwrap_or(&[]).iter().enumerate() {
-            if b.data.len() != BRICK_VOXELS * N {
-                continue;
-            }
-            let (px, py) = (k % bx as usize, k / bx as usize);
-            for (src, voxel) in b.data.chunks_exact(N).enumerate() {
-                let (x, y, z) = (src >> 6, (src >> 3) & 7, src & 7);
-                let dst = z * slice + ((py * 8 + y) * w + px * 8 + x) * N;
-                if let Some(d) = chunk.get_mut(dst..dst + N) {
-                    d.copy_from_slice(voxel);
+    let empty = [0u8; BRICK_VOXELS * 4];
+    // One chunk per texel slice; slice `s` is z = s % 8 of brick layer s / 8.
+    out.par_chunks_mut((row * h).max(1)).enumerate().for_each(|(s, slice)| {
+        let (layer, z) = (s / 8, s % 8);
+        for (ty, line) in slice.chunks_exact_mut(row).enumerate() {
+            let (py, y) = (ty / 8, ty % 8);
+            for (px, texels) in line.chunks_exact_mut(8 * N).enumerate() {
+                let b = first + (layer * by + py) * bx + px;
+                let data = if b < end { bricks.get(b).map_or(&empty[..], |e| &e.data[..]) } else { &empty[..] };
+                for (x, t) in texels.chunks_exact_mut(N).enumerate() {
+                    let src = (x * 64 + y * 8 + z) * N;
+                    if let Some(v) = data.get(src..src + N) {
+                        t.copy_from_slice(v);
+                    }
                 }
             }
         }

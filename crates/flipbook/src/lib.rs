@@ -73,11 +73,14 @@ fn same_bits(a: &Brick, b: &Brick) -> bool {
     bytemuck::cast_slice::<f32, u32>(a) == bytemuck::cast_slice::<f32, u32>(b)
 }
 
+/// Hash maps keyed by data that needs no DoS protection: XXH3, deterministic.
+type Map<K, V> = HashMap<K, V, xxhash_rust::xxh3::Xxh3DefaultBuilder>;
+
 /// Distinct bricks, each stored once.
 #[derive(Default)]
 pub struct BrickPool {
     bricks: Vec<Brick>,
-    index: HashMap<u64, Vec<u32>>,
+    index: Map<u64, Vec<u32>>,
 }
 
 impl BrickPool {
@@ -120,7 +123,7 @@ impl BrickPool {
 /// Hash-consing table for variable-length `u32` keys.
 #[derive(Default)]
 struct Interner {
-    ids: HashMap<Vec<u32>, u32>,
+    ids: Map<Vec<u32>, u32>,
     count: u32,
 }
 
@@ -170,7 +173,7 @@ pub struct Builder {
     background: Option<f32>,
     pool: BrickPool,
     l3: Vec<L3>,
-    l3_index: HashMap<L3, u32>,
+    l3_index: Map<L3, u32>,
     frames: Vec<FrameLeaves>,
     bbox: Option<Bbox>,
     leaves_in: u64,
@@ -195,24 +198,24 @@ impl Builder {
         let bg = grid.background;
         let before = self.pool.len();
         let mut fl = FrameLeaves::default();
-        // Bricks and their hashes in parallel (in leaf order), pooled in order.
-        let bricks: Vec<(usize, Brick, u64)> = grid
+        // Brick hashes in parallel (in leaf order); bricks are pooled in order.
+        let brick_of = |leaf: &vdbcook_grid::Leaf| {
+            let mut brick = [bg; LEAF_VOXELS];
+            for v in leaf.mask.iter_on() {
+                brick[v] = leaf.values[v];
+            }
+            brick
+        };
+        let hashes: Vec<(usize, u64)> = grid
             .leaves
             .par_iter()
             .enumerate()
             .filter(|(_, l)| !l.mask.is_empty())
-            .map(|(i, leaf)| {
-                let mut brick = [bg; LEAF_VOXELS];
-                for v in leaf.mask.iter_on() {
-                    brick[v] = leaf.values[v];
-                }
-                let h = brick_hash(&brick);
-                (i, brick, h)
-            })
+            .map(|(i, leaf)| (i, brick_hash(&brick_of(leaf))))
             .collect();
-        for (i, brick, h) in &bricks {
-            let leaf = &grid.leaves[*i];
-            let brick = self.pool.insert_hashed(brick, *h)?;
+        for &(i, h) in &hashes {
+            let leaf = &grid.leaves[i];
+            let brick = self.pool.insert_hashed(&brick_of(leaf), h)?;
             let key = L3 { mask: leaf.mask.0, brick };
             let next = u32::try_from(self.l3.len()).map_err(|_| Error::Overflow { what: "L3 nodes" })?;
             let id = *self.l3_index.entry(key).or_insert(next);
