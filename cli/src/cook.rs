@@ -6,7 +6,7 @@ use crate::{exit, report_error, Usage};
 use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
-use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress};
+use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress, Quality};
 use vdbcook_grid::Grid;
 use vdbcook_vpak::SourceFile;
 
@@ -16,10 +16,17 @@ frame pattern (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb) expanded over --fr
 Several files are one animation; files, directories and globs are taken in natural
 order (frame_2 before frame_10), pattern frames in --frames order.
 
-Formats (bytes per voxel in the brick atlas):
-  f32     4    exact
-  f16     2    IEEE half (default)
-  unorm8  1    8 bits over each brick's own [min, max]
+Formats (storage per voxel in the brick atlas):
+  f32     32 bits  exact
+  f16     16 bits  IEEE half (default)
+  unorm8   8 bits  8-bit levels over each brick's own [min, max]
+  bc4      4 bits  BC4 block compression of those levels, one z-slice per texture slice
+  bc7      2 bits  BC7 with four consecutive z-slices packed into RGBA
+
+BC7 quality presets (the alpha settings of intel_tex_2, ISPC BC7):
+  ultra-fast  very-fast  fast (default)  basic  slow
+Slower presets search more BC7 modes and refine more; see docs/benchmarks.md for
+their measured speed and error.
 
 Frames are streamed: at most two source frames are held at once. Identical bricks,
 L3 and L2 nodes and frames are stored once. The output is written to a temporary
@@ -43,8 +50,11 @@ pub struct CookArgs {
     #[arg(long)]
     pub allow_missing: bool,
     /// Voxel format of the brick atlas.
-    #[arg(long, default_value = "f16", value_parser = ["f32", "f16", "unorm8"])]
+    #[arg(long, default_value = "f16", value_parser = ["f32", "f16", "unorm8", "bc4", "bc7"])]
     pub format: String,
+    /// BC7 encoder preset (see the table below).
+    #[arg(long, default_value = "fast", value_parser = ["ultra-fast", "very-fast", "fast", "basic", "slow"])]
+    pub quality: String,
     /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
     #[arg(long, default_value_t = 2048, value_name = "TEXELS", value_parser = clap::value_parser!(u32).range(8..=16384))]
     pub max_texture_dim: u32,
@@ -98,19 +108,21 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
         return Err(anyhow!("{} already exists (use --force to replace it)", args.output.display()));
     }
     let format = Format::parse(&args.format).ok_or_else(|| Usage(format!("unknown format {}", args.format)))?;
+    let quality = Quality::parse(&args.quality).ok_or_else(|| Usage(format!("unknown quality {}", args.quality)))?;
     let files = inputs::expand(&args.inputs, args.frames)?;
     let started = Instant::now();
     let bars = Bars::new(quiet);
 
     let settings = vec![
         ("format".to_string(), format.name().to_string()),
+        ("quality".to_string(), if format == Format::Bc7 { quality.name().to_string() } else { String::new() }),
         ("grid".to_string(), args.grid.clone().unwrap_or_default()),
         ("frames".to_string(), args.frames.map(|f| format!("{}-{}:{}", f.first, f.last, f.step)).unwrap_or_default()),
         ("allow_missing".to_string(), args.allow_missing.to_string()),
         ("max_texture_dim".to_string(), args.max_texture_dim.to_string()),
         ("inputs".to_string(), args.inputs.join(" ")),
     ];
-    let mut cooker = Cooker::new(CookOptions { format, max_texture_dim: args.max_texture_dim, settings });
+    let mut cooker = Cooker::new(CookOptions { format, quality, max_texture_dim: args.max_texture_dim, settings });
 
     // A reader thread stays one frame ahead: at most two source frames live at once.
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Frame>>(0);

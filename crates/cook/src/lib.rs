@@ -12,7 +12,7 @@
 mod unpack;
 
 pub use unpack::{load_nodes, unpack_frame};
-pub use vdbcook_encode::Format;
+pub use vdbcook_encode::{Format, Quality};
 
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -52,6 +52,8 @@ impl Progress for NoProgress {}
 #[derive(Clone, Debug)]
 pub struct CookOptions {
     pub format: Format,
+    /// BC7 encoder preset.
+    pub quality: Quality,
     /// Largest 3D texture edge an atlas may use (wgpu's default limit is 2048).
     pub max_texture_dim: u32,
     /// Every setting, recorded verbatim in the asset's metadata.
@@ -60,7 +62,7 @@ pub struct CookOptions {
 
 impl Default for CookOptions {
     fn default() -> Self {
-        CookOptions { format: Format::F16, max_texture_dim: 2048, settings: Vec::new() }
+        CookOptions { format: Format::F16, quality: Quality::Fast, max_texture_dim: 2048, settings: Vec::new() }
     }
 }
 
@@ -176,14 +178,7 @@ impl Cooker {
         let t0 = Instant::now();
         let pool = built.pool.bricks();
         progress.start("encoding", pool.len() as u64);
-        let encoded: Vec<EncodedBrick> = pool
-            .par_chunks(1024)
-            .flat_map_iter(|chunk| {
-                let out: Vec<EncodedBrick> = chunk.iter().map(|b| vdbcook_encode::encode_brick(format, b)).collect();
-                progress.advance(chunk.len() as u64);
-                out
-            })
-            .collect();
+        let encoded: Vec<EncodedBrick> = vdbcook_encode::encode_all(format, self.opts.quality, pool, &|n| progress.advance(n as u64));
         progress.finish();
         let (stored, remap) = dedup_encoded(encoded);
         timings.push(("encode".into(), t0.elapsed().as_secs_f64()));
@@ -209,12 +204,12 @@ impl Cooker {
         drop(std::mem::take(&mut built.pool));
 
         let t0 = Instant::now();
-        let layouts = vdbcook_encode::plan_atlases(stored.len() as u32, self.opts.max_texture_dim);
+        let layouts = vdbcook_encode::plan_atlases(format, stored.len() as u32, self.opts.max_texture_dim);
         let mut sections = node_sections(&nodes);
         let ranges: Vec<u32> = stored.iter().flat_map(|b| b.range.map(f32::to_bits)).collect();
         sections.push(Section { kind: kind::BRICK_RANGES, index: 0, data: words(&ranges) });
         for (i, l) in layouts.iter().enumerate() {
-            sections.push(Section { kind: kind::ATLAS, index: i as u32, data: vdbcook_encode::pack_atlas(l, &stored, format) });
+            sections.push(Section { kind: kind::ATLAS, index: i as u32, data: vdbcook_encode::pack_atlas(l, &stored) });
         }
         let stored_bricks = stored.len();
         drop(stored);

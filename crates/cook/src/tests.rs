@@ -20,7 +20,7 @@ fn frame(shift: i32) -> Grid {
 }
 
 fn cook(format: Format, frames: &[Grid], max_dim: u32) -> (Vec<u8>, CookReport) {
-    let mut c = Cooker::new(CookOptions { format, max_texture_dim: max_dim, settings: vec![("format".into(), format.name().into())] });
+    let mut c = Cooker::new(CookOptions { format, quality: Quality::Fast, max_texture_dim: max_dim, settings: vec![("format".into(), format.name().into())] });
     for f in frames {
         c.push(f, None).unwrap();
     }
@@ -89,4 +89,39 @@ fn changing_transform_is_an_error() {
     let mut f = frame(1);
     f.transform = Transform::scale_translate(vdbcook_grid::MapType::UniformScale, [2.0; 3], [0.0; 3]);
     assert!(matches!(c.push(&f, None), Err(Error::Transform { frame: 1, .. })));
+}
+
+/// Smoke-like values: smooth in space, every voxel active.
+fn smooth_frame(shift: i32) -> Grid {
+    let mut g = frame(shift);
+    for l in g.leaves.iter_mut() {
+        l.mask = LeafMask([u64::MAX; 8]);
+        for v in 0..512 {
+            let (x, y, z) = ((l.origin.x + (v / 64) as i32) as f32, (l.origin.y + ((v / 8) % 8) as i32) as f32, (l.origin.z + (v % 8) as i32) as f32);
+            l.values[v] = 0.05 * (1.0 + (x * 0.11).sin() * (y * 0.07 + z * 0.05).cos());
+        }
+    }
+    g
+}
+
+#[test]
+fn block_formats_round_trip_within_their_precision() {
+    let frames = [smooth_frame(0), smooth_frame(2)];
+    for (format, bits) in [(Format::Bc4, 4.0), (Format::Bc7, 2.0)] {
+        let (bytes, report) = cook(format, &frames, 64);
+        let asset = Asset::from_bytes(&bytes).unwrap();
+        let atlas_bytes: u64 = asset.sections.iter().filter(|s| s.kind == vdbcook_vpak::kind::ATLAS).map(|s| s.size).sum();
+        // Bricks fill the atlases up to the last layer's padding.
+        assert!(atlas_bytes as f64 * 8.0 >= report.stored_bricks as f64 * 512.0 * bits, "{format:?}");
+        let g = unpack_frame(&asset, 1).unwrap();
+        let mut worst = 0.0f32;
+        for (a, b) in g.leaves.iter().zip(&frames[1].leaves) {
+            for v in b.mask.iter_on() {
+                worst = worst.max((a.values[v] - b.values[v]).abs());
+            }
+        }
+        assert!(f64::from(worst) <= report.voxel_max_error + 1e-7, "{format:?}: {worst} vs reported {}", report.voxel_max_error);
+        // Values span [0, 0.1]: a few 8-bit steps of error at most.
+        assert!(report.voxel_rmse > 0.0 && report.voxel_rmse < 0.1 / 255.0 * 3.0, "{format:?}: {}", report.voxel_rmse);
+    }
 }

@@ -50,9 +50,9 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Grid, Error> {
             .enumerate()
             .find(|(_, a)| brick >= a.first_brick && brick - a.first_brick < a.count)
             .ok_or_else(|| Error::Corrupt(format!("brick {brick} is in no atlas")))?;
-        let layout = AtlasLayout { bricks: info.1.bricks, first_brick: info.1.first_brick, count: info.1.count };
+        let layout = AtlasLayout { format, bricks: info.1.bricks, first_brick: info.1.first_brick, count: info.1.count };
         let atlas = asset.section(kind::ATLAS, info.0 as u32)?;
-        let data = vdbcook_encode::unpack_brick(&layout, atlas, brick - layout.first_brick, format).ok_or_else(|| Error::Corrupt(format!("atlas {} is too small for its bricks", info.0)))?;
+        let data = vdbcook_encode::unpack_brick(&layout, atlas, brick - layout.first_brick).ok_or_else(|| Error::Corrupt(format!("atlas {} is too small for its bricks", info.0)))?;
         let b = brick as usize;
         let range = [*ranges.get(2 * b).ok_or_else(|| Error::Corrupt(format!("no range for brick {brick}")))?, ranges.get(2 * b + 1).copied().unwrap_or(0.0)];
         let decoded = vdbcook_encode::decode_brick(format, range, &data);

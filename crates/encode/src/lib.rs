@@ -26,34 +26,102 @@ pub enum Format {
     F32,
     F16,
     Unorm8,
+    /// BC4: one channel, 8 bytes per 4×4 block, 4 bits per voxel.
+    Bc4,
+    /// BC7 with four consecutive z-slices in RGBA: 16 bytes per 4×4×4 voxels, 2 bits per voxel.
+    Bc7,
 }
 
 impl Format {
+    pub const ALL: [Format; 5] = [Format::F32, Format::F16, Format::Unorm8, Format::Bc4, Format::Bc7];
+
     pub fn name(self) -> &'static str {
         match self {
             Format::F32 => "f32",
             Format::F16 => "f16",
             Format::Unorm8 => "unorm8",
+            Format::Bc4 => "bc4",
+            Format::Bc7 => "bc7",
         }
     }
 
     pub fn parse(s: &str) -> Option<Format> {
-        Some(match s {
-            "f32" => Format::F32,
-            "f16" => Format::F16,
-            "unorm8" => Format::Unorm8,
-            _ => return None,
-        })
+        Format::ALL.into_iter().find(|f| f.name() == s)
     }
 
+    /// Bytes per texel for the uncompressed formats.
     pub fn bytes_per_voxel(self) -> usize {
         match self {
             Format::F32 => 4,
             Format::F16 => 2,
-            Format::Unorm8 => 1,
+            Format::Unorm8 | Format::Bc4 | Format::Bc7 => 1,
+        }
+    }
+
+    /// True for the block-compressed formats.
+    pub fn is_block(self) -> bool {
+        matches!(self, Format::Bc4 | Format::Bc7)
+    }
+
+    /// Texture slices one brick takes (BC7 packs four z-slices into RGBA).
+    pub fn slices_per_brick(self) -> u32 {
+        if self == Format::Bc7 {
+            2
+        } else {
+            8
+        }
+    }
+
+    /// Stored bytes per brick.
+    pub fn brick_bytes(self) -> usize {
+        match self {
+            Format::Bc4 => bc::BC4_BRICK_BYTES,
+            Format::Bc7 => bc::BC7_BRICK_BYTES,
+            f => BRICK_VOXELS * f.bytes_per_voxel(),
+        }
+    }
+
+    /// Bytes of one 4×4 block (block formats only).
+    pub fn block_bytes(self) -> usize {
+        if self == Format::Bc7 {
+            16
+        } else {
+            8
         }
     }
 }
+
+/// BC7 encoder presets (intel_tex_2's ISPC "alpha" settings, since all four
+/// channels carry voxels); BC4 has a single encoder.  `VeryFast` is the
+/// default: see docs/benchmarks.md for the measurements behind it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Quality {
+    UltraFast,
+    VeryFast,
+    Fast,
+    Basic,
+    Slow,
+}
+
+impl Quality {
+    pub const ALL: [Quality; 5] = [Quality::UltraFast, Quality::VeryFast, Quality::Fast, Quality::Basic, Quality::Slow];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::UltraFast => "ultra-fast",
+            Quality::VeryFast => "very-fast",
+            Quality::Fast => "fast",
+            Quality::Basic => "basic",
+            Quality::Slow => "slow",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Quality> {
+        Quality::ALL.into_iter().find(|q| q.name() == s)
+    }
+}
+
+mod bc;
 
 /// One encoded brick: its range and `512 · bytes_per_voxel` bytes in brick order.
 #[derive(Clone, Debug, PartialEq)]
@@ -75,8 +143,34 @@ fn range_of(values: &[f32; BRICK_VOXELS]) -> [f32; 2] {
     [lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max)]
 }
 
+/// Encodes one brick (BC7 at `Quality::Fast`; use [`encode_all`] to choose).
 pub fn encode_brick(format: Format, values: &[f32; BRICK_VOXELS]) -> EncodedBrick {
-    let range = range_of(values);
+    encode_chunk(format, Quality::Fast, std::slice::from_ref(values)).pop().unwrap_or(EncodedBrick { range: [0.0; 2], data: Vec::new() })
+}
+
+/// 8-bit levels of a brick over its own range.
+fn quantise(values: &[f32; BRICK_VOXELS], [lo, hi]: [f32; 2]) -> [u8; BRICK_VOXELS] {
+    let span = hi - lo;
+    if span > 0.0 && span.is_finite() {
+        let scale = 255.0 / span;
+        values.map(|v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8)
+    } else {
+        [0; BRICK_VOXELS]
+    }
+}
+
+fn encode_chunk(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]]) -> Vec<EncodedBrick> {
+    let ranges: Vec<[f32; 2]> = bricks.iter().map(range_of).collect();
+    match format {
+        Format::Bc4 | Format::Bc7 => {
+            let levels: Vec<[u8; BRICK_VOXELS]> = bricks.iter().zip(&ranges).map(|(b, r)| quantise(b, *r)).collect();
+            bc::encode(format, quality, &levels).into_iter().zip(ranges).map(|(data, range)| EncodedBrick { range, data }).collect()
+        }
+        _ => bricks.iter().zip(ranges).map(|(values, range)| EncodedBrick { range, data: encode_voxels(format, values, range) }).collect(),
+    }
+}
+
+fn encode_voxels(format: Format, values: &[f32; BRICK_VOXELS], range: [f32; 2]) -> Vec<u8> {
     let mut data = Vec::with_capacity(BRICK_VOXELS * format.bytes_per_voxel());
     match format {
         Format::F32 => {
@@ -91,18 +185,9 @@ pub fn encode_brick(format: Format, values: &[f32; BRICK_VOXELS]) -> EncodedBric
                 data.extend_from_slice(&v.to_bits().to_le_bytes());
             }
         }
-        Format::Unorm8 => {
-            let [lo, hi] = range;
-            let span = hi - lo;
-            if span > 0.0 && span.is_finite() {
-                let scale = 255.0 / span;
-                data.extend(values.iter().map(|&v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8));
-            } else {
-                data.resize(BRICK_VOXELS, 0);
-            }
-        }
+        _ => data.extend_from_slice(&quantise(values, range)),
     }
-    EncodedBrick { range, data }
+    data
 }
 
 /// Decodes `data` (one brick in `format`) back to values.
@@ -125,18 +210,34 @@ pub fn decode_brick(format: Format, range: [f32; 2], data: &[u8]) -> [f32; BRICK
                 *o = if hi > lo { lo + (f32::from(q) / 255.0) * (hi - lo) } else { lo };
             }
         }
+        Format::Bc4 | Format::Bc7 => {
+            let [lo, hi] = range;
+            let t = bc::decode(format, data);
+            for (o, t) in out.iter_mut().zip(t) {
+                *o = if hi > lo { lo + t * (hi - lo) } else { lo };
+            }
+        }
     }
     out
 }
 
-/// Encodes every brick (in parallel; the output order is the input order).
-pub fn encode_all(format: Format, bricks: &[[f32; BRICK_VOXELS]]) -> Vec<EncodedBrick> {
-    bricks.par_iter().map(|b| encode_brick(format, b)).collect()
+/// Encodes every brick in parallel chunks (the output order is the input
+/// order); `progress(n)` is called after each chunk of `n` bricks.
+pub fn encode_all(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]], progress: &(dyn Fn(usize) + Sync)) -> Vec<EncodedBrick> {
+    bricks
+        .par_chunks(256)
+        .flat_map_iter(|chunk| {
+            let out = encode_chunk(format, quality, chunk);
+            progress(chunk.len());
+            out
+        })
+        .collect()
 }
 
 /// Where a run of consecutive bricks lives: one 3D texture.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct AtlasLayout {
+    pub format: Format,
     /// Bricks along x, y, z.
     pub bricks: [u32; 3],
     /// Global index of the first brick in this atlas.
@@ -146,9 +247,10 @@ pub struct AtlasLayout {
 }
 
 impl AtlasLayout {
-    /// Texture size in texels.
+    /// Texture size in texels (a brick is 8×8 texels and 8 slices, or 2 for BC7).
     pub fn texels(&self) -> [u32; 3] {
-        self.bricks.map(|b| b * 8)
+        let [bx, by, bz] = self.bricks;
+        [bx * 8, by * 8, bz * self.format.slices_per_brick()]
     }
 
     /// Brick position (in bricks) of local brick `i`.
@@ -157,22 +259,42 @@ impl AtlasLayout {
         [i % bx, (i / bx) % by, i / (bx * by)]
     }
 
-    /// Byte offset of texel (x, y, z) for `bpv` bytes per texel.
-    pub fn texel_offset(&self, x: u32, y: u32, z: u32, bpv: usize) -> usize {
-        let [w, h, _] = self.texels();
-        ((z as usize * h as usize + y as usize) * w as usize + x as usize) * bpv
+    /// Bytes of one texture slice: texel rows, or rows of 4×4 blocks.
+    pub fn slice_bytes(&self) -> usize {
+        let [w, h, _] = self.texels().map(|t| t as usize);
+        if self.format.is_block() {
+            (w / 4) * (h / 4) * self.format.block_bytes()
+        } else {
+            w * h * self.format.bytes_per_voxel()
+        }
     }
 
-    pub fn byte_len(&self, bpv: usize) -> usize {
-        let [w, h, d] = self.texels();
-        w as usize * h as usize * d as usize * bpv
+    /// Bytes of one row in a slice (texels, or one row of blocks): wgpu's `bytes_per_row`.
+    pub fn row_bytes(&self) -> usize {
+        let w = self.texels()[0] as usize;
+        if self.format.is_block() {
+            (w / 4) * self.format.block_bytes()
+        } else {
+            w * self.format.bytes_per_voxel()
+        }
+    }
+
+    pub fn byte_len(&self) -> usize {
+        self.slice_bytes() * self.texels()[2] as usize
+    }
+
+    /// Byte offset of uncompressed texel (x, y, z).
+    pub fn texel_offset(&self, x: u32, y: u32, z: u32) -> usize {
+        let [w, h, _] = self.texels();
+        ((z as usize * h as usize + y as usize) * w as usize + x as usize) * self.format.bytes_per_voxel()
     }
 }
 
 /// Splits `count` bricks over as few atlases as fit a `max_dim`³ texture limit.
-pub fn plan_atlases(count: u32, max_dim: u32) -> Vec<AtlasLayout> {
+pub fn plan_atlases(format: Format, count: u32, max_dim: u32) -> Vec<AtlasLayout> {
     let per = (max_dim / 8).max(1);
-    let cap = per.saturating_mul(per).saturating_mul(per);
+    let per_z = (max_dim / format.slices_per_brick()).max(1);
+    let cap = per.saturating_mul(per).saturating_mul(per_z);
     let mut out = Vec::new();
     let mut first = 0u32;
     while first < count {
@@ -180,40 +302,45 @@ pub fn plan_atlases(count: u32, max_dim: u32) -> Vec<AtlasLayout> {
         let bx = n.min(per);
         let by = n.div_ceil(bx).min(per);
         let bz = n.div_ceil(bx * by);
-        out.push(AtlasLayout { bricks: [bx, by, bz], first_brick: first, count: n });
+        out.push(AtlasLayout { format, bricks: [bx, by, bz], first_brick: first, count: n });
         first += n;
     }
     out
 }
 
-/// Lays the bricks of one atlas out as texture bytes (in parallel over layers of bricks).
-pub fn pack_atlas(layout: &AtlasLayout, bricks: &[EncodedBrick], format: Format) -> Vec<u8> {
-    match format.bytes_per_voxel() {
-        1 => pack_atlas_n::<1>(layout, bricks),
-        2 => pack_atlas_n::<2>(layout, bricks),
-        _ => pack_atlas_n::<4>(layout, bricks),
+/// Lays the bricks of one atlas out as texture bytes, in parallel over
+/// slices; each slice is written strictly in order.
+pub fn pack_atlas(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
+    match (layout.format, layout.format.bytes_per_voxel()) {
+        (f, _) if f.is_block() => pack_blocks(layout, bricks),
+        (_, 1) => pack_voxels::<1>(layout, bricks),
+        (_, 2) => pack_voxels::<2>(layout, bricks),
+        _ => pack_voxels::<4>(layout, bricks),
     }
 }
 
-/// [`pack_atlas`] for `N` bytes per voxel (a constant, so each copy is one move).
-/// The output is written strictly in order: slice by slice, row by row, and
-/// along a row eight texels from each brick in turn.
-fn pack_atlas_n<const N: usize>(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
-    let mut out = vec![0u8; layout.byte_len(N)];
+/// The encoded data of global brick `b` if it belongs to the layout.
+fn brick_data<'a>(layout: &AtlasLayout, bricks: &'a [EncodedBrick], b: usize) -> Option<&'a [u8]> {
+    let (first, end) = (layout.first_brick as usize, layout.first_brick as usize + layout.count as usize);
+    if (first..end).contains(&b) {
+        bricks.get(b).map(|e| &e.data[..]).filter(|d| d.len() == layout.format.brick_bytes())
+    } else {
+        None
+    }
+}
+
+/// Uncompressed texels, `N` bytes each (a constant, so each copy is one move).
+fn pack_voxels<const N: usize>(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
+    let mut out = vec![0u8; layout.byte_len()];
     let [bx, by, _] = layout.bricks.map(|b| b as usize);
-    let [w, h, _] = layout.texels().map(|t| t as usize);
-    let row = w * N;
-    let first = layout.first_brick as usize;
-    let end = first + layout.count as usize;
-    let empty = [0u8; BRICK_VOXELS * 4];
-    // One chunk per texel slice; slice `s` is z = s % 8 of brick layer s / 8.
-    out.par_chunks_mut((row * h).max(1)).enumerate().for_each(|(s, slice)| {
+    let row = layout.row_bytes();
+    // Slice `s` is z = s % 8 of brick layer s / 8.
+    out.par_chunks_mut(layout.slice_bytes().max(1)).enumerate().for_each(|(s, slice)| {
         let (layer, z) = (s / 8, s % 8);
         for (ty, line) in slice.chunks_exact_mut(row).enumerate() {
             let (py, y) = (ty / 8, ty % 8);
             for (px, texels) in line.chunks_exact_mut(8 * N).enumerate() {
-                let b = first + (layer * by + py) * bx + px;
-                let data = if b < end { bricks.get(b).map_or(&empty[..], |e| &e.data[..]) } else { &empty[..] };
+                let Some(data) = brick_data(layout, bricks, layout.first_brick as usize + (layer * by + py) * bx + px) else { continue };
                 for (x, t) in texels.chunks_exact_mut(N).enumerate() {
                     let src = (x * 64 + y * 8 + z) * N;
                     if let Some(v) = data.get(src..src + N) {
@@ -226,20 +353,59 @@ fn pack_atlas_n<const N: usize>(layout: &AtlasLayout, bricks: &[EncodedBrick]) -
     out
 }
 
-/// Reads local brick `i` back out of atlas bytes (brick order, `512 · bpv` bytes).
-pub fn unpack_brick(layout: &AtlasLayout, atlas: &[u8], i: u32, format: Format) -> Option<Vec<u8>> {
-    let bpv = format.bytes_per_voxel();
-    if i >= layout.count || atlas.len() < layout.byte_len(bpv) {
+/// Block-compressed slices: each brick holds `slices_per_brick` × 2 × 2 blocks
+/// in that order (see `bc.rs`); a slice is rows of blocks.
+fn pack_blocks(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
+    let mut out = vec![0u8; layout.byte_len()];
+    let [bx, by, _] = layout.bricks.map(|b| b as usize);
+    let sp = layout.format.slices_per_brick() as usize;
+    let bb = layout.format.block_bytes();
+    let row = layout.row_bytes();
+    out.par_chunks_mut(layout.slice_bytes().max(1)).enumerate().for_each(|(s, slice)| {
+        let (layer, ls) = (s / sp, s % sp);
+        for (r, line) in slice.chunks_exact_mut(row).enumerate() {
+            let (py, br) = (r / 2, r % 2);
+            for (c, block) in line.chunks_exact_mut(bb).enumerate() {
+                let (px, bc) = (c / 2, c % 2);
+                let Some(data) = brick_data(layout, bricks, layout.first_brick as usize + (layer * by + py) * bx + px) else { continue };
+                let src = ((ls * 2 + br) * 2 + bc) * bb;
+                if let Some(v) = data.get(src..src + bb) {
+                    block.copy_from_slice(v);
+                }
+            }
+        }
+    });
+    out
+}
+
+/// Reads local brick `i` back out of atlas bytes, in its encoded brick order.
+pub fn unpack_brick(layout: &AtlasLayout, atlas: &[u8], i: u32) -> Option<Vec<u8>> {
+    if i >= layout.count || atlas.len() < layout.byte_len() {
         return None;
     }
-    let [px, py, pz] = layout.position(i);
-    let mut out = vec![0u8; BRICK_VOXELS * bpv];
-    for x in 0..8u32 {
-        for y in 0..8u32 {
-            for z in 0..8u32 {
-                let dst = ((x * 64 + y * 8 + z) as usize) * bpv;
-                let src = layout.texel_offset(px * 8 + x, py * 8 + y, pz * 8 + z, bpv);
-                out[dst..dst + bpv].copy_from_slice(atlas.get(src..src + bpv)?);
+    let [px, py, pz] = layout.position(i).map(|p| p as usize);
+    let f = layout.format;
+    let mut out = vec![0u8; f.brick_bytes()];
+    if f.is_block() {
+        let (sp, bb, row, slice) = (f.slices_per_brick() as usize, f.block_bytes(), layout.row_bytes(), layout.slice_bytes());
+        for ls in 0..sp {
+            for br in 0..2 {
+                for bc in 0..2 {
+                    let src = (pz * sp + ls) * slice + (py * 2 + br) * row + (px * 2 + bc) * bb;
+                    let dst = ((ls * 2 + br) * 2 + bc) * bb;
+                    out.get_mut(dst..dst + bb)?.copy_from_slice(atlas.get(src..src + bb)?);
+                }
+            }
+        }
+    } else {
+        let n = f.bytes_per_voxel();
+        for x in 0..8u32 {
+            for y in 0..8u32 {
+                for z in 0..8u32 {
+                    let dst = ((x * 64 + y * 8 + z) as usize) * n;
+                    let src = layout.texel_offset(px as u32 * 8 + x, py as u32 * 8 + y, pz as u32 * 8 + z);
+                    out.get_mut(dst..dst + n)?.copy_from_slice(atlas.get(src..src + n)?);
+                }
             }
         }
     }
@@ -321,15 +487,19 @@ mod tests {
 
     #[test]
     fn atlases_respect_the_texture_limit() {
-        let p = plan_atlases(5, 2048);
-        assert_eq!(p, vec![AtlasLayout { bricks: [5, 1, 1], first_brick: 0, count: 5 }]);
-        let p = plan_atlases(300, 64); // 8 bricks per axis, 512 per atlas
+        let p = plan_atlases(Format::F32, 5, 2048);
+        assert_eq!(p, vec![AtlasLayout { format: Format::F32, bricks: [5, 1, 1], first_brick: 0, count: 5 }]);
+        let p = plan_atlases(Format::F16, 300, 64); // 8 bricks per axis, 512 per atlas
         assert_eq!(p.len(), 1);
         assert_eq!(p[0].bricks, [8, 8, 5]);
-        let p = plan_atlases(1100, 64);
+        let p = plan_atlases(Format::Unorm8, 1100, 64);
         assert_eq!(p.iter().map(|a| a.count).collect::<Vec<_>>(), vec![512, 512, 76]);
         assert!(p.iter().all(|a| a.texels().iter().all(|&t| t <= 64)));
-        assert!(plan_atlases(0, 2048).is_empty());
+        // BC7 packs a brick into two slices: four times as many layers fit.
+        let p = plan_atlases(Format::Bc7, 1100, 64);
+        assert_eq!(p.iter().map(|a| a.count).collect::<Vec<_>>(), vec![1100]);
+        assert!(p[0].texels()[2] <= 64 && p[0].texels()[2] % 2 == 0);
+        assert!(plan_atlases(Format::Bc4, 0, 2048).is_empty());
     }
 
     #[test]
@@ -340,15 +510,40 @@ mod tests {
             let bricks: Vec<EncodedBrick> = (0..count)
                 .map(|i| EncodedBrick { range: [0.0, 1.0], data: (0..512u32).flat_map(|v| (i * 1000 + v).to_le_bytes()).collect() })
                 .collect();
-            for layout in plan_atlases(count, max_dim) {
-                let atlas = pack_atlas(&layout, &bricks, Format::F32);
+            for layout in plan_atlases(Format::F32, count, max_dim) {
+                let atlas = pack_atlas(&layout, &bricks);
                 for i in 0..layout.count {
                     let g = layout.first_brick + i;
-                    assert_eq!(unpack_brick(&layout, &atlas, i, Format::F32).unwrap(), bricks[g as usize].data);
+                    assert_eq!(unpack_brick(&layout, &atlas, i).unwrap(), bricks[g as usize].data);
                     let [px, py, pz] = layout.position(i);
                     let (x, y, z) = (3u32, 5u32, 6u32);
-                    let o = layout.texel_offset(px * 8 + x, py * 8 + y, pz * 8 + z, 4);
+                    let o = layout.texel_offset(px * 8 + x, py * 8 + y, pz * 8 + z);
                     assert_eq!(u32::from_le_bytes(atlas[o..o + 4].try_into().unwrap()), g * 1000 + x * 64 + y * 8 + z);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn every_block_lands_at_its_brick_position() {
+        for format in [Format::Bc4, Format::Bc7] {
+            for (count, max_dim) in [(1u32, 2048u32), (9, 16), (70, 32)] {
+                let bricks: Vec<EncodedBrick> = (0..count)
+                    .map(|i| EncodedBrick { range: [0.0, 1.0], data: (0..format.brick_bytes()).map(|b| (i as usize * 7 + b) as u8).collect() })
+                    .collect();
+                for layout in plan_atlases(format, count, max_dim) {
+                    let atlas = pack_atlas(&layout, &bricks);
+                    assert_eq!(atlas.len(), layout.byte_len());
+                    for i in 0..layout.count {
+                        let g = (layout.first_brick + i) as usize;
+                        assert_eq!(unpack_brick(&layout, &atlas, i).unwrap(), bricks[g].data, "{format:?} brick {g}");
+                        // Block (slice 1, row 1, col 0) of the brick, straight from the texture.
+                        let [px, py, pz] = layout.position(i).map(|p| p as usize);
+                        let sp = format.slices_per_brick() as usize;
+                        let o = (pz * sp + 1) * layout.slice_bytes() + (py * 2 + 1) * layout.row_bytes() + (px * 2) * format.block_bytes();
+                        let want = ((1 * 2 + 1) * 2) * format.block_bytes();
+                        assert_eq!(&atlas[o..o + format.block_bytes()], &bricks[g].data[want..want + format.block_bytes()]);
+                    }
                 }
             }
         }

@@ -1,0 +1,353 @@
+//! Variance-gated k-means over a brick pool (seed thesis §4.5 and §5.3).
+//!
+//! 1. Every brick is a row of 512 values. Its normalised variance is its
+//!    variance divided by its mean. Constant bricks and bricks whose
+//!    normalised variance exceeds the threshold are never clustered
+//!    (constant bricks are already stored once by the exact deduplication).
+//! 2. k-means over the remaining bricks with the normalised Manhattan
+//!    distance (mean absolute difference over the 512 values): k-means++
+//!    seeding from a fixed seed, then `iterations` rounds of assignment
+//!    (nearest centroid, ties to the lower index) and update (the mean of
+//!    each cluster; an empty cluster keeps its centroid), then a final
+//!    assignment.
+//! 3. Beyond the thesis, `max_brick_error`: a brick whose largest absolute
+//!    difference from its centroid exceeds it is kept as it is, so no voxel
+//!    moves further than the bound the artist sets.
+//!
+//! Everything is deterministic whatever the thread count: distances are
+//! summed in a fixed order, and cluster sums are reduced over fixed-size
+//! chunks in index order.
+
+use rayon::prelude::*;
+
+pub const BRICK: usize = 512;
+pub type Brick = [f32; BRICK];
+
+/// Bricks per chunk in reductions (fixed, so results do not depend on threads).
+const CHUNK: usize = 1024;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    /// Number of centroids (k).
+    pub clusters: usize,
+    pub iterations: usize,
+    /// Bricks with variance / mean above this are never clustered.
+    pub variance_threshold: f64,
+    /// A clustered brick whose largest absolute difference from its centroid exceeds this stays unique.
+    pub max_brick_error: Option<f32>,
+    pub seed: u64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options { clusters: 256, iterations: 5, variance_threshold: 0.05, max_brick_error: None, seed: 0x5eed }
+    }
+}
+
+/// Why each brick ended up where it did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Stats {
+    pub bricks_in: usize,
+    pub constant: usize,
+    pub high_variance: usize,
+    pub candidates: usize,
+    /// Candidates kept unique because their centroid was too far (`max_brick_error`).
+    pub over_error: usize,
+    pub clustered: usize,
+    /// Centroids at least one brick uses.
+    pub centroids: usize,
+    pub bricks_out: usize,
+}
+
+/// The clustered pool.
+pub struct Clustered {
+    /// Output bricks: unclustered input bricks in input order, then the used centroids.
+    pub bricks: Vec<Brick>,
+    /// For every input brick, its index in `bricks`.
+    pub remap: Vec<u32>,
+    /// For every input brick, whether it was replaced by a centroid.
+    pub merged: Vec<bool>,
+    pub stats: Stats,
+}
+
+/// Mean absolute difference, accumulated in eight fixed lanes (the result
+/// does not depend on `bound`); stops early, returning a value above `bound`,
+/// once the partial sum exceeds it (or reaches it, when `strict` is false).
+#[inline]
+fn l1_bounded(a: &Brick, b: &Brick, bound: f32, strict: bool) -> f32 {
+    let bound = bound * BRICK as f32;
+    let mut total = 0.0f32;
+    for (ca, cb) in a.chunks_exact(64).zip(b.chunks_exact(64)) {
+        let mut lanes = [0.0f32; 8];
+        for (xa, xb) in ca.chunks_exact(8).zip(cb.chunks_exact(8)) {
+            for k in 0..8 {
+                lanes[k] += (xa[k] - xb[k]).abs();
+            }
+        }
+        total += lanes.iter().sum::<f32>();
+        if total > bound || (!strict && total == bound && bound.is_finite()) {
+            return total / BRICK as f32;
+        }
+    }
+    total / BRICK as f32
+}
+
+/// Mean absolute difference of two bricks (the normalised Manhattan distance);
+/// stops early with a value >= `bound` once it is certain to reach it.
+#[inline]
+pub fn l1(a: &Brick, b: &Brick, bound: f32) -> f32 {
+    l1_bounded(a, b, bound, false)
+}
+
+/// Nearest centroid (ties to the lower index) and its distance. Starting
+/// from `hint` (the previous assignment) gives a tight bound at once, so most
+/// other centroids are abandoned after a few values; the result is the same
+/// as a plain scan.
+fn nearest(b: &Brick, centroids: &[Brick], hint: u32) -> (u32, f32) {
+    let hint = if (hint as usize) < centroids.len() { hint } else { 0 };
+    let mut best = (hint, l1(b, &centroids[hint as usize], f32::INFINITY));
+    for (i, c) in centroids.iter().enumerate() {
+        let i = i as u32;
+        if i == hint {
+            continue;
+        }
+        // A lower index wins a tie, so it must be computed in full when equal.
+        let lower = i < best.0;
+        let d = l1_bounded(b, c, best.1, lower);
+        if d < best.1 || (lower && d == best.1) {
+            best = (i, d);
+        }
+    }
+    best
+}
+
+/// Mean, variance, and whether every value is equal.
+fn moments(b: &Brick) -> (f64, f64, bool) {
+    let mean = b.iter().map(|&v| f64::from(v)).sum::<f64>() / BRICK as f64;
+    let var = b.iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / BRICK as f64;
+    (mean, var, b.iter().all(|&v| v.to_bits() == b[0].to_bits()))
+}
+
+/// Normalised variance (variance / mean); infinite when the mean is not positive.
+pub fn normalized_variance(b: &Brick) -> f64 {
+    let (mean, var, _) = moments(b);
+    if var == 0.0 {
+        0.0
+    } else if mean > 0.0 {
+        var / mean
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// SplitMix64: a small, seeded, portable generator.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Bricks k-means++ looks at per centroid: seeding runs on a seeded random
+/// sample of `SEED_SAMPLE_PER_CLUSTER · k` bricks (all of them when fewer), so
+/// its cost does not grow with the pool.
+pub const SEED_SAMPLE_PER_CLUSTER: usize = 64;
+
+/// k-means++ seeding on a sample: the first centroid uniformly, each next
+/// one with probability proportional to the squared distance to the nearest
+/// chosen centroid.
+pub fn seed_centroids(data: &[&Brick], k: usize, seed: u64) -> Vec<Brick> {
+    let mut rng = Rng(seed);
+    if data.is_empty() || k == 0 {
+        return Vec::new();
+    }
+    let want = k.saturating_mul(SEED_SAMPLE_PER_CLUSTER);
+    let sample: Vec<&Brick> = if data.len() <= want {
+        data.to_vec()
+    } else {
+        // Partial Fisher-Yates over indices, then back to input order.
+        let mut idx: Vec<usize> = (0..data.len()).collect();
+        for i in 0..want {
+            let j = i + (rng.next() % (data.len() - i) as u64) as usize;
+            idx.swap(i, j);
+        }
+        idx.truncate(want);
+        idx.sort_unstable();
+        idx.into_iter().map(|i| data[i]).collect()
+    };
+    kmeans_pp(&sample, k, &mut rng)
+}
+
+fn kmeans_pp(data: &[&Brick], k: usize, rng: &mut Rng) -> Vec<Brick> {
+    let mut centroids: Vec<Brick> = Vec::with_capacity(k);
+    centroids.push(*data[(rng.next() % data.len() as u64) as usize]);
+    let mut dist: Vec<f32> = data.par_iter().map(|b| l1(b, &centroids[0], f32::INFINITY)).collect();
+    while centroids.len() < k {
+        // Sum in fixed chunks, in order.
+        let partial: Vec<f64> = dist.par_chunks(CHUNK).map(|c| c.iter().map(|&d| f64::from(d) * f64::from(d)).sum()).collect();
+        let total: f64 = partial.iter().sum();
+        if total <= 0.0 {
+            break; // every brick coincides with a centroid
+        }
+        let mut target = rng.unit() * total;
+        let mut pick = dist.len() - 1;
+        'find: for (ci, &p) in partial.iter().enumerate() {
+            if target >= p {
+                target -= p;
+                continue;
+            }
+            for (j, &d) in dist[ci * CHUNK..].iter().enumerate().take(CHUNK) {
+                target -= f64::from(d) * f64::from(d);
+                if target < 0.0 {
+                    pick = ci * CHUNK + j;
+                    break 'find;
+                }
+            }
+        }
+        let c = *data[pick];
+        dist.par_iter_mut().zip(data.par_iter()).for_each(|(d, b)| *d = d.min(l1(b, &c, *d)));
+        centroids.push(c);
+    }
+    centroids
+}
+
+/// Labels every brick with its nearest centroid; `previous` labels, when
+/// given, only speed the search up.
+pub fn assign(data: &[&Brick], centroids: &[Brick], previous: Option<&[(u32, f32)]>) -> Vec<(u32, f32)> {
+    match previous {
+        Some(p) => data.par_iter().zip(p.par_iter()).map(|(b, &(h, _))| nearest(b, centroids, h)).collect(),
+        None => data.par_iter().map(|b| nearest(b, centroids, 0)).collect(),
+    }
+}
+
+/// New centroids: the mean of each cluster's bricks (an empty cluster keeps its centroid).
+pub fn update(data: &[&Brick], labels: &[(u32, f32)], centroids: &[Brick]) -> Vec<Brick> {
+    let k = centroids.len();
+    let partial: Vec<(Vec<f64>, Vec<u64>)> = data
+        .par_chunks(CHUNK)
+        .zip(labels.par_chunks(CHUNK))
+        .map(|(bs, ls)| {
+            let mut sums = vec![0.0f64; k * BRICK];
+            let mut counts = vec![0u64; k];
+            for (b, &(l, _)) in bs.iter().zip(ls) {
+                let l = l as usize;
+                counts[l] += 1;
+                for (s, &v) in sums[l * BRICK..(l + 1) * BRICK].iter_mut().zip(b.iter()) {
+                    *s += f64::from(v);
+                }
+            }
+            (sums, counts)
+        })
+        .collect();
+    let mut sums = vec![0.0f64; k * BRICK];
+    let mut counts = vec![0u64; k];
+    for (s, c) in &partial {
+        for (a, b) in sums.iter_mut().zip(s) {
+            *a += b;
+        }
+        for (a, b) in counts.iter_mut().zip(c) {
+            *a += b;
+        }
+    }
+    (0..k)
+        .map(|i| {
+            if counts[i] == 0 {
+                centroids[i]
+            } else {
+                std::array::from_fn(|v| (sums[i * BRICK + v] / counts[i] as f64) as f32)
+            }
+        })
+        .collect()
+}
+
+/// Runs the whole procedure; `progress(step, steps)` after each k-means round.
+pub fn cluster(bricks: &[Brick], opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
+    let n = bricks.len();
+    let mut stats = Stats { bricks_in: n, ..Stats::default() };
+    let kind: Vec<u8> = bricks
+        .par_iter()
+        .map(|b| {
+            let (mean, var, constant) = moments(b);
+            let nv = if var == 0.0 { 0.0 } else if mean > 0.0 { var / mean } else { f64::INFINITY };
+            if constant {
+                0
+            } else if nv > opts.variance_threshold {
+                1
+            } else {
+                2
+            }
+        })
+        .collect();
+    stats.constant = kind.iter().filter(|&&k| k == 0).count();
+    stats.high_variance = kind.iter().filter(|&&k| k == 1).count();
+    let cand: Vec<usize> = (0..n).filter(|&i| kind[i] == 2).collect();
+    stats.candidates = cand.len();
+
+    let mut label: Vec<Option<u32>> = vec![None; n];
+    let mut centroids = Vec::new();
+    if opts.clusters > 0 && cand.len() > opts.clusters {
+        let data: Vec<&Brick> = cand.iter().map(|&i| &bricks[i]).collect();
+        centroids = seed_centroids(&data, opts.clusters, opts.seed);
+        let steps = opts.iterations + 1;
+        let mut labels = assign(&data, &centroids, None);
+        progress(1, steps);
+        for it in 0..opts.iterations {
+            centroids = update(&data, &labels, &centroids);
+            labels = assign(&data, &centroids, Some(&labels));
+            progress(it + 2, steps);
+        }
+        // The error bound, brick by brick: the largest voxel difference.
+        let over: Vec<bool> = match opts.max_brick_error {
+            None => vec![false; data.len()],
+            Some(e) => data
+                .par_iter()
+                .zip(labels.par_iter())
+                .map(|(b, &(l, _))| b.iter().zip(centroids[l as usize].iter()).any(|(x, c)| (x - c).abs() > e))
+                .collect(),
+        };
+        for (j, &i) in cand.iter().enumerate() {
+            if over[j] {
+                stats.over_error += 1;
+            } else {
+                label[i] = Some(labels[j].0);
+            }
+        }
+    }
+
+    // Output: unclustered bricks in input order, then the centroids in use.
+    let mut out: Vec<Brick> = Vec::new();
+    let mut remap = vec![0u32; n];
+    let mut merged = vec![false; n];
+    for i in 0..n {
+        if label[i].is_none() {
+            remap[i] = out.len() as u32;
+            out.push(bricks[i]);
+        }
+    }
+    let mut centroid_slot: Vec<Option<u32>> = vec![None; centroids.len()];
+    for i in 0..n {
+        if let Some(l) = label[i] {
+            let slot = *centroid_slot[l as usize].get_or_insert_with(|| {
+                out.push(centroids[l as usize]);
+                (out.len() - 1) as u32
+            });
+            remap[i] = slot;
+            merged[i] = true;
+            stats.clustered += 1;
+        }
+    }
+    stats.centroids = centroid_slot.iter().filter(|s| s.is_some()).count();
+    stats.bricks_out = out.len();
+    Clustered { bricks: out, remap, merged, stats }
+}
+
+#[cfg(test)]
+mod tests;

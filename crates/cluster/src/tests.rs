@@ -1,0 +1,127 @@
+use super::*;
+
+/// A smooth, positive, low-variance brick shaped by `p`.
+fn prototype(p: usize) -> Brick {
+    std::array::from_fn(|i| {
+        let (x, y, z) = ((i / 64) as f32, ((i / 8) % 8) as f32, (i % 8) as f32);
+        0.5 + 0.05 * ((x + p as f32 * 1.7) * 0.4).sin() * ((y * 0.3 + z * 0.2) + p as f32).cos()
+    })
+}
+
+fn jitter(b: &Brick, seed: u64, amp: f32) -> Brick {
+    let mut r = Rng(seed);
+    b.map(|v| v + amp * (r.unit() as f32 - 0.5))
+}
+
+fn planted() -> (Vec<Brick>, Vec<usize>) {
+    let mut bricks = Vec::new();
+    let mut group = Vec::new();
+    for p in 0..6 {
+        let base = prototype(p);
+        for c in 0..40 {
+            bricks.push(jitter(&base, (p * 1000 + c) as u64, 1e-3));
+            group.push(p);
+        }
+    }
+    (bricks, group)
+}
+
+#[test]
+fn planted_near_duplicates_collapse_to_the_planted_count() {
+    let (bricks, group) = planted();
+    for seed in 0..20 {
+        let opts = Options { clusters: 6, iterations: 5, variance_threshold: 0.05, max_brick_error: None, seed };
+        let c = cluster(&bricks, &opts, &|_, _| {});
+        assert_eq!(c.stats.bricks_out, 6, "seed {seed}: {:?}", c.stats);
+        for i in 0..bricks.len() {
+            for j in 0..bricks.len() {
+                assert_eq!(c.remap[i] == c.remap[j], group[i] == group[j], "seed {seed}: bricks {i} and {j}");
+            }
+        }
+        assert!(c.merged.iter().all(|&m| m));
+    }
+}
+
+#[test]
+fn high_variance_and_constant_bricks_are_never_merged() {
+    let (mut bricks, _) = planted();
+    let spiky: Brick = std::array::from_fn(|i| if i % 7 == 0 { 1.0 } else { 0.001 });
+    let constant = [0.25f32; BRICK];
+    bricks.push(spiky);
+    bricks.push(constant);
+    let n = bricks.len();
+    assert!(normalized_variance(&spiky) > 0.05);
+    let opts = Options { clusters: 6, iterations: 5, variance_threshold: 0.05, max_brick_error: None, seed: 1 };
+    let c = cluster(&bricks, &opts, &|_, _| {});
+    assert!(!c.merged[n - 2] && !c.merged[n - 1]);
+    assert_eq!(c.bricks[c.remap[n - 2] as usize], spiky);
+    assert_eq!(c.bricks[c.remap[n - 1] as usize], constant);
+    assert_eq!((c.stats.high_variance, c.stats.constant), (1, 1));
+    assert_eq!(c.stats.bricks_out, 8);
+}
+
+#[test]
+fn max_brick_error_is_honoured_brick_by_brick() {
+    let (mut bricks, _) = planted();
+    // Outliers: near a prototype, but off by more than the bound somewhere.
+    for k in 0..5 {
+        let mut b = jitter(&prototype(k), 99 + k as u64, 1e-3);
+        b[k * 50] += 0.02;
+        bricks.push(b);
+    }
+    let e = 0.01f32;
+    let opts = Options { clusters: 6, iterations: 5, variance_threshold: 0.05, max_brick_error: Some(e), seed: 3 };
+    let c = cluster(&bricks, &opts, &|_, _| {});
+    for (i, b) in bricks.iter().enumerate() {
+        let out = &c.bricks[c.remap[i] as usize];
+        let worst = b.iter().zip(out).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        assert!(worst <= e, "brick {i}: {worst}");
+    }
+    assert_eq!(c.stats.over_error, 5, "{:?}", c.stats);
+    let loose = cluster(&bricks, &Options { max_brick_error: None, ..opts }, &|_, _| {});
+    assert_eq!(loose.stats.over_error, 0);
+    assert!(loose.stats.bricks_out < c.stats.bricks_out);
+}
+
+#[test]
+fn same_result_on_any_thread_count() {
+    let (bricks, _) = planted();
+    let opts = Options { clusters: 4, iterations: 3, variance_threshold: 0.05, max_brick_error: None, seed: 9 };
+    let run = |t| rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap().install(|| cluster(&bricks, &opts, &|_, _| {}));
+    let (a, b) = (run(1), run(3));
+    assert_eq!(a.remap, b.remap);
+    assert!(a.bricks == b.bricks);
+}
+
+#[test]
+fn l1_early_exit_never_changes_the_minimum() {
+    let a = prototype(0);
+    let b = prototype(1);
+    let full = l1(&a, &b, f32::INFINITY);
+    assert!(l1(&a, &b, full * 0.5) >= full * 0.5);
+    assert_eq!(l1(&a, &b, full * 2.0), full);
+    assert_eq!(l1(&a, &a, 0.0), 0.0);
+}
+
+#[test]
+fn fewer_candidates_than_clusters_changes_nothing() {
+    let bricks = vec![prototype(0), prototype(1)];
+    let c = cluster(&bricks, &Options { clusters: 8, ..Options::default() }, &|_, _| {});
+    assert_eq!(c.remap, vec![0, 1]);
+    assert!(c.bricks == bricks);
+}
+
+#[test]
+fn hinted_search_finds_the_same_nearest_centroid() {
+    let (bricks, _) = planted();
+    let data: Vec<&Brick> = bricks.iter().collect();
+    // Duplicate centroids make ties: the lower index must win either way.
+    let mut cents = seed_centroids(&data, 6, 5);
+    cents.push(cents[2]);
+    cents.insert(0, cents[4]);
+    let plain = assign(&data, &cents, None);
+    for h in 0..cents.len() as u32 {
+        let hints = vec![(h, 0.0); data.len()];
+        assert_eq!(assign(&data, &cents, Some(&hints)), plain, "hint {h}");
+    }
+}
