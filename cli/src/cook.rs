@@ -24,9 +24,16 @@ Formats (storage per voxel in the brick atlas):
   bc7      2 bits  BC7 with four consecutive z-slices packed into RGBA
 
 BC7 quality presets (the alpha settings of intel_tex_2, ISPC BC7):
-  ultra-fast  very-fast  fast (default)  basic  slow
+  ultra-fast  very-fast (default)  fast  basic  slow
 Slower presets search more BC7 modes and refine more; see docs/benchmarks.md for
 their measured speed and error.
+
+Clustering (--clusters K): every brick's normalised variance (variance / mean) is
+computed; constant bricks and bricks above --variance-threshold are kept as they are;
+the rest go through k-means with the normalised Manhattan distance (seeded k-means++,
+then --iterations rounds), and each is replaced by its centroid unless that moves a
+voxel by more than --max-brick-error. The report gives bricks before and after and the
+voxel RMSE with and without clustering.
 
 Frames are streamed: at most two source frames are held at once. Identical bricks,
 L3 and L2 nodes and frames are stored once. The output is written to a temporary
@@ -53,8 +60,20 @@ pub struct CookArgs {
     #[arg(long, default_value = "f16", value_parser = ["f32", "f16", "unorm8", "bc4", "bc7"])]
     pub format: String,
     /// BC7 encoder preset (see the table below).
-    #[arg(long, default_value = "fast", value_parser = ["ultra-fast", "very-fast", "fast", "basic", "slow"])]
+    #[arg(long, default_value = "very-fast", value_parser = ["ultra-fast", "very-fast", "fast", "basic", "slow"])]
     pub quality: String,
+    /// Merge similar bricks with variance-gated k-means into K centroid bricks (off by default).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub clusters: Option<u32>,
+    /// k-means iterations.
+    #[arg(long, default_value_t = 5, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=1000))]
+    pub iterations: u32,
+    /// Bricks whose variance / mean exceeds T are never clustered.
+    #[arg(long, default_value_t = 0.01, value_name = "T")]
+    pub variance_threshold: f64,
+    /// A clustered brick whose largest voxel difference from its centroid exceeds E stays unique.
+    #[arg(long, value_name = "E")]
+    pub max_brick_error: Option<f32>,
     /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
     #[arg(long, default_value_t = 2048, value_name = "TEXELS", value_parser = clap::value_parser!(u32).range(8..=16384))]
     pub max_texture_dim: u32,
@@ -109,6 +128,19 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     }
     let format = Format::parse(&args.format).ok_or_else(|| Usage(format!("unknown format {}", args.format)))?;
     let quality = Quality::parse(&args.quality).ok_or_else(|| Usage(format!("unknown quality {}", args.quality)))?;
+    if !(args.variance_threshold >= 0.0) {
+        return Err(Usage(format!("--variance-threshold must be a number >= 0, not {}", args.variance_threshold)).into());
+    }
+    if args.max_brick_error.is_some_and(|e| !(e >= 0.0)) {
+        return Err(Usage("--max-brick-error must be a number >= 0".into()).into());
+    }
+    let clustering = args.clusters.map(|k| vdbcook_cluster::Options {
+        clusters: k as usize,
+        iterations: args.iterations as usize,
+        variance_threshold: args.variance_threshold,
+        max_brick_error: args.max_brick_error,
+        ..vdbcook_cluster::Options::default()
+    });
     let files = inputs::expand(&args.inputs, args.frames)?;
     let started = Instant::now();
     let bars = Bars::new(quiet);
@@ -120,9 +152,13 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
         ("frames".to_string(), args.frames.map(|f| format!("{}-{}:{}", f.first, f.last, f.step)).unwrap_or_default()),
         ("allow_missing".to_string(), args.allow_missing.to_string()),
         ("max_texture_dim".to_string(), args.max_texture_dim.to_string()),
+        ("clusters".to_string(), args.clusters.map(|k| k.to_string()).unwrap_or_default()),
+        ("iterations".to_string(), if args.clusters.is_some() { args.iterations.to_string() } else { String::new() }),
+        ("variance_threshold".to_string(), if args.clusters.is_some() { args.variance_threshold.to_string() } else { String::new() }),
+        ("max_brick_error".to_string(), args.max_brick_error.map(|e| e.to_string()).unwrap_or_default()),
         ("inputs".to_string(), args.inputs.join(" ")),
     ];
-    let mut cooker = Cooker::new(CookOptions { format, quality, max_texture_dim: args.max_texture_dim, settings });
+    let mut cooker = Cooker::new(CookOptions { format, quality, max_texture_dim: args.max_texture_dim, clustering, settings });
 
     // A reader thread stays one frame ahead: at most two source frames live at once.
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Frame>>(0);
@@ -201,6 +237,13 @@ fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
     let _ = writeln!(s, "  bricks          {} leaves -> {} unique -> {} stored in {} atlas{}", r.bricks, r.unique_bricks, r.stored_bricks, r.atlases, if r.atlases == 1 { "" } else { "es" });
     let _ = writeln!(s, "  nodes           L1 {}, L2 {}, L3 {}, tiles {}; tree {} (thesis layout: {})", r.l1_nodes, r.l2_nodes, r.l3_nodes, r.tiles, mb(r.tree_bytes), mb(r.thesis_tree_bytes));
     let _ = writeln!(s, "  voxel error     rmse {:.3e}, psnr {:.1} dB, max {:.3e}", r.voxel_rmse, r.voxel_psnr, r.voxel_max_error);
+    if let Some(c) = &r.clustering {
+        let _ = writeln!(
+            s,
+            "  clustering      {} -> {} bricks ({:.2}x; {} constant, {} high variance, {} over the error bound kept), rmse {:.3e} without, {:.3e} with",
+            c.bricks_before, c.bricks_after, c.ratio, c.constant, c.high_variance, c.over_error, c.rmse_without, c.rmse_with
+        );
+    }
     let t: Vec<String> = r.timings.iter().map(|(k, v)| format!("{k} {v:.2}s")).collect();
     let _ = writeln!(s, "  time            {}", t.join(", "));
     s

@@ -36,13 +36,20 @@ struct GridReport<'a> {
 
 fn describe(file: &VdbFile) -> anyhow::Result<Vec<GridReport<'_>>> {
     let mut out = Vec::with_capacity(file.grids.len());
+    // Figures per tree: instances share their parent's, which is read once.
+    let mut trees: std::collections::HashMap<&str, (f32, Stats)> = std::collections::HashMap::new();
     for (i, info) in file.grids.iter().enumerate() {
         let skipped = info.unsupported.as_ref().map(|u| u.to_string());
+        let tree = info.instance_parent.as_deref().unwrap_or(&info.unique_name);
         let (background, stats) = if skipped.is_some() {
             (None, None)
+        } else if let Some((bg, st)) = trees.get(tree) {
+            (Some(*bg), Some(*st))
         } else {
             let grid = file.read_grid(i)?;
-            (Some(grid.background), Some(grid.stats()))
+            let st = grid.stats();
+            trees.insert(tree, (grid.background, st));
+            (Some(grid.background), Some(st))
         };
         out.push(GridReport { info, background, stats, skipped });
     }

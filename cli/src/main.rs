@@ -1,6 +1,7 @@
 //! The `vdbcook` binary: flags in, library calls, human or JSON text out.
 
 mod cook;
+mod diff;
 mod inputs;
 mod inspect;
 mod inspect_vpak;
@@ -60,6 +61,9 @@ enum Command {
     Cook(cook::CookArgs),
     /// Decode one frame of a .vpak asset into a .vdb file that OpenVDB reads.
     Unpack(unpack::UnpackArgs),
+    /// Compare two .vdb grids voxel by voxel (RMSE, PSNR, max error).
+    #[command(after_help = diff::AFTER_HELP)]
+    Diff(diff::DiffArgs),
 }
 
 /// A usage problem found after parsing (exit code 2).
@@ -98,6 +102,7 @@ fn main() -> ExitCode {
         Command::Inspect { files, json } => inspect::run(&files, json, cli.quiet),
         Command::Cook(args) => cook::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
         Command::Unpack(args) => unpack::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
+        Command::Diff(args) => diff::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
     };
     ExitCode::from(code)
 }

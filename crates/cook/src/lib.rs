@@ -56,13 +56,15 @@ pub struct CookOptions {
     pub quality: Quality,
     /// Largest 3D texture edge an atlas may use (wgpu's default limit is 2048).
     pub max_texture_dim: u32,
+    /// Merge similar bricks with variance-gated k-means before encoding.
+    pub clustering: Option<vdbcook_cluster::Options>,
     /// Every setting, recorded verbatim in the asset's metadata.
     pub settings: Vec<(String, String)>,
 }
 
 impl Default for CookOptions {
     fn default() -> Self {
-        CookOptions { format: Format::F16, quality: Quality::Fast, max_texture_dim: 2048, settings: Vec::new() }
+        CookOptions { format: Format::F16, quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, settings: Vec::new() }
     }
 }
 
@@ -99,8 +101,31 @@ pub struct CookReport {
     pub voxel_max_error: f64,
     /// Per frame: (rmse, max error).
     pub frame_errors: Vec<(f64, f64)>,
+    /// What clustering did, when it ran.
+    pub clustering: Option<ClusterReport>,
     /// (stage, seconds).
     pub timings: Vec<(String, f64)>,
+}
+
+/// The thesis's Figure 19 table for one cook: bricks before and after, and
+/// the voxel RMSE with and without clustering.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ClusterReport {
+    pub clusters: usize,
+    pub iterations: usize,
+    pub variance_threshold: f64,
+    pub max_brick_error: Option<f32>,
+    pub bricks_before: usize,
+    pub bricks_after: usize,
+    pub ratio: f64,
+    pub constant: usize,
+    pub high_variance: usize,
+    pub candidates: usize,
+    pub over_error: usize,
+    pub clustered: usize,
+    pub centroids: usize,
+    pub rmse_without: f64,
+    pub rmse_with: f64,
 }
 
 /// Streams frames into an asset.
@@ -174,13 +199,28 @@ impl Cooker {
         let format = self.opts.format;
         let mut built = self.builder.finish()?;
 
-        // Encode every distinct brick, then store identical encodings once.
-        let t0 = Instant::now();
+        // Optionally merge similar bricks; then encode every brick and store
+        // identical encodings once.
         let pool = built.pool.bricks();
-        progress.start("encoding", pool.len() as u64);
-        let encoded: Vec<EncodedBrick> = vdbcook_encode::encode_all(format, self.opts.quality, pool, &|n| progress.advance(n as u64));
+        let clustered = self.opts.clustering.as_ref().map(|co| {
+            let t0 = Instant::now();
+            progress.start("clustering", co.iterations as u64 + 1);
+            let c = vdbcook_cluster::cluster(pool, co, &|_, _| progress.advance(1));
+            progress.finish();
+            timings.push(("cluster".into(), t0.elapsed().as_secs_f64()));
+            c
+        });
+        let work: &[vdbcook_flipbook::Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
+        let t0 = Instant::now();
+        progress.start("encoding", work.len() as u64);
+        let encoded: Vec<EncodedBrick> = vdbcook_encode::encode_all(format, self.opts.quality, work, &|n| progress.advance(n as u64));
         progress.finish();
-        let (stored, remap) = dedup_encoded(encoded);
+        let (stored, enc_remap) = dedup_encoded(encoded);
+        // Pool brick -> stored brick.
+        let remap: Vec<u32> = match &clustered {
+            Some(c) => c.remap.iter().map(|&w| enc_remap[w as usize]).collect(),
+            None => enc_remap,
+        };
         timings.push(("encode".into(), t0.elapsed().as_secs_f64()));
 
         // Node arrays over the final brick ids.
@@ -190,13 +230,51 @@ impl Cooker {
         progress.finish();
         timings.push(("nodes".into(), t0.elapsed().as_secs_f64()));
 
-        // Voxel-domain error of what is stored, per frame.
+        // Voxel-domain error of what is stored, per frame (and, with
+        // clustering, what it would have been without: merged bricks encoded
+        // on their own).
         let t0 = Instant::now();
-        let frame_err = voxel_errors(&built, &stored, &remap, format);
+        let decode_stored = |b: u32| remap.get(b as usize).and_then(|&i| stored.get(i as usize)).map(|e| vdbcook_encode::decode_brick(format, e.range, &e.data));
+        let frame_err = voxel_errors(&built, &decode_stored);
         let mut total = ErrorStats::default();
         for e in &frame_err {
             total.merge(e);
         }
+        let cluster_report = clustered.as_ref().zip(self.opts.clustering.as_ref()).map(|(c, co)| {
+            let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
+            let own: Vec<vdbcook_flipbook::Brick> = merged.iter().map(|&i| pool[i]).collect();
+            let own_enc = vdbcook_encode::encode_all(format, self.opts.quality, &own, &|_| {});
+            let mut slot = vec![u32::MAX; c.merged.len()];
+            for (k, &i) in merged.iter().enumerate() {
+                slot[i] = k as u32;
+            }
+            let decode_unclustered = |b: u32| match slot.get(b as usize) {
+                Some(&k) if k != u32::MAX => own_enc.get(k as usize).map(|e| vdbcook_encode::decode_brick(format, e.range, &e.data)),
+                _ => decode_stored(b),
+            };
+            let mut without = ErrorStats::default();
+            for e in voxel_errors(&built, &decode_unclustered) {
+                without.merge(&e);
+            }
+            ClusterReport {
+                clusters: co.clusters,
+                iterations: co.iterations,
+                variance_threshold: co.variance_threshold,
+                max_brick_error: co.max_brick_error,
+                bricks_before: c.stats.bricks_in,
+                bricks_after: c.stats.bricks_out,
+                ratio: c.stats.bricks_in as f64 / c.stats.bricks_out.max(1) as f64,
+                constant: c.stats.constant,
+                high_variance: c.stats.high_variance,
+                candidates: c.stats.candidates,
+                over_error: c.stats.over_error,
+                clustered: c.stats.clustered,
+                centroids: c.stats.centroids,
+                rmse_without: without.rmse(),
+                rmse_with: total.rmse(),
+            }
+        });
+        drop(clustered);
         timings.push(("error".into(), t0.elapsed().as_secs_f64()));
 
         // The source-precision bricks are not needed any more.
@@ -267,6 +345,7 @@ impl Cooker {
             voxel_psnr: total.psnr(if peak > 0.0 { peak } else { 1.0 }),
             voxel_max_error: total.max_abs,
             frame_errors: frame_err.iter().map(|e| (e.rmse(), e.max_abs)).collect(),
+            clustering: cluster_report,
             timings,
         };
         Ok((sections, report))
@@ -297,17 +376,16 @@ fn dedup_encoded(encoded: Vec<EncodedBrick>) -> (Vec<EncodedBrick>, Vec<u32>) {
     (stored, remap)
 }
 
-/// Error of the stored (decoded) values against the source over each frame's active voxels.
-fn voxel_errors(built: &Built, stored: &[EncodedBrick], remap: &[u32], format: Format) -> Vec<ErrorStats> {
+/// Error of decoded bricks (`decoded(pool brick)`) against the source over
+/// each frame's active voxels.
+fn voxel_errors(built: &Built, decoded: &(dyn Fn(u32) -> Option<[f32; 512]> + Sync)) -> Vec<ErrorStats> {
     // Per L3 node: its error over its own active voxels.
     let per_l3: Vec<ErrorStats> = built
         .l3
         .par_iter()
         .map(|l| {
             let mut e = ErrorStats::default();
-            let src = &built.pool.bricks()[l.brick as usize];
-            let Some(enc) = remap.get(l.brick as usize).and_then(|&i| stored.get(i as usize)) else { return e };
-            let dec = vdbcook_encode::decode_brick(format, enc.range, &enc.data);
+            let (Some(src), Some(dec)) = (built.pool.bricks().get(l.brick as usize), decoded(l.brick)) else { return e };
             for (w, &word) in l.mask.iter().enumerate() {
                 let mut bits = word;
                 while bits != 0 {

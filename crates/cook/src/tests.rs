@@ -20,7 +20,7 @@ fn frame(shift: i32) -> Grid {
 }
 
 fn cook(format: Format, frames: &[Grid], max_dim: u32) -> (Vec<u8>, CookReport) {
-    let mut c = Cooker::new(CookOptions { format, quality: Quality::Fast, max_texture_dim: max_dim, settings: vec![("format".into(), format.name().into())] });
+    let mut c = Cooker::new(CookOptions { format, quality: Quality::Fast, max_texture_dim: max_dim, clustering: None, settings: vec![("format".into(), format.name().into())] });
     for f in frames {
         c.push(f, None).unwrap();
     }
@@ -123,5 +123,41 @@ fn block_formats_round_trip_within_their_precision() {
         assert!(f64::from(worst) <= report.voxel_max_error + 1e-7, "{format:?}: {worst} vs reported {}", report.voxel_max_error);
         // Values span [0, 0.1]: a few 8-bit steps of error at most.
         assert!(report.voxel_rmse > 0.0 && report.voxel_rmse < 0.1 / 255.0 * 3.0, "{format:?}: {}", report.voxel_rmse);
+    }
+}
+
+#[test]
+fn clustering_reduces_bricks_and_reports_both_errors() {
+    // Many nearly identical smooth bricks: one frame shifted by whole leaves.
+    let mut frames = Vec::new();
+    for k in 0..4 {
+        let mut f = smooth_frame(0);
+        for l in f.leaves.iter_mut() {
+            for v in l.values.iter_mut() {
+                *v += 0.0001 * k as f32;
+            }
+        }
+        frames.push(f);
+    }
+    let co = vdbcook_cluster::Options { clusters: 8, iterations: 5, variance_threshold: 1.0, max_brick_error: Some(0.02), seed: 1 };
+    let mut c = Cooker::new(CookOptions { format: Format::F32, clustering: Some(co), ..CookOptions::default() });
+    for f in &frames {
+        c.push(f, None).unwrap();
+    }
+    let (sections, report) = c.finish(&NoProgress).unwrap();
+    let cr = report.clustering.clone().unwrap();
+    assert_eq!(cr.bricks_before, 160);
+    assert!(cr.bricks_after <= 8 + cr.over_error, "{cr:?}");
+    assert!(cr.ratio > 5.0, "{cr:?}");
+    assert_eq!(cr.rmse_without, 0.0, "f32 without clustering is exact");
+    assert!(cr.rmse_with > 0.0 && cr.rmse_with == report.voxel_rmse);
+    assert!(report.voxel_max_error <= 0.02 + 1e-6, "{}", report.voxel_max_error);
+    // Unpacked values match the report's error bound.
+    let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+    let g = unpack_frame(&asset, 3).unwrap();
+    for (a, b) in g.leaves.iter().zip(&frames[3].leaves) {
+        for v in 0..512 {
+            assert!((a.values[v] - b.values[v]).abs() <= 0.02 + 1e-6);
+        }
     }
 }

@@ -50,8 +50,71 @@ pub const L1_DIM: i64 = 4096;
 /// Voxel edge of an L1 slot (an L2 node or a tile).
 pub const L1_CHILD_DIM: i32 = 128;
 
-/// A brick: the 512 values of one leaf, inactive voxels set to the background.
+/// A brick: the 512 values of one leaf.  Inactive voxels hold fill values
+/// (see [`brick_of_leaf`]): readers take their value from the background.
 pub type Brick = [f32; LEAF_VOXELS];
+
+/// Fill passes before the remaining inactive voxels take the active mean.
+const FILL_PASSES: usize = 4;
+
+/// The brick of a leaf.  Active voxels keep their values; inactive voxels,
+/// which every reader replaces by the background (the L3 mask says which),
+/// are filled smoothly from their active neighbours (a few passes of
+/// 6-neighbour averaging, then the mean of the active values), so that
+/// quantised and block-compressed encodings spend no precision on a jump to
+/// the background at the edge of the active region.
+pub fn brick_of_leaf(leaf: &vdbcook_grid::Leaf) -> Brick {
+    let n = leaf.mask.count_on();
+    if n as usize == LEAF_VOXELS {
+        return leaf.values;
+    }
+    let mut b = [0.0f32; LEAF_VOXELS];
+    let mut known = [false; LEAF_VOXELS];
+    let mut sum = 0.0f64;
+    for i in leaf.mask.iter_on() {
+        b[i] = leaf.values[i];
+        known[i] = true;
+        sum += f64::from(leaf.values[i]);
+    }
+    let mean = if n > 0 { (sum / f64::from(n)) as f32 } else { 0.0 };
+    for _ in 0..FILL_PASSES {
+        let (prev_b, prev_known) = (b, known);
+        let mut changed = false;
+        for i in 0..LEAF_VOXELS {
+            if prev_known[i] {
+                continue;
+            }
+            let (x, y, z) = (i >> 6, (i >> 3) & 7, i & 7);
+            let (mut acc, mut cnt) = (0.0f32, 0u32);
+            let mut visit = |j: usize| {
+                if prev_known[j] {
+                    acc += prev_b[j];
+                    cnt += 1;
+                }
+            };
+            if x > 0 { visit(i - 64); }
+            if x < 7 { visit(i + 64); }
+            if y > 0 { visit(i - 8); }
+            if y < 7 { visit(i + 8); }
+            if z > 0 { visit(i - 1); }
+            if z < 7 { visit(i + 1); }
+            if cnt > 0 {
+                b[i] = acc / cnt as f32;
+                known[i] = true;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    for i in 0..LEAF_VOXELS {
+        if !known[i] {
+            b[i] = mean;
+        }
+    }
+    b
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -195,17 +258,10 @@ impl Builder {
             }
             Some(_) => {}
         }
-        let bg = grid.background;
         let before = self.pool.len();
         let mut fl = FrameLeaves::default();
         // Brick hashes in parallel (in leaf order); bricks are pooled in order.
-        let brick_of = |leaf: &vdbcook_grid::Leaf| {
-            let mut brick = [bg; LEAF_VOXELS];
-            for v in leaf.mask.iter_on() {
-                brick[v] = leaf.values[v];
-            }
-            brick
-        };
+        let brick_of = brick_of_leaf;
         let hashes: Vec<(usize, u64)> = grid
             .leaves
             .par_iter()

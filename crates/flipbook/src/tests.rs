@@ -67,9 +67,8 @@ fn nodes_give_back_every_leaf_and_tile() {
     for (o, _, brick) in &got {
         let src = leaves.iter().find(|l| l.origin == *o).unwrap();
         let b = &built.pool.bricks()[*brick as usize];
-        for i in 0..512 {
-            let want = if src.mask.is_on(i) { src.values[i] } else { 0.0 };
-            assert_eq!(b[i], want);
+        for i in src.mask.iter_on() {
+            assert_eq!(b[i], src.values[i]);
         }
     }
     let mut t = got_tiles.clone();
@@ -140,4 +139,23 @@ fn brick_remap_merges_l3_nodes() {
 fn thesis_layout_size() {
     assert_eq!(thesis_tree_bytes(1, 0), 4100 + 32768 * 516);
     assert_eq!(thesis_tree_bytes(2, 10), 2 * (4100 + 32768 * 516) + 680);
+}
+
+#[test]
+fn inactive_voxels_are_filled_within_the_active_range() {
+    let mut l = leaf(Coord::new(0, 0, 0), 4, 0);
+    // One active corner and one active voxel in the middle.
+    l.mask.set(0, true);
+    l.values[0] = 0.2;
+    l.mask.set(4 * 64 + 4 * 8 + 4, true);
+    l.values[4 * 64 + 4 * 8 + 4] = 0.6;
+    let b = brick_of_leaf(&l);
+    assert_eq!((b[0], b[4 * 64 + 4 * 8 + 4]), (0.2, 0.6));
+    assert!(b.iter().all(|&v| (0.2..=0.6).contains(&v)), "fill leaves the active range");
+    // The inactive value 9.0 of the leaf never reaches the brick.
+    assert!(b[511] < 1.0);
+    // Neighbours of an active voxel take its value in the first pass.
+    assert_eq!(b[1], 0.2);
+    let full = leaf(Coord::new(0, 0, 0), 5, 512);
+    assert_eq!(brick_of_leaf(&full), full.values);
 }

@@ -281,6 +281,12 @@ impl VdbFile {
                     have: (len as u64).saturating_sub(grid_pos as u64),
                 }));
             }
+            // A grid's data lies between its descriptor and the next one, so
+            // grids cannot share (or re-read) each other's bytes: reading a
+            // file is linear in its size.
+            if grid_pos < cur.pos() as i64 {
+                return Err(ctx_err(Error::invalid("grid descriptor", at, format!("grid data at offset {grid_pos} starts before its descriptor ends ({})", cur.pos()))));
+            }
             if !ok(grid_pos) || !ok(end_pos) || end_pos < grid_pos {
                 return Err(ctx_err(Error::invalid("grid descriptor", at, format!("grid offsets {grid_pos}..{end_pos} do not fit in the file ({len} bytes)"))));
             }

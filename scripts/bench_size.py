@@ -1,0 +1,81 @@
+#!/usr/bin/python3
+"""Asset size against error: NanoVDB's quantised grids against vdbcook's BC formats.
+
+    /usr/bin/python3 scripts/bench_size.py [FILE ...]
+
+For each input (default: a fixture, a generated noisy volume and real samples from
+../shared/vdb-samples), in one run:
+* NanoVDB: `nanovdb_convert --fp4 | --fp8 | --fpN -a 0.005`, file bytes; the .nvdb is
+  converted back to .vdb by nanovdb_convert and compared with the source by
+  `vdbcook diff` (voxel RMSE over the source's active voxels);
+* vdbcook: `cook --format bc7 | bc4`, with and without `--clusters 256`; file bytes and
+  the voxel RMSE from the cook report (the same figure `vdbcook diff` gives).
+Prints bytes per active voxel and RMSE side by side, and the bc7 / fp4 byte ratio.
+"""
+
+import json
+import os
+import subprocess
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+OUT = os.path.join(ROOT, "bench-out")
+EXE = os.path.join(ROOT, "target", "release", "vdbcook")
+SAMPLES = os.path.join(ROOT, "..", "shared", "vdb-samples")
+
+
+def run(cmd):
+    return subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+
+
+def grid_args(path):
+    # EmberGen files have no density grid; pick its flames.
+    return ["--grid", "flames"] if "embergen" in path else []
+
+
+def main():
+    os.makedirs(OUT, exist_ok=True)
+    subprocess.run(["cargo", "build", "--release", "--quiet", "-p", "vdbcook"], cwd=ROOT, check=True)
+    inputs = sys.argv[1:] or [
+        os.path.join(ROOT, "fixtures/fog_blosc.vdb"),
+        os.path.join(ROOT, "fixtures/smoke_seq/smoke_0004.vdb"),
+        os.path.join(SAMPLES, "arnold-usd/smoke.vdb"),
+        os.path.join(SAMPLES, "elyg-visualizer/pyro.vdb"),
+        os.path.join(SAMPLES, "vfx-toolkit-embergen/embergen_fire_a_50.vdb"),
+        os.path.join(SAMPLES, "waveletturbulence/fluid_data_0153.vdb"),
+        os.path.join(OUT, "fog_300.vdb"),
+    ]
+    nv = os.path.join(OUT, "size.nvdb")
+    back = os.path.join(OUT, "size_back.vdb")
+    vp = os.path.join(OUT, "size.vpak")
+    for src in inputs:
+        if not os.path.exists(src):
+            print("skipping %s (missing)" % src)
+            continue
+        g = grid_args(src)
+        info = json.loads(run([EXE, "inspect", "--json", src]))
+        grids = info["files"][0]["grids"]
+        name = g[1] if g else next((x["name"] for x in grids if x["name"] == "density"), grids[0]["name"])
+        active = next(x["active_voxels"] for x in grids if x["name"] == name)
+        print("\n%s: grid %s, %d active voxels" % (os.path.relpath(src, ROOT), name, active))
+        print("  %-24s %12s %10s %12s" % ("encoding", "bytes", "B/voxel", "voxel RMSE"))
+        rows = {}
+        for label, flags in [("nanovdb fp4", ["--fp4"]), ("nanovdb fp8", ["--fp8"]), ("nanovdb fpN -a 0.005", ["--fpN", "-a", "0.005"])]:
+            run(["nanovdb_convert", "-f", "-g", name, *flags, src, nv])
+            run(["nanovdb_convert", "-f", nv, back])
+            d = json.loads(run([EXE, "diff", "--json", "--grid", name, src, back]))
+            rows[label] = (os.path.getsize(nv), d["rmse"])
+        for fmt in ["bc7", "bc4"]:
+            for clusters in [None, 256]:
+                label = "vdbcook %s%s" % (fmt, " +256 clusters" if clusters else "")
+                extra = ["--clusters", str(clusters)] if clusters else []
+                r = json.loads(run([EXE, "cook", "--json", "--force", "--format", fmt, *g, *extra, "-o", vp, src]))
+                rows[label] = (r["file_bytes"], r["voxel_rmse"])
+        for label, (b, rmse) in rows.items():
+            print("  %-24s %12d %10.4f %12.4e" % (label, b, b / active, rmse))
+        fp4, bc7 = rows["nanovdb fp4"], rows["vdbcook bc7"]
+        print("  bc7 / fp4: bytes %.3f, RMSE %.2f" % (bc7[0] / fp4[0], bc7[1] / fp4[1] if fp4[1] else float("inf")))
+
+
+if __name__ == "__main__":
+    main()
