@@ -84,12 +84,13 @@ def main():
     frames = sorted(os.listdir(seq))
     biggest = max(frames, key=lambda f: os.path.getsize(os.path.join(seq, f)))
     one = os.path.join(seq, biggest)
-    m_seq = max_rss_kb([EXE, "cook", "-q", "--force", "-o", tmp, seq])
+    seq_out = os.path.join(OUT, "bench_seq.vpak")
+    m_seq = max_rss_kb([EXE, "cook", "-q", "--force", "-o", seq_out, seq])
     m_one = max_rss_kb([EXE, "cook", "-q", "--force", "-o", tmp, one])
     m_read = max_rss_kb([EXE, "inspect", "-q", one])
     print("   read one frame (%s)      %7.1f MB" % (biggest, m_read / 1024))
     print("   cook that one frame              %7.1f MB" % (m_one / 1024))
-    print("   cook all %d frames              %7.1f MB  (output %.1f MB)" % (len(frames), m_seq / 1024, os.path.getsize(tmp) / 1e6))
+    print("   cook all %d frames              %7.1f MB  (output %.1f MB)" % (len(frames), m_seq / 1024, os.path.getsize(seq_out) / 1e6))
 
 
 if __name__ == "__main__":

@@ -262,3 +262,45 @@ fn real_samples_cook() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn bc7_unpack_read_by_openvdb_matches_the_reported_rmse() {
+    if !oracle_available() {
+        return;
+    }
+    let dir = scratch();
+    let asset = dir.join("bc7.vpak");
+    let r = ok(vdbcook(&["cook", "--json", "--format", "bc7", "-o", s(&asset), "fixtures/fog_blosc.vdb"]));
+    let report: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let reported = report["voxel_rmse"].as_f64().unwrap();
+    let out = dir.join("bc7.vdb");
+    ok(vdbcook(&["unpack", "-q", s(&asset), "--frame", "0", "-o", s(&out)]));
+    let (sv, _) = openvdb_voxels(&root().join("fixtures/fog_blosc.vdb"), &dir);
+    let (uv, _) = openvdb_voxels(&out, &dir);
+    assert_eq!(sv.len(), uv.len());
+    let mut sum = 0.0;
+    for (a, b) in sv.iter().zip(&uv) {
+        assert_eq!(a.0, b.0);
+        sum += (a.1 - b.1).powi(2);
+    }
+    let rmse = (sum / sv.len() as f64).sqrt();
+    assert!(reported > 0.0 && (rmse - reported).abs() <= reported * 1e-4, "OpenVDB sees {rmse}, the report says {reported}");
+    // `vdbcook diff` agrees too.
+    let d: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["diff", "--json", "fixtures/fog_blosc.vdb", s(&out)])).stdout).unwrap();
+    assert!((d["rmse"].as_f64().unwrap() - reported).abs() <= reported * 1e-4);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn clustering_report_and_bound() {
+    let dir = scratch();
+    let asset = dir.join("cl.vpak");
+    let r = ok(vdbcook(&["cook", "--json", "--format", "f32", "--clusters", "16", "--variance-threshold", "1", "--max-brick-error", "0.05", "-o", s(&asset), "fixtures/fog_blosc.vdb"]));
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let c = &v["clustering"];
+    assert!(c["bricks_after"].as_u64().unwrap() < c["bricks_before"].as_u64().unwrap(), "{c}");
+    assert_eq!(c["rmse_without"], 0.0);
+    assert!(c["rmse_with"].as_f64().unwrap() > 0.0);
+    assert!(v["voxel_max_error"].as_f64().unwrap() <= 0.05 + 1e-6);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -385,14 +385,8 @@ fn voxel_errors(built: &Built, decoded: &(dyn Fn(u32) -> Option<[f32; 512]> + Sy
         .par_iter()
         .map(|l| {
             let mut e = ErrorStats::default();
-            let (Some(src), Some(dec)) = (built.pool.bricks().get(l.brick as usize), decoded(l.brick)) else { return e };
-            for (w, &word) in l.mask.iter().enumerate() {
-                let mut bits = word;
-                while bits != 0 {
-                    let i = w * 64 + bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    e.add(src[i], dec[i]);
-                }
+            if let (Some(src), Some(dec)) = (built.pool.bricks().get(l.brick as usize), decoded(l.brick)) {
+                e.add_masked(src, &dec, &l.mask);
             }
             e
         })

@@ -174,16 +174,14 @@ fn encode_voxels(format: Format, values: &[f32; BRICK_VOXELS], range: [f32; 2]) 
     let mut data = Vec::with_capacity(BRICK_VOXELS * format.bytes_per_voxel());
     match format {
         Format::F32 => {
-            for v in values {
-                data.extend_from_slice(&v.to_le_bytes());
-            }
+            let bits = values.map(|v| v.to_bits().to_le());
+            data.extend_from_slice(bytemuck::cast_slice(&bits));
         }
         Format::F16 => {
             let mut h = [half::f16::ZERO; BRICK_VOXELS];
             h.convert_from_f32_slice(values);
-            for v in h {
-                data.extend_from_slice(&v.to_bits().to_le_bytes());
-            }
+            let bits = h.map(|v| v.to_bits().to_le());
+            data.extend_from_slice(bytemuck::cast_slice(&bits));
         }
         _ => data.extend_from_slice(&quantise(values, range)),
     }
@@ -427,6 +425,33 @@ impl ErrorStats {
         self.sum_sq += d * d;
         self.max_abs = self.max_abs.max(d.abs());
     }
+    /// Adds the voxels of `mask` (512 bits) of a reference brick and its decoding.
+    pub fn add_masked(&mut self, reference: &[f32; BRICK_VOXELS], value: &[f32; BRICK_VOXELS], mask: &[u64; 8]) {
+        if mask.iter().all(|&w| w == u64::MAX) {
+            // Every voxel: eight fixed lanes the compiler can vectorise.
+            let (mut sq, mut mx) = ([0.0f64; 8], [0.0f64; 8]);
+            for (r, v) in reference.chunks_exact(8).zip(value.chunks_exact(8)) {
+                for k in 0..8 {
+                    let d = f64::from(v[k]) - f64::from(r[k]);
+                    sq[k] += d * d;
+                    mx[k] = mx[k].max(d.abs());
+                }
+            }
+            self.count += BRICK_VOXELS as u64;
+            self.sum_sq += sq.iter().sum::<f64>();
+            self.max_abs = mx.iter().copied().fold(self.max_abs, f64::max);
+            return;
+        }
+        for (w, &word) in mask.iter().enumerate() {
+            let mut bits = word;
+            while bits != 0 {
+                let i = w * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                self.add(reference[i], value[i]);
+            }
+        }
+    }
+
     pub fn merge(&mut self, o: &ErrorStats) {
         self.count += o.count;
         self.sum_sq += o.sum_sq;

@@ -260,27 +260,37 @@ impl Builder {
         }
         let before = self.pool.len();
         let mut fl = FrameLeaves::default();
-        // Brick hashes in parallel (in leaf order); bricks are pooled in order.
-        let brick_of = brick_of_leaf;
-        let hashes: Vec<(usize, u64)> = grid
-            .leaves
-            .par_iter()
-            .enumerate()
-            .filter(|(_, l)| !l.mask.is_empty())
-            .map(|(i, leaf)| (i, brick_hash(&brick_of(leaf))))
-            .collect();
-        for &(i, h) in &hashes {
-            let leaf = &grid.leaves[i];
-            let brick = self.pool.insert_hashed(&brick_of(leaf), h)?;
-            let key = L3 { mask: leaf.mask.0, brick };
-            let next = u32::try_from(self.l3.len()).map_err(|_| Error::Overflow { what: "L3 nodes" })?;
-            let id = *self.l3_index.entry(key).or_insert(next);
-            if id == next {
-                self.l3.push(key);
+        // Bricks and their hashes in parallel, a bounded batch at a time (in
+        // leaf order); bricks are pooled in order.
+        let live: Vec<usize> = (0..grid.leaves.len()).filter(|&i| !grid.leaves[i].mask.is_empty()).collect();
+        // Room for every leaf being new, so the pool never moves while it grows
+        // (untouched capacity costs no memory).
+        self.pool.bricks.reserve(live.len());
+        self.l3.reserve(live.len());
+        self.l3_index.reserve(live.len());
+        fl.leaves.reserve(live.len());
+        for batch in live.chunks(4096) {
+            let bricks: Vec<(Brick, u64)> = batch
+                .par_iter()
+                .map(|&i| {
+                    let b = brick_of_leaf(&grid.leaves[i]);
+                    let h = brick_hash(&b);
+                    (b, h)
+                })
+                .collect();
+            for (&i, (b, h)) in batch.iter().zip(&bricks) {
+                let leaf = &grid.leaves[i];
+                let brick = self.pool.insert_hashed(b, *h)?;
+                let key = L3 { mask: leaf.mask.0, brick };
+                let next = u32::try_from(self.l3.len()).map_err(|_| Error::Overflow { what: "L3 nodes" })?;
+                let id = *self.l3_index.entry(key).or_insert(next);
+                if id == next {
+                    self.l3.push(key);
+                }
+                fl.leaves.push((leaf.origin, id));
+                fl.active_voxels += u64::from(leaf.mask.count_on());
+                self.grow(Bbox::new(leaf.origin, leaf.origin.offset(7, 7, 7)));
             }
-            fl.leaves.push((leaf.origin, id));
-            fl.active_voxels += u64::from(leaf.mask.count_on());
-            self.grow(Bbox::new(leaf.origin, leaf.origin.offset(7, 7, 7)));
         }
         for t in grid.tiles.iter().filter(|t| t.active) {
             fl.tiles.push((t.origin, t.dim, t.value));
