@@ -241,7 +241,7 @@ fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
         let _ = writeln!(
             s,
             "  clustering      {} -> {} bricks ({:.2}x; {} constant, {} high variance, {} over the error bound kept), rmse {:.3e} without, {:.3e} with",
-            c.bricks_before, c.bricks_after, c.ratio, c.constant, c.high_variance, c.over_error, c.rmse_without, c.rmse_with
+            c.stats.bricks_in, c.stats.bricks_out, c.ratio, c.stats.constant, c.stats.high_variance, c.stats.over_error, c.rmse_without, c.rmse_with
         );
     }
     let t: Vec<String> = r.timings.iter().map(|(k, v)| format!("{k} {v:.2}s")).collect();

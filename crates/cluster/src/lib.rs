@@ -45,7 +45,7 @@ impl Default for Options {
 }
 
 /// Why each brick ended up where it did.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct Stats {
     pub bricks_in: usize,
     pub constant: usize,

@@ -107,23 +107,17 @@ pub struct CookReport {
     pub timings: Vec<(String, f64)>,
 }
 
-/// The thesis's Figure 19 table for one cook: bricks before and after, and
-/// the voxel RMSE with and without clustering.
+/// The thesis's Figure 19 table for one cook: bricks before (`bricks_in`) and
+/// after (`bricks_out`), their ratio, and the voxel RMSE with and without clustering.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ClusterReport {
     pub clusters: usize,
     pub iterations: usize,
     pub variance_threshold: f64,
     pub max_brick_error: Option<f32>,
-    pub bricks_before: usize,
-    pub bricks_after: usize,
+    #[serde(flatten)]
+    pub stats: vdbcook_cluster::Stats,
     pub ratio: f64,
-    pub constant: usize,
-    pub high_variance: usize,
-    pub candidates: usize,
-    pub over_error: usize,
-    pub clustered: usize,
-    pub centroids: usize,
     pub rmse_without: f64,
     pub rmse_with: f64,
 }
@@ -261,15 +255,8 @@ impl Cooker {
                 iterations: co.iterations,
                 variance_threshold: co.variance_threshold,
                 max_brick_error: co.max_brick_error,
-                bricks_before: c.stats.bricks_in,
-                bricks_after: c.stats.bricks_out,
+                stats: c.stats.clone(),
                 ratio: c.stats.bricks_in as f64 / c.stats.bricks_out.max(1) as f64,
-                constant: c.stats.constant,
-                high_variance: c.stats.high_variance,
-                candidates: c.stats.candidates,
-                over_error: c.stats.over_error,
-                clustered: c.stats.clustered,
-                centroids: c.stats.centroids,
                 rmse_without: without.rmse(),
                 rmse_with: total.rmse(),
             }

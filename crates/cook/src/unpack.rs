@@ -51,6 +51,9 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Grid, Error> {
             .find(|(_, a)| brick >= a.first_brick && brick - a.first_brick < a.count)
             .ok_or_else(|| Error::Corrupt(format!("brick {brick} is in no atlas")))?;
         let layout = AtlasLayout { format, bricks: info.1.bricks, first_brick: info.1.first_brick, count: info.1.count };
+        if !layout.is_valid() {
+            return Err(Error::Corrupt(format!("atlas {} has an impossible layout {:?} for {} bricks", info.0, layout.bricks, layout.count)));
+        }
         let atlas = asset.section(kind::ATLAS, info.0 as u32)?;
         let data = vdbcook_encode::unpack_brick(&layout, atlas, brick - layout.first_brick).ok_or_else(|| Error::Corrupt(format!("atlas {} is too small for its bricks", info.0)))?;
         let b = brick as usize;

@@ -248,7 +248,13 @@ impl AtlasLayout {
     /// Texture size in texels (a brick is 8×8 texels and 8 slices, or 2 for BC7).
     pub fn texels(&self) -> [u32; 3] {
         let [bx, by, bz] = self.bricks;
-        [bx * 8, by * 8, bz * self.format.slices_per_brick()]
+        [bx.saturating_mul(8), by.saturating_mul(8), bz.saturating_mul(self.format.slices_per_brick())]
+    }
+
+    /// True when the layout is self-consistent: no empty axis, and room for its bricks.
+    pub fn is_valid(&self) -> bool {
+        let [bx, by, bz] = self.bricks.map(u64::from);
+        bx > 0 && by > 0 && bz > 0 && u64::from(self.count) <= bx * by * bz
     }
 
     /// Brick position (in bricks) of local brick `i`.
@@ -261,9 +267,9 @@ impl AtlasLayout {
     pub fn slice_bytes(&self) -> usize {
         let [w, h, _] = self.texels().map(|t| t as usize);
         if self.format.is_block() {
-            (w / 4) * (h / 4) * self.format.block_bytes()
+            (w / 4).saturating_mul(h / 4).saturating_mul(self.format.block_bytes())
         } else {
-            w * h * self.format.bytes_per_voxel()
+            w.saturating_mul(h).saturating_mul(self.format.bytes_per_voxel())
         }
     }
 
@@ -278,7 +284,7 @@ impl AtlasLayout {
     }
 
     pub fn byte_len(&self) -> usize {
-        self.slice_bytes() * self.texels()[2] as usize
+        self.slice_bytes().saturating_mul(self.texels()[2] as usize)
     }
 
     /// Byte offset of uncompressed texel (x, y, z).
@@ -378,7 +384,7 @@ fn pack_blocks(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
 
 /// Reads local brick `i` back out of atlas bytes, in its encoded brick order.
 pub fn unpack_brick(layout: &AtlasLayout, atlas: &[u8], i: u32) -> Option<Vec<u8>> {
-    if i >= layout.count || atlas.len() < layout.byte_len() {
+    if !layout.is_valid() || i >= layout.count || atlas.len() < layout.byte_len() {
         return None;
     }
     let [px, py, pz] = layout.position(i).map(|p| p as usize);

@@ -516,7 +516,8 @@ impl Nodes {
         let prefix = node.get(mask_words + w / 2).map_or(0, |p| (p >> (16 * (w % 2))) & 0xffff);
         let first = node.get(mask_words + mask_words / 2).copied().unwrap_or(0);
         let below = (word & ((1u32 << b) - 1)).count_ones();
-        let e = entries.get((first + prefix + below) as usize).copied().unwrap_or(0);
+        // Saturating: a corrupt `first` must give "no entry", not an overflow.
+        let e = entries.get(first.saturating_add(prefix).saturating_add(below) as usize).copied().unwrap_or(0);
         if e & TILE_FLAG != 0 {
             let t = ((e & !TILE_FLAG) * 2) as usize;
             Slot::Tile { value: f32::from_bits(tiles.get(t).copied().unwrap_or(0)), active: tiles.get(t + 1).is_some_and(|f| f & 1 == 1) }

@@ -66,6 +66,22 @@ impl GridClass {
     }
 }
 
+/// Offsets of the set bits of a mask stored as 64-bit words (bit `i` is bit
+/// `i % 64` of word `i / 64`), in increasing order.
+pub fn set_bits(words: &[u64]) -> impl Iterator<Item = usize> + '_ {
+    words.iter().enumerate().flat_map(|(wi, &w)| {
+        let mut bits = w;
+        std::iter::from_fn(move || {
+            if bits == 0 {
+                return None;
+            }
+            let b = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            Some(wi * 64 + b)
+        })
+    })
+}
+
 /// A 512-bit voxel mask in OpenVDB's layout: bit `i` is bit `i % 64` of word `i / 64`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct LeafMask(pub [u64; 8]);
@@ -92,17 +108,7 @@ impl LeafMask {
     }
     /// Offsets of the set bits, in increasing order.
     pub fn iter_on(&self) -> impl Iterator<Item = usize> + '_ {
-        self.0.iter().enumerate().flat_map(|(wi, &w)| {
-            let mut bits = w;
-            std::iter::from_fn(move || {
-                if bits == 0 {
-                    return None;
-                }
-                let b = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                Some(wi * 64 + b)
-            })
-        })
+        set_bits(&self.0)
     }
 }
 

@@ -22,7 +22,7 @@ use crate::values::{self, Ctx, ValueBlock, COMPRESS_ZIP, VERSION_NODE_MASK_COMPR
 use crate::Error;
 use rayon::prelude::*;
 use std::sync::Mutex;
-use vdbcook_grid::{Coord, Leaf, LeafMask, Tile, LEAF_VOXELS};
+use vdbcook_grid::{set_bits, Coord, Leaf, LeafMask, Tile, LEAF_VOXELS};
 
 struct LeafTopo<'a> {
     origin: Coord,
@@ -50,21 +50,6 @@ fn bit(words: &[u64], i: usize) -> bool {
 
 fn ones(words: &[u64]) -> u64 {
     words.iter().map(|w| u64::from(w.count_ones())).sum()
-}
-
-/// Offsets of the set bits, in increasing order.
-fn iter_on(words: &[u64]) -> impl Iterator<Item = usize> + '_ {
-    words.iter().enumerate().flat_map(|(wi, &w)| {
-        let mut bits = w;
-        std::iter::from_fn(move || {
-            if bits == 0 {
-                return None;
-            }
-            let b = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            Some(wi * 64 + b)
-        })
-    })
 }
 
 /// Origin of slot `i` in an internal node with `2^log2dim` slots per axis of `child_dim` voxels.
@@ -115,11 +100,11 @@ impl<'a> Scanner<'_, 'a> {
     fn internal32(&mut self, origin: Coord, leaves: &mut Vec<LeafTopo<'a>>) -> Result<(), Error> {
         let child_mask = self.internal(origin, 5, 128)?;
         self.cur.check_count("internal node count", ones(&child_mask), MIN_INTERNAL16_BYTES)?;
-        for i in iter_on(&child_mask) {
+        for i in set_bits(&child_mask) {
             let o16 = slot_origin(origin, i, 5, 128);
             let leaf_mask = self.internal(o16, 4, 8)?;
             self.cur.check_count("leaf count", ones(&leaf_mask), MIN_LEAF_BYTES)?;
-            for j in iter_on(&leaf_mask) {
+            for j in set_bits(&leaf_mask) {
                 let words = self.cur.mask(8, "leaf mask")?;
                 let mut mask = LeafMask::default();
                 mask.0.copy_from_slice(&words);
@@ -241,7 +226,7 @@ mod tests {
     #[test]
     fn mask_iteration() {
         let w = [0b1001u64, 1 << 63];
-        assert_eq!(iter_on(&w).collect::<Vec<_>>(), vec![0, 3, 127]);
+        assert_eq!(set_bits(&w).collect::<Vec<_>>(), vec![0, 3, 127]);
         assert_eq!(ones(&w), 3);
     }
 }
