@@ -1,0 +1,190 @@
+//! The same march on the CPU (uncompressed formats), to check the GPU path:
+//! every step mirrors `shaders/vpak.wgsl` and `shaders/march.wgsl`.
+
+use crate::{AssetData, Error, Image, Scene, View};
+use vdbcook_vpak::Asset;
+
+struct Sampler<'a> {
+    d: AssetData<'a>,
+    l1: u32,
+    bricks: [u32; 4],
+    texels: [u32; 3],
+}
+
+impl Sampler<'_> {
+    fn entry(nodes: &[u32], base: usize, mask_words: usize, s: usize) -> Option<usize> {
+        let (w, bit) = (s >> 5, s & 31);
+        let word = *nodes.get(base + w)?;
+        if (word >> bit) & 1 == 0 {
+            return None;
+        }
+        let prefix = (nodes.get(base + mask_words + (w >> 1))? >> (16 * (w & 1))) & 0xffff;
+        let first = *nodes.get(base + mask_words + mask_words / 2)?;
+        let below = (word & ((1u32 << bit) - 1)).count_ones();
+        Some(first.saturating_add(prefix).saturating_add(below) as usize)
+    }
+
+    fn tile(&self, e: u32) -> f32 {
+        f32::from_bits(self.d.tiles.get(((e & 0x7fff_ffff) * 2) as usize).copied().unwrap_or(0))
+    }
+
+    fn texel(&self, x: u32, y: u32, z: u32) -> f32 {
+        let [w, h, _] = self.texels;
+        let i = ((z as usize * h as usize + y as usize) * w as usize) + x as usize;
+        let a = self.d.atlas;
+        match self.d.format {
+            0 => a.get(i * 4..i * 4 + 4).map_or(0.0, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+            1 => a.get(i * 2..i * 2 + 2).map_or(0.0, |b| half_to_f32(u16::from_le_bytes([b[0], b[1]]))),
+            _ => a.get(i).map_or(0.0, |&q| f32::from(q) / 255.0),
+        }
+    }
+
+    /// Value and empty-region edge, as `vpak_query`.
+    fn query(&self, p: [i32; 3]) -> (f32, u32) {
+        let bg = self.d.meta.background;
+        if p.iter().any(|&c| !(0..4096).contains(&c)) {
+            return (bg, 128);
+        }
+        let u = p.map(|c| c as u32);
+        let s1 = (((u[0] >> 7) & 31) << 10 | ((u[1] >> 7) & 31) << 5 | ((u[2] >> 7) & 31)) as usize;
+        let Some(i1) = Self::entry(self.d.l1, self.l1 as usize * 1537, 1024, s1) else { return (bg, 128) };
+        let e1 = self.d.l1_entries.get(i1).copied().unwrap_or(0);
+        if e1 & 0x8000_0000 != 0 {
+            return (self.tile(e1), 0);
+        }
+        let s2 = (((u[0] >> 3) & 15) << 8 | ((u[1] >> 3) & 15) << 4 | ((u[2] >> 3) & 15)) as usize;
+        let Some(i2) = Self::entry(self.d.l2, e1 as usize * 193, 128, s2) else { return (bg, 8) };
+        let e2 = self.d.l2_entries.get(i2).copied().unwrap_or(0);
+        if e2 & 0x8000_0000 != 0 {
+            return (self.tile(e2), 0);
+        }
+        let l3 = e2 as usize * 17;
+        let v = u.map(|c| c & 7);
+        let i = (v[0] << 6 | v[1] << 3 | v[2]) as usize;
+        if (self.d.l3.get(l3 + (i >> 5)).copied().unwrap_or(0) >> (i & 31)) & 1 == 0 {
+            return (bg, 0);
+        }
+        let b = self.d.l3.get(l3 + 16).copied().unwrap_or(0);
+        let [bx, by, _, _] = self.bricks;
+        let pos = [b % bx, (b / bx) % by, b / (bx * by)];
+        let t = self.texel(pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2] * 8 + v[2]);
+        if self.d.format <= 1 {
+            return (t, 0);
+        }
+        let r = [self.d.ranges.get(2 * b as usize).copied().unwrap_or(0.0), self.d.ranges.get(2 * b as usize + 1).copied().unwrap_or(0.0)];
+        (r[0] + t * (r[1] - r[0]), 0)
+    }
+}
+
+fn half_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = i32::from((h >> 10) & 0x1f);
+    let man = f32::from(h & 0x3ff);
+    sign * match exp {
+        0 => man * 2f32.powi(-24),
+        31 => if man == 0.0 { f32::INFINITY } else { f32::NAN },
+        e => (1.0 + man / 1024.0) * 2f32.powi(e - 15),
+    }
+}
+
+fn box_hit(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3]) -> (f32, f32) {
+    let (mut t0, mut t1) = (0.0f32, f32::INFINITY);
+    for a in 0..3 {
+        let inv = 1.0 / d[a];
+        let (x, y) = ((lo[a] - o[a]) * inv, (hi[a] - o[a]) * inv);
+        t0 = t0.max(x.min(y));
+        t1 = t1.min(x.max(y));
+    }
+    (t0, t1)
+}
+
+fn cell_exit(p: [f32; 3], d: [f32; 3], dim: f32) -> f32 {
+    let mut t = f32::INFINITY;
+    for a in 0..3 {
+        let lo = (p[a] / dim).floor() * dim;
+        let inv = 1.0 / d[a];
+        t = t.min(((lo - p[a]) * inv).max((lo + dim - p[a]) * inv));
+    }
+    t
+}
+
+fn at(o: [f32; 3], d: [f32; 3], t: f32) -> [f32; 3] {
+    [o[0] + d[0] * t, o[1] + d[1] * t, o[2] + d[2] * t]
+}
+
+/// Renders like the GPU path; BC formats are not decoded here.
+pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width: u32, height: u32) -> Result<Image, Error> {
+    let d = AssetData::new(asset)?;
+    if d.format > 2 {
+        return Err(Error::Format(d.meta.format.clone()));
+    }
+    let l1 = d.frame_l1(frame)?;
+    let bricks = d.atlas_bricks();
+    let texels = d.meta.atlases.first().map_or([8, 8, 8], |a| a.texels);
+    let skip = d.meta.background == 0.0;
+    let s = Sampler { d, l1, bricks, texels };
+    let (r, u, f) = view.basis();
+    let tf = (view.fov_deg.to_radians() * 0.5).tan();
+    let aspect = width as f32 / height as f32;
+    let shadow = |o: [f32; 3]| -> f32 {
+        let dl = scene.light;
+        let (_, t1) = box_hit(o, dl, scene.box_min, scene.box_max);
+        let (mut depth, mut k, mut n) = (0.0f32, 0.5f32, 0u32);
+        loop {
+            let t = k * scene.shadow_step;
+            if t >= t1 || n >= scene.max_steps {
+                break;
+            }
+            n += 1;
+            let p = at(o, dl, t);
+            let (v, empty) = s.query(p.map(|c| c.floor() as i32));
+            if empty > 0 && skip {
+                let exit = t + cell_exit(p, dl, empty as f32);
+                k = (k + 1.0).max((exit / scene.shadow_step - 0.5).ceil() + 0.5);
+                continue;
+            }
+            depth += v.max(0.0) * scene.density_scale * scene.shadow_step;
+            k += 1.0;
+        }
+        depth
+    };
+    let mut pixels = vec![0.0f32; (width * height) as usize];
+    for y in 0..height {
+        for x in 0..width {
+            let px = (x as f32 + 0.5) / width as f32 * 2.0 - 1.0;
+            let py = 1.0 - (y as f32 + 0.5) / height as f32 * 2.0;
+            let dir = [0, 1, 2].map(|a| f[a] + r[a] * (px * tf * aspect) + u[a] * (py * tf));
+            let l = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+            let dir = dir.map(|c| c / l);
+            let (t0, t1) = box_hit(view.eye, dir, scene.box_min, scene.box_max);
+            let mut radiance = 0.0f32;
+            if t0 < t1 {
+                let (mut trans, mut k, mut n) = (1.0f32, 0.5f32, 0u32);
+                loop {
+                    let t = t0 + k * scene.step;
+                    if t >= t1 || n >= scene.max_steps || trans < 1e-4 {
+                        break;
+                    }
+                    n += 1;
+                    let p = at(view.eye, dir, t);
+                    let (v, empty) = s.query(p.map(|c| c.floor() as i32));
+                    if empty > 0 && skip {
+                        let exit = t + cell_exit(p, dir, empty as f32);
+                        k = (k + 1.0).max(((exit - t0) / scene.step - 0.5).ceil() + 0.5);
+                        continue;
+                    }
+                    let sigma = v.max(0.0) * scene.density_scale;
+                    if sigma > 0.0 {
+                        let a = 1.0 - (-sigma * scene.step).exp();
+                        let lit = 0.25 + 0.75 * (-shadow(p)).exp();
+                        radiance += trans * a * lit;
+                        trans *= 1.0 - a;
+                    }
+                    k += 1.0;
+                }
+            }
+            pixels[(y * width + x) as usize] = radiance;
+        }
+    }
+    Ok(Image { width, height, pixels })
+}

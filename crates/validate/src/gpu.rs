@@ -1,0 +1,223 @@
+//! The wgpu side: device, pipeline, asset upload, one dispatch per image.
+
+use crate::{AssetData, Error, Image, Scene, View};
+use vdbcook_vpak::Asset;
+use wgpu::util::DeviceExt;
+
+const SHADER: &str = concat!(
+    include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shaders/vpak.wgsl")),
+    "\n",
+    include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shaders/march.wgsl"))
+);
+
+/// The WGSL source of the renderer (the library followed by the marcher).
+pub fn shader_source() -> &'static str {
+    SHADER
+}
+
+/// A device with the ray-marching pipeline.
+pub struct Renderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    bc: bool,
+    /// "name (backend, device type)".
+    pub adapter: String,
+}
+
+/// An asset uploaded for rendering.
+pub struct GpuAsset {
+    buffers: Vec<wgpu::Buffer>,
+    view: wgpu::TextureView,
+    _texture: wgpu::Texture,
+    frames: Vec<u32>,
+    format: u32,
+    background: f32,
+    atlas_bricks: [u32; 4],
+}
+
+fn storage(kind: bool) -> wgpu::BindingType {
+    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: kind }, has_dynamic_offset: false, min_binding_size: None }
+}
+
+impl Renderer {
+    /// Opens an adapter: the first whose name contains `filter` (case-insensitive), else the default one.
+    pub fn new(filter: Option<&str>) -> Result<Renderer, Error> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        let adapter = match filter {
+            Some(f) => {
+                let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+                let f_low = f.to_lowercase();
+                adapters.into_iter().find(|a| a.get_info().name.to_lowercase().contains(&f_low)).ok_or_else(|| {
+                    Error::NoAdapter(format!(" matching \"{f}\" (adapters: {})", if names.is_empty() { "none".to_string() } else { names.join(", ") }))
+                })?
+            }
+            None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions { power_preference: wgpu::PowerPreference::HighPerformance, force_fallback_adapter: false, compatible_surface: None, ..Default::default() }))
+                .map_err(|e| Error::NoAdapter(format!(" ({e})")))?,
+        };
+        let info = adapter.get_info();
+        let adapter_name = format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
+        let want = wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D;
+        let bc = adapter.features().contains(want);
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("vdbcook"),
+            required_features: if bc { want } else { wgpu::Features::empty() },
+            required_limits: limits,
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .map_err(|e| Error::Device(e.to_string()))?;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("march"), source: wgpu::ShaderSource::Wgsl(SHADER.into()) });
+        let mut entries = vec![wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
+            count: None,
+        }];
+        for b in 1..=7 {
+            entries.push(wgpu::BindGroupLayoutEntry { binding: b, visibility: wgpu::ShaderStages::COMPUTE, ty: storage(true), count: None });
+        }
+        entries.push(wgpu::BindGroupLayoutEntry {
+            binding: 8,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D3, multisampled: false },
+            count: None,
+        });
+        entries.push(wgpu::BindGroupLayoutEntry { binding: 9, visibility: wgpu::ShaderStages::COMPUTE, ty: storage(false), count: None });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
+        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("march"),
+            layout: Some(&pl),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Ok(Renderer { device, queue, pipeline, layout, bc, adapter: adapter_name })
+    }
+
+    /// Whether BC4/BC7 3D textures can be sampled.
+    pub fn has_bc(&self) -> bool {
+        self.bc
+    }
+
+    /// Uploads an asset's node arrays, brick ranges and atlas.
+    pub fn upload(&self, asset: &Asset) -> Result<GpuAsset, Error> {
+        let d = AssetData::new(asset)?;
+        let limit = u64::from(self.device.limits().max_storage_buffer_binding_size);
+        let mut buffers = Vec::new();
+        for (what, data) in [
+            ("l1 nodes", bytemuck::cast_slice::<u32, u8>(d.l1)),
+            ("l1 entries", bytemuck::cast_slice(d.l1_entries)),
+            ("l2 nodes", bytemuck::cast_slice(d.l2)),
+            ("l2 entries", bytemuck::cast_slice(d.l2_entries)),
+            ("l3 nodes", bytemuck::cast_slice(d.l3)),
+            ("tiles", bytemuck::cast_slice(d.tiles)),
+            ("brick ranges", bytemuck::cast_slice(d.ranges)),
+        ] {
+            if data.len() as u64 > limit {
+                return Err(Error::TooLarge { what, bytes: data.len() as u64, limit });
+            }
+            // Bindings may not be empty: pad to 16 bytes.
+            let mut bytes = data.to_vec();
+            bytes.resize(bytes.len().max(16).next_multiple_of(4), 0);
+            buffers.push(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: &bytes, usage: wgpu::BufferUsages::STORAGE }));
+        }
+        let (tex_format, block) = match d.format {
+            0 => (wgpu::TextureFormat::R32Float, None),
+            1 => (wgpu::TextureFormat::R16Float, None),
+            2 => (wgpu::TextureFormat::R8Unorm, None),
+            3 => (wgpu::TextureFormat::Bc4RUnorm, Some(8u32)),
+            _ => (wgpu::TextureFormat::Bc7RgbaUnorm, Some(16u32)),
+        };
+        if block.is_some() && !self.bc {
+            return Err(Error::Unsupported { adapter: self.adapter.clone(), format: d.meta.format.clone(), feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D" });
+        }
+        let (size, data): ([u32; 3], &[u8]) = match d.meta.atlases.first() {
+            Some(a) => (a.texels, d.atlas),
+            None => ([8, 8, if d.format == 4 { 2 } else { 8 }], &[]),
+        };
+        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("atlas"),
+            size: wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: tex_format,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        let (row, rows) = match block {
+            Some(bb) => (size[0] / 4 * bb, size[1] / 4),
+            None => (size[0] * tex_format.block_copy_size(None).unwrap_or(4), size[1]),
+        };
+        if !data.is_empty() {
+            self.queue.write_texture(
+                wgpu::TexelCopyTextureInfo { texture: &texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+                data,
+                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(rows) },
+                wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
+            );
+        }
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        Ok(GpuAsset { buffers, view, _texture: texture, frames: d.frames.to_vec(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks() })
+    }
+
+    /// Renders frame `frame` of `asset` from `view`.
+    pub fn render(&self, asset: &GpuAsset, scene: &Scene, frame: usize, view: &View, width: u32, height: u32) -> Result<Image, Error> {
+        let l1 = *asset.frames.get(frame).ok_or(Error::Frame { frame, count: asset.frames.len() })?;
+        let (r, u, f) = view.basis();
+        let tf = (view.fov_deg.to_radians() * 0.5).tan();
+        let mut p: Vec<u32> = Vec::with_capacity(48);
+        p.extend([l1, asset.format, asset.background.to_bits(), 0]);
+        p.extend(asset.atlas_bricks);
+        let v4 = |p: &mut Vec<u32>, v: [f32; 3], w: f32| p.extend([v[0].to_bits(), v[1].to_bits(), v[2].to_bits(), w.to_bits()]);
+        v4(&mut p, view.eye, 0.0);
+        v4(&mut p, r, 0.0);
+        v4(&mut p, u, 0.0);
+        v4(&mut p, f, tf);
+        v4(&mut p, scene.box_min, scene.step);
+        v4(&mut p, scene.box_max, scene.shadow_step);
+        v4(&mut p, scene.light, scene.density_scale);
+        // Skipping empty space is exact only when empty space is zero.
+        p.extend([width, height, scene.max_steps, u32::from(asset.background == 0.0)]);
+        let params = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("params"), contents: bytemuck::cast_slice(&p), usage: wgpu::BufferUsages::UNIFORM });
+        let bytes = u64::from(width) * u64::from(height) * 4;
+        let out = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("image"), size: bytes, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
+        let read = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("readback"), size: bytes, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+        let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() }];
+        for (i, b) in asset.buffers.iter().enumerate() {
+            entries.push(wgpu::BindGroupEntry { binding: i as u32 + 1, resource: b.as_entire_binding() });
+        }
+        entries.push(wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::TextureView(&asset.view) });
+        entries.push(wgpu::BindGroupEntry { binding: 9, resource: out.as_entire_binding() });
+        let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("vpak"), layout: &self.layout, entries: &entries });
+        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("march") });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("march"), timestamp_writes: None });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+        }
+        enc.copy_buffer_to_buffer(&out, 0, &read, 0, bytes);
+        self.queue.submit([enc.finish()]);
+        let slice = read.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| Error::Gpu(e.to_string()))?;
+        rx.recv().map_err(|e| Error::Gpu(e.to_string()))?.map_err(|e| Error::Gpu(e.to_string()))?;
+        let pixels: Vec<f32> = {
+            let view = slice.get_mapped_range().map_err(|e| Error::Gpu(e.to_string()))?;
+            bytemuck::cast_slice(&view).to_vec()
+        };
+        read.unmap();
+        Ok(Image { width, height, pixels })
+    }
+}

@@ -1,0 +1,220 @@
+//! The validation renderer: one deterministic wgpu ray-marcher for any two
+//! `.vpak` assets (the cooked one and a lossless reference cooked from the
+//! source), image metrics, and a CPU twin of the same march for tests.
+//!
+//! The WGSL lives in the top-level `shaders/` folder: `vpak.wgsl` samples an
+//! asset (the library an engine can include), `march.wgsl` is the marcher.
+
+mod cpu;
+mod gpu;
+
+
+pub use cpu::render_cpu;
+pub use gpu::{shader_source, GpuAsset, Renderer};
+
+use vdbcook_vpak::{kind, Asset, Metadata};
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("no GPU adapter found{0}; on Debian, install Mesa's Vulkan drivers (CPU rendering works too): apt-get install mesa-vulkan-drivers libvulkan1")]
+    NoAdapter(String),
+    #[error("cannot open the GPU device: {0}")]
+    Device(String),
+    #[error("the adapter \"{adapter}\" cannot sample {format} bricks: it lacks {feature}")]
+    Unsupported { adapter: String, format: String, feature: &'static str },
+    #[error("the asset has {0} brick atlases; the renderer binds one")]
+    Atlases(usize),
+    #[error("the asset's {what} ({bytes} bytes) exceeds the adapter's limit of {limit} bytes")]
+    TooLarge { what: &'static str, bytes: u64, limit: u64 },
+    #[error("unsupported voxel format \"{0}\"")]
+    Format(String),
+    #[error("frame {frame} is out of range (the asset has {count})")]
+    Frame { frame: usize, count: usize },
+    #[error("GPU error: {0}")]
+    Gpu(String),
+    #[error(transparent)]
+    Asset(#[from] vdbcook_vpak::Error),
+}
+
+/// Voxel format codes shared with `vpak.wgsl`.
+pub fn format_code(name: &str) -> Option<u32> {
+    Some(match name {
+        "f32" => 0,
+        "f16" => 1,
+        "unorm8" => 2,
+        "bc4" => 3,
+        "bc7" => 4,
+        _ => return None,
+    })
+}
+
+/// A camera looking at a point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    pub eye: [f32; 3],
+    pub target: [f32; 3],
+    /// Vertical field of view in degrees.
+    pub fov_deg: f32,
+}
+
+/// What every image of one comparison shares.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scene {
+    /// Asset index-space box to march: [min, max) in voxels.
+    pub box_min: [f32; 3],
+    pub box_max: [f32; 3],
+    /// Extinction per unit of value per voxel.
+    pub density_scale: f32,
+    /// Direction towards the light (normalised).
+    pub light: [f32; 3],
+    pub step: f32,
+    pub shadow_step: f32,
+    pub max_steps: u32,
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+fn normalize(a: [f32; 3]) -> [f32; 3] {
+    let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt().max(1e-20);
+    [a[0] / l, a[1] / l, a[2] / l]
+}
+
+impl View {
+    /// Camera basis: right, up, forward.
+    pub fn basis(&self) -> ([f32; 3], [f32; 3], [f32; 3]) {
+        let f = normalize(sub(self.target, self.eye));
+        let world_up = if f[1].abs() > 0.99 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+        let r = normalize(cross(f, world_up));
+        let u = cross(r, f);
+        (r, u, f)
+    }
+}
+
+impl Scene {
+    /// The scene for an asset: its union bbox (from the metadata), a density
+    /// scale giving an optical depth of 4 across the box at the largest value,
+    /// and a fixed light.
+    pub fn for_asset(meta: &Metadata) -> Scene {
+        let o = meta.index_offset;
+        let (lo, hi) = match meta.index_bbox {
+            Some((a, b)) => ([a[0] - o[0], a[1] - o[1], a[2] - o[2]], [b[0] - o[0] + 1, b[1] - o[1] + 1, b[2] - o[2] + 1]),
+            None => ([0; 3], [1; 3]),
+        };
+        let box_min = lo.map(|v| v as f32);
+        let box_max = hi.map(|v| v as f32);
+        let ext = sub(box_max, box_min);
+        let diag = (ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]).sqrt().max(1.0);
+        let peak = meta.value_range[1].abs().max(meta.value_range[0].abs()).max(1e-6);
+        Scene {
+            box_min,
+            box_max,
+            density_scale: 4.0 / (peak * diag),
+            light: normalize([0.4, 1.0, 0.3]),
+            step: 1.0,
+            shadow_step: 2.0,
+            max_steps: 4 * (diag as u32 + 8),
+        }
+    }
+
+    /// `n` views orbiting the box centre at 20° elevation, evenly spaced in azimuth.
+    pub fn orbit(&self, n: usize) -> Vec<View> {
+        let c = [(self.box_min[0] + self.box_max[0]) * 0.5, (self.box_min[1] + self.box_max[1]) * 0.5, (self.box_min[2] + self.box_max[2]) * 0.5];
+        let ext = sub(self.box_max, self.box_min);
+        let radius = 0.5 * (ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]).sqrt().max(1.0);
+        let fov_deg = 40.0f32;
+        let dist = radius / (fov_deg.to_radians() * 0.5).sin() * 1.05;
+        let elev = 20f32.to_radians();
+        (0..n)
+            .map(|i| {
+                let az = std::f32::consts::TAU * i as f32 / n as f32;
+                let eye = [c[0] + dist * elev.cos() * az.cos(), c[1] + dist * elev.sin(), c[2] + dist * elev.cos() * az.sin()];
+                View { eye, target: c, fov_deg }
+            })
+            .collect()
+    }
+}
+
+/// A single-channel linear image, row-major from the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<f32>,
+}
+
+/// RMSE, PSNR (peak 1) and max absolute difference of two images, values clamped to [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ImageMetrics {
+    pub rmse: f64,
+    pub psnr: f64,
+    pub max_error: f64,
+}
+
+pub fn compare(reference: &Image, other: &Image) -> ImageMetrics {
+    let mut sq = 0.0f64;
+    let mut mx = 0.0f64;
+    for (a, b) in reference.pixels.iter().zip(&other.pixels) {
+        let d = f64::from(a.clamp(0.0, 1.0)) - f64::from(b.clamp(0.0, 1.0));
+        sq += d * d;
+        mx = mx.max(d.abs());
+    }
+    let n = reference.pixels.len().max(1) as f64;
+    let rmse = (sq / n).sqrt();
+    ImageMetrics { rmse, psnr: if rmse > 0.0 { -20.0 * rmse.log10() } else { f64::INFINITY }, max_error: mx }
+}
+
+/// The node arrays and bricks of an asset, as the renderers read them.
+pub(crate) struct AssetData<'a> {
+    pub meta: Metadata,
+    pub format: u32,
+    pub l1: &'a [u32],
+    pub l1_entries: &'a [u32],
+    pub l2: &'a [u32],
+    pub l2_entries: &'a [u32],
+    pub l3: &'a [u32],
+    pub tiles: &'a [u32],
+    pub ranges: &'a [f32],
+    pub frames: &'a [u32],
+    pub atlas: &'a [u8],
+}
+
+impl<'a> AssetData<'a> {
+    pub fn new(asset: &'a Asset) -> Result<AssetData<'a>, Error> {
+        let meta = asset.metadata()?;
+        let format = format_code(&meta.format).ok_or_else(|| Error::Format(meta.format.clone()))?;
+        if meta.atlases.len() > 1 {
+            return Err(Error::Atlases(meta.atlases.len()));
+        }
+        let atlas = if meta.atlases.is_empty() { &[][..] } else { asset.section(kind::ATLAS, 0)? };
+        Ok(AssetData {
+            format,
+            l1: asset.u32s(kind::L1_NODES)?,
+            l1_entries: asset.u32s(kind::L1_ENTRIES)?,
+            l2: asset.u32s(kind::L2_NODES)?,
+            l2_entries: asset.u32s(kind::L2_ENTRIES)?,
+            l3: asset.u32s(kind::L3_NODES)?,
+            tiles: asset.u32s(kind::TILES)?,
+            ranges: asset.f32s(kind::BRICK_RANGES)?,
+            frames: asset.u32s(kind::FRAMES)?,
+            atlas,
+            meta,
+        })
+    }
+
+    /// Atlas size in bricks and slices per brick.
+    pub fn atlas_bricks(&self) -> [u32; 4] {
+        let spb = if self.format == 4 { 2 } else { 8 };
+        match self.meta.atlases.first() {
+            Some(a) => [a.bricks[0].max(1), a.bricks[1].max(1), a.bricks[2].max(1), spb],
+            None => [1, 1, 1, spb],
+        }
+    }
+
+    pub fn frame_l1(&self, frame: usize) -> Result<u32, Error> {
+        self.frames.get(frame).copied().ok_or(Error::Frame { frame, count: self.frames.len() })
+    }
+}

@@ -1,0 +1,110 @@
+// march.wgsl: the validation ray-marcher (include vpak.wgsl first).
+//
+// One invocation per pixel. A camera ray is marched through the asset's
+// bounding box in fixed steps; every sample lies on the same lattice
+// (t0 + (k + 1/2)·step), so skipping empty space never changes which samples
+// are taken: an empty L1 or L2 slot (hierarchical DDA over the masks) moves
+// the ray to the first lattice point past that slot. Shading is
+// emission-absorption fog lit by ambient light and one directional light
+// through shadow rays that march (and skip) the same way. No randomness:
+// the image depends only on the data, so two assets can be compared exactly.
+
+struct Params {
+    info: VpakInfo,
+    eye: vec4<f32>,
+    right: vec4<f32>,
+    up: vec4<f32>,
+    forward: vec4<f32>,     // w: tan(fov / 2)
+    box_min: vec4<f32>,     // w: step (voxels)
+    box_max: vec4<f32>,     // w: shadow step (voxels)
+    light: vec4<f32>,       // xyz: direction towards the light, w: density scale
+    size: vec4<u32>,        // width, height, max steps, skip empty space (0/1)
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(9) var<storage, read_write> image: array<f32>;
+
+fn box_hit(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
+    let inv = 1.0 / d;
+    let a = (lo - o) * inv;
+    let b = (hi - o) * inv;
+    let tmin = min(a, b);
+    let tmax = max(a, b);
+    return vec2<f32>(max(max(tmin.x, tmin.y), max(tmin.z, 0.0)), min(min(tmax.x, tmax.y), tmax.z));
+}
+
+// Distance along the ray to the exit of the `dim`-sized cell containing `p`.
+fn cell_exit(p: vec3<f32>, d: vec3<f32>, dim: f32) -> f32 {
+    let lo = floor(p / dim) * dim;
+    let hi = lo + vec3<f32>(dim);
+    let inv = 1.0 / d;
+    let t = max((lo - p) * inv, (hi - p) * inv);
+    return min(min(t.x, t.y), t.z);
+}
+
+// Optical depth from `o` towards the light.
+fn shadow_depth(o: vec3<f32>) -> f32 {
+    let d = params.light.xyz;
+    let hit = box_hit(o, d, params.box_min.xyz, params.box_max.xyz);
+    let step = params.box_max.w;
+    var depth = 0.0;
+    var k = 0.5;
+    var n = 0u;
+    loop {
+        let t = k * step;
+        if (t >= hit.y || n >= params.size.z) { break; }
+        n += 1u;
+        let p = o + d * t;
+        let q = vpak_query(params.info, vec3<i32>(floor(p)));
+        if (q.empty_dim > 0u && params.size.w == 1u) {
+            let exit = t + cell_exit(p, d, f32(q.empty_dim));
+            k = max(k + 1.0, ceil(exit / step - 0.5) + 0.5);
+            continue;
+        }
+        depth += max(q.value, 0.0) * params.light.w * step;
+        k += 1.0;
+    }
+    return depth;
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let w = params.size.x;
+    let h = params.size.y;
+    if (gid.x >= w || gid.y >= h) { return; }
+    let px = (f32(gid.x) + 0.5) / f32(w) * 2.0 - 1.0;
+    let py = 1.0 - (f32(gid.y) + 0.5) / f32(h) * 2.0;
+    let aspect = f32(w) / f32(h);
+    let tf = params.forward.w;
+    let d = normalize(params.forward.xyz + params.right.xyz * (px * tf * aspect) + params.up.xyz * (py * tf));
+    let o = params.eye.xyz;
+    let hit = box_hit(o, d, params.box_min.xyz, params.box_max.xyz);
+    var radiance = 0.0;
+    if (hit.x < hit.y) {
+        let step = params.box_min.w;
+        var trans = 1.0;
+        var k = 0.5;
+        var n = 0u;
+        loop {
+            let t = hit.x + k * step;
+            if (t >= hit.y || n >= params.size.z || trans < 1e-4) { break; }
+            n += 1u;
+            let p = o + d * t;
+            let q = vpak_query(params.info, vec3<i32>(floor(p)));
+            if (q.empty_dim > 0u && params.size.w == 1u) {
+                let exit = t + cell_exit(p, d, f32(q.empty_dim));
+                k = max(k + 1.0, ceil((exit - hit.x) / step - 0.5) + 0.5);
+                continue;
+            }
+            let sigma = max(q.value, 0.0) * params.light.w;
+            if (sigma > 0.0) {
+                let a = 1.0 - exp(-sigma * step);
+                let lit = 0.25 + 0.75 * exp(-shadow_depth(p));
+                radiance += trans * a * lit;
+                trans *= 1.0 - a;
+            }
+            k += 1.0;
+        }
+    }
+    image[gid.y * w + gid.x] = radiance;
+}

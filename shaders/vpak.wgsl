@@ -1,0 +1,142 @@
+// vpak.wgsl: sample a .vpak asset on the GPU (see docs/format.md).
+//
+// An engine includes this file, binds the asset's sections as storage
+// buffers and its brick atlas as a 3D texture, and calls `vpak_sample` (the
+// value at a voxel) or `vpak_query` (the value plus the size of the empty
+// region around it, for hierarchical empty-space skipping).
+//
+// Coordinates are asset index space: source index minus `index_offset`,
+// inside [0, 4096)^3. Only the first brick atlas is bound here.
+
+const VPAK_L1_WORDS: u32 = 1537u;   // 1024 mask words, 512 prefix words, first entry
+const VPAK_L2_WORDS: u32 = 193u;    // 128 mask words, 64 prefix words, first entry
+const VPAK_L3_WORDS: u32 = 17u;     // 16 mask words, brick index
+const VPAK_TILE: u32 = 0x80000000u;
+
+// Voxel formats (Metadata.format).
+const VPAK_F32: u32 = 0u;
+const VPAK_F16: u32 = 1u;
+const VPAK_UNORM8: u32 = 2u;
+const VPAK_BC4: u32 = 3u;
+const VPAK_BC7: u32 = 4u;
+
+struct VpakInfo {
+    // L1 node of the frame being sampled.
+    l1: u32,
+    format: u32,
+    background: f32,
+    _pad: u32,
+    // Atlas size in bricks (x, y, z) and texture slices per brick (8, or 2 for BC7).
+    atlas_bricks: vec4<u32>,
+}
+
+@group(0) @binding(1) var<storage, read> vpak_l1: array<u32>;
+@group(0) @binding(2) var<storage, read> vpak_l1_entries: array<u32>;
+@group(0) @binding(3) var<storage, read> vpak_l2: array<u32>;
+@group(0) @binding(4) var<storage, read> vpak_l2_entries: array<u32>;
+@group(0) @binding(5) var<storage, read> vpak_l3: array<u32>;
+@group(0) @binding(6) var<storage, read> vpak_tiles: array<u32>;
+@group(0) @binding(7) var<storage, read> vpak_ranges: array<vec2<f32>>;
+@group(0) @binding(8) var vpak_atlas: texture_3d<f32>;
+
+// Entry of slot `s` in the node at `base` with `mask_words` mask words,
+// or 0xffffffff when the slot is empty: the mask bit, then the rank of the
+// slot among the occupied ones from the per-word prefix counts.
+fn vpak_entry_index(nodes_is_l1: bool, base: u32, mask_words: u32, s: u32) -> u32 {
+    let w = s >> 5u;
+    let bit = s & 31u;
+    var word: u32;
+    var prefix_word: u32;
+    var first: u32;
+    if (nodes_is_l1) {
+        word = vpak_l1[base + w];
+        prefix_word = vpak_l1[base + mask_words + (w >> 1u)];
+        first = vpak_l1[base + mask_words + (mask_words >> 1u)];
+    } else {
+        word = vpak_l2[base + w];
+        prefix_word = vpak_l2[base + mask_words + (w >> 1u)];
+        first = vpak_l2[base + mask_words + (mask_words >> 1u)];
+    }
+    if (((word >> bit) & 1u) == 0u) {
+        return 0xffffffffu;
+    }
+    let prefix = (prefix_word >> (16u * (w & 1u))) & 0xffffu;
+    let below = countOneBits(word & ((1u << bit) - 1u));
+    return first + prefix + below;
+}
+
+fn vpak_tile_value(e: u32) -> f32 {
+    return bitcast<f32>(vpak_tiles[(e & ~VPAK_TILE) * 2u]);
+}
+
+// The stored value of voxel `v` (x·64 + y·8 + z) of brick `b`.
+fn vpak_brick_value(info: VpakInfo, b: u32, v: vec3<u32>) -> f32 {
+    let bx = info.atlas_bricks.x;
+    let by = info.atlas_bricks.y;
+    let pos = vec3<u32>(b % bx, (b / bx) % by, b / (bx * by));
+    var t: f32;
+    if (info.format == VPAK_BC7) {
+        let texel = vec4<f32>(textureLoad(vpak_atlas, vec3<i32>(pos * vec3<u32>(8u, 8u, 2u) + vec3<u32>(v.x, v.y, v.z / 4u)), 0));
+        t = texel[v.z & 3u];
+    } else {
+        t = textureLoad(vpak_atlas, vec3<i32>(pos * 8u + v), 0).r;
+    }
+    if (info.format == VPAK_F32 || info.format == VPAK_F16) {
+        return t;
+    }
+    let r = vpak_ranges[b];
+    return r.x + t * (r.y - r.x);
+}
+
+// Value at voxel `p`, and the edge of the empty (background) region that
+// contains it: 128 for an empty L1 slot, 8 for an empty L2 slot, 0 when the
+// voxel is inside an L3 node or a tile.
+struct VpakQuery {
+    value: f32,
+    empty_dim: u32,
+}
+
+fn vpak_query(info: VpakInfo, p: vec3<i32>) -> VpakQuery {
+    var q: VpakQuery;
+    q.value = info.background;
+    q.empty_dim = 0u;
+    if (any(p < vec3<i32>(0)) || any(p >= vec3<i32>(4096))) {
+        q.empty_dim = 128u;
+        return q;
+    }
+    let u = vec3<u32>(p);
+    let s1 = (((u.x >> 7u) & 31u) << 10u) | (((u.y >> 7u) & 31u) << 5u) | ((u.z >> 7u) & 31u);
+    let i1 = vpak_entry_index(true, info.l1 * VPAK_L1_WORDS, 1024u, s1);
+    if (i1 == 0xffffffffu) {
+        q.empty_dim = 128u;
+        return q;
+    }
+    let e1 = vpak_l1_entries[i1];
+    if ((e1 & VPAK_TILE) != 0u) {
+        q.value = vpak_tile_value(e1);
+        return q;
+    }
+    let s2 = (((u.x >> 3u) & 15u) << 8u) | (((u.y >> 3u) & 15u) << 4u) | ((u.z >> 3u) & 15u);
+    let i2 = vpak_entry_index(false, e1 * VPAK_L2_WORDS, 128u, s2);
+    if (i2 == 0xffffffffu) {
+        q.empty_dim = 8u;
+        return q;
+    }
+    let e2 = vpak_l2_entries[i2];
+    if ((e2 & VPAK_TILE) != 0u) {
+        q.value = vpak_tile_value(e2);
+        return q;
+    }
+    let l3 = e2 * VPAK_L3_WORDS;
+    let v = u & vec3<u32>(7u);
+    let i = (v.x << 6u) | (v.y << 3u) | v.z;
+    if (((vpak_l3[l3 + (i >> 5u)] >> (i & 31u)) & 1u) == 0u) {
+        return q;
+    }
+    q.value = vpak_brick_value(info, vpak_l3[l3 + 16u], v);
+    return q;
+}
+
+fn vpak_sample(info: VpakInfo, p: vec3<i32>) -> f32 {
+    return vpak_query(info, p).value;
+}
