@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # The whole test suite, on a fresh Debian machine with only Rust installed.
 # Installs the Debian packages the tests need (OpenVDB's reference tools,
-# used as the oracle in differential tests) when they are missing, then runs
-# every test in the workspace.
+# used as the oracle in differential tests, and Mesa's Vulkan drivers for the
+# GPU tests) when they are missing, then runs every test in the workspace.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 need=()
-for pkg in python3-openvdb python3-numpy libopenvdb-tools libnanovdb-tools libblosc1; do
+for pkg in python3-openvdb python3-numpy libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then
@@ -17,5 +17,9 @@ if [ ${#need[@]} -gt 0 ]; then
     $sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
 fi
+
+# Mesa's Vulkan loader wants a runtime directory; the GPU tests run on its
+# CPU driver (lavapipe) when there is no GPU.
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
 
 cargo test --workspace --locked "$@"

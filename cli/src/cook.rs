@@ -2,6 +2,7 @@
 
 use crate::inputs::{self, FrameFile, FrameRange};
 use crate::progress::Bars;
+use crate::validate::ValidateArgs;
 use crate::{exit, report_error, Usage};
 use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
@@ -37,7 +38,10 @@ voxel RMSE with and without clustering.
 
 Frames are streamed: at most two source frames are held at once. Identical bricks,
 L3 and L2 nodes and frames are stored once. The output is written to a temporary
-file and renamed; an existing OUT is replaced only with --force.";
+file and renamed; an existing OUT is replaced only with --force.
+
+--validate renders the new asset against its sources on the GPU afterwards (see
+`vdbcook validate --help`); with --max-rmse / --min-psnr a failed gate exits with 3.";
 
 #[derive(clap::Args)]
 pub struct CookArgs {
@@ -83,6 +87,15 @@ pub struct CookArgs {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+    /// After cooking, run `vdbcook validate` on the asset against the inputs (8 views, 512×512).
+    #[arg(long)]
+    pub validate: bool,
+    /// With --validate: exit with code 3 when any image's RMSE is above X.
+    #[arg(long, value_name = "X", requires = "validate")]
+    pub max_rmse: Option<f64>,
+    /// With --validate: exit with code 3 when any image's PSNR (dB) is below Y.
+    #[arg(long, value_name = "Y", requires = "validate")]
+    pub min_psnr: Option<f64>,
 }
 
 /// One frame as read by the reader thread.
@@ -120,6 +133,54 @@ fn read_frame(file: FrameFile, grid_name: &mut Option<String>, allow_missing: bo
         *grid_name = Some(vdb.grids[index].name.clone());
     }
     Ok(Frame { file, grid: Some(grid), source: Some(source) })
+}
+
+/// Reads `files` on a thread that stays one frame ahead (at most two source
+/// frames live at once) and pushes each frame into `cooker`. Returns the grid
+/// name used and the seconds spent waiting for frames.
+pub fn feed(cooker: &mut Cooker, files: Vec<FrameFile>, grid: Option<String>, allow_missing: bool, bars: &Bars) -> Result<(Option<String>, f64)> {
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Frame>>(0);
+    let total = files.len() as u64;
+    let reader = std::thread::spawn(move || {
+        let mut grid_name = grid;
+        for f in files {
+            let r = read_frame(f, &mut grid_name, allow_missing);
+            let stop = r.is_err();
+            if tx.send(r).is_err() || stop {
+                break;
+            }
+        }
+        grid_name
+    });
+    bars.start("reading frames", total);
+    let mut read_secs = 0.0;
+    let mut wait = Instant::now();
+    let mut failure = None;
+    for r in rx {
+        read_secs += wait.elapsed().as_secs_f64();
+        let pushed = r.and_then(|frame| {
+            let n = cooker.frame_count();
+            match &frame.grid {
+                Some(g) => cooker.push(g, frame.source).with_context(|| format!("{}: frame {n}", frame.file.path.display())),
+                None => {
+                    cooker.push_empty(frame.source);
+                    Ok(())
+                }
+            }
+        });
+        if let Err(e) = pushed {
+            failure = Some(e);
+            break;
+        }
+        bars.advance(1);
+        wait = Instant::now();
+    }
+    bars.finish();
+    let grid_name = reader.join().map_err(|_| anyhow!("the frame reader thread panicked"))?;
+    match failure {
+        Some(e) => Err(e),
+        None => Ok((grid_name, read_secs)),
+    }
 }
 
 pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
@@ -160,55 +221,7 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     ];
     let mut cooker = Cooker::new(CookOptions { format, quality, max_texture_dim: args.max_texture_dim, clustering, settings });
 
-    // A reader thread stays one frame ahead: at most two source frames live at once.
-    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Frame>>(0);
-    let allow_missing = args.allow_missing;
-    let mut grid_name = args.grid.clone();
-    let total = files.len() as u64;
-    let reader = std::thread::spawn(move || {
-        for f in files {
-            let r = read_frame(f, &mut grid_name, allow_missing);
-            let stop = r.is_err();
-            if tx.send(r).is_err() || stop {
-                break;
-            }
-        }
-        grid_name
-    });
-    bars.start("reading frames", total);
-    let mut read_secs = 0.0;
-    let mut wait = Instant::now();
-    let mut failure = None;
-    for r in rx {
-        read_secs += wait.elapsed().as_secs_f64();
-        match r {
-            Ok(frame) => {
-                let n = cooker.frame_count();
-                let res = match &frame.grid {
-                    Some(g) => cooker.push(g, frame.source).with_context(|| format!("{}: frame {n}", frame.file.path.display())),
-                    None => {
-                        cooker.push_empty(frame.source);
-                        Ok(())
-                    }
-                };
-                if let Err(e) = res {
-                    failure = Some(e);
-                    break;
-                }
-                bars.advance(1);
-            }
-            Err(e) => {
-                failure = Some(e);
-                break;
-            }
-        }
-        wait = Instant::now();
-    }
-    bars.finish();
-    let grid_name = reader.join().map_err(|_| anyhow!("the frame reader thread panicked"))?;
-    if let Some(e) = failure {
-        return Err(e);
-    }
+    let (grid_name, read_secs) = feed(&mut cooker, files, args.grid.clone(), args.allow_missing, &bars)?;
     if cooker.frame_count() == 0 {
         return Err(anyhow!("no frames to cook"));
     }
@@ -218,11 +231,32 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     vdbcook_vpak::write_file(&args.output, &sections, args.force).with_context(|| args.output.display().to_string())?;
     report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
     report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
+    let validation = if args.validate {
+        let v = ValidateArgs {
+            asset: args.output.clone(),
+            source: args.inputs.clone(),
+            source_frames: args.frames,
+            frames: None,
+            views: 8,
+            size: (512, 512),
+            max_rmse: args.max_rmse,
+            min_psnr: args.min_psnr,
+            report: None,
+            adapter: None,
+            json: args.json,
+        };
+        Some(crate::validate::evaluate(v, quiet)?)
+    } else {
+        None
+    };
     if !quiet {
-        let text = if args.json { summary_json(&args, grid_name.as_deref(), &report) } else { summary_text(&args, grid_name.as_deref(), &report) };
+        let mut text = if args.json { summary_json(&args, grid_name.as_deref(), &report, validation.as_ref().map(|o| &o.doc)) } else { summary_text(&args, grid_name.as_deref(), &report) };
+        if let (Some(o), false) = (&validation, args.json) {
+            text += &o.text;
+        }
         crate::write_stdout(&text).ok();
     }
-    Ok(exit::SUCCESS)
+    Ok(validation.map_or(exit::SUCCESS, |o| crate::validate::gate(&o.gate_failure)))
 }
 
 fn mb(b: u64) -> String {
@@ -249,9 +283,12 @@ fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
     s
 }
 
-fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
+fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport, validation: Option<&serde_json::Value>) -> String {
     let mut v = serde_json::to_value(r).unwrap_or_default();
     if let Some(o) = v.as_object_mut() {
+        if let Some(val) = validation {
+            o.insert("validation".into(), val.clone());
+        }
         o.insert("output".into(), serde_json::json!(args.output.display().to_string()));
         o.insert("grid".into(), serde_json::json!(grid));
         o.insert("sections".into(), serde_json::json!(r.sections.iter().map(|(n, b)| serde_json::json!({"name": n, "bytes": b})).collect::<Vec<_>>()));

@@ -7,6 +7,7 @@ mod inspect;
 mod inspect_vpak;
 mod progress;
 mod unpack;
+mod validate;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -19,8 +20,7 @@ pub mod exit {
     pub const FAILURE: u8 = 1;
     /// Bad command line (clap exits with 2 itself).
     pub const USAGE: u8 = 2;
-    /// A quality gate (`validate --max-rmse`) failed.
-    #[allow(dead_code)]
+    /// A quality gate (`validate --max-rmse` / `--min-psnr`) failed.
     pub const QUALITY_GATE: u8 = 3;
 }
 
@@ -29,7 +29,7 @@ Exit codes:
   0  success
   1  failure: unreadable or invalid input, I/O error
   2  usage error (bad flags or arguments)
-  3  quality gate failed (reserved for validate --max-rmse)";
+  3  quality gate failed (validate --max-rmse / --min-psnr)";
 
 #[derive(Parser)]
 #[command(name = "vdbcook", version, about = "Cook OpenVDB volume sequences into compact GPU-ready assets", after_help = AFTER_HELP)]
@@ -64,6 +64,11 @@ enum Command {
     /// Compare two .vdb grids voxel by voxel (RMSE, PSNR, max error).
     #[command(after_help = diff::AFTER_HELP)]
     Diff(diff::DiffArgs),
+    /// Render asset and source with the same GPU ray-marcher and report what the compression cost.
+    #[command(after_help = validate::AFTER_HELP)]
+    Validate(validate::ValidateArgs),
+    /// Render one frame of a .vpak (or a .vdb) to a PNG preview.
+    Render(validate::RenderArgs),
 }
 
 /// A usage problem found after parsing (exit code 2).
@@ -86,7 +91,23 @@ pub fn write_stdout(text: &str) -> std::io::Result<()> {
     out.flush()
 }
 
+/// Mesa's Vulkan drivers print a warning on every start when
+/// XDG_RUNTIME_DIR is unset (common in CI and containers); give them a
+/// private one. Runs before any thread exists.
+fn ensure_runtime_dir() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
+        return;
+    }
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt};
+    let dir = std::env::temp_dir().join(format!("vdbcook-runtime-{}", std::fs::metadata("/proc/self").map(|m| m.uid()).unwrap_or(0)));
+    let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+    if dir.is_dir() {
+        std::env::set_var("XDG_RUNTIME_DIR", &dir);
+    }
+}
+
 fn main() -> ExitCode {
+    ensure_runtime_dir();
     let cli = Cli::parse();
     if let Some(n) = cli.threads {
         if n == 0 {
@@ -103,6 +124,8 @@ fn main() -> ExitCode {
         Command::Cook(args) => cook::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
         Command::Unpack(args) => unpack::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
         Command::Diff(args) => diff::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
+        Command::Validate(args) => validate::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
+        Command::Render(args) => validate::render(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
     };
     ExitCode::from(code)
 }

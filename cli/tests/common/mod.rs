@@ -84,3 +84,16 @@ pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec
         r
     })
 }
+
+/// True when a GPU adapter (lavapipe is enough) can be opened. In CI its
+/// absence is a failure, never a skip.
+pub fn gpu_available() -> bool {
+    match vdbcook_validate::Renderer::new(None) {
+        Ok(_) => true,
+        Err(e) => {
+            assert!(!in_ci(), "CI=true but no GPU adapter: {e} (scripts/test.sh installs mesa-vulkan-drivers)");
+            eprintln!("note: no GPU adapter, skipping GPU checks: {e}");
+            false
+        }
+    }
+}

@@ -7,6 +7,7 @@
 
 mod cpu;
 mod gpu;
+pub mod report;
 
 
 pub use cpu::render_cpu;

@@ -1,0 +1,353 @@
+//! `vdbcook validate` and `vdbcook render`: the GPU check of what a cook cost.
+
+use crate::cook::feed;
+use crate::inputs::{self, FrameRange};
+use crate::progress::Bars;
+use crate::{exit, Usage};
+use anyhow::{anyhow, Context, Result};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use vdbcook_cook::{CookOptions, Cooker, Format, NoProgress, Progress};
+use vdbcook_encode::ErrorStats;
+use vdbcook_validate::{compare, report, Image, ImageMetrics, Renderer, Scene};
+use vdbcook_vpak::Asset;
+
+pub const AFTER_HELP: &str = "\
+The source frames are cooked again in memory, losslessly (f32, no clustering), and
+both assets are rendered by the same deterministic wgpu ray-marcher (emission and
+absorption, one directional light with shadow rays, hierarchical empty-space skipping;
+no noise), from --views cameras orbiting the volume. For each frame and view it
+reports RMSE, PSNR and the largest difference of the images (linear values in [0, 1]),
+and for each frame the voxel-domain RMSE, PSNR and max error; the worst frame is named.
+
+--max-rmse and --min-psnr make validate exit with code 3 when any image is over budget.
+--report DIR writes report.json, PNGs of the reference, the asset and an error
+heat-map for the worst views, and a self-contained report.html.
+
+A GPU is not required: Mesa's CPU Vulkan driver (Debian: mesa-vulkan-drivers) works.";
+
+#[derive(clap::Args, Clone)]
+pub struct ValidateArgs {
+    /// The cooked asset.
+    #[arg(value_name = "ASSET.vpak")]
+    pub asset: PathBuf,
+    /// The source frames the asset was cooked from (files, directories, globs or patterns).
+    #[arg(long, required = true, num_args = 1.., value_name = "INPUT")]
+    pub source: Vec<String>,
+    /// Frames of a source frame pattern: A-B or A-B:STEP.
+    #[arg(long, value_name = "RANGE")]
+    pub source_frames: Option<FrameRange>,
+    /// Asset frames to render, counted from 0: A-B or A-B:STEP (default: all).
+    #[arg(long, value_name = "RANGE")]
+    pub frames: Option<FrameRange>,
+    /// Cameras orbiting the volume.
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=360))]
+    pub views: u32,
+    /// Image size.
+    #[arg(long, default_value = "512x512", value_name = "WxH", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Exit with code 3 when any image's RMSE is above X.
+    #[arg(long, value_name = "X")]
+    pub max_rmse: Option<f64>,
+    /// Exit with code 3 when any image's PSNR (dB) is below Y.
+    #[arg(long, value_name = "Y")]
+    pub min_psnr: Option<f64>,
+    /// Write report.json, PNGs and report.html into DIR.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// Use the first GPU adapter whose name contains NAME (e.g. "llvmpipe").
+    #[arg(long, value_name = "NAME")]
+    pub adapter: Option<String>,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("invalid size \"{s}\" (expected WxH, e.g. 512x512, each 8 to 8192)");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
+    if !(8..=8192).contains(&w) || !(8..=8192).contains(&h) {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+/// Cooks the source frames losslessly in memory: the reference asset.
+fn reference(meta: &vdbcook_vpak::Metadata, source: &[String], frames: Option<FrameRange>, bars: &Bars) -> Result<Asset> {
+    let files = inputs::expand(source, frames)?;
+    let allow_missing = meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
+    let grid = if meta.grid_name.is_empty() { None } else { Some(meta.grid_name.clone()) };
+    let mut cooker = Cooker::new(CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() });
+    feed(&mut cooker, files, grid, allow_missing, bars)?;
+    let (sections, _) = cooker.finish(&NoProgress).map_err(|e| anyhow!(e)).context("cooking the reference")?;
+    Ok(Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?)
+}
+
+/// Voxel-domain error of the asset's frame against the reference's, over the reference's active voxels.
+fn voxel_error(asset: &Asset, reference: &Asset, frame: usize) -> Result<ErrorStats> {
+    let a = vdbcook_cook::unpack_frame(asset, frame).map_err(|e| anyhow!(e))?;
+    let r = vdbcook_cook::unpack_frame(reference, frame).map_err(|e| anyhow!(e))?;
+    let mut e = ErrorStats::default();
+    for leaf in &r.leaves {
+        for i in leaf.mask.iter_on() {
+            let (x, y, z) = vdbcook_grid::leaf_local(i);
+            e.add(leaf.values[i], a.probe(leaf.origin.offset(x, y, z)).0);
+        }
+    }
+    Ok(e)
+}
+
+struct Shot {
+    frame: usize,
+    view: usize,
+    metrics: ImageMetrics,
+}
+
+/// What a validation found: the JSON document, a human summary, and the
+/// gate failure message, if any.
+pub struct Outcome {
+    pub doc: serde_json::Value,
+    pub text: String,
+    pub gate_failure: Option<String>,
+}
+
+pub fn run(args: ValidateArgs, quiet: bool) -> Result<u8> {
+    let json_out = args.json;
+    let o = evaluate(args, quiet)?;
+    if !quiet {
+        let text = if json_out { format!("{}\n", serde_json::to_string_pretty(&o.doc).unwrap_or_default()) } else { o.text };
+        crate::write_stdout(&text).ok();
+    }
+    Ok(gate(&o.gate_failure))
+}
+
+/// Prints a gate failure; the exit code.
+pub fn gate(failure: &Option<String>) -> u8 {
+    match failure {
+        Some(msg) => {
+            eprintln!("vdbcook: quality gate failed: {msg}");
+            exit::QUALITY_GATE
+        }
+        None => exit::SUCCESS,
+    }
+}
+
+/// Renders and compares; `quiet` hides progress bars.
+pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
+    let name = args.asset.display().to_string();
+    let asset = Asset::open(&args.asset).with_context(|| name.clone())?;
+    let meta = asset.metadata().with_context(|| name.clone())?;
+    let bars = Bars::new(quiet || args.json);
+    let reference = reference(&meta, &args.source, args.source_frames, &bars)?;
+    let ref_meta = reference.metadata()?;
+    if ref_meta.frame_count != meta.frame_count {
+        return Err(anyhow!("{name}: the asset has {} frames, the source {}", meta.frame_count, ref_meta.frame_count));
+    }
+    let frames: Vec<usize> = match args.frames {
+        Some(r) => r.frames().map(|f| usize::try_from(f).unwrap_or(usize::MAX)).collect(),
+        None => (0..meta.frame_count as usize).collect(),
+    };
+    if let Some(&bad) = frames.iter().find(|&&f| f >= meta.frame_count as usize) {
+        return Err(Usage(format!("--frames: frame {bad} is out of range (the asset has {} frames, numbered from 0)", meta.frame_count)).into());
+    }
+    let renderer = Renderer::new(args.adapter.as_deref())?;
+    let gpu_asset = renderer.upload(&asset).with_context(|| name.clone())?;
+    let gpu_ref = renderer.upload(&reference).context("reference")?;
+    let scene = Scene::for_asset(&ref_meta);
+    let views = scene.orbit(args.views as usize);
+    let (w, h) = args.size;
+
+    let mut shots = Vec::new();
+    let mut voxel = Vec::new();
+    let mut worst_images: Vec<(Shot, Image, Image)> = Vec::new();
+    bars.start("rendering", (frames.len() * views.len()) as u64);
+    for &f in &frames {
+        voxel.push((f, voxel_error(&asset, &reference, f)?));
+        for (vi, v) in views.iter().enumerate() {
+            let r = renderer.render(&gpu_ref, &scene, f, v, w, h)?;
+            let a = renderer.render(&gpu_asset, &scene, f, v, w, h)?;
+            let m = compare(&r, &a);
+            // Keep the images of the three worst views for the report.
+            if args.report.is_some() {
+                worst_images.push((Shot { frame: f, view: vi, metrics: m }, r, a));
+                worst_images.sort_by(|x, y| y.0.metrics.rmse.total_cmp(&x.0.metrics.rmse));
+                worst_images.truncate(3);
+            }
+            shots.push(Shot { frame: f, view: vi, metrics: m });
+            bars.advance(1);
+        }
+    }
+    bars.finish();
+    let worst = shots.iter().max_by(|a, b| a.metrics.rmse.total_cmp(&b.metrics.rmse));
+    let peak = f64::from(ref_meta.value_range[1] - ref_meta.value_range[0]).max(1e-12);
+    let mut vox_total = ErrorStats::default();
+    for (_, e) in &voxel {
+        vox_total.merge(e);
+    }
+    let num = |v: f64| if v.is_finite() { json!(v) } else { serde_json::Value::Null };
+    let doc = json!({
+        "asset": name,
+        "adapter": renderer.adapter,
+        "format": meta.format,
+        "grid": meta.grid_name,
+        "frames": meta.frame_count,
+        "views": args.views,
+        "size": [w, h],
+        "images": shots.iter().map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "max_error": s.metrics.max_error})).collect::<Vec<_>>(),
+        "worst": worst.map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr)})),
+        "voxel": {
+            "rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak)), "max_error": vox_total.max_abs,
+            "frames": voxel.iter().map(|(f, e)| json!({"frame": f, "rmse": e.rmse(), "psnr": num(e.psnr(peak)), "max_error": e.max_abs})).collect::<Vec<_>>(),
+        },
+        "gate": {"max_rmse": args.max_rmse, "min_psnr": args.min_psnr},
+    });
+    let failed: Vec<&Shot> = shots
+        .iter()
+        .filter(|s| args.max_rmse.is_some_and(|x| s.metrics.rmse > x) || args.min_psnr.is_some_and(|y| s.metrics.psnr < y))
+        .collect();
+    if let Some(dir) = &args.report {
+        write_report(dir, &doc, &shots, &worst_images, &meta.format, &name).with_context(|| dir.display().to_string())?;
+    }
+    let mut text = format!("{name}: {} vs lossless reference, {} frame(s) × {} view(s) at {w}×{h} on {}\n", meta.format, frames.len(), args.views, renderer.adapter);
+    if let Some(s) = worst {
+        text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error);
+        let mean = shots.iter().map(|s| s.metrics.rmse).sum::<f64>() / shots.len() as f64;
+        text += &format!("           mean rmse {:.3e}\n", mean);
+    }
+    text += &format!("  voxels   rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", vox_total.rmse(), vox_total.psnr(peak), vox_total.max_abs);
+    if let Some(d) = &args.report {
+        text += &format!("  report   {}\n", d.join("report.html").display());
+    }
+    let gate_failure = failed.first().map(|s| {
+        format!("{} image(s) over budget, first frame {} view {} (rmse {:.3e}, psnr {:.1} dB)", failed.len(), s.frame, s.view, s.metrics.rmse, s.metrics.psnr)
+    });
+    Ok(Outcome { doc, text, gate_failure })
+}
+
+fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[(Shot, Image, Image)], format: &str, name: &str) -> Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let write = |file: &str, bytes: &[u8]| vdbcook_vpak::write_atomic(&dir.join(file), bytes, true).map_err(|e| anyhow!(e));
+    write("report.json", format!("{}\n", serde_json::to_string_pretty(doc).unwrap_or_default()).as_bytes())?;
+    let mut figures = String::new();
+    for (s, r, a) in worst {
+        let stem = format!("frame{}_view{}", s.frame, s.view);
+        let (rp, ap, hp) = (report::png_grey(r), report::png_grey(a), report::png_heat(r, a, (s.metrics.max_error as f32).max(1e-6)));
+        write(&format!("{stem}_reference.png"), &rp)?;
+        write(&format!("{stem}_asset.png"), &ap)?;
+        write(&format!("{stem}_error.png"), &hp)?;
+        figures += &format!(
+            "<h3>frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}</h3><div class='row'>\
+<figure><img src='data:image/png;base64,{}'><figcaption>reference (lossless)</figcaption></figure>\
+<figure><img src='data:image/png;base64,{}'><figcaption>asset ({})</figcaption></figure>\
+<figure><img src='data:image/png;base64,{}'><figcaption>|difference|, full scale {:.2e}</figcaption></figure></div>",
+            s.frame,
+            s.view,
+            s.metrics.rmse,
+            s.metrics.psnr,
+            s.metrics.max_error,
+            report::base64(&rp),
+            report::base64(&ap),
+            report::esc(format),
+            report::base64(&hp),
+            s.metrics.max_error
+        );
+    }
+    // Worst view per frame.
+    let mut per_frame: Vec<(usize, f64)> = Vec::new();
+    for s in shots {
+        match per_frame.iter_mut().find(|(f, _)| *f == s.frame) {
+            Some(e) => e.1 = e.1.max(s.metrics.rmse),
+            None => per_frame.push((s.frame, s.metrics.rmse)),
+        }
+    }
+    let rows: String = per_frame.iter().map(|(f, r)| format!("<tr><td>{f}</td><td>{r:.4e}</td></tr>")).collect();
+    let v = &doc["voxel"];
+    let html = format!(
+        "<!doctype html><html><head><meta charset='utf-8'><title>vdbcook validation: {n}</title>\
+<style>body{{font-family:sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}\
+.row{{display:flex;gap:1em}}figure{{margin:0}}img{{image-rendering:pixelated;max-width:300px}}</style></head><body>\
+<h1>vdbcook validation</h1><p>{n}, adapter {ad}</p>\
+<table><tr><th>model</th><th>format</th><th>worst image RMSE</th><th>worst PSNR (dB)</th><th>voxel RMSE</th><th>voxel PSNR (dB)</th></tr>\
+<tr><td>{g}</td><td>{f}</td><td>{wr}</td><td>{wp}</td><td>{vr}</td><td>{vp}</td></tr></table>\
+<h2>Per-frame RMSE (worst view)</h2>{plot}<table><tr><th>frame</th><th>RMSE</th></tr>{rows}</table><h2>Worst views</h2>{figures}</body></html>",
+        n = report::esc(name),
+        ad = report::esc(doc["adapter"].as_str().unwrap_or("")),
+        g = report::esc(doc["grid"].as_str().unwrap_or("")),
+        f = report::esc(format),
+        wr = doc["worst"]["rmse"],
+        wp = doc["worst"]["psnr"],
+        vr = v["rmse"],
+        vp = v["psnr"],
+        plot = report::svg_plot(&per_frame.iter().map(|p| p.1).collect::<Vec<_>>(), "image RMSE per frame"),
+    );
+    write("report.html", html.as_bytes())
+}
+
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// A .vpak asset or a .vdb file.
+    #[arg(value_name = "ASSET|VDB")]
+    pub input: PathBuf,
+    /// Frame of the asset (counted from 0); a .vdb file has one.
+    #[arg(long, default_value_t = 0)]
+    pub frame: usize,
+    /// The PNG to write.
+    #[arg(short, long, value_name = "OUT.png")]
+    pub output: PathBuf,
+    /// Image size.
+    #[arg(long, default_value = "512x512", value_name = "WxH", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Which of --views orbiting cameras to use (from 0).
+    #[arg(long, default_value_t = 0)]
+    pub view: u32,
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=360))]
+    pub views: u32,
+    /// Grid of a .vdb input (default: "density", else the first float grid).
+    #[arg(long, value_name = "NAME")]
+    pub grid: Option<String>,
+    /// Use the first GPU adapter whose name contains NAME.
+    #[arg(long, value_name = "NAME")]
+    pub adapter: Option<String>,
+    /// Replace OUT if it exists.
+    #[arg(long)]
+    pub force: bool,
+}
+
+pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
+    let name = args.input.display().to_string();
+    if args.output.exists() && !args.force {
+        return Err(anyhow!("{} already exists (use --force to replace it)", args.output.display()));
+    }
+    if args.view >= args.views {
+        return Err(Usage(format!("--view {} is out of range (0 to {})", args.view, args.views - 1)).into());
+    }
+    let is_vpak = {
+        use std::io::Read;
+        let mut m = [0u8; 8];
+        std::fs::File::open(&args.input).and_then(|mut f| f.read_exact(&mut m)).is_ok() && m == vdbcook_vpak::MAGIC
+    };
+    let asset = if is_vpak {
+        Asset::open(&args.input).with_context(|| name.clone())?
+    } else {
+        let files = vec![inputs::FrameFile { path: args.input.clone(), from_pattern: false }];
+        let mut cooker = Cooker::new(CookOptions { format: Format::F32, ..CookOptions::default() });
+        feed(&mut cooker, files, args.grid.clone(), false, &Bars::new(true))?;
+        let (sections, _) = cooker.finish(&NoProgress).map_err(|e| anyhow!(e))?;
+        Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?
+    };
+    let meta = asset.metadata().with_context(|| name.clone())?;
+    if args.frame >= meta.frame_count as usize {
+        return Err(anyhow!("{name}: frame {} is out of range (it has {} frames, numbered from 0)", args.frame, meta.frame_count));
+    }
+    let renderer = Renderer::new(args.adapter.as_deref())?;
+    let gpu = renderer.upload(&asset).with_context(|| name.clone())?;
+    let scene = Scene::for_asset(&meta);
+    let view = scene.orbit(args.views as usize)[args.view as usize];
+    let img = renderer.render(&gpu, &scene, args.frame, &view, args.size.0, args.size.1)?;
+    vdbcook_vpak::write_atomic(&args.output, &report::png_grey(&img), args.force).with_context(|| args.output.display().to_string())?;
+    if !quiet {
+        crate::write_stdout(&format!("rendered frame {} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter)).ok();
+    }
+    Ok(exit::SUCCESS)
+}

@@ -1,0 +1,121 @@
+//! Images as PNG, error heat-maps, and the self-contained HTML report.
+
+use crate::Image;
+
+/// 8-bit grey PNG of an image (values clamped to [0, 1], sRGB-encoded).
+pub fn png_grey(img: &Image) -> Vec<u8> {
+    let px: Vec<u8> = img
+        .pixels
+        .iter()
+        .map(|&v| {
+            let v = v.clamp(0.0, 1.0);
+            let s = if v <= 0.003_130_8 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+            (s * 255.0).round() as u8
+        })
+        .collect();
+    encode(img.width, img.height, png::ColorType::Grayscale, &px)
+}
+
+/// RGB heat-map PNG of |a - b|, full scale at `scale` (black, red, yellow, white).
+pub fn png_heat(a: &Image, b: &Image, scale: f32) -> Vec<u8> {
+    let scale = if scale > 0.0 { scale } else { 1.0 };
+    let mut px = Vec::with_capacity(a.pixels.len() * 3);
+    for (x, y) in a.pixels.iter().zip(&b.pixels) {
+        let t = ((x.clamp(0.0, 1.0) - y.clamp(0.0, 1.0)).abs() / scale).clamp(0.0, 1.0) * 3.0;
+        let c = [t.min(1.0), (t - 1.0).clamp(0.0, 1.0), (t - 2.0).clamp(0.0, 1.0)];
+        px.extend(c.map(|v| (v * 255.0).round() as u8));
+    }
+    encode(a.width, a.height, png::ColorType::Rgb, &px)
+}
+
+fn encode(w: u32, h: u32, color: png::ColorType, data: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut out, w, h);
+        enc.set_color(color);
+        enc.set_depth(png::BitDepth::Eight);
+        // Writing into a Vec cannot fail for a well-sized buffer.
+        if let Ok(mut writer) = enc.write_header() {
+            let _ = writer.write_image_data(data);
+        }
+    }
+    out
+}
+
+/// Standard base64 (for images inlined in the HTML report).
+pub fn base64(data: &[u8]) -> String {
+    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::with_capacity(data.len().div_ceil(3) * 4);
+    for c in data.chunks(3) {
+        let n = (u32::from(c[0]) << 16) | (u32::from(*c.get(1).unwrap_or(&0)) << 8) | u32::from(*c.get(2).unwrap_or(&0));
+        for k in 0..4 {
+            if k <= c.len() {
+                s.push(T[((n >> (18 - 6 * k)) & 63) as usize] as char);
+            } else {
+                s.push('=');
+            }
+        }
+    }
+    s
+}
+
+/// Escapes text for HTML.
+pub fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// An SVG line plot of per-frame values (the worst view's RMSE of each frame).
+pub fn svg_plot(values: &[f64], label: &str) -> String {
+    let (w, h, pad) = (640.0, 220.0, 40.0);
+    let max = values.iter().copied().fold(0.0f64, f64::max).max(1e-12);
+    let n = values.len().max(2) - 1;
+    let pts: Vec<String> = values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| format!("{:.1},{:.1}", pad + (w - 2.0 * pad) * i as f64 / n as f64, h - pad - (h - 2.0 * pad) * v / max))
+        .collect();
+    format!(
+        "<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{h}' style='background:#fff;border:1px solid #ccc'>\
+<text x='{pad}' y='20' font-size='12'>{}: max {:.3e}</text>\
+<line x1='{pad}' y1='{}' x2='{}' y2='{}' stroke='#888'/><line x1='{pad}' y1='{pad}' x2='{pad}' y2='{}' stroke='#888'/>\
+<polyline fill='none' stroke='#c33' stroke-width='2' points='{}'/>\
+<text x='{pad}' y='{}' font-size='11'>frame 0</text><text x='{}' y='{}' font-size='11' text-anchor='end'>frame {}</text></svg>",
+        esc(label),
+        max,
+        h - pad,
+        w - pad,
+        h - pad,
+        h - pad,
+        pts.join(" "),
+        h - pad + 15.0,
+        w - pad,
+        h - pad + 15.0,
+        values.len().saturating_sub(1)
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_matches_the_standard() {
+        assert_eq!(base64(b""), "");
+        assert_eq!(base64(b"f"), "Zg==");
+        assert_eq!(base64(b"fo"), "Zm8=");
+        assert_eq!(base64(b"foo"), "Zm9v");
+        assert_eq!(base64(b"foobar"), "Zm9vYmFy");
+    }
+
+    #[test]
+    fn pngs_are_pngs() {
+        let img = Image { width: 3, height: 2, pixels: vec![0.0, 0.5, 1.0, 2.0, -1.0, 0.25] };
+        let p = png_grey(&img);
+        assert_eq!(&p[..8], &[0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a]);
+        let dec = png::Decoder::new(std::io::Cursor::new(p)).read_info().unwrap();
+        assert_eq!((dec.info().width, dec.info().height), (3, 2));
+        let h = png_heat(&img, &Image { width: 3, height: 2, pixels: vec![0.0; 6] }, 1.0);
+        assert!(h.starts_with(&[0x89, b'P', b'N', b'G']));
+        assert!(svg_plot(&[0.1, 0.3, 0.2], "rmse").contains("polyline"));
+    }
+}
