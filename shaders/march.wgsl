@@ -42,27 +42,29 @@ fn cell_exit(p: vec3<f32>, d: vec3<f32>, dim: f32) -> f32 {
     return min(min(t.x, t.y), t.z);
 }
 
-// Optical depth from `o` towards the light.
+// Optical depth from `o` towards the light. Steps grow by 1.25 each sample
+// (about 20 samples cross 256 voxels): shadows are smooth, and both assets
+// are rendered with the same march, so the approximation cancels out.
 fn shadow_depth(o: vec3<f32>) -> f32 {
     let d = params.light.xyz;
     let hit = box_hit(o, d, params.box_min.xyz, params.box_max.xyz);
-    let step = params.box_max.w;
+    var step = params.box_max.w;
+    var t = 0.5 * step;
     var depth = 0.0;
-    var k = 0.5;
     var n = 0u;
     loop {
-        let t = k * step;
-        if (t >= hit.y || n >= params.size.z) { break; }
+        // Past an optical depth of 8 the light is gone (transmittance < 0.04 %).
+        if (t >= hit.y || n >= params.size.z || depth > 8.0) { break; }
         n += 1u;
         let p = o + d * t;
         let q = vpak_query(params.info, vec3<i32>(floor(p)));
         if (q.empty_dim > 0u && params.size.w == 1u) {
-            let exit = t + cell_exit(p, d, f32(q.empty_dim));
-            k = max(k + 1.0, ceil(exit / step - 0.5) + 0.5);
+            t += cell_exit(p, d, f32(q.empty_dim)) + 0.5 * step;
             continue;
         }
         depth += max(q.value, 0.0) * params.light.w * step;
-        k += 1.0;
+        t += step;
+        step *= 1.25;
     }
     return depth;
 }
@@ -85,9 +87,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var trans = 1.0;
         var k = 0.5;
         var n = 0u;
+        var shadow_slot = 0xffffffffu;
+        var lit = 0.0;
         loop {
             let t = hit.x + k * step;
-            if (t >= hit.y || n >= params.size.z || trans < 1e-4) { break; }
+            if (t >= hit.y || n >= params.size.z || trans < 1e-3) { break; }
             n += 1u;
             let p = o + d * t;
             let q = vpak_query(params.info, vec3<i32>(floor(p)));
@@ -99,7 +103,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let sigma = max(q.value, 0.0) * params.light.w;
             if (sigma > 0.0) {
                 let a = 1.0 - exp(-sigma * step);
-                let lit = 0.25 + 0.75 * exp(-shadow_depth(p));
+                // One shadow ray per 4 lattice steps; samples in between reuse it.
+                let slot = u32(floor(k)) / 4u;
+                if (slot != shadow_slot) {
+                    shadow_slot = slot;
+                    lit = 0.25 + 0.75 * exp(-shadow_depth(p));
+                }
                 radiance += trans * a * lit;
                 trans *= 1.0 - a;
             }

@@ -129,22 +129,22 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
     let shadow = |o: [f32; 3]| -> f32 {
         let dl = scene.light;
         let (_, t1) = box_hit(o, dl, scene.box_min, scene.box_max);
-        let (mut depth, mut k, mut n) = (0.0f32, 0.5f32, 0u32);
+        let mut step = scene.shadow_step;
+        let (mut t, mut depth, mut n) = (0.5 * step, 0.0f32, 0u32);
         loop {
-            let t = k * scene.shadow_step;
-            if t >= t1 || n >= scene.max_steps {
+            if t >= t1 || n >= scene.max_steps || depth > 8.0 {
                 break;
             }
             n += 1;
             let p = at(o, dl, t);
             let (v, empty) = s.query(p.map(|c| c.floor() as i32));
             if empty > 0 && skip {
-                let exit = t + cell_exit(p, dl, empty as f32);
-                k = (k + 1.0).max((exit / scene.shadow_step - 0.5).ceil() + 0.5);
+                t += cell_exit(p, dl, empty as f32) + 0.5 * step;
                 continue;
             }
-            depth += v.max(0.0) * scene.density_scale * scene.shadow_step;
-            k += 1.0;
+            depth += v.max(0.0) * scene.density_scale * step;
+            t += step;
+            step *= 1.25;
         }
         depth
     };
@@ -160,9 +160,10 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
             let mut radiance = 0.0f32;
             if t0 < t1 {
                 let (mut trans, mut k, mut n) = (1.0f32, 0.5f32, 0u32);
+                let (mut shadow_slot, mut lit) = (u32::MAX, 0.0f32);
                 loop {
                     let t = t0 + k * scene.step;
-                    if t >= t1 || n >= scene.max_steps || trans < 1e-4 {
+                    if t >= t1 || n >= scene.max_steps || trans < 1e-3 {
                         break;
                     }
                     n += 1;
@@ -176,7 +177,12 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
                     let sigma = v.max(0.0) * scene.density_scale;
                     if sigma > 0.0 {
                         let a = 1.0 - (-sigma * scene.step).exp();
-                        let lit = 0.25 + 0.75 * (-shadow(p)).exp();
+                        // One shadow ray per 4 lattice steps, as the shader.
+                        let slot = k.floor() as u32 / 4;
+                        if slot != shadow_slot {
+                            shadow_slot = slot;
+                            lit = 0.25 + 0.75 * (-shadow(p)).exp();
+                        }
                         radiance += trans * a * lit;
                         trans *= 1.0 - a;
                     }

@@ -116,7 +116,7 @@ impl Scene {
             density_scale: 4.0 / (peak * diag),
             light: normalize([0.4, 1.0, 0.3]),
             step: 1.0,
-            shadow_step: 2.0,
+            shadow_step: 1.0,
             max_steps: 4 * (diag as u32 + 8),
         }
     }
