@@ -5,9 +5,12 @@
 // (t0 + (k + 1/2)·step), so skipping empty space never changes which samples
 // are taken: an empty L1 or L2 slot (hierarchical DDA over the masks) moves
 // the ray to the first lattice point past that slot. Shading is
-// emission-absorption fog lit by ambient light and one directional light
-// through shadow rays that march (and skip) the same way. No randomness:
-// the image depends only on the data, so two assets can be compared exactly.
+// emission-absorption fog lit by ambient light and one directional light.
+// Light reaching a point comes from a shadow grid computed once per frame
+// (`shadow_main`: one shadow ray from the centre of each cell, marching and
+// skipping the same way) and read with trilinear interpolation, so all views
+// of a frame share it. No randomness: the image depends only on the data, so
+// two assets can be compared exactly.
 
 struct Params {
     info: VpakInfo,
@@ -19,10 +22,41 @@ struct Params {
     box_max: vec4<f32>,     // w: shadow step (voxels)
     light: vec4<f32>,       // xyz: direction towards the light, w: density scale
     size: vec4<u32>,        // width, height, max steps, skip empty space (0/1)
+    shadow: vec4<f32>,      // shadow grid cells along x, y, z (as floats), cell edge in voxels
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(9) var<storage, read_write> image: array<f32>;
+// Optical depth towards the light at each shadow cell centre, x fastest.
+@group(0) @binding(10) var<storage, read_write> shadow: array<f32>;
+
+@compute @workgroup_size(64, 1, 1)
+fn shadow_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let g = vec3<u32>(params.shadow.xyz);
+    let n = g.x * g.y * g.z;
+    let i = gid.x;
+    if (i >= n) { return; }
+    let c = vec3<u32>(i % g.x, (i / g.x) % g.y, i / (g.x * g.y));
+    let p = params.box_min.xyz + (vec3<f32>(c) + vec3<f32>(0.5)) * params.shadow.w;
+    shadow[i] = shadow_depth(p);
+}
+
+// Trilinear read of the shadow grid at `p` (clamped to the cell centres).
+fn shadow_at(p: vec3<f32>) -> f32 {
+    let g = vec3<i32>(params.shadow.xyz);
+    let f = clamp((p - params.box_min.xyz) / params.shadow.w - vec3<f32>(0.5), vec3<f32>(0.0), vec3<f32>(g - vec3<i32>(1)));
+    let i0 = vec3<i32>(floor(f));
+    let i1 = min(i0 + vec3<i32>(1), g - vec3<i32>(1));
+    let w = f - vec3<f32>(i0);
+    var acc = 0.0;
+    for (var k = 0; k < 8; k += 1) {
+        let sel = vec3<bool>((k & 1) != 0, (k & 2) != 0, (k & 4) != 0);
+        let c = select(i0, i1, sel);
+        let wk = select(vec3<f32>(1.0) - w, w, sel);
+        acc += shadow[u32((c.z * g.y + c.y) * g.x + c.x)] * wk.x * wk.y * wk.z;
+    }
+    return acc;
+}
 
 fn box_hit(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
     let inv = 1.0 / d;
@@ -87,14 +121,20 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var trans = 1.0;
         var k = 0.5;
         var n = 0u;
-        var shadow_slot = 0xffffffffu;
-        var lit = 0.0;
+        var cell = vec3<i32>(-1 << 30);
+        var leaf: VpakLeaf;
         loop {
             let t = hit.x + k * step;
             if (t >= hit.y || n >= params.size.z || trans < 1e-3) { break; }
             n += 1u;
             let p = o + d * t;
-            let q = vpak_query(params.info, vec3<i32>(floor(p)));
+            let ip = vec3<i32>(floor(p));
+            // The L1/L2 walk is done once per 8³ cell the ray enters.
+            if (any((ip >> vec3<u32>(3u)) != cell)) {
+                cell = ip >> vec3<u32>(3u);
+                leaf = vpak_leaf(params.info, ip);
+            }
+            let q = vpak_leaf_query(params.info, leaf, ip);
             if (q.empty_dim > 0u && params.size.w == 1u) {
                 let exit = t + cell_exit(p, d, f32(q.empty_dim));
                 k = max(k + 1.0, ceil((exit - hit.x) / step - 0.5) + 0.5);
@@ -103,12 +143,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let sigma = max(q.value, 0.0) * params.light.w;
             if (sigma > 0.0) {
                 let a = 1.0 - exp(-sigma * step);
-                // One shadow ray per 4 lattice steps; samples in between reuse it.
-                let slot = u32(floor(k)) / 4u;
-                if (slot != shadow_slot) {
-                    shadow_slot = slot;
-                    lit = 0.25 + 0.75 * exp(-shadow_depth(p));
-                }
+                let lit = 0.25 + 0.75 * exp(-shadow_at(p));
                 radiance += trans * a * lit;
                 trans *= 1.0 - a;
             }

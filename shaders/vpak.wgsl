@@ -96,45 +96,71 @@ struct VpakQuery {
     empty_dim: u32,
 }
 
-fn vpak_query(info: VpakInfo, p: vec3<i32>) -> VpakQuery {
-    var q: VpakQuery;
-    q.value = info.background;
-    q.empty_dim = 0u;
+// What the tree holds for the 8³ cell of a voxel: an L3 node (`l3` is its
+// first word), or a constant (tile or empty region, `l3` = 0xffffffff).
+// A marcher keeps it while it stays in the same cell and skips the L1/L2 walk.
+struct VpakLeaf {
+    l3: u32,
+    value: f32,
+    empty_dim: u32,
+}
+
+fn vpak_leaf(info: VpakInfo, p: vec3<i32>) -> VpakLeaf {
+    var leaf: VpakLeaf;
+    leaf.l3 = 0xffffffffu;
+    leaf.value = info.background;
+    leaf.empty_dim = 0u;
     if (any(p < vec3<i32>(0)) || any(p >= vec3<i32>(4096))) {
-        q.empty_dim = 128u;
-        return q;
+        leaf.empty_dim = 128u;
+        return leaf;
     }
     let u = vec3<u32>(p);
     let s1 = (((u.x >> 7u) & 31u) << 10u) | (((u.y >> 7u) & 31u) << 5u) | ((u.z >> 7u) & 31u);
     let i1 = vpak_entry_index(true, info.l1 * VPAK_L1_WORDS, 1024u, s1);
     if (i1 == 0xffffffffu) {
-        q.empty_dim = 128u;
-        return q;
+        leaf.empty_dim = 128u;
+        return leaf;
     }
     let e1 = vpak_l1_entries[i1];
     if ((e1 & VPAK_TILE) != 0u) {
-        q.value = vpak_tile_value(e1);
-        return q;
+        leaf.value = vpak_tile_value(e1);
+        return leaf;
     }
     let s2 = (((u.x >> 3u) & 15u) << 8u) | (((u.y >> 3u) & 15u) << 4u) | ((u.z >> 3u) & 15u);
     let i2 = vpak_entry_index(false, e1 * VPAK_L2_WORDS, 128u, s2);
     if (i2 == 0xffffffffu) {
-        q.empty_dim = 8u;
-        return q;
+        leaf.empty_dim = 8u;
+        return leaf;
     }
     let e2 = vpak_l2_entries[i2];
     if ((e2 & VPAK_TILE) != 0u) {
-        q.value = vpak_tile_value(e2);
+        leaf.value = vpak_tile_value(e2);
+        return leaf;
+    }
+    leaf.l3 = e2 * VPAK_L3_WORDS;
+    return leaf;
+}
+
+// Voxel `p` of the cell `leaf` describes (from `vpak_leaf` of any voxel in it).
+fn vpak_leaf_query(info: VpakInfo, leaf: VpakLeaf, p: vec3<i32>) -> VpakQuery {
+    var q: VpakQuery;
+    q.value = leaf.value;
+    q.empty_dim = leaf.empty_dim;
+    if (leaf.l3 == 0xffffffffu) {
         return q;
     }
-    let l3 = e2 * VPAK_L3_WORDS;
-    let v = u & vec3<u32>(7u);
+    let v = vec3<u32>(p) & vec3<u32>(7u);
     let i = (v.x << 6u) | (v.y << 3u) | v.z;
-    if (((vpak_l3[l3 + (i >> 5u)] >> (i & 31u)) & 1u) == 0u) {
+    if (((vpak_l3[leaf.l3 + (i >> 5u)] >> (i & 31u)) & 1u) == 0u) {
+        q.value = info.background;
         return q;
     }
-    q.value = vpak_brick_value(info, vpak_l3[l3 + 16u], v);
+    q.value = vpak_brick_value(info, vpak_l3[leaf.l3 + 16u], v);
     return q;
+}
+
+fn vpak_query(info: VpakInfo, p: vec3<i32>) -> VpakQuery {
+    return vpak_leaf_query(info, vpak_leaf(info, p), p);
 }
 
 fn vpak_sample(info: VpakInfo, p: vec3<i32>) -> f32 {

@@ -164,9 +164,9 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in &frames {
         voxel.push((f, voxel_error(&asset, &reference, f)?));
-        for (vi, v) in views.iter().enumerate() {
-            let r = renderer.render(&gpu_ref, &scene, f, v, w, h)?;
-            let a = renderer.render(&gpu_asset, &scene, f, v, w, h)?;
+        let refs = renderer.render_views(&gpu_ref, &scene, f, &views, w, h)?;
+        let imgs = renderer.render_views(&gpu_asset, &scene, f, &views, w, h)?;
+        for (vi, (r, a)) in refs.into_iter().zip(imgs).enumerate() {
             let m = compare(&r, &a);
             // Keep the images of the three worst views for the report.
             if args.report.is_some() {

@@ -148,6 +148,29 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
         }
         depth
     };
+    // The shadow grid, as `shadow_main`.
+    let g = scene.shadow_grid();
+    let cell = scene.shadow_cell;
+    let mut grid = vec![0.0f32; (g[0] * g[1] * g[2]) as usize];
+    for (i, v) in grid.iter_mut().enumerate() {
+        let i = i as u32;
+        let c = [i % g[0], (i / g[0]) % g[1], i / (g[0] * g[1])];
+        *v = shadow([0, 1, 2].map(|a| scene.box_min[a] + (c[a] as f32 + 0.5) * cell));
+    }
+    let shadow_at = |p: [f32; 3]| -> f32 {
+        let f = [0, 1, 2].map(|a| ((p[a] - scene.box_min[a]) / cell - 0.5).clamp(0.0, (g[a] - 1) as f32));
+        let i0 = f.map(|v| v.floor() as u32);
+        let i1 = [0, 1, 2].map(|a| (i0[a] + 1).min(g[a] - 1));
+        let w = [0, 1, 2].map(|a| f[a] - i0[a] as f32);
+        let mut acc = 0.0f32;
+        for k in 0..8 {
+            let sel = [k & 1 != 0, k & 2 != 0, k & 4 != 0];
+            let c = [0, 1, 2].map(|a| if sel[a] { i1[a] } else { i0[a] });
+            let wk = [0, 1, 2].map(|a| if sel[a] { w[a] } else { 1.0 - w[a] });
+            acc += grid[((c[2] * g[1] + c[1]) * g[0] + c[0]) as usize] * wk[0] * wk[1] * wk[2];
+        }
+        acc
+    };
     let mut pixels = vec![0.0f32; (width * height) as usize];
     for y in 0..height {
         for x in 0..width {
@@ -160,7 +183,6 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
             let mut radiance = 0.0f32;
             if t0 < t1 {
                 let (mut trans, mut k, mut n) = (1.0f32, 0.5f32, 0u32);
-                let (mut shadow_slot, mut lit) = (u32::MAX, 0.0f32);
                 loop {
                     let t = t0 + k * scene.step;
                     if t >= t1 || n >= scene.max_steps || trans < 1e-3 {
@@ -177,12 +199,7 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
                     let sigma = v.max(0.0) * scene.density_scale;
                     if sigma > 0.0 {
                         let a = 1.0 - (-sigma * scene.step).exp();
-                        // One shadow ray per 4 lattice steps, as the shader.
-                        let slot = k.floor() as u32 / 4;
-                        if slot != shadow_slot {
-                            shadow_slot = slot;
-                            lit = 0.25 + 0.75 * (-shadow(p)).exp();
-                        }
+                        let lit = 0.25 + 0.75 * (-shadow_at(p)).exp();
                         radiance += trans * a * lit;
                         trans *= 1.0 - a;
                     }

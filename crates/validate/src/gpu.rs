@@ -20,6 +20,7 @@ pub struct Renderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
+    shadow_pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     bc: bool,
     /// "name (backend, device type)".
@@ -88,17 +89,21 @@ impl Renderer {
             count: None,
         });
         entries.push(wgpu::BindGroupLayoutEntry { binding: 9, visibility: wgpu::ShaderStages::COMPUTE, ty: storage(false), count: None });
+        entries.push(wgpu::BindGroupLayoutEntry { binding: 10, visibility: wgpu::ShaderStages::COMPUTE, ty: storage(false), count: None });
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("march"),
-            layout: Some(&pl),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        Ok(Renderer { device, queue, pipeline, layout, bc, adapter: adapter_name })
+        let make = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pl),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let (pipeline, shadow_pipeline) = (make("main"), make("shadow_main"));
+        Ok(Renderer { device, queue, pipeline, shadow_pipeline, layout, bc, adapter: adapter_name })
     }
 
     /// Whether BC4/BC7 3D textures can be sampled.
@@ -170,10 +175,14 @@ impl Renderer {
 
     /// Renders frame `frame` of `asset` from `view`.
     pub fn render(&self, asset: &GpuAsset, scene: &Scene, frame: usize, view: &View, width: u32, height: u32) -> Result<Image, Error> {
-        let l1 = *asset.frames.get(frame).ok_or(Error::Frame { frame, count: asset.frames.len() })?;
+        let mut v = self.render_views(asset, scene, frame, std::slice::from_ref(view), width, height)?;
+        v.pop().ok_or_else(|| Error::Gpu("no image".into()))
+    }
+
+    fn params(&self, asset: &GpuAsset, scene: &Scene, l1: u32, view: &View, width: u32, height: u32) -> wgpu::Buffer {
         let (r, u, f) = view.basis();
         let tf = (view.fov_deg.to_radians() * 0.5).tan();
-        let mut p: Vec<u32> = Vec::with_capacity(48);
+        let mut p: Vec<u32> = Vec::with_capacity(52);
         p.extend([l1, asset.format, asset.background.to_bits(), 0]);
         p.extend(asset.atlas_bricks);
         let v4 = |p: &mut Vec<u32>, v: [f32; 3], w: f32| p.extend([v[0].to_bits(), v[1].to_bits(), v[2].to_bits(), w.to_bits()]);
@@ -186,38 +195,67 @@ impl Renderer {
         v4(&mut p, scene.light, scene.density_scale);
         // Skipping empty space is exact only when empty space is zero.
         p.extend([width, height, scene.max_steps, u32::from(asset.background == 0.0)]);
-        let params = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("params"), contents: bytemuck::cast_slice(&p), usage: wgpu::BufferUsages::UNIFORM });
+        v4(&mut p, scene.shadow_grid().map(|g| g as f32), scene.shadow_cell);
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("params"), contents: bytemuck::cast_slice(&p), usage: wgpu::BufferUsages::UNIFORM })
+    }
+
+    /// Renders frame `frame` of `asset` from every view: the shadow grid is
+    /// computed once, then one dispatch per view, all in one submission.
+    pub fn render_views(&self, asset: &GpuAsset, scene: &Scene, frame: usize, views: &[View], width: u32, height: u32) -> Result<Vec<Image>, Error> {
+        let l1 = *asset.frames.get(frame).ok_or(Error::Frame { frame, count: asset.frames.len() })?;
+        let [gx, gy, gz] = scene.shadow_grid();
+        let cells = u64::from(gx) * u64::from(gy) * u64::from(gz);
+        let shadow = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("shadow"), size: cells * 4, usage: wgpu::BufferUsages::STORAGE, mapped_at_creation: false });
         let bytes = u64::from(width) * u64::from(height) * 4;
-        let out = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("image"), size: bytes, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
-        let read = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("readback"), size: bytes, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
-        let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() }];
-        for (i, b) in asset.buffers.iter().enumerate() {
-            entries.push(wgpu::BindGroupEntry { binding: i as u32 + 1, resource: b.as_entire_binding() });
-        }
-        entries.push(wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::TextureView(&asset.view) });
-        entries.push(wgpu::BindGroupEntry { binding: 9, resource: out.as_entire_binding() });
-        let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("vpak"), layout: &self.layout, entries: &entries });
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("march") });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("march"), timestamp_writes: None });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+        let mut reads = Vec::with_capacity(views.len());
+        for (i, view) in views.iter().enumerate() {
+            let params = self.params(asset, scene, l1, view, width, height);
+            let out = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("image"), size: bytes, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
+            let read = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("readback"), size: bytes, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+            let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() }];
+            for (b, buf) in asset.buffers.iter().enumerate() {
+                entries.push(wgpu::BindGroupEntry { binding: b as u32 + 1, resource: buf.as_entire_binding() });
+            }
+            entries.push(wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::TextureView(&asset.view) });
+            entries.push(wgpu::BindGroupEntry { binding: 9, resource: out.as_entire_binding() });
+            entries.push(wgpu::BindGroupEntry { binding: 10, resource: shadow.as_entire_binding() });
+            let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("vpak"), layout: &self.layout, entries: &entries });
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("march"), timestamp_writes: None });
+                pass.set_bind_group(0, &group, &[]);
+                if i == 0 {
+                    pass.set_pipeline(&self.shadow_pipeline);
+                    pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);
+                }
+                pass.set_pipeline(&self.pipeline);
+                pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+            }
+            enc.copy_buffer_to_buffer(&out, 0, &read, 0, bytes);
+            reads.push(read);
         }
-        enc.copy_buffer_to_buffer(&out, 0, &read, 0, bytes);
         self.queue.submit([enc.finish()]);
-        let slice = read.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
+        for (i, read) in reads.iter().enumerate() {
+            let tx = tx.clone();
+            read.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send((i, r));
+            });
+        }
+        drop(tx);
         self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| Error::Gpu(e.to_string()))?;
-        rx.recv().map_err(|e| Error::Gpu(e.to_string()))?.map_err(|e| Error::Gpu(e.to_string()))?;
-        let pixels: Vec<f32> = {
-            let view = slice.get_mapped_range().map_err(|e| Error::Gpu(e.to_string()))?;
-            bytemuck::cast_slice(&view).to_vec()
-        };
-        read.unmap();
-        Ok(Image { width, height, pixels })
+        for (_, r) in rx.iter() {
+            r.map_err(|e| Error::Gpu(e.to_string()))?;
+        }
+        let mut images = Vec::with_capacity(reads.len());
+        for read in &reads {
+            let pixels: Vec<f32> = {
+                let view = read.slice(..).get_mapped_range().map_err(|e| Error::Gpu(e.to_string()))?;
+                bytemuck::cast_slice(&view).to_vec()
+            };
+            read.unmap();
+            images.push(Image { width, height, pixels });
+        }
+        Ok(images)
     }
 }

@@ -71,6 +71,8 @@ pub struct Scene {
     pub step: f32,
     pub shadow_step: f32,
     pub max_steps: u32,
+    /// Edge of a shadow-grid cell in voxels.
+    pub shadow_cell: f32,
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -118,7 +120,14 @@ impl Scene {
             step: 1.0,
             shadow_step: 1.0,
             max_steps: 4 * (diag as u32 + 8),
+            // At most 128 cells along the longest axis, at least 4 voxels a cell.
+            shadow_cell: (ext[0].max(ext[1]).max(ext[2]) / 128.0).ceil().max(4.0),
         }
+    }
+
+    /// Shadow-grid cells along each axis.
+    pub fn shadow_grid(&self) -> [u32; 3] {
+        [0, 1, 2].map(|a| (((self.box_max[a] - self.box_min[a]) / self.shadow_cell).ceil() as u32).max(1))
     }
 
     /// `n` views orbiting the box centre at 20° elevation, evenly spaced in azimuth.
