@@ -106,23 +106,7 @@ pub(crate) fn decompress(input: &[u8], out: &mut [u8]) -> Result<(), String> {
                 let lo = ip.byte("far match distance")?;
                 distance = (hi << 8 | lo).saturating_add(MAX_DISTANCE + 1);
             }
-            if distance > op {
-                return Err(format!(
-                    "match distance {distance} reaches before the start of the output \
-                     ({op} bytes written)"
-                ));
-            }
-            let end = op
-                .checked_add(len)
-                .filter(|&end| end <= out_len)
-                .ok_or_else(|| {
-                    format!(
-                        "match of {len} bytes at output offset {op} overflows the \
-                         {out_len}-byte output"
-                    )
-                })?;
-            copy_match(out, op, distance, len);
-            op = end;
+            op = checked_copy_match(out, op, distance, len)?;
         } else {
             // Literal run.
             let n = ctrl.saturating_add(1);
@@ -150,6 +134,24 @@ pub(crate) fn decompress(input: &[u8], out: &mut [u8]) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// Checks an LZ77 match (`1 <= distance <= op`, `op + len <= out.len()`),
+/// copies it with [`copy_match`], and returns the new output offset.
+pub(crate) fn checked_copy_match(out: &mut [u8], op: usize, distance: usize, len: usize) -> Result<usize, String> {
+    if distance == 0 {
+        return Err(format!("match distance 0 is invalid at output offset {op}"));
+    }
+    if distance > op {
+        return Err(format!("match distance {distance} reaches before the start of the output ({op} bytes written)"));
+    }
+    let out_len = out.len();
+    let end = op
+        .checked_add(len)
+        .filter(|&end| end <= out_len)
+        .ok_or_else(|| format!("match of {len} bytes at output offset {op} overflows the {out_len}-byte output"))?;
+    copy_match(out, op, distance, len);
+    Ok(end)
 }
 
 /// LZ77 copy of `len` bytes from `distance` back to `op`, with the

@@ -14,7 +14,7 @@
 //! may overlap their own output, byte by byte as in LZ77.
 //! ```
 
-use crate::blosclz::copy_match;
+use crate::blosclz::checked_copy_match;
 
 /// Decodes `input` into exactly `out.len()` bytes; the preamble must state
 /// that length (c-blosc checks the decoded size equals the stream size).
@@ -72,22 +72,7 @@ pub(crate) fn decompress(input: &[u8], out: &mut [u8]) -> Result<(), String> {
             2 => ((tag >> 2).saturating_add(1), le(take(&mut ip, 2)?)),
             _ => ((tag >> 2).saturating_add(1), le(take(&mut ip, 4)?)),
         };
-        if offset == 0 || offset > op {
-            return Err(format!(
-                "copy offset {offset} is invalid at output offset {op}"
-            ));
-        }
-        let end = op
-            .checked_add(len)
-            .filter(|&end| end <= out_len)
-            .ok_or_else(|| {
-                format!(
-                    "copy of {len} bytes at output offset {op} overflows the \
-                     {out_len}-byte output"
-                )
-            })?;
-        copy_match(out, op, offset, len);
-        op = end;
+        op = checked_copy_match(out, op, offset, len)?;
     }
     if op != out_len {
         return Err(format!(
