@@ -6,7 +6,8 @@
 // region around it, for hierarchical empty-space skipping).
 //
 // Coordinates are asset index space: source index minus `index_offset`,
-// inside [0, 4096)^3. Only the first brick atlas is bound here.
+// inside [0, 4096)^3. Up to four brick atlases are bound; every atlas but the
+// last holds the same number of bricks (`atlas_bricks.w` below).
 
 const VPAK_L1_WORDS: u32 = 1537u;   // 1024 mask words, 512 prefix words, first entry
 const VPAK_L2_WORDS: u32 = 193u;    // 128 mask words, 64 prefix words, first entry
@@ -26,7 +27,8 @@ struct VpakInfo {
     format: u32,
     background: f32,
     _pad: u32,
-    // Atlas size in bricks (x, y, z) and texture slices per brick (8, or 2 for BC7).
+    // Size in bricks (x, y, z) of every atlas but possibly the last (which
+    // shares x and y), and the bricks each holds (x·y·z).
     atlas_bricks: vec4<u32>,
 }
 
@@ -37,7 +39,19 @@ struct VpakInfo {
 @group(0) @binding(5) var<storage, read> vpak_l3: array<u32>;
 @group(0) @binding(6) var<storage, read> vpak_tiles: array<u32>;
 @group(0) @binding(7) var<storage, read> vpak_ranges: array<vec2<f32>>;
-@group(0) @binding(8) var vpak_atlas: texture_3d<f32>;
+@group(0) @binding(8) var vpak_atlas0: texture_3d<f32>;
+@group(0) @binding(11) var vpak_atlas1: texture_3d<f32>;
+@group(0) @binding(12) var vpak_atlas2: texture_3d<f32>;
+@group(0) @binding(13) var vpak_atlas3: texture_3d<f32>;
+
+fn vpak_texel(atlas: u32, t: vec3<i32>) -> vec4<f32> {
+    switch atlas {
+        case 0u: { return textureLoad(vpak_atlas0, t, 0); }
+        case 1u: { return textureLoad(vpak_atlas1, t, 0); }
+        case 2u: { return textureLoad(vpak_atlas2, t, 0); }
+        default: { return textureLoad(vpak_atlas3, t, 0); }
+    }
+}
 
 // Entry of slot `s` in the node at `base` with `mask_words` mask words,
 // or 0xffffffff when the slot is empty: the mask bit, then the rank of the
@@ -73,13 +87,15 @@ fn vpak_tile_value(e: u32) -> f32 {
 fn vpak_brick_value(info: VpakInfo, b: u32, v: vec3<u32>) -> f32 {
     let bx = info.atlas_bricks.x;
     let by = info.atlas_bricks.y;
-    let pos = vec3<u32>(b % bx, (b / bx) % by, b / (bx * by));
+    let atlas = b / info.atlas_bricks.w;
+    let i = b % info.atlas_bricks.w;
+    let pos = vec3<u32>(i % bx, (i / bx) % by, i / (bx * by));
     var t: f32;
     if (info.format == VPAK_BC7) {
-        let texel = vec4<f32>(textureLoad(vpak_atlas, vec3<i32>(pos * vec3<u32>(8u, 8u, 2u) + vec3<u32>(v.x, v.y, v.z / 4u)), 0));
+        let texel = vpak_texel(atlas, vec3<i32>(pos * vec3<u32>(8u, 8u, 2u) + vec3<u32>(v.x, v.y, v.z / 4u)));
         t = texel[v.z & 3u];
     } else {
-        t = textureLoad(vpak_atlas, vec3<i32>(pos * 8u + v), 0).r;
+        t = vpak_texel(atlas, vec3<i32>(pos * 8u + v)).r;
     }
     if (info.format == VPAK_F32 || info.format == VPAK_F16) {
         return t;

@@ -8,7 +8,6 @@ struct Sampler<'a> {
     d: AssetData<'a>,
     l1: u32,
     bricks: [u32; 4],
-    texels: [u32; 3],
 }
 
 impl Sampler<'_> {
@@ -28,10 +27,11 @@ impl Sampler<'_> {
         f32::from_bits(self.d.tiles.get(((e & 0x7fff_ffff) * 2) as usize).copied().unwrap_or(0))
     }
 
-    fn texel(&self, x: u32, y: u32, z: u32) -> f32 {
-        let [w, h, _] = self.texels;
+    fn texel(&self, atlas: u32, x: u32, y: u32, z: u32) -> f32 {
+        let Some(info) = self.d.meta.atlases.get(atlas as usize) else { return 0.0 };
+        let [w, h, _] = info.texels;
         let i = ((z as usize * h as usize + y as usize) * w as usize) + x as usize;
-        let a = self.d.atlas;
+        let a = self.d.atlases.get(atlas as usize).copied().unwrap_or(&[]);
         match self.d.format {
             0 => a.get(i * 4..i * 4 + 4).map_or(0.0, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
             1 => a.get(i * 2..i * 2 + 2).map_or(0.0, |b| half_to_f32(u16::from_le_bytes([b[0], b[1]]))),
@@ -65,9 +65,10 @@ impl Sampler<'_> {
             return (bg, 0);
         }
         let b = self.d.l3.get(l3 + 16).copied().unwrap_or(0);
-        let [bx, by, _, _] = self.bricks;
-        let pos = [b % bx, (b / bx) % by, b / (bx * by)];
-        let t = self.texel(pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2] * 8 + v[2]);
+        let [bx, by, _, per] = self.bricks;
+        let (atlas, i) = (b / per, b % per);
+        let pos = [i % bx, (i / bx) % by, i / (bx * by)];
+        let t = self.texel(atlas, pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2] * 8 + v[2]);
         if self.d.format <= 1 {
             return (t, 0);
         }
@@ -120,9 +121,8 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
     }
     let l1 = d.frame_l1(frame)?;
     let bricks = d.atlas_bricks();
-    let texels = d.meta.atlases.first().map_or([8, 8, 8], |a| a.texels);
     let skip = d.meta.background == 0.0;
-    let s = Sampler { d, l1, bricks, texels };
+    let s = Sampler { d, l1, bricks };
     let (r, u, f) = view.basis();
     let tf = (view.fov_deg.to_radians() * 0.5).tan();
     let aspect = width as f32 / height as f32;

@@ -30,8 +30,8 @@ pub struct Renderer {
 /// An asset uploaded for rendering.
 pub struct GpuAsset {
     buffers: Vec<wgpu::Buffer>,
-    view: wgpu::TextureView,
-    _texture: wgpu::Texture,
+    views: Vec<wgpu::TextureView>,
+    _textures: Vec<wgpu::Texture>,
     frames: Vec<u32>,
     format: u32,
     background: f32,
@@ -90,6 +90,11 @@ impl Renderer {
         });
         entries.push(wgpu::BindGroupLayoutEntry { binding: 9, visibility: wgpu::ShaderStages::COMPUTE, ty: storage(false), count: None });
         entries.push(wgpu::BindGroupLayoutEntry { binding: 10, visibility: wgpu::ShaderStages::COMPUTE, ty: storage(false), count: None });
+        for binding in 11..=13 {
+            let mut e = entries[8];
+            e.binding = binding;
+            entries.push(e);
+        }
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
         let make = |entry: &str| {
@@ -143,34 +148,40 @@ impl Renderer {
         if block.is_some() && !self.bc {
             return Err(Error::Unsupported { adapter: self.adapter.clone(), format: d.meta.format.clone(), feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D" });
         }
-        let (size, data): ([u32; 3], &[u8]) = match d.meta.atlases.first() {
-            Some(a) => (a.texels, d.atlas),
-            None => ([8, 8, if d.format == 4 { 2 } else { 8 }], &[]),
-        };
-        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("atlas"),
-            size: wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D3,
-            format: tex_format,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        let (row, rows) = match block {
-            Some(bb) => (size[0] / 4 * bb, size[1] / 4),
-            None => (size[0] * tex_format.block_copy_size(None).unwrap_or(4), size[1]),
-        };
-        if !data.is_empty() {
-            self.queue.write_texture(
-                wgpu::TexelCopyTextureInfo { texture: &texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
-                data,
-                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(rows) },
-                wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
-            );
+        // Every atlas slot is bound; unused ones get a small empty texture.
+        let empty_size = [8, 8, if d.format == 4 { 2 } else { 8 }];
+        let mut textures = Vec::with_capacity(crate::MAX_ATLASES);
+        for slot in 0..crate::MAX_ATLASES {
+            let (size, data): ([u32; 3], &[u8]) = match (d.meta.atlases.get(slot), d.atlases.get(slot)) {
+                (Some(a), Some(bytes)) => (a.texels, bytes),
+                _ => (empty_size, &[]),
+            };
+            let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("atlas"),
+                size: wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format: tex_format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            });
+            let (row, rows) = match block {
+                Some(bb) => (size[0] / 4 * bb, size[1] / 4),
+                None => (size[0] * tex_format.block_copy_size(None).unwrap_or(4), size[1]),
+            };
+            if !data.is_empty() {
+                self.queue.write_texture(
+                    wgpu::TexelCopyTextureInfo { texture: &texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+                    data,
+                    wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(rows) },
+                    wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
+                );
+            }
+            textures.push(texture);
         }
-        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        Ok(GpuAsset { buffers, view, _texture: texture, frames: d.frames.to_vec(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks() })
+        let views = textures.iter().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default())).collect();
+        Ok(GpuAsset { buffers, views, _textures: textures, frames: d.frames.to_vec(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks() })
     }
 
     /// Renders frame `frame` of `asset` from `view`.
@@ -217,7 +228,9 @@ impl Renderer {
             for (b, buf) in asset.buffers.iter().enumerate() {
                 entries.push(wgpu::BindGroupEntry { binding: b as u32 + 1, resource: buf.as_entire_binding() });
             }
-            entries.push(wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::TextureView(&asset.view) });
+            for (k, v) in asset.views.iter().enumerate() {
+                entries.push(wgpu::BindGroupEntry { binding: if k == 0 { 8 } else { 10 + k as u32 }, resource: wgpu::BindingResource::TextureView(v) });
+            }
             entries.push(wgpu::BindGroupEntry { binding: 9, resource: out.as_entire_binding() });
             entries.push(wgpu::BindGroupEntry { binding: 10, resource: shadow.as_entire_binding() });
             let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("vpak"), layout: &self.layout, entries: &entries });

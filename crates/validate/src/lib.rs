@@ -23,7 +23,7 @@ pub enum Error {
     Device(String),
     #[error("the adapter \"{adapter}\" cannot sample {format} bricks: it lacks {feature}")]
     Unsupported { adapter: String, format: String, feature: &'static str },
-    #[error("the asset has {0} brick atlases; the renderer binds one")]
+    #[error("the asset has {0} brick atlases; the renderer binds at most {MAX_ATLASES} (cook with a larger --max-texture-dim)")]
     Atlases(usize),
     #[error("the asset's {what} ({bytes} bytes) exceeds the adapter's limit of {limit} bytes")]
     TooLarge { what: &'static str, bytes: u64, limit: u64 },
@@ -36,6 +36,9 @@ pub enum Error {
     #[error(transparent)]
     Asset(#[from] vdbcook_vpak::Error),
 }
+
+/// Brick atlases the renderer binds.
+pub const MAX_ATLASES: usize = 4;
 
 /// Voxel format codes shared with `vpak.wgsl`.
 pub fn format_code(name: &str) -> Option<u32> {
@@ -189,17 +192,17 @@ pub(crate) struct AssetData<'a> {
     pub tiles: &'a [u32],
     pub ranges: &'a [f32],
     pub frames: &'a [u32],
-    pub atlas: &'a [u8],
+    pub atlases: Vec<&'a [u8]>,
 }
 
 impl<'a> AssetData<'a> {
     pub fn new(asset: &'a Asset) -> Result<AssetData<'a>, Error> {
         let meta = asset.metadata()?;
         let format = format_code(&meta.format).ok_or_else(|| Error::Format(meta.format.clone()))?;
-        if meta.atlases.len() > 1 {
+        if meta.atlases.len() > MAX_ATLASES {
             return Err(Error::Atlases(meta.atlases.len()));
         }
-        let atlas = if meta.atlases.is_empty() { &[][..] } else { asset.section(kind::ATLAS, 0)? };
+        let atlases = (0..meta.atlases.len()).map(|i| asset.section(kind::ATLAS, i as u32)).collect::<Result<Vec<_>, _>>()?;
         Ok(AssetData {
             format,
             l1: asset.u32s(kind::L1_NODES)?,
@@ -210,17 +213,19 @@ impl<'a> AssetData<'a> {
             tiles: asset.u32s(kind::TILES)?,
             ranges: asset.f32s(kind::BRICK_RANGES)?,
             frames: asset.u32s(kind::FRAMES)?,
-            atlas,
+            atlases,
             meta,
         })
     }
 
-    /// Atlas size in bricks and slices per brick.
+    /// Size in bricks of the first atlas and the bricks every full atlas holds.
     pub fn atlas_bricks(&self) -> [u32; 4] {
-        let spb = if self.format == 4 { 2 } else { 8 };
         match self.meta.atlases.first() {
-            Some(a) => [a.bricks[0].max(1), a.bricks[1].max(1), a.bricks[2].max(1), spb],
-            None => [1, 1, 1, spb],
+            Some(a) => {
+                let [x, y, z] = a.bricks.map(|b| b.max(1));
+                [x, y, z, x.saturating_mul(y).saturating_mul(z)]
+            }
+            None => [1, 1, 1, 1],
         }
     }
 

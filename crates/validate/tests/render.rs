@@ -9,8 +9,12 @@ use vdbcook_validate::{compare, render_cpu, Renderer, Scene};
 use vdbcook_vpak::Asset;
 
 fn cook(files: &[&str], format: Format) -> Vec<u8> {
+    cook_dim(files, format, 2048)
+}
+
+fn cook_dim(files: &[&str], format: Format, max_texture_dim: u32) -> Vec<u8> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let mut c = Cooker::new(CookOptions { format, ..CookOptions::default() });
+    let mut c = Cooker::new(CookOptions { format, max_texture_dim, ..CookOptions::default() });
     for f in files {
         let v = vdbcook_vdb::open(&root.join(f)).unwrap();
         c.push(&v.read_grid(v.select(None).unwrap()).unwrap(), None).unwrap();
@@ -93,4 +97,37 @@ fn an_f32_asset_renders_like_the_reference_and_lossy_ones_do_not() {
     }
     assert!(Asset::from_bytes(&bad).unwrap().verify().is_err(), "the checksum catches it");
     assert!(rmse(&bad) > 0.05, "a corrupted atlas must show");
+}
+
+#[test]
+fn several_atlases_render_like_one() {
+    let Some(r) = renderer() else { return };
+    let one = cook(&SEQ, Format::F32);
+    let a1 = Asset::from_bytes(&one).unwrap();
+    let scene = Scene::for_asset(&a1.metadata().unwrap());
+    let view = scene.orbit(3)[1];
+    let reference = r.render(&r.upload(&a1).unwrap(), &scene, 1, &view, 40, 40).unwrap();
+    let mut formats = vec![(Format::F32, 32u32), (Format::Unorm8, 32)];
+    if r.has_bc() {
+        formats.push((Format::Bc4, 32));
+        formats.push((Format::Bc7, 20));
+    }
+    for (format, dim) in formats {
+        let bytes = cook_dim(&SEQ, format, dim);
+        let asset = Asset::from_bytes(&bytes).unwrap();
+        let n = asset.metadata().unwrap().atlases.len();
+        assert!((2..=4).contains(&n), "{format:?}: {n} atlases");
+        let img = r.render(&r.upload(&asset).unwrap(), &scene, 1, &view, 40, 40).unwrap();
+        if format == Format::F32 {
+            assert!(compare(&reference, &img).rmse < 1e-6, "split f32 atlases must render identically");
+            let cpu = render_cpu(&asset, &scene, 1, &view, 40, 40).unwrap();
+            assert!(compare(&cpu, &img).max_error < 2e-3);
+        } else {
+            let same = Asset::from_bytes(&cook(&SEQ, format)).unwrap();
+            let whole = r.render(&r.upload(&same).unwrap(), &scene, 1, &view, 40, 40).unwrap();
+            assert!(compare(&whole, &img).rmse < 1e-6, "{format:?}: split atlases must render as one");
+        }
+    }
+    let many = Asset::from_bytes(&cook_dim(&SEQ, Format::F32, 16)).unwrap();
+    assert!(matches!(r.upload(&many), Err(vdbcook_validate::Error::Atlases(_))));
 }
