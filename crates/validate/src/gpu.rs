@@ -19,8 +19,9 @@ pub fn shader_source() -> &'static str {
 pub struct Renderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    pipeline: wgpu::ComputePipeline,
-    shadow_pipeline: wgpu::ComputePipeline,
+    /// (march, shadow) pipelines for one atlas, and for several.
+    single: (wgpu::ComputePipeline, wgpu::ComputePipeline),
+    multi: (wgpu::ComputePipeline, wgpu::ComputePipeline),
     layout: wgpu::BindGroupLayout,
     bc: bool,
     /// "name (backend, device type)".
@@ -33,6 +34,7 @@ pub struct GpuAsset {
     views: Vec<wgpu::TextureView>,
     _textures: Vec<wgpu::Texture>,
     frames: Vec<u32>,
+    atlases: usize,
     format: u32,
     background: f32,
     atlas_bricks: [u32; 4],
@@ -97,18 +99,19 @@ impl Renderer {
         }
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
-        let make = |entry: &str| {
+        let make = |entry: &str, multi: bool| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(entry),
                 layout: Some(&pl),
                 module: &module,
                 entry_point: Some(entry),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions { constants: &[("VPAK_MULTI_ATLAS", if multi { 1.0 } else { 0.0 })], ..Default::default() },
                 cache: None,
             })
         };
-        let (pipeline, shadow_pipeline) = (make("main"), make("shadow_main"));
-        Ok(Renderer { device, queue, pipeline, shadow_pipeline, layout, bc, adapter: adapter_name })
+        let single = (make("main", false), make("shadow_main", false));
+        let multi = (make("main", true), make("shadow_main", true));
+        Ok(Renderer { device, queue, single, multi, layout, bc, adapter: adapter_name })
     }
 
     /// Whether BC4/BC7 3D textures can be sampled.
@@ -181,7 +184,7 @@ impl Renderer {
             textures.push(texture);
         }
         let views = textures.iter().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default())).collect();
-        Ok(GpuAsset { buffers, views, _textures: textures, frames: d.frames.to_vec(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks() })
+        Ok(GpuAsset { buffers, views, _textures: textures, frames: d.frames.to_vec(), atlases: d.meta.atlases.len(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks() })
     }
 
     /// Renders frame `frame` of `asset` from `view`.
@@ -237,11 +240,12 @@ impl Renderer {
             {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("march"), timestamp_writes: None });
                 pass.set_bind_group(0, &group, &[]);
+                let (march, shadow_pipeline) = if asset.atlases > 1 { &self.multi } else { &self.single };
                 if i == 0 {
-                    pass.set_pipeline(&self.shadow_pipeline);
+                    pass.set_pipeline(shadow_pipeline);
                     pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);
                 }
-                pass.set_pipeline(&self.pipeline);
+                pass.set_pipeline(march);
                 pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
             }
             enc.copy_buffer_to_buffer(&out, 0, &read, 0, bytes);
