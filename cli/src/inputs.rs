@@ -37,7 +37,7 @@ impl std::str::FromStr for FrameRange {
         if step < 1 || last < first {
             return Err(bad());
         }
-        if (last - first) / step > 1_000_000 {
+        if i128::from(last) - i128::from(first) > 1_000_000 * i128::from(step) {
             return Err(format!("frame range \"{s}\" has more than a million frames"));
         }
         Ok(FrameRange { first, last, step })
@@ -70,7 +70,7 @@ fn parse_pattern(s: &str) -> Option<(String, usize, String)> {
         let rest = &s[start + 1..];
         let digits: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
         if rest[digits.len()..].starts_with('d') {
-            let width = digits.trim_start_matches('0').parse().unwrap_or(if digits.is_empty() { 0 } else { 1 });
+            let width = if digits.trim_start_matches('0').is_empty() { usize::from(!digits.is_empty()) } else { digits.trim_start_matches('0').parse().unwrap_or(usize::MAX) };
             return Some((s[..start].to_string(), width, rest[digits.len() + 1..].to_string()));
         }
     }
@@ -78,7 +78,7 @@ fn parse_pattern(s: &str) -> Option<(String, usize, String)> {
     if let Some(start) = s.find("$F") {
         let rest = &s[start + 2..];
         let digits: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
-        let width = digits.parse().unwrap_or(0);
+        let width = if digits.is_empty() { 0 } else { digits.parse().unwrap_or(usize::MAX) };
         return Some((s[..start].to_string(), width, rest[digits.len()..].to_string()));
     }
     None
@@ -86,11 +86,14 @@ fn parse_pattern(s: &str) -> Option<(String, usize, String)> {
 
 fn format_frame(n: i64, width: usize) -> String {
     if n < 0 {
-        format!("-{:0width$}", -n, width = width.saturating_sub(1))
+        format!("-{:0width$}", n.unsigned_abs(), width = width.saturating_sub(1))
     } else {
         format!("{n:0width$}")
     }
 }
+
+/// Widest zero padding a frame pattern may ask for.
+const MAX_PAD: usize = 32;
 
 /// Compares names the way people count: digit runs by value.
 pub fn natural_cmp(a: &str, b: &str) -> Ordering {
@@ -156,6 +159,9 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<Frame
         } else if path.exists() {
             plain.push(path.to_path_buf());
         } else if let Some((pre, width, post)) = parse_pattern(input) {
+            if width > MAX_PAD {
+                return Err(Usage(format!("{input}: a frame pattern pads to at most {MAX_PAD} digits")).into());
+            }
             let Some(range) = frames else {
                 return Err(Usage(format!("{input}: a frame pattern needs --frames A-B[:STEP]")).into());
             };
@@ -208,6 +214,9 @@ mod tests {
         assert!("9-1".parse::<FrameRange>().is_err());
         assert!("1-9:0".parse::<FrameRange>().is_err());
         assert!("a-b".parse::<FrameRange>().is_err());
+        // Ranges whose length overflows i64 are refused, not wrapped.
+        assert!("-9223372036854775808-9223372036854775807".parse::<FrameRange>().is_err());
+        assert_eq!(format_frame(i64::MIN, 3), "-9223372036854775808");
     }
 
     #[test]
@@ -220,5 +229,7 @@ mod tests {
             assert!(f[1].from_pattern);
         }
         assert!(expand(&["s_####.vdb".into()], None).is_err());
+        assert!(expand(&["s_%70000d.vdb".into()], r).is_err());
+        assert!(expand(&["s_$F99999999999999999999.vdb".into()], r).is_err());
     }
 }

@@ -21,7 +21,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let l3 = size(kind::L3_NODES) / (L3_WORDS as u64 * 4);
     let atlas_bytes = size(kind::ATLAS);
     let file_bytes = asset.bytes().len() as u64;
-    let active: u64 = meta.frames.iter().map(|f| f.active_voxels).sum();
+    let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));
     let nodes = [
         ("l1", l1, size(kind::L1_NODES) + size(kind::L1_ENTRIES)),
         ("l2", l2, size(kind::L2_NODES) + size(kind::L2_ENTRIES)),

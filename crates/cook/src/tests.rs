@@ -199,3 +199,36 @@ fn corrupted_assets_never_panic_even_unverified() {
         assert!(std::panic::catch_unwind(|| read(&bytes[..cut])).is_ok());
     }
 }
+
+/// A checksum-valid asset whose one L1 node points every slot at one L2 node
+/// pointing every slot at one L3 node: 134 M leaves from a few hundred KB.
+/// unpack must refuse it by the metadata's leaf count, not decode it.
+#[test]
+fn sealed_fan_out_assets_are_refused_not_expanded() {
+    use vdbcook_flipbook::{L1_MASK_WORDS, L2_MASK_WORDS};
+    let (bytes, _) = cook(Format::F32, &[frame(0)], 2048);
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    let mut sections: Vec<vdbcook_vpak::Section> = asset.sections.iter().map(|s| vdbcook_vpak::Section { kind: s.kind, index: s.index, data: asset.bytes()[s.offset as usize..(s.offset + s.size) as usize].to_vec() }).collect();
+    let full = |mask_words: usize| -> Vec<u32> {
+        let mut w = vec![u32::MAX; mask_words];
+        for k in 0..mask_words / 2 {
+            w.push(((2 * k as u32 * 32) & 0xffff) | (((2 * k as u32 + 1) * 32) << 16));
+        }
+        w.push(0);
+        w
+    };
+    let words = |v: Vec<u32>| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+    for s in sections.iter_mut() {
+        match s.kind {
+            vdbcook_vpak::kind::FRAMES => s.data = words(vec![0]),
+            vdbcook_vpak::kind::L1_NODES => s.data = words(full(L1_MASK_WORDS)),
+            vdbcook_vpak::kind::L1_ENTRIES => s.data = words(vec![0; 32768]),
+            vdbcook_vpak::kind::L2_NODES => s.data = words(full(L2_MASK_WORDS)),
+            vdbcook_vpak::kind::L2_ENTRIES => s.data = words(vec![0; 4096]),
+            _ => {}
+        }
+    }
+    let hostile = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+    hostile.verify().unwrap();
+    assert!(matches!(unpack_frame(&hostile, 0), Err(Error::Corrupt(_))));
+}

@@ -6,6 +6,10 @@ use vdbcook_flipbook::{Nodes, L1_WORDS, L2_WORDS, L3_WORDS};
 use vdbcook_grid::{Coord, Grid, GridClass, Leaf, LeafMask, MapType, Tile, Transform, LEAF_VOXELS};
 use vdbcook_vpak::{kind, Asset, Metadata};
 
+/// Tiles a frame may decode to (a root tile fills at most 32768 L1 slots;
+/// the rest is a bound on corrupt assets).
+const MAX_TILES: usize = 1 << 22;
+
 fn need_multiple(name: &str, v: &[u32], unit: usize) -> Result<(), Error> {
     if v.len() % unit != 0 {
         return Err(Error::Corrupt(format!("{name} holds {} words, not a multiple of {unit}", v.len())));
@@ -40,8 +44,19 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Grid, Error> {
     }
     let format = Format::parse(&meta.format).ok_or_else(|| Error::Format(meta.format.clone()))?;
     let nodes = load_nodes(asset, &meta)?;
+    if nodes.frames.len() != meta.frame_count as usize {
+        return Err(Error::Corrupt(format!("{} frames in the frame table, {} in the metadata", nodes.frames.len(), meta.frame_count)));
+    }
+    if meta.index_offset.iter().any(|o| o % 128 != 0) {
+        return Err(Error::Corrupt(format!("index offset {:?} is not a multiple of 128", meta.index_offset)));
+    }
     let ranges = asset.f32s(kind::BRICK_RANGES)?;
-    let (leaves, tiles) = nodes.frame_contents(frame);
+    // The metadata says how many leaves the frame has: decode no more.
+    let want = meta.frames.get(frame).map_or(0, |f| f.leaves as usize);
+    let (leaves, tiles) = nodes.frame_contents(frame, want, MAX_TILES).ok_or_else(|| Error::Corrupt(format!("frame {frame} holds more than the {want} leaves or {MAX_TILES} tiles its metadata allows")))?;
+    if leaves.len() != want {
+        return Err(Error::Corrupt(format!("frame {frame} holds {} leaves, its metadata says {want}", leaves.len())));
+    }
     let mut out = Vec::with_capacity(leaves.len());
     for (origin, mask, brick) in leaves {
         let info = meta

@@ -548,11 +548,15 @@ impl Nodes {
         Some((mask, w[16]))
     }
 
-    /// Every leaf (source origin, mask, brick) and active tile (source origin, edge, value) of a frame.
-    pub fn frame_contents(&self, frame: usize) -> (Vec<(Coord, [u64; 8], u32)>, Vec<(Coord, u32, f32)>) {
+    /// Every leaf (source origin, mask, brick) and active tile (source origin,
+    /// edge, value) of a frame; `None` when there are more than `max_leaves`
+    /// leaves or `max_tiles` tiles (shared nodes let a small, corrupt asset
+    /// claim billions, so callers bound what they will decode).
+    #[allow(clippy::type_complexity)]
+    pub fn frame_contents(&self, frame: usize, max_leaves: usize, max_tiles: usize) -> Option<(Vec<(Coord, [u64; 8], u32)>, Vec<(Coord, u32, f32)>)> {
         let mut leaves = Vec::new();
         let mut tiles = Vec::new();
-        let Some(&l1) = self.frames.get(frame) else { return (leaves, tiles) };
+        let Some(&l1) = self.frames.get(frame) else { return Some((leaves, tiles)) };
         let node = self.l1.get(l1 as usize * L1_WORDS..(l1 as usize + 1) * L1_WORDS).unwrap_or(&[]);
         let o = self.offset;
         for w in 0..L1_MASK_WORDS {
@@ -579,9 +583,12 @@ impl Nodes {
                     }
                     _ => {}
                 }
+                if leaves.len() > max_leaves || tiles.len() > max_tiles {
+                    return None;
+                }
             }
         }
-        (leaves, tiles)
+        Some((leaves, tiles))
     }
 
     /// Bytes of each node array, for reports.

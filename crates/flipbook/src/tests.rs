@@ -58,7 +58,7 @@ fn nodes_give_back_every_leaf_and_tile() {
     let built = b.finish().unwrap();
     assert_eq!(built.offset, Coord::new(-256, -384, 0));
     let n = built.nodes(|id| id).unwrap();
-    let (got, got_tiles) = n.frame_contents(0);
+    let (got, got_tiles) = n.frame_contents(0, usize::MAX, usize::MAX).unwrap();
     let mut want: Vec<(Coord, [u64; 8])> = leaves.iter().map(|l| (l.origin, l.mask.0)).collect();
     want.sort_by_key(|w| w.0);
     let mut have: Vec<(Coord, [u64; 8])> = got.iter().map(|l| (l.0, l.1)).collect();
@@ -74,7 +74,8 @@ fn nodes_give_back_every_leaf_and_tile() {
     let mut t = got_tiles.clone();
     t.sort_by_key(|t| t.0);
     assert_eq!(t, vec![(Coord::new(8, 8, 8), 8, 0.75), (Coord::new(256, 0, 0), 128, 0.5)]);
-    assert_eq!(n.frame_contents(1), (vec![], vec![]));
+    assert_eq!(n.frame_contents(1, usize::MAX, usize::MAX), Some((vec![], vec![])));
+    assert!(n.frame_contents(0, 2, usize::MAX).is_none(), "the leaf limit holds");
 }
 
 #[test]
@@ -89,7 +90,7 @@ fn prefix_counts_make_lookup_match_a_scan() {
     b.push(&grid(leaves.clone(), vec![])).unwrap();
     let built = b.finish().unwrap();
     let n = built.nodes(|id| id).unwrap();
-    let (got, _) = n.frame_contents(0);
+    let (got, _) = n.frame_contents(0, usize::MAX, usize::MAX).unwrap();
     assert_eq!(got.len(), leaves.len());
 }
 
@@ -99,7 +100,7 @@ fn root_tiles_fill_the_l1_slots_they_cover() {
     let mut b = Builder::new();
     b.push(&g).unwrap();
     let n = b.finish().unwrap().nodes(|id| id).unwrap();
-    let (leaves, tiles) = n.frame_contents(0);
+    let (leaves, tiles) = n.frame_contents(0, usize::MAX, usize::MAX).unwrap();
     assert_eq!(leaves.len(), 1);
     // Slot 0 holds the leaf's L2 node; the other 32767 slots are the tile.
     assert_eq!(tiles.len(), 32767);

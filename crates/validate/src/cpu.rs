@@ -65,9 +65,11 @@ impl Sampler<'_> {
             return (bg, 0);
         }
         let b = self.d.l3.get(l3 + 16).copied().unwrap_or(0);
-        let [bx, by, _, per] = self.bricks;
-        let (atlas, i) = (b / per, b % per);
-        let pos = [i % bx, (i / bx) % by, i / (bx * by)];
+        let [bx, by, _, per] = self.bricks.map(u64::from);
+        let b64 = u64::from(b);
+        let (atlas, i) = (b64 / per.max(1), b64 % per.max(1));
+        let pos = [i % bx.max(1), (i / bx.max(1)) % by.max(1), i / (bx * by).max(1)].map(|p| p as u32);
+        let atlas = atlas as u32;
         let t = self.texel(atlas, pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2] * 8 + v[2]);
         if self.d.format <= 1 {
             return (t, 0);

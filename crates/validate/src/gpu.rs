@@ -151,6 +151,11 @@ impl Renderer {
         if block.is_some() && !self.bc {
             return Err(Error::Unsupported { adapter: self.adapter.clone(), format: d.meta.format.clone(), feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D" });
         }
+        let max_dim = self.device.limits().max_texture_dimension_3d;
+        if let Some(a) = d.meta.atlases.iter().find(|a| a.texels.iter().any(|&t| t > max_dim)) {
+            return Err(Error::Texture { size: a.texels, limit: max_dim });
+        }
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         // Every atlas slot is bound; unused ones get a small empty texture.
         let empty_size = [8, 8, if d.format == 4 { 2 } else { 8 }];
         let mut textures = Vec::with_capacity(crate::MAX_ATLASES);
@@ -184,6 +189,9 @@ impl Renderer {
             textures.push(texture);
         }
         let views = textures.iter().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default())).collect();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Gpu(e.to_string()));
+        }
         Ok(GpuAsset { buffers, views, _textures: textures, frames: d.frames.to_vec(), atlases: d.meta.atlases.len(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks() })
     }
 
@@ -221,6 +229,7 @@ impl Renderer {
         let cells = u64::from(gx) * u64::from(gy) * u64::from(gz);
         let shadow = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("shadow"), size: cells * 4, usage: wgpu::BufferUsages::STORAGE, mapped_at_creation: false });
         let bytes = u64::from(width) * u64::from(height) * 4;
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("march") });
         let mut reads = Vec::with_capacity(views.len());
         for (i, view) in views.iter().enumerate() {
@@ -252,6 +261,9 @@ impl Renderer {
             reads.push(read);
         }
         self.queue.submit([enc.finish()]);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Gpu(e.to_string()));
+        }
         let (tx, rx) = std::sync::mpsc::channel();
         for (i, read) in reads.iter().enumerate() {
             let tx = tx.clone();

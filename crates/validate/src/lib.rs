@@ -25,10 +25,14 @@ pub enum Error {
     Unsupported { adapter: String, format: String, feature: &'static str },
     #[error("the asset has {0} brick atlases; the renderer binds at most {MAX_ATLASES} (cook with a larger --max-texture-dim)")]
     Atlases(usize),
+    #[error("a brick atlas of {size:?} texels exceeds the adapter's 3D texture limit of {limit} (cook with a smaller --max-texture-dim)")]
+    Texture { size: [u32; 3], limit: u32 },
     #[error("the asset's {what} ({bytes} bytes) exceeds the adapter's limit of {limit} bytes")]
     TooLarge { what: &'static str, bytes: u64, limit: u64 },
     #[error("unsupported voxel format \"{0}\"")]
     Format(String),
+    #[error("the asset is inconsistent: {0}")]
+    Corrupt(String),
     #[error("frame {frame} is out of range (the asset has {count})")]
     Frame { frame: usize, count: usize },
     #[error("GPU error: {0}")]
@@ -105,13 +109,14 @@ impl Scene {
     /// scale giving an optical depth of 4 across the box at the largest value,
     /// and a fixed light.
     pub fn for_asset(meta: &Metadata) -> Scene {
-        let o = meta.index_offset;
+        let o = meta.index_offset.map(i64::from);
         let (lo, hi) = match meta.index_bbox {
-            Some((a, b)) => ([a[0] - o[0], a[1] - o[1], a[2] - o[2]], [b[0] - o[0] + 1, b[1] - o[1] + 1, b[2] - o[2] + 1]),
+            Some((a, b)) => ([0, 1, 2].map(|i| i64::from(a[i]) - o[i]), [0, 1, 2].map(|i| i64::from(b[i]) - o[i] + 1)),
             None => ([0; 3], [1; 3]),
         };
-        let box_min = lo.map(|v| v as f32);
-        let box_max = hi.map(|v| v as f32);
+        // Asset index space is [0, 4096): clamp what a corrupt bbox could claim.
+        let box_min = lo.map(|v| v.clamp(0, 4096) as f32);
+        let box_max = hi.map(|v| v.clamp(0, 4096) as f32);
         let ext = sub(box_max, box_min);
         let diag = (ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]).sqrt().max(1.0);
         let peak = meta.value_range[1].abs().max(meta.value_range[0].abs()).max(1e-6);
@@ -122,7 +127,7 @@ impl Scene {
             light: normalize([0.4, 1.0, 0.3]),
             step: 1.0,
             shadow_step: 1.0,
-            max_steps: 4 * (diag as u32 + 8),
+            max_steps: 4 * (diag.min(1e6) as u32 + 8),
             // At most 128 cells along the longest axis, at least 4 voxels a cell.
             shadow_cell: (ext[0].max(ext[1]).max(ext[2]) / 128.0).ceil().max(4.0),
         }
@@ -180,6 +185,49 @@ pub fn compare(reference: &Image, other: &Image) -> ImageMetrics {
     ImageMetrics { rmse, psnr: if rmse > 0.0 { -20.0 * rmse.log10() } else { f64::INFINITY }, max_error: mx }
 }
 
+/// Atlas metadata must describe the sections exactly, and every atlas but the
+/// last must have the first one's shape (the samplers assume both).
+fn check_atlases(meta: &Metadata, format: u32, sections: &[&[u8]]) -> Result<(), Error> {
+    let spb: u64 = if format == 4 { 2 } else { 8 };
+    let first = meta.atlases.first();
+    let mut next_brick = 0u64;
+    for (i, (a, bytes)) in meta.atlases.iter().zip(sections).enumerate() {
+        let bad = |what: String| Err(Error::Corrupt(format!("atlas {i}: {what}")));
+        let [bx, by, bz] = a.bricks.map(u64::from);
+        if bx == 0 || by == 0 || bz == 0 || u64::from(a.count) > bx * by * bz {
+            return bad(format!("{:?} bricks cannot hold {}", a.bricks, a.count));
+        }
+        if a.texels.map(u64::from) != [bx * 8, by * 8, bz * spb] {
+            return bad(format!("texture size {:?} does not match {:?} bricks", a.texels, a.bricks));
+        }
+        // Samplers place brick i of any atlas with the first atlas's shape:
+        // every atlas but the last has that shape, and the last must hold
+        // every position it gives.
+        if let Some(f) = first {
+            let [fx, fy, _] = f.bricks.map(|b| u64::from(b).max(1));
+            let n = u64::from(a.count);
+            let need = [n.min(fx), n.div_ceil(fx).min(fy), n.div_ceil(fx * fy)];
+            let fits = if i + 1 < meta.atlases.len() { a.bricks == f.bricks } else { (0..3).all(|k| u64::from(a.bricks[k]) >= need[k]) };
+            if !fits || u64::from(a.first_brick) != next_brick {
+                return bad("its layout does not follow the first atlas's".into());
+            }
+        }
+        next_brick += u64::from(a.count);
+        let [w, h, d] = a.texels.map(u64::from);
+        let expected = match format {
+            0 => w * h * d * 4,
+            1 => w * h * d * 2,
+            2 => w * h * d,
+            3 => (w / 4) * (h / 4) * d * 8,
+            _ => (w / 4) * (h / 4) * d * 16,
+        };
+        if bytes.len() as u64 != expected {
+            return bad(format!("{} bytes, its size needs {expected}", bytes.len()));
+        }
+    }
+    Ok(())
+}
+
 /// The node arrays and bricks of an asset, as the renderers read them.
 pub(crate) struct AssetData<'a> {
     pub meta: Metadata,
@@ -203,6 +251,7 @@ impl<'a> AssetData<'a> {
             return Err(Error::Atlases(meta.atlases.len()));
         }
         let atlases = (0..meta.atlases.len()).map(|i| asset.section(kind::ATLAS, i as u32)).collect::<Result<Vec<_>, _>>()?;
+        check_atlases(&meta, format, &atlases)?;
         Ok(AssetData {
             format,
             l1: asset.u32s(kind::L1_NODES)?,

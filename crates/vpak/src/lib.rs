@@ -157,8 +157,9 @@ impl Metadata {
         bincode::serde::encode_to_vec(self, bincode::config::standard()).map_err(|e| Error::Metadata(e.to_string()))
     }
     pub fn from_bytes(b: &[u8]) -> Result<Metadata, Error> {
-        // The limit keeps a hostile length prefix from allocating more than the section holds.
-        let cfg = bincode::config::standard().with_limit::<{ 1 << 30 }>();
+        // A fixed cap on what a (possibly hostile) length prefix can make the
+        // decoder allocate; real metadata is kilobytes.
+        let cfg = bincode::config::standard().with_limit::<{ 64 << 20 }>();
         let (m, _) = bincode::serde::decode_from_slice(b, cfg).map_err(|e| Error::Metadata(e.to_string()))?;
         Ok(m)
     }
@@ -262,9 +263,14 @@ pub fn write_atomic_with(path: &Path, overwrite: bool, fill: impl FnOnce(&mut dy
     }
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    // A fresh name (never an existing file or symlink): pid, time and a counter.
+    static SERIAL: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
+    let serial = SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = dir.join(format!(".{name}.{}-{nanos}-{serial}.tmp", std::process::id()));
     let result = (|| -> Result<(), Error> {
-        let mut f = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&tmp)?);
+        let file = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
+        let mut f = std::io::BufWriter::with_capacity(1 << 20, file);
         fill(&mut f)?;
         f.flush()?;
         let f = f.into_inner().map_err(|e| Error::Io(e.into_error()))?;
@@ -274,8 +280,13 @@ pub fn write_atomic_with(path: &Path, overwrite: bool, fill: impl FnOnce(&mut dy
             std::fs::rename(&tmp, path)?;
         } else {
             // A hard link fails if `path` appeared meanwhile: no clobbering, even racing.
-            std::fs::hard_link(&tmp, path).map_err(|e| if e.kind() == std::io::ErrorKind::AlreadyExists { Error::Exists(path.display().to_string()) } else { Error::Io(e) })?;
-            std::fs::remove_file(&tmp)?;
+            match std::fs::hard_link(&tmp, path) {
+                Ok(()) => std::fs::remove_file(&tmp)?,
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => return Err(Error::Exists(path.display().to_string())),
+                // File systems without hard links: check, then rename.
+                Err(_) if !path.exists() => std::fs::rename(&tmp, path)?,
+                Err(_) => return Err(Error::Exists(path.display().to_string())),
+            }
         }
         Ok(())
     })();
