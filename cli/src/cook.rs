@@ -1,6 +1,6 @@
 //! `vdbcook cook`: a VDB sequence into one .vpak asset.
 
-use crate::inputs::{self, FrameFile, FrameRange};
+use crate::inputs::{self, FrameRange};
 use crate::progress::Bars;
 use crate::validate::ValidateArgs;
 use crate::{exit, report_error, Usage};
@@ -100,7 +100,7 @@ pub struct CookArgs {
 
 /// One frame as read by the reader thread.
 struct Frame {
-    file: FrameFile,
+    path: PathBuf,
     grid: Option<Grid>,
     source: Option<SourceFile>,
 }
@@ -110,35 +110,32 @@ fn hash_hex(bytes: &[u8]) -> String {
 }
 
 /// Reads one frame; `grid_name` is fixed by the first frame that has a grid.
-fn read_frame(file: FrameFile, grid_name: &mut Option<String>, allow_missing: bool) -> Result<Frame> {
-    let p = file.path.display().to_string();
-    if !file.path.exists() {
+fn read_frame(path: PathBuf, grid_name: &mut Option<String>, allow_missing: bool) -> Result<Frame> {
+    let p = path.display().to_string();
+    if !path.exists() {
         if allow_missing {
-            return Ok(Frame { file, grid: None, source: None });
+            return Ok(Frame { path, grid: None, source: None });
         }
         return Err(anyhow!("{p}: no such file (use --allow-missing to cook it as an empty frame)"));
     }
-    let vdb = vdbcook_vdb::open(&file.path).with_context(|| p.clone())?;
+    let vdb = vdbcook_vdb::open(&path).with_context(|| p.clone())?;
     let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(vdb.bytes()) };
     let index = match vdb.select(grid_name.as_deref()) {
         Ok(i) => i,
-        Err(e) if allow_missing => {
-            let _ = e;
-            return Ok(Frame { file, grid: None, source: Some(source) });
-        }
+        Err(_) if allow_missing => return Ok(Frame { path, grid: None, source: Some(source) }),
         Err(e) => return Err(anyhow!(e).context(p)),
     };
     let grid = vdb.read_grid(index).with_context(|| p.clone())?;
     if grid_name.is_none() {
         *grid_name = Some(vdb.grids[index].name.clone());
     }
-    Ok(Frame { file, grid: Some(grid), source: Some(source) })
+    Ok(Frame { path, grid: Some(grid), source: Some(source) })
 }
 
 /// Reads `files` on a thread that stays one frame ahead (at most two source
 /// frames live at once) and pushes each frame into `cooker`. Returns the grid
 /// name used and the seconds spent waiting for frames.
-pub fn feed(cooker: &mut Cooker, files: Vec<FrameFile>, grid: Option<String>, allow_missing: bool, bars: &Bars) -> Result<(Option<String>, f64)> {
+pub fn feed(cooker: &mut Cooker, files: Vec<PathBuf>, grid: Option<String>, allow_missing: bool, bars: &Bars) -> Result<(Option<String>, f64)> {
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Frame>>(0);
     let total = files.len() as u64;
     let reader = std::thread::spawn(move || {
@@ -161,7 +158,7 @@ pub fn feed(cooker: &mut Cooker, files: Vec<FrameFile>, grid: Option<String>, al
         let pushed = r.and_then(|frame| {
             let n = cooker.frame_count();
             match &frame.grid {
-                Some(g) => cooker.push(g, frame.source).with_context(|| format!("{}: frame {n}", frame.file.path.display())),
+                Some(g) => cooker.push(g, frame.source).with_context(|| format!("{}: frame {n}", frame.path.display())),
                 None => {
                     cooker.push_empty(frame.source);
                     Ok(())
@@ -183,10 +180,17 @@ pub fn feed(cooker: &mut Cooker, files: Vec<FrameFile>, grid: Option<String>, al
     }
 }
 
+/// Cooks `files` losslessly in memory (f32, no clustering): the reference
+/// asset `validate` compares with, and what `render` draws for a .vdb.
+pub fn cook_lossless(files: Vec<PathBuf>, grid: Option<String>, allow_missing: bool, bars: &Bars) -> Result<vdbcook_vpak::Asset> {
+    let mut cooker = Cooker::new(CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() });
+    feed(&mut cooker, files, grid, allow_missing, bars)?;
+    let (sections, _) = cooker.finish(&vdbcook_cook::NoProgress).map_err(|e| anyhow!(e))?;
+    Ok(vdbcook_vpak::Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?)
+}
+
 pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
-    if args.output.exists() && !args.force {
-        return Err(anyhow!("{} already exists (use --force to replace it)", args.output.display()));
-    }
+    crate::refuse_existing(&args.output, args.force)?;
     let format = Format::parse(&args.format).ok_or_else(|| Usage(format!("unknown format {}", args.format)))?;
     let quality = Quality::parse(&args.quality).ok_or_else(|| Usage(format!("unknown quality {}", args.quality)))?;
     if !(args.variance_threshold >= 0.0) {

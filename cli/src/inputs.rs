@@ -50,13 +50,6 @@ impl FrameRange {
     }
 }
 
-/// One frame to cook: its file, and whether a missing file is allowed to be an empty frame.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct FrameFile {
-    pub path: PathBuf,
-    /// From a frame pattern: the file may legitimately be absent (`--allow-missing`).
-    pub from_pattern: bool,
-}
 
 /// A frame pattern's pieces: prefix, zero-padded width, suffix.
 fn parse_pattern(s: &str) -> Option<(String, usize, String)> {
@@ -138,7 +131,7 @@ fn is_glob(s: &str) -> bool {
 }
 
 /// Expands INPUT arguments into frames, in order.
-pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<FrameFile>> {
+pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     let mut plain: Vec<PathBuf> = Vec::new();
     let mut used_range = false;
@@ -168,7 +161,7 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<Frame
             used_range = true;
             flush(&mut plain, &mut out);
             for n in range.frames() {
-                out.push(FrameFile { path: PathBuf::from(format!("{pre}{}{post}", format_frame(n, width))), from_pattern: true });
+                out.push(PathBuf::from(format!("{pre}{}{post}", format_frame(n, width))));
             }
         } else if is_glob(input) {
             let mut found: Vec<PathBuf> = glob::glob(input).with_context(|| format!("{input}: invalid glob"))?.flatten().filter(|p| p.is_file()).collect();
@@ -189,9 +182,9 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<Frame
 }
 
 /// Moves the plain files gathered so far, in natural order, to the frame list.
-fn flush(plain: &mut Vec<PathBuf>, out: &mut Vec<FrameFile>) {
+fn flush(plain: &mut Vec<PathBuf>, out: &mut Vec<PathBuf>) {
     natural_sort(plain);
-    out.extend(plain.drain(..).map(|path| FrameFile { path, from_pattern: false }));
+    out.extend(plain.drain(..));
 }
 
 #[cfg(test)]
@@ -225,8 +218,7 @@ mod tests {
         for (p, want) in [("s_####.vdb", "s_0009.vdb"), ("s_%04d.vdb", "s_0009.vdb"), ("s_%d.vdb", "s_9.vdb"), ("s_$F4.vdb", "s_0009.vdb"), ("s_$F.vdb", "s_9.vdb")] {
             let f = expand(&[p.to_string()], r).unwrap();
             assert_eq!(f.len(), 3);
-            assert_eq!(f[1].path, PathBuf::from(want), "{p}");
-            assert!(f[1].from_pattern);
+            assert_eq!(f[1], PathBuf::from(want), "{p}");
         }
         assert!(expand(&["s_####.vdb".into()], None).is_err());
         assert!(expand(&["s_%70000d.vdb".into()], r).is_err());

@@ -20,7 +20,7 @@ A file that cannot be read prints one error line and makes the exit code 1;
 the other files are still described.";
 
 /// True when the file starts with the .vpak magic.
-fn is_vpak(path: &Path) -> bool {
+pub fn is_vpak(path: &Path) -> bool {
     use std::io::Read;
     let mut magic = [0u8; 8];
     std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && magic == vdbcook_vpak::MAGIC

@@ -83,6 +83,15 @@ impl std::fmt::Display for Usage {
 
 impl std::error::Error for Usage {}
 
+/// Fails before any work when `path` exists and `--force` was not given
+/// (the atomic write checks again, racing writers included).
+pub fn refuse_existing(path: &std::path::Path, force: bool) -> anyhow::Result<()> {
+    if path.exists() && !force {
+        anyhow::bail!("{} already exists (use --force to replace it)", path.display());
+    }
+    Ok(())
+}
+
 /// Writes to stdout; a closed pipe (`| head`) just ends the output.
 pub fn write_stdout(text: &str) -> std::io::Result<()> {
     use std::io::Write;

@@ -1,7 +1,7 @@
 //! `vdbcook unpack`: one frame of an asset as a .vdb file OpenVDB reads.
 
 use crate::exit;
-use anyhow::{anyhow, Context, Result};
+use anyhow::{Context, Result};
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -25,9 +25,7 @@ pub struct UnpackArgs {
 
 pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
     let name = args.asset.display().to_string();
-    if args.output.exists() && !args.force {
-        return Err(anyhow!("{} already exists (use --force to replace it)", args.output.display()));
-    }
+    crate::refuse_existing(&args.output, args.force)?;
     let asset = vdbcook_vpak::Asset::open(&args.asset).with_context(|| name.clone())?;
     let grid = vdbcook_cook::unpack_frame(&asset, args.frame).with_context(|| name.clone())?;
     let bytes = vdbcook_vdb::write_vdb(&grid, vdbcook_vdb::WriteOptions { version: 224, zip: !args.no_zip }).with_context(|| args.output.display().to_string())?;

@@ -1,13 +1,13 @@
 //! `vdbcook validate` and `vdbcook render`: the GPU check of what a cook cost.
 
-use crate::cook::feed;
+use crate::cook::cook_lossless;
 use crate::inputs::{self, FrameRange};
 use crate::progress::Bars;
 use crate::{exit, Usage};
 use anyhow::{anyhow, Context, Result};
 use serde_json::json;
 use std::path::{Path, PathBuf};
-use vdbcook_cook::{CookOptions, Cooker, Format, NoProgress, Progress};
+use vdbcook_cook::Progress;
 use vdbcook_encode::ErrorStats;
 use vdbcook_validate::{compare, report, Image, ImageMetrics, Renderer, Scene};
 use vdbcook_vpak::Asset;
@@ -78,10 +78,7 @@ fn reference(meta: &vdbcook_vpak::Metadata, source: &[String], frames: Option<Fr
     let files = inputs::expand(source, frames)?;
     let allow_missing = meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
     let grid = if meta.grid_name.is_empty() { None } else { Some(meta.grid_name.clone()) };
-    let mut cooker = Cooker::new(CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() });
-    feed(&mut cooker, files, grid, allow_missing, bars)?;
-    let (sections, _) = cooker.finish(&NoProgress).map_err(|e| anyhow!(e)).context("cooking the reference")?;
-    Ok(Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?)
+    cook_lossless(files, grid, allow_missing, bars).context("cooking the reference")
 }
 
 /// Voxel-domain error of the asset's frame against the reference's, over the reference's active voxels.
@@ -316,25 +313,14 @@ pub struct RenderArgs {
 
 pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let name = args.input.display().to_string();
-    if args.output.exists() && !args.force {
-        return Err(anyhow!("{} already exists (use --force to replace it)", args.output.display()));
-    }
+    crate::refuse_existing(&args.output, args.force)?;
     if args.view >= args.views {
         return Err(Usage(format!("--view {} is out of range (0 to {})", args.view, args.views - 1)).into());
     }
-    let is_vpak = {
-        use std::io::Read;
-        let mut m = [0u8; 8];
-        std::fs::File::open(&args.input).and_then(|mut f| f.read_exact(&mut m)).is_ok() && m == vdbcook_vpak::MAGIC
-    };
-    let asset = if is_vpak {
+    let asset = if crate::inspect::is_vpak(&args.input) {
         Asset::open(&args.input).with_context(|| name.clone())?
     } else {
-        let files = vec![inputs::FrameFile { path: args.input.clone(), from_pattern: false }];
-        let mut cooker = Cooker::new(CookOptions { format: Format::F32, ..CookOptions::default() });
-        feed(&mut cooker, files, args.grid.clone(), false, &Bars::new(true))?;
-        let (sections, _) = cooker.finish(&NoProgress).map_err(|e| anyhow!(e))?;
-        Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?
+        cook_lossless(vec![args.input.clone()], args.grid.clone(), false, &Bars::new(true))?
     };
     let meta = asset.metadata().with_context(|| name.clone())?;
     if args.frame >= meta.frame_count as usize {
