@@ -1,9 +1,16 @@
 // vpak.wgsl: sample a .vpak asset on the GPU (see docs/format.md).
 //
-// An engine includes this file, binds the asset's sections as storage
-// buffers and its brick atlas as a 3D texture, and calls `vpak_sample` (the
-// value at a voxel) or `vpak_query` (the value plus the size of the empty
-// region around it, for hierarchical empty-space skipping).
+// An engine includes this file and one of the two atlas files, binds the
+// asset's sections as storage buffers, and calls `vpak_sample` (the value at a
+// voxel) or `vpak_query` (the value plus the size of the empty region around
+// it, for hierarchical empty-space skipping). The atlas files define
+// `vpak_texel(info, atlas, texel)`:
+//   vpak_atlas_texture.wgsl  the brick atlases as 3D textures, read through the
+//                            texture unit (BC4/BC7 need TEXTURE_COMPRESSION_BC
+//                            and TEXTURE_COMPRESSION_BC_SLICED_3D);
+//   vpak_atlas_buffer.wgsl   BC4/BC7 atlases as storage buffers of raw blocks,
+//                            decoded in the shader (include bcdec.wgsl too), for
+//                            GPUs without block-compressed 3D textures.
 //
 // Coordinates are asset index space: source index minus `index_offset`,
 // inside [0, 4096)^3. Up to four brick atlases are bound; every atlas but the
@@ -39,27 +46,9 @@ struct VpakInfo {
 @group(0) @binding(5) var<storage, read> vpak_l3: array<u32>;
 @group(0) @binding(6) var<storage, read> vpak_tiles: array<u32>;
 @group(0) @binding(7) var<storage, read> vpak_ranges: array<vec2<f32>>;
-// False when the asset has a single atlas: the selection below then folds
+// False when the asset has a single atlas: the atlas selection then folds
 // away at pipeline creation (it costs ~20 % on a CPU driver otherwise).
 override VPAK_MULTI_ATLAS: bool = true;
-
-@group(0) @binding(8) var vpak_atlas0: texture_3d<f32>;
-@group(0) @binding(11) var vpak_atlas1: texture_3d<f32>;
-@group(0) @binding(12) var vpak_atlas2: texture_3d<f32>;
-@group(0) @binding(13) var vpak_atlas3: texture_3d<f32>;
-
-fn vpak_texel(atlas: u32, t: vec3<i32>) -> vec4<f32> {
-    if (!VPAK_MULTI_ATLAS || atlas == 0u) {
-        return textureLoad(vpak_atlas0, t, 0);
-    }
-    switch atlas {
-        case 0u: { return textureLoad(vpak_atlas0, t, 0); }
-        case 1u: { return textureLoad(vpak_atlas1, t, 0); }
-        case 2u: { return textureLoad(vpak_atlas2, t, 0); }
-        default: { return textureLoad(vpak_atlas3, t, 0); }
-    }
-}
-
 // Entry of slot `s` in the node at `base` with `mask_words` mask words,
 // or 0xffffffff when the slot is empty: the mask bit, then the rank of the
 // slot among the occupied ones from the per-word prefix counts.
@@ -90,29 +79,54 @@ fn vpak_tile_value(e: u32) -> f32 {
     return bitcast<f32>(vpak_tiles[(e & ~VPAK_TILE) * 2u]);
 }
 
-// The stored value of voxel `v` (x·64 + y·8 + z) of brick `b`.
-fn vpak_brick_value(info: VpakInfo, b: u32, v: vec3<u32>) -> f32 {
+// Where brick `b` lives: its atlas, its first texel there, and the range its
+// stored levels map to (0..1 for f32 and f16, which store values).
+struct VpakBrick {
+    atlas: u32,
+    origin: vec3<u32>,
+    range: vec2<f32>,
+}
+
+fn vpak_brick(info: VpakInfo, b: u32) -> VpakBrick {
     let bx = info.atlas_bricks.x;
     let by = info.atlas_bricks.y;
-    var atlas = 0u;
+    var brick: VpakBrick;
+    brick.atlas = 0u;
     var i = b;
     if (VPAK_MULTI_ATLAS && b >= info.atlas_bricks.w) {
-        atlas = b / info.atlas_bricks.w;
+        brick.atlas = b / info.atlas_bricks.w;
         i = b % info.atlas_bricks.w;
     }
     let pos = vec3<u32>(i % bx, (i / bx) % by, i / (bx * by));
-    var t: f32;
     if (info.format == VPAK_BC7) {
-        let texel = vpak_texel(atlas, vec3<i32>(pos * vec3<u32>(8u, 8u, 2u) + vec3<u32>(v.x, v.y, v.z / 4u)));
-        t = texel[v.z & 3u];
+        brick.origin = pos * vec3<u32>(8u, 8u, 2u);
     } else {
-        t = vpak_texel(atlas, vec3<i32>(pos * 8u + v)).r;
+        brick.origin = pos * 8u;
     }
     if (info.format == VPAK_F32 || info.format == VPAK_F16) {
-        return t;
+        brick.range = vec2<f32>(0.0, 1.0);
+    } else {
+        brick.range = vpak_ranges[b];
     }
-    let r = vpak_ranges[b];
-    return r.x + t * (r.y - r.x);
+    return brick;
+}
+
+// The stored value of voxel `v` (x·64 + y·8 + z) of `brick`.
+fn vpak_brick_texel(info: VpakInfo, brick: VpakBrick, v: vec3<u32>) -> f32 {
+    var t: f32;
+    if (info.format == VPAK_BC7) {
+        // Four consecutive z-slices share a texel, one per channel.
+        let texel = vpak_texel(info, brick.atlas, vec3<i32>(brick.origin + vec3<u32>(v.x, v.y, v.z >> 2u)));
+        t = texel[v.z & 3u];
+    } else {
+        t = vpak_texel(info, brick.atlas, vec3<i32>(brick.origin + v)).r;
+    }
+    return brick.range.x + t * (brick.range.y - brick.range.x);
+}
+
+// The stored value of voxel `v` of brick `b`.
+fn vpak_brick_value(info: VpakInfo, b: u32, v: vec3<u32>) -> f32 {
+    return vpak_brick_texel(info, vpak_brick(info, b), v);
 }
 
 // Value at voxel `p`, and the edge of the empty (background) region that
@@ -130,6 +144,8 @@ struct VpakLeaf {
     l3: u32,
     value: f32,
     empty_dim: u32,
+    // The L3 node's brick (when `l3` is set).
+    brick: VpakBrick,
 }
 
 fn vpak_leaf(info: VpakInfo, p: vec3<i32>) -> VpakLeaf {
@@ -165,6 +181,7 @@ fn vpak_leaf(info: VpakInfo, p: vec3<i32>) -> VpakLeaf {
         return leaf;
     }
     leaf.l3 = e2 * VPAK_L3_WORDS;
+    leaf.brick = vpak_brick(info, vpak_l3[leaf.l3 + 16u]);
     return leaf;
 }
 
@@ -182,7 +199,7 @@ fn vpak_leaf_query(info: VpakInfo, leaf: VpakLeaf, p: vec3<i32>) -> VpakQuery {
         q.value = info.background;
         return q;
     }
-    q.value = vpak_brick_value(info, vpak_l3[leaf.l3 + 16u], v);
+    q.value = vpak_brick_texel(info, leaf.brick, v);
     return q;
 }
 

@@ -247,6 +247,7 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
             min_psnr: args.min_psnr,
             report: None,
             adapter: None,
+            bc_decode: Default::default(),
             json: args.json,
         };
         Some(crate::validate::evaluate(v, quiet)?)

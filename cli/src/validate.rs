@@ -9,7 +9,7 @@ use serde_json::json;
 use std::path::{Path, PathBuf};
 use vdbcook_cook::Progress;
 use vdbcook_encode::ErrorStats;
-use vdbcook_validate::{compare, report, Image, ImageMetrics, Renderer, Scene};
+use vdbcook_validate::{compare, report, BcDecode, Image, ImageMetrics, Renderer, Scene};
 use vdbcook_vpak::Asset;
 
 pub const AFTER_HELP: &str = "\
@@ -58,9 +58,18 @@ pub struct ValidateArgs {
     /// Use the first GPU adapter whose name contains NAME (e.g. "llvmpipe").
     #[arg(long, value_name = "NAME")]
     pub adapter: Option<String>,
+    /// Where BC4/BC7 bricks are decoded: "texture" (the GPU's texture unit), "shader"
+    /// (raw blocks decoded in WGSL, for GPUs without BC 3D textures), or "auto"
+    /// (the texture unit when the adapter supports it).
+    #[arg(long, value_name = "WHERE", default_value = "auto", value_parser = parse_bc_decode)]
+    pub bc_decode: BcDecode,
     /// Print the report as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+}
+
+fn parse_bc_decode(s: &str) -> Result<BcDecode, String> {
+    BcDecode::parse(s).ok_or_else(|| format!("invalid value \"{s}\" (expected auto, texture or shader)"))
 }
 
 pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -148,7 +157,7 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     if let Some(&bad) = frames.iter().find(|&&f| f >= meta.frame_count as usize) {
         return Err(Usage(format!("--frames: frame {bad} is out of range (the asset has {} frames, numbered from 0)", meta.frame_count)).into());
     }
-    let renderer = Renderer::new(args.adapter.as_deref())?;
+    let renderer = Renderer::new(args.adapter.as_deref())?.with_bc_decode(args.bc_decode);
     let gpu_asset = renderer.upload(&asset).with_context(|| name.clone())?;
     let gpu_ref = renderer.upload(&reference).context("reference")?;
     let scene = Scene::for_asset(&ref_meta);
@@ -186,6 +195,7 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     let doc = json!({
         "asset": name,
         "adapter": renderer.adapter,
+        "bc_decode": if gpu_asset.decodes_in_shader() { "shader" } else { "texture" },
         "format": meta.format,
         "grid": meta.grid_name,
         "frames": meta.frame_count,
@@ -206,7 +216,8 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     if let Some(dir) = &args.report {
         write_report(dir, &doc, &shots, &worst_images, &meta.format, &name).with_context(|| dir.display().to_string())?;
     }
-    let mut text = format!("{name}: {} vs lossless reference, {} frame(s) × {} view(s) at {w}×{h} on {}\n", meta.format, frames.len(), args.views, renderer.adapter);
+    let decoder = if gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
+    let mut text = format!("{name}: {} vs lossless reference, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", meta.format, frames.len(), args.views, renderer.adapter);
     if let Some(s) = worst {
         text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error);
         let mean = shots.iter().map(|s| s.metrics.rmse).sum::<f64>() / shots.len() as f64;
@@ -306,6 +317,11 @@ pub struct RenderArgs {
     /// Use the first GPU adapter whose name contains NAME.
     #[arg(long, value_name = "NAME")]
     pub adapter: Option<String>,
+    /// Where BC4/BC7 bricks are decoded: "texture" (the GPU's texture unit), "shader"
+    /// (raw blocks decoded in WGSL, for GPUs without BC 3D textures), or "auto"
+    /// (the texture unit when the adapter supports it).
+    #[arg(long, value_name = "WHERE", default_value = "auto", value_parser = parse_bc_decode)]
+    pub bc_decode: BcDecode,
     /// Replace OUT if it exists.
     #[arg(long)]
     pub force: bool,
@@ -326,7 +342,7 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     if args.frame >= meta.frame_count as usize {
         return Err(anyhow!("{name}: frame {} is out of range (it has {} frames, numbered from 0)", args.frame, meta.frame_count));
     }
-    let renderer = Renderer::new(args.adapter.as_deref())?;
+    let renderer = Renderer::new(args.adapter.as_deref())?.with_bc_decode(args.bc_decode);
     let gpu = renderer.upload(&asset).with_context(|| name.clone())?;
     let scene = Scene::for_asset(&meta);
     let view = scene.orbit(args.views as usize)[args.view as usize];

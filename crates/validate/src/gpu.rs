@@ -4,40 +4,128 @@ use crate::{AssetData, Error, Image, Scene, View};
 use vdbcook_vpak::Asset;
 use wgpu::util::DeviceExt;
 
-const SHADER: &str = concat!(
-    include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shaders/vpak.wgsl")),
-    "\n",
-    include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shaders/march.wgsl"))
-);
-
-/// The WGSL source of the renderer (the library followed by the marcher).
-pub fn shader_source() -> &'static str {
-    SHADER
+macro_rules! shader {
+    ($($file:literal),*) => {
+        concat!($(include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shaders/", $file)), "\n"),*)
+    };
 }
 
-/// A device with the ray-marching pipeline.
+/// The renderer with brick atlases as textures, and with BC4/BC7 atlases as
+/// storage buffers decoded in the shader.
+const TEXTURE_SHADER: &str = shader!("vpak.wgsl", "vpak_atlas_texture.wgsl", "march.wgsl");
+const BUFFER_SHADER: &str = shader!("vpak.wgsl", "bcdec.wgsl", "vpak_atlas_buffer.wgsl", "march.wgsl");
+
+/// The WGSL sources of the renderer: atlases as textures, and BC atlases decoded in the shader.
+pub fn shader_sources() -> [&'static str; 2] {
+    [TEXTURE_SHADER, BUFFER_SHADER]
+}
+
+/// Where BC4/BC7 bricks are decoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum BcDecode {
+    /// The texture unit when the adapter can sample BC 3D textures, else the shader.
+    #[default]
+    Auto,
+    /// Block-compressed 3D textures, decoded by the texture unit.
+    Texture,
+    /// Storage buffers of raw blocks, decoded by `shaders/bcdec.wgsl`.
+    Shader,
+}
+
+impl BcDecode {
+    /// Whether bricks are decoded in the shader, for a block-compressed format
+    /// or not, on an adapter that can sample BC 3D textures or not; `None`
+    /// when the texture unit is asked for and cannot do it.
+    pub fn in_shader(self, block_compressed: bool, adapter_has_bc: bool) -> Option<bool> {
+        if !block_compressed {
+            return Some(false);
+        }
+        match self {
+            BcDecode::Auto => Some(!adapter_has_bc),
+            BcDecode::Shader => Some(true),
+            BcDecode::Texture => adapter_has_bc.then_some(false),
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<BcDecode> {
+        Some(match s {
+            "auto" => BcDecode::Auto,
+            "texture" => BcDecode::Texture,
+            "shader" => BcDecode::Shader,
+            _ => return None,
+        })
+    }
+}
+
+/// The bind group layout and the (march, shadow) pipelines for one atlas and for several.
+struct Pipelines {
+    layout: wgpu::BindGroupLayout,
+    single: (wgpu::ComputePipeline, wgpu::ComputePipeline),
+    multi: (wgpu::ComputePipeline, wgpu::ComputePipeline),
+}
+
+impl Pipelines {
+    fn new(device: &wgpu::Device, source: &str, atlas: wgpu::BindingType) -> Pipelines {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("march"), source: wgpu::ShaderSource::Wgsl(source.into()) });
+        let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry { binding, visibility: wgpu::ShaderStages::COMPUTE, ty, count: None };
+        let mut entries = vec![entry(0, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None })];
+        entries.extend((1..=7).map(|b| entry(b, storage(true))));
+        entries.extend([8, 11, 12, 13].map(|b| entry(b, atlas)));
+        entries.extend([9, 10].map(|b| entry(b, storage(false))));
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
+        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
+        let make = |entry: &str, multi: bool| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pl),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: wgpu::PipelineCompilationOptions { constants: &[("VPAK_MULTI_ATLAS", if multi { 1.0 } else { 0.0 })], ..Default::default() },
+                cache: None,
+            })
+        };
+        let single = (make("main", false), make("shadow_main", false));
+        let multi = (make("main", true), make("shadow_main", true));
+        Pipelines { layout, single, multi }
+    }
+}
+
+/// A device with the ray-marching pipelines.
 pub struct Renderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    /// (march, shadow) pipelines for one atlas, and for several.
-    single: (wgpu::ComputePipeline, wgpu::ComputePipeline),
-    multi: (wgpu::ComputePipeline, wgpu::ComputePipeline),
-    layout: wgpu::BindGroupLayout,
+    /// Atlases as textures (every format).
+    textures: Pipelines,
+    /// BC atlases as storage buffers, made on first use.
+    buffers: std::sync::OnceLock<Pipelines>,
     bc: bool,
+    decode: BcDecode,
     /// "name (backend, device type)".
     pub adapter: String,
+}
+
+/// A brick atlas on the GPU (a texture is kept alive with its view).
+enum Atlas {
+    Texture(#[allow(dead_code)] wgpu::Texture, wgpu::TextureView),
+    Buffer(wgpu::Buffer),
 }
 
 /// An asset uploaded for rendering.
 pub struct GpuAsset {
     buffers: Vec<wgpu::Buffer>,
-    views: Vec<wgpu::TextureView>,
-    _textures: Vec<wgpu::Texture>,
+    atlases: Vec<Atlas>,
     frames: Vec<u32>,
-    atlases: usize,
+    atlas_count: usize,
     format: u32,
     background: f32,
     atlas_bricks: [u32; 4],
+}
+
+impl GpuAsset {
+    /// True when BC bricks are decoded by the shader rather than the texture unit.
+    pub fn decodes_in_shader(&self) -> bool {
+        matches!(self.atlases.first(), Some(Atlas::Buffer(_)))
+    }
 }
 
 fn storage(kind: bool) -> wgpu::BindingType {
@@ -74,44 +162,18 @@ impl Renderer {
             trace: wgpu::Trace::Off,
         }))
         .map_err(|e| Error::Device(e.to_string()))?;
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("march"), source: wgpu::ShaderSource::Wgsl(SHADER.into()) });
-        let mut entries = vec![wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
-            count: None,
-        }];
-        for b in 1..=7 {
-            entries.push(wgpu::BindGroupLayoutEntry { binding: b, visibility: wgpu::ShaderStages::COMPUTE, ty: storage(true), count: None });
-        }
-        entries.push(wgpu::BindGroupLayoutEntry {
-            binding: 8,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D3, multisampled: false },
-            count: None,
-        });
-        entries.push(wgpu::BindGroupLayoutEntry { binding: 9, visibility: wgpu::ShaderStages::COMPUTE, ty: storage(false), count: None });
-        entries.push(wgpu::BindGroupLayoutEntry { binding: 10, visibility: wgpu::ShaderStages::COMPUTE, ty: storage(false), count: None });
-        for binding in 11..=13 {
-            let mut e = entries[8];
-            e.binding = binding;
-            entries.push(e);
-        }
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
-        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
-        let make = |entry: &str, multi: bool| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pl),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: wgpu::PipelineCompilationOptions { constants: &[("VPAK_MULTI_ATLAS", if multi { 1.0 } else { 0.0 })], ..Default::default() },
-                cache: None,
-            })
-        };
-        let single = (make("main", false), make("shadow_main", false));
-        let multi = (make("main", true), make("shadow_main", true));
-        Ok(Renderer { device, queue, single, multi, layout, bc, adapter: adapter_name })
+        let textures = Pipelines::new(&device, TEXTURE_SHADER, wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D3, multisampled: false });
+        Ok(Renderer { device, queue, textures, buffers: std::sync::OnceLock::new(), bc, decode: BcDecode::Auto, adapter: adapter_name })
+    }
+
+    /// Chooses where BC4/BC7 bricks of assets uploaded from now on are decoded.
+    pub fn with_bc_decode(mut self, decode: BcDecode) -> Renderer {
+        self.decode = decode;
+        self
+    }
+
+    fn buffer_pipelines(&self) -> &Pipelines {
+        self.buffers.get_or_init(|| Pipelines::new(&self.device, BUFFER_SHADER, storage(true)))
     }
 
     /// Whether BC4/BC7 3D textures can be sampled.
@@ -119,10 +181,19 @@ impl Renderer {
         self.bc
     }
 
-    /// Uploads an asset's node arrays, brick ranges and atlas.
+    /// Uploads an asset's node arrays, brick ranges and atlases.
     pub fn upload(&self, asset: &Asset) -> Result<GpuAsset, Error> {
         let d = AssetData::new(asset)?;
         let limit = u64::from(self.device.limits().max_storage_buffer_binding_size);
+        let buffer = |what: &'static str, data: &[u8]| -> Result<wgpu::Buffer, Error> {
+            if data.len() as u64 > limit {
+                return Err(Error::TooLarge { what, bytes: data.len() as u64, limit });
+            }
+            // Bindings may not be empty: pad to 16 bytes.
+            let mut bytes = data.to_vec();
+            bytes.resize(bytes.len().max(16).next_multiple_of(4), 0);
+            Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: &bytes, usage: wgpu::BufferUsages::STORAGE }))
+        };
         let mut buffers = Vec::new();
         for (what, data) in [
             ("l1 nodes", bytemuck::cast_slice::<u32, u8>(d.l1)),
@@ -133,13 +204,7 @@ impl Renderer {
             ("tiles", bytemuck::cast_slice(d.tiles)),
             ("brick ranges", bytemuck::cast_slice(d.ranges)),
         ] {
-            if data.len() as u64 > limit {
-                return Err(Error::TooLarge { what, bytes: data.len() as u64, limit });
-            }
-            // Bindings may not be empty: pad to 16 bytes.
-            let mut bytes = data.to_vec();
-            bytes.resize(bytes.len().max(16).next_multiple_of(4), 0);
-            buffers.push(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: &bytes, usage: wgpu::BufferUsages::STORAGE }));
+            buffers.push(buffer(what, data)?);
         }
         let (tex_format, block) = match d.format {
             0 => (wgpu::TextureFormat::R32Float, None),
@@ -148,51 +213,60 @@ impl Renderer {
             3 => (wgpu::TextureFormat::Bc4RUnorm, Some(8u32)),
             _ => (wgpu::TextureFormat::Bc7RgbaUnorm, Some(16u32)),
         };
-        if block.is_some() && !self.bc {
-            return Err(Error::Unsupported { adapter: self.adapter.clone(), format: d.meta.format.clone(), feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D" });
-        }
-        let max_dim = self.device.limits().max_texture_dimension_3d;
-        if let Some(a) = d.meta.atlases.iter().find(|a| a.texels.iter().any(|&t| t > max_dim)) {
-            return Err(Error::Texture { size: a.texels, limit: max_dim });
-        }
-        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // Every atlas slot is bound; unused ones get a small empty texture.
-        let empty_size = [8, 8, if d.format == 4 { 2 } else { 8 }];
-        let mut textures = Vec::with_capacity(crate::MAX_ATLASES);
-        for slot in 0..crate::MAX_ATLASES {
-            let (size, data): ([u32; 3], &[u8]) = match (d.meta.atlases.get(slot), d.atlases.get(slot)) {
-                (Some(a), Some(bytes)) => (a.texels, bytes),
-                _ => (empty_size, &[]),
-            };
-            let texture = self.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("atlas"),
-                size: wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format: tex_format,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            });
-            let (row, rows) = match block {
-                Some(bb) => (size[0] / 4 * bb, size[1] / 4),
-                None => (size[0] * tex_format.block_copy_size(None).unwrap_or(4), size[1]),
-            };
-            if !data.is_empty() {
-                self.queue.write_texture(
-                    wgpu::TexelCopyTextureInfo { texture: &texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
-                    data,
-                    wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(rows) },
-                    wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
-                );
+        let in_shader = self.decode.in_shader(block.is_some(), self.bc).ok_or_else(|| Error::Unsupported {
+            adapter: self.adapter.clone(),
+            format: d.meta.format.clone(),
+            feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D (use --bc-decode shader or auto)",
+        })?;
+        let mut atlases = Vec::with_capacity(crate::MAX_ATLASES);
+        if in_shader {
+            // Every atlas slot is bound; unused ones get a small empty buffer.
+            for slot in 0..crate::MAX_ATLASES {
+                atlases.push(Atlas::Buffer(buffer("brick atlas", d.atlases.get(slot).copied().unwrap_or(&[]))?));
             }
-            textures.push(texture);
+        } else {
+            let max_dim = self.device.limits().max_texture_dimension_3d;
+            if let Some(a) = d.meta.atlases.iter().find(|a| a.texels.iter().any(|&t| t > max_dim)) {
+                return Err(Error::Texture { size: a.texels, limit: max_dim });
+            }
+            let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+            // Every atlas slot is bound; unused ones get a small empty texture.
+            let empty_size = [8, 8, if d.format == 4 { 2 } else { 8 }];
+            for slot in 0..crate::MAX_ATLASES {
+                let (size, data): ([u32; 3], &[u8]) = match (d.meta.atlases.get(slot), d.atlases.get(slot)) {
+                    (Some(a), Some(bytes)) => (a.texels, bytes),
+                    _ => (empty_size, &[]),
+                };
+                let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("atlas"),
+                    size: wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D3,
+                    format: tex_format,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
+                });
+                let (row, rows) = match block {
+                    Some(bb) => (size[0] / 4 * bb, size[1] / 4),
+                    None => (size[0] * tex_format.block_copy_size(None).unwrap_or(4), size[1]),
+                };
+                if !data.is_empty() {
+                    self.queue.write_texture(
+                        wgpu::TexelCopyTextureInfo { texture: &texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
+                        data,
+                        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(rows) },
+                        wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
+                    );
+                }
+                let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+                atlases.push(Atlas::Texture(texture, view));
+            }
+            if let Some(e) = pollster::block_on(scope.pop()) {
+                return Err(Error::Gpu(e.to_string()));
+            }
         }
-        let views = textures.iter().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default())).collect();
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(Error::Gpu(e.to_string()));
-        }
-        Ok(GpuAsset { buffers, views, _textures: textures, frames: d.frames.to_vec(), atlases: d.meta.atlases.len(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks() })
+        Ok(GpuAsset { buffers, atlases, frames: d.frames.to_vec(), atlas_count: d.meta.atlases.len(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks() })
     }
 
     /// Renders frame `frame` of `asset` from `view`.
@@ -230,6 +304,7 @@ impl Renderer {
         let shadow = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("shadow"), size: cells * 4, usage: wgpu::BufferUsages::STORAGE, mapped_at_creation: false });
         let bytes = u64::from(width) * u64::from(height) * 4;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let pipelines = if asset.decodes_in_shader() { self.buffer_pipelines() } else { &self.textures };
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("march") });
         let mut reads = Vec::with_capacity(views.len());
         for (i, view) in views.iter().enumerate() {
@@ -240,16 +315,20 @@ impl Renderer {
             for (b, buf) in asset.buffers.iter().enumerate() {
                 entries.push(wgpu::BindGroupEntry { binding: b as u32 + 1, resource: buf.as_entire_binding() });
             }
-            for (k, v) in asset.views.iter().enumerate() {
-                entries.push(wgpu::BindGroupEntry { binding: if k == 0 { 8 } else { 10 + k as u32 }, resource: wgpu::BindingResource::TextureView(v) });
+            for (k, atlas) in asset.atlases.iter().enumerate() {
+                let resource = match atlas {
+                    Atlas::Texture(_, view) => wgpu::BindingResource::TextureView(view),
+                    Atlas::Buffer(b) => b.as_entire_binding(),
+                };
+                entries.push(wgpu::BindGroupEntry { binding: if k == 0 { 8 } else { 10 + k as u32 }, resource });
             }
             entries.push(wgpu::BindGroupEntry { binding: 9, resource: out.as_entire_binding() });
             entries.push(wgpu::BindGroupEntry { binding: 10, resource: shadow.as_entire_binding() });
-            let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("vpak"), layout: &self.layout, entries: &entries });
+            let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("vpak"), layout: &pipelines.layout, entries: &entries });
             {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("march"), timestamp_writes: None });
                 pass.set_bind_group(0, &group, &[]);
-                let (march, shadow_pipeline) = if asset.atlases > 1 { &self.multi } else { &self.single };
+                let (march, shadow_pipeline) = if asset.atlas_count > 1 { &pipelines.multi } else { &pipelines.single };
                 if i == 0 {
                     pass.set_pipeline(shadow_pipeline);
                     pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);
@@ -286,5 +365,27 @@ impl Renderer {
             images.push(Image { width, height, pixels });
         }
         Ok(images)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::BcDecode;
+
+    #[test]
+    fn bc_decode_falls_back_to_the_shader_only_where_it_must() {
+        // Uncompressed formats always use textures.
+        for d in [BcDecode::Auto, BcDecode::Texture, BcDecode::Shader] {
+            for bc in [false, true] {
+                assert_eq!(d.in_shader(false, bc), Some(false));
+            }
+        }
+        assert_eq!(BcDecode::Auto.in_shader(true, true), Some(false));
+        assert_eq!(BcDecode::Auto.in_shader(true, false), Some(true));
+        assert_eq!(BcDecode::Shader.in_shader(true, true), Some(true));
+        assert_eq!(BcDecode::Texture.in_shader(true, true), Some(false));
+        assert_eq!(BcDecode::Texture.in_shader(true, false), None);
+        assert_eq!(BcDecode::parse("shader"), Some(BcDecode::Shader));
+        assert_eq!(BcDecode::parse("gpu"), None);
     }
 }

@@ -3,7 +3,9 @@
 //! source), image metrics, and a CPU twin of the same march for tests.
 //!
 //! The WGSL lives in the top-level `shaders/` folder: `vpak.wgsl` samples an
-//! asset (the library an engine can include), `march.wgsl` is the marcher.
+//! asset (the library an engine can include) with `vpak_atlas_texture.wgsl`,
+//! or with `vpak_atlas_buffer.wgsl` and `bcdec.wgsl` where BC bricks are
+//! decoded in the shader; `march.wgsl` is the marcher.
 
 mod cpu;
 mod gpu;
@@ -11,7 +13,7 @@ pub mod report;
 
 
 pub use cpu::render_cpu;
-pub use gpu::{shader_source, GpuAsset, Renderer};
+pub use gpu::{shader_sources, BcDecode, GpuAsset, Renderer};
 
 use vdbcook_vpak::{kind, Asset, Metadata};
 

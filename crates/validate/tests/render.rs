@@ -5,7 +5,7 @@
 
 use std::path::Path;
 use vdbcook_cook::{CookOptions, Cooker, Format, NoProgress};
-use vdbcook_validate::{compare, render_cpu, Renderer, Scene};
+use vdbcook_validate::{compare, render_cpu, BcDecode, Renderer, Scene};
 use vdbcook_vpak::Asset;
 
 fn cook(files: &[&str], format: Format) -> Vec<u8> {
@@ -35,8 +35,10 @@ fn renderer() -> Option<Renderer> {
 
 #[test]
 fn wgsl_parses_and_validates() {
-    let module = naga::front::wgsl::parse_str(vdbcook_validate::shader_source()).expect("WGSL parses");
-    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all()).validate(&module).expect("WGSL validates");
+    for source in vdbcook_validate::shader_sources() {
+        let module = naga::front::wgsl::parse_str(source).expect("WGSL parses");
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all()).validate(&module).expect("WGSL validates");
+    }
 }
 
 const SEQ: [&str; 2] = ["fixtures/smoke_seq/smoke_0001.vdb", "fixtures/smoke_seq/smoke_0004.vdb"];
@@ -130,4 +132,40 @@ fn several_atlases_render_like_one() {
     }
     let many = Asset::from_bytes(&cook_dim(&SEQ, Format::F32, 16)).unwrap();
     assert!(matches!(r.upload(&many), Err(vdbcook_validate::Error::Atlases(_))));
+}
+
+#[test]
+fn bc_bricks_decoded_in_the_shader_render_like_the_texture_unit() {
+    let Some(r) = renderer() else { return };
+    let soft = Renderer::new(None).unwrap().with_bc_decode(BcDecode::Shader);
+    let reference = Asset::from_bytes(&cook(&SEQ, Format::F32)).unwrap();
+    let scene = Scene::for_asset(&reference.metadata().unwrap());
+    let views = scene.orbit(3);
+    let ref_gpu = r.upload(&reference).unwrap();
+    for (format, dim) in [(Format::Bc4, 2048), (Format::Bc7, 2048), (Format::Bc4, 32), (Format::Bc7, 20)] {
+        let bytes = cook_dim(&SEQ, format, dim);
+        let asset = Asset::from_bytes(&bytes).unwrap();
+        let in_shader = soft.upload(&asset).unwrap();
+        assert!(in_shader.decodes_in_shader());
+        for (i, view) in views.iter().enumerate() {
+            let frame = i % 2;
+            let s = soft.render(&in_shader, &scene, frame, view, 48, 40).unwrap();
+            let lossless = r.render(&ref_gpu, &scene, frame, view, 48, 40).unwrap();
+            let e = compare(&lossless, &s).rmse;
+            assert!(e > 0.0 && e < 0.2, "{format:?} (max dim {dim}) view {i}: RMSE {e} against the lossless render");
+            if r.has_bc() {
+                let hw = r.upload(&asset).unwrap();
+                assert!(!hw.decodes_in_shader());
+                let t = r.render(&hw, &scene, frame, view, 48, 40).unwrap();
+                let m = compare(&t, &s);
+                // BC7 decodes to exact 8-bit values everywhere. A texture unit may
+                // round BC4's interpolated values to 8 bits (lavapipe does); the
+                // shader keeps them in float, as the CPU decoder of the cook report.
+                let (max, rmse) = if format == Format::Bc7 { (1e-6, 1e-7) } else { (2e-3, 2e-4) };
+                assert!(m.max_error <= max && m.rmse <= rmse, "{format:?} (max dim {dim}) view {i}: shader decode differs from the texture unit: {m:?}");
+            }
+        }
+    }
+    // Uncompressed formats never go through the decoder.
+    assert!(!soft.upload(&reference).unwrap().decodes_in_shader());
 }
