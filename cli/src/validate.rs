@@ -59,8 +59,8 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "NAME")]
     pub adapter: Option<String>,
     /// Where BC4/BC7 bricks are decoded: "texture" (the GPU's texture unit), "shader"
-    /// (raw blocks decoded in WGSL, for GPUs without BC 3D textures), or "auto"
-    /// (the texture unit when the adapter supports it).
+    /// (raw blocks decoded in WGSL), or "auto": the texture unit of a GPU with BC 3D
+    /// textures, the shader on other adapters and on CPU drivers (faster there).
     #[arg(long, value_name = "WHERE", default_value = "auto", value_parser = parse_bc_decode)]
     pub bc_decode: BcDecode,
     /// Print the report as JSON on stdout.
@@ -318,8 +318,8 @@ pub struct RenderArgs {
     #[arg(long, value_name = "NAME")]
     pub adapter: Option<String>,
     /// Where BC4/BC7 bricks are decoded: "texture" (the GPU's texture unit), "shader"
-    /// (raw blocks decoded in WGSL, for GPUs without BC 3D textures), or "auto"
-    /// (the texture unit when the adapter supports it).
+    /// (raw blocks decoded in WGSL), or "auto": the texture unit of a GPU with BC 3D
+    /// textures, the shader on other adapters and on CPU drivers (faster there).
     #[arg(long, value_name = "WHERE", default_value = "auto", value_parser = parse_bc_decode)]
     pub bc_decode: BcDecode,
     /// Replace OUT if it exists.

@@ -23,7 +23,9 @@ pub fn shader_sources() -> [&'static str; 2] {
 /// Where BC4/BC7 bricks are decoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum BcDecode {
-    /// The texture unit when the adapter can sample BC 3D textures, else the shader.
+    /// The texture unit of a GPU that can sample BC 3D textures; the shader on
+    /// other adapters and on CPU drivers (whose "texture unit" is software, and
+    /// several times slower than the shader for BC7).
     #[default]
     Auto,
     /// Block-compressed 3D textures, decoded by the texture unit.
@@ -32,18 +34,26 @@ pub enum BcDecode {
     Shader,
 }
 
+/// What an adapter offers for BC bricks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BcSupport {
+    /// TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D.
+    pub textures: bool,
+    /// The adapter is a CPU driver (lavapipe, SwiftShader, WARP).
+    pub cpu: bool,
+}
+
 impl BcDecode {
     /// Whether bricks are decoded in the shader, for a block-compressed format
-    /// or not, on an adapter that can sample BC 3D textures or not; `None`
-    /// when the texture unit is asked for and cannot do it.
-    pub fn in_shader(self, block_compressed: bool, adapter_has_bc: bool) -> Option<bool> {
+    /// or not; `None` when the texture unit is asked for and cannot do it.
+    pub fn in_shader(self, block_compressed: bool, adapter: BcSupport) -> Option<bool> {
         if !block_compressed {
             return Some(false);
         }
         match self {
-            BcDecode::Auto => Some(!adapter_has_bc),
+            BcDecode::Auto => Some(!adapter.textures || adapter.cpu),
             BcDecode::Shader => Some(true),
-            BcDecode::Texture => adapter_has_bc.then_some(false),
+            BcDecode::Texture => adapter.textures.then_some(false),
         }
     }
 
@@ -98,7 +108,7 @@ pub struct Renderer {
     textures: Pipelines,
     /// BC atlases as storage buffers, made on first use.
     buffers: std::sync::OnceLock<Pipelines>,
-    bc: bool,
+    bc: BcSupport,
     decode: BcDecode,
     /// "name (backend, device type)".
     pub adapter: String,
@@ -151,11 +161,11 @@ impl Renderer {
         let info = adapter.get_info();
         let adapter_name = format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
         let want = wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D;
-        let bc = adapter.features().contains(want);
+        let bc = BcSupport { textures: adapter.features().contains(want), cpu: info.device_type == wgpu::DeviceType::Cpu };
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("vdbcook"),
-            required_features: if bc { want } else { wgpu::Features::empty() },
+            required_features: if bc.textures { want } else { wgpu::Features::empty() },
             required_limits: limits,
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -178,7 +188,7 @@ impl Renderer {
 
     /// Whether BC4/BC7 3D textures can be sampled.
     pub fn has_bc(&self) -> bool {
-        self.bc
+        self.bc.textures
     }
 
     /// Uploads an asset's node arrays, brick ranges and atlases.
@@ -370,21 +380,26 @@ impl Renderer {
 
 #[cfg(test)]
 mod tests {
-    use super::BcDecode;
+    use super::{BcDecode, BcSupport};
 
     #[test]
     fn bc_decode_falls_back_to_the_shader_only_where_it_must() {
+        let gpu = BcSupport { textures: true, cpu: false };
+        let no_bc = BcSupport { textures: false, cpu: false };
+        let cpu = BcSupport { textures: true, cpu: true };
         // Uncompressed formats always use textures.
         for d in [BcDecode::Auto, BcDecode::Texture, BcDecode::Shader] {
-            for bc in [false, true] {
-                assert_eq!(d.in_shader(false, bc), Some(false));
+            for a in [gpu, no_bc, cpu] {
+                assert_eq!(d.in_shader(false, a), Some(false));
             }
         }
-        assert_eq!(BcDecode::Auto.in_shader(true, true), Some(false));
-        assert_eq!(BcDecode::Auto.in_shader(true, false), Some(true));
-        assert_eq!(BcDecode::Shader.in_shader(true, true), Some(true));
-        assert_eq!(BcDecode::Texture.in_shader(true, true), Some(false));
-        assert_eq!(BcDecode::Texture.in_shader(true, false), None);
+        assert_eq!(BcDecode::Auto.in_shader(true, gpu), Some(false));
+        assert_eq!(BcDecode::Auto.in_shader(true, no_bc), Some(true));
+        assert_eq!(BcDecode::Auto.in_shader(true, cpu), Some(true));
+        assert_eq!(BcDecode::Shader.in_shader(true, gpu), Some(true));
+        assert_eq!(BcDecode::Texture.in_shader(true, gpu), Some(false));
+        assert_eq!(BcDecode::Texture.in_shader(true, cpu), Some(false));
+        assert_eq!(BcDecode::Texture.in_shader(true, no_bc), None);
         assert_eq!(BcDecode::parse("shader"), Some(BcDecode::Shader));
         assert_eq!(BcDecode::parse("gpu"), None);
     }
