@@ -145,3 +145,47 @@ fn cook_validate_adds_the_validation() {
     assert_eq!(v["validation"]["images"].as_array().unwrap().len(), 8);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Keys in the first column of the tables under each `## ` heading of a doc.
+fn documented_keys(doc: &str) -> Vec<(String, Vec<String>)> {
+    let mut out: Vec<(String, Vec<String>)> = Vec::new();
+    for line in doc.lines() {
+        if let Some(h) = line.strip_prefix("## ") {
+            out.push((h.to_string(), Vec::new()));
+        } else if let (Some(first), Some((_, keys))) = (line.strip_prefix("| `").map(|l| l.split(" | ").next().unwrap_or("")), out.last_mut()) {
+            keys.extend(format!("`{first}").split('`').skip(1).step_by(2).map(str::to_string));
+        }
+    }
+    out
+}
+
+#[test]
+fn the_json_follows_the_documented_schema() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = scratch("schema");
+    let (code, v, err) = validate_json(&cook(&dir, "unorm8"), &[]);
+    assert_eq!(code, Some(0), "{err}");
+    let doc = std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/validate-json.md")).unwrap();
+    let sections = documented_keys(&doc);
+    let keys = |name: &str| sections.iter().find(|(h, _)| h.starts_with(name)).map(|(_, k)| k.clone()).unwrap_or_else(|| panic!("no section {name}"));
+    let top = keys("Top level");
+    assert!(top.len() >= 12, "{top:?}");
+    for k in &top {
+        assert!(v.get(k).is_some(), "documented key {k} is missing: {v}");
+    }
+    for k in v.as_object().unwrap().keys() {
+        assert!(top.contains(k), "key {k} is not documented");
+    }
+    for img in v["images"].as_array().unwrap() {
+        for k in keys("Image entries") {
+            assert!(img.get(&k).is_some(), "{k} missing in {img}");
+        }
+    }
+    for k in keys("Voxel figures") {
+        assert!(v["voxel"].get(&k).is_some(), "{k} missing in {}", v["voxel"]);
+    }
+    assert!(["texture", "shader"].contains(&v["bc_decode"].as_str().unwrap()));
+    let _ = std::fs::remove_dir_all(&dir);
+}
