@@ -72,6 +72,7 @@ def bench(src, runs):
     bc7_views = {}
     for where in ("texture", "shader"):
         t = best([EXE, "validate", "-q", bc7, "--source", src, "--views", "8", "--size", "512x512", "--bc-decode", where], runs)
+        # An estimate: the f16 run's fixed part and reference images are taken off.
         bc7_views[where] = t - fixed - 8 * per_image
     render = ["vdb_render", src, ppm, "-res", "512x512", "-cpus", "2"]
     default = best(render, runs)

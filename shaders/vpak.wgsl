@@ -34,9 +34,13 @@ struct VpakInfo {
     format: u32,
     background: f32,
     _pad: u32,
-    // Size in bricks (x, y, z) of every atlas but possibly the last (which
-    // shares x and y), and the bricks each holds (x·y·z).
+    // Size in bricks (x, y, z) of every atlas but possibly the last, and the
+    // bricks each holds (x·y·z). Brick positions in every atlas follow this
+    // shape; the last atlas may be smaller but holds every position used.
     atlas_bricks: vec4<u32>,
+    // The last atlas: its number, and its own size in bricks along x and y
+    // (the stride of its rows and slices, for vpak_atlas_buffer.wgsl).
+    last_atlas: vec4<u32>,
 }
 
 @group(0) @binding(1) var<storage, read> vpak_l1: array<u32>;

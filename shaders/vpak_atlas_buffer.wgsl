@@ -26,9 +26,13 @@ fn vpak_block_word(atlas: u32, i: u32) -> u32 {
 // Texel `t` of atlas `atlas`, as textureLoad on the BC texture returns it.
 fn vpak_texel(info: VpakInfo, atlas: u32, t: vec3<i32>) -> vec4<f32> {
     let u = vec3<u32>(t);
-    // Blocks per row and per slice of the atlas (8×8 texels a brick).
-    let row = info.atlas_bricks.x * 2u;
-    let slice = row * info.atlas_bricks.y * 2u;
+    // Blocks per row and per slice of this atlas (8×8 texels a brick).
+    var size = info.atlas_bricks.xy;
+    if (atlas == info.last_atlas.x) {
+        size = info.last_atlas.yz;
+    }
+    let row = size.x * 2u;
+    let slice = row * size.y * 2u;
     let block = u.z * slice + (u.y >> 2u) * row + (u.x >> 2u);
     let texel = ((u.y & 3u) << 2u) | (u.x & 3u);
     if (info.format == VPAK_BC7) {

@@ -246,8 +246,7 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
             max_rmse: args.max_rmse,
             min_psnr: args.min_psnr,
             report: None,
-            adapter: None,
-            bc_decode: Default::default(),
+            gpu: Default::default(),
             json: args.json,
         };
         Some(crate::validate::evaluate(v, quiet)?)

@@ -55,21 +55,43 @@ pub struct ValidateArgs {
     /// Write report.json, PNGs and report.html into DIR.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
-    /// Use the first GPU adapter whose name contains NAME (e.g. "llvmpipe").
-    #[arg(long, value_name = "NAME")]
-    pub adapter: Option<String>,
-    /// Where BC4/BC7 bricks are decoded: "texture" (the GPU's texture unit), "shader"
-    /// (raw blocks decoded in WGSL), or "auto": the texture unit of a GPU with BC 3D
-    /// textures, the shader on other adapters and on CPU drivers (faster there).
-    #[arg(long, value_name = "WHERE", default_value = "auto", value_parser = parse_bc_decode)]
-    pub bc_decode: BcDecode,
+    #[command(flatten)]
+    pub gpu: GpuArgs,
     /// Print the report as JSON on stdout.
     #[arg(long)]
     pub json: bool,
 }
 
-fn parse_bc_decode(s: &str) -> Result<BcDecode, String> {
-    BcDecode::parse(s).ok_or_else(|| format!("invalid value \"{s}\" (expected auto, texture or shader)"))
+/// The GPU options of `validate` and `render`.
+#[derive(clap::Args, Clone, Default)]
+pub struct GpuArgs {
+    /// Use the first GPU adapter whose name contains NAME (e.g. "llvmpipe").
+    #[arg(long, value_name = "NAME")]
+    pub adapter: Option<String>,
+    /// Where BC4/BC7 bricks are decoded: the GPU's texture unit, the shader (raw blocks
+    /// decoded in WGSL), or auto: the texture unit of a GPU with BC 3D textures, the
+    /// shader on other adapters and on CPU drivers (faster there).
+    #[arg(long, value_name = "WHERE", value_enum, default_value_t = BcDecodeArg::Auto)]
+    pub bc_decode: BcDecodeArg,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Default)]
+pub enum BcDecodeArg {
+    #[default]
+    Auto,
+    Texture,
+    Shader,
+}
+
+impl GpuArgs {
+    pub fn renderer(&self) -> Result<Renderer> {
+        let decode = match self.bc_decode {
+            BcDecodeArg::Auto => BcDecode::Auto,
+            BcDecodeArg::Texture => BcDecode::Texture,
+            BcDecodeArg::Shader => BcDecode::Shader,
+        };
+        Ok(Renderer::new(self.adapter.as_deref())?.with_bc_decode(decode))
+    }
 }
 
 pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -157,7 +179,7 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     if let Some(&bad) = frames.iter().find(|&&f| f >= meta.frame_count as usize) {
         return Err(Usage(format!("--frames: frame {bad} is out of range (the asset has {} frames, numbered from 0)", meta.frame_count)).into());
     }
-    let renderer = Renderer::new(args.adapter.as_deref())?.with_bc_decode(args.bc_decode);
+    let renderer = args.gpu.renderer()?;
     let gpu_asset = renderer.upload(&asset).with_context(|| name.clone())?;
     let gpu_ref = renderer.upload(&reference).context("reference")?;
     let scene = Scene::for_asset(&ref_meta);
@@ -314,14 +336,8 @@ pub struct RenderArgs {
     /// Grid of a .vdb input (default: "density", else the first float grid).
     #[arg(long, value_name = "NAME")]
     pub grid: Option<String>,
-    /// Use the first GPU adapter whose name contains NAME.
-    #[arg(long, value_name = "NAME")]
-    pub adapter: Option<String>,
-    /// Where BC4/BC7 bricks are decoded: "texture" (the GPU's texture unit), "shader"
-    /// (raw blocks decoded in WGSL), or "auto": the texture unit of a GPU with BC 3D
-    /// textures, the shader on other adapters and on CPU drivers (faster there).
-    #[arg(long, value_name = "WHERE", default_value = "auto", value_parser = parse_bc_decode)]
-    pub bc_decode: BcDecode,
+    #[command(flatten)]
+    pub gpu: GpuArgs,
     /// Replace OUT if it exists.
     #[arg(long)]
     pub force: bool,
@@ -342,7 +358,7 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     if args.frame >= meta.frame_count as usize {
         return Err(anyhow!("{name}: frame {} is out of range (it has {} frames, numbered from 0)", args.frame, meta.frame_count));
     }
-    let renderer = Renderer::new(args.adapter.as_deref())?.with_bc_decode(args.bc_decode);
+    let renderer = args.gpu.renderer()?;
     let gpu = renderer.upload(&asset).with_context(|| name.clone())?;
     let scene = Scene::for_asset(&meta);
     let view = scene.orbit(args.views as usize)[args.view as usize];

@@ -78,19 +78,24 @@ fn bc_decoded_in_the_shader_reports_what_the_texture_unit_does() {
     }
     let dir = scratch("bc-decode");
     let bc7 = cook(&dir, "bc7");
-    let (code, texture, err) = validate_json(&bc7, &["--bc-decode", "texture"]);
-    assert_eq!(code, Some(0), "{err}");
-    assert_eq!(texture["bc_decode"], "texture");
     let (code, shader, err) = validate_json(&bc7, &["--bc-decode", "shader"]);
     assert_eq!(code, Some(0), "{err}");
     assert_eq!(shader["bc_decode"], "shader");
-    for (a, b) in texture["images"].as_array().unwrap().iter().zip(shader["images"].as_array().unwrap()) {
-        let (a, b) = (a["rmse"].as_f64().unwrap(), b["rmse"].as_f64().unwrap());
-        assert!(a > 0.0 && (a - b).abs() <= 1e-6 * a.max(1e-3), "texture {a} vs shader {b}");
+    let (code, texture, err) = validate_json(&bc7, &["--bc-decode", "texture"]);
+    if err.contains("TEXTURE_COMPRESSION_BC") {
+        // An adapter without BC 3D textures: a clear error, and nothing to compare.
+        assert_eq!(code, Some(1), "{err}");
+    } else {
+        assert_eq!(code, Some(0), "{err}");
+        assert_eq!(texture["bc_decode"], "texture");
+        for (a, b) in texture["images"].as_array().unwrap().iter().zip(shader["images"].as_array().unwrap()) {
+            let (a, b) = (a["rmse"].as_f64().unwrap(), b["rmse"].as_f64().unwrap());
+            assert!(a > 0.0 && (a - b).abs() <= 1e-6 * a.max(1e-3), "texture {a} vs shader {b}");
+        }
     }
     let (code, _, err) = validate_json(&bc7, &["--bc-decode", "cpu"]);
     assert_eq!(code, Some(2));
-    assert!(err.contains("expected auto, texture or shader"), "{err}");
+    assert!(err.contains("[possible values: auto, texture, shader]"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

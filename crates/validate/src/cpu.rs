@@ -1,5 +1,6 @@
-//! The same march on the CPU (uncompressed formats), to check the GPU path:
-//! every step mirrors `shaders/vpak.wgsl` and `shaders/march.wgsl`.
+//! The same march on the CPU, to check the GPU path: every step mirrors
+//! `shaders/vpak.wgsl` and `shaders/march.wgsl`; BC4/BC7 blocks are decoded by
+//! bcdec_rs (BC4 in float, as `shaders/bcdec.wgsl`).
 
 use crate::{AssetData, Error, Image, Scene, View};
 use vdbcook_vpak::Asset;
@@ -27,11 +28,28 @@ impl Sampler<'_> {
         f32::from_bits(self.d.tiles.get(((e & 0x7fff_ffff) * 2) as usize).copied().unwrap_or(0))
     }
 
-    fn texel(&self, atlas: u32, x: u32, y: u32, z: u32) -> f32 {
+    /// Channel `c` of texel (x, y, z) of an atlas, as textureLoad returns it.
+    fn texel(&self, atlas: u32, [x, y, z]: [u32; 3], c: usize) -> f32 {
         let Some(info) = self.d.meta.atlases.get(atlas as usize) else { return 0.0 };
-        let [w, h, _] = info.texels;
-        let i = ((z as usize * h as usize + y as usize) * w as usize) + x as usize;
+        let [w, h, _] = info.texels.map(|t| t as usize);
+        let (x, y, z) = (x as usize, y as usize, z as usize);
         let a = self.d.atlases.get(atlas as usize).copied().unwrap_or(&[]);
+        if self.d.format >= 3 {
+            let bb = if self.d.format == 3 { 8 } else { 16 };
+            let at = ((z * (h / 4) + y / 4) * (w / 4) + x / 4) * bb;
+            let Some(block) = a.get(at..at + bb) else { return 0.0 };
+            let t = (y & 3) * 4 + (x & 3);
+            return if self.d.format == 3 {
+                let mut r = [0.0f32; 16];
+                bcdec_rs::bc4_float(block, &mut r, 4, false);
+                r[t]
+            } else {
+                let mut rgba = [0u8; 64];
+                bcdec_rs::bc7(block, &mut rgba, 16);
+                f32::from(rgba[t * 4 + c]) / 255.0
+            };
+        }
+        let i = (z * h + y) * w + x;
         match self.d.format {
             0 => a.get(i * 4..i * 4 + 4).map_or(0.0, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
             1 => a.get(i * 2..i * 2 + 2).map_or(0.0, |b| half_to_f32(u16::from_le_bytes([b[0], b[1]]))),
@@ -70,7 +88,12 @@ impl Sampler<'_> {
         let (atlas, i) = (b64 / per.max(1), b64 % per.max(1));
         let pos = [i % bx.max(1), (i / bx.max(1)) % by.max(1), i / (bx * by).max(1)].map(|p| p as u32);
         let atlas = atlas as u32;
-        let t = self.texel(atlas, pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2] * 8 + v[2]);
+        // BC7 holds four z-slices of a brick in one texel's RGBA.
+        let t = if self.d.format == 4 {
+            self.texel(atlas, [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2] * 2 + v[2] / 4], (v[2] & 3) as usize)
+        } else {
+            self.texel(atlas, [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2] * 8 + v[2]], 0)
+        };
         if self.d.format <= 1 {
             return (t, 0);
         }
@@ -115,12 +138,9 @@ fn at(o: [f32; 3], d: [f32; 3], t: f32) -> [f32; 3] {
     [o[0] + d[0] * t, o[1] + d[1] * t, o[2] + d[2] * t]
 }
 
-/// Renders like the GPU path; BC formats are not decoded here.
+/// Renders like the GPU path.
 pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width: u32, height: u32) -> Result<Image, Error> {
     let d = AssetData::new(asset)?;
-    if d.format > 2 {
-        return Err(Error::Format(d.meta.format.clone()));
-    }
     let l1 = d.frame_l1(frame)?;
     let bricks = d.atlas_bricks();
     let skip = d.meta.background == 0.0;

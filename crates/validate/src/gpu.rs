@@ -45,27 +45,22 @@ pub struct BcSupport {
 
 impl BcDecode {
     /// Whether bricks are decoded in the shader, for a block-compressed format
-    /// or not; `None` when the texture unit is asked for and cannot do it.
-    pub fn in_shader(self, block_compressed: bool, adapter: BcSupport) -> Option<bool> {
+    /// or not, when the atlases fit the adapter's storage buffers or not;
+    /// `None` when the texture unit is asked for and cannot do it.
+    pub fn in_shader(self, block_compressed: bool, adapter: BcSupport, fits_buffers: bool) -> Option<bool> {
         if !block_compressed {
             return Some(false);
         }
         match self {
-            BcDecode::Auto => Some(!adapter.textures || adapter.cpu),
+            BcDecode::Auto => Some(!adapter.textures || (adapter.cpu && fits_buffers)),
             BcDecode::Shader => Some(true),
             BcDecode::Texture => adapter.textures.then_some(false),
         }
     }
-
-    pub fn parse(s: &str) -> Option<BcDecode> {
-        Some(match s {
-            "auto" => BcDecode::Auto,
-            "texture" => BcDecode::Texture,
-            "shader" => BcDecode::Shader,
-            _ => return None,
-        })
-    }
 }
+
+/// Bindings of atlases 0 to 3 (`vpak_atlas_texture.wgsl`, `vpak_atlas_buffer.wgsl`).
+const ATLAS_BINDINGS: [u32; crate::MAX_ATLASES] = [8, 11, 12, 13];
 
 /// The bind group layout and the (march, shadow) pipelines for one atlas and for several.
 struct Pipelines {
@@ -80,7 +75,7 @@ impl Pipelines {
         let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry { binding, visibility: wgpu::ShaderStages::COMPUTE, ty, count: None };
         let mut entries = vec![entry(0, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None })];
         entries.extend((1..=7).map(|b| entry(b, storage(true))));
-        entries.extend([8, 11, 12, 13].map(|b| entry(b, atlas)));
+        entries.extend(ATLAS_BINDINGS.map(|b| entry(b, atlas)));
         entries.extend([9, 10].map(|b| entry(b, storage(false))));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
@@ -129,6 +124,7 @@ pub struct GpuAsset {
     format: u32,
     background: f32,
     atlas_bricks: [u32; 4],
+    last_atlas: [u32; 4],
 }
 
 impl GpuAsset {
@@ -194,15 +190,34 @@ impl Renderer {
     /// Uploads an asset's node arrays, brick ranges and atlases.
     pub fn upload(&self, asset: &Asset) -> Result<GpuAsset, Error> {
         let d = AssetData::new(asset)?;
-        let limit = u64::from(self.device.limits().max_storage_buffer_binding_size);
+        let limits = self.device.limits();
+        let limit = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        // Out-of-memory and validation errors of the uploads come back here
+        // instead of reaching wgpu's default handler (which panics).
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let uploaded = self.upload_in_scope(&d, limit);
+        let errors = [pollster::block_on(scope.pop()), pollster::block_on(oom.pop())];
+        if let Some(e) = errors.into_iter().flatten().next() {
+            return Err(Error::Gpu(e.to_string()));
+        }
+        uploaded
+    }
+
+    fn upload_in_scope(&self, d: &AssetData, limit: u64) -> Result<GpuAsset, Error> {
         let buffer = |what: &'static str, data: &[u8]| -> Result<wgpu::Buffer, Error> {
             if data.len() as u64 > limit {
                 return Err(Error::TooLarge { what, bytes: data.len() as u64, limit });
             }
-            // Bindings may not be empty: pad to 16 bytes.
-            let mut bytes = data.to_vec();
-            bytes.resize(bytes.len().max(16).next_multiple_of(4), 0);
-            Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: &bytes, usage: wgpu::BufferUsages::STORAGE }))
+            // Bindings may not be empty and are whole words: pad when needed.
+            let contents: std::borrow::Cow<[u8]> = if data.len() >= 16 && data.len() % 4 == 0 {
+                data.into()
+            } else {
+                let mut v = data.to_vec();
+                v.resize(v.len().max(16).next_multiple_of(4), 0);
+                v.into()
+            };
+            Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: &contents, usage: wgpu::BufferUsages::STORAGE }))
         };
         let mut buffers = Vec::new();
         for (what, data) in [
@@ -223,23 +238,23 @@ impl Renderer {
             3 => (wgpu::TextureFormat::Bc4RUnorm, Some(8u32)),
             _ => (wgpu::TextureFormat::Bc7RgbaUnorm, Some(16u32)),
         };
-        let in_shader = self.decode.in_shader(block.is_some(), self.bc).ok_or_else(|| Error::Unsupported {
+        let fits_buffers = d.atlases.iter().all(|a| a.len() as u64 <= limit);
+        let in_shader = self.decode.in_shader(block.is_some(), self.bc, fits_buffers).ok_or_else(|| Error::Unsupported {
             adapter: self.adapter.clone(),
             format: d.meta.format.clone(),
-            feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D (use --bc-decode shader or auto)",
+            feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D (decode them in the shader instead)",
         })?;
         let mut atlases = Vec::with_capacity(crate::MAX_ATLASES);
         if in_shader {
             // Every atlas slot is bound; unused ones get a small empty buffer.
             for slot in 0..crate::MAX_ATLASES {
-                atlases.push(Atlas::Buffer(buffer("brick atlas", d.atlases.get(slot).copied().unwrap_or(&[]))?));
+                atlases.push(Atlas::Buffer(buffer("brick atlas (decoded in the shader; cook with a smaller --max-texture-dim)", d.atlases.get(slot).copied().unwrap_or(&[]))?));
             }
         } else {
             let max_dim = self.device.limits().max_texture_dimension_3d;
             if let Some(a) = d.meta.atlases.iter().find(|a| a.texels.iter().any(|&t| t > max_dim)) {
                 return Err(Error::Texture { size: a.texels, limit: max_dim });
             }
-            let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
             // Every atlas slot is bound; unused ones get a small empty texture.
             let empty_size = [8, 8, if d.format == 4 { 2 } else { 8 }];
             for slot in 0..crate::MAX_ATLASES {
@@ -272,11 +287,8 @@ impl Renderer {
                 let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
                 atlases.push(Atlas::Texture(texture, view));
             }
-            if let Some(e) = pollster::block_on(scope.pop()) {
-                return Err(Error::Gpu(e.to_string()));
-            }
         }
-        Ok(GpuAsset { buffers, atlases, frames: d.frames.to_vec(), atlas_count: d.meta.atlases.len(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks() })
+        Ok(GpuAsset { buffers, atlases, frames: d.frames.to_vec(), atlas_count: d.meta.atlases.len(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks(), last_atlas: d.last_atlas() })
     }
 
     /// Renders frame `frame` of `asset` from `view`.
@@ -288,9 +300,10 @@ impl Renderer {
     fn params(&self, asset: &GpuAsset, scene: &Scene, l1: u32, view: &View, width: u32, height: u32) -> wgpu::Buffer {
         let (r, u, f) = view.basis();
         let tf = (view.fov_deg.to_radians() * 0.5).tan();
-        let mut p: Vec<u32> = Vec::with_capacity(52);
+        let mut p: Vec<u32> = Vec::with_capacity(56);
         p.extend([l1, asset.format, asset.background.to_bits(), 0]);
         p.extend(asset.atlas_bricks);
+        p.extend(asset.last_atlas);
         let v4 = |p: &mut Vec<u32>, v: [f32; 3], w: f32| p.extend([v[0].to_bits(), v[1].to_bits(), v[2].to_bits(), w.to_bits()]);
         v4(&mut p, view.eye, 0.0);
         v4(&mut p, r, 0.0);
@@ -330,7 +343,7 @@ impl Renderer {
                     Atlas::Texture(_, view) => wgpu::BindingResource::TextureView(view),
                     Atlas::Buffer(b) => b.as_entire_binding(),
                 };
-                entries.push(wgpu::BindGroupEntry { binding: if k == 0 { 8 } else { 10 + k as u32 }, resource });
+                entries.push(wgpu::BindGroupEntry { binding: ATLAS_BINDINGS[k], resource });
             }
             entries.push(wgpu::BindGroupEntry { binding: 9, resource: out.as_entire_binding() });
             entries.push(wgpu::BindGroupEntry { binding: 10, resource: shadow.as_entire_binding() });
@@ -390,17 +403,19 @@ mod tests {
         // Uncompressed formats always use textures.
         for d in [BcDecode::Auto, BcDecode::Texture, BcDecode::Shader] {
             for a in [gpu, no_bc, cpu] {
-                assert_eq!(d.in_shader(false, a), Some(false));
+                assert_eq!(d.in_shader(false, a, true), Some(false));
             }
         }
-        assert_eq!(BcDecode::Auto.in_shader(true, gpu), Some(false));
-        assert_eq!(BcDecode::Auto.in_shader(true, no_bc), Some(true));
-        assert_eq!(BcDecode::Auto.in_shader(true, cpu), Some(true));
-        assert_eq!(BcDecode::Shader.in_shader(true, gpu), Some(true));
-        assert_eq!(BcDecode::Texture.in_shader(true, gpu), Some(false));
-        assert_eq!(BcDecode::Texture.in_shader(true, cpu), Some(false));
-        assert_eq!(BcDecode::Texture.in_shader(true, no_bc), None);
-        assert_eq!(BcDecode::parse("shader"), Some(BcDecode::Shader));
-        assert_eq!(BcDecode::parse("gpu"), None);
+        assert_eq!(BcDecode::Auto.in_shader(true, gpu, true), Some(false));
+        assert_eq!(BcDecode::Auto.in_shader(true, no_bc, true), Some(true));
+        assert_eq!(BcDecode::Auto.in_shader(true, cpu, true), Some(true));
+        // A CPU driver keeps the texture unit for atlases too large for a buffer.
+        assert_eq!(BcDecode::Auto.in_shader(true, cpu, false), Some(false));
+        // Without BC textures the shader is the only way (too large fails later).
+        assert_eq!(BcDecode::Auto.in_shader(true, no_bc, false), Some(true));
+        assert_eq!(BcDecode::Shader.in_shader(true, gpu, true), Some(true));
+        assert_eq!(BcDecode::Texture.in_shader(true, gpu, true), Some(false));
+        assert_eq!(BcDecode::Texture.in_shader(true, cpu, true), Some(false));
+        assert_eq!(BcDecode::Texture.in_shader(true, no_bc, true), None);
     }
 }

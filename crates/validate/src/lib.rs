@@ -280,6 +280,14 @@ impl<'a> AssetData<'a> {
         }
     }
 
+    /// The last atlas's number and its own size in bricks along x and y.
+    pub fn last_atlas(&self) -> [u32; 4] {
+        match self.meta.atlases.last() {
+            Some(a) => [(self.meta.atlases.len() - 1) as u32, a.bricks[0].max(1), a.bricks[1].max(1), 0],
+            None => [0, 1, 1, 0],
+        }
+    }
+
     pub fn frame_l1(&self, frame: usize) -> Result<u32, Error> {
         self.frames.get(frame).copied().ok_or(Error::Frame { frame, count: self.frames.len() })
     }
