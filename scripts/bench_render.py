@@ -4,8 +4,9 @@
     /usr/bin/python3 scripts/bench_render.py [FILE...] [--runs R]
 
 Default FILEs: the OpenVDB "smoke1" sample (../shared/vdb-samples/arnold-usd/smoke.vdb,
-111x222x112 voxels) and bench-out/fog_256.vdb (a generated 256^3 smoke-like fog,
-15 M active voxels; made by scripts/make_bench_volume.py when missing).
+111x222x112 voxels), bench-out/fog_256.vdb (a generated 256^3 smoke-like fog, 15 M
+active voxels, densities up to 1) and bench-out/thin_256.vdb (the same at 1/20 of the
+density: thin smoke); the last two are made by scripts/make_bench_volume.py when missing.
 * ours: `vdbcook validate` of an f16 cook of FILE against FILE, 8 views at 512x512:
   cooking the lossless reference in memory, uploading both, and 16 images (8 of the
   asset, 8 of the reference), on whatever adapter wgpu picks (lavapipe here);
@@ -99,10 +100,11 @@ def main():
     if "--runs" in sys.argv:
         args.remove(str(runs))
     os.makedirs(OUT, exist_ok=True)
-    fog = os.path.join(OUT, "fog_256.vdb")
-    files = args or [os.path.join(ROOT, "..", "shared", "vdb-samples", "arnold-usd", "smoke.vdb"), fog]
-    if fog in files and not os.path.exists(fog):
-        subprocess.run([sys.executable, os.path.join(ROOT, "scripts/make_bench_volume.py"), fog, "--size", "256"], check=True)
+    generated = {os.path.join(OUT, "fog_256.vdb"): [], os.path.join(OUT, "thin_256.vdb"): ["--scale", "0.05"]}
+    files = args or [os.path.join(ROOT, "..", "shared", "vdb-samples", "arnold-usd", "smoke.vdb")] + list(generated)
+    for path, extra in generated.items():
+        if path in files and not os.path.exists(path):
+            subprocess.run([sys.executable, os.path.join(ROOT, "scripts/make_bench_volume.py"), path, "--size", "256", *extra], check=True)
     subprocess.run(["cargo", "build", "--release", "--quiet", "-p", "vdbcook"], cwd=ROOT, check=True)
     print("best of %d runs (the matched vdb_render: one run)\n" % runs)
     for src in files:

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Write a large procedural smoke-like fog volume for read-throughput benchmarks.
 
-    /usr/bin/python3 scripts/make_bench_volume.py OUT.vdb [--size N] [--seed S] [--half]
+    /usr/bin/python3 scripts/make_bench_volume.py OUT.vdb [--size N] [--seed S] [--half] [--scale K]
 
 * one float grid "density" (class fog volume), values in (0, 1], written by OpenVDB
   itself (pyopenvdb.write: blosc + active-mask compression; --half stores 16-bit halves);
@@ -90,11 +90,14 @@ def main():
     ap.add_argument("--seed", type=int, default=2024)
     ap.add_argument("--voxel-size", type=float, default=0.02)
     ap.add_argument("--half", action="store_true", help="store values as 16-bit halves")
+    ap.add_argument("--scale", type=float, default=1.0, help="multiply every density by this (thin smoke: 0.05)")
     args = ap.parse_args()
     if args.size < 8:
         ap.error("--size must be at least 8")
     t0 = time.time()
     dens = bench_density(args.size, args.seed)
+    if args.scale != 1.0:
+        dens *= np.float32(args.scale)
     t1 = time.time()
     g = vdb.FloatGrid(0.0)
     # centre the block on the origin so that the volume spans 8 root-node octants
@@ -110,8 +113,8 @@ def main():
     del dens
     t2 = time.time()
     vdb.write(args.out, [g], metadata={"creator": "vdbcook scripts/make_bench_volume.py"})
-    fix_uuid(args.out, "bench size=%d seed=%d vs=%r half=%d"
-             % (args.size, args.seed, args.voxel_size, args.half))
+    fix_uuid(args.out, "bench size=%d seed=%d vs=%r half=%d" % (args.size, args.seed, args.voxel_size, args.half)
+             + ("" if args.scale == 1.0 else " scale=%r" % args.scale))
     t3 = time.time()
     print("%s: %d active voxels, %d leaves, bbox %s; noise %.1fs, build %.1fs, write %.1fs"
           % (args.out, active, leaves, g.evalActiveVoxelBoundingBox(), t1 - t0, t2 - t1, t3 - t2),

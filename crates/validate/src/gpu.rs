@@ -111,7 +111,7 @@ pub struct Renderer {
 
 /// A brick atlas on the GPU (a texture is kept alive with its view).
 enum Atlas {
-    Texture(#[allow(dead_code)] wgpu::Texture, wgpu::TextureView),
+    Texture { _texture: wgpu::Texture, view: wgpu::TextureView },
     Buffer(wgpu::Buffer),
 }
 
@@ -285,7 +285,7 @@ impl Renderer {
                     );
                 }
                 let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-                atlases.push(Atlas::Texture(texture, view));
+                atlases.push(Atlas::Texture { _texture: texture, view });
             }
         }
         Ok(GpuAsset { buffers, atlases, frames: d.frames.to_vec(), atlas_count: d.meta.atlases.len(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks(), last_atlas: d.last_atlas() })
@@ -340,7 +340,7 @@ impl Renderer {
             }
             for (k, atlas) in asset.atlases.iter().enumerate() {
                 let resource = match atlas {
-                    Atlas::Texture(_, view) => wgpu::BindingResource::TextureView(view),
+                    Atlas::Texture { view, .. } => wgpu::BindingResource::TextureView(view),
                     Atlas::Buffer(b) => b.as_entire_binding(),
                 };
                 entries.push(wgpu::BindGroupEntry { binding: ATLAS_BINDINGS[k], resource });
