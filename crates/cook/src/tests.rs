@@ -188,8 +188,8 @@ fn corrupted_assets_never_panic_even_unverified() {
         let i = (next() % b.len() as u64) as usize;
         b[i] ^= 1 << (next() % 8);
         // Re-seal the header so the flip gets past it.
-        let sections: Vec<vdbcook_vpak::Section> = match Asset::from_bytes(&b) {
-            Ok(a) => a.sections.iter().map(|s| vdbcook_vpak::Section { kind: s.kind, index: s.index, data: a.bytes()[s.offset as usize..(s.offset + s.size) as usize].to_vec() }).collect(),
+        let sections = match Asset::from_bytes(&b) {
+            Ok(a) => a.to_sections(),
             Err(_) => continue,
         };
         let resealed = vdbcook_vpak::assemble(&sections);
@@ -208,7 +208,7 @@ fn sealed_fan_out_assets_are_refused_not_expanded() {
     use vdbcook_flipbook::{L1_MASK_WORDS, L2_MASK_WORDS};
     let (bytes, _) = cook(Format::F32, &[frame(0)], 2048);
     let asset = Asset::from_bytes(&bytes).unwrap();
-    let mut sections: Vec<vdbcook_vpak::Section> = asset.sections.iter().map(|s| vdbcook_vpak::Section { kind: s.kind, index: s.index, data: asset.bytes()[s.offset as usize..(s.offset + s.size) as usize].to_vec() }).collect();
+    let mut sections = asset.to_sections();
     let full = |mask_words: usize| -> Vec<u32> {
         let mut w = vec![u32::MAX; mask_words];
         for k in 0..mask_words / 2 {

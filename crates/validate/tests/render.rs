@@ -180,3 +180,55 @@ fn bc_bricks_decoded_in_the_shader_render_like_the_texture_unit() {
     // Uncompressed formats never go through the decoder.
     assert!(!soft.upload(&reference).unwrap().decodes_in_shader());
 }
+
+/// Checksum-valid assets with one flipped bit (the file is resealed after the
+/// flip) never panic the renderers: they render, or give an error.
+#[test]
+fn resealed_corrupt_assets_never_panic_the_renderers() {
+    let Some(r) = renderer() else { return };
+    let soft = Renderer::new(None).unwrap().with_bc_decode(BcDecode::Shader);
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let (mut changed, mut refused) = (0, 0);
+    for (format, dim) in [(Format::Unorm8, 32), (Format::Bc7, 20), (Format::Bc4, 2048)] {
+        let bytes = cook_dim(&SEQ, format, dim);
+        let clean = Asset::from_bytes(&bytes).unwrap();
+        let scene = Scene::for_asset(&clean.metadata().unwrap());
+        let view = scene.orbit(2)[1];
+        let expected = render_cpu(&clean, &scene, 1, &view, 32, 24).unwrap();
+        let meta = clean.sections.iter().find(|s| s.kind == vdbcook_vpak::kind::METADATA).unwrap();
+        for k in 0..80 {
+            let mut b = bytes.clone();
+            // Every other flip in the metadata, the rest anywhere past the header
+            // and the section table.
+            let i = if k % 2 == 0 { meta.offset + next() % meta.size } else { 512 + next() % (b.len() as u64 - 512) } as usize;
+            b[i] ^= 1 << (next() % 8);
+            let Ok(a) = Asset::from_bytes(&b) else { continue };
+            let sealed = vdbcook_vpak::assemble(&a.to_sections());
+            let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                let asset = Asset::from_bytes(&sealed).unwrap();
+                // The scene of the clean asset: a flipped bbox must not change the camera.
+                let cpu = render_cpu(&asset, &scene, 1, &view, 32, 24).ok();
+                for renderer in [&r, &soft] {
+                    if let Ok(g) = renderer.upload(&asset) {
+                        let _ = renderer.render(&g, &scene, 1, &view, 32, 24);
+                    }
+                }
+                cpu
+            }));
+            match outcome {
+                Ok(Some(img)) => changed += usize::from(img.pixels != expected.pixels),
+                Ok(None) => refused += 1,
+                Err(_) => panic!("{format:?}: a panic after flipping byte {i}"),
+            }
+        }
+    }
+    // The flips reached the renderers: some images changed, some assets were refused.
+    eprintln!("corrupt assets: {changed} changed images, {refused} refused");
+    assert!(changed >= 3 && refused >= 3, "changed {changed}, refused {refused}");
+}

@@ -424,6 +424,12 @@ impl Asset {
     pub fn metadata(&self) -> Result<Metadata, Error> {
         Metadata::from_bytes(self.section(kind::METADATA, 0)?)
     }
+
+    /// Every section, copied: edit them and `assemble` a new asset (its
+    /// checksums are computed afresh).
+    pub fn to_sections(&self) -> Vec<Section> {
+        self.sections.iter().map(|s| Section { kind: s.kind, index: s.index, data: self.raw(s).to_vec() }).collect()
+    }
 }
 
 #[cfg(test)]
