@@ -193,10 +193,10 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     crate::refuse_existing(&args.output, args.force)?;
     let format = Format::parse(&args.format).ok_or_else(|| Usage(format!("unknown format {}", args.format)))?;
     let quality = Quality::parse(&args.quality).ok_or_else(|| Usage(format!("unknown quality {}", args.quality)))?;
-    if !(args.variance_threshold >= 0.0) {
+    if args.variance_threshold.is_nan() || args.variance_threshold < 0.0 {
         return Err(Usage(format!("--variance-threshold must be a number >= 0, not {}", args.variance_threshold)).into());
     }
-    if args.max_brick_error.is_some_and(|e| !(e >= 0.0)) {
+    if args.max_brick_error.is_some_and(|e| e.is_nan() || e < 0.0) {
         return Err(Usage("--max-brick-error must be a number >= 0".into()).into());
     }
     let clustering = args.clusters.map(|k| vdbcook_cluster::Options {

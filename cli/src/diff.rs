@@ -2,7 +2,7 @@
 
 use crate::exit;
 use anyhow::{Context, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use vdbcook_encode::ErrorStats;
 use vdbcook_grid::{leaf_local, Grid};
 
@@ -28,7 +28,7 @@ pub struct DiffArgs {
     pub json: bool,
 }
 
-fn load(path: &PathBuf, grid: Option<&str>) -> Result<Grid> {
+fn load(path: &Path, grid: Option<&str>) -> Result<Grid> {
     let name = path.display().to_string();
     let f = vdbcook_vdb::open(path).with_context(|| name.clone())?;
     let i = f.select(grid).with_context(|| name.clone())?;

@@ -184,7 +184,7 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<PathB
 /// Moves the plain files gathered so far, in natural order, to the frame list.
 fn flush(plain: &mut Vec<PathBuf>, out: &mut Vec<PathBuf>) {
     natural_sort(plain);
-    out.extend(plain.drain(..));
+    out.append(plain);
 }
 
 #[cfg(test)]

@@ -140,7 +140,7 @@ fn a_hundred_unchanging_frames_cost_about_one() {
     let (one, hundred) = (dir.join("one.vpak"), dir.join("hundred.vpak"));
     ok(vdbcook(&["cook", "-q", "-o", s(&one), "fixtures/fog_blosc.vdb"]));
     let mut args = vec!["cook", "-q", "-o", s(&hundred)];
-    args.extend(std::iter::repeat("fixtures/fog_blosc.vdb").take(100));
+    args.extend(std::iter::repeat_n("fixtures/fog_blosc.vdb", 100));
     ok(vdbcook(&args));
     let (a, b) = (std::fs::metadata(&one).unwrap().len(), std::fs::metadata(&hundred).unwrap().len());
     assert!((b as f64) < a as f64 * 1.03, "one frame {a} bytes, a hundred {b}");

@@ -45,7 +45,7 @@ fn every_file_reads_and_matches_openvdb() {
     let mut failures = Vec::new();
     for (file, (mine, theirs)) in files.iter().zip(results) {
         let name = file.display();
-        assert_eq!(mine["grids"].as_array().map(Vec::len).is_some(), true, "{name}: no grids array");
+        assert!(mine["grids"].as_array().map(Vec::len).is_some(), "{name}: no grids array");
         let Some(theirs) = theirs else { continue };
         compared += 1;
         let mut fail = |what: String| failures.push(format!("{name}: {what}"));

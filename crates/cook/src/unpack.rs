@@ -11,7 +11,7 @@ use vdbcook_vpak::{kind, Asset, Metadata};
 const MAX_TILES: usize = 1 << 22;
 
 fn need_multiple(name: &str, v: &[u32], unit: usize) -> Result<(), Error> {
-    if v.len() % unit != 0 {
+    if !v.len().is_multiple_of(unit) {
         return Err(Error::Corrupt(format!("{name} holds {} words, not a multiple of {unit}", v.len())));
     }
     Ok(())

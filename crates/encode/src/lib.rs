@@ -529,7 +529,7 @@ mod tests {
         // BC7 packs a brick into two slices: four times as many layers fit.
         let p = plan_atlases(Format::Bc7, 1100, 64);
         assert_eq!(p.iter().map(|a| a.count).collect::<Vec<_>>(), vec![1100]);
-        assert!(p[0].texels()[2] <= 64 && p[0].texels()[2] % 2 == 0);
+        assert!(p[0].texels()[2] <= 64 && p[0].texels()[2].is_multiple_of(2));
         assert!(plan_atlases(Format::Bc4, 0, 2048).is_empty());
     }
 
@@ -572,7 +572,8 @@ mod tests {
                         let [px, py, pz] = layout.position(i).map(|p| p as usize);
                         let sp = format.slices_per_brick() as usize;
                         let o = (pz * sp + 1) * layout.slice_bytes() + (py * 2 + 1) * layout.row_bytes() + (px * 2) * format.block_bytes();
-                        let want = ((1 * 2 + 1) * 2) * format.block_bytes();
+                        // Block (slice 1, row 1, column 0) of the brick: ((1·2 + 1)·2 + 0) blocks in.
+                        let want = 6 * format.block_bytes();
                         assert_eq!(&atlas[o..o + format.block_bytes()], &bricks[g].data[want..want + format.block_bytes()]);
                     }
                 }

@@ -191,7 +191,7 @@ impl Renderer {
     pub fn upload(&self, asset: &Asset) -> Result<GpuAsset, Error> {
         let d = AssetData::new(asset)?;
         let limits = self.device.limits();
-        let limit = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         // Out-of-memory and validation errors of the uploads come back here
         // instead of reaching wgpu's default handler (which panics).
         let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
@@ -210,7 +210,7 @@ impl Renderer {
                 return Err(Error::TooLarge { what, bytes: data.len() as u64, limit });
             }
             // Bindings may not be empty and are whole words: pad when needed.
-            let contents: std::borrow::Cow<[u8]> = if data.len() >= 16 && data.len() % 4 == 0 {
+            let contents: std::borrow::Cow<[u8]> = if data.len() >= 16 && data.len().is_multiple_of(4) {
                 data.into()
             } else {
                 let mut v = data.to_vec();

@@ -380,7 +380,7 @@ impl Asset {
             let e = HEADER_LEN + i * ENTRY_LEN;
             let s = SectionEntry { kind: u32_at(e), index: u32_at(e + 4), offset: u64_at(e + 8), size: u64_at(e + 16), checksum: u64_at(e + 24) };
             let end = s.offset.checked_add(s.size);
-            if s.offset % ALIGN as u64 != 0 || s.offset < table_end as u64 || end.is_none_or(|e| e > b.len() as u64) {
+            if !s.offset.is_multiple_of(ALIGN as u64) || s.offset < table_end as u64 || end.is_none_or(|e| e > b.len() as u64) {
                 return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
             }
             sections.push(s);
