@@ -36,6 +36,8 @@ pub enum Error {
     NoFrame { frame: usize, count: usize },
     #[error("unsupported voxel format \"{0}\"")]
     Format(String),
+    #[error("frame {frame} unpacks to {leaves} leaves ({} MiB in memory), more than the {} MiB this machine has to spare", .bytes >> 20, .budget >> 20)]
+    TooBig { frame: usize, leaves: u64, bytes: u64, budget: u64 },
 }
 
 /// Receives progress from long stages; every method does nothing by default.

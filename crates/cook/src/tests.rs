@@ -231,4 +231,16 @@ fn sealed_fan_out_assets_are_refused_not_expanded() {
     let hostile = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
     hostile.verify().unwrap();
     assert!(matches!(unpack_frame(&hostile, 0), Err(Error::Corrupt(_))));
+    // The same tree with metadata that owns up to all 134 M leaves: refused
+    // for memory before anything is expanded.
+    let mut meta = hostile.metadata().unwrap();
+    meta.frames[0].leaves = 32 * 32 * 32 * 4096;
+    for s in sections.iter_mut().filter(|s| s.kind == vdbcook_vpak::kind::METADATA) {
+        s.data = meta.to_bytes().unwrap();
+    }
+    let honest = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+    match unpack_frame(&honest, 0) {
+        Err(e @ Error::TooBig { .. }) => assert!(e.to_string().contains("134217728 leaves"), "{e}"),
+        other => panic!("expected TooBig, got {:?}", other.map(|g| g.leaves.len())),
+    }
 }

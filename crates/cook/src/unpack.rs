@@ -6,6 +6,19 @@ use vdbcook_flipbook::{Nodes, L1_WORDS, L2_WORDS, L3_WORDS};
 use vdbcook_grid::{Coord, Grid, GridClass, Leaf, LeafMask, MapType, Tile, Transform, LEAF_VOXELS};
 use vdbcook_vpak::{kind, Asset, Metadata};
 
+/// Memory one decoded leaf takes: the leaf, and its entry while the tree is walked.
+const LEAF_COST: u64 = (std::mem::size_of::<Leaf>() + std::mem::size_of::<(Coord, [u64; 8], u32)>()) as u64;
+
+/// Bytes an unpacked frame may take: half of the memory available now (Linux),
+/// else 4 GiB.
+fn memory_budget() -> u64 {
+    let available = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
+        let line = m.lines().find(|l| l.starts_with("MemAvailable:"))?;
+        line.split_whitespace().nth(1)?.parse::<u64>().ok()
+    });
+    available.map_or(4 << 30, |kib| kib.saturating_mul(1024) / 2)
+}
+
 /// Tiles a frame may decode to (a root tile fills at most 32768 L1 slots;
 /// the rest is a bound on corrupt assets).
 const MAX_TILES: usize = 1 << 22;
@@ -51,8 +64,15 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Grid, Error> {
         return Err(Error::Corrupt(format!("index offset {:?} is not a multiple of 128", meta.index_offset)));
     }
     let ranges = asset.f32s(kind::BRICK_RANGES)?;
-    // The metadata says how many leaves the frame has: decode no more.
-    let want = meta.frames.get(frame).map_or(0, |f| f.leaves as usize);
+    // The metadata says how many leaves the frame has: decode no more. Shared
+    // nodes let a small asset describe a huge frame (legitimately, for
+    // repeated leaves): refuse what would not fit in memory before expanding it.
+    let want = meta.frames.get(frame).map_or(0, |f| u64::from(f.leaves));
+    let (bytes, budget) = (want.saturating_mul(LEAF_COST), memory_budget());
+    if bytes > budget {
+        return Err(Error::TooBig { frame, leaves: want, bytes, budget });
+    }
+    let want = want as usize;
     let (leaves, tiles) = nodes.frame_contents(frame, want, MAX_TILES).ok_or_else(|| Error::Corrupt(format!("frame {frame} holds more than the {want} leaves or {MAX_TILES} tiles its metadata allows")))?;
     if leaves.len() != want {
         return Err(Error::Corrupt(format!("frame {frame} holds {} leaves, its metadata says {want}", leaves.len())));
