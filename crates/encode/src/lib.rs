@@ -299,13 +299,23 @@ pub fn plan_atlases(format: Format, count: u32, max_dim: u32) -> Vec<AtlasLayout
     let per = (max_dim / 8).max(1);
     let per_z = (max_dim / format.slices_per_brick()).max(1);
     let cap = per.saturating_mul(per).saturating_mul(per_z);
+    let single = count <= cap;
     let mut out = Vec::new();
     let mut first = 0u32;
     while first < count {
         let n = (count - first).min(cap);
         let bx = n.min(per);
-        let by = n.div_ceil(bx).min(per);
-        let bz = n.div_ceil(bx * by);
+        let (by, bz) = if single {
+            // One atlas: the layers it needs, each with as few rows as hold
+            // the bricks, so that at most a row per layer stays empty.
+            let bz = n.div_ceil(bx * per);
+            (n.div_ceil(bx * bz), bz)
+        } else {
+            // Samplers place every atlas's bricks with the first one's shape:
+            // the last keeps full layers.
+            let by = n.div_ceil(bx).min(per);
+            (by, n.div_ceil(bx * by))
+        };
         out.push(AtlasLayout { format, bricks: [bx, by, bz], first_brick: first, count: n });
         first += n;
     }
@@ -531,13 +541,26 @@ mod tests {
         assert_eq!(p.iter().map(|a| a.count).collect::<Vec<_>>(), vec![1100]);
         assert!(p[0].texels()[2] <= 64 && p[0].texels()[2].is_multiple_of(2));
         assert!(plan_atlases(Format::Bc4, 0, 2048).is_empty());
+        // Past one full layer, a single atlas grows only the rows it needs:
+        // 70,000 bricks take 2 layers of 137 rows, not 2 of 256.
+        let p = plan_atlases(Format::F16, 70_000, 2048);
+        assert_eq!(p.len(), 1);
+        assert_eq!(p[0].bricks, [256, 137, 2]);
+        for count in [1u32, 255, 256, 65_537, 115_230, 1_000_000] {
+            for a in plan_atlases(Format::Bc7, count, 2048) {
+                let [bx, by, bz] = a.bricks;
+                assert!(a.is_valid() && a.texels().iter().all(|&t| t <= 2048), "{count}: {a:?}");
+                assert!(bx * by * bz - a.count < bx * bz, "{count}: more than a row per layer empty: {a:?}");
+            }
+        }
     }
 
     #[test]
     fn every_voxel_lands_at_its_brick_coordinate() {
         // Property: for many brick counts and limits, packing then reading
         // back each brick (and each texel directly) gives its own values.
-        for (count, max_dim) in [(1u32, 2048u32), (7, 16), (37, 32), (130, 40)] {
+        // (20, 32): one atlas of 4×3×2 bricks (its layers are not full).
+        for (count, max_dim) in [(1u32, 2048u32), (7, 16), (20, 32), (37, 32), (130, 40)] {
             let bricks: Vec<EncodedBrick> = (0..count)
                 .map(|i| EncodedBrick { range: [0.0, 1.0], data: (0..512u32).flat_map(|v| (i * 1000 + v).to_le_bytes()).collect() })
                 .collect();
@@ -572,7 +595,6 @@ mod tests {
                         let [px, py, pz] = layout.position(i).map(|p| p as usize);
                         let sp = format.slices_per_brick() as usize;
                         let o = (pz * sp + 1) * layout.slice_bytes() + (py * 2 + 1) * layout.row_bytes() + (px * 2) * format.block_bytes();
-                        // Block (slice 1, row 1, column 0) of the brick: ((1·2 + 1)·2 + 0) blocks in.
                         let want = 6 * format.block_bytes();
                         assert_eq!(&atlas[o..o + format.block_bytes()], &bricks[g].data[want..want + format.block_bytes()]);
                     }

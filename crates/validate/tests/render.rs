@@ -143,14 +143,19 @@ fn bc_bricks_decoded_in_the_shader_render_like_the_texture_unit() {
     let scene = Scene::for_asset(&reference.metadata().unwrap());
     let views = scene.orbit(3);
     let ref_gpu = r.upload(&reference).unwrap();
-    // The last two split the pool over several atlases; with 24, the last atlas
-    // is narrower than the others (24×16×8 texels against 24×24×24).
-    for (files, format, dim) in [(&SEQ[..], Format::Bc4, 2048), (&SEQ, Format::Bc7, 2048), (&SEQ, Format::Bc4, 32), (&SEQ, Format::Bc7, 20), (&["fixtures/smoke_seq/smoke_0004.vdb"], Format::Bc4, 24)] {
+    // 32 and 20 split the pool over several atlases; with 24, the last atlas is
+    // narrower than the others (24×16×8 texels against 24×24×24); with 64, one
+    // atlas has two layers of fewer rows than columns.
+    for (files, format, dim) in [(&SEQ[..], Format::Bc4, 2048), (&SEQ, Format::Bc7, 2048), (&SEQ, Format::Bc4, 32), (&SEQ, Format::Bc7, 20), (&["fixtures/smoke_seq/smoke_0004.vdb"], Format::Bc4, 24), (&SEQ, Format::Bc7, 64)] {
         let bytes = cook_dim(files, format, dim);
         let asset = Asset::from_bytes(&bytes).unwrap();
         let meta = asset.metadata().unwrap();
         if dim == 24 {
             assert!(meta.atlases.len() == 3 && meta.atlases[2].bricks[1] < meta.atlases[0].bricks[1], "{:?}", meta.atlases);
+        }
+        if dim == 64 {
+            // One atlas of two layers whose rows are not all used.
+            assert!(meta.atlases.len() == 1 && meta.atlases[0].bricks[2] == 2 && meta.atlases[0].bricks[1] < 8, "{:?}", meta.atlases);
         }
         let in_shader = soft.upload(&asset).unwrap();
         assert!(in_shader.decodes_in_shader());
