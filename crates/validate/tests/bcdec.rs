@@ -81,21 +81,9 @@ struct Gpu {
     bc4: wgpu::ComputePipeline,
 }
 
-/// Mesa warns on every start when XDG_RUNTIME_DIR is unset; give it a private one.
-fn ensure_runtime_dir() {
-    if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
-        return;
-    }
-    use std::os::unix::fs::{DirBuilderExt, MetadataExt};
-    let dir = std::env::temp_dir().join(format!("vdbcook-runtime-{}", std::fs::metadata("/proc/self").map(|m| m.uid()).unwrap_or(0)));
-    let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
-    if dir.is_dir() {
-        std::env::set_var("XDG_RUNTIME_DIR", &dir);
-    }
-}
-
+// XDG_RUNTIME_DIR (which Mesa wants) is exported by scripts/test.sh, as for
+// the other GPU tests; setting it here would race with other test threads.
 fn open() -> Result<Gpu, String> {
-    ensure_runtime_dir();
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
     let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
         power_preference: wgpu::PowerPreference::HighPerformance,
