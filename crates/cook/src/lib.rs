@@ -15,10 +15,9 @@ pub use unpack::{load_nodes, unpack_frame};
 pub use vdbcook_encode::{Format, Quality};
 
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::time::Instant;
-use vdbcook_encode::{EncodedBrick, ErrorStats};
-use vdbcook_flipbook::{Builder, Built, Nodes};
+use vdbcook_encode::{EncodedBricks, ErrorStats};
+use vdbcook_flipbook::{Builder, Built, HashIndex, Nodes};
 use vdbcook_grid::{Grid, Transform};
 use vdbcook_vpak::{kind, AtlasInfo, FrameInfo, Metadata, Section, SourceFile};
 
@@ -166,11 +165,10 @@ impl Cooker {
             }
             Some(_) => {}
         }
-        let st = grid.stats();
-        if let (Some(lo), Some(hi)) = (st.min, st.max) {
-            self.range = [self.range[0].min(lo as f32), self.range[1].max(hi as f32)];
-        }
         let fs = self.builder.push(grid)?;
+        if let Some([lo, hi]) = fs.range {
+            self.range = [self.range[0].min(lo), self.range[1].max(hi)];
+        }
         let source = self.add_source(source);
         self.frames.push(FrameInfo { source, active_voxels: fs.active_voxels, leaves: fs.leaves as u32, tiles: fs.tiles as u32 });
         self.build_secs += t0.elapsed().as_secs_f64();
@@ -209,7 +207,7 @@ impl Cooker {
         let work: &[vdbcook_flipbook::Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
         let t0 = Instant::now();
         progress.start("encoding", work.len() as u64);
-        let encoded: Vec<EncodedBrick> = vdbcook_encode::encode_all(format, self.opts.quality, work, &|n| progress.advance(n as u64));
+        let encoded = vdbcook_encode::encode_all(format, self.opts.quality, work, &|n| progress.advance(n as u64));
         progress.finish();
         let (stored, enc_remap) = dedup_encoded(encoded);
         // Pool brick -> stored brick.
@@ -230,7 +228,7 @@ impl Cooker {
         // clustering, what it would have been without: merged bricks encoded
         // on their own).
         let t0 = Instant::now();
-        let decode_stored = |b: u32| remap.get(b as usize).and_then(|&i| stored.get(i as usize)).map(|e| vdbcook_encode::decode_brick(format, e.range, &e.data));
+        let decode_stored = |b: u32| remap.get(b as usize).and_then(|&i| stored.decode(i as usize));
         let frame_err = voxel_errors(&built, &decode_stored);
         let mut total = ErrorStats::default();
         for e in &frame_err {
@@ -245,7 +243,7 @@ impl Cooker {
                 slot[i] = k as u32;
             }
             let decode_unclustered = |b: u32| match slot.get(b as usize) {
-                Some(&k) if k != u32::MAX => own_enc.get(k as usize).map(|e| vdbcook_encode::decode_brick(format, e.range, &e.data)),
+                Some(&k) if k != u32::MAX => own_enc.decode(k as usize),
                 _ => decode_stored(b),
             };
             let mut without = ErrorStats::default();
@@ -273,7 +271,7 @@ impl Cooker {
         let t0 = Instant::now();
         let layouts = vdbcook_encode::plan_atlases(format, stored.len() as u32, self.opts.max_texture_dim);
         let mut sections = node_sections(&nodes);
-        let ranges: Vec<u32> = stored.iter().flat_map(|b| b.range.map(f32::to_bits)).collect();
+        let ranges: Vec<u32> = stored.ranges.iter().flat_map(|r| r.map(f32::to_bits)).collect();
         sections.push(Section { kind: kind::BRICK_RANGES, index: 0, data: words(&ranges) });
         for (i, l) in layouts.iter().enumerate() {
             sections.push(Section { kind: kind::ATLAS, index: i as u32, data: vdbcook_encode::pack_atlas(l, &stored) });
@@ -341,28 +339,39 @@ impl Cooker {
     }
 }
 
-/// Stores each distinct encoding once; returns the stored bricks and, per
-/// pool brick, its stored index.
-fn dedup_encoded(encoded: Vec<EncodedBrick>) -> (Vec<EncodedBrick>, Vec<u32>) {
-    let mut index: HashMap<(u64, [u32; 2]), Vec<u32>> = HashMap::new();
-    let mut stored: Vec<EncodedBrick> = Vec::new();
+/// Stores each distinct encoding once (the first of equal ones, in order);
+/// returns the stored bricks and, per pool brick, its stored index.
+fn dedup_encoded(mut encoded: EncodedBricks) -> (EncodedBricks, Vec<u32>) {
+    // A brick's hash covers its bytes and its range.
+    let hashes: Vec<u64> = (0..encoded.len())
+        .into_par_iter()
+        .map(|i| {
+            let [lo, hi] = encoded.ranges[i].map(f32::to_bits);
+            xxhash_rust::xxh3::xxh3_64_with_seed(encoded.brick(i).unwrap_or(&[]), u64::from(lo) << 32 | u64::from(hi))
+        })
+        .collect();
+    let mut index = HashIndex::default();
+    index.reserve(encoded.len());
+    let mut keep: Vec<usize> = Vec::new();
     let mut remap = Vec::with_capacity(encoded.len());
-    for e in encoded {
-        let key = (xxhash_rust::xxh3::xxh3_64(&e.data), e.range.map(f32::to_bits));
-        let ids = index.entry(key).or_default();
-        let found = ids.iter().copied().find(|&i| stored[i as usize].data == e.data);
-        let id = match found {
-            Some(i) => i,
+    for (i, &h) in hashes.iter().enumerate() {
+        let same = |k: u32| {
+            let j = keep[k as usize];
+            encoded.ranges[j].map(f32::to_bits) == encoded.ranges[i].map(f32::to_bits) && encoded.brick(j) == encoded.brick(i)
+        };
+        let id = match index.find(h, same) {
+            Some(k) => k,
             None => {
-                let i = stored.len() as u32;
-                ids.push(i);
-                stored.push(e);
-                i
+                let k = keep.len() as u32;
+                index.add(h, k);
+                keep.push(i);
+                k
             }
         };
         remap.push(id);
     }
-    (stored, remap)
+    encoded.keep_only(&keep);
+    (encoded, remap)
 }
 
 /// Error of decoded bricks (`decoded(pool brick)`) against the source over

@@ -244,3 +244,25 @@ fn sealed_fan_out_assets_are_refused_not_expanded() {
         other => panic!("expected TooBig, got {:?}", other.map(|g| g.leaves.len())),
     }
 }
+
+#[test]
+fn bricks_equal_once_encoded_are_stored_once_but_only_with_equal_ranges() {
+    // A; B = A with one voxel (neither its min nor its max) nudged below
+    // half precision and below a unorm8 step; C = 2·A (the same unorm8
+    // levels over twice the range).
+    let a: [f32; 512] = std::array::from_fn(|i| 0.25 + (i % 37) as f32 / 64.0);
+    let mut b = a;
+    b[1] += 1e-7;
+    let c = a.map(|v| v * 2.0);
+    let leaves: Vec<Leaf> = [a, b, c].into_iter().enumerate().map(|(k, values)| Leaf { origin: Coord::new(8 * k as i32, 0, 0), mask: LeafMask([u64::MAX; 8]), values }).collect();
+    let g = Grid { name: "density".into(), class: GridClass::FogVolume, background: 0.0, transform: Transform::identity(), leaves: leaves.clone(), tiles: vec![] };
+    for (format, stored) in [(Format::F32, 3), (Format::F16, 2), (Format::Unorm8, 2)] {
+        let (bytes, report) = cook(format, std::slice::from_ref(&g), 2048);
+        assert_eq!((report.unique_bricks, report.stored_bricks), (3, stored), "{format:?}");
+        let back = unpack_frame(&Asset::from_bytes(&bytes).unwrap(), 0).unwrap();
+        for (l, src) in back.leaves.iter().zip(&leaves) {
+            let worst = l.values.iter().zip(&src.values).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
+            assert!(worst <= 0.01, "{format:?}: {worst}");
+        }
+    }
+}

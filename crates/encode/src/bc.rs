@@ -25,11 +25,12 @@ fn bc7_settings(q: Quality) -> intel_tex_2::bc7::EncodeSettings {
 }
 
 /// Encodes bricks of 8-bit levels (index `x·64 + y·8 + z`), side by side in
-/// one surface per call: `8·n` texels wide, `8 · slices` tall.
-pub fn encode(format: Format, quality: Quality, levels: &[[u8; BRICK_VOXELS]]) -> Vec<Vec<u8>> {
+/// one surface per call (`8·n` texels wide, `8 · slices` tall), into `out`
+/// (`brick_bytes` per brick).
+pub fn encode(format: Format, quality: Quality, levels: &[[u8; BRICK_VOXELS]], out: &mut [u8]) {
     let n = levels.len();
     if n == 0 {
-        return Vec::new();
+        return;
     }
     let sp = format.slices_per_brick() as usize;
     let comps = if format == Format::Bc7 { 4 } else { 1 };
@@ -59,20 +60,16 @@ pub fn encode(format: Format, quality: Quality, levels: &[[u8; BRICK_VOXELS]]) -
     };
     // Blocks come out row-major over the surface: row r = 2s + block row, column 2k + block column.
     let cols = w / 4;
-    (0..n)
-        .map(|k| {
-            let mut out = Vec::with_capacity(format.brick_bytes());
-            for s in 0..sp {
-                for br in 0..2 {
-                    for bc in 0..2 {
-                        let i = ((2 * s + br) * cols + 2 * k + bc) * bb;
-                        out.extend_from_slice(blocks.get(i..i + bb).unwrap_or(&[0; 16][..bb]));
-                    }
-                }
+    for (k, brick) in out.chunks_exact_mut(format.brick_bytes()).take(n).enumerate() {
+        for (j, dst) in brick.chunks_exact_mut(bb).enumerate() {
+            // Block j of a brick is (slice, block row, block column).
+            let (s, br, bc) = (j / 4, (j / 2) % 2, j % 2);
+            let i = ((2 * s + br) * cols + 2 * k + bc) * bb;
+            if let Some(src) = blocks.get(i..i + bb) {
+                dst.copy_from_slice(src);
             }
-            out
-        })
-        .collect()
+        }
+    }
 }
 
 /// Decodes an encoded brick to levels in [0, 1] (index `x·64 + y·8 + z`).
@@ -127,14 +124,14 @@ mod tests {
     #[test]
     fn bc4_round_trip_keeps_orientation() {
         let lv = ramp();
-        let enc = encode(Format::Bc4, Quality::Fast, &[lv, [200; BRICK_VOXELS]]);
-        assert_eq!(enc.len(), 2);
-        assert_eq!(enc[0].len(), BC4_BRICK_BYTES);
-        let d = decode(Format::Bc4, &enc[0]);
+        let mut enc = [0u8; 2 * BC4_BRICK_BYTES];
+        encode(Format::Bc4, Quality::Fast, &[lv, [200; BRICK_VOXELS]], &mut enc);
+        let enc: Vec<&[u8]> = enc.chunks(BC4_BRICK_BYTES).collect();
+        let d = decode(Format::Bc4, enc[0]);
         for i in 0..BRICK_VOXELS {
             assert!((d[i] * 255.0 - f32::from(lv[i])).abs() <= 6.0, "voxel {i}: {} vs {}", d[i] * 255.0, lv[i]);
         }
-        let flat = decode(Format::Bc4, &enc[1]);
+        let flat = decode(Format::Bc4, enc[1]);
         assert!(flat.iter().all(|&v| (v * 255.0 - 200.0).abs() < 0.5));
     }
 
@@ -142,15 +139,16 @@ mod tests {
     fn bc7_round_trip_keeps_orientation_and_channels() {
         let lv = ramp();
         for q in Quality::ALL {
-            let enc = encode(Format::Bc7, q, &[[7; BRICK_VOXELS], lv]);
-            assert_eq!(enc[1].len(), BC7_BRICK_BYTES);
-            let d = decode(Format::Bc7, &enc[1]);
+            let mut enc = [0u8; 2 * BC7_BRICK_BYTES];
+            encode(Format::Bc7, q, &[[7; BRICK_VOXELS], lv], &mut enc);
+            let enc: Vec<&[u8]> = enc.chunks(BC7_BRICK_BYTES).collect();
+            let d = decode(Format::Bc7, enc[1]);
             let mut worst = 0.0f32;
             for i in 0..BRICK_VOXELS {
                 worst = worst.max((d[i] * 255.0 - f32::from(lv[i])).abs());
             }
             assert!(worst <= 12.0, "{q:?}: worst level error {worst}");
-            assert!(decode(Format::Bc7, &enc[0]).iter().all(|&v| (v * 255.0 - 7.0).abs() < 0.5));
+            assert!(decode(Format::Bc7, enc[0]).iter().all(|&v| (v * 255.0 - 7.0).abs() < 0.5));
         }
     }
 

@@ -123,11 +123,52 @@ impl Quality {
 
 mod bc;
 
-/// One encoded brick: its range and `512 · bytes_per_voxel` bytes in brick order.
+/// Encoded bricks side by side: brick `i` is `format.brick_bytes()` bytes at
+/// `data[i · brick_bytes ..]`, with range `ranges[i]`.  Inside a brick,
+/// uncompressed formats hold their texels in atlas order (x fastest, then y,
+/// then z: each 8-texel row is one copy into the atlas); block formats hold
+/// their blocks in the order `bc.rs` describes.
 #[derive(Clone, Debug, PartialEq)]
-pub struct EncodedBrick {
-    pub range: [f32; 2],
+pub struct EncodedBricks {
+    pub format: Format,
+    pub ranges: Vec<[f32; 2]>,
     pub data: Vec<u8>,
+}
+
+impl EncodedBricks {
+    pub fn len(&self) -> usize {
+        self.ranges.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.ranges.is_empty()
+    }
+
+    /// The encoded bytes of brick `i`.
+    pub fn brick(&self, i: usize) -> Option<&[u8]> {
+        let n = self.format.brick_bytes();
+        self.data.get(i.checked_mul(n)?..(i + 1).checked_mul(n)?)
+    }
+
+    /// Brick `i` decoded back to values (index `x·64 + y·8 + z`).
+    pub fn decode(&self, i: usize) -> Option<[f32; BRICK_VOXELS]> {
+        Some(decode_brick(self.format, *self.ranges.get(i)?, self.brick(i)?))
+    }
+
+    /// Keeps only the bricks `keep` (strictly increasing indices), in that
+    /// order, moving them down in place.
+    pub fn keep_only(&mut self, keep: &[usize]) {
+        let n = self.format.brick_bytes();
+        for (j, &i) in keep.iter().enumerate() {
+            debug_assert!(j <= i && i < self.len());
+            if i != j {
+                self.data.copy_within(i * n..(i + 1) * n, j * n);
+                self.ranges[j] = self.ranges[i];
+            }
+        }
+        self.ranges.truncate(keep.len());
+        self.data.truncate(keep.len() * n);
+    }
 }
 
 fn range_of(values: &[f32; BRICK_VOXELS]) -> [f32; 2] {
@@ -144,8 +185,8 @@ fn range_of(values: &[f32; BRICK_VOXELS]) -> [f32; 2] {
 }
 
 /// Encodes one brick (BC7 at `Quality::Fast`; use [`encode_all`] to choose).
-pub fn encode_brick(format: Format, values: &[f32; BRICK_VOXELS]) -> EncodedBrick {
-    encode_chunk(format, Quality::Fast, std::slice::from_ref(values)).pop().unwrap_or(EncodedBrick { range: [0.0; 2], data: Vec::new() })
+pub fn encode_brick(format: Format, values: &[f32; BRICK_VOXELS]) -> EncodedBricks {
+    encode_all(format, Quality::Fast, std::slice::from_ref(values), &|_| {})
 }
 
 /// 8-bit levels of a brick over its own range.
@@ -159,38 +200,52 @@ fn quantise(values: &[f32; BRICK_VOXELS], [lo, hi]: [f32; 2]) -> [u8; BRICK_VOXE
     }
 }
 
-fn encode_chunk(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]]) -> Vec<EncodedBrick> {
-    let ranges: Vec<[f32; 2]> = bricks.iter().map(range_of).collect();
-    match format {
-        Format::Bc4 | Format::Bc7 => {
-            let levels: Vec<[u8; BRICK_VOXELS]> = bricks.iter().zip(&ranges).map(|(b, r)| quantise(b, *r)).collect();
-            bc::encode(format, quality, &levels).into_iter().zip(ranges).map(|(data, range)| EncodedBrick { range, data }).collect()
-        }
-        _ => bricks.iter().zip(ranges).map(|(values, range)| EncodedBrick { range, data: encode_voxels(format, values, range) }).collect(),
+/// Swaps the x and z axes of a brick: leaf order (`x·64 + y·8 + z`) to atlas
+/// order (`z·64 + y·8 + x`) and back.
+fn swap_xz<T: Copy>(a: &[T; BRICK_VOXELS]) -> [T; BRICK_VOXELS] {
+    std::array::from_fn(|i| a[(i & 7) << 6 | (i & 0o70) | i >> 6])
+}
+
+/// Encodes `bricks` into `ranges` and `out` (`brick_bytes` each).
+fn encode_chunk(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]], ranges: &mut [[f32; 2]], out: &mut [u8]) {
+    for (r, b) in ranges.iter_mut().zip(bricks) {
+        *r = range_of(b);
+    }
+    if format.is_block() {
+        let levels: Vec<[u8; BRICK_VOXELS]> = bricks.iter().zip(ranges.iter()).map(|(b, r)| quantise(b, *r)).collect();
+        bc::encode(format, quality, &levels, out);
+        return;
+    }
+    for ((values, range), o) in bricks.iter().zip(ranges.iter()).zip(out.chunks_exact_mut(format.brick_bytes())) {
+        encode_voxels(format, values, *range, o);
     }
 }
 
-fn encode_voxels(format: Format, values: &[f32; BRICK_VOXELS], range: [f32; 2]) -> Vec<u8> {
-    let mut data = Vec::with_capacity(BRICK_VOXELS * format.bytes_per_voxel());
+/// One uncompressed brick, in atlas order, little-endian.
+fn encode_voxels(format: Format, values: &[f32; BRICK_VOXELS], range: [f32; 2], out: &mut [u8]) {
     match format {
         Format::F32 => {
-            let bits = values.map(|v| v.to_bits().to_le());
-            data.extend_from_slice(bytemuck::cast_slice(&bits));
+            for (o, v) in out.chunks_exact_mut(4).zip(swap_xz(values)) {
+                o.copy_from_slice(&v.to_le_bytes());
+            }
         }
         Format::F16 => {
             let mut h = [half::f16::ZERO; BRICK_VOXELS];
-            h.convert_from_f32_slice(values);
-            let bits = h.map(|v| v.to_bits().to_le());
-            data.extend_from_slice(bytemuck::cast_slice(&bits));
+            h.convert_from_f32_slice(&swap_xz(values));
+            for (o, v) in out.chunks_exact_mut(2).zip(h) {
+                o.copy_from_slice(&v.to_le_bytes());
+            }
         }
-        _ => data.extend_from_slice(&quantise(values, range)),
+        _ => out.copy_from_slice(&swap_xz(&quantise(values, range))),
     }
-    data
 }
 
-/// Decodes `data` (one brick in `format`) back to values.
+/// Decodes `data` (one brick in `format`, as [`EncodedBricks`] holds it)
+/// back to values (index `x·64 + y·8 + z`).
 pub fn decode_brick(format: Format, range: [f32; 2], data: &[u8]) -> [f32; BRICK_VOXELS] {
     let mut out = [0.0f32; BRICK_VOXELS];
+    let [lo, hi] = range;
+    let scaled = |t: f32| if hi > lo { lo + t * (hi - lo) } else { lo };
     match format {
         Format::F32 => {
             for (o, b) in out.iter_mut().zip(data.chunks_exact(4)) {
@@ -198,38 +253,38 @@ pub fn decode_brick(format: Format, range: [f32; 2], data: &[u8]) -> [f32; BRICK
             }
         }
         Format::F16 => {
-            for (o, b) in out.iter_mut().zip(data.chunks_exact(2)) {
-                *o = half::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32();
+            // Bits first, then one slice conversion (vectorised where the CPU has F16C).
+            let mut h = [half::f16::ZERO; BRICK_VOXELS];
+            for (o, b) in h.iter_mut().zip(data.chunks_exact(2)) {
+                *o = half::f16::from_bits(u16::from_le_bytes([b[0], b[1]]));
             }
+            h.convert_to_f32_slice(&mut out);
         }
         Format::Unorm8 => {
-            let [lo, hi] = range;
             for (o, &q) in out.iter_mut().zip(data) {
-                *o = if hi > lo { lo + (f32::from(q) / 255.0) * (hi - lo) } else { lo };
+                *o = scaled(f32::from(q) / 255.0);
             }
         }
-        Format::Bc4 | Format::Bc7 => {
-            let [lo, hi] = range;
-            let t = bc::decode(format, data);
-            for (o, t) in out.iter_mut().zip(t) {
-                *o = if hi > lo { lo + t * (hi - lo) } else { lo };
-            }
-        }
+        Format::Bc4 | Format::Bc7 => return bc::decode(format, data).map(scaled),
     }
-    out
+    swap_xz(&out)
 }
+
+/// Bricks per parallel work item of [`encode_all`].
+const CHUNK: usize = 256;
 
 /// Encodes every brick in parallel chunks (the output order is the input
 /// order); `progress(n)` is called after each chunk of `n` bricks.
-pub fn encode_all(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]], progress: &(dyn Fn(usize) + Sync)) -> Vec<EncodedBrick> {
-    bricks
-        .par_chunks(256)
-        .flat_map_iter(|chunk| {
-            let out = encode_chunk(format, quality, chunk);
-            progress(chunk.len());
-            out
-        })
-        .collect()
+pub fn encode_all(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]], progress: &(dyn Fn(usize) + Sync)) -> EncodedBricks {
+    let n = format.brick_bytes();
+    let mut ranges = vec![[0.0f32; 2]; bricks.len()];
+    let mut data = vec![0u8; bricks.len() * n];
+    vdbcook_grid::mem::advise_huge_pages(&data);
+    data.par_chunks_mut(CHUNK * n).zip(ranges.par_chunks_mut(CHUNK)).zip(bricks.par_chunks(CHUNK)).for_each(|((out, r), chunk)| {
+        encode_chunk(format, quality, chunk, r, out);
+        progress(chunk.len());
+    });
+    EncodedBricks { format, ranges, data }
 }
 
 /// Where a run of consecutive bricks lives: one 3D texture.
@@ -324,67 +379,33 @@ pub fn plan_atlases(format: Format, count: u32, max_dim: u32) -> Vec<AtlasLayout
 
 /// Lays the bricks of one atlas out as texture bytes, in parallel over
 /// slices; each slice is written strictly in order.
-pub fn pack_atlas(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
-    match (layout.format, layout.format.bytes_per_voxel()) {
-        (f, _) if f.is_block() => pack_blocks(layout, bricks),
-        (_, 1) => pack_voxels::<1>(layout, bricks),
-        (_, 2) => pack_voxels::<2>(layout, bricks),
-        _ => pack_voxels::<4>(layout, bricks),
-    }
-}
-
-/// The encoded data of global brick `b` if it belongs to the layout.
-fn brick_data<'a>(layout: &AtlasLayout, bricks: &'a [EncodedBrick], b: usize) -> Option<&'a [u8]> {
-    let (first, end) = (layout.first_brick as usize, layout.first_brick as usize + layout.count as usize);
-    if (first..end).contains(&b) {
-        bricks.get(b).map(|e| &e.data[..]).filter(|d| d.len() == layout.format.brick_bytes())
-    } else {
-        None
-    }
-}
-
-/// Uncompressed texels, `N` bytes each (a constant, so each copy is one move).
-fn pack_voxels<const N: usize>(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
+pub fn pack_atlas(layout: &AtlasLayout, bricks: &EncodedBricks) -> Vec<u8> {
     let mut out = vec![0u8; layout.byte_len()];
-    let [bx, by, _] = layout.bricks.map(|b| b as usize);
-    let row = layout.row_bytes();
-    // Slice `s` is z = s % 8 of brick layer s / 8.
-    out.par_chunks_mut(layout.slice_bytes().max(1)).enumerate().for_each(|(s, slice)| {
-        let (layer, z) = (s / 8, s % 8);
-        for (ty, line) in slice.chunks_exact_mut(row).enumerate() {
-            let (py, y) = (ty / 8, ty % 8);
-            for (px, texels) in line.chunks_exact_mut(8 * N).enumerate() {
-                let Some(data) = brick_data(layout, bricks, layout.first_brick as usize + (layer * by + py) * bx + px) else { continue };
-                for (x, t) in texels.chunks_exact_mut(N).enumerate() {
-                    let src = (x * 64 + y * 8 + z) * N;
-                    if let Some(v) = data.get(src..src + N) {
-                        t.copy_from_slice(v);
-                    }
-                }
-            }
-        }
-    });
-    out
-}
-
-/// Block-compressed slices: each brick holds `slices_per_brick` × 2 × 2 blocks
-/// in that order (see `bc.rs`); a slice is rows of blocks.
-fn pack_blocks(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
-    let mut out = vec![0u8; layout.byte_len()];
+    vdbcook_grid::mem::advise_huge_pages(&out);
+    if layout.format != bricks.format {
+        return out;
+    }
     let [bx, by, _] = layout.bricks.map(|b| b as usize);
     let sp = layout.format.slices_per_brick() as usize;
-    let bb = layout.format.block_bytes();
     let row = layout.row_bytes();
+    // The brick at position (px, py) of layer `layer`, if it holds one.
+    let brick_at = |layer: usize, py: usize, px: usize| {
+        let local = (layer * by + py) * bx + px;
+        (local < layout.count as usize).then(|| bricks.brick(layout.first_brick as usize + local)).flatten()
+    };
+    // A brick is slices × rows × columns of runs that are contiguous both in
+    // its data and in the atlas: 8 × 8 × 1 rows of 8 texels, or
+    // slices × 2 × 2 blocks.
+    let (run, rows_per_brick, per_row) = if layout.format.is_block() { (layout.format.block_bytes(), 2, 2) } else { (8 * layout.format.bytes_per_voxel(), 8, 1) };
+    let src = |ls: usize, r: usize, c: usize| ((ls * rows_per_brick + r) * per_row + c) * run;
     out.par_chunks_mut(layout.slice_bytes().max(1)).enumerate().for_each(|(s, slice)| {
         let (layer, ls) = (s / sp, s % sp);
         for (r, line) in slice.chunks_exact_mut(row).enumerate() {
-            let (py, br) = (r / 2, r % 2);
-            for (c, block) in line.chunks_exact_mut(bb).enumerate() {
-                let (px, bc) = (c / 2, c % 2);
-                let Some(data) = brick_data(layout, bricks, layout.first_brick as usize + (layer * by + py) * bx + px) else { continue };
-                let src = ((ls * 2 + br) * 2 + bc) * bb;
-                if let Some(v) = data.get(src..src + bb) {
-                    block.copy_from_slice(v);
+            let (py, br) = (r / rows_per_brick, r % rows_per_brick);
+            for (c, dst) in line.chunks_exact_mut(run).enumerate() {
+                let (px, bc) = (c / per_row, c % per_row);
+                if let Some(v) = brick_at(layer, py, px).and_then(|data| data.get(src(ls, br, bc)..src(ls, br, bc) + run)) {
+                    dst.copy_from_slice(v);
                 }
             }
         }
@@ -392,7 +413,7 @@ fn pack_blocks(layout: &AtlasLayout, bricks: &[EncodedBrick]) -> Vec<u8> {
     out
 }
 
-/// Reads local brick `i` back out of atlas bytes, in its encoded brick order.
+/// Reads local brick `i` back out of atlas bytes, in [`EncodedBricks`]' brick order.
 pub fn unpack_brick(layout: &AtlasLayout, atlas: &[u8], i: u32) -> Option<Vec<u8>> {
     if !layout.is_valid() || i >= layout.count || atlas.len() < layout.byte_len() {
         return None;
@@ -400,27 +421,20 @@ pub fn unpack_brick(layout: &AtlasLayout, atlas: &[u8], i: u32) -> Option<Vec<u8
     let [px, py, pz] = layout.position(i).map(|p| p as usize);
     let f = layout.format;
     let mut out = vec![0u8; f.brick_bytes()];
+    let (sp, row, slice) = (f.slices_per_brick() as usize, layout.row_bytes(), layout.slice_bytes());
     if f.is_block() {
-        let (sp, bb, row, slice) = (f.slices_per_brick() as usize, f.block_bytes(), layout.row_bytes(), layout.slice_bytes());
-        for ls in 0..sp {
-            for br in 0..2 {
-                for bc in 0..2 {
-                    let src = (pz * sp + ls) * slice + (py * 2 + br) * row + (px * 2 + bc) * bb;
-                    let dst = ((ls * 2 + br) * 2 + bc) * bb;
-                    out.get_mut(dst..dst + bb)?.copy_from_slice(atlas.get(src..src + bb)?);
-                }
-            }
+        let bb = f.block_bytes();
+        for (j, dst) in out.chunks_exact_mut(bb).enumerate() {
+            let (ls, br, bc) = (j / 4, (j / 2) % 2, j % 2);
+            let src = (pz * sp + ls) * slice + (py * 2 + br) * row + (px * 2 + bc) * bb;
+            dst.copy_from_slice(atlas.get(src..src + bb)?);
         }
     } else {
-        let n = f.bytes_per_voxel();
-        for x in 0..8u32 {
-            for y in 0..8u32 {
-                for z in 0..8u32 {
-                    let dst = ((x * 64 + y * 8 + z) as usize) * n;
-                    let src = layout.texel_offset(px as u32 * 8 + x, py as u32 * 8 + y, pz as u32 * 8 + z);
-                    out.get_mut(dst..dst + n)?.copy_from_slice(atlas.get(src..src + n)?);
-                }
-            }
+        let run = 8 * f.bytes_per_voxel();
+        for (j, dst) in out.chunks_exact_mut(run).enumerate() {
+            let (z, y) = (j / 8, j % 8);
+            let src = (pz * 8 + z) * slice + (py * 8 + y) * row + px * run;
+            dst.copy_from_slice(atlas.get(src..src + run)?);
         }
     }
     Some(out)
@@ -503,8 +517,7 @@ mod tests {
     fn f32_is_exact_and_f16_within_half_precision() {
         let b = smoke(1.0);
         assert_eq!(decode_brick(Format::F32, [0.0, 0.0], &encode_brick(Format::F32, &b).data), b);
-        let e = encode_brick(Format::F16, &b);
-        let d = decode_brick(Format::F16, e.range, &e.data);
+        let d = encode_brick(Format::F16, &b).decode(0).unwrap();
         for (x, y) in b.iter().zip(d.iter()) {
             assert!((x - y).abs() <= x.abs() * 2f32.powi(-11) + 1e-7, "{x} {y}");
         }
@@ -515,15 +528,14 @@ mod tests {
         let mut b = smoke(2.0);
         b[0] = 1e-4; // thin smoke must keep its own range
         let e = encode_brick(Format::Unorm8, &b);
-        let [lo, hi] = e.range;
-        let d = decode_brick(Format::Unorm8, e.range, &e.data);
+        let [lo, hi] = e.ranges[0];
+        let d = e.decode(0).unwrap();
         let step = (hi - lo) / 255.0;
         for (x, y) in b.iter().zip(d.iter()) {
             assert!((x - y).abs() <= step * 0.5 + 1e-6, "{x} {y} step {step}");
         }
         let flat = [0.25f32; BRICK_VOXELS];
-        let e = encode_brick(Format::Unorm8, &flat);
-        assert_eq!(decode_brick(Format::Unorm8, e.range, &e.data), flat);
+        assert_eq!(encode_brick(Format::Unorm8, &flat).decode(0).unwrap(), flat);
     }
 
     #[test]
@@ -557,46 +569,74 @@ mod tests {
 
     #[test]
     fn every_voxel_lands_at_its_brick_coordinate() {
-        // Property: for many brick counts and limits, packing then reading
-        // back each brick (and each texel directly) gives its own values.
+        // Property: for many brick counts and limits, voxel (x, y, z) of
+        // every brick (leaf order) is texel (8·px + x, 8·py + y, 8·pz + z) of
+        // its atlas, and reading each brick back gives its encoding.
         // (20, 32): one atlas of 4×3×2 bricks (its layers are not full).
         for (count, max_dim) in [(1u32, 2048u32), (7, 16), (20, 32), (37, 32), (130, 40)] {
-            let bricks: Vec<EncodedBrick> = (0..count)
-                .map(|i| EncodedBrick { range: [0.0, 1.0], data: (0..512u32).flat_map(|v| (i * 1000 + v).to_le_bytes()).collect() })
-                .collect();
+            let values: Vec<[f32; BRICK_VOXELS]> = (0..count).map(|i| std::array::from_fn(|v| (i * 1000 + v as u32) as f32)).collect();
+            let bricks = encode_all(Format::F32, Quality::Fast, &values, &|_| {});
             for layout in plan_atlases(Format::F32, count, max_dim) {
                 let atlas = pack_atlas(&layout, &bricks);
                 for i in 0..layout.count {
                     let g = layout.first_brick + i;
-                    assert_eq!(unpack_brick(&layout, &atlas, i).unwrap(), bricks[g as usize].data);
+                    let back = unpack_brick(&layout, &atlas, i).unwrap();
+                    assert_eq!(back, bricks.brick(g as usize).unwrap());
+                    assert_eq!(decode_brick(Format::F32, [0.0; 2], &back), values[g as usize]);
                     let [px, py, pz] = layout.position(i);
-                    let (x, y, z) = (3u32, 5u32, 6u32);
-                    let o = layout.texel_offset(px * 8 + x, py * 8 + y, pz * 8 + z);
-                    assert_eq!(u32::from_le_bytes(atlas[o..o + 4].try_into().unwrap()), g * 1000 + x * 64 + y * 8 + z);
+                    for v in 0..BRICK_VOXELS as u32 {
+                        let (x, y, z) = (v / 64, (v / 8) % 8, v % 8);
+                        let o = layout.texel_offset(px * 8 + x, py * 8 + y, pz * 8 + z);
+                        assert_eq!(f32::from_le_bytes(atlas[o..o + 4].try_into().unwrap()), (g * 1000 + v) as f32);
+                    }
                 }
             }
         }
     }
 
     #[test]
+    fn every_format_keeps_voxel_order() {
+        // A brick whose voxels differ along each axis by different steps
+        // decodes with each voxel in its place, in every format.
+        let ramp: [f32; BRICK_VOXELS] = std::array::from_fn(|i| (((i / 64) * 24 + ((i / 8) % 8) * 6 + i % 8 * 2) as f32) / 255.0);
+        for format in Format::ALL {
+            let e = encode_brick(format, &ramp);
+            let d = e.decode(0).unwrap();
+            let worst = ramp.iter().zip(d.iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+            assert!(worst <= 12.0 / 255.0, "{format:?}: worst error {worst}");
+        }
+    }
+
+    #[test]
+    fn keep_only_moves_bricks_down() {
+        let values: Vec<[f32; BRICK_VOXELS]> = (0..5).map(|i| [i as f32; BRICK_VOXELS]).collect();
+        let mut e = encode_all(Format::F16, Quality::Fast, &values, &|_| {});
+        e.keep_only(&[0, 2, 4]);
+        assert_eq!(e.len(), 3);
+        assert_eq!(e.data.len(), 3 * Format::F16.brick_bytes());
+        assert_eq!((0..3).map(|i| e.decode(i).unwrap()[0]).collect::<Vec<_>>(), vec![0.0, 2.0, 4.0]);
+        assert_eq!(e.ranges, vec![[0.0; 2], [2.0; 2], [4.0; 2]]);
+        assert!(e.brick(3).is_none());
+    }
+
+    #[test]
     fn every_block_lands_at_its_brick_position() {
         for format in [Format::Bc4, Format::Bc7] {
             for (count, max_dim) in [(1u32, 2048u32), (9, 16), (70, 32)] {
-                let bricks: Vec<EncodedBrick> = (0..count)
-                    .map(|i| EncodedBrick { range: [0.0, 1.0], data: (0..format.brick_bytes()).map(|b| (i as usize * 7 + b) as u8).collect() })
-                    .collect();
+                let data = (0..count as usize).flat_map(|i| (0..format.brick_bytes()).map(move |b| (i * 7 + b) as u8)).collect();
+                let bricks = EncodedBricks { format, ranges: vec![[0.0, 1.0]; count as usize], data };
                 for layout in plan_atlases(format, count, max_dim) {
                     let atlas = pack_atlas(&layout, &bricks);
                     assert_eq!(atlas.len(), layout.byte_len());
                     for i in 0..layout.count {
                         let g = (layout.first_brick + i) as usize;
-                        assert_eq!(unpack_brick(&layout, &atlas, i).unwrap(), bricks[g].data, "{format:?} brick {g}");
+                        assert_eq!(unpack_brick(&layout, &atlas, i).unwrap(), bricks.brick(g).unwrap(), "{format:?} brick {g}");
                         // Block (slice 1, row 1, col 0) of the brick, straight from the texture.
                         let [px, py, pz] = layout.position(i).map(|p| p as usize);
                         let sp = format.slices_per_brick() as usize;
                         let o = (pz * sp + 1) * layout.slice_bytes() + (py * 2 + 1) * layout.row_bytes() + (px * 2) * format.block_bytes();
                         let want = 6 * format.block_bytes();
-                        assert_eq!(&atlas[o..o + format.block_bytes()], &bricks[g].data[want..want + format.block_bytes()]);
+                        assert_eq!(&atlas[o..o + format.block_bytes()], &bricks.brick(g).unwrap()[want..want + format.block_bytes()]);
                     }
                 }
             }

@@ -139,30 +139,73 @@ fn same_bits(a: &Brick, b: &Brick) -> bool {
 /// Hash maps keyed by data that needs no DoS protection: XXH3, deterministic.
 type Map<K, V> = HashMap<K, V, xxhash_rust::xxh3::Xxh3DefaultBuilder>;
 
+/// Ids of items by content hash, for deduplication: equal hashes are told
+/// apart by comparing the items themselves.
+#[derive(Default)]
+pub struct HashIndex {
+    /// Hash -> the first item with it.
+    first: Map<u64, u32>,
+    /// Further items whose hash equals an earlier, different item's.
+    more: Map<u64, Vec<u32>>,
+}
+
+impl HashIndex {
+    pub fn reserve(&mut self, n: usize) {
+        self.first.reserve(n);
+    }
+
+    /// The id of an item with hash `h` for which `same(id)` holds, if any.
+    pub fn find(&self, h: u64, same: impl Fn(u32) -> bool) -> Option<u32> {
+        let first = *self.first.get(&h)?;
+        if same(first) {
+            return Some(first);
+        }
+        self.more.get(&h).and_then(|ids| ids.iter().copied().find(|&id| same(id)))
+    }
+
+    /// Records item `id`, with hash `h`, as new.
+    pub fn add(&mut self, h: u64, id: u32) {
+        if self.first.contains_key(&h) {
+            self.more.entry(h).or_default().push(id);
+        } else {
+            self.first.insert(h, id);
+        }
+    }
+}
+
 /// Distinct bricks, each stored once.
 #[derive(Default)]
 pub struct BrickPool {
     bricks: Vec<Brick>,
-    index: Map<u64, Vec<u32>>,
+    index: HashIndex,
 }
 
 impl BrickPool {
     /// Returns the id of `brick`, adding it if it is new.
     pub fn insert(&mut self, brick: &Brick) -> Result<u32, Error> {
-        self.insert_hashed(brick, brick_hash(brick))
+        let h = brick_hash(brick);
+        let id = self.bricks.len();
+        self.bricks.push(*brick);
+        let mut next = id;
+        let found = self.settle(id, &mut next, h);
+        self.bricks.truncate(next);
+        found
     }
 
-    /// [`BrickPool::insert`] with the brick's [`brick_hash`] already computed.
-    pub fn insert_hashed(&mut self, brick: &Brick, h: u64) -> Result<u32, Error> {
-        let ids = self.index.entry(h).or_default();
-        for &id in ids.iter() {
-            if self.bricks.get(id as usize).is_some_and(|b| same_bits(b, brick)) {
-                return Ok(id);
-            }
+    /// Pools the brick at `from`, which was appended past the pool's first
+    /// `next` bricks (all distinct): returns the id of an equal brick among
+    /// them, or moves it to `next`, takes that as its id and advances `next`.
+    fn settle(&mut self, from: usize, next: &mut usize, h: u64) -> Result<u32, Error> {
+        let Some(brick) = self.bricks.get(from) else { return Err(Error::Overflow { what: "bricks" }) };
+        if let Some(id) = self.index.find(h, |id| self.bricks.get(id as usize).is_some_and(|b| same_bits(b, brick))) {
+            return Ok(id);
         }
-        let id = u32::try_from(self.bricks.len()).ok().filter(|&i| i < TILE_FLAG).ok_or(Error::Overflow { what: "bricks" })?;
-        self.bricks.push(*brick);
-        ids.push(id);
+        let id = u32::try_from(*next).ok().filter(|&i| i < TILE_FLAG).ok_or(Error::Overflow { what: "bricks" })?;
+        if from != *next {
+            self.bricks.copy_within(from..from + 1, *next);
+        }
+        self.index.add(h, id);
+        *next += 1;
         Ok(id)
     }
 
@@ -228,6 +271,8 @@ pub struct FrameStats {
     pub tiles: usize,
     pub active_voxels: u64,
     pub new_bricks: usize,
+    /// Minimum and maximum active value (tiles included); `None` when nothing is active.
+    pub range: Option<[f32; 2]>,
 }
 
 /// Streams frames into a brick pool and per-frame leaf lists.
@@ -260,46 +305,57 @@ impl Builder {
         }
         let before = self.pool.len();
         let mut fl = FrameLeaves::default();
-        // Bricks and their hashes in parallel, a bounded batch at a time (in
-        // leaf order); bricks are pooled in order.
+        // A bounded batch at a time (in leaf order): the batch's bricks are
+        // built straight into the pool and hashed in parallel, then pooled in
+        // order, duplicates squeezed out.
         let live: Vec<usize> = (0..grid.leaves.len()).filter(|&i| !grid.leaves[i].mask.is_empty()).collect();
         // Room for every leaf being new, so the pool never moves while it grows
         // (untouched capacity costs no memory).
         self.pool.bricks.reserve(live.len());
+        self.pool.index.reserve(live.len());
+        vdbcook_grid::mem::advise_huge_pages(&self.pool.bricks);
         self.l3.reserve(live.len());
         self.l3_index.reserve(live.len());
         fl.leaves.reserve(live.len());
+        let mut range = [f32::INFINITY, f32::NEG_INFINITY];
         for batch in live.chunks(4096) {
-            let bricks: Vec<(Brick, u64)> = batch
+            let start = self.pool.bricks.len();
+            self.pool.bricks.par_extend(batch.par_iter().map(|&i| brick_of_leaf(&grid.leaves[i])));
+            let hashes: Vec<(u64, f32, f32)> = batch
                 .par_iter()
-                .map(|&i| {
-                    let b = brick_of_leaf(&grid.leaves[i]);
-                    let h = brick_hash(&b);
-                    (b, h)
+                .zip(self.pool.bricks.get(start..).unwrap_or(&[]).par_iter())
+                .map(|(&i, b)| {
+                    let s = vdbcook_grid::LeafSummary::of(&grid.leaves[i]);
+                    (brick_hash(b), s.min, s.max)
                 })
                 .collect();
-            for (&i, (b, h)) in batch.iter().zip(&bricks) {
+            let mut next = start;
+            for (k, (&i, &(h, lo, hi))) in batch.iter().zip(&hashes).enumerate() {
                 let leaf = &grid.leaves[i];
-                let brick = self.pool.insert_hashed(b, *h)?;
+                range = [range[0].min(lo), range[1].max(hi)];
+                let brick = self.pool.settle(start + k, &mut next, h)?;
                 let key = L3 { mask: leaf.mask.0, brick };
-                let next = u32::try_from(self.l3.len()).map_err(|_| Error::Overflow { what: "L3 nodes" })?;
-                let id = *self.l3_index.entry(key).or_insert(next);
-                if id == next {
+                let next_l3 = u32::try_from(self.l3.len()).map_err(|_| Error::Overflow { what: "L3 nodes" })?;
+                let id = *self.l3_index.entry(key).or_insert(next_l3);
+                if id == next_l3 {
                     self.l3.push(key);
                 }
                 fl.leaves.push((leaf.origin, id));
                 fl.active_voxels += u64::from(leaf.mask.count_on());
                 self.grow(Bbox::new(leaf.origin, leaf.origin.offset(7, 7, 7)));
             }
+            self.pool.bricks.truncate(next);
         }
         for t in grid.tiles.iter().filter(|t| t.active) {
             fl.tiles.push((t.origin, t.dim, t.value));
             fl.active_voxels += t.voxel_count();
+            range = [range[0].min(t.value), range[1].max(t.value)];
             self.grow(t.bbox());
         }
         fl.leaves.sort_by_key(|l| l.0);
         self.leaves_in += fl.leaves.len() as u64;
-        let stats = FrameStats { leaves: fl.leaves.len(), tiles: fl.tiles.len(), active_voxels: fl.active_voxels, new_bricks: self.pool.len() - before };
+        let range = (fl.active_voxels > 0).then_some(range);
+        let stats = FrameStats { leaves: fl.leaves.len(), tiles: fl.tiles.len(), active_voxels: fl.active_voxels, new_bricks: self.pool.len() - before, range };
         self.frames.push(fl);
         Ok(stats)
     }
@@ -422,15 +478,17 @@ impl Built {
     pub fn nodes(&self, brick_of: impl Fn(u32) -> u32) -> Result<Nodes, Error> {
         let mut n = Nodes { offset: self.offset, ..Nodes::default() };
         // L3 nodes, re-interned after the brick remap (two L3s may now be equal).
-        let mut l3_table = Interner::default();
+        let mut l3_table: Map<L3, u32> = Map::default();
+        l3_table.reserve(self.l3.len());
+        n.l3.reserve(self.l3.len() * L3_WORDS);
         let mut l3_id = Vec::with_capacity(self.l3.len());
         for l in &self.l3 {
-            let brick = brick_of(l.brick);
-            let mut words: Vec<u32> = l.mask.iter().flat_map(|w| [*w as u32, (*w >> 32) as u32]).collect();
-            words.push(brick);
-            let (id, new) = l3_table.intern(words.clone());
-            if new {
-                n.l3.extend(words);
+            let key = L3 { mask: l.mask, brick: brick_of(l.brick) };
+            let next = l3_table.len() as u32;
+            let id = *l3_table.entry(key).or_insert(next);
+            if id == next {
+                n.l3.extend(key.mask.iter().flat_map(|w| [*w as u32, (*w >> 32) as u32]));
+                n.l3.push(key.brick);
             }
             l3_id.push(id);
         }
@@ -448,19 +506,19 @@ impl Built {
         let off = self.offset;
         let local = |c: Coord| Coord::new(c.x.wrapping_sub(off.x), c.y.wrapping_sub(off.y), c.z.wrapping_sub(off.z));
         for fl in &self.frames {
-            // l1 slot -> (l2 slot -> entry), or a tile for the whole slot.
-            let mut l2s: BTreeMap<usize, BTreeMap<usize, u32>> = BTreeMap::new();
+            // (l1 slot, l2 slot, entry), or a tile for a whole l1 slot.
+            let mut l2s: Vec<(usize, usize, u32)> = Vec::with_capacity(fl.leaves.len());
             let mut l1_tiles: BTreeMap<usize, u32> = BTreeMap::new();
             for &(o, id) in &fl.leaves {
                 let p = local(o);
-                l2s.entry(slot(p, L1_LOG2, 7)).or_default().insert(slot(p, L2_LOG2, 3), l3_id[id as usize]);
+                l2s.push((slot(p, L1_LOG2, 7), slot(p, L2_LOG2, 3), l3_id[id as usize]));
             }
             for &(o, dim, value) in &fl.tiles {
                 let t = tile(value, &mut n);
                 match dim {
                     8 => {
                         let p = local(o);
-                        l2s.entry(slot(p, L1_LOG2, 7)).or_default().insert(slot(p, L2_LOG2, 3), t);
+                        l2s.push((slot(p, L1_LOG2, 7), slot(p, L2_LOG2, 3), t));
                     }
                     128 => {
                         l1_tiles.insert(slot(local(o), L1_LOG2, 7), t);
@@ -479,14 +537,23 @@ impl Built {
                     }
                 }
             }
-            let mut l1_occ: Vec<(usize, u32)> = Vec::with_capacity(l2s.len() + l1_tiles.len());
-            for (s1, l2) in &l2s {
-                let occ: Vec<(usize, u32)> = l2.iter().map(|(&s, &e)| (s, e)).collect();
+            // By slot; of two entries for one slot, the later one counts.
+            l2s.sort_by_key(|e| (e.0, e.1));
+            let mut l1_occ: Vec<(usize, u32)> = Vec::with_capacity(l1_tiles.len() + 1);
+            for node in l2s.chunk_by(|a, b| a.0 == b.0) {
+                let mut occ: Vec<(usize, u32)> = Vec::with_capacity(node.len());
+                for e in node {
+                    match occ.last_mut() {
+                        Some(last) if last.0 == e.1 => last.1 = e.2,
+                        _ => occ.push((e.1, e.2)),
+                    }
+                }
                 let id = intern_node(&mut l2_table, &mut n.l2, &mut n.l2_entries, L2_SLOTS, &occ)?;
-                l1_occ.push((*s1, id));
+                l1_occ.push((node[0].0, id));
             }
+            let with_l2 = l1_occ.len();
             for (&s, &t) in &l1_tiles {
-                if !l2s.contains_key(&s) {
+                if l1_occ[..with_l2].binary_search_by_key(&s, |e| e.0).is_err() {
                     l1_occ.push((s, t));
                 }
             }

@@ -33,6 +33,56 @@ fn pool_stores_identical_bricks_once() {
 }
 
 #[test]
+fn pool_keeps_bricks_apart_when_their_hashes_collide() {
+    // Three different bricks given one hash, then looked up again.
+    let mut p = BrickPool::default();
+    let bricks = [[0.25f32; 512], [0.5; 512], [0.75; 512]];
+    for (k, b) in bricks.iter().enumerate() {
+        p.bricks.push(*b);
+        let mut next = k;
+        assert_eq!(p.settle(k, &mut next, 42).unwrap(), k as u32);
+        assert_eq!(next, k + 1);
+    }
+    for (k, b) in bricks.iter().enumerate().rev() {
+        p.bricks.push(*b);
+        let mut next = 3;
+        assert_eq!(p.settle(3, &mut next, 42).unwrap(), k as u32);
+        assert_eq!(next, 3, "a duplicate takes no slot");
+        p.bricks.truncate(3);
+    }
+}
+
+#[test]
+fn a_frame_with_repeated_leaves_pools_each_brick_once_in_first_order() {
+    // 5,000 leaves (more than one batch): every third repeats one of 50
+    // patterns, the others are new, so new bricks follow duplicates inside
+    // a batch; every fifth is partly active.
+    let leaves: Vec<Leaf> = (0..5000).map(|i| leaf(Coord::new(8 * (i / 64), 8 * (i % 64), 0), if i % 3 == 0 { (i / 3 % 50) as u32 } else { 1000 + i as u32 }, if i % 5 == 0 { 100 } else { 512 })).collect();
+    let g = grid(leaves.clone(), vec![Tile { origin: Coord::new(0, 0, 1024), dim: 8, value: -3.0, active: true }]);
+    let mut first: Vec<Brick> = Vec::new();
+    for l in &leaves {
+        let br = brick_of_leaf(l);
+        if !first.iter().any(|f| same_bits(f, &br)) {
+            first.push(br);
+        }
+    }
+    assert!(first.len() > 3000 && first.len() < 3500, "{}", first.len());
+    let mut b = Builder::new();
+    let fs = b.push(&g).unwrap();
+    assert_eq!(fs.new_bricks, first.len());
+    let st = g.stats();
+    assert_eq!(fs.range, Some([st.min.unwrap() as f32, st.max.unwrap() as f32]));
+    let built = b.finish().unwrap();
+    assert_eq!(built.pool.bricks(), &first[..]);
+    for (origin, l3) in &built.frames[0].leaves {
+        let l = leaves.iter().find(|l| l.origin == *origin).unwrap();
+        let node = built.l3[*l3 as usize];
+        assert_eq!(node.mask, l.mask.0);
+        assert!(same_bits(&built.pool.bricks()[node.brick as usize], &brick_of_leaf(l)));
+    }
+}
+
+#[test]
 fn unchanging_frames_share_every_node() {
     let g = grid(vec![leaf(Coord::new(-8, 0, 16), 1, 300), leaf(Coord::new(200, 8, 0), 2, 512)], vec![Tile { origin: Coord::new(128, 128, 0), dim: 128, value: 0.25, active: true }]);
     let mut b = Builder::new();

@@ -10,6 +10,7 @@
 //! space.
 
 mod coord;
+pub mod mem;
 mod transform;
 
 use rayon::prelude::*;
@@ -170,17 +171,18 @@ pub struct Stats {
     pub sum: f64,
 }
 
-/// Active-value figures of one leaf.
-struct LeafSummary {
-    count: u64,
-    min: f32,
-    max: f32,
-    sum: f64,
-    bbox: Option<Bbox>,
+/// Active-value figures of one leaf (min and max are infinite when it has none).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LeafSummary {
+    pub count: u64,
+    pub min: f32,
+    pub max: f32,
+    pub sum: f64,
+    pub bbox: Option<Bbox>,
 }
 
 impl LeafSummary {
-    fn of(leaf: &Leaf) -> LeafSummary {
+    pub fn of(leaf: &Leaf) -> LeafSummary {
         let mut s = LeafSummary { count: 0, min: f32::INFINITY, max: f32::NEG_INFINITY, sum: 0.0, bbox: None };
         let n = leaf.mask.count_on();
         if n == 0 {

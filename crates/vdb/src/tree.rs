@@ -187,7 +187,8 @@ impl TreeLayout<'_> {
         self.leaves.sort_unstable_by_key(|l| l.origin);
         // The first failing leaf (in leaf order, whatever the thread count).
         let failure: Mutex<Option<(usize, Error)>> = Mutex::new(None);
-        let mut leaves = Vec::new();
+        let mut leaves = Vec::with_capacity(self.leaves.len());
+        vdbcook_grid::mem::advise_huge_pages(&leaves);
         self.leaves
             .par_iter()
             .enumerate()
