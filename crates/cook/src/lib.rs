@@ -16,7 +16,7 @@ pub use vdbcook_encode::{Format, Quality};
 
 use rayon::prelude::*;
 use std::time::Instant;
-use vdbcook_encode::{EncodedBricks, ErrorStats};
+use vdbcook_encode::{Encodings, ErrorStats, Subset};
 use vdbcook_flipbook::{Builder, Built, HashIndex, Nodes};
 use vdbcook_grid::{Grid, Transform};
 use vdbcook_vpak::{kind, AtlasInfo, FrameInfo, Metadata, Section, SourceFile};
@@ -207,9 +207,10 @@ impl Cooker {
         let work: &[vdbcook_flipbook::Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
         let t0 = Instant::now();
         progress.start("encoding", work.len() as u64);
-        let encoded = vdbcook_encode::encode_all(format, self.opts.quality, work, &|n| progress.advance(n as u64));
+        let encoded = vdbcook_encode::encodings(format, self.opts.quality, work, &|n| progress.advance(n as u64));
         progress.finish();
-        let (stored, enc_remap) = dedup_encoded(encoded);
+        let (keep, enc_remap) = dedup_encoded(&*encoded);
+        let stored = Subset { inner: &*encoded, keep: &keep };
         // Pool brick -> stored brick.
         let remap: Vec<u32> = match &clustered {
             Some(c) => c.remap.iter().map(|&w| enc_remap[w as usize]).collect(),
@@ -237,7 +238,7 @@ impl Cooker {
         let cluster_report = clustered.as_ref().zip(self.opts.clustering.as_ref()).map(|(c, co)| {
             let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
             let own: Vec<vdbcook_flipbook::Brick> = merged.iter().map(|&i| pool[i]).collect();
-            let own_enc = vdbcook_encode::encode_all(format, self.opts.quality, &own, &|_| {});
+            let own_enc = vdbcook_encode::encodings(format, self.opts.quality, &own, &|_| {});
             let mut slot = vec![u32::MAX; c.merged.len()];
             for (k, &i) in merged.iter().enumerate() {
                 slot[i] = k as u32;
@@ -261,23 +262,22 @@ impl Cooker {
                 rmse_with: total.rmse(),
             }
         });
-        drop(clustered);
         timings.push(("error".into(), t0.elapsed().as_secs_f64()));
 
-        // The source-precision bricks are not needed any more.
         let unique_bricks = built.pool.len();
-        drop(std::mem::take(&mut built.pool));
-
         let t0 = Instant::now();
         let layouts = vdbcook_encode::plan_atlases(format, stored.len() as u32, self.opts.max_texture_dim);
         let mut sections = node_sections(&nodes);
-        let ranges: Vec<u32> = stored.ranges.iter().flat_map(|r| r.map(f32::to_bits)).collect();
+        let ranges: Vec<u32> = (0..stored.len()).flat_map(|i| stored.range(i).unwrap_or_default().map(f32::to_bits)).collect();
         sections.push(Section { kind: kind::BRICK_RANGES, index: 0, data: words(&ranges) });
         for (i, l) in layouts.iter().enumerate() {
             sections.push(Section { kind: kind::ATLAS, index: i as u32, data: vdbcook_encode::pack_atlas(l, &stored) });
         }
         let stored_bricks = stored.len();
-        drop(stored);
+        // The source-precision bricks are not needed any more.
+        drop(encoded);
+        drop(clustered);
+        drop(std::mem::take(&mut built.pool));
         let (grid_name, grid_class, transform) = self.first.clone().unwrap_or_else(|| (String::new(), "unknown".into(), Transform::identity()));
         let range = if self.range[0] <= self.range[1] { self.range } else { [built.background; 2] };
         let meta = Metadata {
@@ -339,16 +339,25 @@ impl Cooker {
     }
 }
 
-/// Stores each distinct encoding once (the first of equal ones, in order);
-/// returns the stored bricks and, per pool brick, its stored index.
-fn dedup_encoded(mut encoded: EncodedBricks) -> (EncodedBricks, Vec<u32>) {
+/// Finds the distinct encodings (the first of equal ones, in order):
+/// returns their indices and, per pool brick, its stored index.
+fn dedup_encoded(encoded: &dyn Encodings) -> (Vec<usize>, Vec<u32>) {
+    let n = encoded.format().brick_bytes();
+    let write = |i: usize, buf: &mut [u8; vdbcook_encode::MAX_BRICK_BYTES]| {
+        encoded.write(i, &mut buf[..n]);
+    };
     // A brick's hash covers its bytes and its range.
+    let ranges: Vec<[u32; 2]> = (0..encoded.len()).map(|i| encoded.range(i).unwrap_or_default().map(f32::to_bits)).collect();
     let hashes: Vec<u64> = (0..encoded.len())
         .into_par_iter()
-        .map(|i| {
-            let [lo, hi] = encoded.ranges[i].map(f32::to_bits);
-            xxhash_rust::xxh3::xxh3_64_with_seed(encoded.brick(i).unwrap_or(&[]), u64::from(lo) << 32 | u64::from(hi))
-        })
+        .map_init(
+            || [0u8; vdbcook_encode::MAX_BRICK_BYTES],
+            |buf, i| {
+                write(i, buf);
+                let [lo, hi] = ranges[i];
+                xxhash_rust::xxh3::xxh3_64_with_seed(&buf[..n], u64::from(lo) << 32 | u64::from(hi))
+            },
+        )
         .collect();
     let mut index = HashIndex::default();
     index.reserve(encoded.len());
@@ -357,7 +366,14 @@ fn dedup_encoded(mut encoded: EncodedBricks) -> (EncodedBricks, Vec<u32>) {
     for (i, &h) in hashes.iter().enumerate() {
         let same = |k: u32| {
             let j = keep[k as usize];
-            encoded.ranges[j].map(f32::to_bits) == encoded.ranges[i].map(f32::to_bits) && encoded.brick(j) == encoded.brick(i)
+            if ranges[j] != ranges[i] {
+                return false;
+            }
+            // Equal hashes are rare: encode both again to compare.
+            let (mut x, mut y) = ([0u8; vdbcook_encode::MAX_BRICK_BYTES], [0u8; vdbcook_encode::MAX_BRICK_BYTES]);
+            write(j, &mut x);
+            write(i, &mut y);
+            x[..n] == y[..n]
         };
         let id = match index.find(h, same) {
             Some(k) => k,
@@ -370,8 +386,7 @@ fn dedup_encoded(mut encoded: EncodedBricks) -> (EncodedBricks, Vec<u32>) {
         };
         remap.push(id);
     }
-    encoded.keep_only(&keep);
-    (encoded, remap)
+    (keep, remap)
 }
 
 /// Error of decoded bricks (`decoded(pool brick)`) against the source over

@@ -136,38 +136,126 @@ pub struct EncodedBricks {
 }
 
 impl EncodedBricks {
-    pub fn len(&self) -> usize {
-        self.ranges.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.ranges.is_empty()
-    }
-
     /// The encoded bytes of brick `i`.
     pub fn brick(&self, i: usize) -> Option<&[u8]> {
         let n = self.format.brick_bytes();
         self.data.get(i.checked_mul(n)?..(i + 1).checked_mul(n)?)
     }
+}
 
-    /// Brick `i` decoded back to values (index `x·64 + y·8 + z`).
-    pub fn decode(&self, i: usize) -> Option<[f32; BRICK_VOXELS]> {
-        Some(decode_brick(self.format, *self.ranges.get(i)?, self.brick(i)?))
+/// Where each brick's encoding comes from: computed once and kept
+/// ([`EncodedBricks`], for the block formats, whose encoder is slow), or
+/// computed from the source brick whenever it is asked for ([`SourceBricks`],
+/// for the uncompressed formats, so that no copy of the whole pool is kept).
+pub trait Encodings: Sync {
+    fn format(&self) -> Format;
+    fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
     }
+    /// Brick `i`'s range (`None` past the end).
+    fn range(&self, i: usize) -> Option<[f32; 2]>;
+    /// Writes brick `i`'s encoding (`format().brick_bytes()` bytes, in the
+    /// order [`EncodedBricks`] describes) to `out`; false past the end.
+    fn write(&self, i: usize, out: &mut [u8]) -> bool;
+    /// Brick `i` decoded back to values (index `x·64 + y·8 + z`).
+    fn decode(&self, i: usize) -> Option<[f32; BRICK_VOXELS]> {
+        let mut buf = [0u8; MAX_BRICK_BYTES];
+        let data = buf.get_mut(..self.format().brick_bytes())?;
+        self.write(i, data).then(|| decode_brick(self.format(), self.range(i).unwrap_or_default(), data))
+    }
+}
 
-    /// Keeps only the bricks `keep` (strictly increasing indices), in that
-    /// order, moving them down in place.
-    pub fn keep_only(&mut self, keep: &[usize]) {
-        let n = self.format.brick_bytes();
-        for (j, &i) in keep.iter().enumerate() {
-            debug_assert!(j <= i && i < self.len());
-            if i != j {
-                self.data.copy_within(i * n..(i + 1) * n, j * n);
-                self.ranges[j] = self.ranges[i];
+/// The largest encoded brick (f32).
+pub const MAX_BRICK_BYTES: usize = BRICK_VOXELS * 4;
+
+impl Encodings for EncodedBricks {
+    fn format(&self) -> Format {
+        self.format
+    }
+    fn len(&self) -> usize {
+        self.ranges.len()
+    }
+    fn range(&self, i: usize) -> Option<[f32; 2]> {
+        self.ranges.get(i).copied()
+    }
+    fn write(&self, i: usize, out: &mut [u8]) -> bool {
+        match self.brick(i) {
+            Some(b) if b.len() == out.len() => {
+                out.copy_from_slice(b);
+                true
             }
+            _ => false,
         }
-        self.ranges.truncate(keep.len());
-        self.data.truncate(keep.len() * n);
+    }
+}
+
+/// Uncompressed encodings of source bricks, made when asked for.
+pub struct SourceBricks<'a> {
+    format: Format,
+    bricks: &'a [[f32; BRICK_VOXELS]],
+    ranges: Vec<[f32; 2]>,
+}
+
+impl<'a> SourceBricks<'a> {
+    /// `None` for a block format.
+    pub fn new(format: Format, bricks: &'a [[f32; BRICK_VOXELS]]) -> Option<SourceBricks<'a>> {
+        (!format.is_block()).then(|| SourceBricks { format, bricks, ranges: bricks.par_iter().map(range_of).collect() })
+    }
+}
+
+impl Encodings for SourceBricks<'_> {
+    fn format(&self) -> Format {
+        self.format
+    }
+    fn len(&self) -> usize {
+        self.bricks.len()
+    }
+    fn range(&self, i: usize) -> Option<[f32; 2]> {
+        self.ranges.get(i).copied()
+    }
+    fn write(&self, i: usize, out: &mut [u8]) -> bool {
+        match (self.bricks.get(i), self.ranges.get(i)) {
+            (Some(b), Some(r)) if out.len() == self.format.brick_bytes() => {
+                encode_voxels(self.format, b, *r, out);
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+/// The bricks `keep[0]`, `keep[1]`, … of `inner`, renumbered from 0.
+pub struct Subset<'a> {
+    pub inner: &'a dyn Encodings,
+    pub keep: &'a [usize],
+}
+
+impl Encodings for Subset<'_> {
+    fn format(&self) -> Format {
+        self.inner.format()
+    }
+    fn len(&self) -> usize {
+        self.keep.len()
+    }
+    fn range(&self, i: usize) -> Option<[f32; 2]> {
+        self.inner.range(*self.keep.get(i)?)
+    }
+    fn write(&self, i: usize, out: &mut [u8]) -> bool {
+        self.keep.get(i).is_some_and(|&k| self.inner.write(k, out))
+    }
+}
+
+/// The encodings of `bricks` in `format`: block formats are encoded now, in
+/// parallel (`progress(n)` after each chunk of `n` bricks); uncompressed
+/// formats when asked for.
+pub fn encodings<'a>(format: Format, quality: Quality, bricks: &'a [[f32; BRICK_VOXELS]], progress: &(dyn Fn(usize) + Sync)) -> Box<dyn Encodings + 'a> {
+    match SourceBricks::new(format, bricks) {
+        Some(s) => {
+            progress(bricks.len());
+            Box::new(s)
+        }
+        None => Box::new(encode_all(format, quality, bricks, progress)),
     }
 }
 
@@ -377,35 +465,51 @@ pub fn plan_atlases(format: Format, count: u32, max_dim: u32) -> Vec<AtlasLayout
     out
 }
 
-/// Lays the bricks of one atlas out as texture bytes, in parallel over
-/// slices; each slice is written strictly in order.
-pub fn pack_atlas(layout: &AtlasLayout, bricks: &EncodedBricks) -> Vec<u8> {
+/// Lays the bricks of one atlas out as texture bytes (global brick
+/// `layout.first_brick + i` of `bricks` at local position `i`), in parallel
+/// over rows of bricks; each brick's encoding is made or fetched once.
+pub fn pack_atlas(layout: &AtlasLayout, bricks: &dyn Encodings) -> Vec<u8> {
     let mut out = vec![0u8; layout.byte_len()];
     vdbcook_grid::mem::advise_huge_pages(&out);
-    if layout.format != bricks.format {
+    let format = layout.format;
+    if format != bricks.format() || !layout.is_valid() {
         return out;
     }
     let [bx, by, _] = layout.bricks.map(|b| b as usize);
-    let sp = layout.format.slices_per_brick() as usize;
+    let sp = format.slices_per_brick() as usize;
     let row = layout.row_bytes();
-    // The brick at position (px, py) of layer `layer`, if it holds one.
-    let brick_at = |layer: usize, py: usize, px: usize| {
-        let local = (layer * by + py) * bx + px;
-        (local < layout.count as usize).then(|| bricks.brick(layout.first_brick as usize + local)).flatten()
-    };
     // A brick is slices × rows × columns of runs that are contiguous both in
-    // its data and in the atlas: 8 × 8 × 1 rows of 8 texels, or
+    // its encoding and in the atlas: 8 × 8 × 1 rows of 8 texels, or
     // slices × 2 × 2 blocks.
-    let (run, rows_per_brick, per_row) = if layout.format.is_block() { (layout.format.block_bytes(), 2, 2) } else { (8 * layout.format.bytes_per_voxel(), 8, 1) };
-    let src = |ls: usize, r: usize, c: usize| ((ls * rows_per_brick + r) * per_row + c) * run;
-    out.par_chunks_mut(layout.slice_bytes().max(1)).enumerate().for_each(|(s, slice)| {
-        let (layer, ls) = (s / sp, s % sp);
-        for (r, line) in slice.chunks_exact_mut(row).enumerate() {
-            let (py, br) = (r / rows_per_brick, r % rows_per_brick);
-            for (c, dst) in line.chunks_exact_mut(run).enumerate() {
-                let (px, bc) = (c / per_row, c % per_row);
-                if let Some(v) = brick_at(layer, py, px).and_then(|data| data.get(src(ls, br, bc)..src(ls, br, bc) + run)) {
-                    dst.copy_from_slice(v);
+    let (run, rows_per_brick, per_row) = if format.is_block() { (format.block_bytes(), 2, 2) } else { (8 * format.bytes_per_voxel(), 8, 1) };
+    // The atlas as bands (the rows of one slice that one row of bricks
+    // covers), grouped by row of bricks: group (layer, py) holds the bands of
+    // its `sp` slices, in slice order.
+    let mut groups: Vec<Vec<&mut [u8]>> = Vec::new();
+    groups.resize_with(out.len() / (rows_per_brick * row * sp).max(1), Vec::new);
+    for (k, band) in out.chunks_exact_mut((rows_per_brick * row).max(1)).enumerate() {
+        let (slice, py) = (k / by, k % by);
+        if let Some(g) = groups.get_mut((slice / sp) * by + py) {
+            g.push(band);
+        }
+    }
+    groups.par_iter_mut().enumerate().for_each(|(g, bands)| {
+        let mut buf = [0u8; MAX_BRICK_BYTES];
+        let data = &mut buf[..format.brick_bytes()];
+        for px in 0..bx {
+            let local = g * bx + px;
+            if local >= layout.count as usize || !bricks.write(layout.first_brick as usize + local, data) {
+                break;
+            }
+            for (ls, band) in bands.iter_mut().enumerate() {
+                for r in 0..rows_per_brick {
+                    for c in 0..per_row {
+                        let src = ((ls * rows_per_brick + r) * per_row + c) * run;
+                        let dst = r * row + (px * per_row + c) * run;
+                        if let (Some(d), Some(v)) = (band.get_mut(dst..dst + run), data.get(src..src + run)) {
+                            d.copy_from_slice(v);
+                        }
+                    }
                 }
             }
         }
@@ -608,15 +712,31 @@ mod tests {
     }
 
     #[test]
-    fn keep_only_moves_bricks_down() {
-        let values: Vec<[f32; BRICK_VOXELS]> = (0..5).map(|i| [i as f32; BRICK_VOXELS]).collect();
-        let mut e = encode_all(Format::F16, Quality::Fast, &values, &|_| {});
-        e.keep_only(&[0, 2, 4]);
-        assert_eq!(e.len(), 3);
-        assert_eq!(e.data.len(), 3 * Format::F16.brick_bytes());
-        assert_eq!((0..3).map(|i| e.decode(i).unwrap()[0]).collect::<Vec<_>>(), vec![0.0, 2.0, 4.0]);
-        assert_eq!(e.ranges, vec![[0.0; 2], [2.0; 2], [4.0; 2]]);
-        assert!(e.brick(3).is_none());
+    fn made_on_demand_kept_and_subset_encodings_agree() {
+        // Uncompressed bricks encoded when asked for give the same bytes,
+        // ranges and atlases as bricks encoded up front; a subset renumbers.
+        let values: Vec<[f32; BRICK_VOXELS]> = (0..70).map(|i| smoke(i as f32)).collect();
+        for format in [Format::F32, Format::F16, Format::Unorm8] {
+            let kept = encode_all(format, Quality::Fast, &values, &|_| {});
+            let lazy = SourceBricks::new(format, &values).unwrap();
+            let mut buf = vec![0u8; format.brick_bytes()];
+            for i in 0..values.len() {
+                assert!(lazy.write(i, &mut buf));
+                assert_eq!(Some(&buf[..]), kept.brick(i));
+                assert_eq!(lazy.range(i), kept.range(i));
+            }
+            assert!(!lazy.write(values.len(), &mut buf));
+            for layout in plan_atlases(format, 70, 32) {
+                assert_eq!(pack_atlas(&layout, &lazy), pack_atlas(&layout, &kept), "{format:?}");
+            }
+            let keep = [3usize, 4, 60];
+            let sub = Subset { inner: &lazy, keep: &keep };
+            assert_eq!(sub.len(), 3);
+            assert_eq!(sub.decode(2), kept.decode(60));
+            assert_eq!(sub.range(1), kept.range(4));
+            assert!(sub.decode(3).is_none());
+        }
+        assert!(SourceBricks::new(Format::Bc7, &values).is_none());
     }
 
     #[test]

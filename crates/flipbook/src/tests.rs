@@ -210,3 +210,91 @@ fn inactive_voxels_are_filled_within_the_active_range() {
     let full = leaf(Coord::new(0, 0, 0), 5, 512);
     assert_eq!(brick_of_leaf(&full), full.values);
 }
+
+/// The first sessions' fill: every voxel every pass, the straightforward way.
+fn reference_fill(leaf: &vdbcook_grid::Leaf) -> Brick {
+    let n = leaf.mask.count_on();
+    if n as usize == LEAF_VOXELS {
+        return leaf.values;
+    }
+    let mut b = [0.0f32; LEAF_VOXELS];
+    let mut known = [false; LEAF_VOXELS];
+    let mut sum = 0.0f64;
+    for i in leaf.mask.iter_on() {
+        b[i] = leaf.values[i];
+        known[i] = true;
+        sum += f64::from(leaf.values[i]);
+    }
+    let mean = if n > 0 { (sum / f64::from(n)) as f32 } else { 0.0 };
+    for _ in 0..FILL_PASSES {
+        let (prev_b, prev_known) = (b, known);
+        let mut changed = false;
+        for i in 0..LEAF_VOXELS {
+            if prev_known[i] {
+                continue;
+            }
+            let (x, y, z) = (i >> 6, (i >> 3) & 7, i & 7);
+            let (mut acc, mut cnt) = (0.0f32, 0u32);
+            let mut visit = |j: usize| {
+                if prev_known[j] {
+                    acc += prev_b[j];
+                    cnt += 1;
+                }
+            };
+            if x > 0 { visit(i - 64); }
+            if x < 7 { visit(i + 64); }
+            if y > 0 { visit(i - 8); }
+            if y < 7 { visit(i + 8); }
+            if z > 0 { visit(i - 1); }
+            if z < 7 { visit(i + 1); }
+            if cnt > 0 {
+                b[i] = acc / cnt as f32;
+                known[i] = true;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    for i in 0..LEAF_VOXELS {
+        if !known[i] {
+            b[i] = mean;
+        }
+    }
+    b
+}
+
+#[test]
+fn the_bitmask_fill_equals_the_plain_one_bit_for_bit() {
+    // Random masks from nearly empty to nearly full, and a few shapes.
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let mut leaves = Vec::new();
+    for round in 0..400 {
+        let density = round % 20;
+        let mut mask = LeafMask::default();
+        let mut values = [0.0f32; 512];
+        for (i, v) in values.iter_mut().enumerate() {
+            *v = (next() % 10_000) as f32 / 7_919.0;
+            mask.set(i, next() % 20 < density);
+        }
+        leaves.push(Leaf { origin: Coord::new(0, 0, 0), mask, values });
+    }
+    for shape in [|i: usize| i == 0, |i: usize| i == 511, |i: usize| i & 7 == 3, |i: usize| i >> 6 == 7, |i: usize| (i >> 3) & 7 == 0 && i & 7 == 0] {
+        let mut mask = LeafMask::default();
+        for i in 0..512 {
+            mask.set(i, shape(i));
+        }
+        leaves.push(Leaf { origin: Coord::new(0, 0, 0), mask, values: std::array::from_fn(|i| i as f32 * 0.37) });
+    }
+    for (k, l) in leaves.iter().enumerate() {
+        let (a, b) = (brick_of_leaf(l), reference_fill(l));
+        assert!(same_bits(&a, &b), "leaf {k}: {:?}", a.iter().zip(b.iter()).position(|(x, y)| x.to_bits() != y.to_bits()));
+    }
+}
