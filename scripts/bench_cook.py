@@ -8,8 +8,8 @@
    against what the seed thesis's layout takes for the same frames (4100 B per L1,
    516 B per L2 with all 32768 allocated per frame, 68 B per L3 for every leaf).
 2. Cook throughput: `vdbcook cook --format f16` against `nanovdb_convert --fp16` on the
-   24M-voxel fog volume (scripts/make_bench_volume.py), best of R runs each, in active
-   voxels per second, and the ratio.
+   24M-voxel fog volume (scripts/make_bench_volume.py), R alternating runs each: best
+   and median times, active voxels per second, and both ratios.
 3. Peak memory (max RSS, /usr/bin/time): cooking the 100-frame sequence against cooking
    its largest single frame and against merely reading that frame (`inspect`).
 Figures go to docs/benchmarks.md by hand, with the date and this command.
@@ -18,6 +18,7 @@ Figures go to docs/benchmarks.md by hand, with the date and this command.
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import time
@@ -66,19 +67,20 @@ def main():
           % (r["bricks"], r["unique_bricks"], r["stored_bricks"], r["l1_nodes"], r["l2_nodes"], r["l3_nodes"], r["file_bytes"] / 1e6, r["bits_per_active_voxel"]))
 
     print("2. cook throughput, f16, %s" % os.path.relpath(vol, ROOT))
-    ours, theirs, n = float("inf"), float("inf"), 0
+    ours, theirs, n = [], [], 0
     nvdb = os.path.join(OUT, "bench.nvdb")
     for _ in range(args.runs):
         t0 = time.perf_counter()
         r = cook([vol], tmp, "f16")
-        ours = min(ours, time.perf_counter() - t0)
+        ours.append(time.perf_counter() - t0)
         n = r["active_voxels"]
         t0 = time.perf_counter()
         subprocess.run(["nanovdb_convert", "-f", "--fp16", vol, nvdb], check=True, capture_output=True)
-        theirs = min(theirs, time.perf_counter() - t0)
-    print("   vdbcook cook --format f16   %.3f s  %.1f M active voxels/s  (%.1f MB)" % (ours, n / ours / 1e6, os.path.getsize(tmp) / 1e6))
-    print("   nanovdb_convert --fp16      %.3f s  %.1f M active voxels/s  (%.1f MB)" % (theirs, n / theirs / 1e6, os.path.getsize(nvdb) / 1e6))
-    print("   ratio %.2fx (vdbcook / nanovdb_convert throughput, best of %d)" % (theirs / ours, args.runs))
+        theirs.append(time.perf_counter() - t0)
+    for name, t, out in [("vdbcook cook --format f16", ours, tmp), ("nanovdb_convert --fp16", theirs, nvdb)]:
+        print("   %-27s best %.3f s, median %.3f s  %.1f M active voxels/s at best  (%.1f MB)" % (name, min(t), statistics.median(t), n / min(t) / 1e6, os.path.getsize(out) / 1e6))
+    print("   ratio %.2fx best, %.2fx median (vdbcook / nanovdb_convert throughput, %d alternating runs)"
+          % (min(theirs) / min(ours), statistics.median(theirs) / statistics.median(ours), args.runs))
 
     print("3. peak memory (max RSS)")
     frames = sorted(os.listdir(seq))
