@@ -19,8 +19,11 @@ fn ok(out: std::process::Output) -> std::process::Output {
     out
 }
 
+/// Active voxels as (coord, value), and active tiles as (min, max, value).
+type OracleVoxels = (Vec<([i32; 3], f64)>, Vec<([i32; 3], [i32; 3], f64)>);
+
 /// Active voxels of grid 0 in an oracle dump: (coord, value), sorted.
-fn openvdb_voxels(file: &Path, dir: &Path) -> (Vec<([i32; 3], f64)>, Vec<([i32; 3], [i32; 3], f64)>) {
+fn openvdb_voxels(file: &Path, dir: &Path) -> OracleVoxels {
     let dump = dir.join(format!("{}.bin", file.file_name().unwrap().to_string_lossy()));
     oracle(file, Some(&dump)).expect("OpenVDB reads it");
     let b = std::fs::read(&dump).unwrap();

@@ -7,10 +7,10 @@ fn frame(shift: i32) -> Grid {
     for i in 0..40 {
         let mut mask = LeafMask::default();
         let mut values = [0.0f32; 512];
-        for v in 0..512 {
+        for (v, value) in values.iter_mut().enumerate() {
             if (v + i) % 3 != 0 {
                 mask.set(v, true);
-                values[v] = (((v * 7 + i * 13) as f32) * 0.01 + shift as f32).sin().abs() * 0.1;
+                *value = (((v * 7 + i * 13) as f32) * 0.01 + shift as f32).sin().abs() * 0.1;
             }
         }
         leaves.push(Leaf { origin: Coord::new((i as i32 % 5) * 8 - 64, (i as i32 / 5) * 8 + shift * 8, 0), mask, values });

@@ -168,10 +168,11 @@ impl HashIndex {
 
     /// Records item `id`, with hash `h`, as new.
     pub fn add(&mut self, h: u64, id: u32) {
-        if self.first.contains_key(&h) {
-            self.more.entry(h).or_default().push(id);
-        } else {
-            self.first.insert(h, id);
+        match self.first.entry(h) {
+            std::collections::hash_map::Entry::Occupied(_) => self.more.entry(h).or_default().push(id),
+            std::collections::hash_map::Entry::Vacant(e) => {
+                e.insert(id);
+            }
         }
     }
 }

@@ -8,9 +8,9 @@ fn grid(leaves: Vec<Leaf>, tiles: Vec<Tile>) -> Grid {
 fn leaf(origin: Coord, seed: u32, active: usize) -> Leaf {
     let mut mask = LeafMask::default();
     let mut values = [0.0f32; 512];
-    for i in 0..active {
+    for (i, v) in values.iter_mut().enumerate().take(active) {
         mask.set(i, true);
-        values[i] = (seed as f32 + i as f32 * 0.001).sin().abs();
+        *v = (seed as f32 + i as f32 * 0.001).sin().abs();
     }
     // An inactive value that must not leak into the brick.
     values[511] = 9.0;
