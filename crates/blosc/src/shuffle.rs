@@ -196,15 +196,7 @@ mod tests {
     }
 
     fn pseudo_random(len: usize, seed: u32) -> Vec<u8> {
-        let mut x = seed.wrapping_mul(2654435761).wrapping_add(1);
-        (0..len)
-            .map(|_| {
-                x ^= x << 13;
-                x ^= x >> 17;
-                x ^= x << 5;
-                (x >> 8) as u8
-            })
-            .collect()
+        vdbcook_testkit::Rng::new(u64::from(seed)).bytes(len)
     }
 
     #[test]

@@ -165,13 +165,7 @@ fn clustering_reduces_bricks_and_reports_both_errors() {
 #[test]
 fn corrupted_assets_never_panic_even_unverified() {
     let (bytes, _) = cook(Format::Bc7, &[smooth_frame(0), frame(1)], 32);
-    let mut state = 0x2545_F491_4F6C_DD1Du64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut rng = vdbcook_testkit::Rng::new(0x2545_F491_4F6C_DD1D);
     let read = |b: &[u8]| -> Result<usize, Error> {
         let asset = Asset::from_bytes(b)?;
         let mut n = 0;
@@ -185,8 +179,8 @@ fn corrupted_assets_never_panic_even_unverified() {
     // Checksums bypassed: every byte outside the header is reachable.
     for _ in 0..3000 {
         let mut b = bytes.clone();
-        let i = (next() % b.len() as u64) as usize;
-        b[i] ^= 1 << (next() % 8);
+        let i = rng.below(b.len() as u64) as usize;
+        b[i] ^= 1 << rng.below(8);
         // Re-seal the header so the flip gets past it.
         let sections = match Asset::from_bytes(&b) {
             Ok(a) => a.to_sections(),

@@ -268,21 +268,15 @@ fn reference_fill(leaf: &vdbcook_grid::Leaf) -> Brick {
 #[test]
 fn the_bitmask_fill_equals_the_plain_one_bit_for_bit() {
     // Random masks from nearly empty to nearly full, and a few shapes.
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut rng = vdbcook_testkit::Rng::new(0x9e37_79b9_7f4a_7c15);
     let mut leaves = Vec::new();
     for round in 0..400 {
         let density = round % 20;
         let mut mask = LeafMask::default();
         let mut values = [0.0f32; 512];
         for (i, v) in values.iter_mut().enumerate() {
-            *v = (next() % 10_000) as f32 / 7_919.0;
-            mask.set(i, next() % 20 < density);
+            *v = rng.below(10_000) as f32 / 7_919.0;
+            mask.set(i, rng.below(20) < density);
         }
         leaves.push(Leaf { origin: Coord::new(0, 0, 0), mask, values });
     }

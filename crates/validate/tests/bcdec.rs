@@ -4,6 +4,7 @@
 
 use std::sync::OnceLock;
 use vdbcook_encode::{encode_all, encode_brick, Format, Quality, BRICK_VOXELS};
+use vdbcook_testkit::Rng;
 
 const LIBRARY: &str = include_str!("../../../shaders/bcdec.wgsl");
 
@@ -198,23 +199,9 @@ impl Gpu {
 // Blocks
 
 /// xorshift64*: deterministic test data.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-
-    fn block(&mut self) -> u128 {
-        u128::from(self.next()) | u128::from(self.next()) << 64
-    }
-
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
+/// A random 16-byte block.
+fn block(rng: &mut Rng) -> u128 {
+    u128::from(rng.next_u64()) | u128::from(rng.next_u64()) << 64
 }
 
 /// Replaces `width` bits of `block` at bit `at` with `value`.
@@ -262,7 +249,7 @@ fn force_mode(block: u128, mode: u32, k: u32) -> u128 {
 
 /// Smooth, noisy, sparse and constant bricks.
 fn bricks() -> Vec<[f32; BRICK_VOXELS]> {
-    let mut rng = Rng(0x0dd_b1a5);
+    let mut rng = Rng::new(0x0dd_b1a5);
     let mut out = Vec::new();
     for k in 0..40 {
         let (fx, fy, fz) = (0.05 + 0.1 * (k % 5) as f32, 0.07 * (k % 3) as f32, 0.3 - 0.04 * (k % 7) as f32);
@@ -296,21 +283,21 @@ fn hex(block: &[u8]) -> String {
 #[test]
 fn bc7_matches_bcdec_rs_bit_for_bit() {
     let Some(gpu) = gpu() else { return };
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
     let mut blocks: Vec<u128> = Vec::new();
     // Fully random blocks: random first bytes give every mode (mostly low ones).
     for _ in 0..4000 {
-        blocks.push(rng.block());
+        blocks.push(block(&mut rng));
     }
     // Every mode explicitly, with partitions, rotations and selectors spread.
     for mode in 0..8 {
         for k in 0..1280 {
-            blocks.push(force_mode(rng.block(), mode, k));
+            blocks.push(force_mode(block(&mut rng), mode, k));
         }
     }
     // Invalid: first byte zero; and extreme patterns.
     for _ in 0..200 {
-        blocks.push(rng.block() & !0xff);
+        blocks.push(block(&mut rng) & !0xff);
     }
     blocks.extend([0, u128::MAX, u128::MAX << 8, 1, 0x80, !0x7f]);
     let random = blocks.len();
@@ -385,8 +372,8 @@ fn bc7_matches_bcdec_rs_bit_for_bit() {
 #[test]
 fn invalid_bc7_blocks_decode_to_transparent_black() {
     let Some(gpu) = gpu() else { return };
-    let mut rng = Rng(7);
-    let bytes: Vec<u8> = (0..64).flat_map(|_| (rng.block() & !0xff).to_le_bytes()).collect();
+    let mut rng = Rng::new(7);
+    let bytes: Vec<u8> = (0..64).flat_map(|_| (block(&mut rng) & !0xff).to_le_bytes()).collect();
     for (n, block) in bytes.chunks_exact(16).enumerate() {
         let mut want = [0xaau8; 64];
         bcdec_rs::bc7(block, &mut want, 16);
@@ -401,10 +388,10 @@ fn invalid_bc7_blocks_decode_to_transparent_black() {
 #[test]
 fn bc4_matches_bcdec_rs() {
     let Some(gpu) = gpu() else { return };
-    let mut rng = Rng(0x5eed_bc40);
+    let mut rng = Rng::new(0x5eed_bc40);
     let mut blocks: Vec<u64> = Vec::new();
     for k in 0..24_000u64 {
-        let b = rng.next();
+        let b = rng.next_u64();
         let (e0, e1) = (b & 0xff, (b >> 8) & 0xff);
         // Random, then both endpoint orders explicitly, then equal endpoints.
         blocks.push(match k % 4 {

@@ -192,13 +192,7 @@ fn bc_bricks_decoded_in_the_shader_render_like_the_texture_unit() {
 fn resealed_corrupt_assets_never_panic_the_renderers() {
     let Some(r) = renderer() else { return };
     let soft = Renderer::new(None).unwrap().with_bc_decode(BcDecode::Shader);
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut rng = vdbcook_testkit::Rng::new(0x9E37_79B9_7F4A_7C15);
     let (mut changed, mut refused) = (0, 0);
     for (format, dim) in [(Format::Unorm8, 32), (Format::Bc7, 20), (Format::Bc4, 2048)] {
         let bytes = cook_dim(&SEQ, format, dim);
@@ -211,8 +205,8 @@ fn resealed_corrupt_assets_never_panic_the_renderers() {
             let mut b = bytes.clone();
             // Every other flip in the metadata, the rest anywhere past the header
             // and the section table.
-            let i = if k % 2 == 0 { meta.offset + next() % meta.size } else { 512 + next() % (b.len() as u64 - 512) } as usize;
-            b[i] ^= 1 << (next() % 8);
+            let i = if k % 2 == 0 { meta.offset + rng.below(meta.size) } else { 512 + rng.below(b.len() as u64 - 512) } as usize;
+            b[i] ^= 1 << rng.below(8);
             let Ok(a) = Asset::from_bytes(&b) else { continue };
             let sealed = vdbcook_vpak::assemble(&a.to_sections());
             let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {

@@ -51,15 +51,7 @@ fn read_all(bytes: Vec<u8>) -> Result<f64, vdbcook_vdb::Error> {
 }
 
 /// A small deterministic generator (xorshift64*).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-}
+use vdbcook_testkit::Rng;
 
 fn inputs() -> Vec<PathBuf> {
     let mut v = Vec::new();
@@ -93,7 +85,7 @@ fn inputs() -> Vec<PathBuf> {
 
 #[test]
 fn truncated_and_bit_flipped_files_fail_cleanly() {
-    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut rng = Rng::new(0x9E37_79B9_7F4A_7C15);
     let mut runs = 0usize;
     for path in inputs() {
         let original = std::fs::read(&path).unwrap();
@@ -121,7 +113,7 @@ fn truncated_and_bit_flipped_files_fail_cleanly() {
         // Single bit flips anywhere in the file.
         for _ in 0..1500 {
             let mut data = original.clone();
-            let bit = (rng.next() % (len as u64 * 8)) as usize;
+            let bit = rng.below(len as u64 * 8) as usize;
             data[bit / 8] ^= 1 << (bit % 8);
             if std::panic::catch_unwind(|| read_all(data)).is_err() {
                 panic!("{}: panic after flipping bit {bit}", path.display());
