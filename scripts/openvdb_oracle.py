@@ -116,18 +116,9 @@ import sys
 import tempfile
 from array import array
 
-# pyopenvdb (and numpy) live in Debian's system interpreter; a pyenv/virtualenv
-# `python3` first on PATH has neither. Re-run under /usr/bin/python3 in that case.
-try:
-    import numpy as np
-    import pyopenvdb as vdb  # noqa: F401
-except ImportError:
-    if os.path.realpath(sys.executable) != os.path.realpath("/usr/bin/python3") \
-            and os.path.exists("/usr/bin/python3") and not os.environ.get("VDBCOOK_NO_REEXEC"):
-        os.environ["VDBCOOK_NO_REEXEC"] = "1"
-        os.execv("/usr/bin/python3", ["/usr/bin/python3"] + sys.argv)
-    sys.exit("%s needs pyopenvdb and numpy: run it with /usr/bin/python3 (Debian's "
-             "python3-openvdb)" % os.path.basename(sys.argv[0]))
+import system_python  # noqa: F401,E402  (re-runs under /usr/bin/python3 when needed)
+import numpy as np  # noqa: E402
+import pyopenvdb as vdb  # noqa: E402,F401
 
 VDB_MAGIC = 0x56444220
 DUMP_MAGIC = b"VDBORC01"
