@@ -24,10 +24,12 @@ Formats (storage per voxel in the brick atlas):
   bc4      4 bits  BC4 block compression of those levels, one z-slice per texture slice
   bc7      2 bits  BC7 with four consecutive z-slices packed into RGBA
 
-BC7 quality presets (the alpha settings of intel_tex_2, ISPC BC7):
+Quality presets (--quality), for the block formats:
   ultra-fast  very-fast (default)  fast  basic  slow
-Slower presets search more BC7 modes and refine more; see docs/benchmarks.md for
-their measured speed and error.
+For bc7 they are the alpha settings of intel_tex_2 (ISPC BC7): slower presets search
+more BC7 modes and refine more. For bc4 (vdbcook's own encoder) they widen the search
+for each block's endpoints around the least-squares fit: 0, 1, 2, 3 or 4 levels. See
+docs/benchmarks.md for their measured speed and error.
 
 Clustering (--clusters K): every brick's normalised variance (variance / mean) is
 computed; constant bricks and bricks above --variance-threshold are kept as they are;
@@ -63,7 +65,7 @@ pub struct CookArgs {
     /// Voxel format of the brick atlas.
     #[arg(long, default_value = "f16", value_parser = ["f32", "f16", "unorm8", "bc4", "bc7"])]
     pub format: String,
-    /// BC7 encoder preset (see the table below).
+    /// Encoder preset of bc7 and bc4 (see the notes below).
     #[arg(long, default_value = "very-fast", value_parser = ["ultra-fast", "very-fast", "fast", "basic", "slow"])]
     pub quality: String,
     /// Merge similar bricks with variance-gated k-means into K centroid bricks (off by default).
@@ -212,7 +214,7 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
 
     let settings = vec![
         ("format".to_string(), format.name().to_string()),
-        ("quality".to_string(), if format == Format::Bc7 { quality.name().to_string() } else { String::new() }),
+        ("quality".to_string(), if format.is_block() { quality.name().to_string() } else { String::new() }),
         ("grid".to_string(), args.grid.clone().unwrap_or_default()),
         ("frames".to_string(), args.frames.map(|f| format!("{}-{}:{}", f.first, f.last, f.step)).unwrap_or_default()),
         ("allow_missing".to_string(), args.allow_missing.to_string()),

@@ -205,9 +205,16 @@ impl Cooker {
             c
         });
         let work: &[vdbcook_flipbook::Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
+        // Which voxels of each brick some L3 node shows (block encoders may
+        // spend nothing on the others).
+        let pool_masks = format.is_block().then(|| union_masks(pool.len(), built.l3.iter().map(|l| (l.brick as usize, l.mask))));
+        let work_masks = pool_masks.as_ref().map(|m| match &clustered {
+            Some(c) => union_masks(work.len(), c.remap.iter().zip(m).map(|(&w, &mask)| (w as usize, mask))),
+            None => m.clone(),
+        });
         let t0 = Instant::now();
         progress.start("encoding", work.len() as u64);
-        let encoded = vdbcook_encode::encodings(format, self.opts.quality, work, &|n| progress.advance(n as u64));
+        let encoded = vdbcook_encode::encodings(format, self.opts.quality, work, work_masks.as_deref(), &|n| progress.advance(n as u64));
         progress.finish();
         let (keep, enc_remap) = dedup_encoded(&*encoded);
         let stored = Subset { inner: &*encoded, keep: &keep };
@@ -238,7 +245,8 @@ impl Cooker {
         let cluster_report = clustered.as_ref().zip(self.opts.clustering.as_ref()).map(|(c, co)| {
             let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
             let own: Vec<vdbcook_flipbook::Brick> = merged.iter().map(|&i| pool[i]).collect();
-            let own_enc = vdbcook_encode::encodings(format, self.opts.quality, &own, &|_| {});
+            let own_masks: Option<Vec<[u64; 8]>> = pool_masks.as_ref().map(|m| merged.iter().map(|&i| m[i]).collect());
+            let own_enc = vdbcook_encode::encodings(format, self.opts.quality, &own, own_masks.as_deref(), &|_| {});
             let mut slot = vec![u32::MAX; c.merged.len()];
             for (k, &i) in merged.iter().enumerate() {
                 slot[i] = k as u32;
@@ -337,6 +345,19 @@ impl Cooker {
         };
         Ok((sections, report))
     }
+}
+
+/// Per item `0..n`, the union of the masks given for it.
+fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8])>) -> Vec<[u64; 8]> {
+    let mut out = vec![[0u64; 8]; n];
+    for (i, m) in masks {
+        if let Some(o) = out.get_mut(i) {
+            for (o, m) in o.iter_mut().zip(m) {
+                *o |= m;
+            }
+        }
+    }
+    out
 }
 
 /// Finds the distinct encodings (the first of equal ones, in order):

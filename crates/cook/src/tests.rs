@@ -77,9 +77,11 @@ fn an_unchanging_sequence_costs_about_one_frame() {
 #[test]
 fn output_is_identical_on_any_thread_count() {
     let frames = [frame(0), frame(1), frame(5)];
-    let run = |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| cook(Format::Unorm8, &frames, 2048).0);
-    assert_eq!(run(1), run(2));
-    assert_eq!(run(1), run(3));
+    for format in Format::ALL {
+        let run = |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| cook(format, &frames, 2048).0);
+        assert_eq!(run(1), run(2), "{format:?}");
+        assert_eq!(run(1), run(3), "{format:?}");
+    }
 }
 
 #[test]
@@ -259,4 +261,11 @@ fn bricks_equal_once_encoded_are_stored_once_but_only_with_equal_ranges() {
             assert!(worst <= 0.01, "{format:?}: {worst}");
         }
     }
+}
+
+#[test]
+fn union_masks_ors_every_mask_given_for_an_item() {
+    let m = |w: u64| [w, 0, 0, 0, 0, 0, 0, w];
+    let u = union_masks(3, [(0, m(1)), (2, m(4)), (0, m(2)), (7, m(8))].into_iter());
+    assert_eq!(u, vec![m(3), [0; 8], m(4)]);
 }

@@ -91,8 +91,9 @@ impl Format {
     }
 }
 
-/// BC7 encoder presets (intel_tex_2's ISPC "alpha" settings, since all four
-/// channels carry voxels); BC4 has a single encoder.  `VeryFast` is the
+/// Encoder presets of the block formats: for BC7, intel_tex_2's ISPC "alpha"
+/// settings (all four channels carry voxels); for BC4, how far our encoder
+/// searches around each block's least-squares endpoints.  `VeryFast` is the
 /// default: see docs/benchmarks.md for the measurements behind it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Quality {
@@ -248,14 +249,15 @@ impl Encodings for Subset<'_> {
 
 /// The encodings of `bricks` in `format`: block formats are encoded now, in
 /// parallel (`progress(n)` after each chunk of `n` bricks); uncompressed
-/// formats when asked for.
-pub fn encodings<'a>(format: Format, quality: Quality, bricks: &'a [[f32; BRICK_VOXELS]], progress: &(dyn Fn(usize) + Sync)) -> Box<dyn Encodings + 'a> {
+/// formats when asked for.  `masks` (see [`encode_all`]) says which voxels
+/// count.
+pub fn encodings<'a>(format: Format, quality: Quality, bricks: &'a [[f32; BRICK_VOXELS]], masks: Option<&[[u64; 8]]>, progress: &(dyn Fn(usize) + Sync)) -> Box<dyn Encodings + 'a> {
     match SourceBricks::new(format, bricks) {
         Some(s) => {
             progress(bricks.len());
             Box::new(s)
         }
-        None => Box::new(encode_all(format, quality, bricks, progress)),
+        None => Box::new(encode_all(format, quality, bricks, masks, progress)),
     }
 }
 
@@ -274,18 +276,25 @@ fn range_of(values: &[f32; BRICK_VOXELS]) -> [f32; 2] {
 
 /// Encodes one brick (BC7 at `Quality::Fast`; use [`encode_all`] to choose).
 pub fn encode_brick(format: Format, values: &[f32; BRICK_VOXELS]) -> EncodedBricks {
-    encode_all(format, Quality::Fast, std::slice::from_ref(values), &|_| {})
+    encode_all(format, Quality::Fast, std::slice::from_ref(values), None, &|_| {})
+}
+
+/// A brick's values as levels in [0, 255] over its own range (not rounded).
+fn levels(values: &[f32; BRICK_VOXELS], [lo, hi]: [f32; 2]) -> [f32; BRICK_VOXELS] {
+    let span = hi - lo;
+    let mut out = [0.0f32; BRICK_VOXELS];
+    if span > 0.0 && span.is_finite() {
+        let scale = 255.0 / span;
+        for (o, &v) in out.iter_mut().zip(values) {
+            *o = ((v - lo) * scale).clamp(0.0, 255.0);
+        }
+    }
+    out
 }
 
 /// 8-bit levels of a brick over its own range.
-fn quantise(values: &[f32; BRICK_VOXELS], [lo, hi]: [f32; 2]) -> [u8; BRICK_VOXELS] {
-    let span = hi - lo;
-    if span > 0.0 && span.is_finite() {
-        let scale = 255.0 / span;
-        values.map(|v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8)
-    } else {
-        [0; BRICK_VOXELS]
-    }
+fn quantise(values: &[f32; BRICK_VOXELS], range: [f32; 2]) -> [u8; BRICK_VOXELS] {
+    levels(values, range).map(|l| l.round() as u8)
 }
 
 /// Swaps the x and z axes of a brick: leaf order (`x·64 + y·8 + z`) to atlas
@@ -295,14 +304,20 @@ fn swap_xz<T: Copy>(a: &[T; BRICK_VOXELS]) -> [T; BRICK_VOXELS] {
 }
 
 /// Encodes `bricks` into `ranges` and `out` (`brick_bytes` each).
-fn encode_chunk(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]], ranges: &mut [[f32; 2]], out: &mut [u8]) {
+fn encode_chunk(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]], masks: Option<&[[u64; 8]]>, ranges: &mut [[f32; 2]], out: &mut [u8]) {
     for (r, b) in ranges.iter_mut().zip(bricks) {
         *r = range_of(b);
     }
-    if format.is_block() {
-        let levels: Vec<[u8; BRICK_VOXELS]> = bricks.iter().zip(ranges.iter()).map(|(b, r)| quantise(b, *r)).collect();
-        bc::encode(format, quality, &levels, out);
-        return;
+    match format {
+        Format::Bc4 => {
+            let lv: Vec<[f32; BRICK_VOXELS]> = bricks.iter().zip(ranges.iter()).map(|(b, r)| levels(b, *r)).collect();
+            return bc::encode_bc4(quality, &lv, masks, out);
+        }
+        Format::Bc7 => {
+            let lv: Vec<[u8; BRICK_VOXELS]> = bricks.iter().zip(ranges.iter()).map(|(b, r)| quantise(b, *r)).collect();
+            return bc::encode_bc7(quality, &lv, out);
+        }
+        _ => {}
     }
     for ((values, range), o) in bricks.iter().zip(ranges.iter()).zip(out.chunks_exact_mut(format.brick_bytes())) {
         encode_voxels(format, values, *range, o);
@@ -362,14 +377,18 @@ pub fn decode_brick(format: Format, range: [f32; 2], data: &[u8]) -> [f32; BRICK
 const CHUNK: usize = 256;
 
 /// Encodes every brick in parallel chunks (the output order is the input
-/// order); `progress(n)` is called after each chunk of `n` bricks.
-pub fn encode_all(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]], progress: &(dyn Fn(usize) + Sync)) -> EncodedBricks {
+/// order); `progress(n)` is called after each chunk of `n` bricks.  With
+/// `masks` (512 bits per brick), only the set voxels of a brick count for the
+/// encoders that can use it (BC4): readers take the others from the
+/// background.
+pub fn encode_all(format: Format, quality: Quality, bricks: &[[f32; BRICK_VOXELS]], masks: Option<&[[u64; 8]]>, progress: &(dyn Fn(usize) + Sync)) -> EncodedBricks {
     let n = format.brick_bytes();
     let mut ranges = vec![[0.0f32; 2]; bricks.len()];
     let mut data = vec![0u8; bricks.len() * n];
     vdbcook_grid::mem::advise_huge_pages(&data);
-    data.par_chunks_mut(CHUNK * n).zip(ranges.par_chunks_mut(CHUNK)).zip(bricks.par_chunks(CHUNK)).for_each(|((out, r), chunk)| {
-        encode_chunk(format, quality, chunk, r, out);
+    data.par_chunks_mut(CHUNK * n).zip(ranges.par_chunks_mut(CHUNK)).zip(bricks.par_chunks(CHUNK)).enumerate().for_each(|(c, ((out, r), chunk))| {
+        let m = masks.and_then(|m| m.get(c * CHUNK..c * CHUNK + chunk.len()));
+        encode_chunk(format, quality, chunk, m, r, out);
         progress(chunk.len());
     });
     EncodedBricks { format, ranges, data }
@@ -679,7 +698,7 @@ mod tests {
         // (20, 32): one atlas of 4×3×2 bricks (its layers are not full).
         for (count, max_dim) in [(1u32, 2048u32), (7, 16), (20, 32), (37, 32), (130, 40)] {
             let values: Vec<[f32; BRICK_VOXELS]> = (0..count).map(|i| std::array::from_fn(|v| (i * 1000 + v as u32) as f32)).collect();
-            let bricks = encode_all(Format::F32, Quality::Fast, &values, &|_| {});
+            let bricks = encode_all(Format::F32, Quality::Fast, &values, None, &|_| {});
             for layout in plan_atlases(Format::F32, count, max_dim) {
                 let atlas = pack_atlas(&layout, &bricks);
                 for i in 0..layout.count {
@@ -717,7 +736,7 @@ mod tests {
         // ranges and atlases as bricks encoded up front; a subset renumbers.
         let values: Vec<[f32; BRICK_VOXELS]> = (0..70).map(|i| smoke(i as f32)).collect();
         for format in [Format::F32, Format::F16, Format::Unorm8] {
-            let kept = encode_all(format, Quality::Fast, &values, &|_| {});
+            let kept = encode_all(format, Quality::Fast, &values, None, &|_| {});
             let lazy = SourceBricks::new(format, &values).unwrap();
             let mut buf = vec![0u8; format.brick_bytes()];
             for i in 0..values.len() {
