@@ -8,11 +8,11 @@ For each input (default: a fixture, a generated noisy volume and real samples fr
 * NanoVDB: `nanovdb_convert --fp4 | --fp8 | --fpN -a 0.005`, file bytes; the .nvdb is
   converted back to .vdb by nanovdb_convert and compared with the source by
   `vdbcook diff` (voxel RMSE over the source's active voxels);
-* vdbcook: `cook --format bc7 | bc4`, with and without `--clusters 256`, and
-  `--format unorm8`; file bytes and the voxel RMSE from the cook report (the same figure
-  `vdbcook diff` gives).
+* vdbcook: `cook --format bc7 | bc4`, with and without `--clusters 256`, bc4 at
+  `--quality slow`, and `--format unorm8`; file bytes and the voxel RMSE from the cook
+  report (the same figure `vdbcook diff` gives).
 Prints bytes per active voxel and RMSE side by side, and the ratios bc7 / fp4, bc4 / fp4
-and unorm8 / fp8.
+(default and slow) and unorm8 / fp8.
 """
 
 import json
@@ -73,11 +73,13 @@ def main():
                 extra = ["--clusters", str(clusters)] if clusters else []
                 r = json.loads(run([EXE, "cook", "--json", "--force", "--format", fmt, *g, *extra, "-o", vp, src]))
                 rows[label] = (r["file_bytes"], r["voxel_rmse"])
+        r = json.loads(run([EXE, "cook", "--json", "--force", "--format", "bc4", "--quality", "slow", *g, "-o", vp, src]))
+        rows["vdbcook bc4 slow"] = (r["file_bytes"], r["voxel_rmse"])
         r = json.loads(run([EXE, "cook", "--json", "--force", "--format", "unorm8", *g, "-o", vp, src]))
         rows["vdbcook unorm8"] = (r["file_bytes"], r["voxel_rmse"])
         for label, (b, rmse) in rows.items():
             print("  %-24s %12d %10.4f %12.4e" % (label, b, b / active, rmse))
-        for ours, theirs in [("vdbcook bc7", "nanovdb fp4"), ("vdbcook bc4", "nanovdb fp4"), ("vdbcook unorm8", "nanovdb fp8")]:
+        for ours, theirs in [("vdbcook bc7", "nanovdb fp4"), ("vdbcook bc4", "nanovdb fp4"), ("vdbcook bc4 slow", "nanovdb fp4"), ("vdbcook unorm8", "nanovdb fp8")]:
             (ob, oe), (tb, te) = rows[ours], rows[theirs]
             print("  %s / %s: bytes %.3f, RMSE %.2f" % (ours[8:], theirs[8:], ob / tb, oe / te if te else float("inf")))
 
