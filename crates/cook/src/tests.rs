@@ -269,3 +269,31 @@ fn union_masks_ors_every_mask_given_for_an_item() {
     let u = union_masks(3, [(0, m(1)), (2, m(4)), (0, m(2)), (7, m(8))].into_iter());
     assert_eq!(u, vec![m(3), [0; 8], m(4)]);
 }
+
+#[test]
+fn non_finite_values_never_panic_any_format() {
+    // NaN, infinities and huge values, in full and partly active leaves.
+    let specials = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, f32::MAX, -f32::MAX, 1e-38, 0.5];
+    let leaves: Vec<Leaf> = (0..12)
+        .map(|k| {
+            let mut mask = LeafMask::default();
+            let values = std::array::from_fn(|i| {
+                mask.set(i, k % 2 == 0 || i % 3 == 0);
+                if (i + k) % 5 == 0 { specials[(i / 5 + k) % specials.len()] } else { 0.25 }
+            });
+            Leaf { origin: Coord::new(8 * k as i32, 0, 0), mask, values }
+        })
+        .collect();
+    let g = Grid { name: "density".into(), class: GridClass::FogVolume, background: 0.0, transform: Transform::identity(), leaves, tiles: vec![] };
+    for format in Format::ALL {
+        for clustering in [None, Some(vdbcook_cluster::Options { clusters: 3, ..vdbcook_cluster::Options::default() })] {
+            let mut c = Cooker::new(CookOptions { format, quality: Quality::UltraFast, max_texture_dim: 2048, clustering, settings: vec![] });
+            c.push(&g, None).unwrap();
+            let (sections, report) = c.finish(&NoProgress).unwrap();
+            let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+            asset.verify().unwrap();
+            assert_eq!(unpack_frame(&asset, 0).unwrap().leaves.len(), 12, "{format:?}");
+            assert_eq!(report.bricks, 12);
+        }
+    }
+}
