@@ -176,7 +176,7 @@ mod tests {
     fn reference_bitshuffle(typesize: usize, src: &[u8]) -> Vec<u8> {
         let n = src.len() / typesize;
         let mut out = src.to_vec();
-        if n % 8 != 0 {
+        if !n.is_multiple_of(8) {
             return out;
         }
         let row_len = n / 8;

@@ -9,7 +9,7 @@
 //! levels over the brick's own [min, max].
 //!
 //! BC7 blocks come from intel_tex_2 (ISPC). BC4 blocks come from our own
-//! encoder ([`bc4_block`]), which leaves 12–27 % less RMSE on the real samples
+//! encoder ([`bc4_block`]), which leaves 13–28 % less RMSE on the real samples
 //! than intel_tex_2's BC4 (see docs/benchmarks.md).
 
 use crate::{Format, Quality, BRICK_VOXELS};
@@ -176,7 +176,8 @@ fn bc4_indices(x: &[f32; 16], e0: i32, e1: i32) -> [u8; 16] {
 /// One BC4 block for 16 levels in [0, 255], of which those with weight 0 do
 /// not count: the 8-step mode from the (counted) levels' extremes, refined by
 /// least squares (three rounds), then every endpoint pair within `radius` of
-/// the best; and the 6-step mode (which has exact 0 and 255, the extremes of
+/// the best (and again around a better one found, up to four times); and the
+/// 6-step mode (which has exact 0 and 255, the extremes of
 /// every brick) from the extremes of the other levels, likewise.  The
 /// smallest weighted squared error wins (the first found on ties):
 /// deterministic.
@@ -240,26 +241,31 @@ pub fn bc4_block(v: &[f32; 16], w: &[f32; 16], radius: i32) -> [u8; 8] {
         }
         (a, b) = (na, nb);
     }
-    let (ba, bb) = (best.1, best.2);
-    for da in -radius..=radius {
-        for db in -radius..=radius {
-            if ba + da > bb + db {
-                consider(ba + da, bb + db, &mut best);
+    // Every pair of one mode within `radius` of `center`; again around a
+    // better pair of that mode, up to four rounds.
+    let search = |mut center: (i32, i32), six_step: bool, best: &mut (f32, i32, i32)| {
+        let in_mode = |e0: i32, e1: i32| (e0 <= e1) == six_step;
+        for _ in 0..4 {
+            for da in -radius..=radius {
+                for db in -radius..=radius {
+                    let (e0, e1) = (center.0 + da, center.1 + db);
+                    if in_mode(e0, e1) {
+                        consider(e0, e1, best);
+                    }
+                }
             }
+            if !in_mode(best.1, best.2) || (best.1, best.2) == center {
+                break;
+            }
+            center = (best.1, best.2);
         }
-    }
-    // 6-step mode (e0 <= e1), endpoints from the levels away from 0 and 255.
+    };
+    search((best.1, best.2), false, &mut best);
+    // 6-step mode (e0 <= e1), from the extremes of the levels away from 0 and 255.
     let inner = counted().filter(|&x| x > 16.0 && x < 239.0);
     let (l, h) = (inner.clone().fold(f32::INFINITY, f32::min), inner.fold(f32::NEG_INFINITY, f32::max));
     if l <= h {
-        let (l, h) = (l.round() as i32, h.round() as i32);
-        for da in -radius..=radius {
-            for db in -radius..=radius {
-                if l + da <= h + db {
-                    consider(l + da, h + db, &mut best);
-                }
-            }
-        }
+        search((l.round() as i32, h.round() as i32), true, &mut best);
     }
     let bits = bc4_indices(&x, best.1, best.2).iter().enumerate().fold(0u64, |acc, (k, &i)| acc | u64::from(i) << (3 * k));
     let mut out = [0u8; 8];
@@ -415,6 +421,8 @@ mod tests {
 
     #[test]
     fn bc4_encoder_beats_intel_tex_and_improves_with_radius() {
+        // Over all blocks, a wider search does better (per block it usually
+        // does too, but a search that moves on can end elsewhere).
         // intel_tex_2's BC4 sees the levels rounded (its input is 8-bit);
         // both are measured against the levels themselves.
         let blocks = test_blocks();
@@ -436,10 +444,6 @@ mod tests {
                 assert!(o <= last, "radius {radius}: {o} after {last}");
                 last = o;
             }
-        }
-        // Per block, a wider search never loses.
-        for v in blocks.iter().take(500) {
-            assert!(decoded_sse(v, &bc4_block(v, &[1.0; 16], 2)) <= decoded_sse(v, &bc4_block(v, &[1.0; 16], 1)) + 1e-6);
         }
     }
 
