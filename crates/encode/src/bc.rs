@@ -243,13 +243,17 @@ pub fn bc4_block(v: &[f32; 16], w: &[f32; 16], radius: i32) -> [u8; 8] {
     }
     // Every pair of one mode within `radius` of `center`; again around a
     // better pair of that mode, up to four rounds.
+    // (A pair the previous round already tried cannot win again: skipping
+    // it changes nothing.)
     let search = |mut center: (i32, i32), six_step: bool, best: &mut (f32, i32, i32)| {
         let in_mode = |e0: i32, e1: i32| (e0 <= e1) == six_step;
+        let mut prev: Option<(i32, i32)> = None;
         for _ in 0..4 {
             for da in -radius..=radius {
                 for db in -radius..=radius {
                     let (e0, e1) = (center.0 + da, center.1 + db);
-                    if in_mode(e0, e1) {
+                    let tried = prev.is_some_and(|p| (e0 - p.0).abs() <= radius && (e1 - p.1).abs() <= radius);
+                    if in_mode(e0, e1) && !tried {
                         consider(e0, e1, best);
                     }
                 }
@@ -257,6 +261,7 @@ pub fn bc4_block(v: &[f32; 16], w: &[f32; 16], radius: i32) -> [u8; 8] {
             if !in_mode(best.1, best.2) || (best.1, best.2) == center {
                 break;
             }
+            prev = Some(center);
             center = (best.1, best.2);
         }
     };
