@@ -60,15 +60,14 @@ pub fn encode_bc7(quality: Quality, levels: &[[u8; BRICK_VOXELS]], out: &mut [u8
     }
     let format = Format::Bc7;
     let sp = format.slices_per_brick() as usize;
-    let comps = 4;
     let (w, h) = (8 * n, 8 * sp);
-    let mut surface = vec![0u8; w * h * comps];
+    let mut surface = vec![0u8; w * h * 4];
     for (k, lv) in levels.iter().enumerate() {
         for s in 0..sp {
             for y in 0..8 {
                 for x in 0..8 {
-                    let px = ((s * 8 + y) * w + k * 8 + x) * comps;
-                    for c in 0..comps {
+                    let px = ((s * 8 + y) * w + k * 8 + x) * 4;
+                    for c in 0..4 {
                         surface[px + c] = lv[x * 64 + y * 8 + 4 * s + c];
                     }
                 }

@@ -484,6 +484,19 @@ pub fn plan_atlases(format: Format, count: u32, max_dim: u32) -> Vec<AtlasLayout
     out
 }
 
+/// How a brick's encoding is cut into runs that are contiguous both in it
+/// and in an atlas: per slice of the brick, `rows` × `per_row` runs of `run`
+/// bytes (8 × 1 rows of 8 texels, or 2 × 2 blocks), run `(slice, r, c)` at
+/// `((slice · rows + r) · per_row + c) · run` in the encoding.  Returns
+/// (run, rows, per_row).
+fn brick_runs(format: Format) -> (usize, usize, usize) {
+    if format.is_block() {
+        (format.block_bytes(), 2, 2)
+    } else {
+        (8 * format.bytes_per_voxel(), 8, 1)
+    }
+}
+
 /// Lays the bricks of one atlas out as texture bytes (global brick
 /// `layout.first_brick + i` of `bricks` at local position `i`), in parallel
 /// over rows of bricks; each brick's encoding is made or fetched once.
@@ -497,10 +510,7 @@ pub fn pack_atlas(layout: &AtlasLayout, bricks: &dyn Encodings) -> Vec<u8> {
     let [bx, by, _] = layout.bricks.map(|b| b as usize);
     let sp = format.slices_per_brick() as usize;
     let row = layout.row_bytes();
-    // A brick is slices × rows × columns of runs that are contiguous both in
-    // its encoding and in the atlas: 8 × 8 × 1 rows of 8 texels, or
-    // slices × 2 × 2 blocks.
-    let (run, rows_per_brick, per_row) = if format.is_block() { (format.block_bytes(), 2, 2) } else { (8 * format.bytes_per_voxel(), 8, 1) };
+    let (run, rows_per_brick, per_row) = brick_runs(format);
     // The atlas as bands (the rows of one slice that one row of bricks
     // covers), grouped by row of bricks: group (layer, py) holds the bands of
     // its `sp` slices, in slice order.
@@ -545,20 +555,12 @@ pub fn unpack_brick(layout: &AtlasLayout, atlas: &[u8], i: u32) -> Option<Vec<u8
     let f = layout.format;
     let mut out = vec![0u8; f.brick_bytes()];
     let (sp, row, slice) = (f.slices_per_brick() as usize, layout.row_bytes(), layout.slice_bytes());
-    if f.is_block() {
-        let bb = f.block_bytes();
-        for (j, dst) in out.chunks_exact_mut(bb).enumerate() {
-            let (ls, br, bc) = (j / 4, (j / 2) % 2, j % 2);
-            let src = (pz * sp + ls) * slice + (py * 2 + br) * row + (px * 2 + bc) * bb;
-            dst.copy_from_slice(atlas.get(src..src + bb)?);
-        }
-    } else {
-        let run = 8 * f.bytes_per_voxel();
-        for (j, dst) in out.chunks_exact_mut(run).enumerate() {
-            let (z, y) = (j / 8, j % 8);
-            let src = (pz * 8 + z) * slice + (py * 8 + y) * row + px * run;
-            dst.copy_from_slice(atlas.get(src..src + run)?);
-        }
+    let (run, rows, per_row) = brick_runs(f);
+    // Run j of the encoding is (slice ls, row r, column c), as `pack_atlas` lays it.
+    for (j, dst) in out.chunks_exact_mut(run).enumerate() {
+        let (ls, r, c) = (j / (rows * per_row), (j / per_row) % rows, j % per_row);
+        let src = (pz * sp + ls) * slice + (py * rows + r) * row + (px * per_row + c) * run;
+        dst.copy_from_slice(atlas.get(src..src + run)?);
     }
     Some(out)
 }
