@@ -230,16 +230,26 @@ impl BrickPool {
     }
 }
 
-/// Hash-consing table for variable-length `u32` keys.
-#[derive(Default)]
-struct Interner {
-    ids: Map<Vec<u32>, u32>,
+/// Hash-consing table: ids in first-seen order (node keys are variable-length
+/// `u32` words; L3 nodes are their own keys).
+struct Interner<K = Vec<u32>> {
+    ids: Map<K, u32>,
     count: u32,
 }
 
-impl Interner {
+impl<K> Default for Interner<K> {
+    fn default() -> Self {
+        Interner { ids: Map::default(), count: 0 }
+    }
+}
+
+impl<K: std::hash::Hash + Eq> Interner<K> {
+    fn reserve(&mut self, n: usize) {
+        self.ids.reserve(n);
+    }
+
     /// Returns `(id, new)`.
-    fn intern(&mut self, key: Vec<u32>) -> (u32, bool) {
+    fn intern(&mut self, key: K) -> (u32, bool) {
         let next = self.count;
         let id = *self.ids.entry(key).or_insert(next);
         if id == next {
@@ -285,7 +295,7 @@ pub struct Builder {
     background: Option<f32>,
     pool: BrickPool,
     l3: Vec<L3>,
-    l3_index: Map<L3, u32>,
+    l3_index: Interner<L3>,
     frames: Vec<FrameLeaves>,
     bbox: Option<Bbox>,
     leaves_in: u64,
@@ -339,9 +349,11 @@ impl Builder {
                 range = [range[0].min(lo), range[1].max(hi)];
                 let brick = self.pool.settle(start + k, &mut next, h)?;
                 let key = L3 { mask: leaf.mask.0, brick };
-                let next_l3 = u32::try_from(self.l3.len()).map_err(|_| Error::Overflow { what: "L3 nodes" })?;
-                let id = *self.l3_index.entry(key).or_insert(next_l3);
-                if id == next_l3 {
+                if u32::try_from(self.l3.len()).is_err() {
+                    return Err(Error::Overflow { what: "L3 nodes" });
+                }
+                let (id, new) = self.l3_index.intern(key);
+                if new {
                     self.l3.push(key);
                 }
                 fl.leaves.push((leaf.origin, id));
@@ -482,15 +494,14 @@ impl Built {
     pub fn nodes(&self, brick_of: impl Fn(u32) -> u32) -> Result<Nodes, Error> {
         let mut n = Nodes { offset: self.offset, ..Nodes::default() };
         // L3 nodes, re-interned after the brick remap (two L3s may now be equal).
-        let mut l3_table: Map<L3, u32> = Map::default();
+        let mut l3_table = Interner::<L3>::default();
         l3_table.reserve(self.l3.len());
         n.l3.reserve(self.l3.len() * L3_WORDS);
         let mut l3_id = Vec::with_capacity(self.l3.len());
         for l in &self.l3 {
             let key = L3 { mask: l.mask, brick: brick_of(l.brick) };
-            let next = l3_table.len() as u32;
-            let id = *l3_table.entry(key).or_insert(next);
-            if id == next {
+            let (id, new) = l3_table.intern(key);
+            if new {
                 n.l3.extend(key.mask.iter().flat_map(|w| [*w as u32, (*w >> 32) as u32]));
                 n.l3.push(key.brick);
             }
