@@ -466,22 +466,50 @@ pub fn plan_atlases(format: Format, count: u32, max_dim: u32) -> Vec<AtlasLayout
     let mut first = 0u32;
     while first < count {
         let n = (count - first).min(cap);
-        let bx = n.min(per);
-        let (by, bz) = if single {
-            // One atlas: the layers it needs, each with as few rows as hold
-            // the bricks, so that at most a row per layer stays empty.
-            let bz = n.div_ceil(bx * per);
-            (n.div_ceil(bx * bz), bz)
+        let bricks = if single {
+            tightest_shape(n, per, per_z)
         } else {
             // Samplers place every atlas's bricks with the first one's shape:
             // the last keeps full layers.
+            let bx = n.min(per);
             let by = n.div_ceil(bx).min(per);
-            (by, n.div_ceil(bx * by))
+            [bx, by, n.div_ceil(bx * by)]
         };
-        out.push(AtlasLayout { format, bricks: [bx, by, bz], first_brick: first, count: n });
+        out.push(AtlasLayout { format, bricks, first_brick: first, count: n });
         first += n;
     }
     out
+}
+
+/// The shape, at most `per` bricks along x and y and `per_z` along z, that
+/// holds `n` bricks with the fewest empty positions (then the fewest layers,
+/// then the widest rows).  A texture has no partial rows, so a fixed row
+/// width can leave most of a small atlas empty: 268 bricks in rows of 256
+/// took 512 positions; 134 × 2 takes 268.  Some shape holds them: a caller
+/// gives at most `per² · per_z` bricks.
+fn tightest_shape(n: u32, per: u32, per_z: u32) -> [u32; 3] {
+    let (n64, per64) = (u64::from(n), u64::from(per));
+    let mut best = [n.min(per), 1, 1];
+    let mut best_key = (u64::MAX, u64::MAX, u64::MAX);
+    let min_bz = n64.div_ceil(per64 * per64).max(1);
+    for bz in min_bz..=u64::from(per_z).min(n64.max(1)) {
+        for bx in 1..=per64.min(n64.max(1)) {
+            let by = n64.div_ceil(bx * bz).max(1);
+            if by > per64 {
+                continue;
+            }
+            let key = (bx * by * bz - n64, bz, u64::MAX - bx);
+            if key < best_key {
+                best_key = key;
+                // All three fit in u32: bx, by ≤ per and bz ≤ per_z.
+                best = [bx as u32, by as u32, bz as u32];
+            }
+        }
+        if best_key.0 == 0 {
+            break; // no later layer count can beat an exact fit with fewer layers
+        }
+    }
+    best
 }
 
 /// How a brick's encoding is cut into runs that are contiguous both in it
@@ -678,16 +706,49 @@ mod tests {
         assert_eq!(p.iter().map(|a| a.count).collect::<Vec<_>>(), vec![1100]);
         assert!(p[0].texels()[2] <= 64 && p[0].texels()[2].is_multiple_of(2));
         assert!(plan_atlases(Format::Bc4, 0, 2048).is_empty());
-        // Past one full layer, a single atlas grows only the rows it needs:
-        // 70,000 bricks take 2 layers of 137 rows, not 2 of 256.
+        // A single atlas takes the shape with the fewest empty positions:
+        // 70,000 bricks fit 250 × 140 × 2 exactly (rows of 256 would leave 144
+        // empty), and so do the 268 bricks of a short EmberGen sequence (rows of
+        // 256 left 244 of 512 empty) and the 3,115 of arnold-usd/smoke.vdb.
         let p = plan_atlases(Format::F16, 70_000, 2048);
         assert_eq!(p.len(), 1);
-        assert_eq!(p[0].bricks, [256, 137, 2]);
+        assert_eq!(p[0].bricks, [250, 140, 2]);
+        assert_eq!(plan_atlases(Format::Bc7, 268, 2048)[0].bricks, [134, 2, 1]);
+        assert_eq!(plan_atlases(Format::Bc7, 3115, 2048)[0].bricks, [89, 35, 1]);
         for count in [1u32, 255, 256, 65_537, 115_230, 1_000_000] {
             for a in plan_atlases(Format::Bc7, count, 2048) {
                 let [bx, by, bz] = a.bricks;
                 assert!(a.is_valid() && a.texels().iter().all(|&t| t <= 2048), "{count}: {a:?}");
                 assert!(bx * by * bz - a.count < bx * bz, "{count}: more than a row per layer empty: {a:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_single_atlas_wastes_no_more_than_full_rows_did() {
+        // Against the previous rule (rows as wide as the limit allows, as many
+        // rows and layers as needed) on every count up to 600 and a spread of
+        // larger ones, under several limits: never more empty positions, never
+        // over the limit, and an exact fit whenever the count has one.
+        let full_rows = |n: u32, per: u32| {
+            let bx = n.min(per);
+            let bz = n.div_ceil(bx * per);
+            bx * n.div_ceil(bx * bz) * bz
+        };
+        let counts = (1u32..=600).chain([1009, 3115, 4096, 65_535, 65_537, 70_001, 115_230]);
+        for max_dim in [16u32, 64, 2048] {
+            for format in [Format::F16, Format::Bc7] {
+                let per = max_dim / 8;
+                let cap = per * per * (max_dim / format.slices_per_brick());
+                for n in counts.clone().filter(|&n| n <= cap) {
+                    let p = plan_atlases(format, n, max_dim);
+                    assert_eq!(p.len(), 1, "{n} bricks, limit {max_dim}");
+                    let [bx, by, bz] = p[0].bricks;
+                    assert!(p[0].is_valid() && p[0].texels().iter().all(|&t| t <= max_dim), "{n}: {:?}", p[0]);
+                    assert!(bx * by * bz <= full_rows(n, per), "{n}: {:?} wastes more than full rows", p[0]);
+                    let exact = (1..=per).any(|x| (1..=per).any(|y| n % (x * y) == 0 && n / (x * y) <= max_dim / format.slices_per_brick()));
+                    assert_eq!(bx * by * bz == n, exact, "{n}: {:?}", p[0]);
+                }
             }
         }
     }
