@@ -18,7 +18,7 @@
 
 const VPAK_L1_WORDS: u32 = 1537u;   // 1024 mask words, 512 prefix words, first entry
 const VPAK_L2_WORDS: u32 = 193u;    // 128 mask words, 64 prefix words, first entry
-const VPAK_L3_WORDS: u32 = 17u;     // 16 mask words, brick index
+const VPAK_L3_WORDS: u32 = 3u;      // brick, sub-block states, first sub-mask (after a count)
 const VPAK_TILE: u32 = 0x80000000u;
 
 // Voxel formats (Metadata.format).
@@ -146,6 +146,9 @@ struct VpakQuery {
 // A marcher keeps it while it stays in the same cell and skips the L1/L2 walk.
 struct VpakLeaf {
     l3: u32,
+    // The L3 node's sub-block states and the index of its first sub-mask.
+    states: u32,
+    masks: u32,
     value: f32,
     empty_dim: u32,
     // The L3 node's brick (when `l3` is set).
@@ -184,8 +187,10 @@ fn vpak_leaf(info: VpakInfo, p: vec3<i32>) -> VpakLeaf {
         leaf.value = vpak_tile_value(e2);
         return leaf;
     }
-    leaf.l3 = e2 * VPAK_L3_WORDS;
-    leaf.brick = vpak_brick(info, vpak_l3[leaf.l3 + 16u]);
+    leaf.l3 = 1u + e2 * VPAK_L3_WORDS;
+    leaf.brick = vpak_brick(info, vpak_l3[leaf.l3]);
+    leaf.states = vpak_l3[leaf.l3 + 1u];
+    leaf.masks = vpak_l3[leaf.l3 + 2u];
     return leaf;
 }
 
@@ -198,10 +203,20 @@ fn vpak_leaf_query(info: VpakInfo, leaf: VpakLeaf, p: vec3<i32>) -> VpakQuery {
         return q;
     }
     let v = vec3<u32>(p) & vec3<u32>(7u);
-    let i = (v.x << 6u) | (v.y << 3u) | v.z;
-    if (((vpak_l3[leaf.l3 + (i >> 5u)] >> (i & 31u)) & 1u) == 0u) {
+    // The voxel's 4³ sub-block: no voxel active, all active, or a sub-mask.
+    let sb = ((v.x >> 2u) << 2u) | ((v.y >> 2u) << 1u) | (v.z >> 2u);
+    let state = (leaf.states >> (2u * sb)) & 3u;
+    if (state == 0u) {
         q.value = info.background;
         return q;
+    }
+    if (state >= 2u) {
+        let j = ((v.x & 3u) << 4u) | ((v.y & 3u) << 2u) | (v.z & 3u);
+        let below = countOneBits((leaf.states >> 1u) & 0x5555u & ((1u << (2u * sb)) - 1u));
+        if (((vpak_l3[leaf.masks + 2u * below + (j >> 5u)] >> (j & 31u)) & 1u) == 0u) {
+            q.value = info.background;
+            return q;
+        }
     }
     q.value = vpak_brick_texel(info, leaf.brick, v);
     return q;

@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::path::Path;
-use vdbcook_flipbook::{L1_WORDS, L2_WORDS, L3_WORDS};
+use vdbcook_flipbook::{L1_WORDS, L2_WORDS};
 use vdbcook_vpak::{kind, Asset};
 
 pub enum Described {
@@ -18,7 +18,8 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let size = |k: u32| asset.sections.iter().filter(|s| s.kind == k).map(|s| s.size).sum::<u64>();
     let l1 = size(kind::L1_NODES) / (L1_WORDS as u64 * 4);
     let l2 = size(kind::L2_NODES) / (L2_WORDS as u64 * 4);
-    let l3 = size(kind::L3_NODES) / (L3_WORDS as u64 * 4);
+    // The L3 section counts its nodes in its first word (records follow, then sub-masks).
+    let l3 = asset.u32s(kind::L3_NODES).ok().and_then(|w| w.first().copied()).map_or(0, u64::from);
     let atlas_bytes = size(kind::ATLAS);
     let file_bytes = asset.bytes().len() as u64;
     let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));

@@ -44,7 +44,10 @@ pub fn load_nodes(asset: &Asset, meta: &Metadata) -> Result<Nodes, Error> {
     };
     need_multiple("l1 nodes", &n.l1, L1_WORDS)?;
     need_multiple("l2 nodes", &n.l2, L2_WORDS)?;
-    need_multiple("l3 nodes", &n.l3, L3_WORDS)?;
+    let l3 = n.l3.first().copied().unwrap_or(0) as usize;
+    if n.l3.is_empty() || l3.saturating_mul(L3_WORDS).saturating_add(1) > n.l3.len() {
+        return Err(Error::Corrupt(format!("l3 nodes: {} words cannot hold the {l3} nodes the section counts", n.l3.len())));
+    }
     need_multiple("tiles", &n.tiles, 2)?;
     Ok(n)
 }

@@ -23,9 +23,18 @@
 //! L2 node  (16³ slots of 8³ voxels)    L2_WORDS = 128 + 64 + 1, same shape, entries in l2_entries
 //! entry    bit 31 clear: child index (L2 node for L1 entries, L3 node for L2 entries)
 //!          bit 31 set:   tile index (low 31 bits) into `tiles`
-//! L3 node  L3_WORDS = 16 + 1: active mask (512 bits, bit i = voxel x·64 + y·8 + z), brick index
+//! L3 array word 0: the number n of L3 nodes; node k is words [1 + 3k, 4 + 3k):
+//!   0  brick index
+//!   1  states: 2 bits per 4³ sub-block b = (x/4)·4 + (y/4)·2 + z/4 (bits 2b..2b+1):
+//!      0 no voxel active, 1 all 64 active, 2 some (a sub-mask is stored)
+//!   2  word index (in this array) of the node's first sub-mask
+//!   after the n nodes: the sub-masks, 2 words each, of every node's partly active
+//!   sub-blocks in sub-block order; bit j = (x%4)·16 + (y%4)·4 + z%4
 //! tile     2 words: value (f32 bits), flags (bit 0: active)
 //! ```
+//! Voxels are x·64 + y·8 + z in a leaf.  A leaf's 512-bit mask would take 64
+//! bytes; smoke is mostly made of sub-blocks wholly inside or outside it, which
+//! cost 2 bits here (0.37–0.76× of the L3 bytes on the real samples).
 //! A slot's entry is `entries[first + prefix(word) + popcount(mask[word] & below(bit))]`:
 //! O(1) on the GPU, and only occupied slots cost memory.  Identical L3, L2
 //! and L1 nodes are stored once (hash-consing, bottom-up), so the parts of an
@@ -43,7 +52,14 @@ pub const L1_MASK_WORDS: usize = L1_SLOTS / 32;
 pub const L2_MASK_WORDS: usize = L2_SLOTS / 32;
 pub const L1_WORDS: usize = L1_MASK_WORDS + L1_MASK_WORDS / 2 + 1;
 pub const L2_WORDS: usize = L2_MASK_WORDS + L2_MASK_WORDS / 2 + 1;
-pub const L3_WORDS: usize = 16 + 1;
+/// Words of one L3 node record (brick, sub-block states, first sub-mask).
+pub const L3_WORDS: usize = 3;
+/// Sub-block state: no voxel active.
+pub const SUB_EMPTY: u32 = 0;
+/// Sub-block state: every voxel active.
+pub const SUB_FULL: u32 = 1;
+/// Sub-block state: a sub-mask says which voxels are active.
+pub const SUB_PARTIAL: u32 = 2;
 pub const TILE_FLAG: u32 = 1 << 31;
 /// Edge of the index space one L1 node covers.
 pub const L1_DIM: i64 = 4096;
@@ -468,6 +484,25 @@ fn node_words(occupied: &[usize], slots: usize, first: u32) -> Vec<u32> {
     words
 }
 
+/// The L3 array of the given nodes (layout in the module documentation).
+fn l3_words(nodes: &[L3]) -> Result<Vec<u32>, Error> {
+    let overflow = || Error::Overflow { what: "L3 nodes" };
+    let count = u32::try_from(nodes.len()).map_err(|_| overflow())?;
+    let mut head = Vec::with_capacity(1 + nodes.len() * L3_WORDS);
+    head.push(count);
+    let mut masks = Vec::new();
+    let start = 1 + nodes.len() * L3_WORDS;
+    for l in nodes {
+        let (states, partial) = encode_l3_mask(&l.mask);
+        let first = u32::try_from(start + masks.len()).map_err(|_| overflow())?;
+        head.extend([l.brick, states, first]);
+        masks.extend(partial.iter().flat_map(|m| [*m as u32, (*m >> 32) as u32]));
+    }
+    u32::try_from(start + masks.len()).map_err(|_| overflow())?;
+    head.extend(masks);
+    Ok(head)
+}
+
 /// Interns a node given its occupied slots (ascending) and their entries.
 fn intern_node(table: &mut Interner, nodes: &mut Vec<u32>, entries: &mut Vec<u32>, slots: usize, occupied: &[(usize, u32)]) -> Result<u32, Error> {
     // The key is the node's shape and content; `first` is assigned only when new.
@@ -489,6 +524,72 @@ fn intern_node(table: &mut Interner, nodes: &mut Vec<u32>, entries: &mut Vec<u32
     Ok(id)
 }
 
+/// The 64 bits of 4³ sub-block `b` of a leaf mask (bit `j` = (x%4)·16 + (y%4)·4 + z%4).
+pub fn sub_mask(mask: &[u64; 8], b: usize) -> u64 {
+    let (x0, y0, z0) = ((b >> 2) * 4, ((b >> 1) & 1) * 4, (b & 1) * 4);
+    let mut out = 0u64;
+    for dx in 0..4 {
+        let plane = mask[(x0 + dx) & 7];
+        for dy in 0..4 {
+            out |= ((plane >> ((y0 + dy) * 8 + z0)) & 0xf) << (dx * 16 + dy * 4);
+        }
+    }
+    out
+}
+
+/// Sets sub-block `b` of a leaf mask to `bits` (the inverse of [`sub_mask`]).
+fn put_sub_mask(mask: &mut [u64; 8], b: usize, bits: u64) {
+    let (x0, y0, z0) = ((b >> 2) * 4, ((b >> 1) & 1) * 4, (b & 1) * 4);
+    for dx in 0..4 {
+        for dy in 0..4 {
+            mask[(x0 + dx) & 7] |= ((bits >> (dx * 16 + dy * 4)) & 0xf) << ((y0 + dy) * 8 + z0);
+        }
+    }
+}
+
+/// The states word of a leaf mask, and its partly active sub-blocks' masks in order.
+pub fn encode_l3_mask(mask: &[u64; 8]) -> (u32, Vec<u64>) {
+    let mut states = 0u32;
+    let mut partial = Vec::new();
+    for b in 0..8 {
+        let m = sub_mask(mask, b);
+        let state = match m {
+            0 => SUB_EMPTY,
+            u64::MAX => SUB_FULL,
+            _ => {
+                partial.push(m);
+                SUB_PARTIAL
+            }
+        };
+        states |= state << (2 * b);
+    }
+    (states, partial)
+}
+
+/// A leaf mask back from its states word and the words of its sub-masks
+/// (`None` for a state of 3, or too few words).
+pub fn decode_l3_mask(states: u32, words: &[u32]) -> Option<[u64; 8]> {
+    let mut mask = [0u64; 8];
+    let mut k = 0;
+    for b in 0..8 {
+        let bits = match (states >> (2 * b)) & 3 {
+            SUB_EMPTY => 0,
+            SUB_FULL => u64::MAX,
+            SUB_PARTIAL => {
+                let w = words.get(2 * k..2 * k + 2)?;
+                k += 1;
+                u64::from(w[0]) | (u64::from(w[1]) << 32)
+            }
+            _ => return None,
+        };
+        put_sub_mask(&mut mask, b, bits);
+    }
+    if states >> 16 != 0 {
+        return None;
+    }
+    Some(mask)
+}
+
 impl Built {
     /// Lays out the node arrays; `brick_of(l3.brick)` gives each brick's final id.
     pub fn nodes(&self, brick_of: impl Fn(u32) -> u32) -> Result<Nodes, Error> {
@@ -496,17 +597,17 @@ impl Built {
         // L3 nodes, re-interned after the brick remap (two L3s may now be equal).
         let mut l3_table = Interner::<L3>::default();
         l3_table.reserve(self.l3.len());
-        n.l3.reserve(self.l3.len() * L3_WORDS);
         let mut l3_id = Vec::with_capacity(self.l3.len());
+        let mut distinct = Vec::with_capacity(self.l3.len());
         for l in &self.l3 {
             let key = L3 { mask: l.mask, brick: brick_of(l.brick) };
             let (id, new) = l3_table.intern(key);
             if new {
-                n.l3.extend(key.mask.iter().flat_map(|w| [*w as u32, (*w >> 32) as u32]));
-                n.l3.push(key.brick);
+                distinct.push(key);
             }
             l3_id.push(id);
         }
+        n.l3 = l3_words(&distinct)?;
         let mut tile_table = Interner::default();
         let mut tile = |value: f32, n: &mut Nodes| -> u32 {
             let key = vec![value.to_bits(), 1];
@@ -620,14 +721,16 @@ impl Nodes {
         Nodes::lookup(node, &self.l2_entries, &self.tiles, L2_MASK_WORDS, s)
     }
 
-    /// Active mask and brick of L3 node `id`.
+    /// Active mask and brick of L3 node `id` (`None` past the end or when
+    /// the node's words are inconsistent).
     pub fn l3_node(&self, id: u32) -> Option<([u64; 8], u32)> {
-        let w = self.l3.get(id as usize * L3_WORDS..(id as usize + 1) * L3_WORDS)?;
-        let mut mask = [0u64; 8];
-        for (k, m) in mask.iter_mut().enumerate() {
-            *m = u64::from(w[2 * k]) | (u64::from(w[2 * k + 1]) << 32);
+        if id as usize >= self.l3_count() {
+            return None;
         }
-        Some((mask, w[16]))
+        let at = 1 + id as usize * L3_WORDS;
+        let w = self.l3.get(at..at + L3_WORDS)?;
+        let masks = self.l3.get(w[2] as usize..).unwrap_or(&[]);
+        Some((decode_l3_mask(w[1], masks)?, w[0]))
     }
 
     /// Every leaf (source origin, mask, brick) and active tile (source origin,
@@ -692,8 +795,15 @@ impl Nodes {
     pub fn l2_count(&self) -> usize {
         self.l2.len() / L2_WORDS
     }
+    /// L3 nodes, as word 0 of the L3 array says (0 when the array cannot
+    /// hold that many records).
     pub fn l3_count(&self) -> usize {
-        self.l3.len() / L3_WORDS
+        let n = self.l3.first().map_or(0, |&n| n as usize);
+        if n.saturating_mul(L3_WORDS).saturating_add(1) <= self.l3.len() {
+            n
+        } else {
+            0
+        }
     }
 }
 

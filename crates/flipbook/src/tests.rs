@@ -292,3 +292,86 @@ fn the_bitmask_fill_equals_the_plain_one_bit_for_bit() {
         assert!(same_bits(&a, &b), "leaf {k}: {:?}", a.iter().zip(b.iter()).position(|(x, y)| x.to_bits() != y.to_bits()));
     }
 }
+
+/// Voxel `i = x·64 + y·8 + z` of a leaf mask.
+fn bit(mask: &[u64; 8], i: usize) -> bool {
+    (mask[i / 64] >> (i % 64)) & 1 == 1
+}
+
+#[test]
+fn compact_l3_masks_round_trip() {
+    // Random masks of every density, a sphere-like blob, half spaces along
+    // each axis, single voxels and the empty and full masks.
+    let mut rng = vdbcook_testkit::Rng::new(7);
+    let mut masks: Vec<[u64; 8]> = vec![[0; 8], [u64::MAX; 8]];
+    for density in [1u64, 8, 32, 56, 63] {
+        for _ in 0..200 {
+            masks.push(std::array::from_fn(|_| (0..64).fold(0u64, |m, b| m | (u64::from(rng.below(64) < density) << b))));
+        }
+    }
+    for axis in 0..3 {
+        for cut in 1..8 {
+            let mut m = [0u64; 8];
+            for i in 0..512 {
+                let c = [i / 64, (i / 8) % 8, i % 8];
+                if c[axis] < cut {
+                    m[i / 64] |= 1 << (i % 64);
+                }
+            }
+            masks.push(m);
+        }
+    }
+    for i in 0..512 {
+        let mut m = [0u64; 8];
+        m[i / 64] |= 1 << (i % 64);
+        masks.push(m);
+    }
+    for mask in &masks {
+        let (states, partial) = encode_l3_mask(mask);
+        // Each sub-block's state says what its 64 voxels are.
+        for b in 0..8 {
+            let voxels: Vec<bool> = (0..512).filter(|i| (i / 64 / 4) * 4 + ((i / 8) % 8 / 4) * 2 + (i % 8 / 4) == b).map(|i| bit(mask, i)).collect();
+            let want = if voxels.iter().all(|&v| !v) { SUB_EMPTY } else if voxels.iter().all(|&v| v) { SUB_FULL } else { SUB_PARTIAL };
+            assert_eq!((states >> (2 * b)) & 3, want, "sub-block {b}");
+        }
+        assert_eq!(partial.len() as u32, (0..8).filter(|b| (states >> (2 * b)) & 3 == SUB_PARTIAL).count() as u32);
+        let words: Vec<u32> = partial.iter().flat_map(|m| [*m as u32, (*m >> 32) as u32]).collect();
+        assert_eq!(decode_l3_mask(states, &words), Some(*mask));
+        // Bit j of a sub-mask is voxel (x%4)·16 + (y%4)·4 + z%4 of its sub-block.
+        for (k, b) in (0..8).filter(|b| (states >> (2 * b)) & 3 == SUB_PARTIAL).enumerate() {
+            for j in 0..64 {
+                let (x, y, z) = ((b >> 2) * 4 + j / 16, ((b >> 1) & 1) * 4 + (j / 4) % 4, (b & 1) * 4 + j % 4);
+                assert_eq!((partial[k] >> j) & 1 == 1, bit(mask, x * 64 + y * 8 + z));
+            }
+        }
+        if !partial.is_empty() {
+            assert_eq!(decode_l3_mask(states, &words[..words.len() - 1]), None, "a missing sub-mask word is refused");
+        }
+    }
+    assert_eq!(decode_l3_mask(3, &[0, 0]), None, "state 3 is invalid");
+    assert_eq!(decode_l3_mask(1 << 16, &[]), None, "bits past the eight states are invalid");
+}
+
+#[test]
+fn l3_array_holds_count_nodes_and_sub_masks() {
+    // Two leaves: one full (no sub-mask), one with 300 voxels (a partial
+    // sub-block or more); the array is the count, two 3-word nodes, and the
+    // partial sub-masks of the second; every node reads back.
+    let g = grid(vec![leaf(Coord::new(0, 0, 0), 1, 512), leaf(Coord::new(8, 0, 0), 2, 300)], vec![]);
+    let mut b = Builder::new();
+    b.push(&g).unwrap();
+    let built = b.finish().unwrap();
+    let n = built.nodes(|id| id).unwrap();
+    assert_eq!(n.l3_count(), 2);
+    let partial: usize = built.l3.iter().map(|l| encode_l3_mask(&l.mask).1.len()).sum();
+    assert!(partial >= 1);
+    assert_eq!(n.l3.len(), 1 + 2 * L3_WORDS + 2 * partial);
+    for (id, l) in built.l3.iter().enumerate() {
+        assert_eq!(n.l3_node(id as u32), Some((l.mask, l.brick)));
+    }
+    assert_eq!(n.l3_node(2), None);
+    // A count the array cannot hold reads as no nodes.
+    let mut bad = n.clone();
+    bad.l3[0] = 1000;
+    assert_eq!((bad.l3_count(), bad.l3_node(0)), (0, None));
+}

@@ -5,7 +5,7 @@
 //! ```text
 //! offset  size   field
 //! 0       8      magic "VPAK\r\n\x1a\n"
-//! 8       4      format version (1)
+//! 8       4      format version (2)
 //! 12      4      flags (0; reserved)
 //! 16      4      section count n
 //! 20      4      reserved (0)
@@ -22,7 +22,8 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
-pub const VERSION: u32 = 1;
+/// 2: compact L3 nodes (sub-block states and sub-masks instead of 512-bit masks).
+pub const VERSION: u32 = 2;
 pub const HEADER_LEN: usize = 64;
 pub const ENTRY_LEN: usize = 32;
 /// Every section starts at a multiple of this (GPU upload and mmap friendly).
@@ -71,7 +72,7 @@ pub enum Error {
     Io(#[from] std::io::Error),
     #[error("not a .vpak file (bad magic)")]
     Magic,
-    #[error("unsupported .vpak version {0} (this build reads version {VERSION})")]
+    #[error("unsupported .vpak version {0} (this build reads version {VERSION}: cook the asset again)")]
     Version(u32),
     #[error("truncated: the header says {expected} bytes, the file has {actual}")]
     Size { expected: u64, actual: u64 },
