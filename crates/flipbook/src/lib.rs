@@ -567,8 +567,11 @@ pub fn encode_l3_mask(mask: &[u64; 8]) -> (u32, Vec<u64>) {
 }
 
 /// A leaf mask back from its states word and the words of its sub-masks
-/// (`None` for a state of 3, or too few words).
+/// (`None` for a state of 3, bits past the eight states, or too few words).
 pub fn decode_l3_mask(states: u32, words: &[u32]) -> Option<[u64; 8]> {
+    if states >> 16 != 0 {
+        return None; // only eight 2-bit states
+    }
     let mut mask = [0u64; 8];
     let mut k = 0;
     for b in 0..8 {
@@ -583,9 +586,6 @@ pub fn decode_l3_mask(states: u32, words: &[u32]) -> Option<[u64; 8]> {
             _ => return None,
         };
         put_sub_mask(&mut mask, b, bits);
-    }
-    if states >> 16 != 0 {
-        return None;
     }
     Some(mask)
 }

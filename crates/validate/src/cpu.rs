@@ -77,10 +77,10 @@ impl Sampler<'_> {
             return (self.tile(e2), 0);
         }
         let word = |k: usize| self.d.l3.get(k).copied().unwrap_or(0);
-        let l3 = 1 + e2 as usize * 3;
+        let l3 = (e2 as usize).saturating_mul(3).saturating_add(1);
         let v = u.map(|c| c & 7);
         // The voxel's 4³ sub-block: empty, full, or partly active (a sub-mask).
-        let states = word(l3 + 1);
+        let states = word(l3.saturating_add(1));
         let sb = (v[0] >> 2) << 2 | (v[1] >> 2) << 1 | (v[2] >> 2);
         let state = (states >> (2 * sb)) & 3;
         if state == 0 {
@@ -89,7 +89,7 @@ impl Sampler<'_> {
         if state >= 2 {
             let j = (v[0] & 3) << 4 | (v[1] & 3) << 2 | (v[2] & 3);
             let below = ((states >> 1) & 0x5555 & ((1u32 << (2 * sb)) - 1)).count_ones();
-            let at = word(l3 + 2) as usize + 2 * below as usize + (j >> 5) as usize;
+            let at = (word(l3.saturating_add(2)) as usize).saturating_add(2 * below as usize + (j >> 5) as usize);
             if (word(at) >> (j & 31)) & 1 == 0 {
                 return (bg, 0);
             }
