@@ -36,10 +36,7 @@ import sys
 import numpy as np
 import pyopenvdb as vdb
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-OUT = os.path.join(ROOT, "bench-out")
-EXE = os.path.join(ROOT, "target", "release", "vdbcook")
-SAMPLES = os.path.join(ROOT, "..", "shared", "vdb-samples")
+from bench_size import EXE, INPUTS, OUT, ROOT, grid_args, nanovdb, run
 
 
 def partitions2():
@@ -108,31 +105,18 @@ def texels(B, axis):
     return B.transpose(order).reshape(len(B), 16, 4)
 
 
-def run(cmd):
-    return subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-
-
 def measured(path, grid):
     """(our bc7 cook's RMSE, nanovdb --fp4's RMSE) on the same grid."""
     os.makedirs(OUT, exist_ok=True)
-    vp, nv, back = (os.path.join(OUT, "floor" + e) for e in (".vpak", ".nvdb", "_back.vdb"))
-    r = json.loads(run([EXE, "cook", "--json", "--force", "--format", "bc7", "--grid", grid, "-o", vp, path]))
-    run(["nanovdb_convert", "-f", "-g", grid, "--fp4", path, nv])
-    run(["nanovdb_convert", "-f", nv, back])
-    d = json.loads(run([EXE, "diff", "--json", "--grid", grid, path, back]))
-    return r["voxel_rmse"], d["rmse"]
+    r = json.loads(run([EXE, "cook", "--json", "--force", "--format", "bc7", "--grid", grid, "-o", os.path.join(OUT, "floor.vpak"), path]))
+    return r["voxel_rmse"], nanovdb(path, grid, ["--fp4"], stem="floor")[1]
 
 
 def main():
     subprocess.run(["cargo", "build", "--release", "--quiet", "-p", "vdbcook"], cwd=ROOT, check=True)
-    inputs = sys.argv[1:] or [
-        os.path.join(ROOT, "fixtures/fog_blosc.vdb"),
-        os.path.join(ROOT, "fixtures/smoke_seq/smoke_0004.vdb"),
-        os.path.join(SAMPLES, "arnold-usd/smoke.vdb"),
-        os.path.join(SAMPLES, "elyg-visualizer/pyro.vdb"),
-        os.path.join(SAMPLES, "vfx-toolkit-embergen/embergen_fire_a_50.vdb") + ":flames",
-        os.path.join(SAMPLES, "waveletturbulence/fluid_data_0153.vdb"),
-    ]
+    # The size table's inputs but the 24M-voxel fog_300 (this script holds the
+    # volume densely in NumPy and walks OpenVDB's iterator in Python).
+    inputs = sys.argv[1:] or [p + ":" + (grid_args(p) or ["", "density"])[1] for p in INPUTS if "fog_300" not in p]
     parts = partitions2()
     print("%-28s %10s %10s %10s %10s %10s %9s %9s" % (
         "input", "active", "floor z", "floor y", "floor x", "best axis", "our bc7", "fp4"))

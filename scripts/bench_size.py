@@ -35,20 +35,32 @@ def grid_args(path):
     return ["--grid", "flames"] if "embergen" in path else []
 
 
+# The inputs of the size table (bc7_floor.py uses the same ones, but fog_300).
+INPUTS = [
+    os.path.join(ROOT, "fixtures/fog_blosc.vdb"),
+    os.path.join(ROOT, "fixtures/smoke_seq/smoke_0004.vdb"),
+    os.path.join(SAMPLES, "arnold-usd/smoke.vdb"),
+    os.path.join(SAMPLES, "elyg-visualizer/pyro.vdb"),
+    os.path.join(SAMPLES, "vfx-toolkit-embergen/embergen_fire_a_50.vdb"),
+    os.path.join(SAMPLES, "waveletturbulence/fluid_data_0153.vdb"),
+    os.path.join(OUT, "fog_300.vdb"),
+]
+
+
+def nanovdb(src, grid, flags, stem="size"):
+    """(bytes, voxel RMSE) of `nanovdb_convert FLAGS`: the .nvdb converted back to .vdb
+    by nanovdb_convert and compared with the source by `vdbcook diff`."""
+    nv, back = (os.path.join(OUT, stem + e) for e in (".nvdb", "_back.vdb"))
+    run(["nanovdb_convert", "-f", "-g", grid, *flags, src, nv])
+    run(["nanovdb_convert", "-f", nv, back])
+    d = json.loads(run([EXE, "diff", "--json", "--grid", grid, src, back]))
+    return os.path.getsize(nv), d["rmse"]
+
+
 def main():
     os.makedirs(OUT, exist_ok=True)
     subprocess.run(["cargo", "build", "--release", "--quiet", "-p", "vdbcook"], cwd=ROOT, check=True)
-    inputs = sys.argv[1:] or [
-        os.path.join(ROOT, "fixtures/fog_blosc.vdb"),
-        os.path.join(ROOT, "fixtures/smoke_seq/smoke_0004.vdb"),
-        os.path.join(SAMPLES, "arnold-usd/smoke.vdb"),
-        os.path.join(SAMPLES, "elyg-visualizer/pyro.vdb"),
-        os.path.join(SAMPLES, "vfx-toolkit-embergen/embergen_fire_a_50.vdb"),
-        os.path.join(SAMPLES, "waveletturbulence/fluid_data_0153.vdb"),
-        os.path.join(OUT, "fog_300.vdb"),
-    ]
-    nv = os.path.join(OUT, "size.nvdb")
-    back = os.path.join(OUT, "size_back.vdb")
+    inputs = sys.argv[1:] or INPUTS
     vp = os.path.join(OUT, "size.vpak")
     for src in inputs:
         if not os.path.exists(src):
@@ -63,10 +75,7 @@ def main():
         print("  %-24s %12s %10s %12s" % ("encoding", "bytes", "B/voxel", "voxel RMSE"))
         rows = {}
         for label, flags in [("nanovdb fp4", ["--fp4"]), ("nanovdb fp8", ["--fp8"]), ("nanovdb fpN -a 0.005", ["--fpN", "-a", "0.005"])]:
-            run(["nanovdb_convert", "-f", "-g", name, *flags, src, nv])
-            run(["nanovdb_convert", "-f", nv, back])
-            d = json.loads(run([EXE, "diff", "--json", "--grid", name, src, back]))
-            rows[label] = (os.path.getsize(nv), d["rmse"])
+            rows[label] = nanovdb(src, name, flags)
         for fmt in ["bc7", "bc4"]:
             for clusters in [None, 256]:
                 label = "vdbcook %s%s" % (fmt, " +256 clusters" if clusters else "")
