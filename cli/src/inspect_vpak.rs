@@ -19,7 +19,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let l1 = size(kind::L1_NODES) / (L1_WORDS as u64 * 4);
     let l2 = size(kind::L2_NODES) / (L2_WORDS as u64 * 4);
     // The L3 section counts its nodes in its first word (records follow, then sub-masks).
-    let l3 = asset.u32s(kind::L3_NODES).ok().and_then(|w| w.first().copied()).map_or(0, u64::from);
+    let l3 = asset.u32s(kind::L3_NODES).ok().and_then(vdbcook_flipbook::l3_node_count).map_or(0, |n| n as u64);
     let atlas_bytes = size(kind::ATLAS);
     let file_bytes = asset.bytes().len() as u64;
     let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));

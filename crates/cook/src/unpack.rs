@@ -2,7 +2,7 @@
 
 use crate::{Error, Format};
 use vdbcook_encode::AtlasLayout;
-use vdbcook_flipbook::{Nodes, L1_WORDS, L2_WORDS, L3_WORDS};
+use vdbcook_flipbook::{Nodes, L1_WORDS, L2_WORDS};
 use vdbcook_grid::{Coord, Grid, GridClass, Leaf, LeafMask, MapType, Tile, Transform, LEAF_VOXELS};
 use vdbcook_vpak::{kind, Asset, Metadata};
 
@@ -44,8 +44,8 @@ pub fn load_nodes(asset: &Asset, meta: &Metadata) -> Result<Nodes, Error> {
     };
     need_multiple("l1 nodes", &n.l1, L1_WORDS)?;
     need_multiple("l2 nodes", &n.l2, L2_WORDS)?;
-    let l3 = n.l3.first().copied().unwrap_or(0) as usize;
-    if n.l3.is_empty() || l3.saturating_mul(L3_WORDS).saturating_add(1) > n.l3.len() {
+    if vdbcook_flipbook::l3_node_count(&n.l3).is_none() {
+        let l3 = n.l3.first().copied().unwrap_or(0);
         return Err(Error::Corrupt(format!("l3 nodes: {} words cannot hold the {l3} nodes the section counts", n.l3.len())));
     }
     need_multiple("tiles", &n.tiles, 2)?;

@@ -484,6 +484,13 @@ fn node_words(occupied: &[usize], slots: usize, first: u32) -> Vec<u32> {
     words
 }
 
+/// The node count word 0 of an L3 array gives, when the array holds that many
+/// node records (`None` for an empty or too short array).
+pub fn l3_node_count(words: &[u32]) -> Option<usize> {
+    let n = *words.first()? as usize;
+    (n.saturating_mul(L3_WORDS).saturating_add(1) <= words.len()).then_some(n)
+}
+
 /// The L3 array of the given nodes (layout in the module documentation).
 fn l3_words(nodes: &[L3]) -> Result<Vec<u32>, Error> {
     let overflow = || Error::Overflow { what: "L3 nodes" };
@@ -798,12 +805,7 @@ impl Nodes {
     /// L3 nodes, as word 0 of the L3 array says (0 when the array cannot
     /// hold that many records).
     pub fn l3_count(&self) -> usize {
-        let n = self.l3.first().map_or(0, |&n| n as usize);
-        if n.saturating_mul(L3_WORDS).saturating_add(1) <= self.l3.len() {
-            n
-        } else {
-            0
-        }
+        l3_node_count(&self.l3).unwrap_or(0)
     }
 }
 

@@ -374,4 +374,5 @@ fn l3_array_holds_count_nodes_and_sub_masks() {
     let mut bad = n.clone();
     bad.l3[0] = 1000;
     assert_eq!((bad.l3_count(), bad.l3_node(0)), (0, None));
+    assert_eq!((l3_node_count(&n.l3), l3_node_count(&bad.l3), l3_node_count(&[])), (Some(2), None, None));
 }
