@@ -299,7 +299,10 @@ fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport, validation:
         o.insert("grid".into(), serde_json::json!(grid));
         o.insert("sections".into(), serde_json::json!(r.sections.iter().map(|(n, b)| serde_json::json!({"name": n, "bytes": b})).collect::<Vec<_>>()));
         o.insert("timings".into(), serde_json::json!(r.timings.iter().map(|(n, s)| (n.clone(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>()));
-        o.insert("frame_errors".into(), serde_json::json!(r.frame_errors.iter().enumerate().map(|(i, (rmse, max))| serde_json::json!({"frame": i, "rmse": rmse, "max_error": max})).collect::<Vec<_>>()));
+        o.insert(
+            "frame_errors".into(),
+            serde_json::json!(r.frame_errors.iter().enumerate().map(|(i, (rmse, max))| serde_json::json!({"frame": i, "rmse": rmse, "max_error": max})).collect::<Vec<_>>()),
+        );
         if !r.voxel_psnr.is_finite() {
             o.insert("voxel_psnr".into(), serde_json::Value::Null);
         }

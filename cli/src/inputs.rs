@@ -50,7 +50,6 @@ impl FrameRange {
     }
 }
 
-
 /// A frame pattern's pieces: prefix, zero-padded width, suffix.
 fn parse_pattern(s: &str) -> Option<(String, usize, String)> {
     // ####

@@ -75,12 +75,10 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
             }
             continue;
         }
-        let result = vdbcook_vdb::open(path)
-            .with_context(|| path.display().to_string())
-            .and_then(|file| {
-                let grids = describe(&file).with_context(|| path.display().to_string())?;
-                Ok(if as_json { Err(file_json(path, &file, &grids)) } else { Ok(file_text(path, &file, &grids)) })
-            });
+        let result = vdbcook_vdb::open(path).with_context(|| path.display().to_string()).and_then(|file| {
+            let grids = describe(&file).with_context(|| path.display().to_string())?;
+            Ok(if as_json { Err(file_json(path, &file, &grids)) } else { Ok(file_text(path, &file, &grids)) })
+        });
         match result {
             Ok(Ok(text)) => {
                 if !quiet && write_stdout(&text).is_err() {
@@ -100,8 +98,6 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
     }
     code
 }
-
-
 
 /// `%g`-style number: `digits` significant digits, trailing zeros dropped.
 fn fmt_g(x: f64, digits: i32) -> String {
@@ -129,16 +125,7 @@ fn file_text(path: &Path, file: &VdbFile, grids: &[GridReport<'_>]) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let n = grids.len();
-    let _ = writeln!(
-        s,
-        "{}: OpenVDB file version {}, library {}.{}, {} grid{}",
-        path.display(),
-        file.file_version,
-        file.library_version.0,
-        file.library_version.1,
-        n,
-        if n == 1 { "" } else { "s" }
-    );
+    let _ = writeln!(s, "{}: OpenVDB file version {}, library {}.{}, {} grid{}", path.display(), file.file_version, file.library_version.0, file.library_version.1, n, if n == 1 { "" } else { "s" });
     for g in grids {
         let i = g.info;
         let _ = write!(s, "  grid \"{}\": {} {}", i.display_name(), i.value_type.name(), i.class.vdb_name());

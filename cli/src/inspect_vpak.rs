@@ -58,7 +58,16 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     }
     use std::fmt::Write;
     let mut s = String::new();
-    let _ = writeln!(s, "{name}: vpak v{}, {}, {} frame{}, grid \"{}\" ({}), checksums ok", vdbcook_vpak::VERSION, meta.format, meta.frame_count, if meta.frame_count == 1 { "" } else { "s" }, meta.grid_name, meta.grid_class);
+    let _ = writeln!(
+        s,
+        "{name}: vpak v{}, {}, {} frame{}, grid \"{}\" ({}), checksums ok",
+        vdbcook_vpak::VERSION,
+        meta.format,
+        meta.frame_count,
+        if meta.frame_count == 1 { "" } else { "s" },
+        meta.grid_name,
+        meta.grid_class
+    );
     let _ = writeln!(s, "  written by     {}", meta.tool);
     let _ = writeln!(s, "  transform      {}, index offset {:?}", meta.map_type, meta.index_offset);
     if let Some((a, b)) = meta.index_bbox {

@@ -231,10 +231,7 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
         },
         "gate": {"max_rmse": args.max_rmse, "min_psnr": args.min_psnr},
     });
-    let failed: Vec<&Shot> = shots
-        .iter()
-        .filter(|s| args.max_rmse.is_some_and(|x| s.metrics.rmse > x) || args.min_psnr.is_some_and(|y| s.metrics.psnr < y))
-        .collect();
+    let failed: Vec<&Shot> = shots.iter().filter(|s| args.max_rmse.is_some_and(|x| s.metrics.rmse > x) || args.min_psnr.is_some_and(|y| s.metrics.psnr < y)).collect();
     if let Some(dir) = &args.report {
         write_report(dir, &doc, &shots, &worst_images, &meta.format, &name).with_context(|| dir.display().to_string())?;
     }
@@ -249,9 +246,7 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     if let Some(d) = &args.report {
         text += &format!("  report   {}\n", d.join("report.html").display());
     }
-    let gate_failure = failed.first().map(|s| {
-        format!("{} image(s) over budget, first frame {} view {} (rmse {:.3e}, psnr {:.1} dB)", failed.len(), s.frame, s.view, s.metrics.rmse, s.metrics.psnr)
-    });
+    let gate_failure = failed.first().map(|s| format!("{} image(s) over budget, first frame {} view {} (rmse {:.3e}, psnr {:.1} dB)", failed.len(), s.frame, s.view, s.metrics.rmse, s.metrics.psnr));
     Ok(Outcome { doc, text, gate_failure })
 }
 

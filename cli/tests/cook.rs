@@ -242,15 +242,10 @@ fn real_samples_cook() {
     // an EmberGen sequence whose first frame is empty.
     let Some(samples) = shared_samples() else { return };
     let dir = scratch();
-    for (i, (input, grid)) in [
-        ("elyg-visualizer/test.vdb", None),
-        ("vfx-toolkit-embergen", Some("flames")),
-        ("waveletturbulence", None),
-        ("hsim/writer.vdb", None),
-        ("vscode-cmaketemplate/smoke.vdb", None),
-    ]
-    .into_iter()
-    .enumerate()
+    for (i, (input, grid)) in
+        [("elyg-visualizer/test.vdb", None), ("vfx-toolkit-embergen", Some("flames")), ("waveletturbulence", None), ("hsim/writer.vdb", None), ("vscode-cmaketemplate/smoke.vdb", None)]
+            .into_iter()
+            .enumerate()
     {
         let out = dir.join(format!("{i}.vpak"));
         let mut args = vec!["cook", "-q", "-o", s(&out)];

@@ -72,14 +72,8 @@ fn check_file(file: &Path, dump_path: &Path) -> Result<usize, String> {
         if leaf_active != n {
             return Err(format!("grid {}: {leaf_active} active leaf voxels, openvdb has {n}", info.name));
         }
-        let theirs: HashSet<([i32; 3], [i32; 3], u64)> =
-            dump.tiles.iter().filter(|t| t.0 == gi).map(|t| (t.1, t.2, if double { f64::from(t.3 as f32).to_bits() } else { t.3.to_bits() })).collect();
-        let ours: HashSet<([i32; 3], [i32; 3], u64)> = grid
-            .tiles
-            .iter()
-            .filter(|t| t.active)
-            .map(|t| (t.bbox().min.to_array(), t.bbox().max.to_array(), f64::from(t.value).to_bits()))
-            .collect();
+        let theirs: HashSet<([i32; 3], [i32; 3], u64)> = dump.tiles.iter().filter(|t| t.0 == gi).map(|t| (t.1, t.2, if double { f64::from(t.3 as f32).to_bits() } else { t.3.to_bits() })).collect();
+        let ours: HashSet<([i32; 3], [i32; 3], u64)> = grid.tiles.iter().filter(|t| t.active).map(|t| (t.bbox().min.to_array(), t.bbox().max.to_array(), f64::from(t.value).to_bits())).collect();
         if ours != theirs {
             return Err(format!("grid {}: active tiles differ ({} ours, {} openvdb)", info.name, ours.len(), theirs.len()));
         }

@@ -47,20 +47,13 @@ struct Input<'a> {
 
 impl<'a> Input<'a> {
     fn byte(&mut self, what: &str) -> Result<usize, String> {
-        let b = self
-            .bytes
-            .get(self.pos)
-            .ok_or_else(|| format!("blosclz stream ends inside a {what}"))?;
+        let b = self.bytes.get(self.pos).ok_or_else(|| format!("blosclz stream ends inside a {what}"))?;
         self.pos = self.pos.saturating_add(1);
         Ok(usize::from(*b))
     }
 
     fn slice(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
-        let s = self
-            .pos
-            .checked_add(n)
-            .and_then(|end| self.bytes.get(self.pos..end))
-            .ok_or_else(|| format!("blosclz stream ends inside a {what}"))?;
+        let s = self.pos.checked_add(n).and_then(|end| self.bytes.get(self.pos..end)).ok_or_else(|| format!("blosclz stream ends inside a {what}"))?;
         self.pos = self.pos.saturating_add(n);
         Ok(s)
     }
@@ -72,10 +65,7 @@ impl<'a> Input<'a> {
 
 /// Decodes `input` into exactly `out.len()` bytes.
 pub(crate) fn decompress(input: &[u8], out: &mut [u8]) -> Result<(), String> {
-    let mut ip = Input {
-        bytes: input,
-        pos: 0,
-    };
+    let mut ip = Input { bytes: input, pos: 0 };
     if ip.at_end() {
         return Err("empty blosclz stream".into());
     }
@@ -110,15 +100,12 @@ pub(crate) fn decompress(input: &[u8], out: &mut [u8]) -> Result<(), String> {
         } else {
             // Literal run.
             let n = ctrl.saturating_add(1);
-            let dst = op
-                .checked_add(n)
-                .and_then(|end| out.get_mut(op..end))
-                .ok_or_else(|| {
-                    format!(
-                        "literal run of {n} bytes at output offset {op} overflows the \
+            let dst = op.checked_add(n).and_then(|end| out.get_mut(op..end)).ok_or_else(|| {
+                format!(
+                    "literal run of {n} bytes at output offset {op} overflows the \
                          {out_len}-byte output"
-                    )
-                })?;
+                )
+            })?;
             dst.copy_from_slice(ip.slice(n, "literal run")?);
             op = op.saturating_add(n);
         }
@@ -129,9 +116,7 @@ pub(crate) fn decompress(input: &[u8], out: &mut [u8]) -> Result<(), String> {
     }
 
     if op != out_len {
-        return Err(format!(
-            "blosclz stream decodes to {op} bytes, expected {out_len}"
-        ));
+        return Err(format!("blosclz stream decodes to {op} bytes, expected {out_len}"));
     }
     Ok(())
 }
@@ -146,10 +131,7 @@ pub(crate) fn checked_copy_match(out: &mut [u8], op: usize, distance: usize, len
         return Err(format!("match distance {distance} reaches before the start of the output ({op} bytes written)"));
     }
     let out_len = out.len();
-    let end = op
-        .checked_add(len)
-        .filter(|&end| end <= out_len)
-        .ok_or_else(|| format!("match of {len} bytes at output offset {op} overflows the {out_len}-byte output"))?;
+    let end = op.checked_add(len).filter(|&end| end <= out_len).ok_or_else(|| format!("match of {len} bytes at output offset {op} overflows the {out_len}-byte output"))?;
     copy_match(out, op, distance, len);
     Ok(end)
 }
@@ -252,9 +234,7 @@ mod tests {
     #[test]
     fn near_match_with_high_offset_bits() {
         // Distance (3 << 8) + 4 + 1 = 773, length 3.
-        let data: Vec<u8> = (0..800u32)
-            .map(|i| (i % 200) as u8 ^ (i / 200) as u8)
-            .collect();
+        let data: Vec<u8> = (0..800u32).map(|i| (i % 200) as u8 ^ (i / 200) as u8).collect();
         let mut input = Vec::new();
         for (i, chunk) in data.chunks(32).enumerate() {
             input.push(((chunk.len() - 1) as u8) | if i == 0 { 0x20 } else { 0 });
@@ -270,21 +250,13 @@ mod tests {
         // Empty input.
         assert!(decode(&[], 0).is_err());
         // Match reaching before the output start.
-        assert!(decode(&[0x20, b'a', 1 << 5, 5, 0, b'b'], 6)
-            .unwrap_err()
-            .contains("before the start"));
+        assert!(decode(&[0x20, b'a', 1 << 5, 5, 0, b'b'], 6).unwrap_err().contains("before the start"));
         // Literal overflowing the output.
-        assert!(decode(&[0x20 | 4, 1, 2, 3, 4, 5], 3)
-            .unwrap_err()
-            .contains("overflows"));
+        assert!(decode(&[0x20 | 4, 1, 2, 3, 4, 5], 3).unwrap_err().contains("overflows"));
         // Literal running past the input.
-        assert!(decode(&[0x20 | 4, 1, 2], 5)
-            .unwrap_err()
-            .contains("ends inside"));
+        assert!(decode(&[0x20 | 4, 1, 2], 5).unwrap_err().contains("ends inside"));
         // Match overflowing the output.
-        assert!(decode(&[0x20, b'a', 6 << 5, 0, 0, b'b'], 4)
-            .unwrap_err()
-            .contains("overflows"));
+        assert!(decode(&[0x20, b'a', 6 << 5, 0, 0, b'b'], 4).unwrap_err().contains("overflows"));
         // Too short.
         assert!(decode(&[0x20, b'a'], 2).unwrap_err().contains("expected 2"));
         // A trailing match is performed (BloscLZ 1.x reading).

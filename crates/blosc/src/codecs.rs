@@ -24,9 +24,7 @@ fn lz4(input: &[u8], out: &mut [u8]) -> Result<(), String> {
     let expected = out.len();
     match lz4_flex::block::decompress_into(input, out) {
         Ok(n) if n == expected => Ok(()),
-        Ok(n) => Err(format!(
-            "lz4 block decodes to {n} bytes, expected {expected}"
-        )),
+        Ok(n) => Err(format!("lz4 block decodes to {n} bytes, expected {expected}")),
         Err(e) => Err(format!("lz4: {e}")),
     }
 }
@@ -36,18 +34,12 @@ fn zlib(input: &[u8], out: &mut [u8]) -> Result<(), String> {
     use flate2::{Decompress, FlushDecompress, Status};
     let expected = out.len();
     let mut z = Decompress::new(true);
-    let status = z
-        .decompress(input, out, FlushDecompress::Finish)
-        .map_err(|e| format!("zlib: {e}"))?;
+    let status = z.decompress(input, out, FlushDecompress::Finish).map_err(|e| format!("zlib: {e}"))?;
     let written = z.total_out();
     match status {
         Status::StreamEnd if written == expected as u64 => Ok(()),
-        Status::StreamEnd => Err(format!(
-            "zlib stream decodes to {written} bytes, expected {expected}"
-        )),
-        _ if written == expected as u64 => {
-            Err(format!("zlib stream decodes to more than {expected} bytes"))
-        }
+        Status::StreamEnd => Err(format!("zlib stream decodes to {written} bytes, expected {expected}")),
+        _ if written == expected as u64 => Err(format!("zlib stream decodes to more than {expected} bytes")),
         _ => Err(format!(
             "zlib stream ends early after {} input bytes and {written} of {expected} \
              output bytes",
@@ -73,10 +65,7 @@ fn zstd(input: &[u8], out: &mut [u8]) -> Result<(), String> {
     use std::io::Read;
 
     let expected = out.len();
-    let window_limit = (expected as u64)
-        .checked_next_power_of_two()
-        .unwrap_or(u64::MAX)
-        .max(ZSTD_MIN_WINDOW_LIMIT);
+    let window_limit = (expected as u64).checked_next_power_of_two().unwrap_or(u64::MAX).max(ZSTD_MIN_WINDOW_LIMIT);
     let mut decoder = FrameDecoder::new();
     let mut rest = input;
     let mut written: usize = 0;
@@ -85,20 +74,14 @@ fn zstd(input: &[u8], out: &mut [u8]) -> Result<(), String> {
         let remaining = expected.saturating_sub(written);
         match peek_zstd_frame(rest, remaining, window_limit)? {
             ZstdFrame::Skippable(total) => {
-                rest = rest
-                    .get(total..)
-                    .ok_or_else(|| "zstd skippable frame runs past the stream".to_string())?;
+                rest = rest.get(total..).ok_or_else(|| "zstd skippable frame runs past the stream".to_string())?;
                 continue;
             }
             ZstdFrame::Data => {}
         }
-        decoder
-            .reset(&mut rest)
-            .map_err(|e| format!("zstd frame header: {e}"))?;
+        decoder.reset(&mut rest).map_err(|e| format!("zstd frame header: {e}"))?;
         loop {
-            decoder
-                .decode_blocks(&mut rest, BlockDecodingStrategy::UptoBlocks(1))
-                .map_err(|e| format!("zstd: {e}"))?;
+            decoder.decode_blocks(&mut rest, BlockDecodingStrategy::UptoBlocks(1)).map_err(|e| format!("zstd: {e}"))?;
             let target = out.get_mut(written..).unwrap_or_default();
             let n = decoder.read(target).map_err(|e| format!("zstd: {e}"))?;
             written = written.saturating_add(n);
@@ -109,10 +92,7 @@ fn zstd(input: &[u8], out: &mut [u8]) -> Result<(), String> {
                 break;
             }
         }
-        if let (Some(stored), Some(computed)) = (
-            decoder.get_checksum_from_data(),
-            decoder.get_calculated_checksum(),
-        ) {
+        if let (Some(stored), Some(computed)) = (decoder.get_checksum_from_data(), decoder.get_calculated_checksum()) {
             if stored != computed {
                 return Err(format!(
                     "zstd content checksum {computed:#010x} does not match the stored \
@@ -122,9 +102,7 @@ fn zstd(input: &[u8], out: &mut [u8]) -> Result<(), String> {
         }
     }
     if written != expected {
-        return Err(format!(
-            "zstd data decodes to {written} bytes, expected {expected}"
-        ));
+        return Err(format!("zstd data decodes to {written} bytes, expected {expected}"));
     }
     Ok(())
 }
@@ -140,12 +118,7 @@ enum ZstdFrame {
 /// exceed `window_limit`, and a declared content size must fit in the
 /// `remaining` output. (Frame layout: RFC 8878 section 3.1.1.)
 fn peek_zstd_frame(frame: &[u8], remaining: usize, window_limit: u64) -> Result<ZstdFrame, String> {
-    let byte = |i: usize| -> Result<u64, String> {
-        frame
-            .get(i)
-            .map(|&b| u64::from(b))
-            .ok_or_else(|| "zstd stream ends inside a frame header".to_string())
-    };
+    let byte = |i: usize| -> Result<u64, String> { frame.get(i).map(|&b| u64::from(b)).ok_or_else(|| "zstd stream ends inside a frame header".to_string()) };
     let le = |from: usize, n: usize| -> Result<u64, String> {
         let mut v = 0u64;
         for i in (0..n).rev() {
@@ -160,9 +133,7 @@ fn peek_zstd_frame(frame: &[u8], remaining: usize, window_limit: u64) -> Result<
         return Ok(ZstdFrame::Skippable(total));
     }
     if magic != u64::from(ZSTD_MAGIC) {
-        return Err(format!(
-            "zstd frame magic {magic:#010x}, expected {ZSTD_MAGIC:#010x}"
-        ));
+        return Err(format!("zstd frame magic {magic:#010x}, expected {ZSTD_MAGIC:#010x}"));
     }
     let descriptor = byte(4)?;
     let single_segment = descriptor & 0x20 != 0;
@@ -195,17 +166,11 @@ fn peek_zstd_frame(frame: &[u8], remaining: usize, window_limit: u64) -> Result<
         None
     } else {
         let v = le(pos, fcs_len)?;
-        Some(if fcs_len == 2 {
-            v.saturating_add(256)
-        } else {
-            v
-        })
+        Some(if fcs_len == 2 { v.saturating_add(256) } else { v })
     };
     if let Some(size) = content_size {
         if size > remaining as u64 {
-            return Err(format!(
-                "zstd frame says {size} content bytes, but only {remaining} output bytes remain"
-            ));
+            return Err(format!("zstd frame says {size} content bytes, but only {remaining} output bytes remain"));
         }
     }
     // A single-segment frame's window is its content size.
@@ -307,9 +272,7 @@ mod tests {
         assert!(zlib(&z, &mut short).unwrap_err().contains("more than"));
         let mut long = vec![0u8; data.len() + 1];
         assert!(zlib(&z, &mut long).is_err());
-        assert!(zlib(&z[..z.len() / 2], &mut out)
-            .unwrap_err()
-            .contains("early"));
+        assert!(zlib(&z[..z.len() / 2], &mut out).unwrap_err().contains("early"));
     }
 
     #[test]

@@ -3,10 +3,7 @@
 //! Mirrors `blosc_run_decompression_with_context`, `serial_blosc` and
 //! `blosc_d` of c-blosc 1.21 (blosc/blosc.c), with every offset checked.
 
-use crate::{
-    codecs, shuffle, Compressor, Error, Header, Shuffle, BLOSC_VERSION_FORMAT, FLAG_BITSHUFFLE,
-    FLAG_DONT_SPLIT, FLAG_RESERVED, FLAG_SHUFFLE, HEADER_LEN, MAX_BLOCKSIZE, MAX_NBYTES,
-};
+use crate::{codecs, shuffle, Compressor, Error, Header, Shuffle, BLOSC_VERSION_FORMAT, FLAG_BITSHUFFLE, FLAG_DONT_SPLIT, FLAG_RESERVED, FLAG_SHUFFLE, HEADER_LEN, MAX_BLOCKSIZE, MAX_NBYTES};
 
 /// Blocks are only split when `typesize <= MAX_SPLITS` (c-blosc's `MAX_SPLITS`).
 const MAX_SPLITS: usize = 16;
@@ -23,12 +20,8 @@ const CODEC_VERSION_FORMAT: u8 = 1;
 /// validated (that is [`decompress_into`]'s job), so this also works for
 /// looking at buffers this crate would refuse.
 pub fn header(src: &[u8]) -> Result<Header, Error> {
-    let bytes: [u8; HEADER_LEN] = src
-        .get(..HEADER_LEN)
-        .and_then(|h| h.try_into().ok())
-        .ok_or(Error::TruncatedHeader { len: src.len() })?;
-    let [version, versionlz, flags, typesize, n0, n1, n2, n3, b0, b1, b2, b3, c0, c1, c2, c3] =
-        bytes;
+    let bytes: [u8; HEADER_LEN] = src.get(..HEADER_LEN).and_then(|h| h.try_into().ok()).ok_or(Error::TruncatedHeader { len: src.len() })?;
+    let [version, versionlz, flags, typesize, n0, n1, n2, n3, b0, b1, b2, b3, c0, c1, c2, c3] = bytes;
     let shuffle = if flags & FLAG_SHUFFLE != 0 {
         Shuffle::Byte
     } else if flags & FLAG_BITSHUFFLE != 0 {
@@ -59,10 +52,7 @@ pub fn decompress(src: &[u8], expected_len: usize) -> Result<Vec<u8>, Error> {
     let h = header(src)?;
     check_nbytes(&h, expected_len)?;
     let mut out = Vec::new();
-    out.try_reserve_exact(expected_len)
-        .map_err(|_| Error::OutOfMemory {
-            bytes: expected_len,
-        })?;
+    out.try_reserve_exact(expected_len).map_err(|_| Error::OutOfMemory { bytes: expected_len })?;
     out.resize(expected_len, 0);
     decompress_into(src, &mut out)?;
     Ok(out)
@@ -80,10 +70,7 @@ pub fn decompress_into(src: &[u8], dst: &mut [u8]) -> Result<(), Error> {
     let cbytes = to_usize(h.cbytes);
     // Everything past cbytes is ignored; every offset below is checked
     // against this slice.
-    let buf = src.get(..cbytes).ok_or(Error::CompressedSizeExceedsInput {
-        cbytes: h.cbytes,
-        available: src.len(),
-    })?;
+    let buf = src.get(..cbytes).ok_or(Error::CompressedSizeExceedsInput { cbytes: h.cbytes, available: src.len() })?;
     if cbytes < HEADER_LEN {
         return Err(Error::CompressedSizeTooSmall { cbytes: h.cbytes });
     }
@@ -97,25 +84,17 @@ pub fn decompress_into(src: &[u8], dst: &mut [u8]) -> Result<(), Error> {
     }
     let max_blocksize = h.nbytes.min(MAX_BLOCKSIZE);
     if h.blocksize == 0 || h.blocksize > max_blocksize {
-        return Err(Error::InvalidBlockSize {
-            blocksize: h.blocksize,
-            max: max_blocksize,
-        });
+        return Err(Error::InvalidBlockSize { blocksize: h.blocksize, max: max_blocksize });
     }
 
     if h.memcpyed() {
         let expected = u64::from(h.nbytes).saturating_add(HEADER_LEN as u64);
         if u64::from(h.cbytes) != expected {
-            return Err(Error::MemcpySizeMismatch {
-                cbytes: h.cbytes,
-                expected,
-            });
+            return Err(Error::MemcpySizeMismatch { cbytes: h.cbytes, expected });
         }
         // cbytes == nbytes + 16 and buf.len() == cbytes, so this is the
         // whole payload.
-        let raw = buf
-            .get(HEADER_LEN..)
-            .ok_or(Error::CompressedSizeTooSmall { cbytes: h.cbytes })?;
+        let raw = buf.get(HEADER_LEN..).ok_or(Error::CompressedSizeTooSmall { cbytes: h.cbytes })?;
         copy_exact(dst, raw);
         return Ok(());
     }
@@ -124,32 +103,16 @@ pub fn decompress_into(src: &[u8], dst: &mut [u8]) -> Result<(), Error> {
         return Err(Error::UnsupportedCodec { code });
     }
     if h.versionlz != CODEC_VERSION_FORMAT {
-        return Err(Error::UnsupportedCodecVersion {
-            codec: h.compressor,
-            found: h.versionlz,
-        });
+        return Err(Error::UnsupportedCodecVersion { codec: h.compressor, found: h.versionlz });
     }
 
     let blocksize = to_usize(h.blocksize);
     // blocksize >= 1 was checked above.
     let nblocks = dst.len().div_ceil(blocksize);
     // The block-start table: one i32 per block right after the header.
-    let table = nblocks
-        .checked_mul(4)
-        .and_then(|len| buf.get(HEADER_LEN..)?.get(..len))
-        .ok_or(Error::BlockTableTruncated {
-            nblocks: nblocks as u64,
-            cbytes: h.cbytes,
-        })?;
+    let table = nblocks.checked_mul(4).and_then(|len| buf.get(HEADER_LEN..)?.get(..len)).ok_or(Error::BlockTableTruncated { nblocks: nblocks as u64, cbytes: h.cbytes })?;
 
-    let ctx = Frame {
-        buf,
-        typesize: usize::from(h.typesize),
-        typesize_u8: h.typesize,
-        flags: h.flags,
-        codec: h.compressor,
-        cbytes: h.cbytes,
-    };
+    let ctx = Frame { buf, typesize: usize::from(h.typesize), typesize_u8: h.typesize, flags: h.flags, codec: h.compressor, cbytes: h.cbytes };
     // Scratch space for un-shuffling; at most one block, allocated on first
     // use.
     let mut scratch: Vec<u8> = Vec::new();
@@ -157,24 +120,10 @@ pub fn decompress_into(src: &[u8], dst: &mut [u8]) -> Result<(), Error> {
     // chunks_mut yields exactly nblocks chunks; only the last can be short,
     // and it is short exactly when nbytes % blocksize != 0 (the leftover
     // block).
-    for (block, (dst_block, start)) in dst
-        .chunks_mut(blocksize)
-        .zip(table.chunks_exact(4))
-        .enumerate()
-    {
-        let start = read_i32(start).ok_or(Error::BlockTableTruncated {
-            nblocks: nblocks as u64,
-            cbytes: h.cbytes,
-        })?;
+    for (block, (dst_block, start)) in dst.chunks_mut(blocksize).zip(table.chunks_exact(4)).enumerate() {
+        let start = read_i32(start).ok_or(Error::BlockTableTruncated { nblocks: nblocks as u64, cbytes: h.cbytes })?;
         let leftover_block = dst_block.len() < blocksize;
-        ctx.block(
-            block,
-            start,
-            leftover_block,
-            dst_block,
-            &mut scratch,
-            blocksize,
-        )?;
+        ctx.block(block, start, leftover_block, dst_block, &mut scratch, blocksize)?;
     }
     Ok(())
 }
@@ -192,15 +141,7 @@ struct Frame<'a> {
 
 impl Frame<'_> {
     /// Decodes one block (`blosc_d`).
-    fn block(
-        &self,
-        block: usize,
-        start: i32,
-        leftover_block: bool,
-        dst: &mut [u8],
-        scratch: &mut Vec<u8>,
-        blocksize: usize,
-    ) -> Result<(), Error> {
+    fn block(&self, block: usize, start: i32, leftover_block: bool, dst: &mut [u8], scratch: &mut Vec<u8>, blocksize: usize) -> Result<(), Error> {
         let len = dst.len();
         let ts = self.typesize;
         // Byte shuffle only acts for typesize > 1; otherwise a set bit-shuffle
@@ -215,36 +156,20 @@ impl Frame<'_> {
         // them when reading. (A 1.14+ writer forced to BLOSC_ALWAYS_SPLIT
         // outside those conditions writes buffers c-blosc itself cannot read;
         // we refuse them the same way.)
-        let split = self.flags & FLAG_DONT_SPLIT == 0
-            && ts <= MAX_SPLITS
-            && len.checked_div(ts).unwrap_or(0) >= MIN_BUFFERSIZE
-            && !leftover_block;
+        let split = self.flags & FLAG_DONT_SPLIT == 0 && ts <= MAX_SPLITS && len.checked_div(ts).unwrap_or(0) >= MIN_BUFFERSIZE && !leftover_block;
         let nsplits = if split { ts } else { 1 };
         if len.checked_rem(nsplits) != Some(0) {
-            return Err(Error::UnevenSplit {
-                block,
-                len,
-                typesize: self.typesize_u8,
-            });
+            return Err(Error::UnevenSplit { block, len, typesize: self.typesize_u8 });
         }
         // len >= 1, and nsplits <= len / 128 when splitting, so neblock >= 1.
         let neblock = len.checked_div(nsplits).unwrap_or(0).max(1);
 
         let max_start = self.buf.len().saturating_sub(4);
-        let offset = usize::try_from(start)
-            .ok()
-            .filter(|&o| o <= max_start)
-            .ok_or(Error::BadBlockStart {
-                block,
-                offset: start,
-                max: max_start,
-            })?;
+        let offset = usize::try_from(start).ok().filter(|&o| o <= max_start).ok_or(Error::BadBlockStart { block, offset: start, max: max_start })?;
 
         if byte_shuffle || bit_shuffle {
             if scratch.capacity() < blocksize {
-                scratch
-                    .try_reserve_exact(blocksize)
-                    .map_err(|_| Error::OutOfMemory { bytes: blocksize })?;
+                scratch.try_reserve_exact(blocksize).map_err(|_| Error::OutOfMemory { bytes: blocksize })?;
             }
             scratch.resize(len, 0);
             self.streams(block, offset, neblock, scratch)?;
@@ -261,47 +186,19 @@ impl Frame<'_> {
 
     /// Decodes the `out.len() / neblock` consecutive streams of one block,
     /// starting at `offset` in the compressed buffer, into `out`.
-    fn streams(
-        &self,
-        block: usize,
-        mut offset: usize,
-        neblock: usize,
-        out: &mut [u8],
-    ) -> Result<(), Error> {
+    fn streams(&self, block: usize, mut offset: usize, neblock: usize, out: &mut [u8]) -> Result<(), Error> {
         for (stream, out) in out.chunks_exact_mut(neblock).enumerate() {
-            let size_field = offset
-                .checked_add(4)
-                .and_then(|end| self.buf.get(offset..end))
-                .and_then(read_i32)
-                .ok_or(Error::TruncatedStreamHeader {
-                    block,
-                    stream,
-                    offset,
-                    cbytes: self.cbytes,
-                })?;
+            let size_field = offset.checked_add(4).and_then(|end| self.buf.get(offset..end)).and_then(read_i32).ok_or(Error::TruncatedStreamHeader { block, stream, offset, cbytes: self.cbytes })?;
             // offset + 4 <= buf.len() was just checked.
             let data_start = offset.saturating_add(4);
             let rest = self.buf.get(data_start..).unwrap_or_default();
-            let csize = usize::try_from(size_field)
-                .ok()
-                .filter(|&s| s <= rest.len())
-                .ok_or(Error::BadStreamSize {
-                    block,
-                    stream,
-                    size: size_field,
-                    available: rest.len(),
-                })?;
+            let csize = usize::try_from(size_field).ok().filter(|&s| s <= rest.len()).ok_or(Error::BadStreamSize { block, stream, size: size_field, available: rest.len() })?;
             let data = rest.get(..csize).unwrap_or_default();
             if csize == neblock {
                 // Stored raw: the writer could not compress this stream.
                 copy_exact(out, data);
             } else {
-                codecs::decode(self.codec, data, out).map_err(|reason| Error::CorruptStream {
-                    block,
-                    stream,
-                    codec: self.codec,
-                    reason,
-                })?;
+                codecs::decode(self.codec, data, out).map_err(|reason| Error::CorruptStream { block, stream, codec: self.codec, reason })?;
             }
             offset = data_start.saturating_add(csize);
         }
@@ -322,10 +219,7 @@ fn check_nbytes(h: &Header, expected: usize) -> Result<(), Error> {
         return Err(Error::TooLarge { found: h.nbytes });
     }
     if usize::try_from(h.nbytes).ok() != Some(expected) {
-        return Err(Error::SizeMismatch {
-            found: h.nbytes,
-            expected,
-        });
+        return Err(Error::SizeMismatch { found: h.nbytes, expected });
     }
     Ok(())
 }

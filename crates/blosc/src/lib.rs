@@ -77,16 +77,7 @@
 // unwrap, no unchecked arithmetic. Tests may do as they like.
 #![cfg_attr(
     not(test),
-    deny(
-        clippy::indexing_slicing,
-        clippy::unwrap_used,
-        clippy::expect_used,
-        clippy::panic,
-        clippy::arithmetic_side_effects,
-        clippy::unreachable,
-        clippy::todo,
-        clippy::unimplemented
-    )
+    deny(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::arithmetic_side_effects, clippy::unreachable, clippy::todo, clippy::unimplemented)
 )]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -321,9 +312,7 @@ pub enum Error {
         expected: u64,
     },
     /// The block-start table does not fit in the compressed size.
-    #[error(
-        "blosc block-start table for {nblocks} blocks does not fit in {cbytes} compressed bytes"
-    )]
+    #[error("blosc block-start table for {nblocks} blocks does not fit in {cbytes} compressed bytes")]
     BlockTableTruncated {
         /// Number of blocks implied by `nbytes` and `blocksize`.
         nblocks: u64,

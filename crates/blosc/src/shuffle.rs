@@ -113,8 +113,7 @@ pub fn bitshuffle(typesize: usize, src: &[u8], dst: &mut [u8]) {
     }
     copy(dst_tail, src_tail);
     let row_len = n / 8;
-    let (Some(group_len), Some(rows8_len)) = (typesize.checked_mul(8), row_len.checked_mul(8))
-    else {
+    let (Some(group_len), Some(rows8_len)) = (typesize.checked_mul(8), row_len.checked_mul(8)) else {
         return;
     };
     if row_len == 0 {

@@ -22,25 +22,15 @@ pub(crate) fn decompress(input: &[u8], out: &mut [u8]) -> Result<(), String> {
     let (declared, mut ip) = read_varint(input)?;
     let out_len = out.len();
     if usize::try_from(declared).ok() != Some(out_len) {
-        return Err(format!(
-            "snappy stream says {declared} uncompressed bytes, expected {out_len}"
-        ));
+        return Err(format!("snappy stream says {declared} uncompressed bytes, expected {out_len}"));
     }
     let mut op: usize = 0;
     let take = |ip: &mut usize, n: usize| -> Result<&[u8], String> {
-        let s = ip
-            .checked_add(n)
-            .and_then(|end| input.get(*ip..end))
-            .ok_or_else(|| "snappy stream ends inside an element".to_string())?;
+        let s = ip.checked_add(n).and_then(|end| input.get(*ip..end)).ok_or_else(|| "snappy stream ends inside an element".to_string())?;
         *ip = ip.saturating_add(n);
         Ok(s)
     };
-    let le = |bytes: &[u8]| -> usize {
-        bytes
-            .iter()
-            .rev()
-            .fold(0usize, |acc, &b| acc << 8 | usize::from(b))
-    };
+    let le = |bytes: &[u8]| -> usize { bytes.iter().rev().fold(0usize, |acc, &b| acc << 8 | usize::from(b)) };
 
     while ip < input.len() {
         let tag = usize::from(*take(&mut ip, 1)?.first().unwrap_or(&0));
@@ -52,15 +42,12 @@ pub(crate) fn decompress(input: &[u8], out: &mut [u8]) -> Result<(), String> {
                     len = le(take(&mut ip, extra)?);
                 }
                 let len = len.saturating_add(1);
-                let dst = op
-                    .checked_add(len)
-                    .and_then(|end| out.get_mut(op..end))
-                    .ok_or_else(|| {
-                        format!(
-                            "literal of {len} bytes at output offset {op} overflows the \
+                let dst = op.checked_add(len).and_then(|end| out.get_mut(op..end)).ok_or_else(|| {
+                    format!(
+                        "literal of {len} bytes at output offset {op} overflows the \
                              {out_len}-byte output"
-                        )
-                    })?;
+                    )
+                })?;
                 dst.copy_from_slice(take(&mut ip, len)?);
                 op = op.saturating_add(len);
                 continue;
@@ -75,9 +62,7 @@ pub(crate) fn decompress(input: &[u8], out: &mut [u8]) -> Result<(), String> {
         op = checked_copy_match(out, op, offset, len)?;
     }
     if op != out_len {
-        return Err(format!(
-            "snappy stream decodes to {op} bytes, expected {out_len}"
-        ));
+        return Err(format!("snappy stream decodes to {op} bytes, expected {out_len}"));
     }
     Ok(())
 }
@@ -114,18 +99,7 @@ mod tests {
     fn literals_and_copies() {
         // len 9; literal "abc" (tag (3-1)<<2); copy1 len 4 offset 3;
         // copy2 len 2 offset 1.
-        let input = [
-            9,
-            2 << 2,
-            b'a',
-            b'b',
-            b'c',
-            0b0000_0001,
-            3,
-            (1 << 2) | 2,
-            1,
-            0,
-        ];
+        let input = [9, 2 << 2, b'a', b'b', b'c', 0b0000_0001, 3, (1 << 2) | 2, 1, 0];
         assert_eq!(decode(&input, 9).unwrap(), b"abcabcaaa");
     }
 
@@ -147,10 +121,7 @@ mod tests {
     #[test]
     fn varint() {
         assert_eq!(read_varint(&[0x80, 0x01]).unwrap(), (128, 2));
-        assert_eq!(
-            read_varint(&[0xff, 0xff, 0xff, 0xff, 0x0f]).unwrap(),
-            (u32::MAX, 5)
-        );
+        assert_eq!(read_varint(&[0xff, 0xff, 0xff, 0xff, 0x0f]).unwrap(), (u32::MAX, 5));
         assert!(read_varint(&[0xff, 0xff, 0xff, 0xff, 0x1f]).is_err());
         assert!(read_varint(&[0x80]).is_err());
     }

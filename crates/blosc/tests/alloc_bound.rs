@@ -104,30 +104,17 @@ fn allocations_are_bounded_by_the_expected_size() {
     // size plus the codec state.
     let mut rng = common::Rng(0x0123_4567_89AB_CDEF);
     let mut probes = 0;
-    for v in set
-        .vectors
-        .iter()
-        .filter(|v| v.c_decodes && v.nbytes > 0)
-        .step_by(4)
-    {
+    for v in set.vectors.iter().filter(|v| v.c_decodes && v.nbytes > 0).step_by(4) {
         let src = set.compressed(v);
         let mut mutated = src.to_vec();
         for _ in 0..60 {
             // Mostly the header and block table, where the sizes live.
-            let at = if rng.below(2) == 0 {
-                rng.below(src.len().min(64))
-            } else {
-                rng.below(src.len())
-            };
+            let at = if rng.below(2) == 0 { rng.below(src.len().min(64)) } else { rng.below(src.len()) };
             let bit = rng.below(8);
             mutated[at] ^= 1 << bit;
             let (_, peak) = peak_during(|| decompress(&mutated, v.nbytes));
             let bound = 2 * v.nbytes + CODEC_STATE;
-            assert!(
-                peak <= bound,
-                "{}: byte {at} bit {bit}: peak {peak} > {bound}",
-                v.name
-            );
+            assert!(peak <= bound, "{}: byte {at} bit {bit}: peak {peak} > {bound}", v.name);
             mutated[at] ^= 1 << bit;
             probes += 1;
         }

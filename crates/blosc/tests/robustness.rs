@@ -33,13 +33,7 @@ fn targets(set: &Vectors) -> Vec<&Vector> {
 /// Decodes `src` expecting `len` bytes and, when the header names another
 /// small size, that size too. Records panics and wrongly sized results, and
 /// returns the first result.
-fn probe(
-    v: &Vector,
-    what: &str,
-    src: &[u8],
-    len: usize,
-    failures: &mut Vec<String>,
-) -> Option<Result<Vec<u8>, Error>> {
+fn probe(v: &Vector, what: &str, src: &[u8], len: usize, failures: &mut Vec<String>) -> Option<Result<Vec<u8>, Error>> {
     let mut first = None;
     let mut sizes = vec![len];
     if let Ok(h) = header(src) {
@@ -49,15 +43,8 @@ fn probe(
     }
     for size in sizes {
         match catch_unwind(AssertUnwindSafe(|| decompress(src, size))) {
-            Err(_) => failures.push(format!(
-                "{}: panic after {what} (expected len {size})",
-                v.name
-            )),
-            Ok(Ok(out)) if out.len() != size => failures.push(format!(
-                "{}: {} bytes after {what}, expected {size}",
-                v.name,
-                out.len()
-            )),
+            Err(_) => failures.push(format!("{}: panic after {what} (expected len {size})", v.name)),
+            Ok(Ok(out)) if out.len() != size => failures.push(format!("{}: {} bytes after {what}, expected {size}", v.name, out.len())),
             Ok(r) => {
                 if first.is_none() {
                     first = Some(r);
@@ -111,11 +98,7 @@ fn bit_flips_never_panic() {
     for v in targets(&set) {
         let src = set.compressed(v);
         let h = header(src).unwrap();
-        let nblocks = if h.blocksize == 0 {
-            0
-        } else {
-            (h.nbytes as usize).div_ceil(h.blocksize as usize)
-        };
+        let nblocks = if h.blocksize == 0 { 0 } else { (h.nbytes as usize).div_ceil(h.blocksize as usize) };
         // Every bit of the header, the block table and the first stream
         // headers; then random bits elsewhere.
         let dense = (16 + 4 * nblocks + 48).min(src.len());
@@ -127,13 +110,7 @@ fn bit_flips_never_panic() {
         let mut mutated = src.to_vec();
         for bit in positions {
             mutated[bit / 8] ^= 1 << (bit % 8);
-            let r = probe(
-                v,
-                &format!("flipping bit {bit}"),
-                &mutated,
-                v.nbytes,
-                &mut failures,
-            );
+            let r = probe(v, &format!("flipping bit {bit}"), &mutated, v.nbytes, &mut failures);
             if let Some(Err(Error::CorruptStream { codec, .. })) = r {
                 *codec_errors.entry(codec.to_string()).or_insert(0usize) += 1;
             }
@@ -145,10 +122,7 @@ fn bit_flips_never_panic() {
     // The flips must reach every codec decoder, not only the header checks.
     for codec in ["blosclz", "lz4", "snappy", "zlib", "zstd"] {
         let n = codec_errors.get(codec).copied().unwrap_or(0);
-        assert!(
-            n >= 50,
-            "only {n} corrupt-{codec} results: {codec_errors:?}"
-        );
+        assert!(n >= 50, "only {n} corrupt-{codec} results: {codec_errors:?}");
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
@@ -173,13 +147,7 @@ fn overwritten_bytes_never_panic() {
                     _ => rng.next() as u8,
                 };
             }
-            probe(
-                v,
-                &format!("overwrite round {round}"),
-                &mutated,
-                v.nbytes,
-                &mut failures,
-            );
+            probe(v, &format!("overwrite round {round}"), &mutated, v.nbytes, &mut failures);
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -198,103 +166,46 @@ fn hostile_headers_are_refused() {
     let msg = |r: Result<Vec<u8>, Error>| r.unwrap_err().to_string();
 
     // Too short for a header.
-    assert_eq!(
-        msg(decompress(&[2, 1, 0], 0)),
-        "blosc buffer is 3 bytes, expected at least the 16-byte header"
-    );
+    assert_eq!(msg(decompress(&[2, 1, 0], 0)), "blosc buffer is 3 bytes, expected at least the 16-byte header");
     // Future format version and reserved flag.
     let mut f = frame(0, 1, 0, 0, 16);
     f[0] = 3;
-    assert_eq!(
-        msg(decompress(&f, 0)),
-        "blosc format version 3 is not supported, expected 2"
-    );
-    assert!(matches!(
-        decompress(&frame(0x08, 1, 0, 0, 16), 0),
-        Err(Error::ReservedFlag { flags: 0x08 })
-    ));
+    assert_eq!(msg(decompress(&f, 0)), "blosc format version 3 is not supported, expected 2");
+    assert!(matches!(decompress(&frame(0x08, 1, 0, 0, 16), 0), Err(Error::ReservedFlag { flags: 0x08 })));
     // Empty buffer is fine, and so is an empty memcpyed one.
     assert_eq!(decompress(&frame(0, 1, 0, 0, 16), 0).unwrap(), b"");
     assert_eq!(decompress(&frame(0x02, 1, 0, 0, 16), 0).unwrap(), b"");
     // nbytes beyond i32 and beyond the expected size: refused before
     // anything is allocated.
-    assert!(matches!(
-        decompress(&frame(0, 1, u32::MAX, 1, 16), 10),
-        Err(Error::TooLarge { .. })
-    ));
-    assert_eq!(
-        msg(decompress(&frame(0, 4, 1 << 20, 1 << 16, 1000), 2048)),
-        "blosc header says 1048576 uncompressed bytes, expected 2048"
-    );
+    assert!(matches!(decompress(&frame(0, 1, u32::MAX, 1, 16), 10), Err(Error::TooLarge { .. })));
+    assert_eq!(msg(decompress(&frame(0, 4, 1 << 20, 1 << 16, 1000), 2048)), "blosc header says 1048576 uncompressed bytes, expected 2048");
     // cbytes beyond the input, or below the header size.
-    assert_eq!(
-        msg(decompress(&frame(0, 4, 64, 64, 1000), 64)),
-        "blosc header says 1000 compressed bytes, but the input holds only 16"
-    );
-    assert!(matches!(
-        decompress(&frame(0, 4, 64, 64, 8), 64),
-        Err(Error::CompressedSizeTooSmall { cbytes: 8 })
-    ));
+    assert_eq!(msg(decompress(&frame(0, 4, 64, 64, 1000), 64)), "blosc header says 1000 compressed bytes, but the input holds only 16");
+    assert!(matches!(decompress(&frame(0, 4, 64, 64, 8), 64), Err(Error::CompressedSizeTooSmall { cbytes: 8 })));
     // typesize 0, block size 0 or larger than the buffer.
-    assert!(matches!(
-        decompress(&frame(0, 0, 64, 64, 16), 64),
-        Err(Error::ZeroTypesize)
-    ));
-    assert!(matches!(
-        decompress(&frame(0, 1, 64, 0, 16), 64),
-        Err(Error::InvalidBlockSize {
-            blocksize: 0,
-            max: 64
-        })
-    ));
-    assert!(matches!(
-        decompress(&frame(0, 1, 64, 65, 16), 64),
-        Err(Error::InvalidBlockSize { blocksize: 65, .. })
-    ));
+    assert!(matches!(decompress(&frame(0, 0, 64, 64, 16), 64), Err(Error::ZeroTypesize)));
+    assert!(matches!(decompress(&frame(0, 1, 64, 0, 16), 64), Err(Error::InvalidBlockSize { blocksize: 0, max: 64 })));
+    assert!(matches!(decompress(&frame(0, 1, 64, 65, 16), 64), Err(Error::InvalidBlockSize { blocksize: 65, .. })));
     // Memcpyed with the wrong cbytes.
     let mut f = frame(0x02, 1, 4, 4, 19);
     f.extend_from_slice(&[1, 2, 3]);
-    assert!(matches!(
-        decompress(&f, 4),
-        Err(Error::MemcpySizeMismatch {
-            cbytes: 19,
-            expected: 20
-        })
-    ));
+    assert!(matches!(decompress(&f, 4), Err(Error::MemcpySizeMismatch { cbytes: 19, expected: 20 })));
     // Unknown codec and codec version.
-    assert!(matches!(
-        decompress(&frame(5 << 5, 1, 64, 64, 16), 64),
-        Err(Error::UnsupportedCodec { code: 5 })
-    ));
+    assert!(matches!(decompress(&frame(5 << 5, 1, 64, 64, 16), 64), Err(Error::UnsupportedCodec { code: 5 })));
     let mut f = frame(0, 1, 64, 64, 16);
     f[1] = 2;
-    assert!(matches!(
-        decompress(&f, 64),
-        Err(Error::UnsupportedCodecVersion { found: 2, .. })
-    ));
+    assert!(matches!(decompress(&f, 64), Err(Error::UnsupportedCodecVersion { found: 2, .. })));
     // Block table larger than the buffer: 1 MiB in 1-byte blocks.
-    assert!(matches!(
-        decompress(&frame(0, 1, 1 << 20, 1, 20), 1 << 20).unwrap_err(),
-        Error::CompressedSizeExceedsInput { .. }
-    ));
+    assert!(matches!(decompress(&frame(0, 1, 1 << 20, 1, 20), 1 << 20).unwrap_err(), Error::CompressedSizeExceedsInput { .. }));
     let mut f = frame(0, 1, 1 << 20, 1, 20);
     f.extend_from_slice(&[0; 4]);
-    assert!(matches!(
-        decompress(&f, 1 << 20),
-        Err(Error::BlockTableTruncated {
-            nblocks: 1_048_576,
-            cbytes: 20
-        })
-    ));
+    assert!(matches!(decompress(&f, 1 << 20), Err(Error::BlockTableTruncated { nblocks: 1_048_576, cbytes: 20 })));
     // Block start pointing outside the buffer, or negative.
     for start in [-1i32, 21, i32::MAX] {
         let mut f = frame(0, 1, 200, 200, 24);
         f.extend_from_slice(&start.to_le_bytes());
         f.extend_from_slice(&[0; 4]);
-        assert!(
-            matches!(decompress(&f, 200), Err(Error::BadBlockStart { .. })),
-            "start {start}"
-        );
+        assert!(matches!(decompress(&f, 200), Err(Error::BadBlockStart { .. })), "start {start}");
     }
     // Stream sizes that are negative or too large.
     for size in [-1i32, 1000, i32::MIN] {
@@ -302,34 +213,21 @@ fn hostile_headers_are_refused() {
         f.extend_from_slice(&20i32.to_le_bytes());
         f.extend_from_slice(&size.to_le_bytes());
         f.extend_from_slice(&[0; 4]);
-        assert!(
-            matches!(decompress(&f, 200), Err(Error::BadStreamSize { .. })),
-            "size {size}"
-        );
+        assert!(matches!(decompress(&f, 200), Err(Error::BadStreamSize { .. })), "size {size}");
     }
     // A raw stream (csize == neblock) decodes; one byte short does not.
     let mut f = frame(FLAG_DONT_SPLIT_BIT, 1, 200, 200, 224);
     f.extend_from_slice(&20i32.to_le_bytes());
     f.extend_from_slice(&200i32.to_le_bytes());
     f.extend((0..200).map(|i| i as u8));
-    assert_eq!(
-        decompress(&f, 200).unwrap(),
-        (0..200).map(|i| i as u8).collect::<Vec<_>>()
-    );
+    assert_eq!(decompress(&f, 200).unwrap(), (0..200).map(|i| i as u8).collect::<Vec<_>>());
     f[12..16].copy_from_slice(&223u32.to_le_bytes());
     assert!(decompress(&f, 200).is_err());
     // A split block whose length is not a multiple of typesize.
     let mut f = frame(0, 2, 301, 301, 28);
     f.extend_from_slice(&20i32.to_le_bytes());
     f.extend_from_slice(&[0; 8]);
-    assert!(matches!(
-        decompress(&f, 301),
-        Err(Error::UnevenSplit {
-            len: 301,
-            typesize: 2,
-            ..
-        })
-    ));
+    assert!(matches!(decompress(&f, 301), Err(Error::UnevenSplit { len: 301, typesize: 2, .. })));
 }
 
 const FLAG_DONT_SPLIT_BIT: u8 = vdbcook_blosc::FLAG_DONT_SPLIT;

@@ -257,15 +257,7 @@ pub fn update(data: &[&Brick], labels: &[(u32, f32)], centroids: &[Brick]) -> Ve
             *a += b;
         }
     }
-    (0..k)
-        .map(|i| {
-            if counts[i] == 0 {
-                centroids[i]
-            } else {
-                std::array::from_fn(|v| (sums[i * BRICK + v] / counts[i] as f64) as f32)
-            }
-        })
-        .collect()
+    (0..k).map(|i| if counts[i] == 0 { centroids[i] } else { std::array::from_fn(|v| (sums[i * BRICK + v] / counts[i] as f64) as f32) }).collect()
 }
 
 /// Runs the whole procedure; `progress(step, steps)` after each k-means round.
@@ -276,7 +268,13 @@ pub fn cluster(bricks: &[Brick], opts: &Options, progress: &(dyn Fn(usize, usize
         .par_iter()
         .map(|b| {
             let (mean, var, constant) = moments(b);
-            let nv = if var == 0.0 { 0.0 } else if mean > 0.0 { var / mean } else { f64::INFINITY };
+            let nv = if var == 0.0 {
+                0.0
+            } else if mean > 0.0 {
+                var / mean
+            } else {
+                f64::INFINITY
+            };
             if constant {
                 0
             } else if nv > opts.variance_threshold {
@@ -307,11 +305,7 @@ pub fn cluster(bricks: &[Brick], opts: &Options, progress: &(dyn Fn(usize, usize
         // The error bound, brick by brick: the largest voxel difference.
         let over: Vec<bool> = match opts.max_brick_error {
             None => vec![false; data.len()],
-            Some(e) => data
-                .par_iter()
-                .zip(labels.par_iter())
-                .map(|(b, &(l, _))| b.iter().zip(centroids[l as usize].iter()).any(|(x, c)| (x - c).abs() > e))
-                .collect(),
+            Some(e) => data.par_iter().zip(labels.par_iter()).map(|(b, &(l, _))| b.iter().zip(centroids[l as usize].iter()).any(|(x, c)| (x - c).abs() > e)).collect(),
         };
         for (j, &i) in cand.iter().enumerate() {
             if over[j] {

@@ -16,7 +16,14 @@ fn frame(shift: i32) -> Grid {
         leaves.push(Leaf { origin: Coord::new((i as i32 % 5) * 8 - 64, (i as i32 / 5) * 8 + shift * 8, 0), mask, values });
     }
     leaves.sort_by_key(|l| l.origin);
-    Grid { name: "density".into(), class: GridClass::FogVolume, background: 0.0, transform: Transform::identity(), leaves, tiles: vec![Tile { origin: Coord::new(128, 0, 0), dim: 8, value: 0.5, active: true }] }
+    Grid {
+        name: "density".into(),
+        class: GridClass::FogVolume,
+        background: 0.0,
+        transform: Transform::identity(),
+        leaves,
+        tiles: vec![Tile { origin: Coord::new(128, 0, 0), dim: 8, value: 0.5, active: true }],
+    }
 }
 
 fn cook(format: Format, frames: &[Grid], max_dim: u32) -> (Vec<u8>, CookReport) {
@@ -39,7 +46,21 @@ fn f32_round_trip_is_exact() {
     asset.verify().unwrap();
     for (i, f) in frames.iter().enumerate() {
         let g = unpack_frame(&asset, i).unwrap();
-        assert_eq!(g.leaves, f.leaves.iter().map(|l| { let mut l = l.clone(); for v in 0..512 { if !l.mask.is_on(v) { l.values[v] = 0.0; } } l }).collect::<Vec<_>>());
+        assert_eq!(
+            g.leaves,
+            f.leaves
+                .iter()
+                .map(|l| {
+                    let mut l = l.clone();
+                    for v in 0..512 {
+                        if !l.mask.is_on(v) {
+                            l.values[v] = 0.0;
+                        }
+                    }
+                    l
+                })
+                .collect::<Vec<_>>()
+        );
         assert_eq!(g.tiles, f.tiles);
     }
     assert!(matches!(unpack_frame(&asset, 3), Err(Error::NoFrame { .. })));
@@ -279,7 +300,11 @@ fn non_finite_values_never_panic_any_format() {
             let mut mask = LeafMask::default();
             let values = std::array::from_fn(|i| {
                 mask.set(i, k % 2 == 0 || i % 3 == 0);
-                if (i + k) % 5 == 0 { specials[(i / 5 + k) % specials.len()] } else { 0.25 }
+                if (i + k) % 5 == 0 {
+                    specials[(i / 5 + k) % specials.len()]
+                } else {
+                    0.25
+                }
             });
             Leaf { origin: Coord::new(8 * k as i32, 0, 0), mask, values }
         })

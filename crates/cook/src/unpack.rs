@@ -76,18 +76,14 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Grid, Error> {
         return Err(Error::TooBig { frame, leaves: want, bytes, budget });
     }
     let want = want as usize;
-    let (leaves, tiles) = nodes.frame_contents(frame, want, MAX_TILES).ok_or_else(|| Error::Corrupt(format!("frame {frame} holds more than the {want} leaves or {MAX_TILES} tiles its metadata allows")))?;
+    let (leaves, tiles) =
+        nodes.frame_contents(frame, want, MAX_TILES).ok_or_else(|| Error::Corrupt(format!("frame {frame} holds more than the {want} leaves or {MAX_TILES} tiles its metadata allows")))?;
     if leaves.len() != want {
         return Err(Error::Corrupt(format!("frame {frame} holds {} leaves, its metadata says {want}", leaves.len())));
     }
     let mut out = Vec::with_capacity(leaves.len());
     for (origin, mask, brick) in leaves {
-        let info = meta
-            .atlases
-            .iter()
-            .enumerate()
-            .find(|(_, a)| brick >= a.first_brick && brick - a.first_brick < a.count)
-            .ok_or_else(|| Error::Corrupt(format!("brick {brick} is in no atlas")))?;
+        let info = meta.atlases.iter().enumerate().find(|(_, a)| brick >= a.first_brick && brick - a.first_brick < a.count).ok_or_else(|| Error::Corrupt(format!("brick {brick} is in no atlas")))?;
         let layout = AtlasLayout { format, bricks: info.1.bricks, first_brick: info.1.first_brick, count: info.1.count };
         if !layout.is_valid() {
             return Err(Error::Corrupt(format!("atlas {} has an impossible layout {:?} for {} bricks", info.0, layout.bricks, layout.count)));

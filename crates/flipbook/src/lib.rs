@@ -117,12 +117,24 @@ pub fn brick_of_leaf(leaf: &vdbcook_grid::Leaf) -> Brick {
                     cnt += 1;
                 }
             };
-            if x > 0 { visit(i - 64); }
-            if x < 7 { visit(i + 64); }
-            if y > 0 { visit(i - 8); }
-            if y < 7 { visit(i + 8); }
-            if z > 0 { visit(i - 1); }
-            if z < 7 { visit(i + 1); }
+            if x > 0 {
+                visit(i - 64);
+            }
+            if x < 7 {
+                visit(i + 64);
+            }
+            if y > 0 {
+                visit(i - 8);
+            }
+            if y < 7 {
+                visit(i + 8);
+            }
+            if z > 0 {
+                visit(i - 1);
+            }
+            if z < 7 {
+                visit(i + 1);
+            }
             b[i] = acc / cnt as f32;
         }
         for (k, f) in known.iter_mut().zip(front) {

@@ -57,7 +57,8 @@ fn a_frame_with_repeated_leaves_pools_each_brick_once_in_first_order() {
     // 5,000 leaves (more than one batch): every third repeats one of 50
     // patterns, the others are new, so new bricks follow duplicates inside
     // a batch; every fifth is partly active.
-    let leaves: Vec<Leaf> = (0..5000).map(|i| leaf(Coord::new(8 * (i / 64), 8 * (i % 64), 0), if i % 3 == 0 { (i / 3 % 50) as u32 } else { 1000 + i as u32 }, if i % 5 == 0 { 100 } else { 512 })).collect();
+    let leaves: Vec<Leaf> =
+        (0..5000).map(|i| leaf(Coord::new(8 * (i / 64), 8 * (i % 64), 0), if i % 3 == 0 { (i / 3 % 50) as u32 } else { 1000 + i as u32 }, if i % 5 == 0 { 100 } else { 512 })).collect();
     let g = grid(leaves.clone(), vec![Tile { origin: Coord::new(0, 0, 1024), dim: 8, value: -3.0, active: true }]);
     let mut first: Vec<Brick> = Vec::new();
     for l in &leaves {
@@ -100,7 +101,11 @@ fn unchanging_frames_share_every_node() {
 #[test]
 fn nodes_give_back_every_leaf_and_tile() {
     let leaves = vec![leaf(Coord::new(-136, 5 * 8, 64), 1, 512), leaf(Coord::new(0, 0, 0), 2, 17), leaf(Coord::new(1000, -304, 8), 3, 64)];
-    let tiles = vec![Tile { origin: Coord::new(256, 0, 0), dim: 128, value: 0.5, active: true }, Tile { origin: Coord::new(8, 8, 8), dim: 8, value: 0.75, active: true }, Tile { origin: Coord::new(16, 8, 8), dim: 8, value: 2.0, active: false }];
+    let tiles = vec![
+        Tile { origin: Coord::new(256, 0, 0), dim: 128, value: 0.5, active: true },
+        Tile { origin: Coord::new(8, 8, 8), dim: 8, value: 0.75, active: true },
+        Tile { origin: Coord::new(16, 8, 8), dim: 8, value: 2.0, active: false },
+    ];
     let g = grid(leaves.clone(), tiles);
     let mut b = Builder::new();
     b.push(&g).unwrap();
@@ -241,12 +246,24 @@ fn reference_fill(leaf: &vdbcook_grid::Leaf) -> Brick {
                     cnt += 1;
                 }
             };
-            if x > 0 { visit(i - 64); }
-            if x < 7 { visit(i + 64); }
-            if y > 0 { visit(i - 8); }
-            if y < 7 { visit(i + 8); }
-            if z > 0 { visit(i - 1); }
-            if z < 7 { visit(i + 1); }
+            if x > 0 {
+                visit(i - 64);
+            }
+            if x < 7 {
+                visit(i + 64);
+            }
+            if y > 0 {
+                visit(i - 8);
+            }
+            if y < 7 {
+                visit(i + 8);
+            }
+            if z > 0 {
+                visit(i - 1);
+            }
+            if z < 7 {
+                visit(i + 1);
+            }
             if cnt > 0 {
                 b[i] = acc / cnt as f32;
                 known[i] = true;
@@ -331,7 +348,13 @@ fn compact_l3_masks_round_trip() {
         // Each sub-block's state says what its 64 voxels are.
         for b in 0..8 {
             let voxels: Vec<bool> = (0..512).filter(|i| (i / 64 / 4) * 4 + ((i / 8) % 8 / 4) * 2 + (i % 8 / 4) == b).map(|i| bit(mask, i)).collect();
-            let want = if voxels.iter().all(|&v| !v) { SUB_EMPTY } else if voxels.iter().all(|&v| v) { SUB_FULL } else { SUB_PARTIAL };
+            let want = if voxels.iter().all(|&v| !v) {
+                SUB_EMPTY
+            } else if voxels.iter().all(|&v| v) {
+                SUB_FULL
+            } else {
+                SUB_PARTIAL
+            };
             assert_eq!((states >> (2 * b)) & 3, want, "sub-block {b}");
         }
         assert_eq!(partial.len() as u32, (0..8).filter(|b| (states >> (2 * b)) & 3 == SUB_PARTIAL).count() as u32);

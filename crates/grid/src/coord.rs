@@ -50,23 +50,14 @@ impl Bbox {
         self.union(Bbox::point(c))
     }
     pub fn union(self, o: Bbox) -> Bbox {
-        Bbox {
-            min: Coord::new(self.min.x.min(o.min.x), self.min.y.min(o.min.y), self.min.z.min(o.min.z)),
-            max: Coord::new(self.max.x.max(o.max.x), self.max.y.max(o.max.y), self.max.z.max(o.max.z)),
-        }
+        Bbox { min: Coord::new(self.min.x.min(o.min.x), self.min.y.min(o.min.y), self.min.z.min(o.min.z)), max: Coord::new(self.max.x.max(o.max.x), self.max.y.max(o.max.y), self.max.z.max(o.max.z)) }
     }
     pub fn contains(self, c: Coord) -> bool {
-        (self.min.x..=self.max.x).contains(&c.x)
-            && (self.min.y..=self.max.y).contains(&c.y)
-            && (self.min.z..=self.max.z).contains(&c.z)
+        (self.min.x..=self.max.x).contains(&c.x) && (self.min.y..=self.max.y).contains(&c.y) && (self.min.z..=self.max.z).contains(&c.z)
     }
     /// Edge lengths in voxels (as i64, since a box may span the whole i32 range).
     pub fn extent(self) -> [i64; 3] {
-        [
-            i64::from(self.max.x) - i64::from(self.min.x) + 1,
-            i64::from(self.max.y) - i64::from(self.min.y) + 1,
-            i64::from(self.max.z) - i64::from(self.min.z) + 1,
-        ]
+        [i64::from(self.max.x) - i64::from(self.min.x) + 1, i64::from(self.max.y) - i64::from(self.min.y) + 1, i64::from(self.max.z) - i64::from(self.min.z) + 1]
     }
 }
 

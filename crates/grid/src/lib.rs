@@ -238,15 +238,7 @@ impl Grid {
     /// combined in leaf order, so the result does not depend on the thread count.
     pub fn stats(&self) -> Stats {
         let parts: Vec<LeafSummary> = self.leaves.par_iter().map(LeafSummary::of).collect();
-        let mut st = Stats {
-            active_voxels: 0,
-            leaf_count: self.leaves.len() as u64,
-            active_tiles: 0,
-            bbox: None,
-            min: None,
-            max: None,
-            sum: 0.0,
-        };
+        let mut st = Stats { active_voxels: 0, leaf_count: self.leaves.len() as u64, active_tiles: 0, bbox: None, min: None, max: None, sum: 0.0 };
         let mut lo = f32::INFINITY;
         let mut hi = f32::NEG_INFINITY;
         let grow = |b: Bbox, bbox: &mut Option<Bbox>| {
@@ -340,10 +332,7 @@ mod tests {
             background: 0.0,
             transform: Transform::identity(),
             leaves: vec![leaf_with(Coord::new(-8, 0, 0), &[(7, 1, 2, 0.5), (0, 0, 0, 2.0)])],
-            tiles: vec![
-                Tile { origin: Coord::new(8, 8, 8), dim: 8, value: 1.0, active: true },
-                Tile { origin: Coord::new(128, 0, 0), dim: 128, value: 3.0, active: false },
-            ],
+            tiles: vec![Tile { origin: Coord::new(8, 8, 8), dim: 8, value: 1.0, active: true }, Tile { origin: Coord::new(128, 0, 0), dim: 128, value: 3.0, active: false }],
         };
         let s = g.stats();
         assert_eq!(s.active_voxels, 2 + 512);
@@ -360,14 +349,7 @@ mod tests {
 
     #[test]
     fn empty_grid_has_no_range() {
-        let g = Grid {
-            name: String::new(),
-            class: GridClass::Unknown,
-            background: 0.0,
-            transform: Transform::identity(),
-            leaves: vec![],
-            tiles: vec![],
-        };
+        let g = Grid { name: String::new(), class: GridClass::Unknown, background: 0.0, transform: Transform::identity(), leaves: vec![], tiles: vec![] };
         let s = g.stats();
         assert_eq!((s.active_voxels, s.min, s.max, s.bbox), (0, None, None, None));
     }

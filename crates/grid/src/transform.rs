@@ -103,15 +103,7 @@ mod tests {
 
     #[test]
     fn map_names_round_trip() {
-        for m in [
-            MapType::UniformScale,
-            MapType::UniformScaleTranslate,
-            MapType::Scale,
-            MapType::ScaleTranslate,
-            MapType::Translation,
-            MapType::Affine,
-            MapType::Unitary,
-        ] {
+        for m in [MapType::UniformScale, MapType::UniformScaleTranslate, MapType::Scale, MapType::ScaleTranslate, MapType::Translation, MapType::Affine, MapType::Unitary] {
             assert_eq!(MapType::from_vdb_name(m.vdb_name()), Some(m));
         }
         assert_eq!(MapType::from_vdb_name("NonlinearFrustumMap"), None);

@@ -120,7 +120,13 @@ fn half_to_f32(h: u16) -> f32 {
     let man = f32::from(h & 0x3ff);
     sign * match exp {
         0 => man * 2f32.powi(-24),
-        31 => if man == 0.0 { f32::INFINITY } else { f32::NAN },
+        31 => {
+            if man == 0.0 {
+                f32::INFINITY
+            } else {
+                f32::NAN
+            }
+        }
         e => (1.0 + man / 1024.0) * 2f32.powi(e - 15),
     }
 }

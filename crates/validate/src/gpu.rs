@@ -147,12 +147,18 @@ impl Renderer {
             Some(f) => {
                 let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
                 let f_low = f.to_lowercase();
-                adapters.into_iter().find(|a| a.get_info().name.to_lowercase().contains(&f_low)).ok_or_else(|| {
-                    Error::NoAdapter(format!(" matching \"{f}\" (adapters: {})", if names.is_empty() { "none".to_string() } else { names.join(", ") }))
-                })?
+                adapters
+                    .into_iter()
+                    .find(|a| a.get_info().name.to_lowercase().contains(&f_low))
+                    .ok_or_else(|| Error::NoAdapter(format!(" matching \"{f}\" (adapters: {})", if names.is_empty() { "none".to_string() } else { names.join(", ") })))?
             }
-            None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions { power_preference: wgpu::PowerPreference::HighPerformance, force_fallback_adapter: false, compatible_surface: None, ..Default::default() }))
-                .map_err(|e| Error::NoAdapter(format!(" ({e})")))?,
+            None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                ..Default::default()
+            }))
+            .map_err(|e| Error::NoAdapter(format!(" ({e})")))?,
         };
         let info = adapter.get_info();
         let adapter_name = format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
@@ -168,7 +174,11 @@ impl Renderer {
             trace: wgpu::Trace::Off,
         }))
         .map_err(|e| Error::Device(e.to_string()))?;
-        let textures = Pipelines::new(&device, TEXTURE_SHADER, wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D3, multisampled: false });
+        let textures = Pipelines::new(
+            &device,
+            TEXTURE_SHADER,
+            wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D3, multisampled: false },
+        );
         Ok(Renderer { device, queue, textures, buffers: std::sync::OnceLock::new(), bc, decode: BcDecode::Auto, adapter: adapter_name })
     }
 
@@ -288,7 +298,16 @@ impl Renderer {
                 atlases.push(Atlas::Texture { _texture: texture, view });
             }
         }
-        Ok(GpuAsset { buffers, atlases, frames: d.frames.to_vec(), atlas_count: d.meta.atlases.len(), format: d.format, background: d.meta.background, atlas_bricks: d.atlas_bricks(), last_atlas: d.last_atlas() })
+        Ok(GpuAsset {
+            buffers,
+            atlases,
+            frames: d.frames.to_vec(),
+            atlas_count: d.meta.atlases.len(),
+            format: d.format,
+            background: d.meta.background,
+            atlas_bricks: d.atlas_bricks(),
+            last_atlas: d.last_atlas(),
+        })
     }
 
     /// Renders frame `frame` of `asset` from `view`.
@@ -332,8 +351,14 @@ impl Renderer {
         let mut reads = Vec::with_capacity(views.len());
         for (i, view) in views.iter().enumerate() {
             let params = self.params(asset, scene, l1, view, width, height);
-            let out = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("image"), size: bytes, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
-            let read = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("readback"), size: bytes, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+            let out =
+                self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("image"), size: bytes, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
+            let read = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("readback"),
+                size: bytes,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
             let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() }];
             for (b, buf) in asset.buffers.iter().enumerate() {
                 entries.push(wgpu::BindGroupEntry { binding: b as u32 + 1, resource: buf.as_entire_binding() });

@@ -11,7 +11,6 @@ mod cpu;
 mod gpu;
 pub mod report;
 
-
 pub use cpu::render_cpu;
 pub use gpu::{shader_sources, BcDecode, GpuAsset, Renderer};
 

@@ -69,11 +69,7 @@ pub fn svg_plot(values: &[f64], label: &str) -> String {
     let (w, h, pad) = (640.0, 220.0, 40.0);
     let max = values.iter().copied().fold(0.0f64, f64::max).max(1e-12);
     let n = values.len().max(2) - 1;
-    let pts: Vec<String> = values
-        .iter()
-        .enumerate()
-        .map(|(i, v)| format!("{:.1},{:.1}", pad + (w - 2.0 * pad) * i as f64 / n as f64, h - pad - (h - 2.0 * pad) * v / max))
-        .collect();
+    let pts: Vec<String> = values.iter().enumerate().map(|(i, v)| format!("{:.1},{:.1}", pad + (w - 2.0 * pad) * i as f64 / n as f64, h - pad - (h - 2.0 * pad) * v / max)).collect();
     format!(
         "<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{h}' style='background:#fff;border:1px solid #ccc'>\
 <text x='{pad}' y='20' font-size='12'>{}: max {:.3e}</text>\

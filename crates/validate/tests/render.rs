@@ -148,7 +148,9 @@ fn bc_bricks_decoded_in_the_shader_render_like_the_texture_unit() {
     // atlas of several layers, each holding fewer bricks than the limit allows
     // (the 91 bricks fit 7 × 1 × 13 exactly), so a sampler that assumed full
     // rows or layers would misplace them.
-    for (files, format, dim) in [(&SEQ[..], Format::Bc4, 2048), (&SEQ, Format::Bc7, 2048), (&SEQ, Format::Bc4, 32), (&SEQ, Format::Bc7, 20), (&["fixtures/smoke_seq/smoke_0004.vdb"], Format::Bc4, 24), (&SEQ, Format::Bc7, 64)] {
+    for (files, format, dim) in
+        [(&SEQ[..], Format::Bc4, 2048), (&SEQ, Format::Bc7, 2048), (&SEQ, Format::Bc4, 32), (&SEQ, Format::Bc7, 20), (&["fixtures/smoke_seq/smoke_0004.vdb"], Format::Bc4, 24), (&SEQ, Format::Bc7, 64)]
+    {
         let bytes = cook_dim(files, format, dim);
         let asset = Asset::from_bytes(&bytes).unwrap();
         let meta = asset.metadata().unwrap();

@@ -274,12 +274,7 @@ impl VdbFile {
         let mut g = if self.has_grid_offsets {
             let ok = |p: i64| p >= 0 && (p as u64) <= len as u64;
             if grid_pos >= 0 && end_pos >= grid_pos && ok(grid_pos) && !ok(end_pos) {
-                return Err(ctx_err(Error::Truncated {
-                    what: "grid data",
-                    offset: grid_pos as u64,
-                    need: (end_pos - grid_pos) as u64,
-                    have: (len as u64).saturating_sub(grid_pos as u64),
-                }));
+                return Err(ctx_err(Error::Truncated { what: "grid data", offset: grid_pos as u64, need: (end_pos - grid_pos) as u64, have: (len as u64).saturating_sub(grid_pos as u64) }));
             }
             // A grid's data lies between its descriptor and the next one, so
             // grids cannot share (or re-read) each other's bytes: reading a
@@ -309,20 +304,7 @@ impl VdbFile {
             Err(map::MapError::Read(e)) => return Err(ctx_err(e)),
         };
         let instance_parent = if parent.is_empty() { None } else { Some(parent) };
-        let info = GridInfo {
-            name,
-            unique_name,
-            tree_type,
-            value_type,
-            half_float,
-            instance_parent,
-            compression,
-            class,
-            metadata,
-            transform,
-            unsupported,
-            tree_pos: g.pos(),
-        };
+        let info = GridInfo { name, unique_name, tree_type, value_type, half_float, instance_parent, compression, class, metadata, transform, unsupported, tree_pos: g.pos() };
         // Move to the next descriptor.
         if self.has_grid_offsets {
             *cur = Cursor::at(cur.data(), end_pos as usize).map_err(ctx_err)?;
@@ -388,9 +370,11 @@ impl VdbFile {
         let source = match &info.instance_parent {
             None => info,
             Some(p) => {
-                let parent = self.grids.iter().find(|g| &g.unique_name == p && g.instance_parent.is_none()).ok_or_else(|| {
-                    Error::invalid("grid descriptor", 0, format!("instance parent \"{}\" is missing", p.escape_debug())).in_grid(&gname)
-                })?;
+                let parent = self
+                    .grids
+                    .iter()
+                    .find(|g| &g.unique_name == p && g.instance_parent.is_none())
+                    .ok_or_else(|| Error::invalid("grid descriptor", 0, format!("instance parent \"{}\" is missing", p.escape_debug())).in_grid(&gname))?;
                 if let Some(u) = &parent.unsupported {
                     return Err(Error::Unsupported { grid: gname, reason: format!("its instance parent: {u}") });
                 }
@@ -402,14 +386,7 @@ impl VdbFile {
             let layout = tree::scan(&mut cur, self.ctx(source))?;
             let background = layout.background;
             let (tiles, leaves) = layout.decode()?;
-            Ok(Grid {
-                name: info.name.clone(),
-                class: info.class,
-                background,
-                transform: info.transform.unwrap_or_else(Transform::identity),
-                leaves,
-                tiles,
-            })
+            Ok(Grid { name: info.name.clone(), class: info.class, background, transform: info.transform.unwrap_or_else(Transform::identity), leaves, tiles })
         };
         read().map_err(|e| e.in_grid(&gname))
     }

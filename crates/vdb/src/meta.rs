@@ -29,7 +29,10 @@ pub enum MetaValue {
     Mat4d([f64; 16]),
     /// A type this reader does not interpret (e.g. `__delayedload`), or a
     /// known type whose stored size does not match it.
-    Other { type_name: String, size: u32 },
+    Other {
+        type_name: String,
+        size: u32,
+    },
 }
 
 impl MetaValue {

@@ -162,14 +162,8 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, ctx: &Ctx, count: usize, mask: &[u6
             inactive[1] = ctx.read_value(cur, "inactive value")?;
         }
     }
-    let selection = if matches!(meta, MASK_AND_NO_INACTIVE_VALS | MASK_AND_ONE_INACTIVE_VAL | MASK_AND_TWO_INACTIVE_VALS) {
-        Some(cur.take(count / 8, "selection mask")?)
-    } else {
-        None
-    };
-    let mask_compressed = ctx.compression & COMPRESS_ACTIVE_MASK != 0
-        && meta != NO_MASK_AND_ALL_VALS
-        && ctx.version >= VERSION_NODE_MASK_COMPRESSION;
+    let selection = if matches!(meta, MASK_AND_NO_INACTIVE_VALS | MASK_AND_ONE_INACTIVE_VAL | MASK_AND_TWO_INACTIVE_VALS) { Some(cur.take(count / 8, "selection mask")?) } else { None };
+    let mask_compressed = ctx.compression & COMPRESS_ACTIVE_MASK != 0 && meta != NO_MASK_AND_ALL_VALS && ctx.version >= VERSION_NODE_MASK_COMPRESSION;
     let stored = if mask_compressed { mask.iter().map(|w| w.count_ones() as usize).sum() } else { count };
     let bytes = stored * ctx.stored_type().size();
     let payload_at = cur.pos();
@@ -203,14 +197,9 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, ctx: &Ctx, count: usize, mask: &[u6
 fn inflate(src: &[u8], out: &mut [u8], offset: usize) -> Result<(), Error> {
     let expected = out.len();
     let mut z = flate2::Decompress::new(true);
-    let status = z
-        .decompress(src, out, flate2::FlushDecompress::Finish)
-        .map_err(|e| Error::Zip { offset: offset as u64, detail: e.to_string() })?;
+    let status = z.decompress(src, out, flate2::FlushDecompress::Finish).map_err(|e| Error::Zip { offset: offset as u64, detail: e.to_string() })?;
     if status != flate2::Status::StreamEnd || z.total_out() != expected as u64 {
-        return Err(Error::Zip {
-            offset: offset as u64,
-            detail: format!("inflated to at least {} bytes, expected exactly {expected}", z.total_out()),
-        });
+        return Err(Error::Zip { offset: offset as u64, detail: format!("inflated to at least {} bytes, expected exactly {expected}", z.total_out()) });
     }
     Ok(())
 }

@@ -16,7 +16,20 @@ fn sorted_tiles(g: &Grid) -> Vec<String> {
 fn written_grids_read_back_identical() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures");
     let mut n = 0;
-    for name in ["fog_blosc.vdb", "fog_half_blosc.vdb", "tiles.vdb", "tiles_root.vdb", "levelset_half.vdb", "inactive_modes_blosc.vdb", "map_AffineMap.vdb", "map_ScaleTranslateMap.vdb", "map_TranslationMap.vdb", "map_UnitaryMap.vdb", "map_ScaleMap.vdb", "empty.vdb"] {
+    for name in [
+        "fog_blosc.vdb",
+        "fog_half_blosc.vdb",
+        "tiles.vdb",
+        "tiles_root.vdb",
+        "levelset_half.vdb",
+        "inactive_modes_blosc.vdb",
+        "map_AffineMap.vdb",
+        "map_ScaleTranslateMap.vdb",
+        "map_TranslationMap.vdb",
+        "map_UnitaryMap.vdb",
+        "map_ScaleMap.vdb",
+        "empty.vdb",
+    ] {
         let file = vdbcook_vdb::open(&root.join(name)).unwrap();
         let idx = file.select(None).unwrap();
         let grid = file.read_grid(idx).unwrap();

@@ -42,17 +42,12 @@ impl Vectors {
     }
 
     pub fn by_name(&self, name: &str) -> &Vector {
-        self.vectors
-            .iter()
-            .find(|v| v.name == name)
-            .unwrap_or_else(|| panic!("no vector named {name}"))
+        self.vectors.iter().find(|v| v.name == name).unwrap_or_else(|| panic!("no vector named {name}"))
     }
 }
 
 fn data_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests")
-        .join("data")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests").join("data")
 }
 
 pub fn load() -> Vectors {
@@ -61,10 +56,7 @@ pub fn load() -> Vectors {
     let blob = std::fs::read(dir.join("vectors.bin")).expect("read vectors.bin");
     let mut vectors = Vec::new();
     let mut datasets = HashMap::new();
-    for line in manifest
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.is_empty())
-    {
+    for line in manifest.lines().filter(|l| !l.starts_with('#') && !l.is_empty()) {
         let f: Vec<&str> = line.split('\t').collect();
         assert_eq!(f.len(), 14, "bad manifest line: {line}");
         let v = Vector {
@@ -87,27 +79,12 @@ pub fn load() -> Vectors {
             },
             sha256: f[13].to_string(),
         };
-        assert!(
-            v.offset + v.length <= blob.len(),
-            "{} runs past vectors.bin",
-            v.name
-        );
-        datasets.entry(v.dataset.clone()).or_insert_with(|| {
-            std::fs::read(dir.join("datasets").join(format!("{}.bin", v.dataset)))
-                .expect("read dataset")
-        });
+        assert!(v.offset + v.length <= blob.len(), "{} runs past vectors.bin", v.name);
+        datasets.entry(v.dataset.clone()).or_insert_with(|| std::fs::read(dir.join("datasets").join(format!("{}.bin", v.dataset))).expect("read dataset"));
         vectors.push(v);
     }
-    assert!(
-        vectors.len() > 100,
-        "manifest has only {} vectors",
-        vectors.len()
-    );
-    Vectors {
-        vectors,
-        blob,
-        datasets,
-    }
+    assert!(vectors.len() > 100, "manifest has only {} vectors", vectors.len());
+    Vectors { vectors, blob, datasets }
 }
 
 /// A small deterministic PRNG (xorshift64*).
