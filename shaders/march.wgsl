@@ -23,6 +23,7 @@ struct Params {
     light: vec4<f32>,       // xyz: direction towards the light, w: density scale
     size: vec4<u32>,        // width, height, max steps, skip empty space (0/1)
     shadow: vec4<f32>,      // shadow grid cells along x, y, z (as floats), cell edge in voxels
+    channels: vec4<u32>,    // x: the channel that gives extinction
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -91,7 +92,7 @@ fn shadow_depth(o: vec3<f32>) -> f32 {
         if (t >= hit.y || n >= params.size.z || depth > 8.0) { break; }
         n += 1u;
         let p = o + d * t;
-        let q = vpak_query(params.info, vec3<i32>(floor(p)));
+        let q = vpak_query(params.info, vec3<i32>(floor(p)), params.channels.x);
         if (q.empty_dim > 0u && params.size.w == 1u) {
             t += cell_exit(p, d, f32(q.empty_dim)) + 0.5 * step;
             continue;
@@ -134,13 +135,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 cell = ip >> vec3<u32>(3u);
                 leaf = vpak_leaf(params.info, ip);
             }
-            let q = vpak_leaf_query(params.info, leaf, ip);
-            if (q.empty_dim > 0u && params.size.w == 1u) {
-                let exit = t + cell_exit(p, d, f32(q.empty_dim));
+            if (leaf.empty_dim > 0u && params.size.w == 1u) {
+                let exit = t + cell_exit(p, d, f32(leaf.empty_dim));
                 k = max(k + 1.0, ceil((exit - hit.x) / step - 0.5) + 0.5);
                 continue;
             }
-            let sigma = max(q.value, 0.0) * params.light.w;
+            let sigma = max(vpak_leaf_value(params.info, leaf, ip, params.channels.x), 0.0) * params.light.w;
             if (sigma > 0.0) {
                 let a = 1.0 - exp(-sigma * step);
                 let lit = 0.25 + 0.75 * exp(-shadow_at(p));

@@ -1,45 +1,72 @@
-// vpak_atlas_buffer.wgsl: BC4/BC7 brick atlases as storage buffers, decoded in
-// the shader (include after vpak.wgsl and bcdec.wgsl).
+// vpak_atlas_buffer.wgsl: atlas planes as storage buffers, decoded in the
+// shader (include after vpak.wgsl and bcdec.wgsl).
 //
 // For GPUs without block-compressed 3D textures. Each buffer holds an atlas
-// section exactly as stored in the asset: 4×4 blocks, row by row, slice by
-// slice (8 bytes a BC4 block, 16 a BC7 block), so the texel a textureLoad
-// would return is decoded from its block alone.
+// plane's section exactly as stored in the asset (docs/format.md): texels
+// (or 4×4 blocks) row by row, slice by slice, so the texel a textureLoad
+// would return is decoded from the bytes that hold it alone. Slot s
+// (plane · atlas_count + atlas) is bound at 8, 11, 12, 13, 15, 16, 17, 18.
 
-@group(0) @binding(8) var<storage, read> vpak_blocks0: array<u32>;
-@group(0) @binding(11) var<storage, read> vpak_blocks1: array<u32>;
-@group(0) @binding(12) var<storage, read> vpak_blocks2: array<u32>;
-@group(0) @binding(13) var<storage, read> vpak_blocks3: array<u32>;
+@group(0) @binding(8) var<storage, read> vpak_words0: array<u32>;
+@group(0) @binding(11) var<storage, read> vpak_words1: array<u32>;
+@group(0) @binding(12) var<storage, read> vpak_words2: array<u32>;
+@group(0) @binding(13) var<storage, read> vpak_words3: array<u32>;
+@group(0) @binding(15) var<storage, read> vpak_words4: array<u32>;
+@group(0) @binding(16) var<storage, read> vpak_words5: array<u32>;
+@group(0) @binding(17) var<storage, read> vpak_words6: array<u32>;
+@group(0) @binding(18) var<storage, read> vpak_words7: array<u32>;
 
-// Word `i` of atlas `atlas`.
-fn vpak_block_word(atlas: u32, i: u32) -> u32 {
-    if (!VPAK_MULTI_ATLAS || atlas == 0u) {
-        return vpak_blocks0[i];
-    }
-    switch atlas {
-        case 1u: { return vpak_blocks1[i]; }
-        case 2u: { return vpak_blocks2[i]; }
-        default: { return vpak_blocks3[i]; }
+// Word `i` of texture slot `slot`.
+fn vpak_word(slot: u32, i: u32) -> u32 {
+    switch slot {
+        case 0u: { return vpak_words0[i]; }
+        case 1u: { return vpak_words1[i]; }
+        case 2u: { return vpak_words2[i]; }
+        case 3u: { return vpak_words3[i]; }
+        case 4u: { return vpak_words4[i]; }
+        case 5u: { return vpak_words5[i]; }
+        case 6u: { return vpak_words6[i]; }
+        default: { return vpak_words7[i]; }
     }
 }
 
-// Texel `t` of atlas `atlas`, as textureLoad on the BC texture returns it.
-fn vpak_texel(info: VpakInfo, atlas: u32, t: vec3<i32>) -> vec4<f32> {
+// Byte `b` of texture slot `slot`.
+fn vpak_byte(slot: u32, b: u32) -> u32 {
+    return (vpak_word(slot, b >> 2u) >> (8u * (b & 3u))) & 0xffu;
+}
+
+// Texel `t` of texture slot `slot` (of atlas `atlas`, holding channel `ch`'s
+// plane), as textureLoad on the plane's texture returns it.
+fn vpak_texel(info: VpakInfo, slot: u32, atlas: u32, ch: VpakChannel, t: vec3<i32>) -> vec4<f32> {
     let u = vec3<u32>(t);
-    // Blocks per row and per slice of this atlas (8×8 texels a brick).
-    var size = info.atlas_bricks.xy;
+    // This atlas's size in texels along x and y (8 a brick).
+    var size = info.atlas_bricks.xy * 8u;
     if (atlas == info.last_atlas.x) {
-        size = info.last_atlas.yz;
+        size = info.last_atlas.yz * 8u;
     }
-    let row = size.x * 2u;
-    let slice = row * size.y * 2u;
-    let block = u.z * slice + (u.y >> 2u) * row + (u.x >> 2u);
-    let texel = ((u.y & 3u) << 2u) | (u.x & 3u);
-    if (info.format == VPAK_BC7) {
-        let w = block * 4u;
-        let b = vec4<u32>(vpak_block_word(atlas, w), vpak_block_word(atlas, w + 1u), vpak_block_word(atlas, w + 2u), vpak_block_word(atlas, w + 3u));
-        return bc7_texel(b, texel);
+    if (ch.format == VPAK_BC4 || ch.format == VPAK_BC7) {
+        let row = size.x / 4u;
+        let block = (u.z * (size.y / 4u) + (u.y >> 2u)) * row + (u.x >> 2u);
+        let texel = ((u.y & 3u) << 2u) | (u.x & 3u);
+        if (ch.format == VPAK_BC7) {
+            let w = block * 4u;
+            return bc7_texel(vec4<u32>(vpak_word(slot, w), vpak_word(slot, w + 1u), vpak_word(slot, w + 2u), vpak_word(slot, w + 3u)), texel);
+        }
+        let w = block * 2u;
+        return vec4<f32>(bc4_texel(vec2<u32>(vpak_word(slot, w), vpak_word(slot, w + 1u)), texel), 0.0, 0.0, 1.0);
     }
-    let w = block * 2u;
-    return vec4<f32>(bc4_texel(vec2<u32>(vpak_block_word(atlas, w), vpak_block_word(atlas, w + 1u)), texel), 0.0, 0.0, 1.0);
+    // Uncompressed: `lanes` values of 4, 2 or 1 bytes each, texels x fastest.
+    let index = (u.z * size.y + u.y) * size.x + u.x;
+    var out = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    for (var l = 0u; l < ch.lanes; l += 1u) {
+        let k = index * ch.lanes + l;
+        if (ch.format == VPAK_F32) {
+            out[l] = bitcast<f32>(vpak_word(slot, k));
+        } else if (ch.format == VPAK_F16) {
+            out[l] = unpack2x16float(vpak_word(slot, k >> 1u))[k & 1u];
+        } else {
+            out[l] = f32(vpak_byte(slot, k)) / 255.0;
+        }
+    }
+    return out;
 }

@@ -1,22 +1,29 @@
-// vpak_atlas_texture.wgsl: brick atlases as 3D textures (include after vpak.wgsl).
+// vpak_atlas_texture.wgsl: atlas planes as 3D textures (include after vpak.wgsl).
 //
-// Formats f32, f16 and unorm8 are R32Float, R16Float and R8Unorm textures;
-// bc4 is Bc4RUnorm and bc7 is Bc7RgbaUnorm (four z-slices of a brick in RGBA),
-// decoded by the texture unit.
+// f32, f16 and unorm8 planes are R/RG/RGBA 32Float, 16Float and 8Unorm
+// textures; bc4 planes are Bc4RUnorm and bc7 planes Bc7RgbaUnorm, decoded by
+// the texture unit. Slot s (plane · atlas_count + atlas) is bound at
+// VPAK_SLOT_BINDINGS[s]: 8, 11, 12, 13, 15, 16, 17, 18.
 
 @group(0) @binding(8) var vpak_atlas0: texture_3d<f32>;
 @group(0) @binding(11) var vpak_atlas1: texture_3d<f32>;
 @group(0) @binding(12) var vpak_atlas2: texture_3d<f32>;
 @group(0) @binding(13) var vpak_atlas3: texture_3d<f32>;
+@group(0) @binding(15) var vpak_atlas4: texture_3d<f32>;
+@group(0) @binding(16) var vpak_atlas5: texture_3d<f32>;
+@group(0) @binding(17) var vpak_atlas6: texture_3d<f32>;
+@group(0) @binding(18) var vpak_atlas7: texture_3d<f32>;
 
-// Texel `t` of atlas `atlas`.
-fn vpak_texel(info: VpakInfo, atlas: u32, t: vec3<i32>) -> vec4<f32> {
-    if (!VPAK_MULTI_ATLAS || atlas == 0u) {
-        return textureLoad(vpak_atlas0, t, 0);
-    }
-    switch atlas {
+// Texel `t` of texture slot `slot` (of atlas `atlas`, holding channel `ch`'s plane).
+fn vpak_texel(info: VpakInfo, slot: u32, atlas: u32, ch: VpakChannel, t: vec3<i32>) -> vec4<f32> {
+    switch slot {
+        case 0u: { return textureLoad(vpak_atlas0, t, 0); }
         case 1u: { return textureLoad(vpak_atlas1, t, 0); }
         case 2u: { return textureLoad(vpak_atlas2, t, 0); }
-        default: { return textureLoad(vpak_atlas3, t, 0); }
+        case 3u: { return textureLoad(vpak_atlas3, t, 0); }
+        case 4u: { return textureLoad(vpak_atlas4, t, 0); }
+        case 5u: { return textureLoad(vpak_atlas5, t, 0); }
+        case 6u: { return textureLoad(vpak_atlas6, t, 0); }
+        default: { return textureLoad(vpak_atlas7, t, 0); }
     }
 }

@@ -1,5 +1,6 @@
 //! `vdbcook cook`: a VDB sequence into one .vpak asset.
 
+use crate::grids::{read_frame, Channels, Frame, GridSelection};
 use crate::inputs::{self, FrameRange};
 use crate::progress::Bars;
 use crate::validate::ValidateArgs;
@@ -7,8 +8,7 @@ use crate::{exit, report_error, Usage};
 use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
-use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress, Quality};
-use vdbcook_grid::Grid;
+use vdbcook_cook::{ChannelGroup, CookOptions, CookReport, Cooker, Format, Progress, Quality};
 use vdbcook_vpak::SourceFile;
 
 pub const AFTER_HELP: &str = "\
@@ -57,8 +57,16 @@ pub struct CookArgs {
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<FrameRange>,
     /// Grid to cook (default: "density", else the first float grid).
-    #[arg(long, value_name = "NAME")]
+    #[arg(long, value_name = "NAME", conflicts_with = "grids")]
     pub grid: Option<String>,
+    /// Grids to cook into one asset, as channels of one tree: names as in the files,
+    /// comma-separated, or "all" (every float, double and half grid of the first frame).
+    #[arg(long, value_name = "A,B,...|all")]
+    pub grids: Option<String>,
+    /// Store these channels together in their own format (repeatable), e.g.
+    /// --group temperature,flames=bc7 --group density=bc4; other channels take --format.
+    #[arg(long, value_name = "CHANNELS=FORMAT", value_parser = parse_group)]
+    pub group: Vec<ChannelGroup>,
     /// A frame whose file or grid is missing becomes an empty frame instead of an error.
     #[arg(long)]
     pub allow_missing: bool,
@@ -100,69 +108,53 @@ pub struct CookArgs {
     pub min_psnr: Option<f64>,
 }
 
-/// One frame as read by the reader thread.
-struct Frame {
-    path: PathBuf,
-    grid: Option<Grid>,
-    source: Option<SourceFile>,
-}
-
-fn hash_hex(bytes: &[u8]) -> String {
-    format!("{:032x}", xxhash_rust::xxh3::xxh3_128(bytes))
-}
-
-/// Reads one frame; `grid_name` is fixed by the first frame that has a grid.
-fn read_frame(path: PathBuf, grid_name: &mut Option<String>, allow_missing: bool) -> Result<Frame> {
-    let p = path.display().to_string();
-    if !path.exists() {
-        if allow_missing {
-            return Ok(Frame { path, grid: None, source: None });
-        }
-        return Err(anyhow!("{p}: no such file (use --allow-missing to cook it as an empty frame)"));
-    }
-    let vdb = vdbcook_vdb::open(&path).with_context(|| p.clone())?;
-    let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(vdb.bytes()) };
-    let index = match vdb.select(grid_name.as_deref()) {
-        Ok(i) => i,
-        Err(_) if allow_missing => return Ok(Frame { path, grid: None, source: Some(source) }),
-        Err(e) => return Err(anyhow!(e).context(p)),
-    };
-    let grid = vdb.read_grid(index).with_context(|| p.clone())?;
-    if grid_name.is_none() {
-        *grid_name = Some(vdb.grids[index].name.clone());
-    }
-    Ok(Frame { path, grid: Some(grid), source: Some(source) })
-}
-
 /// Reads `files` on a thread that stays one frame ahead (at most two source
-/// frames live at once) and pushes each frame into `cooker`. Returns the grid
-/// name used and the seconds spent waiting for frames.
-pub fn feed(cooker: &mut Cooker, files: Vec<PathBuf>, grid: Option<String>, allow_missing: bool, bars: &Bars) -> Result<(Option<String>, f64)> {
-    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Frame>>(0);
+/// frames live at once) and pushes each frame into a cooker made with `opts`
+/// for the channels the first frame resolves. Returns the cooker, its
+/// channels and the seconds spent waiting for frames.
+pub fn feed(opts: CookOptions, files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, bars: &Bars) -> Result<(Cooker, Option<Channels>, f64)> {
+    let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
     let total = files.len() as u64;
     let reader = std::thread::spawn(move || {
-        let mut grid_name = grid;
+        let mut channels = None;
         for f in files {
-            let r = read_frame(f, &mut grid_name, allow_missing);
+            let r = read_frame(f, &sel, &mut channels, allow_missing);
             let stop = r.is_err();
-            if tx.send(r).is_err() || stop {
+            if tx.send((r, channels.clone())).is_err() || stop {
                 break;
             }
         }
-        grid_name
     });
     bars.start("reading frames", total);
     let mut read_secs = 0.0;
     let mut wait = Instant::now();
     let mut failure = None;
-    for r in rx {
+    let mut cooker: Option<Cooker> = None;
+    let mut channels: Option<Channels> = None;
+    // Frames before the first one whose file resolves the channels: empty.
+    let mut leading: Vec<Option<SourceFile>> = Vec::new();
+    for (r, ch) in rx {
         read_secs += wait.elapsed().as_secs_f64();
         let pushed = r.and_then(|frame| {
-            let n = cooker.frame_count();
-            match &frame.grid {
-                Some(g) => cooker.push(g, frame.source).with_context(|| format!("{}: frame {n}", frame.path.display())),
+            if cooker.is_none() {
+                if let Some(ch) = ch {
+                    let mut c = Cooker::with_channels(opts.clone(), ch.specs.clone());
+                    for s in leading.drain(..) {
+                        c.push_empty(s);
+                    }
+                    cooker = Some(c);
+                    channels = Some(ch);
+                }
+            }
+            let Some(c) = cooker.as_mut() else {
+                leading.push(frame.source);
+                return Ok(());
+            };
+            let n = c.frame_count();
+            match &frame.grids {
+                Some(g) => c.push_channels(&g.iter().map(Option::as_ref).collect::<Vec<_>>(), frame.source).with_context(|| format!("{}: frame {n}", frame.path.display())),
                 None => {
-                    cooker.push_empty(frame.source);
+                    c.push_empty(frame.source);
                     Ok(())
                 }
             }
@@ -175,20 +167,53 @@ pub fn feed(cooker: &mut Cooker, files: Vec<PathBuf>, grid: Option<String>, allo
         wait = Instant::now();
     }
     bars.finish();
-    let grid_name = reader.join().map_err(|_| anyhow!("the frame reader thread panicked"))?;
-    match failure {
-        Some(e) => Err(e),
-        None => Ok((grid_name, read_secs)),
+    reader.join().map_err(|_| anyhow!("the frame reader thread panicked"))?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    let cooker = cooker.unwrap_or_else(|| {
+        let mut c = Cooker::new(opts);
+        for s in leading {
+            c.push_empty(s);
+        }
+        c
+    });
+    Ok((cooker, channels, read_secs))
+}
+
+/// The selection that reads back every channel of an asset's metadata.
+pub fn selection_of(meta: &vdbcook_vpak::Metadata) -> GridSelection {
+    let mut grids: Vec<String> = Vec::new();
+    for c in &meta.channels {
+        if !grids.contains(&c.grid) {
+            grids.push(c.grid.clone());
+        }
+    }
+    match grids.len() {
+        0 => GridSelection::Default,
+        1 if meta.channels.len() == 1 && !grids[0].is_empty() => GridSelection::One(grids.remove(0)),
+        _ => GridSelection::Many(grids),
     }
 }
 
 /// Cooks `files` losslessly in memory (f32, no clustering): the reference
 /// asset `validate` compares with, and what `render` draws for a .vdb.
-pub fn cook_lossless(files: Vec<PathBuf>, grid: Option<String>, allow_missing: bool, bars: &Bars) -> Result<vdbcook_vpak::Asset> {
-    let mut cooker = Cooker::new(CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() });
-    feed(&mut cooker, files, grid, allow_missing, bars)?;
+pub fn cook_lossless(files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, bars: &Bars) -> Result<vdbcook_vpak::Asset> {
+    let (cooker, _, _) = feed(CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() }, files, sel, allow_missing, bars)?;
     let (sections, _) = cooker.finish(&vdbcook_cook::NoProgress).map_err(|e| anyhow!(e))?;
     Ok(vdbcook_vpak::Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?)
+}
+
+/// `--group CHANNELS=FORMAT`: channels given their own format, stored together.
+pub fn parse_group(s: &str) -> Result<ChannelGroup, String> {
+    let bad = || format!("invalid group \"{s}\" (expected CHANNELS=FORMAT, e.g. temperature,flames=bc7; formats: f32, f16, unorm8, bc4, bc7)");
+    let (names, format) = s.rsplit_once('=').ok_or_else(bad)?;
+    let format = Format::parse(format.trim()).ok_or_else(bad)?;
+    let channels: Vec<String> = names.split(',').map(|n| n.trim().to_string()).filter(|n| !n.is_empty()).collect();
+    if channels.is_empty() {
+        return Err(bad());
+    }
+    Ok(ChannelGroup { channels, format })
 }
 
 pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
@@ -209,13 +234,15 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
         ..vdbcook_cluster::Options::default()
     });
     let files = inputs::expand(&args.inputs, args.frames)?;
+    let sel = GridSelection::from_flags(args.grid.as_deref(), args.grids.as_deref());
     let started = Instant::now();
     let bars = Bars::new(quiet);
 
     let settings = vec![
         ("format".to_string(), format.name().to_string()),
         ("quality".to_string(), if format.is_block() { quality.name().to_string() } else { String::new() }),
-        ("grid".to_string(), args.grid.clone().unwrap_or_default()),
+        ("grid".to_string(), sel.setting()),
+        ("groups".to_string(), args.group.iter().map(|g| format!("{}={}", g.channels.join(","), g.format.name())).collect::<Vec<_>>().join(" ")),
         ("frames".to_string(), args.frames.map(|f| format!("{}-{}:{}", f.first, f.last, f.step)).unwrap_or_default()),
         ("allow_missing".to_string(), args.allow_missing.to_string()),
         ("max_texture_dim".to_string(), args.max_texture_dim.to_string()),
@@ -225,9 +252,15 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
         ("max_brick_error".to_string(), args.max_brick_error.map(|e| e.to_string()).unwrap_or_default()),
         ("inputs".to_string(), args.inputs.join(" ")),
     ];
-    let mut cooker = Cooker::new(CookOptions { format, quality, max_texture_dim: args.max_texture_dim, clustering, settings });
-
-    let (grid_name, read_secs) = feed(&mut cooker, files, args.grid.clone(), args.allow_missing, &bars)?;
+    let opts = CookOptions { format, groups: args.group.clone(), quality, max_texture_dim: args.max_texture_dim, clustering, settings };
+    let (cooker, channels, read_secs) = feed(opts, files, sel, args.allow_missing, &bars)?;
+    if let Some(ch) = &channels {
+        check_groups(&args.group, ch)?;
+        if args.clusters.is_some() && ch.specs.len() > 1 {
+            return Err(Usage("--clusters works on one-channel assets for now; cook several grids without it".into()).into());
+        }
+    }
+    let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
     if cooker.frame_count() == 0 {
         return Err(anyhow!("no frames to cook"));
     }
@@ -265,6 +298,21 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     Ok(validation.map_or(exit::SUCCESS, |o| crate::validate::gate(&o.gate_failure)))
 }
 
+/// Every channel an explicit group names exists, once.
+fn check_groups(groups: &[ChannelGroup], ch: &Channels) -> Result<()> {
+    let mut seen = std::collections::HashSet::new();
+    for name in groups.iter().flat_map(|g| &g.channels) {
+        if !ch.specs.iter().any(|s| &s.name == name) {
+            let names: Vec<&str> = ch.specs.iter().map(|s| s.name.as_str()).collect();
+            return Err(Usage(format!("--group names \"{name}\", which is not a channel of this cook (channels: {})", names.join(", "))).into());
+        }
+        if !seen.insert(name) {
+            return Err(Usage(format!("--group names \"{name}\" twice")).into());
+        }
+    }
+    Ok(())
+}
+
 fn mb(b: u64) -> String {
     format!("{:.2} MB", b as f64 / 1e6)
 }
@@ -272,11 +320,29 @@ fn mb(b: u64) -> String {
 fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
     use std::fmt::Write;
     let mut s = String::new();
-    let _ = writeln!(s, "cooked {} frame{} of grid \"{}\" into {} ({}, {})", r.frames, if r.frames == 1 { "" } else { "s" }, grid.unwrap_or(""), args.output.display(), r.format, mb(r.file_bytes));
+    let what = if r.channels.len() == 1 { format!("grid \"{}\"", grid.unwrap_or("")) } else { format!("{} channels", r.channels.len()) };
+    let _ = writeln!(s, "cooked {} frame{} of {what} into {} ({}, {})", r.frames, if r.frames == 1 { "" } else { "s" }, args.output.display(), r.format, mb(r.file_bytes));
     let _ = writeln!(s, "  active voxels   {} ({:.3} bits per active voxel)", r.active_voxels, r.bits_per_active_voxel);
     let _ = writeln!(s, "  bricks          {} leaves -> {} unique -> {} stored in {} atlas{}", r.bricks, r.unique_bricks, r.stored_bricks, r.atlases, if r.atlases == 1 { "" } else { "es" });
     let _ = writeln!(s, "  nodes           L1 {}, L2 {}, L3 {}, tiles {}; tree {} (thesis layout: {})", r.l1_nodes, r.l2_nodes, r.l3_nodes, r.tiles, mb(r.tree_bytes), mb(r.thesis_tree_bytes));
-    let _ = writeln!(s, "  voxel error     rmse {:.3e}, psnr {:.1} dB, max {:.3e}", r.voxel_rmse, r.voxel_psnr, r.voxel_max_error);
+    if r.channels.len() == 1 {
+        let _ = writeln!(s, "  voxel error     rmse {:.3e}, psnr {:.1} dB, max {:.3e}", r.voxel_rmse, r.voxel_psnr, r.voxel_max_error);
+    } else {
+        for c in &r.channels {
+            let _ = writeln!(
+                s,
+                "  {:<16}{:<7} {:>10}, values [{:.4}, {:.4}], rmse {:.3e}, psnr {:.1} dB, max {:.3e}",
+                c.name,
+                c.format,
+                mb(c.bytes),
+                c.value_range[0],
+                c.value_range[1],
+                c.voxel_rmse,
+                c.voxel_psnr,
+                c.voxel_max_error
+            );
+        }
+    }
     if let Some(c) = &r.clustering {
         let _ = writeln!(
             s,

@@ -3,8 +3,8 @@
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::path::Path;
-use vdbcook_flipbook::{L1_WORDS, L2_WORDS};
-use vdbcook_vpak::{kind, Asset};
+use vdbcook_vpak::nodes::{l3_node_count, L1_WORDS, L2_WORDS};
+use vdbcook_vpak::{kind, Asset, AtlasLayout, Checked};
 
 pub enum Described {
     Text(String),
@@ -14,12 +14,13 @@ pub enum Described {
 pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let name = path.display().to_string();
     let asset = Asset::open(path).with_context(|| name.clone())?;
-    let meta = asset.metadata().with_context(|| name.clone())?;
+    let checked = Checked::new(&asset).with_context(|| name.clone())?;
+    let meta = &checked.meta;
     let size = |k: u32| asset.sections.iter().filter(|s| s.kind == k).map(|s| s.size).sum::<u64>();
     let l1 = size(kind::L1_NODES) / (L1_WORDS as u64 * 4);
     let l2 = size(kind::L2_NODES) / (L2_WORDS as u64 * 4);
     // The L3 section counts its nodes in its first word (records follow, then sub-masks).
-    let l3 = asset.u32s(kind::L3_NODES).ok().and_then(vdbcook_flipbook::l3_node_count).map_or(0, |n| n as u64);
+    let l3 = l3_node_count(checked.l3).map_or(0, |n| n as u64);
     let atlas_bytes = size(kind::ATLAS);
     let file_bytes = asset.bytes().len() as u64;
     let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));
@@ -29,27 +30,39 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         ("l3", l3, size(kind::L3_NODES)),
         ("bricks", u64::from(meta.brick_count), atlas_bytes + size(kind::BRICK_RANGES)),
     ];
+    // Bytes of each plane (all its atlases), and each channel's share of its plane.
+    let plane_bytes: Vec<u64> = (0..meta.planes.len()).map(|p| (0..meta.atlases.len()).filter_map(|a| checked.atlas(p, a)).map(|(_, b)| b.len() as u64).sum()).collect();
+    let sharing = |p: usize| meta.channels.iter().filter(|c| c.plane as usize == p).count().max(1) as u64;
+    let channel_bytes = |c: &vdbcook_vpak::Channel| plane_bytes[c.plane as usize] / sharing(c.plane as usize);
+    let formats = {
+        let mut f: Vec<&str> = meta.planes.iter().map(|p| p.format.name()).collect();
+        f.dedup();
+        f.join("+")
+    };
     if as_json {
         return Ok(Described::Json(json!({
             "path": name,
             "kind": "vpak",
             "checksums_ok": true,
+            "version": vdbcook_vpak::VERSION,
             "tool": meta.tool,
-            "format": meta.format,
+            "format": formats,
             "frames": meta.frame_count,
-            "grid": meta.grid_name,
-            "class": meta.grid_class,
+            "channels": meta.channels.iter().map(|c| json!({
+                "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
+                "background": c.background, "value_range": c.value_range, "group": c.group, "plane": c.plane, "lane": c.lane,
+                "format": meta.planes[c.plane as usize].format.name(), "bytes": channel_bytes(c),
+            })).collect::<Vec<_>>(),
+            "planes": meta.planes.iter().zip(&plane_bytes).map(|(p, b)| json!({"format": p.format.name(), "lanes": p.lanes, "z_per_texel": p.z_per_texel, "bytes": b})).collect::<Vec<_>>(),
             "map_type": meta.map_type,
             "transform": meta.transform,
             "index_offset": meta.index_offset,
             "index_bbox": meta.index_bbox.map(|(a, b)| json!({"min": a, "max": b})),
-            "background": meta.background,
-            "value_range": meta.value_range,
             "active_voxels": active,
             "file_bytes": file_bytes,
             "bits_per_active_voxel": if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 },
             "nodes": nodes.iter().map(|(n, c, b)| (n.to_string(), json!({"count": c, "bytes": b}))).collect::<serde_json::Map<_, _>>(),
-            "atlases": meta.atlases.iter().map(|a| json!({"bricks": a.bricks, "texels": a.texels, "first_brick": a.first_brick, "count": a.count})).collect::<Vec<_>>(),
+            "atlases": meta.atlases.iter().map(|a| json!({"bricks": a.bricks, "first_brick": a.first_brick, "count": a.count})).collect::<Vec<_>>(),
             "sections": asset.sections.iter().map(|s| json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": s.offset, "bytes": s.size, "checksum": format!("{:016x}", s.checksum)})).collect::<Vec<_>>(),
             "settings": meta.settings.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
             "sources": meta.sources.iter().map(|s| json!({"path": s.path, "bytes": s.bytes, "xxh3_128": s.xxh3_128})).collect::<Vec<_>>(),
@@ -58,23 +71,36 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     }
     use std::fmt::Write;
     let mut s = String::new();
+    let n = meta.channels.len();
     let _ = writeln!(
         s,
-        "{name}: vpak v{}, {}, {} frame{}, grid \"{}\" ({}), checksums ok",
+        "{name}: vpak v{}, {formats}, {} frame{}, {n} channel{}, checksums ok",
         vdbcook_vpak::VERSION,
-        meta.format,
         meta.frame_count,
         if meta.frame_count == 1 { "" } else { "s" },
-        meta.grid_name,
-        meta.grid_class
+        if n == 1 { "" } else { "s" },
     );
     let _ = writeln!(s, "  written by     {}", meta.tool);
     let _ = writeln!(s, "  transform      {}, index offset {:?}", meta.map_type, meta.index_offset);
     if let Some((a, b)) = meta.index_bbox {
         let _ = writeln!(s, "  index bbox     {a:?} .. {b:?}");
     }
-    let _ = writeln!(s, "  values         [{}, {}], background {}", meta.value_range[0], meta.value_range[1], meta.background);
     let _ = writeln!(s, "  size           {} bytes, {} active voxels, {:.3} bits per active voxel", file_bytes, active, if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 });
+    let _ = writeln!(s, "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} background", "channel", "format", "plane", "bytes", "class", "values");
+    for c in &meta.channels {
+        let p = &meta.planes[c.plane as usize];
+        let _ = writeln!(
+            s,
+            "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} {}",
+            c.name,
+            p.format.name(),
+            format!("{}.{}", c.plane, c.lane),
+            channel_bytes(c),
+            c.class,
+            format!("[{}, {}]", c.value_range[0], c.value_range[1]),
+            c.background
+        );
+    }
     let _ = writeln!(s, "  {:<12} {:>10} {:>14}", "level", "count", "bytes");
     for (n, c, b) in nodes {
         let _ = writeln!(s, "  {n:<12} {c:>10} {b:>14}");
@@ -84,8 +110,11 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         let label = if e.kind == kind::ATLAS { format!("{} {}", kind::name(e.kind), e.index) } else { kind::name(e.kind).to_string() };
         let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}", e.size, e.offset, e.checksum);
     }
-    for a in &meta.atlases {
-        let _ = writeln!(s, "  atlas          {} bricks from #{}, {}×{}×{} texels", a.count, a.first_brick, a.texels[0], a.texels[1], a.texels[2]);
+    for (p, plane) in meta.planes.iter().enumerate() {
+        for (a, info) in meta.atlases.iter().enumerate() {
+            let t = AtlasLayout { plane: *plane, atlas: *info }.texels();
+            let _ = writeln!(s, "  atlas {a} plane {p}  {} {}-lane, {} bricks from #{}, {}×{}×{} texels", plane.format.name(), plane.lanes, info.count, info.first_brick, t[0], t[1], t[2]);
+        }
     }
     let set: Vec<String> = meta.settings.iter().filter(|(_, v)| !v.is_empty()).map(|(k, v)| format!("{k}={v}")).collect();
     let _ = writeln!(s, "  settings       {}", set.join(" "));

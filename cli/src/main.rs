@@ -2,6 +2,7 @@
 
 mod cook;
 mod diff;
+mod grids;
 mod inputs;
 mod inspect;
 mod inspect_vpak;

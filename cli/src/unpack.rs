@@ -27,8 +27,9 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
     let name = args.asset.display().to_string();
     crate::refuse_existing(&args.output, args.force)?;
     let asset = vdbcook_vpak::Asset::open(&args.asset).with_context(|| name.clone())?;
-    let grid = vdbcook_cook::unpack_frame(&asset, args.frame).with_context(|| name.clone())?;
-    let bytes = vdbcook_vdb::write_vdb(&grid, vdbcook_vdb::WriteOptions { version: 224, zip: !args.no_zip }).with_context(|| args.output.display().to_string())?;
+    let grids = vdbcook_cook::unpack_frame(&asset, args.frame).with_context(|| name.clone())?;
+    let [grid] = &grids[..] else { anyhow::bail!("{name}: unpacking assets of several channels is not supported yet") };
+    let bytes = vdbcook_vdb::write_vdb(grid, vdbcook_vdb::WriteOptions { version: 224, zip: !args.no_zip }).with_context(|| args.output.display().to_string())?;
     vdbcook_vpak::write_atomic(&args.output, &bytes, args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
         let st = grid.stats();

@@ -108,22 +108,34 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
 fn reference(meta: &vdbcook_vpak::Metadata, source: &[String], frames: Option<FrameRange>, bars: &Bars) -> Result<Asset> {
     let files = inputs::expand(source, frames)?;
     let allow_missing = meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
-    let grid = if meta.grid_name.is_empty() { None } else { Some(meta.grid_name.clone()) };
-    cook_lossless(files, grid, allow_missing, bars).context("cooking the reference")
+    cook_lossless(files, crate::cook::selection_of(meta), allow_missing, bars).context("cooking the reference")
 }
 
-/// Voxel-domain error of the asset's frame against the reference's, over the reference's active voxels.
-fn voxel_error(asset: &Asset, reference: &Asset, frame: usize) -> Result<ErrorStats> {
+/// Voxel-domain error of each channel of the asset's frame against the
+/// reference's, over the reference's active voxels.
+fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize) -> Result<Vec<ErrorStats>> {
     let a = vdbcook_cook::unpack_frame(asset, frame).map_err(|e| anyhow!(e))?;
     let r = vdbcook_cook::unpack_frame(reference, frame).map_err(|e| anyhow!(e))?;
-    let mut e = ErrorStats::default();
-    for leaf in &r.leaves {
-        for i in leaf.mask.iter_on() {
-            let (x, y, z) = vdbcook_grid::leaf_local(i);
-            e.add(leaf.values[i], a.probe(leaf.origin.offset(x, y, z)).0);
-        }
-    }
-    Ok(e)
+    Ok(r.iter()
+        .zip(&a)
+        .map(|(r, a)| {
+            let mut e = ErrorStats::default();
+            for leaf in &r.leaves {
+                for i in leaf.mask.iter_on() {
+                    let (x, y, z) = vdbcook_grid::leaf_local(i);
+                    e.add(leaf.values[i], a.probe(leaf.origin.offset(x, y, z)).0);
+                }
+            }
+            e
+        })
+        .collect())
+}
+
+/// The asset's formats: "f16", or "bc4+bc7" for a mix.
+pub fn formats(meta: &vdbcook_vpak::Metadata) -> String {
+    let mut f: Vec<&str> = meta.planes.iter().map(|p| p.format.name()).collect();
+    f.dedup();
+    f.join("+")
 }
 
 struct Shot {
@@ -191,7 +203,7 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     let mut worst_images: Vec<(Shot, Image, Image)> = Vec::new();
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in &frames {
-        voxel.push((f, voxel_error(&asset, &reference, f)?));
+        voxel.push((f, voxel_errors(&asset, &reference, f)?));
         let refs = renderer.render_views(&gpu_ref, &scene, f, &views, w, h)?;
         let imgs = renderer.render_views(&gpu_asset, &scene, f, &views, w, h)?;
         for (vi, (r, a)) in refs.into_iter().zip(imgs).enumerate() {
@@ -208,41 +220,58 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     }
     bars.finish();
     let worst = shots.iter().max_by(|a, b| a.metrics.rmse.total_cmp(&b.metrics.rmse));
-    let peak = f64::from(ref_meta.value_range[1] - ref_meta.value_range[0]).max(1e-12);
-    let mut vox_total = ErrorStats::default();
-    for (_, e) in &voxel {
-        vox_total.merge(e);
+    if ref_meta.channels.len() != meta.channels.len() {
+        return Err(anyhow!("{name}: the asset has {} channels, the source gives {}", meta.channels.len(), ref_meta.channels.len()));
     }
+    let peak = |c: usize| ref_meta.channels.get(c).map_or(1.0, |ch| f64::from(ch.value_range[1] - ch.value_range[0]).max(1e-12));
+    let channel_totals: Vec<ErrorStats> = (0..meta.channels.len())
+        .map(|c| {
+            let mut t = ErrorStats::default();
+            for (_, e) in &voxel {
+                t.merge(&e[c]);
+            }
+            t
+        })
+        .collect();
+    // The voxel figures of the channel the images show.
+    let shown = vdbcook_validate::extinction_channel(&ref_meta);
+    let vox_total = channel_totals.get(shown).copied().unwrap_or_default();
+    let format = formats(&meta);
     let num = |v: f64| if v.is_finite() { json!(v) } else { serde_json::Value::Null };
     let doc = json!({
         "asset": name,
         "adapter": renderer.adapter,
         "bc_decode": if gpu_asset.decodes_in_shader() { "shader" } else { "texture" },
-        "format": meta.format,
-        "grid": meta.grid_name,
+        "format": format,
+        "channels": meta.channels.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
+        "shown": meta.channels.get(shown).map(|c| c.name.clone()),
         "frames": meta.frame_count,
         "views": args.views,
         "size": [w, h],
         "images": shots.iter().map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "max_error": s.metrics.max_error})).collect::<Vec<_>>(),
         "worst": worst.map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr)})),
         "voxel": {
-            "rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak)), "max_error": vox_total.max_abs,
-            "frames": voxel.iter().map(|(f, e)| json!({"frame": f, "rmse": e.rmse(), "psnr": num(e.psnr(peak)), "max_error": e.max_abs})).collect::<Vec<_>>(),
+            "rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak(shown))), "max_error": vox_total.max_abs,
+            "frames": voxel.iter().map(|(f, e)| { let e = e.get(shown).copied().unwrap_or_default(); json!({"frame": f, "rmse": e.rmse(), "psnr": num(e.psnr(peak(shown))), "max_error": e.max_abs}) }).collect::<Vec<_>>(),
         },
+        "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": meta.planes.get(ch.plane as usize).map(|p| p.format.name()), "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
         "gate": {"max_rmse": args.max_rmse, "min_psnr": args.min_psnr},
     });
     let failed: Vec<&Shot> = shots.iter().filter(|s| args.max_rmse.is_some_and(|x| s.metrics.rmse > x) || args.min_psnr.is_some_and(|y| s.metrics.psnr < y)).collect();
     if let Some(dir) = &args.report {
-        write_report(dir, &doc, &shots, &worst_images, &meta.format, &name).with_context(|| dir.display().to_string())?;
+        write_report(dir, &doc, &shots, &worst_images, &format, &name).with_context(|| dir.display().to_string())?;
     }
     let decoder = if gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
-    let mut text = format!("{name}: {} vs lossless reference, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", meta.format, frames.len(), args.views, renderer.adapter);
+    let mut text = format!("{name}: {format} vs lossless reference, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), args.views, renderer.adapter);
     if let Some(s) = worst {
         text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error);
         let mean = shots.iter().map(|s| s.metrics.rmse).sum::<f64>() / shots.len() as f64;
         text += &format!("           mean rmse {:.3e}\n", mean);
     }
-    text += &format!("  voxels   rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", vox_total.rmse(), vox_total.psnr(peak), vox_total.max_abs);
+    for (c, (ch, e)) in meta.channels.iter().zip(&channel_totals).enumerate() {
+        let label = if meta.channels.len() == 1 { "voxels".to_string() } else { ch.name.clone() };
+        text += &format!("  {label:<8} rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", e.rmse(), e.psnr(peak(c)), e.max_abs);
+    }
     if let Some(d) = &args.report {
         text += &format!("  report   {}\n", d.join("report.html").display());
     }
@@ -298,7 +327,7 @@ fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[(S
 <h2>Per-frame RMSE (worst view)</h2>{plot}<table><tr><th>frame</th><th>RMSE</th></tr>{rows}</table><h2>Worst views</h2>{figures}</body></html>",
         n = report::esc(name),
         ad = report::esc(doc["adapter"].as_str().unwrap_or("")),
-        g = report::esc(doc["grid"].as_str().unwrap_or("")),
+        g = report::esc(doc["shown"].as_str().unwrap_or("")),
         f = report::esc(format),
         wr = doc["worst"]["rmse"],
         wp = doc["worst"]["psnr"],
@@ -347,7 +376,7 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let asset = if crate::inspect::is_vpak(&args.input) {
         Asset::open(&args.input).with_context(|| name.clone())?
     } else {
-        cook_lossless(vec![args.input.clone()], args.grid.clone(), false, &Bars::new(true))?
+        cook_lossless(vec![args.input.clone()], crate::grids::GridSelection::from_flags(args.grid.as_deref(), None), false, &Bars::new(true))?
     };
     let meta = asset.metadata().with_context(|| name.clone())?;
     if args.frame >= meta.frame_count as usize {

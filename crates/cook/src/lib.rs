@@ -1,25 +1,28 @@
 //! The cooking pipeline, free of I/O and terminals: frames are pushed in one
-//! at a time ([`Cooker::push`]), and [`Cooker::finish`] returns the bytes of
-//! a `.vpak` asset and a [`CookReport`].  [`unpack_frame`] turns a frame of an
-//! asset back into a [`Grid`].
+//! at a time ([`Cooker::push`], or [`Cooker::push_channels`] for several
+//! grids per frame), and [`Cooker::finish`] returns the sections of a `.vpak`
+//! asset and a [`CookReport`].  [`unpack_frame`] turns a frame of an asset
+//! back into one [`Grid`] per channel.
 //!
 //! ```text
-//! push(frame) ─▶ flipbook::Builder (exact brick dedup, L3 interning)
-//! finish ─▶ encode bricks (parallel) ─▶ dedup encoded bricks ─▶ node arrays
-//!        ─▶ atlases ─▶ vpak sections ─▶ bytes
+//! push(frame) ─▶ flipbook::Builder (union tree of the channels, exact brick dedup, L3 interning)
+//! finish ─▶ encode every plane (parallel) ─▶ dedup encoded bricks ─▶ node arrays
+//!        ─▶ atlases (vpak::layout) ─▶ vpak sections
 //! ```
 
 mod unpack;
 
-pub use unpack::{load_nodes, unpack_frame};
+pub use unpack::unpack_frame;
 pub use vdbcook_encode::{Format, Quality};
 
 use rayon::prelude::*;
 use std::time::Instant;
-use vdbcook_encode::{Encodings, ErrorStats, Subset};
-use vdbcook_flipbook::{Builder, Built, HashIndex, Nodes};
+use vdbcook_encode::{Brick, Encoded, ErrorStats, PlaneSpec};
+use vdbcook_flipbook::{Builder, Built, HashIndex};
 use vdbcook_grid::{Grid, Transform};
-use vdbcook_vpak::{kind, AtlasInfo, FrameInfo, Metadata, Section, SourceFile};
+use vdbcook_vpak::layout::{pack_atlas, plan_atlases, AtlasLayout};
+use vdbcook_vpak::nodes::Nodes;
+use vdbcook_vpak::{kind, Channel, FrameInfo, Metadata, Section, SourceFile};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -27,16 +30,20 @@ pub enum Error {
     Tree(#[from] vdbcook_flipbook::Error),
     #[error(transparent)]
     Asset(#[from] vdbcook_vpak::Error),
-    #[error("frame {frame}: transform differs from the first frame's ({found} vs {expected})")]
-    Transform { frame: usize, found: String, expected: String },
-    #[error("the asset is inconsistent: {0}")]
-    Corrupt(String),
+    #[error("frame {frame}: grid \"{grid}\" has transform {found}, the first frame's first grid has {expected}")]
+    Transform { frame: usize, grid: String, found: String, expected: String },
     #[error("frame {frame} is out of range (the asset has {count} frames, numbered from 0)")]
     NoFrame { frame: usize, count: usize },
-    #[error("unsupported voxel format \"{0}\"")]
-    Format(String),
     #[error("frame {frame} unpacks to {leaves} leaves ({} MiB in memory), more than the {} MiB this machine has to spare", .bytes >> 20, .budget >> 20)]
     TooBig { frame: usize, leaves: u64, bytes: u64, budget: u64 },
+    #[error("the asset is inconsistent: {0}")]
+    Corrupt(String),
+    #[error("channel group names \"{0}\", which is not a channel of the asset")]
+    UnknownChannel(String),
+    #[error("channel \"{0}\" is in two channel groups")]
+    TwiceGrouped(String),
+    #[error("clustering assets of several channels is not supported yet ({0} channels)")]
+    MultiChannelClustering(usize),
 }
 
 /// Receives progress from long stages; every method does nothing by default.
@@ -50,10 +57,20 @@ pub trait Progress: Sync {
 pub struct NoProgress;
 impl Progress for NoProgress {}
 
+/// Channels stored together in one format.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChannelGroup {
+    pub channels: Vec<String>,
+    pub format: Format,
+}
+
 #[derive(Clone, Debug)]
 pub struct CookOptions {
+    /// Format of every channel not in `groups`.
     pub format: Format,
-    /// BC7 encoder preset.
+    /// Channels given their own format, together (see `vdbcook_encode::group_planes`).
+    pub groups: Vec<ChannelGroup>,
+    /// Encoder preset of the block formats.
     pub quality: Quality,
     /// Largest 3D texture edge an atlas may use (wgpu's default limit is 2048).
     pub max_texture_dim: u32,
@@ -65,16 +82,46 @@ pub struct CookOptions {
 
 impl Default for CookOptions {
     fn default() -> Self {
-        CookOptions { format: Format::F16, quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, settings: Vec::new() }
+        CookOptions { format: Format::F16, groups: Vec::new(), quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, settings: Vec::new() }
     }
+}
+
+/// What a channel is, as its source describes it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ChannelSpec {
+    /// "density", or "vel.x" for component x of the vec3 grid "vel".
+    pub name: String,
+    pub grid: String,
+    /// 0, 1, 2 for the components of a vec3 grid.
+    pub component: Option<u32>,
+    /// "float", "double", "half", "vec3s", "vec3d".
+    pub value_type: String,
+    /// The grid class; empty: taken from the first grid pushed for the channel.
+    pub class: String,
+}
+
+/// One channel's figures.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ChannelReport {
+    pub name: String,
+    pub format: String,
+    /// Bytes of the atlas planes the channel is stored in, shared equally among their channels.
+    pub bytes: u64,
+    pub value_range: [f32; 2],
+    /// Voxel-domain error against the source, over the channel's own active voxels.
+    pub voxel_rmse: f64,
+    pub voxel_psnr: f64,
+    pub voxel_max_error: f64,
 }
 
 /// What a cook did, for people and for `--json`.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CookReport {
+    /// The channels' formats: "f16", or "bc4+bc7" for a mix.
     pub format: String,
     pub frames: usize,
     pub empty_frames: usize,
+    /// Voxels active in any channel, over all frames.
     pub active_voxels: u64,
     /// Leaves over all frames: the bricks a cooker without deduplication would store.
     pub bricks: u64,
@@ -95,13 +142,15 @@ pub struct CookReport {
     /// What the seed thesis's layout needs for the same frames.
     pub thesis_tree_bytes: u64,
     pub bits_per_active_voxel: f64,
+    /// The first channel's value range.
     pub value_range: [f32; 2],
-    /// Voxel-domain error of the stored values against the source, over active voxels.
+    /// Voxel-domain error of the channel with the lowest PSNR (the only one, for one channel).
     pub voxel_rmse: f64,
     pub voxel_psnr: f64,
     pub voxel_max_error: f64,
-    /// Per frame: (rmse, max error).
+    /// Per frame: (rmse, max error) of that channel.
     pub frame_errors: Vec<(f64, f64)>,
+    pub channels: Vec<ChannelReport>,
     /// What clustering did, when it ran.
     pub clustering: Option<ClusterReport>,
     /// (stage, seconds).
@@ -126,11 +175,14 @@ pub struct ClusterReport {
 /// Streams frames into an asset.
 pub struct Cooker {
     opts: CookOptions,
+    channels: Vec<ChannelSpec>,
+    /// Channel names and classes still to be taken from the first grid (single-channel cooks).
+    infer: bool,
     builder: Builder,
-    first: Option<(String, String, Transform)>,
+    transform: Option<(String, Transform)>,
     frames: Vec<FrameInfo>,
     sources: Vec<SourceFile>,
-    range: [f32; 2],
+    ranges: Vec<[f32; 2]>,
     build_secs: f64,
 }
 
@@ -139,8 +191,27 @@ fn transform_text(t: &Transform) -> String {
 }
 
 impl Cooker {
+    /// A cooker of one channel, named after the first grid pushed.
     pub fn new(opts: CookOptions) -> Cooker {
-        Cooker { opts, builder: Builder::new(), first: None, frames: Vec::new(), sources: Vec::new(), range: [f32::INFINITY, f32::NEG_INFINITY], build_secs: 0.0 }
+        let mut c = Cooker::with_channels(opts, vec![ChannelSpec { value_type: "float".into(), ..ChannelSpec::default() }]);
+        c.infer = true;
+        c
+    }
+
+    /// A cooker of the given channels (one grid each per frame).
+    pub fn with_channels(opts: CookOptions, channels: Vec<ChannelSpec>) -> Cooker {
+        let n = channels.len().max(1);
+        Cooker {
+            opts,
+            channels,
+            infer: false,
+            builder: Builder::new(n),
+            transform: None,
+            frames: Vec::new(),
+            sources: Vec::new(),
+            ranges: vec![[f32::INFINITY, f32::NEG_INFINITY]; n],
+            build_secs: 0.0,
+        }
     }
 
     /// Records a source file once (a file listed twice is one source).
@@ -154,20 +225,39 @@ impl Cooker {
         })
     }
 
-    /// Adds the next frame.
+    /// Adds the next frame of a one-channel cook.
     pub fn push(&mut self, grid: &Grid, source: Option<SourceFile>) -> Result<(), Error> {
+        self.push_channels(&[Some(grid)], source)
+    }
+
+    /// Adds the next frame: one grid per channel (`None`: empty in this frame).
+    pub fn push_channels(&mut self, grids: &[Option<&Grid>], source: Option<SourceFile>) -> Result<(), Error> {
         let t0 = Instant::now();
         let frame = self.frames.len();
-        match &self.first {
-            None => self.first = Some((grid.name.clone(), grid.class.vdb_name().to_string(), grid.transform)),
-            Some((_, _, t)) if *t != grid.transform => {
-                return Err(Error::Transform { frame, found: transform_text(&grid.transform), expected: transform_text(t) });
+        for (c, g) in grids.iter().enumerate() {
+            let Some(g) = g else { continue };
+            match &self.transform {
+                None => self.transform = Some((g.name.clone(), g.transform)),
+                Some((first, t)) if *t != g.transform => {
+                    return Err(Error::Transform { frame, grid: g.name.clone(), found: transform_text(&g.transform), expected: format!("{} (grid \"{first}\")", transform_text(t)) });
+                }
+                Some(_) => {}
             }
-            Some(_) => {}
+            if let Some(spec) = self.channels.get_mut(c) {
+                if self.infer && spec.name.is_empty() {
+                    spec.name = g.name.clone();
+                    spec.grid = g.name.clone();
+                }
+                if spec.class.is_empty() {
+                    spec.class = g.class.vdb_name().to_string();
+                }
+            }
         }
-        let fs = self.builder.push(grid)?;
-        if let Some([lo, hi]) = fs.range {
-            self.range = [self.range[0].min(lo), self.range[1].max(hi)];
+        let fs = self.builder.push(grids)?;
+        for (acc, r) in self.ranges.iter_mut().zip(&fs.ranges) {
+            if let Some([lo, hi]) = r {
+                *acc = [acc[0].min(*lo), acc[1].max(*hi)];
+            }
         }
         let source = self.add_source(source);
         self.frames.push(FrameInfo { source, active_voxels: fs.active_voxels, leaves: fs.leaves as u32, tiles: fs.tiles as u32 });
@@ -175,7 +265,7 @@ impl Cooker {
         Ok(())
     }
 
-    /// Adds an empty frame (a source without the grid, with `--allow-missing`).
+    /// Adds an empty frame (a source without the grids, with `--allow-missing`).
     pub fn push_empty(&mut self, source: Option<SourceFile>) {
         self.builder.push_empty();
         let source = self.add_source(source);
@@ -186,12 +276,52 @@ impl Cooker {
         self.frames.len()
     }
 
+    /// The planes of every channel group, in order: explicit groups first,
+    /// then the other channels in `format` (uncompressed formats together;
+    /// each alone in BC formats).  Returns the specs and each channel's group.
+    fn plan_planes(&self) -> Result<(Vec<PlaneSpec>, Vec<u32>), Error> {
+        let mut group_of: Vec<Option<u32>> = vec![None; self.channels.len()];
+        let mut groups: Vec<(Format, Vec<usize>)> = Vec::new();
+        for g in &self.opts.groups {
+            let mut members = Vec::new();
+            for name in &g.channels {
+                let c = self.channels.iter().position(|s| &s.name == name).ok_or_else(|| Error::UnknownChannel(name.clone()))?;
+                if group_of[c].is_some() {
+                    return Err(Error::TwiceGrouped(name.clone()));
+                }
+                group_of[c] = Some(groups.len() as u32);
+                members.push(c);
+            }
+            groups.push((g.format, members));
+        }
+        let rest: Vec<usize> = (0..self.channels.len()).filter(|&c| group_of[c].is_none()).collect();
+        let format = self.opts.format;
+        if format.is_block() {
+            for c in rest {
+                group_of[c] = Some(groups.len() as u32);
+                groups.push((format, vec![c]));
+            }
+        } else if !rest.is_empty() {
+            for &c in &rest {
+                group_of[c] = Some(groups.len() as u32);
+            }
+            groups.push((format, rest));
+        }
+        let specs = groups.iter().flat_map(|(f, m)| vdbcook_encode::group_planes(*f, m)).collect();
+        Ok((specs, group_of.into_iter().map(|g| g.unwrap_or(0)).collect()))
+    }
+
     /// Encodes, lays out and serialises the asset.
     /// Returns the asset's sections (write them with `vdbcook_vpak::write_file`) and the report.
     pub fn finish(self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
         let mut timings = vec![("build".to_string(), self.build_secs)];
-        let format = self.opts.format;
+        let channels = self.channels.len().max(1);
+        let (specs, group_of) = self.plan_planes()?;
         let mut built = self.builder.finish()?;
+        if self.opts.clustering.is_some() && channels > 1 {
+            return Err(Error::MultiChannelClustering(channels));
+        }
+        let any_block = specs.iter().any(|s| s.plane.format.is_block());
 
         // Optionally merge similar bricks; then encode every brick and store
         // identical encodings once.
@@ -204,20 +334,19 @@ impl Cooker {
             timings.push(("cluster".into(), t0.elapsed().as_secs_f64()));
             c
         });
-        let work: &[vdbcook_flipbook::Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
+        let work: &[Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
         // Which voxels of each brick some L3 node shows (block encoders may
         // spend nothing on the others).
-        let pool_masks = format.is_block().then(|| union_masks(pool.len(), built.l3.iter().map(|l| (l.brick as usize, l.mask))));
+        let pool_masks = any_block.then(|| union_masks(built.pool.len(), built.l3.iter().map(|l| (l.brick as usize, l.mask))));
         let work_masks = pool_masks.as_ref().map(|m| match &clustered {
             Some(c) => union_masks(work.len(), c.remap.iter().zip(m).map(|(&w, &mask)| (w as usize, mask))),
             None => m.clone(),
         });
         let t0 = Instant::now();
-        progress.start("encoding", work.len() as u64);
-        let encoded = vdbcook_encode::encodings(format, self.opts.quality, work, work_masks.as_deref(), &|n| progress.advance(n as u64));
+        progress.start("encoding", (work.len() / channels * specs.len()) as u64);
+        let encoded = Encoded::new(specs.clone(), self.opts.quality, work, channels, work_masks.as_deref(), &|n| progress.advance(n as u64));
         progress.finish();
-        let (keep, enc_remap) = dedup_encoded(&*encoded);
-        let stored = Subset { inner: &*encoded, keep: &keep };
+        let (keep, enc_remap) = dedup_encoded(&encoded);
         // Pool brick -> stored brick.
         let remap: Vec<u32> = match &clustered {
             Some(c) => c.remap.iter().map(|&w| enc_remap[w as usize]).collect(),
@@ -232,21 +361,26 @@ impl Cooker {
         progress.finish();
         timings.push(("nodes".into(), t0.elapsed().as_secs_f64()));
 
-        // Voxel-domain error of what is stored, per frame (and, with
-        // clustering, what it would have been without: merged bricks encoded
-        // on their own).
+        // Voxel-domain error of what is stored, per frame and channel (and,
+        // with clustering, what it would have been without: merged bricks
+        // encoded on their own).
         let t0 = Instant::now();
-        let decode_stored = |b: u32| remap.get(b as usize).and_then(|&i| stored.decode(i as usize));
+        let decode_stored = |b: u32| remap.get(b as usize).and_then(|&i| keep.get(i as usize)).and_then(|&k| encoded.decode(k));
         let frame_err = voxel_errors(&built, &decode_stored);
-        let mut total = ErrorStats::default();
-        for e in &frame_err {
-            total.merge(e);
-        }
+        let totals: Vec<ErrorStats> = (0..channels)
+            .map(|c| {
+                let mut t = ErrorStats::default();
+                for f in &frame_err {
+                    t.merge(&f[c]);
+                }
+                t
+            })
+            .collect();
         let cluster_report = clustered.as_ref().zip(self.opts.clustering.as_ref()).map(|(c, co)| {
             let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
-            let own: Vec<vdbcook_flipbook::Brick> = merged.iter().map(|&i| pool[i]).collect();
+            let own: Vec<Brick> = merged.iter().map(|&i| pool[i]).collect();
             let own_masks: Option<Vec<[u64; 8]>> = pool_masks.as_ref().map(|m| merged.iter().map(|&i| m[i]).collect());
-            let own_enc = vdbcook_encode::encodings(format, self.opts.quality, &own, own_masks.as_deref(), &|_| {});
+            let own_enc = Encoded::new(specs.clone(), self.opts.quality, &own, 1, own_masks.as_deref(), &|_| {});
             let mut slot = vec![u32::MAX; c.merged.len()];
             for (k, &i) in merged.iter().enumerate() {
                 slot[i] = k as u32;
@@ -257,7 +391,7 @@ impl Cooker {
             };
             let mut without = ErrorStats::default();
             for e in voxel_errors(&built, &decode_unclustered) {
-                without.merge(&e);
+                without.merge(&e[0]);
             }
             ClusterReport {
                 clusters: co.clusters,
@@ -267,41 +401,69 @@ impl Cooker {
                 stats: c.stats.clone(),
                 ratio: c.stats.bricks_in as f64 / c.stats.bricks_out.max(1) as f64,
                 rmse_without: without.rmse(),
-                rmse_with: total.rmse(),
+                rmse_with: totals[0].rmse(),
             }
         });
         timings.push(("error".into(), t0.elapsed().as_secs_f64()));
 
         let unique_bricks = built.pool.len();
         let t0 = Instant::now();
-        let layouts = vdbcook_encode::plan_atlases(format, stored.len() as u32, self.opts.max_texture_dim);
+        let max_slices = specs.iter().map(|s| s.plane.slices_per_brick()).max().unwrap_or(8);
+        let atlases = plan_atlases(max_slices, keep.len() as u32, self.opts.max_texture_dim);
         let mut sections = node_sections(&nodes);
-        let ranges: Vec<u32> = (0..stored.len()).flat_map(|i| stored.range(i).unwrap_or_default().map(f32::to_bits)).collect();
+        let enc = &encoded;
+        let ranges: Vec<u32> = keep.iter().flat_map(|&k| (0..channels).flat_map(move |c| enc.range(k, c))).map(f32::to_bits).collect();
         sections.push(Section { kind: kind::BRICK_RANGES, index: 0, data: words(&ranges) });
-        for (i, l) in layouts.iter().enumerate() {
-            sections.push(Section { kind: kind::ATLAS, index: i as u32, data: vdbcook_encode::pack_atlas(l, &stored) });
+        let mut plane_bytes = vec![0u64; specs.len()];
+        for (p, spec) in specs.iter().enumerate() {
+            let bricks = encoded.plane(p, &keep);
+            for (a, atlas) in atlases.iter().enumerate() {
+                let data = pack_atlas(&AtlasLayout { plane: spec.plane, atlas: *atlas }, &bricks);
+                plane_bytes[p] += data.len() as u64;
+                sections.push(Section { kind: kind::ATLAS, index: (p * atlases.len() + a) as u32, data });
+            }
         }
-        let stored_bricks = stored.len();
+        let stored_bricks = keep.len();
         // The source-precision bricks are not needed any more.
         drop(encoded);
         drop(clustered);
         drop(std::mem::take(&mut built.pool));
-        let (grid_name, grid_class, transform) = self.first.clone().unwrap_or_else(|| (String::new(), "unknown".into(), Transform::identity()));
-        let range = if self.range[0] <= self.range[1] { self.range } else { [built.background; 2] };
+        let (_, transform) = self.transform.clone().unwrap_or_else(|| (String::new(), Transform::identity()));
+        let channel_range = |c: usize| if self.ranges[c][0] <= self.ranges[c][1] { self.ranges[c] } else { [built.backgrounds[c]; 2] };
+        // Each channel's place: its plane and first lane.
+        let mut place = vec![(0u32, 0u32); channels];
+        for (p, spec) in specs.iter().enumerate() {
+            for (slot, &c) in spec.channels.iter().enumerate() {
+                place[c] = (p as u32, slot as u32 * spec.plane.z_per_texel);
+            }
+        }
         let meta = Metadata {
             tool: concat!("vdbcook ", env!("CARGO_PKG_VERSION")).to_string(),
-            format: format.name().to_string(),
             frame_count: self.frames.len() as u32,
-            grid_name,
-            grid_class,
             map_type: transform.map_type.vdb_name().to_string(),
             transform: transform.matrix,
-            index_offset: nodes.offset.to_array(),
+            index_offset: nodes.offset,
             index_bbox: built.bbox.map(|b| (b.min.to_array(), b.max.to_array())),
-            background: built.background,
-            value_range: range,
+            channels: self
+                .channels
+                .iter()
+                .enumerate()
+                .map(|(c, s)| Channel {
+                    name: s.name.clone(),
+                    grid: s.grid.clone(),
+                    component: s.component,
+                    value_type: s.value_type.clone(),
+                    class: if s.class.is_empty() { "unknown".into() } else { s.class.clone() },
+                    background: built.backgrounds[c],
+                    value_range: channel_range(c),
+                    group: group_of[c],
+                    plane: place[c].0,
+                    lane: place[c].1,
+                })
+                .collect(),
+            planes: specs.iter().map(|s| s.plane).collect(),
             brick_count: stored_bricks as u32,
-            atlases: layouts.iter().map(|l| AtlasInfo { bricks: l.bricks, texels: l.texels(), first_brick: l.first_brick, count: l.count }).collect(),
+            atlases: atlases.clone(),
             settings: self.opts.settings.clone(),
             sources: self.sources.clone(),
             frames: self.frames.clone(),
@@ -314,9 +476,34 @@ impl Cooker {
 
         let tree_bytes: u64 = nodes.byte_sizes().iter().map(|(_, b)| *b as u64).sum();
         let active: u64 = self.frames.iter().map(|f| f.active_voxels).sum();
-        let peak = f64::from(range[1] - range[0]);
+        let psnr = |c: usize| {
+            let [lo, hi] = channel_range(c);
+            let peak = f64::from(hi - lo);
+            totals[c].psnr(if peak > 0.0 { peak } else { 1.0 })
+        };
+        let channel_reports: Vec<ChannelReport> = meta
+            .channels
+            .iter()
+            .enumerate()
+            .map(|(c, ch)| {
+                let p = ch.plane as usize;
+                let sharing = specs[p].channels.len().max(1) as u64;
+                ChannelReport {
+                    name: ch.name.clone(),
+                    format: specs[p].plane.format.name().into(),
+                    bytes: plane_bytes[p] / sharing,
+                    value_range: ch.value_range,
+                    voxel_rmse: totals[c].rmse(),
+                    voxel_psnr: psnr(c),
+                    voxel_max_error: totals[c].max_abs,
+                }
+            })
+            .collect();
+        let worst = (0..channels).min_by(|&a, &b| psnr(a).total_cmp(&psnr(b))).unwrap_or(0);
+        let mut formats: Vec<&str> = specs.iter().map(|s| s.plane.format.name()).collect();
+        formats.dedup();
         let report = CookReport {
-            format: format.name().into(),
+            format: formats.join("+"),
             frames: self.frames.len(),
             empty_frames: self.frames.iter().filter(|f| f.leaves == 0 && f.tiles == 0).count(),
             active_voxels: active,
@@ -326,18 +513,19 @@ impl Cooker {
             l1_nodes: nodes.l1_count(),
             l2_nodes: nodes.l2_count(),
             l3_nodes: nodes.l3_count(),
-            tiles: nodes.tiles.len() / 2,
-            atlases: layouts.len(),
+            tiles: nodes.tile_count(),
+            atlases: atlases.len(),
             sections: report_sections,
             file_bytes,
             tree_bytes,
             thesis_tree_bytes: vdbcook_flipbook::thesis_tree_bytes(self.frames.len(), built.leaves_in),
             bits_per_active_voxel: if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 },
-            value_range: range,
-            voxel_rmse: total.rmse(),
-            voxel_psnr: total.psnr(if peak > 0.0 { peak } else { 1.0 }),
-            voxel_max_error: total.max_abs,
-            frame_errors: frame_err.iter().map(|e| (e.rmse(), e.max_abs)).collect(),
+            value_range: channel_range(0),
+            voxel_rmse: totals[worst].rmse(),
+            voxel_psnr: psnr(worst),
+            voxel_max_error: totals[worst].max_abs,
+            frame_errors: frame_err.iter().map(|e| (e[worst].rmse(), e[worst].max_abs)).collect(),
+            channels: channel_reports,
             clustering: cluster_report,
             timings,
         };
@@ -358,25 +546,35 @@ fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8])>) -> Vec<
     out
 }
 
-/// Finds the distinct encodings (the first of equal ones, in order):
-/// returns their indices and, per pool brick, its stored index.
-fn dedup_encoded(encoded: &dyn Encodings) -> (Vec<usize>, Vec<u32>) {
-    let n = encoded.format().brick_bytes();
-    let write = |i: usize, buf: &mut [u8; vdbcook_encode::MAX_BRICK_BYTES]| {
-        encoded.write(i, &mut buf[..n]);
+/// Finds the distinct encoded bricks (every plane and every channel range
+/// equal; the first of equal ones, in order): returns their indices and, per
+/// pool brick, its stored index.
+fn dedup_encoded(encoded: &Encoded) -> (Vec<usize>, Vec<u32>) {
+    let planes = encoded.specs.len();
+    let channels = encoded.channels();
+    let sizes: Vec<usize> = encoded.specs.iter().map(|s| s.plane.brick_bytes()).collect();
+    let total: usize = sizes.iter().sum();
+    // A brick's bytes: every plane's encoding, then every channel's range.
+    let bytes_of = |i: usize, buf: &mut Vec<u8>| {
+        buf.clear();
+        buf.resize(total, 0);
+        let mut at = 0;
+        for p in 0..planes {
+            encoded.write(p, i, &mut buf[at..at + sizes[p]]);
+            at += sizes[p];
+        }
+        for c in 0..channels {
+            for v in encoded.range(i, c) {
+                buf.extend_from_slice(&v.to_bits().to_le_bytes());
+            }
+        }
     };
-    // A brick's hash covers its bytes and its range.
-    let ranges: Vec<[u32; 2]> = (0..encoded.len()).map(|i| encoded.range(i).unwrap_or_default().map(f32::to_bits)).collect();
     let hashes: Vec<u64> = (0..encoded.len())
         .into_par_iter()
-        .map_init(
-            || [0u8; vdbcook_encode::MAX_BRICK_BYTES],
-            |buf, i| {
-                write(i, buf);
-                let [lo, hi] = ranges[i];
-                xxhash_rust::xxh3::xxh3_64_with_seed(&buf[..n], u64::from(lo) << 32 | u64::from(hi))
-            },
-        )
+        .map_init(Vec::new, |buf, i| {
+            bytes_of(i, buf);
+            xxhash_rust::xxh3::xxh3_64(buf)
+        })
         .collect();
     let mut index = HashIndex::default();
     index.reserve(encoded.len());
@@ -384,15 +582,11 @@ fn dedup_encoded(encoded: &dyn Encodings) -> (Vec<usize>, Vec<u32>) {
     let mut remap = Vec::with_capacity(encoded.len());
     for (i, &h) in hashes.iter().enumerate() {
         let same = |k: u32| {
-            let j = keep[k as usize];
-            if ranges[j] != ranges[i] {
-                return false;
-            }
             // Equal hashes are rare: encode both again to compare.
-            let (mut x, mut y) = ([0u8; vdbcook_encode::MAX_BRICK_BYTES], [0u8; vdbcook_encode::MAX_BRICK_BYTES]);
-            write(j, &mut x);
-            write(i, &mut y);
-            x[..n] == y[..n]
+            let (mut x, mut y) = (Vec::new(), Vec::new());
+            bytes_of(keep[k as usize], &mut x);
+            bytes_of(i, &mut y);
+            x == y
         };
         let id = match index.find(h, same) {
             Some(k) => k,
@@ -408,30 +602,66 @@ fn dedup_encoded(encoded: &dyn Encodings) -> (Vec<usize>, Vec<u32>) {
     (keep, remap)
 }
 
-/// Error of decoded bricks (`decoded(pool brick)`) against the source over
-/// each frame's active voxels.
-fn voxel_errors(built: &Built, decoded: &(dyn Fn(u32) -> Option<[f32; 512]> + Sync)) -> Vec<ErrorStats> {
-    // Per L3 node: its error over its own active voxels.
-    let per_l3: Vec<ErrorStats> = built
-        .l3
-        .par_iter()
-        .map(|l| {
-            let mut e = ErrorStats::default();
-            if let (Some(src), Some(dec)) = (built.pool.bricks().get(l.brick as usize), decoded(l.brick)) {
-                e.add_masked(src, &dec, &l.mask);
-            }
-            e
-        })
-        .collect();
+/// Error of decoded bricks (`decoded(pool brick)`, one [`Brick`] per
+/// channel) against the source, per frame and channel, over each channel's
+/// own active voxels.
+fn voxel_errors(built: &Built, decoded: &(dyn Fn(u32) -> Option<Vec<Brick>> + Sync)) -> Vec<Vec<ErrorStats>> {
+    let channels = built.channels;
+    let source = |b: u32| built.pool.brick(b as usize);
+    if channels == 1 {
+        // Per L3 node: its error over its own active voxels (the channel's mask).
+        let per_l3: Vec<ErrorStats> = built
+            .l3
+            .par_iter()
+            .map(|l| {
+                let mut e = ErrorStats::default();
+                if let (Some(src), Some(dec)) = (source(l.brick), decoded(l.brick)) {
+                    e.add_masked(&src[0], &dec[0], &l.mask);
+                }
+                e
+            })
+            .collect();
+        return built
+            .frames
+            .iter()
+            .map(|f| {
+                let mut e = ErrorStats::default();
+                for &(_, id) in &f.leaves {
+                    e.merge(&per_l3[id as usize]);
+                }
+                vec![e]
+            })
+            .collect();
+    }
+    // Several channels: each leaf over each channel's own mask.
     built
         .frames
         .iter()
         .map(|f| {
-            let mut e = ErrorStats::default();
-            for &(_, id) in &f.leaves {
-                e.merge(&per_l3[id as usize]);
+            let per_leaf: Vec<Vec<ErrorStats>> = f
+                .leaves
+                .par_iter()
+                .enumerate()
+                .map(|(k, &(_, id))| {
+                    let mut e = vec![ErrorStats::default(); channels];
+                    let brick = built.l3[id as usize].brick;
+                    if let (Some(src), Some(dec)) = (source(brick), decoded(brick)) {
+                        for (c, e) in e.iter_mut().enumerate() {
+                            if let Some(mask) = f.channel_masks.get(k * channels + c) {
+                                e.add_masked(&src[c], &dec[c], mask);
+                            }
+                        }
+                    }
+                    e
+                })
+                .collect();
+            let mut total = vec![ErrorStats::default(); channels];
+            for leaf in &per_leaf {
+                for (t, e) in total.iter_mut().zip(leaf) {
+                    t.merge(e);
+                }
             }
-            e
+            total
         })
         .collect()
 }

@@ -27,7 +27,7 @@ fn frame(shift: i32) -> Grid {
 }
 
 fn cook(format: Format, frames: &[Grid], max_dim: u32) -> (Vec<u8>, CookReport) {
-    let mut c = Cooker::new(CookOptions { format, quality: Quality::Fast, max_texture_dim: max_dim, clustering: None, settings: vec![("format".into(), format.name().into())] });
+    let mut c = Cooker::new(CookOptions { format, quality: Quality::Fast, max_texture_dim: max_dim, settings: vec![("format".into(), format.name().into())], ..CookOptions::default() });
     for f in frames {
         c.push(f, None).unwrap();
     }
@@ -45,7 +45,7 @@ fn f32_round_trip_is_exact() {
     let asset = Asset::from_bytes(&bytes).unwrap();
     asset.verify().unwrap();
     for (i, f) in frames.iter().enumerate() {
-        let g = unpack_frame(&asset, i).unwrap();
+        let g = unpack_frame(&asset, i).unwrap().remove(0);
         assert_eq!(
             g.leaves,
             f.leaves
@@ -72,7 +72,7 @@ fn small_texture_limit_splits_atlases_and_still_round_trips() {
     let (bytes, report) = cook(Format::F16, &frames, 16);
     assert!(report.atlases > 1, "{report:?}");
     let asset = Asset::from_bytes(&bytes).unwrap();
-    let g = unpack_frame(&asset, 1).unwrap();
+    let g = unpack_frame(&asset, 1).unwrap().remove(0);
     for (a, b) in g.leaves.iter().zip(&frames[1].leaves) {
         for v in b.mask.iter_on() {
             assert!((a.values[v] - b.values[v]).abs() <= b.values[v].abs() * 1e-3 + 1e-7);
@@ -136,7 +136,7 @@ fn block_formats_round_trip_within_their_precision() {
         let atlas_bytes: u64 = asset.sections.iter().filter(|s| s.kind == vdbcook_vpak::kind::ATLAS).map(|s| s.size).sum();
         // Bricks fill the atlases up to the last layer's padding.
         assert!(atlas_bytes as f64 * 8.0 >= report.stored_bricks as f64 * 512.0 * bits, "{format:?}");
-        let g = unpack_frame(&asset, 1).unwrap();
+        let g = unpack_frame(&asset, 1).unwrap().remove(0);
         let mut worst = 0.0f32;
         for (a, b) in g.leaves.iter().zip(&frames[1].leaves) {
             for v in b.mask.iter_on() {
@@ -177,7 +177,7 @@ fn clustering_reduces_bricks_and_reports_both_errors() {
     assert!(report.voxel_max_error <= 0.02 + 1e-6, "{}", report.voxel_max_error);
     // Unpacked values match the report's error bound.
     let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
-    let g = unpack_frame(&asset, 3).unwrap();
+    let g = unpack_frame(&asset, 3).unwrap().remove(0);
     for (a, b) in g.leaves.iter().zip(&frames[3].leaves) {
         for v in 0..512 {
             assert!((a.values[v] - b.values[v]).abs() <= 0.02 + 1e-6);
@@ -194,7 +194,7 @@ fn corrupted_assets_never_panic_even_unverified() {
         let mut n = 0;
         for f in 0..3 {
             if let Ok(g) = unpack_frame(&asset, f) {
-                n += g.leaves.len();
+                n += g.iter().map(|g| g.leaves.len()).sum::<usize>();
             }
         }
         Ok(n)
@@ -222,7 +222,7 @@ fn corrupted_assets_never_panic_even_unverified() {
 /// unpack must refuse it by the metadata's leaf count, not decode it.
 #[test]
 fn sealed_fan_out_assets_are_refused_not_expanded() {
-    use vdbcook_flipbook::{L1_MASK_WORDS, L2_MASK_WORDS};
+    use vdbcook_vpak::nodes::{L1_MASK_WORDS, L2_MASK_WORDS};
     let (bytes, _) = cook(Format::F32, &[frame(0)], 2048);
     let asset = Asset::from_bytes(&bytes).unwrap();
     let mut sections = asset.to_sections();
@@ -258,7 +258,7 @@ fn sealed_fan_out_assets_are_refused_not_expanded() {
     let honest = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
     match unpack_frame(&honest, 0) {
         Err(e @ Error::TooBig { .. }) => assert!(e.to_string().contains("134217728 leaves"), "{e}"),
-        other => panic!("expected TooBig, got {:?}", other.map(|g| g.leaves.len())),
+        other => panic!("expected TooBig, got {:?}", other.map(|g| g.len())),
     }
 }
 
@@ -276,7 +276,7 @@ fn bricks_equal_once_encoded_are_stored_once_but_only_with_equal_ranges() {
     for (format, stored) in [(Format::F32, 3), (Format::F16, 2), (Format::Unorm8, 2)] {
         let (bytes, report) = cook(format, std::slice::from_ref(&g), 2048);
         assert_eq!((report.unique_bricks, report.stored_bricks), (3, stored), "{format:?}");
-        let back = unpack_frame(&Asset::from_bytes(&bytes).unwrap(), 0).unwrap();
+        let back = unpack_frame(&Asset::from_bytes(&bytes).unwrap(), 0).unwrap().remove(0);
         for (l, src) in back.leaves.iter().zip(&leaves) {
             let worst = l.values.iter().zip(&src.values).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max);
             assert!(worst <= 0.01, "{format:?}: {worst}");
@@ -312,12 +312,12 @@ fn non_finite_values_never_panic_any_format() {
     let g = Grid { name: "density".into(), class: GridClass::FogVolume, background: 0.0, transform: Transform::identity(), leaves, tiles: vec![] };
     for format in Format::ALL {
         for clustering in [None, Some(vdbcook_cluster::Options { clusters: 3, ..vdbcook_cluster::Options::default() })] {
-            let mut c = Cooker::new(CookOptions { format, quality: Quality::UltraFast, max_texture_dim: 2048, clustering, settings: vec![] });
+            let mut c = Cooker::new(CookOptions { format, quality: Quality::UltraFast, clustering, ..CookOptions::default() });
             c.push(&g, None).unwrap();
             let (sections, report) = c.finish(&NoProgress).unwrap();
             let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
             asset.verify().unwrap();
-            assert_eq!(unpack_frame(&asset, 0).unwrap().leaves.len(), 12, "{format:?}");
+            assert_eq!(unpack_frame(&asset, 0).unwrap().remove(0).leaves.len(), 12, "{format:?}");
             assert_eq!(report.bricks, 12);
         }
     }

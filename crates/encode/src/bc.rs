@@ -12,10 +12,11 @@
 //! encoder ([`bc4_block`]), which leaves 13–28 % less RMSE on the real samples
 //! than intel_tex_2's BC4 (see docs/benchmarks.md).
 
-use crate::{Format, Quality, BRICK_VOXELS};
+#[cfg(test)]
+use crate::Format;
+use crate::{Quality, BRICK_VOXELS};
 
 pub const BC4_BRICK_BYTES: usize = 8 * 4 * 8;
-pub const BC7_BRICK_BYTES: usize = 2 * 4 * 16;
 
 fn bc7_settings(q: Quality) -> intel_tex_2::bc7::EncodeSettings {
     use intel_tex_2::bc7;
@@ -50,41 +51,39 @@ pub fn encode_bc4(quality: Quality, levels: &[[f32; BRICK_VOXELS]], masks: Optio
     }
 }
 
-/// Encodes bricks of 8-bit levels (index `x·64 + y·8 + z`) as BC7 with
-/// intel_tex_2, side by side in one surface per call (`8·n` texels wide, 16
-/// tall), into `out` (`BC7_BRICK_BYTES` per brick).
-pub fn encode_bc7(quality: Quality, levels: &[[u8; BRICK_VOXELS]], out: &mut [u8]) {
-    let n = levels.len();
+/// Encodes bricks of RGBA texels of 8-bit levels (per brick `64 · slices`
+/// texels in the order (slice, y, x)) as BC7 with intel_tex_2, side by side
+/// in one surface per call (`8·n` texels wide, `8 · slices` tall), into
+/// `out` (`slices · 4 · 16` bytes per brick, blocks in the order (slice,
+/// block row, block column)).
+pub fn encode_bc7(quality: Quality, slices: usize, texels: &[[u8; 4]], out: &mut [u8]) {
+    let n = texels.len() / (64 * slices).max(1);
     if n == 0 {
         return;
     }
-    let format = Format::Bc7;
-    let sp = format.slices_per_brick() as usize;
-    let (w, h) = (8 * n, 8 * sp);
+    let (w, h) = (8 * n, 8 * slices);
     let mut surface = vec![0u8; w * h * 4];
-    for (k, lv) in levels.iter().enumerate() {
-        for s in 0..sp {
+    for k in 0..n {
+        for s in 0..slices {
             for y in 0..8 {
+                let px = ((s * 8 + y) * w + k * 8) * 4;
+                let src = (k * slices + s) * 64 + y * 8;
                 for x in 0..8 {
-                    let px = ((s * 8 + y) * w + k * 8 + x) * 4;
-                    for c in 0..4 {
-                        surface[px + c] = lv[x * 64 + y * 8 + 4 * s + c];
-                    }
+                    surface[px + 4 * x..px + 4 * x + 4].copy_from_slice(&texels[src + x]);
                 }
             }
         }
     }
-    let bb = format.block_bytes();
+    const BB: usize = 16;
     let surf = intel_tex_2::RgbaSurface { data: &surface, width: w as u32, height: h as u32, stride: (w * 4) as u32 };
     let blocks = intel_tex_2::bc7::compress_blocks(&bc7_settings(quality), &surf);
     // Blocks come out row-major over the surface: row r = 2s + block row, column 2k + block column.
     let cols = w / 4;
-    for (k, brick) in out.chunks_exact_mut(format.brick_bytes()).take(n).enumerate() {
-        for (j, dst) in brick.chunks_exact_mut(bb).enumerate() {
-            // Block j of a brick is (slice, block row, block column).
+    for (k, brick) in out.chunks_exact_mut(slices * 4 * BB).take(n).enumerate() {
+        for (j, dst) in brick.chunks_exact_mut(BB).enumerate() {
             let (s, br, bc) = (j / 4, (j / 2) % 2, j % 2);
-            let i = ((2 * s + br) * cols + 2 * k + bc) * bb;
-            if let Some(src) = blocks.get(i..i + bb) {
+            let i = ((2 * s + br) * cols + 2 * k + bc) * BB;
+            if let Some(src) = blocks.get(i..i + BB) {
                 dst.copy_from_slice(src);
             }
         }
@@ -279,46 +278,24 @@ pub fn bc4_block(v: &[f32; 16], w: &[f32; 16], radius: i32) -> [u8; 8] {
     out
 }
 
-/// Decodes an encoded brick to levels in [0, 1] (index `x·64 + y·8 + z`).
-pub fn decode(format: Format, data: &[u8]) -> [f32; BRICK_VOXELS] {
-    let mut out = [0.0f32; BRICK_VOXELS];
-    let sp = format.slices_per_brick() as usize;
-    let bb = format.block_bytes();
-    for s in 0..sp {
-        for br in 0..2 {
-            for bc in 0..2 {
-                let i = ((s * 2 + br) * 2 + bc) * bb;
-                let Some(block) = data.get(i..i + bb) else { continue };
-                if format == Format::Bc7 {
-                    let mut rgba = [0u8; 64];
-                    bcdec_rs::bc7(block, &mut rgba, 16);
-                    for ty in 0..4 {
-                        for tx in 0..4 {
-                            let (x, y) = (bc * 4 + tx, br * 4 + ty);
-                            for c in 0..4 {
-                                out[x * 64 + y * 8 + 4 * s + c] = f32::from(rgba[(ty * 4 + tx) * 4 + c]) / 255.0;
-                            }
-                        }
-                    }
-                } else {
-                    let mut r = [0.0f32; 16];
-                    bcdec_rs::bc4_float(block, &mut r, 4, false);
-                    for ty in 0..4 {
-                        for tx in 0..4 {
-                            let (x, y) = (bc * 4 + tx, br * 4 + ty);
-                            out[x * 64 + y * 8 + s] = r[ty * 4 + tx];
-                        }
-                    }
-                }
-            }
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use vdbcook_vpak::Plane;
+
+    const BC7_BRICK_BYTES: usize = 2 * 4 * 16;
+
+    /// A one-channel brick's levels in [0, 1] (index `x·64 + y·8 + z`).
+    fn decode(format: Format, data: &[u8]) -> [f32; BRICK_VOXELS] {
+        let plane = if format == Format::Bc7 { Plane { format, lanes: 4, z_per_texel: 4 } } else { Plane { format, lanes: 1, z_per_texel: 1 } };
+        plane.channel_values(&plane.decode_brick(data), 0, [0.0, 1.0])
+    }
+
+    /// One-channel bricks of levels as BC7 texels (four z-slices in RGBA).
+    fn encode_bc7_levels(q: Quality, levels: &[[u8; BRICK_VOXELS]], out: &mut [u8]) {
+        let texels = crate::bc7_texels(&levels.iter().map(|l| vec![*l]).collect::<Vec<_>>(), 4);
+        encode_bc7(q, 2, &texels, out);
+    }
 
     /// A smooth field with one distinct value per (x, y, z) direction.
     fn ramp() -> [u8; BRICK_VOXELS] {
@@ -347,7 +324,7 @@ mod tests {
         let lv = ramp();
         for q in Quality::ALL {
             let mut enc = [0u8; 2 * BC7_BRICK_BYTES];
-            encode_bc7(q, &[[7; BRICK_VOXELS], lv], &mut enc);
+            encode_bc7_levels(q, &[[7; BRICK_VOXELS], lv], &mut enc);
             let enc: Vec<&[u8]> = enc.chunks(BC7_BRICK_BYTES).collect();
             let d = decode(Format::Bc7, enc[1]);
             let mut worst = 0.0f32;

@@ -1,70 +1,24 @@
 //! The flip-book tree: one L1 node per frame over shared L2/L3 nodes and one
-//! shared pool of 8³ bricks.
+//! shared pool of 8³ bricks, for one or several channels.
 //!
 //! Frames stream in through [`Builder::push`], which keeps only what the
 //! output needs: every distinct brick once ([`BrickPool`], exact
-//! deduplication by content hash then byte compare), every distinct L3 node
-//! (active mask + brick) once, and per frame the list of its leaves and tiles.
-//! [`Built::nodes`] then lays out the node arrays ([`Nodes`]), once the union
-//! bounding box of all frames is known, after the caller has remapped bricks
-//! (clustering, encoded-brick deduplication).
-//!
-//! # Node layout (all `u32`, little-endian; also the GPU layout)
-//!
-//! Index space is translated by [`Nodes::offset`] (a multiple of 128) so
-//! that every frame fits one L1 node: 4096³ voxels.
-//!
-//! ```text
-//! L1 node  (32³ slots of 128³ voxels)  L1_WORDS = 1024 + 512 + 1
-//!   [0, 1024)     occupancy mask: bit s of word s/32 set when slot s holds a child or a tile
-//!   [1024, 1536)  prefix counts: u16 pairs, count k = set bits in mask words [0, k)
-//!                 (word 1024 + k/2, bits 16·(k%2)..)
-//!   1536          first entry: index into l1_entries of slot rank 0
-//! L2 node  (16³ slots of 8³ voxels)    L2_WORDS = 128 + 64 + 1, same shape, entries in l2_entries
-//! entry    bit 31 clear: child index (L2 node for L1 entries, L3 node for L2 entries)
-//!          bit 31 set:   tile index (low 31 bits) into `tiles`
-//! L3 array word 0: the number n of L3 nodes; node k is words [1 + 3k, 4 + 3k):
-//!   0  brick index
-//!   1  states: 2 bits per 4³ sub-block b = (x/4)·4 + (y/4)·2 + z/4 (bits 2b..2b+1):
-//!      0 no voxel active, 1 all 64 active, 2 some (a sub-mask is stored)
-//!   2  word index (in this array) of the node's first sub-mask
-//!   after the n nodes: the sub-masks, 2 words each, of every node's partly active
-//!   sub-blocks in sub-block order; bit j = (x%4)·16 + (y%4)·4 + z%4
-//! tile     2 words: value (f32 bits), flags (bit 0: active)
-//! ```
-//! Voxels are x·64 + y·8 + z in a leaf.  A leaf's 512-bit mask would take 64
-//! bytes; smoke is mostly made of sub-blocks wholly inside or outside it, which
-//! cost 2 bits here (0.37–0.76× of the L3 bytes on the real samples).
-//! A slot's entry is `entries[first + prefix(word) + popcount(mask[word] & below(bit))]`:
-//! O(1) on the GPU, and only occupied slots cost memory.  Identical L3, L2
-//! and L1 nodes are stored once (hash-consing, bottom-up), so the parts of an
-//! animation that do not change cost nothing per frame.
+//! deduplication by content hash then byte compare, over every channel of the
+//! brick together), every distinct L3 node (active mask + brick) once, and
+//! per frame the list of its leaves and tiles.  With several channels a frame
+//! has one tree over the union of the channels' active voxels: a leaf active
+//! in any channel is one L3 node whose brick holds every channel (a voxel
+//! inactive in a channel holds that channel's background), and a tile holds
+//! one value per channel (tiles of one channel over another's leaves are
+//! split until they no longer overlap).  [`Built::nodes`] then lays out the
+//! node arrays with `vdbcook_vpak::nodes`, which owns their encoding, once
+//! the union bounding box of all frames is known and the caller has
+//! remapped bricks (clustering, encoded-brick deduplication).
 
 use rayon::prelude::*;
-use std::collections::{BTreeMap, HashMap};
-use vdbcook_grid::{Bbox, Coord, Grid, LEAF_VOXELS};
-
-pub const L1_LOG2: u32 = 5;
-pub const L2_LOG2: u32 = 4;
-pub const L1_SLOTS: usize = 1 << (3 * L1_LOG2);
-pub const L2_SLOTS: usize = 1 << (3 * L2_LOG2);
-pub const L1_MASK_WORDS: usize = L1_SLOTS / 32;
-pub const L2_MASK_WORDS: usize = L2_SLOTS / 32;
-pub const L1_WORDS: usize = L1_MASK_WORDS + L1_MASK_WORDS / 2 + 1;
-pub const L2_WORDS: usize = L2_MASK_WORDS + L2_MASK_WORDS / 2 + 1;
-/// Words of one L3 node record (brick, sub-block states, first sub-mask).
-pub const L3_WORDS: usize = 3;
-/// Sub-block state: no voxel active.
-pub const SUB_EMPTY: u32 = 0;
-/// Sub-block state: every voxel active.
-pub const SUB_FULL: u32 = 1;
-/// Sub-block state: a sub-mask says which voxels are active.
-pub const SUB_PARTIAL: u32 = 2;
-pub const TILE_FLAG: u32 = 1 << 31;
-/// Edge of the index space one L1 node covers.
-pub const L1_DIM: i64 = 4096;
-/// Voxel edge of an L1 slot (an L2 node or a tile).
-pub const L1_CHILD_DIM: i32 = 128;
+use std::collections::{BTreeMap, HashMap, HashSet};
+use vdbcook_grid::{Bbox, Coord, Grid, Leaf, LeafMask, LEAF_VOXELS};
+use vdbcook_vpak::nodes::{self, Nodes, L1_CHILD_DIM, L1_DIM, L1_LOG2, L1_SLOTS, L2_LOG2, L2_SLOTS, TILE_FLAG};
 
 /// A brick: the 512 values of one leaf.  Inactive voxels hold fill values
 /// (see [`brick_of_leaf`]): readers take their value from the background.
@@ -151,20 +105,22 @@ pub fn brick_of_leaf(leaf: &vdbcook_grid::Leaf) -> Brick {
 pub enum Error {
     #[error("the frames span {extent} voxels along {axis} (index {min} to {max}); one L1 node holds 4096 voxels starting at a multiple of 128")]
     TooWide { axis: char, extent: i64, min: i64, max: i64 },
-    #[error("frame {frame} has background {found}, earlier frames {expected}")]
-    Background { frame: usize, found: f32, expected: f32 },
+    #[error("channel {channel}: frame {frame} has background {found}, earlier frames {expected}")]
+    Background { channel: usize, frame: usize, found: f32, expected: f32 },
     #[error("more than 2^31 {what}")]
     Overflow { what: &'static str },
+    #[error("a frame gave {found} channels, the builder was made for {expected}")]
+    Channels { found: usize, expected: usize },
 }
 
-/// Content hash of a brick: the exact bits of every value (so -0.0 and 0.0,
-/// or two NaN payloads, stay distinct).
-pub fn brick_hash(b: &Brick) -> u64 {
+/// Content hash of a brick's channels: the exact bits of every value (so
+/// -0.0 and 0.0, or two NaN payloads, stay distinct).
+pub fn brick_hash(b: &[Brick]) -> u64 {
     xxhash_rust::xxh3::xxh3_64(bytemuck::cast_slice(b))
 }
 
-fn same_bits(a: &Brick, b: &Brick) -> bool {
-    bytemuck::cast_slice::<f32, u32>(a) == bytemuck::cast_slice::<f32, u32>(b)
+fn same_bits(a: &[Brick], b: &[Brick]) -> bool {
+    bytemuck::cast_slice::<Brick, u32>(a) == bytemuck::cast_slice::<Brick, u32>(b)
 }
 
 /// Hash maps keyed by data that needs no DoS protection: XXH3, deterministic.
@@ -205,22 +161,33 @@ impl HashIndex {
     }
 }
 
-/// Distinct bricks, each stored once.
-#[derive(Default)]
+/// Distinct bricks, each stored once: brick `i` is the `channels` consecutive
+/// [`Brick`]s from `i · channels`.
 pub struct BrickPool {
+    channels: usize,
     bricks: Vec<Brick>,
     index: HashIndex,
 }
 
+impl Default for BrickPool {
+    fn default() -> Self {
+        BrickPool::new(1)
+    }
+}
+
 impl BrickPool {
-    /// Returns the id of `brick`, adding it if it is new.
-    pub fn insert(&mut self, brick: &Brick) -> Result<u32, Error> {
+    pub fn new(channels: usize) -> BrickPool {
+        BrickPool { channels: channels.max(1), bricks: Vec::new(), index: HashIndex::default() }
+    }
+
+    /// Returns the id of `brick` (its `channels` bricks), adding it if it is new.
+    pub fn insert(&mut self, brick: &[Brick]) -> Result<u32, Error> {
         let h = brick_hash(brick);
-        let id = self.bricks.len();
-        self.bricks.push(*brick);
+        let id = self.len();
+        self.bricks.extend_from_slice(brick);
         let mut next = id;
         let found = self.settle(id, &mut next, h);
-        self.bricks.truncate(next);
+        self.bricks.truncate(next * self.channels);
         found
     }
 
@@ -228,29 +195,40 @@ impl BrickPool {
     /// `next` bricks (all distinct): returns the id of an equal brick among
     /// them, or moves it to `next`, takes that as its id and advances `next`.
     fn settle(&mut self, from: usize, next: &mut usize, h: u64) -> Result<u32, Error> {
-        let Some(brick) = self.bricks.get(from) else { return Err(Error::Overflow { what: "bricks" }) };
-        if let Some(id) = self.index.find(h, |id| self.bricks.get(id as usize).is_some_and(|b| same_bits(b, brick))) {
+        let c = self.channels;
+        let Some(brick) = self.bricks.get(from * c..(from + 1) * c) else { return Err(Error::Overflow { what: "bricks" }) };
+        if let Some(id) = self.index.find(h, |id| self.bricks.get(id as usize * c..(id as usize + 1) * c).is_some_and(|b| same_bits(b, brick))) {
             return Ok(id);
         }
         let id = u32::try_from(*next).ok().filter(|&i| i < TILE_FLAG).ok_or(Error::Overflow { what: "bricks" })?;
         if from != *next {
-            self.bricks.copy_within(from..from + 1, *next);
+            self.bricks.copy_within(from * c..(from + 1) * c, *next * c);
         }
         self.index.add(h, id);
         *next += 1;
         Ok(id)
     }
 
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
     pub fn len(&self) -> usize {
-        self.bricks.len()
+        self.bricks.len() / self.channels
     }
 
     pub fn is_empty(&self) -> bool {
         self.bricks.is_empty()
     }
 
+    /// Every brick's channels, brick by brick.
     pub fn bricks(&self) -> &[Brick] {
         &self.bricks
+    }
+
+    /// Brick `i`'s channels.
+    pub fn brick(&self, i: usize) -> Option<&[Brick]> {
+        self.bricks.get(i * self.channels..(i + 1) * self.channels)
     }
 
     pub fn into_bricks(self) -> Vec<Brick> {
@@ -289,7 +267,7 @@ impl<K: std::hash::Hash + Eq> Interner<K> {
     }
 }
 
-/// A distinct L3 node: active mask and brick id.
+/// A distinct L3 node: active mask (the union over channels) and brick id.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct L3 {
     pub mask: [u64; 8],
@@ -301,26 +279,32 @@ pub struct L3 {
 pub struct FrameLeaves {
     /// (leaf origin, L3 id), sorted by origin.
     pub leaves: Vec<(Coord, u32)>,
-    /// Active tiles: origin, edge (8, 128 or 4096), value.
-    pub tiles: Vec<(Coord, u32, f32)>,
+    /// With several channels, each leaf's active mask in each channel's own
+    /// grid (`channels` per leaf, in leaf order; empty with one channel,
+    /// whose mask is the L3 node's).
+    pub channel_masks: Vec<[u64; 8]>,
+    /// Active tiles: origin, edge (8, 128 or 4096), one value per channel.
+    pub tiles: Vec<(Coord, u32, Vec<f32>)>,
     pub active_voxels: u64,
 }
 
 /// Per-frame figures reported by [`Builder::push`].
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct FrameStats {
     pub leaves: usize,
     pub tiles: usize,
     pub active_voxels: u64,
     pub new_bricks: usize,
-    /// Minimum and maximum active value (tiles included); `None` when nothing is active.
-    pub range: Option<[f32; 2]>,
+    /// Per channel, the minimum and maximum stored value of the frame (tiles
+    /// included; a channel's background where only other channels are
+    /// active); `None` when nothing is active.
+    pub ranges: Vec<Option<[f32; 2]>>,
 }
 
 /// Streams frames into a brick pool and per-frame leaf lists.
-#[derive(Default)]
 pub struct Builder {
-    background: Option<f32>,
+    channels: usize,
+    backgrounds: Vec<Option<f32>>,
     pool: BrickPool,
     l3: Vec<L3>,
     l3_index: Interner<L3>,
@@ -329,53 +313,107 @@ pub struct Builder {
     leaves_in: u64,
 }
 
+impl Default for Builder {
+    fn default() -> Self {
+        Builder::new(1)
+    }
+}
+
+/// The union of several grids' leaves, `channels` per position: leaf `i` of
+/// channel `c` is `leaves[i · channels + c]`.
+struct Merged {
+    leaves: Vec<Leaf>,
+    /// Per leaf per channel, the channel's own active mask.
+    channel_masks: Vec<[u64; 8]>,
+    tiles: Vec<(Coord, u32, Vec<f32>)>,
+}
+
 impl Builder {
-    pub fn new() -> Builder {
-        Builder::default()
+    pub fn new(channels: usize) -> Builder {
+        let channels = channels.max(1);
+        Builder { channels, backgrounds: vec![None; channels], pool: BrickPool::new(channels), l3: Vec::new(), l3_index: Interner::default(), frames: Vec::new(), bbox: None, leaves_in: 0 }
     }
 
-    /// Adds one frame.  Only active values are kept: inactive voxels take the
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// Adds one frame: one grid per channel (`None`: the channel is empty in
+    /// this frame).  Only active values are kept: inactive voxels take the
     /// background, inactive tiles are dropped, leaves with no active voxel vanish.
-    pub fn push(&mut self, grid: &Grid) -> Result<FrameStats, Error> {
-        let frame = self.frames.len();
-        match self.background {
-            None => self.background = Some(grid.background),
-            Some(bg) if bg.to_bits() != grid.background.to_bits() => {
-                return Err(Error::Background { frame, found: grid.background, expected: bg });
-            }
-            Some(_) => {}
+    pub fn push(&mut self, grids: &[Option<&Grid>]) -> Result<FrameStats, Error> {
+        if grids.len() != self.channels {
+            return Err(Error::Channels { found: grids.len(), expected: self.channels });
         }
+        let frame = self.frames.len();
+        for (c, g) in grids.iter().enumerate() {
+            let Some(g) = g else { continue };
+            match self.backgrounds[c] {
+                None => self.backgrounds[c] = Some(g.background),
+                Some(bg) if bg.to_bits() != g.background.to_bits() => return Err(Error::Background { channel: c, frame, found: g.background, expected: bg }),
+                Some(_) => {}
+            }
+        }
+        let backgrounds: Vec<f32> = self.backgrounds.iter().map(|b| b.unwrap_or(0.0)).collect();
+        match grids {
+            [Some(g)] => {
+                let leaves: Vec<&Leaf> = g.leaves.iter().filter(|l| !l.mask.is_empty()).collect();
+                let tiles = g.tiles.iter().filter(|t| t.active).map(|t| (t.origin, t.dim, vec![t.value])).collect();
+                self.push_leaves(&leaves, Vec::new(), tiles)
+            }
+            _ => {
+                let m = merge_channels(grids, &backgrounds);
+                let leaves: Vec<&Leaf> = m.leaves.iter().collect();
+                self.push_leaves(&leaves, m.channel_masks, m.tiles)
+            }
+        }
+    }
+
+    /// Adds a frame's leaves (`channels` per position, sharing a mask) and tiles.
+    fn push_leaves(&mut self, leaves: &[&Leaf], channel_masks: Vec<[u64; 8]>, tiles: Vec<(Coord, u32, Vec<f32>)>) -> Result<FrameStats, Error> {
+        let c = self.channels;
         let before = self.pool.len();
-        let mut fl = FrameLeaves::default();
+        let n = leaves.len() / c;
+        let mut fl = FrameLeaves { channel_masks, ..FrameLeaves::default() };
+        // Room for every leaf being new, so the pool never moves while it grows
+        // (untouched capacity costs no memory).
+        self.pool.bricks.reserve(n * c);
+        self.pool.index.reserve(n);
+        vdbcook_grid::mem::advise_huge_pages(&self.pool.bricks);
+        self.l3.reserve(n);
+        self.l3_index.reserve(n);
+        fl.leaves.reserve(n);
+        let mut ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; c];
         // A bounded batch at a time (in leaf order): the batch's bricks are
         // built straight into the pool and hashed in parallel, then pooled in
         // order, duplicates squeezed out.
-        let live: Vec<usize> = (0..grid.leaves.len()).filter(|&i| !grid.leaves[i].mask.is_empty()).collect();
-        // Room for every leaf being new, so the pool never moves while it grows
-        // (untouched capacity costs no memory).
-        self.pool.bricks.reserve(live.len());
-        self.pool.index.reserve(live.len());
-        vdbcook_grid::mem::advise_huge_pages(&self.pool.bricks);
-        self.l3.reserve(live.len());
-        self.l3_index.reserve(live.len());
-        fl.leaves.reserve(live.len());
-        let mut range = [f32::INFINITY, f32::NEG_INFINITY];
-        for batch in live.chunks(4096) {
-            let start = self.pool.bricks.len();
-            self.pool.bricks.par_extend(batch.par_iter().map(|&i| brick_of_leaf(&grid.leaves[i])));
-            let hashes: Vec<(u64, f32, f32)> = batch
-                .par_iter()
-                .zip(self.pool.bricks.get(start..).unwrap_or(&[]).par_iter())
-                .map(|(&i, b)| {
-                    let s = vdbcook_grid::LeafSummary::of(&grid.leaves[i]);
-                    (brick_hash(b), s.min, s.max)
+        let order: Vec<usize> = (0..n).collect();
+        for batch in order.chunks(4096) {
+            let start = self.pool.len();
+            let part = &leaves[batch[0] * c..(batch[batch.len() - 1] + 1) * c];
+            self.pool.bricks.par_extend(part.par_iter().map(|l| brick_of_leaf(l)));
+            let added = self.pool.bricks.get(start * c..).unwrap_or(&[]);
+            let hashes: Vec<(u64, Vec<[f32; 2]>)> = part
+                .par_chunks(c)
+                .zip(added.par_chunks(c))
+                .map(|(ls, b)| {
+                    let r = ls
+                        .iter()
+                        .map(|l| {
+                            let s = vdbcook_grid::LeafSummary::of(l);
+                            [s.min, s.max]
+                        })
+                        .collect();
+                    (brick_hash(b), r)
                 })
                 .collect();
             let mut next = start;
-            for (k, (&i, &(h, lo, hi))) in batch.iter().zip(&hashes).enumerate() {
-                let leaf = &grid.leaves[i];
-                range = [range[0].min(lo), range[1].max(hi)];
-                let brick = self.pool.settle(start + k, &mut next, h)?;
+            for (k, (&i, (h, r))) in batch.iter().zip(&hashes).enumerate() {
+                let leaf = leaves[i * c];
+                for (acc, r) in ranges.iter_mut().zip(r) {
+                    *acc = [acc[0].min(r[0]), acc[1].max(r[1])];
+                }
+                let brick = self.pool.settle(start + k, &mut next, *h)?;
                 let key = L3 { mask: leaf.mask.0, brick };
                 if u32::try_from(self.l3.len()).is_err() {
                     return Err(Error::Overflow { what: "L3 nodes" });
@@ -388,18 +426,20 @@ impl Builder {
                 fl.active_voxels += u64::from(leaf.mask.count_on());
                 self.grow(Bbox::new(leaf.origin, leaf.origin.offset(7, 7, 7)));
             }
-            self.pool.bricks.truncate(next);
+            self.pool.bricks.truncate(next * c);
         }
-        for t in grid.tiles.iter().filter(|t| t.active) {
-            fl.tiles.push((t.origin, t.dim, t.value));
+        for (origin, dim, values) in tiles {
+            let t = vdbcook_grid::Tile { origin, dim, value: 0.0, active: true };
             fl.active_voxels += t.voxel_count();
-            range = [range[0].min(t.value), range[1].max(t.value)];
+            for (acc, &v) in ranges.iter_mut().zip(&values) {
+                *acc = [acc[0].min(v), acc[1].max(v)];
+            }
             self.grow(t.bbox());
+            fl.tiles.push((origin, dim, values));
         }
-        fl.leaves.sort_by_key(|l| l.0);
         self.leaves_in += fl.leaves.len() as u64;
-        let range = (fl.active_voxels > 0).then_some(range);
-        let stats = FrameStats { leaves: fl.leaves.len(), tiles: fl.tiles.len(), active_voxels: fl.active_voxels, new_bricks: self.pool.len() - before, range };
+        let ranges = ranges.into_iter().map(|r| (fl.active_voxels > 0 && r[0] <= r[1]).then_some(r)).collect();
+        let stats = FrameStats { leaves: fl.leaves.len(), tiles: fl.tiles.len(), active_voxels: fl.active_voxels, new_bricks: self.pool.len() - before, ranges };
         self.frames.push(fl);
         Ok(stats)
     }
@@ -439,13 +479,119 @@ impl Builder {
                 offset
             }
         };
-        Ok(Built { background: self.background.unwrap_or(0.0), pool: self.pool, l3: self.l3, frames: self.frames, bbox: self.bbox, offset, leaves_in: self.leaves_in })
+        let backgrounds = self.backgrounds.iter().map(|b| b.unwrap_or(0.0)).collect();
+        Ok(Built { channels: self.channels, backgrounds, pool: self.pool, l3: self.l3, frames: self.frames, bbox: self.bbox, offset, leaves_in: self.leaves_in })
     }
+}
+
+/// The union of several channels' grids of one frame: a leaf wherever any
+/// channel has one (each channel's leaf there, with the union's mask and the
+/// channel's background where it is inactive), and tiles that hold a value
+/// per channel.  A tile of one channel over finer content of another (a leaf,
+/// or a smaller tile) is split into its children until none overlaps: an 8³
+/// tile over another channel's leaf becomes that channel's part of the leaf.
+fn merge_channels(grids: &[Option<&Grid>], backgrounds: &[f32]) -> Merged {
+    let c = grids.len();
+    let present = || grids.iter().enumerate().filter_map(|(k, g)| g.map(|g| (k, g)));
+    // Leaf origins of every channel, and the coarser regions that hold finer content.
+    let mut leaf_at: HashMap<Coord, Vec<Option<usize>>> = HashMap::new();
+    for (k, g) in present() {
+        for (i, l) in g.leaves.iter().enumerate().filter(|(_, l)| !l.mask.is_empty()) {
+            leaf_at.entry(l.origin).or_insert_with(|| vec![None; c])[k] = Some(i);
+        }
+    }
+    let align = |o: Coord, d: i32| Coord::new(o.x & !(d - 1), o.y & !(d - 1), o.z & !(d - 1));
+    let mut finer128: HashSet<Coord> = leaf_at.keys().map(|&o| align(o, 128)).collect();
+    let mut finer4096: HashSet<Coord> = leaf_at.keys().map(|&o| align(o, 4096)).collect();
+    for (_, g) in present() {
+        for t in g.tiles.iter().filter(|t| t.active) {
+            if t.dim == 8 {
+                finer128.insert(align(t.origin, 128));
+            }
+            if t.dim <= 128 {
+                finer4096.insert(align(t.origin, 4096));
+            }
+        }
+    }
+    // Tiles by (origin, edge), one value per channel; 8³ tiles that fall on a leaf.
+    let mut tiles: BTreeMap<(Coord, u32), Vec<Option<f32>>> = BTreeMap::new();
+    let mut tile_leaves: HashMap<Coord, Vec<Option<f32>>> = HashMap::new();
+    let mut work: Vec<(usize, Coord, u32, f32)> = present().flat_map(|(k, g)| g.tiles.iter().filter(|t| t.active).map(move |t| (k, t.origin, t.dim, t.value))).collect();
+    while let Some((k, o, dim, v)) = work.pop() {
+        let split = match dim {
+            8 => {
+                if leaf_at.contains_key(&o) {
+                    tile_leaves.entry(o).or_insert_with(|| vec![None; c])[k] = Some(v);
+                    continue;
+                }
+                false
+            }
+            128 => finer128.contains(&o),
+            _ => dim > 128 && finer4096.contains(&align(o, 4096)),
+        };
+        if !split {
+            tiles.entry((o, dim)).or_insert_with(|| vec![None; c])[k] = Some(v);
+            continue;
+        }
+        // Children: 16³ tiles of 8 in a 128 tile, 32³ tiles of 128 in a larger one.
+        let child = if dim == 128 { 8 } else { 128 };
+        let n = (dim / child) as i32;
+        for x in 0..n {
+            for y in 0..n {
+                for z in 0..n {
+                    let d = child as i32;
+                    work.push((k, o.offset(x * d, y * d, z * d), child, v));
+                }
+            }
+        }
+    }
+    let mut origins: Vec<Coord> = leaf_at.keys().copied().collect();
+    origins.sort_unstable();
+    let mut leaves = Vec::with_capacity(origins.len() * c);
+    let mut channel_masks = Vec::with_capacity(origins.len() * c);
+    for o in origins {
+        let own = &leaf_at[&o];
+        let tiled = tile_leaves.get(&o);
+        let mut union = [0u64; 8];
+        let parts: Vec<(LeafMask, Option<&Leaf>, Option<f32>)> = (0..c)
+            .map(|k| {
+                let leaf = own[k].and_then(|i| grids[k].and_then(|g| g.leaves.get(i)));
+                let tile = tiled.and_then(|t| t[k]);
+                let mask = match (leaf, tile) {
+                    (Some(l), _) => l.mask,
+                    (None, Some(_)) => LeafMask([u64::MAX; 8]),
+                    (None, None) => LeafMask::default(),
+                };
+                (mask, leaf, tile)
+            })
+            .collect();
+        for (m, _, _) in &parts {
+            for (u, w) in union.iter_mut().zip(m.0) {
+                *u |= w;
+            }
+        }
+        for (k, (mask, leaf, tile)) in parts.into_iter().enumerate() {
+            let mut values = [backgrounds[k]; LEAF_VOXELS];
+            if let Some(v) = tile {
+                values = [v; LEAF_VOXELS];
+            } else if let Some(l) = leaf {
+                for i in l.mask.iter_on() {
+                    values[i] = l.values[i];
+                }
+            }
+            leaves.push(Leaf { origin: o, mask: LeafMask(union), values });
+            channel_masks.push(mask.0);
+        }
+    }
+    let tiles = tiles.into_iter().map(|((o, dim), v)| (o, dim, v.iter().zip(backgrounds).map(|(v, &bg)| v.unwrap_or(bg)).collect())).collect();
+    Merged { leaves, channel_masks, tiles }
 }
 
 /// Everything the builder kept, ready to be laid out.
 pub struct Built {
-    pub background: f32,
+    pub channels: usize,
+    /// Per channel, the background of its grids (0 when it never had one).
+    pub backgrounds: Vec<f32>,
     pub pool: BrickPool,
     pub l3: Vec<L3>,
     pub frames: Vec<FrameLeaves>,
@@ -455,71 +601,6 @@ pub struct Built {
     pub offset: Coord,
     /// Leaves pushed over all frames (before deduplication).
     pub leaves_in: u64,
-}
-
-/// The node arrays of a flip-book.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Nodes {
-    /// Source index-space position of the L1 nodes' origin.
-    pub offset: Coord,
-    /// L1 node of each frame.
-    pub frames: Vec<u32>,
-    pub l1: Vec<u32>,
-    pub l1_entries: Vec<u32>,
-    pub l2: Vec<u32>,
-    pub l2_entries: Vec<u32>,
-    pub l3: Vec<u32>,
-    /// Pairs of (value bits, flags).
-    pub tiles: Vec<u32>,
-}
-
-/// Slot of the (translated) coordinate `p` in a node of `2^log2` slots per axis of `2^child_log2` voxels.
-fn slot(p: Coord, log2: u32, child_log2: u32) -> usize {
-    let m = (1i32 << log2) - 1;
-    let (x, y, z) = (((p.x >> child_log2) & m) as usize, ((p.y >> child_log2) & m) as usize, ((p.z >> child_log2) & m) as usize);
-    (x << (2 * log2)) | (y << log2) | z
-}
-
-/// Occupancy mask, prefix counts and first entry of a node with `slots` slots.
-fn node_words(occupied: &[usize], slots: usize, first: u32) -> Vec<u32> {
-    let mw = slots / 32;
-    let mut words = vec![0u32; mw + mw / 2 + 1];
-    for &s in occupied {
-        words[s / 32] |= 1 << (s % 32);
-    }
-    let mut count = 0u32;
-    for k in 0..mw {
-        words[mw + k / 2] |= (count & 0xffff) << (16 * (k % 2));
-        count += words[k].count_ones();
-    }
-    words[mw + mw / 2] = first;
-    words
-}
-
-/// The node count word 0 of an L3 array gives, when the array holds that many
-/// node records (`None` for an empty or too short array).
-pub fn l3_node_count(words: &[u32]) -> Option<usize> {
-    let n = *words.first()? as usize;
-    (n.saturating_mul(L3_WORDS).saturating_add(1) <= words.len()).then_some(n)
-}
-
-/// The L3 array of the given nodes (layout in the module documentation).
-fn l3_words(nodes: &[L3]) -> Result<Vec<u32>, Error> {
-    let overflow = || Error::Overflow { what: "L3 nodes" };
-    let count = u32::try_from(nodes.len()).map_err(|_| overflow())?;
-    let mut head = Vec::with_capacity(1 + nodes.len() * L3_WORDS);
-    head.push(count);
-    let mut masks = Vec::new();
-    let start = 1 + nodes.len() * L3_WORDS;
-    for l in nodes {
-        let (states, partial) = encode_l3_mask(&l.mask);
-        let first = u32::try_from(start + masks.len()).map_err(|_| overflow())?;
-        head.extend([l.brick, states, first]);
-        masks.extend(partial.iter().flat_map(|m| [*m as u32, (*m >> 32) as u32]));
-    }
-    u32::try_from(start + masks.len()).map_err(|_| overflow())?;
-    head.extend(masks);
-    Ok(head)
 }
 
 /// Interns a node given its occupied slots (ascending) and their entries.
@@ -535,7 +616,7 @@ fn intern_node(table: &mut Interner, nodes: &mut Vec<u32>, entries: &mut Vec<u32
         let first = u32::try_from(entries.len()).map_err(|_| Error::Overflow { what: "node entries" })?;
         entries.extend(occupied.iter().map(|&(_, e)| e));
         let slots_on: Vec<usize> = occupied.iter().map(|&(s, _)| s).collect();
-        nodes.extend(node_words(&slots_on, slots, first));
+        nodes.extend(nodes::node_words(&slots_on, slots, first));
     }
     if id >= TILE_FLAG {
         return Err(Error::Overflow { what: "nodes" });
@@ -543,76 +624,11 @@ fn intern_node(table: &mut Interner, nodes: &mut Vec<u32>, entries: &mut Vec<u32
     Ok(id)
 }
 
-/// The 64 bits of 4³ sub-block `b` of a leaf mask (bit `j` = (x%4)·16 + (y%4)·4 + z%4).
-pub fn sub_mask(mask: &[u64; 8], b: usize) -> u64 {
-    let (x0, y0, z0) = ((b >> 2) * 4, ((b >> 1) & 1) * 4, (b & 1) * 4);
-    let mut out = 0u64;
-    for dx in 0..4 {
-        let plane = mask[(x0 + dx) & 7];
-        for dy in 0..4 {
-            out |= ((plane >> ((y0 + dy) * 8 + z0)) & 0xf) << (dx * 16 + dy * 4);
-        }
-    }
-    out
-}
-
-/// Sets sub-block `b` of a leaf mask to `bits` (the inverse of [`sub_mask`]).
-fn put_sub_mask(mask: &mut [u64; 8], b: usize, bits: u64) {
-    let (x0, y0, z0) = ((b >> 2) * 4, ((b >> 1) & 1) * 4, (b & 1) * 4);
-    for dx in 0..4 {
-        for dy in 0..4 {
-            mask[(x0 + dx) & 7] |= ((bits >> (dx * 16 + dy * 4)) & 0xf) << ((y0 + dy) * 8 + z0);
-        }
-    }
-}
-
-/// The states word of a leaf mask, and its partly active sub-blocks' masks in order.
-pub fn encode_l3_mask(mask: &[u64; 8]) -> (u32, Vec<u64>) {
-    let mut states = 0u32;
-    let mut partial = Vec::new();
-    for b in 0..8 {
-        let m = sub_mask(mask, b);
-        let state = match m {
-            0 => SUB_EMPTY,
-            u64::MAX => SUB_FULL,
-            _ => {
-                partial.push(m);
-                SUB_PARTIAL
-            }
-        };
-        states |= state << (2 * b);
-    }
-    (states, partial)
-}
-
-/// A leaf mask back from its states word and the words of its sub-masks
-/// (`None` for a state of 3, bits past the eight states, or too few words).
-pub fn decode_l3_mask(states: u32, words: &[u32]) -> Option<[u64; 8]> {
-    if states >> 16 != 0 {
-        return None; // only eight 2-bit states
-    }
-    let mut mask = [0u64; 8];
-    let mut k = 0;
-    for b in 0..8 {
-        let bits = match (states >> (2 * b)) & 3 {
-            SUB_EMPTY => 0,
-            SUB_FULL => u64::MAX,
-            SUB_PARTIAL => {
-                let w = words.get(2 * k..2 * k + 2)?;
-                k += 1;
-                u64::from(w[0]) | (u64::from(w[1]) << 32)
-            }
-            _ => return None,
-        };
-        put_sub_mask(&mut mask, b, bits);
-    }
-    Some(mask)
-}
-
 impl Built {
     /// Lays out the node arrays; `brick_of(l3.brick)` gives each brick's final id.
     pub fn nodes(&self, brick_of: impl Fn(u32) -> u32) -> Result<Nodes, Error> {
-        let mut n = Nodes { offset: self.offset, ..Nodes::default() };
+        let off = self.offset;
+        let mut n = Nodes { offset: off.to_array(), channels: self.channels, ..Nodes::default() };
         // L3 nodes, re-interned after the brick remap (two L3s may now be equal).
         let mut l3_table = Interner::<L3>::default();
         l3_table.reserve(self.l3.len());
@@ -622,14 +638,14 @@ impl Built {
             let key = L3 { mask: l.mask, brick: brick_of(l.brick) };
             let (id, new) = l3_table.intern(key);
             if new {
-                distinct.push(key);
+                distinct.push((key.mask, key.brick));
             }
             l3_id.push(id);
         }
-        n.l3 = l3_words(&distinct)?;
+        n.l3 = nodes::l3_words(&distinct).ok_or(Error::Overflow { what: "L3 words" })?;
         let mut tile_table = Interner::default();
-        let mut tile = |value: f32, n: &mut Nodes| -> u32 {
-            let key = vec![value.to_bits(), 1];
+        let mut tile = |values: &[f32], n: &mut Nodes| -> u32 {
+            let key: Vec<u32> = values.iter().map(|v| v.to_bits()).collect();
             let (id, new) = tile_table.intern(key.clone());
             if new {
                 n.tiles.extend(key);
@@ -638,29 +654,28 @@ impl Built {
         };
         let mut l2_table = Interner::default();
         let mut l1_table = Interner::default();
-        let off = self.offset;
-        let local = |c: Coord| Coord::new(c.x.wrapping_sub(off.x), c.y.wrapping_sub(off.y), c.z.wrapping_sub(off.z));
+        let local = |c: Coord| [c.x.wrapping_sub(off.x), c.y.wrapping_sub(off.y), c.z.wrapping_sub(off.z)];
         for fl in &self.frames {
             // (l1 slot, l2 slot, entry), or a tile for a whole l1 slot.
             let mut l2s: Vec<(usize, usize, u32)> = Vec::with_capacity(fl.leaves.len());
             let mut l1_tiles: BTreeMap<usize, u32> = BTreeMap::new();
             for &(o, id) in &fl.leaves {
                 let p = local(o);
-                l2s.push((slot(p, L1_LOG2, 7), slot(p, L2_LOG2, 3), l3_id[id as usize]));
+                l2s.push((nodes::slot(p, L1_LOG2, 7), nodes::slot(p, L2_LOG2, 3), l3_id[id as usize]));
             }
-            for &(o, dim, value) in &fl.tiles {
-                let t = tile(value, &mut n);
+            for (o, dim, values) in &fl.tiles {
+                let t = tile(values, &mut n);
                 match dim {
                     8 => {
-                        let p = local(o);
-                        l2s.push((slot(p, L1_LOG2, 7), slot(p, L2_LOG2, 3), t));
+                        let p = local(*o);
+                        l2s.push((nodes::slot(p, L1_LOG2, 7), nodes::slot(p, L2_LOG2, 3), t));
                     }
                     128 => {
-                        l1_tiles.insert(slot(local(o), L1_LOG2, 7), t);
+                        l1_tiles.insert(nodes::slot(local(*o), L1_LOG2, 7), t);
                     }
                     _ => {
                         // A root tile: every 128³ slot of the L1 region inside it.
-                        let span = i64::from(dim);
+                        let span = i64::from(*dim);
                         for s in 0..L1_SLOTS {
                             let (x, y, z) = ((s >> 10) as i64 * 128, ((s >> 5) & 31) as i64 * 128, (s & 31) as i64 * 128);
                             let w = [i64::from(off.x) + x, i64::from(off.y) + y, i64::from(off.z) + z];
@@ -697,127 +712,6 @@ impl Built {
             n.frames.push(id);
         }
         Ok(n)
-    }
-}
-
-/// What a slot of a node holds.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Slot {
-    Empty,
-    Child(u32),
-    Tile { value: f32, active: bool },
-}
-
-impl Nodes {
-    fn lookup(node: &[u32], entries: &[u32], tiles: &[u32], mask_words: usize, s: usize) -> Slot {
-        let (w, b) = (s / 32, s % 32);
-        let Some(&word) = node.get(w) else { return Slot::Empty };
-        if word >> b & 1 == 0 {
-            return Slot::Empty;
-        }
-        let prefix = node.get(mask_words + w / 2).map_or(0, |p| (p >> (16 * (w % 2))) & 0xffff);
-        let first = node.get(mask_words + mask_words / 2).copied().unwrap_or(0);
-        let below = (word & ((1u32 << b) - 1)).count_ones();
-        // Saturating: a corrupt `first` must give "no entry", not an overflow.
-        let e = entries.get(first.saturating_add(prefix).saturating_add(below) as usize).copied().unwrap_or(0);
-        if e & TILE_FLAG != 0 {
-            let t = ((e & !TILE_FLAG) * 2) as usize;
-            Slot::Tile { value: f32::from_bits(tiles.get(t).copied().unwrap_or(0)), active: tiles.get(t + 1).is_some_and(|f| f & 1 == 1) }
-        } else {
-            Slot::Child(e)
-        }
-    }
-
-    /// Slot `s` of L1 node `id`.
-    pub fn l1_slot(&self, id: u32, s: usize) -> Slot {
-        let node = self.l1.get(id as usize * L1_WORDS..(id as usize + 1) * L1_WORDS).unwrap_or(&[]);
-        Nodes::lookup(node, &self.l1_entries, &self.tiles, L1_MASK_WORDS, s)
-    }
-
-    /// Slot `s` of L2 node `id`.
-    pub fn l2_slot(&self, id: u32, s: usize) -> Slot {
-        let node = self.l2.get(id as usize * L2_WORDS..(id as usize + 1) * L2_WORDS).unwrap_or(&[]);
-        Nodes::lookup(node, &self.l2_entries, &self.tiles, L2_MASK_WORDS, s)
-    }
-
-    /// Active mask and brick of L3 node `id` (`None` past the end or when
-    /// the node's words are inconsistent).
-    pub fn l3_node(&self, id: u32) -> Option<([u64; 8], u32)> {
-        if id as usize >= self.l3_count() {
-            return None;
-        }
-        let at = 1 + id as usize * L3_WORDS;
-        let w = self.l3.get(at..at + L3_WORDS)?;
-        let masks = self.l3.get(w[2] as usize..).unwrap_or(&[]);
-        Some((decode_l3_mask(w[1], masks)?, w[0]))
-    }
-
-    /// Every leaf (source origin, mask, brick) and active tile (source origin,
-    /// edge, value) of a frame; `None` when there are more than `max_leaves`
-    /// leaves or `max_tiles` tiles (shared nodes let a small, corrupt asset
-    /// claim billions, so callers bound what they will decode).
-    #[allow(clippy::type_complexity)]
-    pub fn frame_contents(&self, frame: usize, max_leaves: usize, max_tiles: usize) -> Option<(Vec<(Coord, [u64; 8], u32)>, Vec<(Coord, u32, f32)>)> {
-        let mut leaves = Vec::new();
-        let mut tiles = Vec::new();
-        let Some(&l1) = self.frames.get(frame) else { return Some((leaves, tiles)) };
-        let node = self.l1.get(l1 as usize * L1_WORDS..(l1 as usize + 1) * L1_WORDS).unwrap_or(&[]);
-        let o = self.offset;
-        for w in 0..L1_MASK_WORDS {
-            let mut bits = node.get(w).copied().unwrap_or(0);
-            while bits != 0 {
-                let s1 = w * 32 + bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                let c1 = o.offset(((s1 >> 10) & 31) as i32 * 128, ((s1 >> 5) & 31) as i32 * 128, (s1 & 31) as i32 * 128);
-                match self.l1_slot(l1, s1) {
-                    Slot::Tile { value, active: true } => tiles.push((c1, 128, value)),
-                    Slot::Child(l2) => {
-                        for s2 in 0..L2_SLOTS {
-                            let c2 = c1.offset(((s2 >> 8) & 15) as i32 * 8, ((s2 >> 4) & 15) as i32 * 8, (s2 & 15) as i32 * 8);
-                            match self.l2_slot(l2, s2) {
-                                Slot::Tile { value, active: true } => tiles.push((c2, 8, value)),
-                                Slot::Child(l3) => {
-                                    if let Some((mask, brick)) = self.l3_node(l3) {
-                                        leaves.push((c2, mask, brick));
-                                    }
-                                }
-                                _ => {}
-                            }
-                        }
-                    }
-                    _ => {}
-                }
-                if leaves.len() > max_leaves || tiles.len() > max_tiles {
-                    return None;
-                }
-            }
-        }
-        Some((leaves, tiles))
-    }
-
-    /// Bytes of each node array, for reports.
-    pub fn byte_sizes(&self) -> [(&'static str, usize); 7] {
-        [
-            ("frames", self.frames.len() * 4),
-            ("l1", self.l1.len() * 4),
-            ("l1_entries", self.l1_entries.len() * 4),
-            ("l2", self.l2.len() * 4),
-            ("l2_entries", self.l2_entries.len() * 4),
-            ("l3", self.l3.len() * 4),
-            ("tiles", self.tiles.len() * 4),
-        ]
-    }
-
-    pub fn l1_count(&self) -> usize {
-        self.l1.len() / L1_WORDS
-    }
-    pub fn l2_count(&self) -> usize {
-        self.l2.len() / L2_WORDS
-    }
-    /// L3 nodes, as word 0 of the L3 array says (0 when the array cannot
-    /// hold that many records).
-    pub fn l3_count(&self) -> usize {
-        l3_node_count(&self.l3).unwrap_or(0)
     }
 }
 

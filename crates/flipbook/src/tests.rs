@@ -1,5 +1,6 @@
 use super::*;
 use vdbcook_grid::{GridClass, Leaf, LeafMask, Tile, Transform};
+use vdbcook_vpak::nodes::{decode_l3_mask, encode_l3_mask, l3_node_count, Slot, L3_WORDS, SUB_EMPTY, SUB_FULL, SUB_PARTIAL};
 
 fn grid(leaves: Vec<Leaf>, tiles: Vec<Tile>) -> Grid {
     Grid { name: "density".into(), class: GridClass::FogVolume, background: 0.0, transform: Transform::identity(), leaves, tiles }
@@ -25,10 +26,10 @@ fn pool_stores_identical_bricks_once() {
     b[3] = -0.0;
     let mut c = a;
     c[3] = 0.0;
-    assert_eq!(p.insert(&a).unwrap(), 0);
-    assert_eq!(p.insert(&b).unwrap(), 1);
-    assert_eq!(p.insert(&c).unwrap(), 2);
-    assert_eq!(p.insert(&a).unwrap(), 0);
+    assert_eq!(p.insert(std::slice::from_ref(&a)).unwrap(), 0);
+    assert_eq!(p.insert(std::slice::from_ref(&b)).unwrap(), 1);
+    assert_eq!(p.insert(std::slice::from_ref(&c)).unwrap(), 2);
+    assert_eq!(p.insert(std::slice::from_ref(&a)).unwrap(), 0);
     assert_eq!(p.len(), 3);
 }
 
@@ -63,32 +64,32 @@ fn a_frame_with_repeated_leaves_pools_each_brick_once_in_first_order() {
     let mut first: Vec<Brick> = Vec::new();
     for l in &leaves {
         let br = brick_of_leaf(l);
-        if !first.iter().any(|f| same_bits(f, &br)) {
+        if !first.iter().any(|f| same_bits(std::slice::from_ref(f), std::slice::from_ref(&br))) {
             first.push(br);
         }
     }
     assert!(first.len() > 3000 && first.len() < 3500, "{}", first.len());
-    let mut b = Builder::new();
-    let fs = b.push(&g).unwrap();
+    let mut b = Builder::new(1);
+    let fs = b.push(&[Some(&g)]).unwrap();
     assert_eq!(fs.new_bricks, first.len());
     let st = g.stats();
-    assert_eq!(fs.range, Some([st.min.unwrap() as f32, st.max.unwrap() as f32]));
+    assert_eq!(fs.ranges[0], Some([st.min.unwrap() as f32, st.max.unwrap() as f32]));
     let built = b.finish().unwrap();
     assert_eq!(built.pool.bricks(), &first[..]);
     for (origin, l3) in &built.frames[0].leaves {
         let l = leaves.iter().find(|l| l.origin == *origin).unwrap();
         let node = built.l3[*l3 as usize];
         assert_eq!(node.mask, l.mask.0);
-        assert!(same_bits(&built.pool.bricks()[node.brick as usize], &brick_of_leaf(l)));
+        assert!(same_bits(built.pool.brick(node.brick as usize).unwrap(), &[brick_of_leaf(l)]));
     }
 }
 
 #[test]
 fn unchanging_frames_share_every_node() {
     let g = grid(vec![leaf(Coord::new(-8, 0, 16), 1, 300), leaf(Coord::new(200, 8, 0), 2, 512)], vec![Tile { origin: Coord::new(128, 128, 0), dim: 128, value: 0.25, active: true }]);
-    let mut b = Builder::new();
+    let mut b = Builder::new(1);
     for _ in 0..100 {
-        b.push(&g).unwrap();
+        b.push(&[Some(&g)]).unwrap();
     }
     let built = b.finish().unwrap();
     let n = built.nodes(|id| id).unwrap();
@@ -107,20 +108,20 @@ fn nodes_give_back_every_leaf_and_tile() {
         Tile { origin: Coord::new(16, 8, 8), dim: 8, value: 2.0, active: false },
     ];
     let g = grid(leaves.clone(), tiles);
-    let mut b = Builder::new();
-    b.push(&g).unwrap();
+    let mut b = Builder::new(1);
+    b.push(&[Some(&g)]).unwrap();
     b.push_empty();
     let built = b.finish().unwrap();
     assert_eq!(built.offset, Coord::new(-256, -384, 0));
     let n = built.nodes(|id| id).unwrap();
     let (got, got_tiles) = n.frame_contents(0, usize::MAX, usize::MAX).unwrap();
-    let mut want: Vec<(Coord, [u64; 8])> = leaves.iter().map(|l| (l.origin, l.mask.0)).collect();
+    let mut want: Vec<([i32; 3], [u64; 8])> = leaves.iter().map(|l| (l.origin.to_array(), l.mask.0)).collect();
     want.sort_by_key(|w| w.0);
-    let mut have: Vec<(Coord, [u64; 8])> = got.iter().map(|l| (l.0, l.1)).collect();
+    let mut have: Vec<([i32; 3], [u64; 8])> = got.iter().map(|l| (l.0, l.1)).collect();
     have.sort_by_key(|w| w.0);
     assert_eq!(have, want);
     for (o, _, brick) in &got {
-        let src = leaves.iter().find(|l| l.origin == *o).unwrap();
+        let src = leaves.iter().find(|l| l.origin.to_array() == *o).unwrap();
         let b = &built.pool.bricks()[*brick as usize];
         for i in src.mask.iter_on() {
             assert_eq!(b[i], src.values[i]);
@@ -128,7 +129,8 @@ fn nodes_give_back_every_leaf_and_tile() {
     }
     let mut t = got_tiles.clone();
     t.sort_by_key(|t| t.0);
-    assert_eq!(t, vec![(Coord::new(8, 8, 8), 8, 0.75), (Coord::new(256, 0, 0), 128, 0.5)]);
+    let t: Vec<([i32; 3], u32, Vec<f32>)> = t.iter().map(|&(o, d, i)| (o, d, n.tile(i).unwrap())).collect();
+    assert_eq!(t, vec![([8, 8, 8], 8, vec![0.75]), ([256, 0, 0], 128, vec![0.5])]);
     assert_eq!(n.frame_contents(1, usize::MAX, usize::MAX), Some((vec![], vec![])));
     assert!(n.frame_contents(0, 2, usize::MAX).is_none(), "the leaf limit holds");
 }
@@ -141,8 +143,8 @@ fn prefix_counts_make_lookup_match_a_scan() {
     }
     leaves.sort_by_key(|l| l.origin);
     leaves.dedup_by_key(|l| l.origin);
-    let mut b = Builder::new();
-    b.push(&grid(leaves.clone(), vec![])).unwrap();
+    let mut b = Builder::new(1);
+    b.push(&[Some(&grid(leaves.clone(), vec![]))]).unwrap();
     let built = b.finish().unwrap();
     let n = built.nodes(|id| id).unwrap();
     let (got, _) = n.frame_contents(0, usize::MAX, usize::MAX).unwrap();
@@ -152,40 +154,41 @@ fn prefix_counts_make_lookup_match_a_scan() {
 #[test]
 fn root_tiles_fill_the_l1_slots_they_cover() {
     let g = grid(vec![leaf(Coord::new(0, 0, 0), 1, 5)], vec![Tile { origin: Coord::new(0, 0, 0), dim: 4096, value: 1.0, active: true }]);
-    let mut b = Builder::new();
-    b.push(&g).unwrap();
+    let mut b = Builder::new(1);
+    b.push(&[Some(&g)]).unwrap();
     let n = b.finish().unwrap().nodes(|id| id).unwrap();
     let (leaves, tiles) = n.frame_contents(0, usize::MAX, usize::MAX).unwrap();
     assert_eq!(leaves.len(), 1);
     // Slot 0 holds the leaf's L2 node; the other 32767 slots are the tile.
     assert_eq!(tiles.len(), 32767);
     assert!(matches!(n.l1_slot(n.frames[0], 0), Slot::Child(_)));
-    assert_eq!(n.l1_slot(n.frames[0], 5), Slot::Tile { value: 1.0, active: true });
+    let Slot::Tile(t) = n.l1_slot(n.frames[0], 5) else { panic!("slot 5 is no tile") };
+    assert_eq!(n.tile(t), Some(vec![1.0]));
 }
 
 #[test]
 fn too_wide_sequences_are_refused() {
-    let mut b = Builder::new();
-    b.push(&grid(vec![leaf(Coord::new(0, 0, 0), 1, 5)], vec![])).unwrap();
-    b.push(&grid(vec![leaf(Coord::new(0, 4096, 0), 1, 5)], vec![])).unwrap();
+    let mut b = Builder::new(1);
+    b.push(&[Some(&grid(vec![leaf(Coord::new(0, 0, 0), 1, 5)], vec![]))]).unwrap();
+    b.push(&[Some(&grid(vec![leaf(Coord::new(0, 4096, 0), 1, 5)], vec![]))]).unwrap();
     let e = b.finish().err().unwrap().to_string();
     assert!(e.contains("4104 voxels along y"), "{e}");
 }
 
 #[test]
 fn a_changed_background_is_an_error() {
-    let mut b = Builder::new();
-    b.push(&grid(vec![], vec![])).unwrap();
+    let mut b = Builder::new(1);
+    b.push(&[Some(&grid(vec![], vec![]))]).unwrap();
     let mut g = grid(vec![], vec![]);
     g.background = 1.0;
-    assert!(b.push(&g).is_err());
+    assert!(b.push(&[Some(&g)]).is_err());
 }
 
 #[test]
 fn brick_remap_merges_l3_nodes() {
     let g = grid(vec![leaf(Coord::new(0, 0, 0), 1, 512), leaf(Coord::new(8, 0, 0), 2, 512)], vec![]);
-    let mut b = Builder::new();
-    b.push(&g).unwrap();
+    let mut b = Builder::new(1);
+    b.push(&[Some(&g)]).unwrap();
     let built = b.finish().unwrap();
     assert_eq!(built.nodes(|id| id).unwrap().l3_count(), 2);
     assert_eq!(built.nodes(|_| 0).unwrap().l3_count(), 1);
@@ -306,7 +309,7 @@ fn the_bitmask_fill_equals_the_plain_one_bit_for_bit() {
     }
     for (k, l) in leaves.iter().enumerate() {
         let (a, b) = (brick_of_leaf(l), reference_fill(l));
-        assert!(same_bits(&a, &b), "leaf {k}: {:?}", a.iter().zip(b.iter()).position(|(x, y)| x.to_bits() != y.to_bits()));
+        assert!(same_bits(&[a], &[b]), "leaf {k}: {:?}", a.iter().zip(b.iter()).position(|(x, y)| x.to_bits() != y.to_bits()));
     }
 }
 
@@ -381,8 +384,8 @@ fn l3_array_holds_count_nodes_and_sub_masks() {
     // sub-block or more); the array is the count, two 3-word nodes, and the
     // partial sub-masks of the second; every node reads back.
     let g = grid(vec![leaf(Coord::new(0, 0, 0), 1, 512), leaf(Coord::new(8, 0, 0), 2, 300)], vec![]);
-    let mut b = Builder::new();
-    b.push(&g).unwrap();
+    let mut b = Builder::new(1);
+    b.push(&[Some(&g)]).unwrap();
     let built = b.finish().unwrap();
     let n = built.nodes(|id| id).unwrap();
     assert_eq!(n.l3_count(), 2);
@@ -398,4 +401,97 @@ fn l3_array_holds_count_nodes_and_sub_masks() {
     bad.l3[0] = 1000;
     assert_eq!((bad.l3_count(), bad.l3_node(0)), (0, None));
     assert_eq!((l3_node_count(&n.l3), l3_node_count(&bad.l3), l3_node_count(&[])), (Some(2), None, None));
+}
+
+fn named(name: &str, background: f32, leaves: Vec<Leaf>, tiles: Vec<Tile>) -> Grid {
+    Grid { name: name.into(), class: GridClass::FogVolume, background, transform: Transform::identity(), leaves, tiles }
+}
+
+/// The value of voxel `i` of channel `c` at leaf `origin`, as a reader of the built tree sees it.
+fn read(built: &Built, n: &Nodes, origin: [i32; 3], c: usize, i: usize) -> Option<f32> {
+    let (leaves, _) = n.frame_contents(0, usize::MAX, usize::MAX).unwrap();
+    let (_, mask, brick) = leaves.into_iter().find(|l| l.0 == origin)?;
+    let on = mask[i / 64] >> (i % 64) & 1 == 1;
+    Some(if on { built.pool.brick(brick as usize).unwrap()[c][i] } else { built.backgrounds[c] })
+}
+
+#[test]
+fn channels_share_one_tree_over_the_union_of_their_leaves() {
+    // Channel 0 has leaves at A and B, channel 1 (background 0.5) at B and C;
+    // at B, channel 1 is active on other voxels than channel 0.
+    let (a, b, c) = (Coord::new(0, 0, 0), Coord::new(8, 0, 0), Coord::new(16, 0, 0));
+    let d = named("density", 0.0, vec![leaf(a, 1, 512), leaf(b, 2, 100)], vec![]);
+    let mut tb = leaf(b, 3, 512);
+    for i in 0..50 {
+        tb.mask.set(i, false);
+    }
+    let t = named("temperature", 0.5, vec![tb.clone(), leaf(c, 4, 512)], vec![]);
+    let mut builder = Builder::new(2);
+    let fs = builder.push(&[Some(&d), Some(&t)]).unwrap();
+    assert_eq!(fs.leaves, 3);
+    let built = builder.finish().unwrap();
+    let n = built.nodes(|id| id).unwrap();
+    assert_eq!(built.frames[0].channel_masks.len(), 6, "two masks per leaf");
+    let src = [[Some(leaf(a, 1, 512)), Some(leaf(b, 2, 100)), None], [None, Some(tb), Some(leaf(c, 4, 512))]];
+    for (k, o) in [a, b, c].iter().enumerate() {
+        for ch in 0..2 {
+            for i in 0..512 {
+                let want = match &src[ch][k] {
+                    Some(l) if l.mask.is_on(i) => l.values[i],
+                    _ => built.backgrounds[ch],
+                };
+                assert_eq!(read(&built, &n, o.to_array(), ch, i), Some(want), "leaf {k} channel {ch} voxel {i}");
+            }
+        }
+    }
+    // The union is active where either channel is.
+    let (leaves, _) = n.frame_contents(0, usize::MAX, usize::MAX).unwrap();
+    let at_b = leaves.iter().find(|l| l.0 == b.to_array()).unwrap();
+    assert_eq!(at_b.1.iter().map(|w| w.count_ones()).sum::<u32>(), 512);
+    assert_eq!(fs.ranges.len(), 2);
+}
+
+#[test]
+fn a_tile_over_another_channels_leaf_is_split_and_equal_tiles_merge() {
+    // Channel 0: a 128³ tile at the origin and an 8³ tile at (256, 0, 0).
+    // Channel 1: one leaf inside channel 0's big tile, and an 8³ tile where channel 0 has one.
+    let d = named("density", 0.0, vec![], vec![Tile { origin: Coord::new(0, 0, 0), dim: 128, value: 0.25, active: true }, Tile { origin: Coord::new(256, 0, 0), dim: 8, value: 0.75, active: true }]);
+    let t = named("flames", 0.0, vec![leaf(Coord::new(16, 8, 0), 5, 300)], vec![Tile { origin: Coord::new(256, 0, 0), dim: 8, value: 2.0, active: true }]);
+    let mut builder = Builder::new(2);
+    builder.push(&[Some(&d), Some(&t)]).unwrap();
+    let built = builder.finish().unwrap();
+    let n = built.nodes(|id| id).unwrap();
+    let (leaves, tiles) = n.frame_contents(0, usize::MAX, usize::MAX).unwrap();
+    // The big tile became 4095 8³ tiles and the density part of the one leaf.
+    assert_eq!(leaves.len(), 1);
+    assert_eq!(leaves[0].1, [u64::MAX; 8], "the tile makes every voxel of the leaf active");
+    let brick = built.pool.brick(leaves[0].2 as usize).unwrap();
+    assert!(brick[0].iter().all(|&v| v == 0.25));
+    let src = leaf(Coord::new(16, 8, 0), 5, 300);
+    for i in 0..512 {
+        assert_eq!(brick[1][i], if src.mask.is_on(i) { src.values[i] } else { 0.0 });
+    }
+    let values: Vec<([i32; 3], u32, Vec<f32>)> = tiles.iter().map(|&(o, d, i)| (o, d, n.tile(i).unwrap())).collect();
+    assert_eq!(values.len(), 4096);
+    assert!(values.iter().all(|(o, d, v)| *d == 8 && if *o == [256, 0, 0] { v == &vec![0.75, 2.0] } else { v == &vec![0.25, 0.0] }));
+    // Active voxels: the whole 128³ tile, the leaf's extra voxels are inside it, plus the 8³ tile.
+    assert_eq!(built.frames[0].active_voxels, 128 * 128 * 128 + 512);
+}
+
+#[test]
+fn a_brick_is_shared_only_when_every_channel_matches() {
+    let o = [Coord::new(0, 0, 0), Coord::new(8, 0, 0), Coord::new(16, 0, 0)];
+    let d = named("density", 0.0, o.iter().map(|&c| leaf(c, 1, 512)).collect(), vec![]);
+    // Channel 1 equal at the first two leaves, different at the third.
+    let t = named("temperature", 0.0, vec![leaf(o[0], 7, 512), leaf(o[1], 7, 512), leaf(o[2], 8, 512)], vec![]);
+    let mut builder = Builder::new(2);
+    builder.push(&[Some(&d), Some(&t)]).unwrap();
+    let built = builder.finish().unwrap();
+    assert_eq!(built.pool.len(), 2);
+    let ids: Vec<u32> = built.frames[0].leaves.iter().map(|l| built.l3[l.1 as usize].brick).collect();
+    assert_eq!(ids, vec![0, 0, 1]);
+    // A missing channel is an empty one; a frame must give every channel.
+    let mut builder = Builder::new(2);
+    builder.push(&[None, Some(&t)]).unwrap();
+    assert!(matches!(builder.push(&[Some(&d)]), Err(Error::Channels { found: 1, expected: 2 })));
 }

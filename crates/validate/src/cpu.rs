@@ -3,15 +3,22 @@
 //! bcdec_rs (BC4 in float, as `shaders/bcdec.wgsl`).
 
 use crate::{AssetData, Error, Image, Scene, View};
-use vdbcook_vpak::Asset;
+use vdbcook_vpak::{Asset, GpuChannel};
 
 struct Sampler<'a> {
     d: AssetData<'a>,
     l1: u32,
     bricks: [u32; 4],
+    last: [u32; 4],
+    table: Vec<GpuChannel>,
 }
 
 impl Sampler<'_> {
+    fn new(d: AssetData<'_>, l1: u32) -> Sampler<'_> {
+        let (bricks, last, table) = (d.atlas_bricks(), d.last_atlas(), d.c.gpu_channels());
+        Sampler { d, l1, bricks, last, table }
+    }
+
     fn entry(nodes: &[u32], base: usize, mask_words: usize, s: usize) -> Option<usize> {
         let (w, bit) = (s >> 5, s & 31);
         let word = *nodes.get(base + w)?;
@@ -24,59 +31,82 @@ impl Sampler<'_> {
         Some(first.saturating_add(prefix).saturating_add(below) as usize)
     }
 
-    fn tile(&self, e: u32) -> f32 {
-        f32::from_bits(self.d.tiles.get(((e & 0x7fff_ffff) * 2) as usize).copied().unwrap_or(0))
-    }
-
-    /// Channel `c` of texel (x, y, z) of an atlas, as textureLoad returns it.
-    fn texel(&self, atlas: u32, [x, y, z]: [u32; 3], c: usize) -> f32 {
-        let Some(info) = self.d.meta.atlases.get(atlas as usize) else { return 0.0 };
-        let [w, h, _] = info.texels.map(|t| t as usize);
+    /// Texel `t` of texture slot `slot` (of atlas `atlas`), as `vpak_atlas_buffer.wgsl` decodes it.
+    fn texel(&self, slot: u32, atlas: u32, ch: &GpuChannel, [x, y, z]: [u32; 3]) -> [f32; 4] {
+        let a = self.d.c.atlases.get(slot as usize).copied().unwrap_or(&[]);
+        let size = if atlas == self.last[0] { [self.last[1], self.last[2]] } else { [self.bricks[0], self.bricks[1]] };
+        let [w, h] = size.map(|s| s as usize * 8);
         let (x, y, z) = (x as usize, y as usize, z as usize);
-        let a = self.d.atlases.get(atlas as usize).copied().unwrap_or(&[]);
-        if self.d.format >= 3 {
-            let bb = if self.d.format == 3 { 8 } else { 16 };
+        let mut out = [0.0, 0.0, 0.0, 1.0];
+        if ch.format >= 3 {
+            let bb = if ch.format == 3 { 8 } else { 16 };
             let at = ((z * (h / 4) + y / 4) * (w / 4) + x / 4) * bb;
-            let Some(block) = a.get(at..at + bb) else { return 0.0 };
+            let Some(block) = a.get(at..at + bb) else { return out };
             let t = (y & 3) * 4 + (x & 3);
-            return if self.d.format == 3 {
+            if ch.format == 3 {
                 let mut r = [0.0f32; 16];
                 bcdec_rs::bc4_float(block, &mut r, 4, false);
-                r[t]
+                out[0] = r[t];
             } else {
                 let mut rgba = [0u8; 64];
                 bcdec_rs::bc7(block, &mut rgba, 16);
-                f32::from(rgba[t * 4 + c]) / 255.0
+                out = std::array::from_fn(|l| f32::from(rgba[t * 4 + l]) / 255.0);
+            }
+            return out;
+        }
+        let index = (z * h + y) * w + x;
+        for (l, v) in out.iter_mut().enumerate().take(ch.lanes as usize) {
+            let k = index * ch.lanes as usize + l;
+            *v = match ch.format {
+                0 => a.get(k * 4..k * 4 + 4).map_or(0.0, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                1 => a.get(k * 2..k * 2 + 2).map_or(0.0, |b| half_to_f32(u16::from_le_bytes([b[0], b[1]]))),
+                _ => a.get(k).map_or(0.0, |&q| f32::from(q) / 255.0),
             };
         }
-        let i = (z * h + y) * w + x;
-        match self.d.format {
-            0 => a.get(i * 4..i * 4 + 4).map_or(0.0, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-            1 => a.get(i * 2..i * 2 + 2).map_or(0.0, |b| half_to_f32(u16::from_le_bytes([b[0], b[1]]))),
-            _ => a.get(i).map_or(0.0, |&q| f32::from(q) / 255.0),
-        }
+        out
     }
 
-    /// Value and empty-region edge, as `vpak_query`.
-    fn query(&self, p: [i32; 3]) -> (f32, u32) {
-        let bg = self.d.meta.background;
+    /// Channel `c` of voxel `v` of brick `b`, as `vpak_brick_value`.
+    fn brick_value(&self, b: u32, v: [u32; 3], c: usize) -> f32 {
+        let Some(ch) = self.table.get(c) else { return 0.0 };
+        let [bx, by, _, per] = self.bricks.map(u64::from);
+        let b64 = u64::from(b);
+        let (atlas, i) = if b64 >= per { (b64 / per.max(1), b64 % per.max(1)) } else { (0, b64) };
+        let pos = [i % bx.max(1), (i / bx.max(1)) % by.max(1), i / (bx * by).max(1)].map(|p| p as u32);
+        let atlas = atlas as u32;
+        let slot = ch.plane.saturating_mul(self.d.c.meta.atlases.len() as u32).saturating_add(atlas);
+        let zpt = ch.z_per_texel.max(1);
+        let t = [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2].saturating_mul(ch.slices).saturating_add(v[2] / zpt)];
+        let level = self.texel(slot, atlas, ch, t)[((ch.lane + v[2] % zpt) & 3) as usize];
+        if ch.ranged == 0 {
+            return level;
+        }
+        let [lo, hi] = self.d.c.range(b, c);
+        lo + level * (hi - lo)
+    }
+
+    /// Channel `c`'s value and the empty-region edge, as `vpak_query`.
+    fn query(&self, p: [i32; 3], c: usize) -> (f32, u32) {
+        let channels = self.table.len();
+        let bg = self.table.get(c).map_or(0.0, |ch| f32::from_bits(ch.background));
+        let tile = |e: u32| f32::from_bits(self.d.c.tiles.get(((e & 0x7fff_ffff) as usize).saturating_mul(channels).saturating_add(c)).copied().unwrap_or(0));
         if p.iter().any(|&c| !(0..4096).contains(&c)) {
             return (bg, 128);
         }
         let u = p.map(|c| c as u32);
         let s1 = (((u[0] >> 7) & 31) << 10 | ((u[1] >> 7) & 31) << 5 | ((u[2] >> 7) & 31)) as usize;
-        let Some(i1) = Self::entry(self.d.l1, self.l1 as usize * 1537, 1024, s1) else { return (bg, 128) };
-        let e1 = self.d.l1_entries.get(i1).copied().unwrap_or(0);
+        let Some(i1) = Self::entry(self.d.c.l1, self.l1 as usize * 1537, 1024, s1) else { return (bg, 128) };
+        let e1 = self.d.c.l1_entries.get(i1).copied().unwrap_or(0);
         if e1 & 0x8000_0000 != 0 {
-            return (self.tile(e1), 0);
+            return (tile(e1), 0);
         }
         let s2 = (((u[0] >> 3) & 15) << 8 | ((u[1] >> 3) & 15) << 4 | ((u[2] >> 3) & 15)) as usize;
-        let Some(i2) = Self::entry(self.d.l2, e1 as usize * 193, 128, s2) else { return (bg, 8) };
-        let e2 = self.d.l2_entries.get(i2).copied().unwrap_or(0);
+        let Some(i2) = Self::entry(self.d.c.l2, e1 as usize * 193, 128, s2) else { return (bg, 8) };
+        let e2 = self.d.c.l2_entries.get(i2).copied().unwrap_or(0);
         if e2 & 0x8000_0000 != 0 {
-            return (self.tile(e2), 0);
+            return (tile(e2), 0);
         }
-        let word = |k: usize| self.d.l3.get(k).copied().unwrap_or(0);
+        let word = |k: usize| self.d.c.l3.get(k).copied().unwrap_or(0);
         let l3 = (e2 as usize).saturating_mul(3).saturating_add(1);
         let v = u.map(|c| c & 7);
         // The voxel's 4³ sub-block: empty, full, or partly active (a sub-mask).
@@ -94,23 +124,7 @@ impl Sampler<'_> {
                 return (bg, 0);
             }
         }
-        let b = word(l3);
-        let [bx, by, _, per] = self.bricks.map(u64::from);
-        let b64 = u64::from(b);
-        let (atlas, i) = (b64 / per.max(1), b64 % per.max(1));
-        let pos = [i % bx.max(1), (i / bx.max(1)) % by.max(1), i / (bx * by).max(1)].map(|p| p as u32);
-        let atlas = atlas as u32;
-        // BC7 holds four z-slices of a brick in one texel's RGBA.
-        let t = if self.d.format == 4 {
-            self.texel(atlas, [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2] * 2 + v[2] / 4], (v[2] & 3) as usize)
-        } else {
-            self.texel(atlas, [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2] * 8 + v[2]], 0)
-        };
-        if self.d.format <= 1 {
-            return (t, 0);
-        }
-        let r = [self.d.ranges.get(2 * b as usize).copied().unwrap_or(0.0), self.d.ranges.get(2 * b as usize + 1).copied().unwrap_or(0.0)];
-        (r[0] + t * (r[1] - r[0]), 0)
+        (self.brick_value(word(l3), v, c), 0)
     }
 }
 
@@ -160,9 +174,9 @@ fn at(o: [f32; 3], d: [f32; 3], t: f32) -> [f32; 3] {
 pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width: u32, height: u32) -> Result<Image, Error> {
     let d = AssetData::new(asset)?;
     let l1 = d.frame_l1(frame)?;
-    let bricks = d.atlas_bricks();
-    let skip = d.meta.background == 0.0;
-    let s = Sampler { d, l1, bricks };
+    let ext = crate::extinction_channel(d.meta());
+    let skip = d.meta().channels.get(ext).is_some_and(|c| c.background == 0.0);
+    let s = Sampler::new(d, l1);
     let (r, u, f) = view.basis();
     let tf = (view.fov_deg.to_radians() * 0.5).tan();
     let aspect = width as f32 / height as f32;
@@ -177,7 +191,7 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
             }
             n += 1;
             let p = at(o, dl, t);
-            let (v, empty) = s.query(p.map(|c| c.floor() as i32));
+            let (v, empty) = s.query(p.map(|c| c.floor() as i32), ext);
             if empty > 0 && skip {
                 t += cell_exit(p, dl, empty as f32) + 0.5 * step;
                 continue;
@@ -230,7 +244,7 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
                     }
                     n += 1;
                     let p = at(view.eye, dir, t);
-                    let (v, empty) = s.query(p.map(|c| c.floor() as i32));
+                    let (v, empty) = s.query(p.map(|c| c.floor() as i32), ext);
                     if empty > 0 && skip {
                         let exit = t + cell_exit(p, dir, empty as f32);
                         k = (k + 1.0).max(((exit - t0) / scene.step - 0.5).ceil() + 0.5);
@@ -275,8 +289,8 @@ mod tests {
             let bytes = vdbcook_vpak::assemble(&c.finish(&NoProgress).unwrap().0);
             let asset = Asset::from_bytes(&bytes).unwrap();
             let d = AssetData::new(&asset).unwrap();
-            let (l1, bricks, offset) = (d.frame_l1(0).unwrap(), d.atlas_bricks(), d.meta.index_offset);
-            let s = Sampler { d, l1, bricks };
+            let (l1, offset) = (d.frame_l1(0).unwrap(), d.meta().index_offset);
+            let s = Sampler::new(d, l1);
             let b = grid.stats().bbox.unwrap();
             let mut active = 0u64;
             for x in b.min.x - 8..=b.max.x + 8 {
@@ -284,7 +298,7 @@ mod tests {
                     for z in b.min.z - 8..=b.max.z + 8 {
                         let (value, on) = grid.probe(Coord::new(x, y, z));
                         let want = if on { value } else { grid.background };
-                        let (got, _) = s.query([x - offset[0], y - offset[1], z - offset[2]]);
+                        let (got, _) = s.query([x - offset[0], y - offset[1], z - offset[2]], 0);
                         assert_eq!(got.to_bits(), want.to_bits(), "{f}: voxel ({x}, {y}, {z})");
                         active += u64::from(on);
                     }

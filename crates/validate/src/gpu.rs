@@ -59,8 +59,10 @@ impl BcDecode {
     }
 }
 
-/// Bindings of atlases 0 to 3 (`vpak_atlas_texture.wgsl`, `vpak_atlas_buffer.wgsl`).
-const ATLAS_BINDINGS: [u32; crate::MAX_ATLASES] = [8, 11, 12, 13];
+/// Bindings of texture slots 0 to 7 (`vpak_atlas_texture.wgsl`, `vpak_atlas_buffer.wgsl`).
+const SLOT_BINDINGS: [u32; crate::MAX_TEXTURES] = [8, 11, 12, 13, 15, 16, 17, 18];
+/// Binding of the channel table (`vpak.wgsl`).
+const CHANNEL_BINDING: u32 = 14;
 
 /// The bind group layout and the (march, shadow) pipelines for one atlas and for several.
 struct Pipelines {
@@ -74,8 +76,8 @@ impl Pipelines {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("march"), source: wgpu::ShaderSource::Wgsl(source.into()) });
         let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry { binding, visibility: wgpu::ShaderStages::COMPUTE, ty, count: None };
         let mut entries = vec![entry(0, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None })];
-        entries.extend((1..=7).map(|b| entry(b, storage(true))));
-        entries.extend(ATLAS_BINDINGS.map(|b| entry(b, atlas)));
+        entries.extend((1..=7).chain([CHANNEL_BINDING]).map(|b| entry(b, storage(true))));
+        entries.extend(SLOT_BINDINGS.map(|b| entry(b, atlas)));
         entries.extend([9, 10].map(|b| entry(b, storage(false))));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
@@ -117,11 +119,15 @@ enum Atlas {
 
 /// An asset uploaded for rendering.
 pub struct GpuAsset {
+    /// The node arrays, brick ranges and channel table, in binding order (1 to 7, then 14).
     buffers: Vec<wgpu::Buffer>,
+    /// Texture slots 0 to 7 (unused ones hold a small empty texture or buffer).
     atlases: Vec<Atlas>,
     frames: Vec<u32>,
     atlas_count: usize,
-    format: u32,
+    channels: u32,
+    /// The channel that gives extinction, and its background.
+    extinction: u32,
     background: f32,
     atlas_bricks: [u32; 4],
     last_atlas: [u32; 4],
@@ -131,6 +137,25 @@ impl GpuAsset {
     /// True when BC bricks are decoded by the shader rather than the texture unit.
     pub fn decodes_in_shader(&self) -> bool {
         matches!(self.atlases.first(), Some(Atlas::Buffer(_)))
+    }
+}
+
+/// The texture format of a plane: its format and lanes.
+fn texture_format(p: &vdbcook_vpak::Plane) -> wgpu::TextureFormat {
+    use vdbcook_vpak::Format;
+    use wgpu::TextureFormat as T;
+    match (p.format, p.lanes) {
+        (Format::F32, 1) => T::R32Float,
+        (Format::F32, 2) => T::Rg32Float,
+        (Format::F32, _) => T::Rgba32Float,
+        (Format::F16, 1) => T::R16Float,
+        (Format::F16, 2) => T::Rg16Float,
+        (Format::F16, _) => T::Rgba16Float,
+        (Format::Unorm8, 1) => T::R8Unorm,
+        (Format::Unorm8, 2) => T::Rg8Unorm,
+        (Format::Unorm8, _) => T::Rgba8Unorm,
+        (Format::Bc4, _) => T::Bc4RUnorm,
+        (Format::Bc7, _) => T::Bc7RgbaUnorm,
     }
 }
 
@@ -229,48 +254,46 @@ impl Renderer {
             };
             Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: &contents, usage: wgpu::BufferUsages::STORAGE }))
         };
+        let c = &d.c;
+        let channel_words: Vec<u32> = c.gpu_channels().iter().flat_map(|g| g.words()).collect();
         let mut buffers = Vec::new();
         for (what, data) in [
-            ("l1 nodes", bytemuck::cast_slice::<u32, u8>(d.l1)),
-            ("l1 entries", bytemuck::cast_slice(d.l1_entries)),
-            ("l2 nodes", bytemuck::cast_slice(d.l2)),
-            ("l2 entries", bytemuck::cast_slice(d.l2_entries)),
-            ("l3 nodes", bytemuck::cast_slice(d.l3)),
-            ("tiles", bytemuck::cast_slice(d.tiles)),
-            ("brick ranges", bytemuck::cast_slice(d.ranges)),
+            ("l1 nodes", bytemuck::cast_slice::<u32, u8>(c.l1)),
+            ("l1 entries", bytemuck::cast_slice(c.l1_entries)),
+            ("l2 nodes", bytemuck::cast_slice(c.l2)),
+            ("l2 entries", bytemuck::cast_slice(c.l2_entries)),
+            ("l3 nodes", bytemuck::cast_slice(c.l3)),
+            ("tiles", bytemuck::cast_slice(c.tiles)),
+            ("brick ranges", bytemuck::cast_slice(c.ranges)),
+            ("channel table", bytemuck::cast_slice(&channel_words)),
         ] {
             buffers.push(buffer(what, data)?);
         }
-        let (tex_format, block) = match d.format {
-            0 => (wgpu::TextureFormat::R32Float, None),
-            1 => (wgpu::TextureFormat::R16Float, None),
-            2 => (wgpu::TextureFormat::R8Unorm, None),
-            3 => (wgpu::TextureFormat::Bc4RUnorm, Some(8u32)),
-            _ => (wgpu::TextureFormat::Bc7RgbaUnorm, Some(16u32)),
-        };
-        let fits_buffers = d.atlases.iter().all(|a| a.len() as u64 <= limit);
-        let in_shader = self.decode.in_shader(block.is_some(), self.bc, fits_buffers).ok_or_else(|| Error::Unsupported {
+        let meta = &c.meta;
+        let block = meta.planes.iter().any(|p| p.format.is_block());
+        let fits_buffers = c.atlases.iter().all(|a| a.len() as u64 <= limit);
+        let in_shader = self.decode.in_shader(block, self.bc, fits_buffers).ok_or_else(|| Error::Unsupported {
             adapter: self.adapter.clone(),
-            format: d.meta.format.clone(),
+            format: meta.planes.iter().filter(|p| p.format.is_block()).map(|p| p.format.name()).collect::<Vec<_>>().join("+"),
             feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D (decode them in the shader instead)",
         })?;
-        let mut atlases = Vec::with_capacity(crate::MAX_ATLASES);
+        let mut atlases = Vec::with_capacity(crate::MAX_TEXTURES);
         if in_shader {
-            // Every atlas slot is bound; unused ones get a small empty buffer.
-            for slot in 0..crate::MAX_ATLASES {
-                atlases.push(Atlas::Buffer(buffer("brick atlas (decoded in the shader; cook with a smaller --max-texture-dim)", d.atlases.get(slot).copied().unwrap_or(&[]))?));
+            // Every slot is bound; unused ones get a small empty buffer.
+            for slot in 0..crate::MAX_TEXTURES {
+                atlases.push(Atlas::Buffer(buffer("brick atlas (decoded in the shader; cook with a smaller --max-texture-dim)", c.atlases.get(slot).copied().unwrap_or(&[]))?));
             }
         } else {
             let max_dim = self.device.limits().max_texture_dimension_3d;
-            if let Some(a) = d.meta.atlases.iter().find(|a| a.texels.iter().any(|&t| t > max_dim)) {
-                return Err(Error::Texture { size: a.texels, limit: max_dim });
+            let slots: Vec<(vdbcook_vpak::AtlasLayout, &[u8])> = (0..meta.planes.len()).flat_map(|p| (0..meta.atlases.len()).filter_map(move |a| c.atlas(p, a))).collect();
+            if let Some((l, _)) = slots.iter().find(|(l, _)| l.texels().iter().any(|&t| t > max_dim)) {
+                return Err(Error::Texture { size: l.texels(), limit: max_dim });
             }
-            // Every atlas slot is bound; unused ones get a small empty texture.
-            let empty_size = [8, 8, if d.format == 4 { 2 } else { 8 }];
-            for slot in 0..crate::MAX_ATLASES {
-                let (size, data): ([u32; 3], &[u8]) = match (d.meta.atlases.get(slot), d.atlases.get(slot)) {
-                    (Some(a), Some(bytes)) => (a.texels, bytes),
-                    _ => (empty_size, &[]),
+            for slot in 0..crate::MAX_TEXTURES {
+                // Unused slots get a small empty R8 texture.
+                let (size, data, format) = match slots.get(slot) {
+                    Some((l, bytes)) => (l.texels(), *bytes, texture_format(&l.plane)),
+                    None => ([8, 8, 8], &[][..], wgpu::TextureFormat::R8Unorm),
                 };
                 let texture = self.device.create_texture(&wgpu::TextureDescriptor {
                     label: Some("atlas"),
@@ -278,19 +301,15 @@ impl Renderer {
                     mip_level_count: 1,
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D3,
-                    format: tex_format,
+                    format,
                     usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
                     view_formats: &[],
                 });
-                let (row, rows) = match block {
-                    Some(bb) => (size[0] / 4 * bb, size[1] / 4),
-                    None => (size[0] * tex_format.block_copy_size(None).unwrap_or(4), size[1]),
-                };
-                if !data.is_empty() {
+                if let (Some((l, _)), false) = (slots.get(slot), data.is_empty()) {
                     self.queue.write_texture(
                         wgpu::TexelCopyTextureInfo { texture: &texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect: wgpu::TextureAspect::All },
                         data,
-                        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(rows) },
+                        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(l.row_bytes() as u32), rows_per_image: Some(l.rows() as u32) },
                         wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: size[2] },
                     );
                 }
@@ -298,13 +317,15 @@ impl Renderer {
                 atlases.push(Atlas::Texture { _texture: texture, view });
             }
         }
+        let extinction = crate::extinction_channel(meta);
         Ok(GpuAsset {
             buffers,
             atlases,
-            frames: d.frames.to_vec(),
-            atlas_count: d.meta.atlases.len(),
-            format: d.format,
-            background: d.meta.background,
+            frames: c.frames.to_vec(),
+            atlas_count: meta.atlases.len(),
+            channels: meta.channels.len() as u32,
+            extinction: extinction as u32,
+            background: meta.channels.get(extinction).map_or(0.0, |ch| ch.background),
             atlas_bricks: d.atlas_bricks(),
             last_atlas: d.last_atlas(),
         })
@@ -320,7 +341,7 @@ impl Renderer {
         let (r, u, f) = view.basis();
         let tf = (view.fov_deg.to_radians() * 0.5).tan();
         let mut p: Vec<u32> = Vec::with_capacity(56);
-        p.extend([l1, asset.format, asset.background.to_bits(), 0]);
+        p.extend([l1, asset.channels, asset.atlas_count as u32, 0]);
         p.extend(asset.atlas_bricks);
         p.extend(asset.last_atlas);
         let v4 = |p: &mut Vec<u32>, v: [f32; 3], w: f32| p.extend([v[0].to_bits(), v[1].to_bits(), v[2].to_bits(), w.to_bits()]);
@@ -334,6 +355,7 @@ impl Renderer {
         // Skipping empty space is exact only when empty space is zero.
         p.extend([width, height, scene.max_steps, u32::from(asset.background == 0.0)]);
         v4(&mut p, scene.shadow_grid().map(|g| g as f32), scene.shadow_cell);
+        p.extend([asset.extinction, 0, 0, 0]);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("params"), contents: bytemuck::cast_slice(&p), usage: wgpu::BufferUsages::UNIFORM })
     }
 
@@ -360,15 +382,15 @@ impl Renderer {
                 mapped_at_creation: false,
             });
             let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() }];
-            for (b, buf) in asset.buffers.iter().enumerate() {
-                entries.push(wgpu::BindGroupEntry { binding: b as u32 + 1, resource: buf.as_entire_binding() });
+            for (b, buf) in (1..=7).chain([CHANNEL_BINDING]).zip(&asset.buffers) {
+                entries.push(wgpu::BindGroupEntry { binding: b, resource: buf.as_entire_binding() });
             }
             for (k, atlas) in asset.atlases.iter().enumerate() {
                 let resource = match atlas {
                     Atlas::Texture { view, .. } => wgpu::BindingResource::TextureView(view),
                     Atlas::Buffer(b) => b.as_entire_binding(),
                 };
-                entries.push(wgpu::BindGroupEntry { binding: ATLAS_BINDINGS[k], resource });
+                entries.push(wgpu::BindGroupEntry { binding: SLOT_BINDINGS[k], resource });
             }
             entries.push(wgpu::BindGroupEntry { binding: 9, resource: out.as_entire_binding() });
             entries.push(wgpu::BindGroupEntry { binding: 10, resource: shadow.as_entire_binding() });

@@ -14,7 +14,7 @@ pub mod report;
 pub use cpu::render_cpu;
 pub use gpu::{shader_sources, BcDecode, GpuAsset, Renderer};
 
-use vdbcook_vpak::{kind, Asset, Metadata};
+use vdbcook_vpak::{Asset, Checked, Metadata};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -24,14 +24,12 @@ pub enum Error {
     Device(String),
     #[error("the adapter \"{adapter}\" cannot sample {format} bricks: it lacks {feature}")]
     Unsupported { adapter: String, format: String, feature: &'static str },
-    #[error("the asset has {0} brick atlases; the renderer binds at most {MAX_ATLASES} (cook with a larger --max-texture-dim)")]
-    Atlases(usize),
+    #[error("the asset has {planes} planes in {atlases} atlases, {} textures; the renderer binds at most {MAX_TEXTURES} (cook with a larger --max-texture-dim, or fewer channel groups)", .planes * .atlases)]
+    Textures { planes: usize, atlases: usize },
     #[error("a brick atlas of {size:?} texels exceeds the adapter's 3D texture limit of {limit} (cook with a smaller --max-texture-dim)")]
     Texture { size: [u32; 3], limit: u32 },
     #[error("the asset's {what} ({bytes} bytes) exceeds the adapter's limit of {limit} bytes")]
     TooLarge { what: &'static str, bytes: u64, limit: u64 },
-    #[error("unsupported voxel format \"{0}\"")]
-    Format(String),
     #[error("the asset is inconsistent: {0}")]
     Corrupt(String),
     #[error("frame {frame} is out of range (the asset has {count})")]
@@ -42,19 +40,15 @@ pub enum Error {
     Asset(#[from] vdbcook_vpak::Error),
 }
 
-/// Brick atlases the renderer binds.
-pub const MAX_ATLASES: usize = 4;
+/// Textures (atlas planes) the renderer binds.
+pub const MAX_TEXTURES: usize = 8;
 
-/// Voxel format codes shared with `vpak.wgsl`.
-pub fn format_code(name: &str) -> Option<u32> {
-    Some(match name {
-        "f32" => 0,
-        "f16" => 1,
-        "unorm8" => 2,
-        "bc4" => 3,
-        "bc7" => 4,
-        _ => return None,
-    })
+/// Which channels the validation render shows.  A channel named `density`
+/// gives extinction; without one, `flames` (or `flame`), else `temperature`
+/// (or `heat`), else the first channel.
+pub fn extinction_channel(meta: &Metadata) -> usize {
+    let find = |names: &[&str]| meta.channels.iter().position(|c| names.contains(&c.name.as_str()));
+    find(&["density"]).or_else(|| find(&["flames", "flame"])).or_else(|| find(&["temperature", "heat"])).unwrap_or(0)
 }
 
 /// A camera looking at a point.
@@ -120,7 +114,8 @@ impl Scene {
         let box_max = hi.map(|v| v.clamp(0, 4096) as f32);
         let ext = sub(box_max, box_min);
         let diag = (ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]).sqrt().max(1.0);
-        let peak = meta.value_range[1].abs().max(meta.value_range[0].abs()).max(1e-6);
+        let range = meta.channels.get(extinction_channel(meta)).map_or([0.0, 1.0], |c| c.value_range);
+        let peak = range[1].abs().max(range[0].abs()).max(1e-6);
         Scene {
             box_min,
             box_max,
@@ -186,91 +181,28 @@ pub fn compare(reference: &Image, other: &Image) -> ImageMetrics {
     ImageMetrics { rmse, psnr: if rmse > 0.0 { -20.0 * rmse.log10() } else { f64::INFINITY }, max_error: mx }
 }
 
-/// Atlas metadata must describe the sections exactly, and every atlas but the
-/// last must have the first one's shape (the samplers assume both).
-fn check_atlases(meta: &Metadata, format: u32, sections: &[&[u8]]) -> Result<(), Error> {
-    let spb: u64 = if format == 4 { 2 } else { 8 };
-    let first = meta.atlases.first();
-    let mut next_brick = 0u64;
-    for (i, (a, bytes)) in meta.atlases.iter().zip(sections).enumerate() {
-        let bad = |what: String| Err(Error::Corrupt(format!("atlas {i}: {what}")));
-        let [bx, by, bz] = a.bricks.map(u64::from);
-        if bx == 0 || by == 0 || bz == 0 || u64::from(a.count) > bx * by * bz {
-            return bad(format!("{:?} bricks cannot hold {}", a.bricks, a.count));
-        }
-        if a.texels.map(u64::from) != [bx * 8, by * 8, bz * spb] {
-            return bad(format!("texture size {:?} does not match {:?} bricks", a.texels, a.bricks));
-        }
-        // Samplers place brick i of any atlas with the first atlas's shape:
-        // every atlas but the last has that shape, and the last must hold
-        // every position it gives.
-        if let Some(f) = first {
-            let [fx, fy, _] = f.bricks.map(|b| u64::from(b).max(1));
-            let n = u64::from(a.count);
-            let need = [n.min(fx), n.div_ceil(fx).min(fy), n.div_ceil(fx * fy)];
-            let fits = if i + 1 < meta.atlases.len() { a.bricks == f.bricks } else { (0..3).all(|k| u64::from(a.bricks[k]) >= need[k]) };
-            if !fits || u64::from(a.first_brick) != next_brick {
-                return bad("its layout does not follow the first atlas's".into());
-            }
-        }
-        next_brick += u64::from(a.count);
-        let [w, h, d] = a.texels.map(u64::from);
-        let expected = match format {
-            0 => w * h * d * 4,
-            1 => w * h * d * 2,
-            2 => w * h * d,
-            3 => (w / 4) * (h / 4) * d * 8,
-            _ => (w / 4) * (h / 4) * d * 16,
-        };
-        if bytes.len() as u64 != expected {
-            return bad(format!("{} bytes, its size needs {expected}", bytes.len()));
-        }
-    }
-    Ok(())
-}
-
-/// The node arrays and bricks of an asset, as the renderers read them.
+/// A validated asset, as the renderers read it.
 pub(crate) struct AssetData<'a> {
-    pub meta: Metadata,
-    pub format: u32,
-    pub l1: &'a [u32],
-    pub l1_entries: &'a [u32],
-    pub l2: &'a [u32],
-    pub l2_entries: &'a [u32],
-    pub l3: &'a [u32],
-    pub tiles: &'a [u32],
-    pub ranges: &'a [f32],
-    pub frames: &'a [u32],
-    pub atlases: Vec<&'a [u8]>,
+    pub c: Checked<'a>,
 }
 
 impl<'a> AssetData<'a> {
     pub fn new(asset: &'a Asset) -> Result<AssetData<'a>, Error> {
-        let meta = asset.metadata()?;
-        let format = format_code(&meta.format).ok_or_else(|| Error::Format(meta.format.clone()))?;
-        if meta.atlases.len() > MAX_ATLASES {
-            return Err(Error::Atlases(meta.atlases.len()));
+        let c = Checked::new(asset)?;
+        let (planes, atlases) = (c.meta.planes.len(), c.meta.atlases.len());
+        if planes * atlases > MAX_TEXTURES {
+            return Err(Error::Textures { planes, atlases });
         }
-        let atlases = (0..meta.atlases.len()).map(|i| asset.section(kind::ATLAS, i as u32)).collect::<Result<Vec<_>, _>>()?;
-        check_atlases(&meta, format, &atlases)?;
-        Ok(AssetData {
-            format,
-            l1: asset.u32s(kind::L1_NODES)?,
-            l1_entries: asset.u32s(kind::L1_ENTRIES)?,
-            l2: asset.u32s(kind::L2_NODES)?,
-            l2_entries: asset.u32s(kind::L2_ENTRIES)?,
-            l3: asset.u32s(kind::L3_NODES)?,
-            tiles: asset.u32s(kind::TILES)?,
-            ranges: asset.f32s(kind::BRICK_RANGES)?,
-            frames: asset.u32s(kind::FRAMES)?,
-            atlases,
-            meta,
-        })
+        Ok(AssetData { c })
+    }
+
+    pub fn meta(&self) -> &Metadata {
+        &self.c.meta
     }
 
     /// Size in bricks of the first atlas and the bricks every full atlas holds.
     pub fn atlas_bricks(&self) -> [u32; 4] {
-        match self.meta.atlases.first() {
+        match self.c.meta.atlases.first() {
             Some(a) => {
                 let [x, y, z] = a.bricks.map(|b| b.max(1));
                 [x, y, z, x.saturating_mul(y).saturating_mul(z)]
@@ -281,13 +213,13 @@ impl<'a> AssetData<'a> {
 
     /// The last atlas's number and its own size in bricks along x and y.
     pub fn last_atlas(&self) -> [u32; 4] {
-        match self.meta.atlases.last() {
-            Some(a) => [(self.meta.atlases.len() - 1) as u32, a.bricks[0].max(1), a.bricks[1].max(1), 0],
+        match self.c.meta.atlases.last() {
+            Some(a) => [(self.c.meta.atlases.len() - 1) as u32, a.bricks[0].max(1), a.bricks[1].max(1), 0],
             None => [0, 1, 1, 0],
         }
     }
 
     pub fn frame_l1(&self, frame: usize) -> Result<u32, Error> {
-        self.frames.get(frame).copied().ok_or(Error::Frame { frame, count: self.frames.len() })
+        self.c.frames.get(frame).copied().ok_or(Error::Frame { frame, count: self.c.frames.len() })
     }
 }

@@ -131,7 +131,7 @@ fn several_atlases_render_like_one() {
         }
     }
     let many = Asset::from_bytes(&cook_dim(&SEQ, Format::F32, 16)).unwrap();
-    assert!(matches!(r.upload(&many), Err(vdbcook_validate::Error::Atlases(_))));
+    assert!(matches!(r.upload(&many), Err(vdbcook_validate::Error::Textures { .. })));
 }
 
 #[test]

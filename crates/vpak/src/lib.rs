@@ -16,14 +16,25 @@
 //!                  u32 kind, u32 index, u64 offset, u64 size, u64 XXH3-64 of the section's bytes
 //! ...            sections, each at an offset that is a multiple of 256, zero padding between
 //! ```
-//! All integers are little-endian.  This crate has no CLI or GPU dependency.
+//! All integers are little-endian.  This crate has no CLI or GPU dependency:
+//! it owns the container ([`Asset`], [`write_file`]), the node arrays
+//! ([`nodes`]), the voxel formats, planes, atlas shapes and texel packing
+//! ([`layout`]), and the one validator every reader calls ([`Checked`]).
+
+mod check;
+pub mod layout;
+pub mod nodes;
+
+pub use check::{Checked, GpuChannel, MAX_CHANNELS};
+pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, BRICK_VOXELS, MAX_BRICK_BYTES};
 
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
 /// 2: compact L3 nodes (sub-block states and sub-masks instead of 512-bit masks).
-pub const VERSION: u32 = 2;
+/// 3: channels (several grids in one tree), planes, per-channel brick ranges and tile values.
+pub const VERSION: u32 = 3;
 pub const HEADER_LEN: usize = 64;
 pub const ENTRY_LEN: usize = 32;
 /// Every section starts at a multiple of this (GPU upload and mmap friendly).
@@ -42,11 +53,11 @@ pub mod kind {
     pub const L2_NODES: u32 = 5;
     pub const L2_ENTRIES: u32 = 6;
     pub const L3_NODES: u32 = 7;
-    /// (f32 value, u32 flags) per tile.
+    /// One f32 per channel per tile.
     pub const TILES: u32 = 8;
-    /// (f32 min, f32 max) per brick.
+    /// (f32 min, f32 max) per brick per channel.
     pub const BRICK_RANGES: u32 = 9;
-    /// One brick atlas (a 3D texture); `index` numbers the atlases.
+    /// One plane of one brick atlas (a 3D texture); `index` = plane · atlases + atlas.
     pub const ATLAS: u32 = 10;
 
     pub fn name(k: u32) -> &'static str {
@@ -92,17 +103,8 @@ pub enum Error {
     Metadata(String),
     #[error("{0} already exists (use --force to replace it)")]
     Exists(String),
-}
-
-/// A brick atlas, as recorded in the metadata.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct AtlasInfo {
-    /// Bricks along x, y, z.
-    pub bricks: [u32; 3],
-    /// Texture size in texels.
-    pub texels: [u32; 3],
-    pub first_brick: u32,
-    pub count: u32,
+    #[error("the asset is inconsistent: {0}")]
+    Invalid(String),
 }
 
 /// A source file and its content hash.
@@ -119,9 +121,34 @@ pub struct SourceFile {
 pub struct FrameInfo {
     /// Index into `sources`, or `None` for an empty (missing) frame.
     pub source: Option<u32>,
+    /// Voxels active in any channel (tile voxels included).
     pub active_voxels: u64,
     pub leaves: u32,
     pub tiles: u32,
+}
+
+/// One channel: a scalar grid, or one component of a vec3 grid.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Channel {
+    /// "density", or "vel.x" for component x of the vec3 grid "vel".
+    pub name: String,
+    /// The source grid's name.
+    pub grid: String,
+    /// 0, 1, 2 for the x, y, z component of a vec3 grid; `None` for a scalar grid.
+    pub component: Option<u32>,
+    /// The source grid's value type: "float", "double", "half", "vec3s", "vec3d".
+    pub value_type: String,
+    /// The source grid's class: "fog volume", "level set", "staggered", "unknown".
+    pub class: String,
+    /// The value of a voxel outside the channel's active set.
+    pub background: f32,
+    /// Smallest and largest stored value over every frame (the background if none).
+    pub value_range: [f32; 2],
+    /// Channel group (the channels whose format was chosen together).
+    pub group: u32,
+    /// Plane (texture) holding the channel, and its first lane there.
+    pub plane: u32,
+    pub lane: u32,
 }
 
 /// Everything about the asset that is not a GPU array.
@@ -129,22 +156,18 @@ pub struct FrameInfo {
 pub struct Metadata {
     /// "vdbcook x.y.z".
     pub tool: String,
-    /// Voxel format name: "f32", "f16", "unorm8", ...
-    pub format: String,
     pub frame_count: u32,
-    pub grid_name: String,
-    pub grid_class: String,
     /// OpenVDB map type of the source transform.
     pub map_type: String,
-    /// Index-to-world matrix of the source grid (row-vector convention: world = [i j k 1] · M).
+    /// Index-to-world matrix of the source grids (row-vector convention: world = [i j k 1] · M).
     pub transform: [[f64; 4]; 4],
     /// Source index of the L1 node origin: source index = asset index + offset.
     pub index_offset: [i32; 3],
     /// Union of every frame's active bbox in source index space (inclusive), if any.
     pub index_bbox: Option<([i32; 3], [i32; 3])>,
-    pub background: f32,
-    /// Smallest and largest stored value over all bricks and tiles.
-    pub value_range: [f32; 2],
+    pub channels: Vec<Channel>,
+    /// Textures per atlas, in section order.
+    pub planes: Vec<Plane>,
     pub brick_count: u32,
     pub atlases: Vec<AtlasInfo>,
     /// Every cook setting, as (name, value) text pairs.
@@ -163,6 +186,21 @@ impl Metadata {
         let cfg = bincode::config::standard().with_limit::<{ 64 << 20 }>();
         let (m, _) = bincode::serde::decode_from_slice(b, cfg).map_err(|e| Error::Metadata(e.to_string()))?;
         Ok(m)
+    }
+
+    /// The section index of plane `plane`'s texture of atlas `atlas`.
+    pub fn atlas_section(&self, plane: usize, atlas: usize) -> u32 {
+        (plane * self.atlases.len() + atlas) as u32
+    }
+
+    /// The channel named `name`.
+    pub fn channel(&self, name: &str) -> Option<usize> {
+        self.channels.iter().position(|c| c.name == name)
+    }
+
+    /// Largest slices per brick of any plane (what the atlases were planned for).
+    pub fn max_slices(&self) -> u32 {
+        self.planes.iter().map(Plane::slices_per_brick).max().unwrap_or(8)
     }
 }
 
@@ -440,16 +478,13 @@ mod tests {
     fn sample() -> Vec<u8> {
         let meta = Metadata {
             tool: "t".into(),
-            format: "f32".into(),
             frame_count: 1,
-            grid_name: "density".into(),
-            grid_class: "fog volume".into(),
             map_type: "UniformScaleMap".into(),
             transform: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
             index_offset: [0, -128, 0],
             index_bbox: None,
-            background: 0.0,
-            value_range: [0.0, 1.0],
+            channels: vec![],
+            planes: vec![],
             brick_count: 0,
             atlases: vec![],
             settings: vec![("format".into(), "f32".into())],

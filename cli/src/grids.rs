@@ -1,0 +1,145 @@
+//! Which grids of the input files become channels (`--grid`, `--grids`), and
+//! reading them frame by frame.
+
+use crate::Usage;
+use anyhow::{anyhow, Context, Result};
+use std::path::PathBuf;
+use vdbcook_cook::ChannelSpec;
+use vdbcook_grid::Grid;
+use vdbcook_vdb::{GridInfo, ValueType, VdbFile};
+use vdbcook_vpak::SourceFile;
+
+/// The grids asked for.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum GridSelection {
+    /// "density", else the first float grid.
+    #[default]
+    Default,
+    /// `--grid NAME`: that grid.
+    One(String),
+    /// `--grids a,b,c`: those grids, in that order.
+    Many(Vec<String>),
+    /// `--grids all`: every float, double and half grid of the first frame, in file order.
+    All,
+}
+
+impl GridSelection {
+    pub fn from_flags(grid: Option<&str>, grids: Option<&str>) -> GridSelection {
+        match (grid, grids) {
+            (_, Some("all")) => GridSelection::All,
+            (_, Some(list)) => GridSelection::Many(list.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect()),
+            (Some(g), None) => GridSelection::One(g.to_string()),
+            (None, None) => GridSelection::Default,
+        }
+    }
+
+    /// The selection as the cook settings record it.
+    pub fn setting(&self) -> String {
+        match self {
+            GridSelection::Default => String::new(),
+            GridSelection::One(g) => g.clone(),
+            GridSelection::Many(g) => g.join(","),
+            GridSelection::All => "all".into(),
+        }
+    }
+}
+
+/// The channels of a cook: which grid each comes from.
+#[derive(Clone, Debug)]
+pub struct Channels {
+    pub specs: Vec<ChannelSpec>,
+    /// Whether several grids were asked for (a grid missing in a later frame
+    /// is then an empty channel there, not an error).
+    pub several: bool,
+}
+
+fn describe_grids(vdb: &VdbFile) -> String {
+    let names: Vec<String> = vdb.grids.iter().map(|g| format!("{} ({})", g.display_name(), g.value_type.name())).collect();
+    if names.is_empty() {
+        "none".into()
+    } else {
+        names.join(", ")
+    }
+}
+
+fn spec_of(g: &GridInfo) -> ChannelSpec {
+    let value_type = match &g.value_type {
+        ValueType::Scalar(s) => s.name().to_string(),
+        ValueType::Other(t) => t.clone(),
+    };
+    ChannelSpec { name: g.name.clone(), grid: g.name.clone(), component: None, value_type, class: g.class.vdb_name().to_string() }
+}
+
+/// Resolves the selection against the first frame's file.
+pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channels> {
+    let find = |name: &str| -> Result<&GridInfo> {
+        let g = vdb.grids.iter().find(|g| g.name == name).ok_or_else(|| Usage(format!("{path}: no grid named \"{name}\" (the file has: {})", describe_grids(vdb))))?;
+        if let Some(u) = &g.unsupported {
+            return Err(Usage(format!("{path}: grid \"{name}\" cannot be cooked: {u}")).into());
+        }
+        Ok(g)
+    };
+    let specs = match sel {
+        GridSelection::Default => vec![spec_of(&vdb.grids[vdb.select(None).with_context(|| path.to_string())?])],
+        GridSelection::One(name) => vec![spec_of(find(name)?)],
+        GridSelection::Many(names) => {
+            let mut seen = std::collections::HashSet::new();
+            if let Some(dup) = names.iter().find(|n| !seen.insert(n.as_str())) {
+                return Err(Usage(format!("--grids names \"{dup}\" twice")).into());
+            }
+            names.iter().map(|n| find(n).map(spec_of)).collect::<Result<_>>()?
+        }
+        GridSelection::All => {
+            let mut seen = std::collections::HashSet::new();
+            let all: Vec<ChannelSpec> = vdb.grids.iter().filter(|g| g.is_readable_scalar() && seen.insert(g.name.clone())).map(spec_of).collect();
+            if all.is_empty() {
+                return Err(Usage(format!("{path}: --grids all found no float, double or half grid (the file has: {})", describe_grids(vdb))).into());
+            }
+            all
+        }
+    };
+    Ok(Channels { several: matches!(sel, GridSelection::Many(_) | GridSelection::All), specs })
+}
+
+/// One frame as read: one grid per channel (`None`: missing or empty there).
+pub struct Frame {
+    pub path: PathBuf,
+    /// `None` for a missing file (with `--allow-missing`).
+    pub grids: Option<Vec<Option<Grid>>>,
+    pub source: Option<SourceFile>,
+}
+
+fn hash_hex(bytes: &[u8]) -> String {
+    format!("{:032x}", xxhash_rust::xxh3::xxh3_128(bytes))
+}
+
+/// Reads one frame; the channels are resolved by the first frame that has a file.
+pub fn read_frame(path: PathBuf, sel: &GridSelection, channels: &mut Option<Channels>, allow_missing: bool) -> Result<Frame> {
+    let p = path.display().to_string();
+    if !path.exists() {
+        if allow_missing {
+            return Ok(Frame { path, grids: None, source: None });
+        }
+        return Err(anyhow!("{p}: no such file (use --allow-missing to cook it as an empty frame)"));
+    }
+    let vdb = vdbcook_vdb::open(&path).with_context(|| p.clone())?;
+    let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(vdb.bytes()) };
+    if channels.is_none() {
+        match resolve(&vdb, &p, sel) {
+            Ok(c) => *channels = Some(c),
+            Err(_) if allow_missing && !matches!(sel, GridSelection::Many(_) | GridSelection::All) => return Ok(Frame { path, grids: None, source: Some(source) }),
+            Err(e) => return Err(e),
+        }
+    }
+    let Some(ch) = channels.as_ref() else { return Ok(Frame { path, grids: None, source: Some(source) }) };
+    let mut grids = Vec::with_capacity(ch.specs.len());
+    for spec in &ch.specs {
+        match vdb.grids.iter().position(|g| g.name == spec.grid) {
+            Some(i) => grids.push(Some(vdb.read_grid(i).with_context(|| p.clone())?)),
+            None if ch.several => grids.push(None),
+            None if allow_missing => return Ok(Frame { path, grids: None, source: Some(source) }),
+            None => return Err(anyhow!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(&vdb))),
+        }
+    }
+    Ok(Frame { path, grids: Some(grids), source: Some(source) })
+}

@@ -1,0 +1,329 @@
+//! The node arrays: their encoding (used by the builder in `vdbcook-flipbook`)
+//! and their decoding (used by every reader).  Specified in `docs/format.md`.
+//!
+//! ```text
+//! L1 node  (32³ slots of 128³ voxels)  L1_WORDS = 1024 + 512 + 1
+//!   [0, 1024)     occupancy mask: bit s of word s/32 set when slot s holds a child or a tile
+//!   [1024, 1536)  prefix counts: u16 pairs, count k = set bits in mask words [0, k)
+//!                 (word 1024 + k/2, bits 16·(k%2)..)
+//!   1536          first entry: index into l1_entries of slot rank 0
+//! L2 node  (16³ slots of 8³ voxels)    L2_WORDS = 128 + 64 + 1, same shape, entries in l2_entries
+//! entry    bit 31 clear: child index (L2 node for L1 entries, L3 node for L2 entries)
+//!          bit 31 set:   tile index (low 31 bits) into `tiles`
+//! L3 array word 0: the number n of L3 nodes; node k is words [1 + 3k, 4 + 3k):
+//!   0  brick index
+//!   1  states: 2 bits per 4³ sub-block b = (x/4)·4 + (y/4)·2 + z/4 (bits 2b..2b+1):
+//!      0 no voxel active, 1 all 64 active, 2 some (a sub-mask is stored)
+//!   2  word index (in this array) of the node's first sub-mask
+//!   after the n nodes: the sub-masks, 2 words each, of every node's partly active
+//!   sub-blocks in sub-block order; bit j = (x%4)·16 + (y%4)·4 + z%4
+//! tile     one f32 per channel
+//! ```
+//! Voxels are x·64 + y·8 + z in a leaf.
+
+pub const L1_LOG2: u32 = 5;
+pub const L2_LOG2: u32 = 4;
+pub const L1_SLOTS: usize = 1 << (3 * L1_LOG2);
+pub const L2_SLOTS: usize = 1 << (3 * L2_LOG2);
+pub const L1_MASK_WORDS: usize = L1_SLOTS / 32;
+pub const L2_MASK_WORDS: usize = L2_SLOTS / 32;
+pub const L1_WORDS: usize = L1_MASK_WORDS + L1_MASK_WORDS / 2 + 1;
+pub const L2_WORDS: usize = L2_MASK_WORDS + L2_MASK_WORDS / 2 + 1;
+/// Words of one L3 node record (brick, sub-block states, first sub-mask).
+pub const L3_WORDS: usize = 3;
+/// Sub-block state: no voxel active.
+pub const SUB_EMPTY: u32 = 0;
+/// Sub-block state: every voxel active.
+pub const SUB_FULL: u32 = 1;
+/// Sub-block state: a sub-mask says which voxels are active.
+pub const SUB_PARTIAL: u32 = 2;
+pub const TILE_FLAG: u32 = 1 << 31;
+/// Edge of the index space one L1 node covers.
+pub const L1_DIM: i64 = 4096;
+/// Voxel edge of an L1 slot (an L2 node or a tile).
+pub const L1_CHILD_DIM: i32 = 128;
+
+/// Slot of the asset-space coordinate `p` in a node of `2^log2` slots per axis of `2^child_log2` voxels.
+pub fn slot(p: [i32; 3], log2: u32, child_log2: u32) -> usize {
+    let m = (1i32 << log2) - 1;
+    let [x, y, z] = p.map(|c| ((c >> child_log2) & m) as usize);
+    (x << (2 * log2)) | (y << log2) | z
+}
+
+/// Occupancy mask, prefix counts and first entry of a node with `slots` slots.
+pub fn node_words(occupied: &[usize], slots: usize, first: u32) -> Vec<u32> {
+    let mw = slots / 32;
+    let mut words = vec![0u32; mw + mw / 2 + 1];
+    for &s in occupied {
+        words[s / 32] |= 1 << (s % 32);
+    }
+    let mut count = 0u32;
+    for k in 0..mw {
+        words[mw + k / 2] |= (count & 0xffff) << (16 * (k % 2));
+        count += words[k].count_ones();
+    }
+    words[mw + mw / 2] = first;
+    words
+}
+
+/// The node count word 0 of an L3 array gives, when the array holds that many
+/// node records (`None` for an empty or too short array).
+pub fn l3_node_count(words: &[u32]) -> Option<usize> {
+    let n = *words.first()? as usize;
+    (n.saturating_mul(L3_WORDS).saturating_add(1) <= words.len()).then_some(n)
+}
+
+/// The L3 array of the given nodes (leaf mask, brick), or `None` when it
+/// would need more than 2^32 words.
+pub fn l3_words(nodes: &[([u64; 8], u32)]) -> Option<Vec<u32>> {
+    let count = u32::try_from(nodes.len()).ok()?;
+    let mut head = Vec::with_capacity(1 + nodes.len() * L3_WORDS);
+    head.push(count);
+    let mut masks = Vec::new();
+    let start = 1 + nodes.len() * L3_WORDS;
+    for (mask, brick) in nodes {
+        let (states, partial) = encode_l3_mask(mask);
+        let first = u32::try_from(start + masks.len()).ok()?;
+        head.extend([*brick, states, first]);
+        masks.extend(partial.iter().flat_map(|m| [*m as u32, (*m >> 32) as u32]));
+    }
+    u32::try_from(start + masks.len()).ok()?;
+    head.extend(masks);
+    Some(head)
+}
+
+/// The 64 bits of 4³ sub-block `b` of a leaf mask (bit `j` = (x%4)·16 + (y%4)·4 + z%4).
+pub fn sub_mask(mask: &[u64; 8], b: usize) -> u64 {
+    let (x0, y0, z0) = ((b >> 2) * 4, ((b >> 1) & 1) * 4, (b & 1) * 4);
+    let mut out = 0u64;
+    for dx in 0..4 {
+        let plane = mask[(x0 + dx) & 7];
+        for dy in 0..4 {
+            out |= ((plane >> ((y0 + dy) * 8 + z0)) & 0xf) << (dx * 16 + dy * 4);
+        }
+    }
+    out
+}
+
+/// Sets sub-block `b` of a leaf mask to `bits` (the inverse of [`sub_mask`]).
+fn put_sub_mask(mask: &mut [u64; 8], b: usize, bits: u64) {
+    let (x0, y0, z0) = ((b >> 2) * 4, ((b >> 1) & 1) * 4, (b & 1) * 4);
+    for dx in 0..4 {
+        for dy in 0..4 {
+            mask[(x0 + dx) & 7] |= ((bits >> (dx * 16 + dy * 4)) & 0xf) << ((y0 + dy) * 8 + z0);
+        }
+    }
+}
+
+/// The states word of a leaf mask, and its partly active sub-blocks' masks in order.
+pub fn encode_l3_mask(mask: &[u64; 8]) -> (u32, Vec<u64>) {
+    let mut states = 0u32;
+    let mut partial = Vec::new();
+    for b in 0..8 {
+        let m = sub_mask(mask, b);
+        let state = match m {
+            0 => SUB_EMPTY,
+            u64::MAX => SUB_FULL,
+            _ => {
+                partial.push(m);
+                SUB_PARTIAL
+            }
+        };
+        states |= state << (2 * b);
+    }
+    (states, partial)
+}
+
+/// A leaf mask back from its states word and the words of its sub-masks
+/// (`None` for a state of 3, bits past the eight states, or too few words).
+pub fn decode_l3_mask(states: u32, words: &[u32]) -> Option<[u64; 8]> {
+    if states >> 16 != 0 {
+        return None; // only eight 2-bit states
+    }
+    let mut mask = [0u64; 8];
+    let mut k = 0;
+    for b in 0..8 {
+        let bits = match (states >> (2 * b)) & 3 {
+            SUB_EMPTY => 0,
+            SUB_FULL => u64::MAX,
+            SUB_PARTIAL => {
+                let w = words.get(2 * k..2 * k + 2)?;
+                k += 1;
+                u64::from(w[0]) | (u64::from(w[1]) << 32)
+            }
+            _ => return None,
+        };
+        put_sub_mask(&mut mask, b, bits);
+    }
+    Some(mask)
+}
+
+/// What a slot of a node holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Slot {
+    Empty,
+    Child(u32),
+    /// Index of a tile (its values are `channels` floats from word `index · channels` of the tiles array).
+    Tile(u32),
+}
+
+/// The node arrays of a flip-book (the sections of the same names).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Nodes {
+    /// Source index-space position of the L1 nodes' origin.
+    pub offset: [i32; 3],
+    /// Values per tile (the asset's channel count).
+    pub channels: usize,
+    /// L1 node of each frame.
+    pub frames: Vec<u32>,
+    pub l1: Vec<u32>,
+    pub l1_entries: Vec<u32>,
+    pub l2: Vec<u32>,
+    pub l2_entries: Vec<u32>,
+    pub l3: Vec<u32>,
+    /// `channels` f32 bit patterns per tile.
+    pub tiles: Vec<u32>,
+}
+
+/// A frame's leaves (source origin, active mask, brick) and active tiles
+/// (source origin, edge in voxels, tile index).
+pub type FrameContents = (Vec<([i32; 3], [u64; 8], u32)>, Vec<([i32; 3], u32, u32)>);
+
+fn lookup(node: &[u32], entries: &[u32], mask_words: usize, s: usize) -> Slot {
+    let (w, b) = (s / 32, s % 32);
+    let Some(&word) = node.get(w) else { return Slot::Empty };
+    if word >> b & 1 == 0 {
+        return Slot::Empty;
+    }
+    let prefix = node.get(mask_words + w / 2).map_or(0, |p| (p >> (16 * (w % 2))) & 0xffff);
+    let first = node.get(mask_words + mask_words / 2).copied().unwrap_or(0);
+    let below = (word & ((1u32 << b) - 1)).count_ones();
+    // Saturating: a corrupt `first` must give "no entry", not an overflow.
+    match entries.get(first.saturating_add(prefix).saturating_add(below) as usize) {
+        None => Slot::Empty,
+        Some(&e) if e & TILE_FLAG != 0 => Slot::Tile(e & !TILE_FLAG),
+        Some(&e) => Slot::Child(e),
+    }
+}
+
+impl Nodes {
+    /// Slot `s` of L1 node `id`.
+    pub fn l1_slot(&self, id: u32, s: usize) -> Slot {
+        let node = self.l1.get(id as usize * L1_WORDS..(id as usize + 1) * L1_WORDS).unwrap_or(&[]);
+        lookup(node, &self.l1_entries, L1_MASK_WORDS, s)
+    }
+
+    /// Slot `s` of L2 node `id`.
+    pub fn l2_slot(&self, id: u32, s: usize) -> Slot {
+        let node = self.l2.get(id as usize * L2_WORDS..(id as usize + 1) * L2_WORDS).unwrap_or(&[]);
+        lookup(node, &self.l2_entries, L2_MASK_WORDS, s)
+    }
+
+    /// Active mask and brick of L3 node `id` (`None` past the end or when
+    /// the node's words are inconsistent).
+    pub fn l3_node(&self, id: u32) -> Option<([u64; 8], u32)> {
+        if id as usize >= self.l3_count() {
+            return None;
+        }
+        let at = 1 + id as usize * L3_WORDS;
+        let w = self.l3.get(at..at + L3_WORDS)?;
+        let masks = self.l3.get(w[2] as usize..).unwrap_or(&[]);
+        Some((decode_l3_mask(w[1], masks)?, w[0]))
+    }
+
+    /// The values of tile `index`, one per channel (`None` past the end).
+    pub fn tile(&self, index: u32) -> Option<Vec<f32>> {
+        let c = self.channels;
+        let at = (index as usize).checked_mul(c)?;
+        self.tiles.get(at..at.checked_add(c)?).map(|w| w.iter().map(|&b| f32::from_bits(b)).collect())
+    }
+
+    /// Every leaf and active tile of a frame; `None` when there are more
+    /// than `max_leaves` leaves or `max_tiles` tiles (shared nodes let a
+    /// small, corrupt asset claim billions, so callers bound what they decode).
+    pub fn frame_contents(&self, frame: usize, max_leaves: usize, max_tiles: usize) -> Option<FrameContents> {
+        let mut leaves = Vec::new();
+        let mut tiles = Vec::new();
+        let Some(&l1) = self.frames.get(frame) else { return Some((leaves, tiles)) };
+        let node = self.l1.get(l1 as usize * L1_WORDS..(l1 as usize + 1) * L1_WORDS).unwrap_or(&[]);
+        let o = self.offset;
+        let at = |base: [i32; 3], d: [i32; 3]| [base[0].wrapping_add(d[0]), base[1].wrapping_add(d[1]), base[2].wrapping_add(d[2])];
+        for w in 0..L1_MASK_WORDS {
+            let mut bits = node.get(w).copied().unwrap_or(0);
+            while bits != 0 {
+                let s1 = w * 32 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let c1 = at(o, [((s1 >> 10) & 31) as i32 * 128, ((s1 >> 5) & 31) as i32 * 128, (s1 & 31) as i32 * 128]);
+                match self.l1_slot(l1, s1) {
+                    Slot::Tile(t) => tiles.push((c1, 128, t)),
+                    Slot::Child(l2) => {
+                        for s2 in 0..L2_SLOTS {
+                            let c2 = at(c1, [((s2 >> 8) & 15) as i32 * 8, ((s2 >> 4) & 15) as i32 * 8, (s2 & 15) as i32 * 8]);
+                            match self.l2_slot(l2, s2) {
+                                Slot::Tile(t) => tiles.push((c2, 8, t)),
+                                Slot::Child(l3) => {
+                                    if let Some((mask, brick)) = self.l3_node(l3) {
+                                        leaves.push((c2, mask, brick));
+                                    }
+                                }
+                                Slot::Empty => {}
+                            }
+                        }
+                    }
+                    Slot::Empty => {}
+                }
+                if leaves.len() > max_leaves || tiles.len() > max_tiles {
+                    return None;
+                }
+            }
+        }
+        Some((leaves, tiles))
+    }
+
+    /// Bytes of each node array, for reports.
+    pub fn byte_sizes(&self) -> [(&'static str, usize); 7] {
+        [
+            ("frames", self.frames.len() * 4),
+            ("l1", self.l1.len() * 4),
+            ("l1_entries", self.l1_entries.len() * 4),
+            ("l2", self.l2.len() * 4),
+            ("l2_entries", self.l2_entries.len() * 4),
+            ("l3", self.l3.len() * 4),
+            ("tiles", self.tiles.len() * 4),
+        ]
+    }
+
+    pub fn l1_count(&self) -> usize {
+        self.l1.len() / L1_WORDS
+    }
+    pub fn l2_count(&self) -> usize {
+        self.l2.len() / L2_WORDS
+    }
+    /// L3 nodes, as word 0 of the L3 array says (0 when the array cannot
+    /// hold that many records).
+    pub fn l3_count(&self) -> usize {
+        l3_node_count(&self.l3).unwrap_or(0)
+    }
+    /// Tiles (0 for an asset without channels).
+    pub fn tile_count(&self) -> usize {
+        self.tiles.len().checked_div(self.channels).unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prefix_counts_make_lookup_match_a_scan() {
+        let occupied: Vec<usize> = (0..L2_SLOTS).filter(|s| s % 7 == 0 || s % 11 == 3).collect();
+        let node = node_words(&occupied, L2_SLOTS, 5);
+        let mut entries = vec![0u32; 5];
+        entries.extend((0..occupied.len() as u32).map(|i| i + 100));
+        let n = Nodes { channels: 1, l2: node, l2_entries: entries, ..Nodes::default() };
+        for s in 0..L2_SLOTS {
+            let want = occupied.iter().position(|&o| o == s).map_or(Slot::Empty, |r| Slot::Child(r as u32 + 100));
+            assert_eq!(n.l2_slot(0, s), want, "slot {s}");
+        }
+    }
+}
