@@ -9,7 +9,14 @@
 // Light reaching a point comes from a shadow grid computed once per frame
 // (`shadow_main`: one shadow ray from the centre of each cell, marching and
 // skipping the same way) and read with trilinear interpolation, so all views
-// of a frame share it. No randomness: the image depends only on the data, so
+// of a frame share it. Fire glows: a temperature and a flames channel (when
+// the asset has them) add emission along the ray, temperature through a
+// blackbody-like ramp (black, red, orange, yellow, white as it rises) and
+// flames in a fixed orange, each normalised by its channel's largest value
+// (temperature weighted by its square, so only hot gas glows brightly). Smoke
+// (a density channel) scatters light; without one, flames or temperature give
+// extinction but do not scatter: fire absorbs and glows.
+// The image is RGB. No randomness: the image depends only on the data, so
 // two assets can be compared exactly.
 
 struct Params {
@@ -23,10 +30,12 @@ struct Params {
     light: vec4<f32>,       // xyz: direction towards the light, w: density scale
     size: vec4<u32>,        // width, height, max steps, skip empty space (0/1)
     shadow: vec4<f32>,      // shadow grid cells along x, y, z (as floats), cell edge in voxels
-    channels: vec4<u32>,    // x: the channel that gives extinction
+    channels: vec4<u32>,    // x: the channel that gives extinction; y, z: temperature, flames (or VPAK_NONE)
+    emission: vec4<f32>,    // x, y: 1 / largest temperature, flames; z: emission per voxel at full scale; w: albedo
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
+// RGB per pixel, row-major from the top.
 @group(0) @binding(9) var<storage, read_write> image: array<f32>;
 // Optical depth towards the light at each shadow cell centre, x fastest.
 @group(0) @binding(10) var<storage, read_write> shadow: array<f32>;
@@ -104,6 +113,26 @@ fn shadow_depth(o: vec3<f32>) -> f32 {
     return depth;
 }
 
+// Blackbody-like colour of a normalised temperature t in [0, 1]: red first,
+// then green, then blue rise, so hot cores turn yellow and white.
+fn fire_ramp(t: f32) -> vec3<f32> {
+    return clamp(vec3<f32>(3.0 * t, 3.0 * t - 1.0, 3.0 * t - 2.0), vec3<f32>(0.0), vec3<f32>(1.0));
+}
+
+// Light emitted per voxel of path at voxel `ip` of the cell `leaf` describes.
+fn emission_at(leaf: VpakLeaf, ip: vec3<i32>) -> vec3<f32> {
+    var e = vec3<f32>(0.0);
+    if (params.channels.y != VPAK_NONE) {
+        let t = clamp(vpak_leaf_value(params.info, leaf, ip, params.channels.y) * params.emission.x, 0.0, 1.0);
+        e += fire_ramp(t) * t * t;
+    }
+    if (params.channels.z != VPAK_NONE) {
+        let f = clamp(vpak_leaf_value(params.info, leaf, ip, params.channels.z) * params.emission.y, 0.0, 1.0);
+        e += vec3<f32>(1.0, 0.55, 0.15) * f;
+    }
+    return e * params.emission.z;
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let w = params.size.x;
@@ -116,7 +145,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let d = normalize(params.forward.xyz + params.right.xyz * (px * tf * aspect) + params.up.xyz * (py * tf));
     let o = params.eye.xyz;
     let hit = box_hit(o, d, params.box_min.xyz, params.box_max.xyz);
-    var radiance = 0.0;
+    var radiance = vec3<f32>(0.0);
     if (hit.x < hit.y) {
         let step = params.box_min.w;
         var trans = 1.0;
@@ -140,15 +169,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 k = max(k + 1.0, ceil((exit - hit.x) / step - 0.5) + 0.5);
                 continue;
             }
+            radiance += trans * emission_at(leaf, ip) * step;
             let sigma = max(vpak_leaf_value(params.info, leaf, ip, params.channels.x), 0.0) * params.light.w;
             if (sigma > 0.0) {
                 let a = 1.0 - exp(-sigma * step);
                 let lit = 0.25 + 0.75 * exp(-shadow_at(p));
-                radiance += trans * a * lit;
+                radiance += vec3<f32>(trans * a * lit * params.emission.w);
                 trans *= 1.0 - a;
             }
             k += 1.0;
         }
     }
-    image[gid.y * w + gid.x] = radiance;
+    let pixel = 3u * (gid.y * w + gid.x);
+    image[pixel] = radiance.x;
+    image[pixel + 1u] = radiance.y;
+    image[pixel + 2u] = radiance.z;
 }

@@ -81,6 +81,11 @@ pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channel
     };
     let specs = match sel {
         GridSelection::Default => vec![spec_of(&vdb.grids[vdb.select(None).with_context(|| path.to_string())?])],
+        // One grid missing from a file is that frame's problem (exit 1, or an
+        // empty frame with --allow-missing), as it is in any later frame.
+        GridSelection::One(name) if !vdb.grids.iter().any(|g| &g.name == name) => {
+            return Err(anyhow!("{path}: no grid named \"{name}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", describe_grids(vdb)));
+        }
         GridSelection::One(name) => vec![spec_of(find(name)?)],
         GridSelection::Many(names) => {
             let mut seen = std::collections::HashSet::new();

@@ -286,7 +286,7 @@ fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[(S
     let mut figures = String::new();
     for (s, r, a) in worst {
         let stem = format!("frame{}_view{}", s.frame, s.view);
-        let (rp, ap, hp) = (report::png_grey(r), report::png_grey(a), report::png_heat(r, a, (s.metrics.max_error as f32).max(1e-6)));
+        let (rp, ap, hp) = (report::png_rgb(r), report::png_rgb(a), report::png_heat(r, a, (s.metrics.max_error as f32).max(1e-6)));
         write(&format!("{stem}_reference.png"), &rp)?;
         write(&format!("{stem}_asset.png"), &ap)?;
         write(&format!("{stem}_error.png"), &hp)?;
@@ -387,7 +387,7 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let scene = Scene::for_asset(&meta);
     let view = scene.orbit(args.views as usize)[args.view as usize];
     let img = renderer.render(&gpu, &scene, args.frame, &view, args.size.0, args.size.1)?;
-    vdbcook_vpak::write_atomic(&args.output, &report::png_grey(&img), args.force).with_context(|| args.output.display().to_string())?;
+    vdbcook_vpak::write_atomic(&args.output, &report::png_rgb(&img), args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
         crate::write_stdout(&format!("rendered frame {} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter)).ok();
     }

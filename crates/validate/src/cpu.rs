@@ -174,7 +174,7 @@ fn at(o: [f32; 3], d: [f32; 3], t: f32) -> [f32; 3] {
 pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width: u32, height: u32) -> Result<Image, Error> {
     let d = AssetData::new(asset)?;
     let l1 = d.frame_l1(frame)?;
-    let ext = crate::extinction_channel(d.meta());
+    let ext = scene.channels[0] as usize;
     let skip = d.meta().channels.get(ext).is_some_and(|c| c.background == 0.0);
     let s = Sampler::new(d, l1);
     let (r, u, f) = view.basis();
@@ -225,7 +225,26 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
         }
         acc
     };
-    let mut pixels = vec![0.0f32; (width * height) as usize];
+    // Emission, as `emission_at` in march.wgsl.
+    let [_, temperature, flames] = scene.channels;
+    let emission = |p: [i32; 3]| -> [f32; 3] {
+        let mut e = [0.0f32; 3];
+        if temperature != crate::NONE {
+            let t = (s.query(p, temperature as usize).0 * scene.emission[0]).clamp(0.0, 1.0);
+            let ramp = [3.0 * t, 3.0 * t - 1.0, 3.0 * t - 2.0].map(|c| c.clamp(0.0, 1.0));
+            for (e, r) in e.iter_mut().zip(ramp) {
+                *e += r * t * t;
+            }
+        }
+        if flames != crate::NONE {
+            let f = (s.query(p, flames as usize).0 * scene.emission[1]).clamp(0.0, 1.0);
+            for (e, c) in e.iter_mut().zip([1.0, 0.55, 0.15]) {
+                *e += c * f;
+            }
+        }
+        e.map(|v| v * scene.emission[2])
+    };
+    let mut pixels = vec![0.0f32; (width * height * 3) as usize];
     for y in 0..height {
         for x in 0..width {
             let px = (x as f32 + 0.5) / width as f32 * 2.0 - 1.0;
@@ -234,7 +253,7 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
             let l = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
             let dir = dir.map(|c| c / l);
             let (t0, t1) = box_hit(view.eye, dir, scene.box_min, scene.box_max);
-            let mut radiance = 0.0f32;
+            let mut radiance = [0.0f32; 3];
             if t0 < t1 {
                 let (mut trans, mut k, mut n) = (1.0f32, 0.5f32, 0u32);
                 loop {
@@ -244,23 +263,29 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
                     }
                     n += 1;
                     let p = at(view.eye, dir, t);
-                    let (v, empty) = s.query(p.map(|c| c.floor() as i32), ext);
+                    let ip = p.map(|c| c.floor() as i32);
+                    let (v, empty) = s.query(ip, ext);
                     if empty > 0 && skip {
                         let exit = t + cell_exit(p, dir, empty as f32);
                         k = (k + 1.0).max(((exit - t0) / scene.step - 0.5).ceil() + 0.5);
                         continue;
                     }
+                    for (r, e) in radiance.iter_mut().zip(emission(ip)) {
+                        *r += trans * e * scene.step;
+                    }
                     let sigma = v.max(0.0) * scene.density_scale;
                     if sigma > 0.0 {
                         let a = 1.0 - (-sigma * scene.step).exp();
                         let lit = 0.25 + 0.75 * (-shadow_at(p)).exp();
-                        radiance += trans * a * lit;
+                        for r in radiance.iter_mut() {
+                            *r += trans * a * lit * scene.emission[3];
+                        }
                         trans *= 1.0 - a;
                     }
                     k += 1.0;
                 }
             }
-            pixels[(y * width + x) as usize] = radiance;
+            pixels[(3 * (y * width + x)) as usize..][..3].copy_from_slice(&radiance);
         }
     }
     Ok(Image { width, height, pixels })

@@ -126,8 +126,7 @@ pub struct GpuAsset {
     frames: Vec<u32>,
     atlas_count: usize,
     channels: u32,
-    /// The channel that gives extinction, and its background.
-    extinction: u32,
+    /// The background of the channel that gives extinction.
     background: f32,
     atlas_bricks: [u32; 4],
     last_atlas: [u32; 4],
@@ -324,7 +323,6 @@ impl Renderer {
             frames: c.frames.to_vec(),
             atlas_count: meta.atlases.len(),
             channels: meta.channels.len() as u32,
-            extinction: extinction as u32,
             background: meta.channels.get(extinction).map_or(0.0, |ch| ch.background),
             atlas_bricks: d.atlas_bricks(),
             last_atlas: d.last_atlas(),
@@ -355,7 +353,10 @@ impl Renderer {
         // Skipping empty space is exact only when empty space is zero.
         p.extend([width, height, scene.max_steps, u32::from(asset.background == 0.0)]);
         v4(&mut p, scene.shadow_grid().map(|g| g as f32), scene.shadow_cell);
-        p.extend([asset.extinction, 0, 0, 0]);
+        p.extend(scene.channels);
+        p.push(0);
+        let [t, f, e, albedo] = scene.emission;
+        v4(&mut p, [t, f, e], albedo);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("params"), contents: bytemuck::cast_slice(&p), usage: wgpu::BufferUsages::UNIFORM })
     }
 
@@ -366,7 +367,7 @@ impl Renderer {
         let [gx, gy, gz] = scene.shadow_grid();
         let cells = u64::from(gx) * u64::from(gy) * u64::from(gz);
         let shadow = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("shadow"), size: cells * 4, usage: wgpu::BufferUsages::STORAGE, mapped_at_creation: false });
-        let bytes = u64::from(width) * u64::from(height) * 4;
+        let bytes = u64::from(width) * u64::from(height) * 12;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let pipelines = if asset.decodes_in_shader() { self.buffer_pipelines() } else { &self.textures };
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("march") });

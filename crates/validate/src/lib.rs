@@ -43,12 +43,25 @@ pub enum Error {
 /// Textures (atlas planes) the renderer binds.
 pub const MAX_TEXTURES: usize = 8;
 
-/// Which channels the validation render shows.  A channel named `density`
-/// gives extinction; without one, `flames` (or `flame`), else `temperature`
-/// (or `heat`), else the first channel.
+/// No channel (`VPAK_NONE` in the shaders).
+pub const NONE: u32 = u32::MAX;
+const TEMPERATURE: [&str; 2] = ["temperature", "heat"];
+const FLAMES: [&str; 2] = ["flames", "flame"];
+
+fn find(meta: &Metadata, names: &[&str]) -> Option<usize> {
+    meta.channels.iter().position(|c| names.contains(&c.name.as_str()))
+}
+
+/// The channel that gives extinction in the validation render: `density`;
+/// without one, `flames` (or `flame`), else `temperature` (or `heat`), else
+/// the first channel.
 pub fn extinction_channel(meta: &Metadata) -> usize {
-    let find = |names: &[&str]| meta.channels.iter().position(|c| names.contains(&c.name.as_str()));
-    find(&["density"]).or_else(|| find(&["flames", "flame"])).or_else(|| find(&["temperature", "heat"])).unwrap_or(0)
+    find(meta, &["density"]).or_else(|| find(meta, &FLAMES)).or_else(|| find(meta, &TEMPERATURE)).unwrap_or(0)
+}
+
+/// The channels that glow in the validation render: (temperature, flames).
+pub fn emission_channels(meta: &Metadata) -> (Option<usize>, Option<usize>) {
+    (find(meta, &TEMPERATURE), find(meta, &FLAMES))
 }
 
 /// A camera looking at a point.
@@ -75,6 +88,13 @@ pub struct Scene {
     pub max_steps: u32,
     /// Edge of a shadow-grid cell in voxels.
     pub shadow_cell: f32,
+    /// Channels: extinction, temperature, flames ([`NONE`] when absent).
+    pub channels: [u32; 3],
+    /// 1 / the largest temperature and flames value, the light emitted per
+    /// voxel of path at full scale, and the albedo of the extinguishing
+    /// medium (1 for smoke; 0 when flames or temperature stand in for a
+    /// missing density: fire absorbs and glows, it does not scatter).
+    pub emission: [f32; 4],
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -114,8 +134,10 @@ impl Scene {
         let box_max = hi.map(|v| v.clamp(0, 4096) as f32);
         let ext = sub(box_max, box_min);
         let diag = (ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]).sqrt().max(1.0);
-        let range = meta.channels.get(extinction_channel(meta)).map_or([0.0, 1.0], |c| c.value_range);
-        let peak = range[1].abs().max(range[0].abs()).max(1e-6);
+        let peak_of = |c: usize| meta.channels.get(c).map_or(1.0, |c| c.value_range[1].abs().max(c.value_range[0].abs()).max(1e-6));
+        let extinction = extinction_channel(meta);
+        let peak = peak_of(extinction);
+        let (temperature, flames) = emission_channels(meta);
         Scene {
             box_min,
             box_max,
@@ -126,6 +148,9 @@ impl Scene {
             max_steps: 4 * (diag.min(1e6) as u32 + 8),
             // At most 128 cells along the longest axis, at least 4 voxels a cell.
             shadow_cell: (ext[0].max(ext[1]).max(ext[2]) / 128.0).ceil().max(4.0),
+            channels: [extinction as u32, temperature.map_or(NONE, |c| c as u32), flames.map_or(NONE, |c| c as u32)],
+            // A ray across the box through full-scale fire gathers about 6.
+            emission: [1.0 / temperature.map_or(1.0, peak_of), 1.0 / flames.map_or(1.0, peak_of), 6.0 / diag, if find(meta, &["density"]).is_some() { 1.0 } else { 0.0 }],
         }
     }
 
@@ -152,7 +177,7 @@ impl Scene {
     }
 }
 
-/// A single-channel linear image, row-major from the top.
+/// A linear RGB image, row-major from the top: `pixels` holds R, G, B per pixel.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
     pub width: u32,
@@ -160,7 +185,8 @@ pub struct Image {
     pub pixels: Vec<f32>,
 }
 
-/// RMSE, PSNR (peak 1) and max absolute difference of two images, values clamped to [0, 1].
+/// RMSE, PSNR (peak 1) and max absolute difference of two images over every
+/// colour component, values clamped to [0, 1].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct ImageMetrics {
     pub rmse: f64,

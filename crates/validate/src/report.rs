@@ -2,8 +2,8 @@
 
 use crate::Image;
 
-/// 8-bit grey PNG of an image (values clamped to [0, 1], sRGB-encoded).
-pub fn png_grey(img: &Image) -> Vec<u8> {
+/// 8-bit RGB PNG of an image (values clamped to [0, 1], sRGB-encoded).
+pub fn png_rgb(img: &Image) -> Vec<u8> {
     let px: Vec<u8> = img
         .pixels
         .iter()
@@ -13,15 +13,17 @@ pub fn png_grey(img: &Image) -> Vec<u8> {
             (s * 255.0).round() as u8
         })
         .collect();
-    encode(img.width, img.height, png::ColorType::Grayscale, &px)
+    encode(img.width, img.height, png::ColorType::Rgb, &px)
 }
 
-/// RGB heat-map PNG of |a - b|, full scale at `scale` (black, red, yellow, white).
+/// RGB heat-map PNG of the largest |a - b| over a pixel's colours, full
+/// scale at `scale` (black, red, yellow, white).
 pub fn png_heat(a: &Image, b: &Image, scale: f32) -> Vec<u8> {
     let scale = if scale > 0.0 { scale } else { 1.0 };
-    let mut px = Vec::with_capacity(a.pixels.len() * 3);
-    for (x, y) in a.pixels.iter().zip(&b.pixels) {
-        let t = ((x.clamp(0.0, 1.0) - y.clamp(0.0, 1.0)).abs() / scale).clamp(0.0, 1.0) * 3.0;
+    let mut px = Vec::with_capacity(a.pixels.len());
+    for (x, y) in a.pixels.chunks_exact(3).zip(b.pixels.chunks_exact(3)) {
+        let d = x.iter().zip(y).map(|(x, y)| (x.clamp(0.0, 1.0) - y.clamp(0.0, 1.0)).abs()).fold(0.0f32, f32::max);
+        let t = (d / scale).clamp(0.0, 1.0) * 3.0;
         let c = [t.min(1.0), (t - 1.0).clamp(0.0, 1.0), (t - 2.0).clamp(0.0, 1.0)];
         px.extend(c.map(|v| (v * 255.0).round() as u8));
     }
@@ -105,12 +107,12 @@ mod tests {
 
     #[test]
     fn pngs_are_pngs() {
-        let img = Image { width: 3, height: 2, pixels: vec![0.0, 0.5, 1.0, 2.0, -1.0, 0.25] };
-        let p = png_grey(&img);
+        let img = Image { width: 3, height: 2, pixels: (0..18).map(|k| k as f32 / 12.0 - 0.2).collect() };
+        let p = png_rgb(&img);
         assert_eq!(&p[..8], &[0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a]);
         let dec = png::Decoder::new(std::io::Cursor::new(p)).read_info().unwrap();
         assert_eq!((dec.info().width, dec.info().height), (3, 2));
-        let h = png_heat(&img, &Image { width: 3, height: 2, pixels: vec![0.0; 6] }, 1.0);
+        let h = png_heat(&img, &Image { width: 3, height: 2, pixels: vec![0.0; 18] }, 1.0);
         assert!(h.starts_with(&[0x89, b'P', b'N', b'G']));
         assert!(svg_plot(&[0.1, 0.3, 0.2], "rmse").contains("polyline"));
     }
