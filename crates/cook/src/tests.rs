@@ -322,3 +322,177 @@ fn non_finite_values_never_panic_any_format() {
         }
     }
 }
+
+/// Three channels of one frame: density everywhere `frame` has leaves,
+/// temperature (background 0.25) on a shifted subset, flames on a few leaves
+/// and an 8³ tile over one of density's leaves.
+fn fire(shift: i32) -> [Grid; 3] {
+    let d = smooth_frame(shift);
+    let mut t = frame(shift + 1);
+    t.name = "temperature".into();
+    t.background = 0.25;
+    t.tiles.clear();
+    for l in t.leaves.iter_mut() {
+        for v in l.values.iter_mut() {
+            *v = *v * 40.0 + 300.0;
+        }
+    }
+    let mut f = frame(shift);
+    f.name = "flames".into();
+    f.leaves.truncate(7);
+    f.tiles = vec![Tile { origin: d.leaves[20].origin, dim: 8, value: 2.0, active: true }];
+    [d, t, f]
+}
+
+fn specs(names: &[&str]) -> Vec<ChannelSpec> {
+    names.iter().map(|n| ChannelSpec { name: n.to_string(), grid: n.to_string(), value_type: "float".into(), ..ChannelSpec::default() }).collect()
+}
+
+fn cook_fire(opts: CookOptions, frames: &[[Grid; 3]]) -> (Vec<u8>, CookReport) {
+    let mut c = Cooker::with_channels(opts, specs(&["density", "temperature", "flames"]));
+    for f in frames {
+        c.push_channels(&[Some(&f[0]), Some(&f[1]), Some(&f[2])], None).unwrap();
+    }
+    let (sections, report) = c.finish(&NoProgress).unwrap();
+    (vdbcook_vpak::assemble(&sections), report)
+}
+
+/// Every active voxel of every channel's source, as the unpacked grids give it.
+fn worst_error(src: &[Grid; 3], back: &[Grid]) -> [f32; 3] {
+    let mut worst = [0.0f32; 3];
+    for c in 0..3 {
+        for l in &src[c].leaves {
+            for i in l.mask.iter_on() {
+                let (x, y, z) = vdbcook_grid::leaf_local(i);
+                let (v, on) = back[c].probe(l.origin.offset(x, y, z));
+                assert!(on, "channel {c}: an active source voxel must be active");
+                worst[c] = worst[c].max((v - l.values[i]).abs());
+            }
+        }
+        for t in src[c].tiles.iter().filter(|t| t.active) {
+            assert_eq!(back[c].probe(t.origin), (t.value, true), "channel {c}: tile");
+        }
+    }
+    worst
+}
+
+#[test]
+fn several_channels_round_trip_in_every_format() {
+    let frames = [fire(0), fire(2)];
+    for format in Format::ALL {
+        let (bytes, report) = cook_fire(CookOptions { format, quality: Quality::Fast, ..CookOptions::default() }, &frames);
+        assert_eq!(report.channels.len(), 3);
+        let asset = Asset::from_bytes(&bytes).unwrap();
+        let meta = asset.metadata().unwrap();
+        assert_eq!(meta.channels.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(), ["density", "temperature", "flames"]);
+        assert_eq!(meta.channels[1].background, 0.25);
+        for (k, f) in frames.iter().enumerate() {
+            let back = unpack_frame(&asset, k).unwrap();
+            assert_eq!(back.len(), 3);
+            // Where only other channels are active, a channel reads its background.
+            let d_only = f[0].leaves.iter().find(|l| f[1].leaves.iter().all(|t| t.origin != l.origin)).unwrap();
+            assert_eq!(back[1].probe(d_only.origin.offset(0, 0, 1)), (0.25, true), "{format:?}");
+            let worst = worst_error(f, &back);
+            for c in 0..3 {
+                let [lo, hi] = meta.channels[c].value_range;
+                let bound = match format {
+                    Format::F32 => 0.0,
+                    Format::F16 => hi.abs().max(lo.abs()) * 2f32.powi(-11),
+                    Format::Unorm8 => (hi - lo) / 255.0 * 0.5,
+                    _ => (hi - lo) / 255.0 * 16.0,
+                };
+                assert!(worst[c] <= bound + 1e-6, "{format:?} channel {c}: worst {} over bound {bound}", worst[c]);
+                assert!(f64::from(worst[c]) <= report.channels[c].voxel_max_error + 1e-6, "{format:?} channel {c}: the report's max error holds");
+            }
+        }
+        if format == Format::F32 {
+            assert!(report.channels.iter().all(|c| c.voxel_rmse == 0.0));
+        }
+    }
+}
+
+#[test]
+fn channel_groups_choose_formats_and_planes() {
+    let frames = [fire(0)];
+    let groups = vec![ChannelGroup { channels: vec!["temperature".into(), "flames".into()], format: Format::Bc7 }];
+    let (bytes, report) = cook_fire(CookOptions { format: Format::Bc4, groups, ..CookOptions::default() }, &frames);
+    let meta = Asset::from_bytes(&bytes).unwrap().metadata().unwrap();
+    // temperature + flames share one BC7 plane (two z-slices each per texel); density is BC4.
+    assert_eq!(meta.planes.len(), 2);
+    assert_eq!((meta.planes[0].format, meta.planes[0].z_per_texel), (Format::Bc7, 2));
+    assert_eq!(meta.planes[1].format, Format::Bc4);
+    assert_eq!((meta.channels[1].plane, meta.channels[1].lane, meta.channels[2].plane, meta.channels[2].lane), (0, 0, 0, 2));
+    assert_eq!(meta.channels[0].plane, 1);
+    assert_eq!(report.format, "bc7+bc4");
+    // A group must name channels of the cook, each once.
+    for (groups, want) in [
+        (vec![ChannelGroup { channels: vec!["smoke".into()], format: Format::F16 }], "smoke"),
+        (vec![ChannelGroup { channels: vec!["flames".into()], format: Format::F16 }, ChannelGroup { channels: vec!["flames".into()], format: Format::Bc4 }], "two channel groups"),
+    ] {
+        let mut c = Cooker::with_channels(CookOptions { groups, ..CookOptions::default() }, specs(&["density", "temperature", "flames"]));
+        let f = fire(0);
+        c.push_channels(&[Some(&f[0]), Some(&f[1]), Some(&f[2])], None).unwrap();
+        let e = c.finish(&NoProgress).err().unwrap().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+}
+
+#[test]
+fn several_channels_are_deterministic_and_share_one_tree() {
+    let frames = [fire(0), fire(1), fire(1)];
+    for format in [Format::Unorm8, Format::Bc4, Format::Bc7] {
+        let run = |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| cook_fire(CookOptions { format, ..CookOptions::default() }, &frames).0);
+        let one = run(1);
+        assert_eq!(one, run(2), "{format:?}");
+        assert_eq!(one, run(3), "{format:?}");
+    }
+    // One tree for all channels: the node arrays of the 3-channel asset are
+    // those of its union, not three trees (frames 1 and 2 are equal: one L1 node).
+    let (_, report) = cook_fire(CookOptions::default(), &frames);
+    assert_eq!(report.l1_nodes, 2);
+    let union_leaves: usize = {
+        let mut o: Vec<_> = frames[0].iter().flat_map(|g| g.leaves.iter().map(|l| l.origin)).collect();
+        o.sort();
+        o.dedup();
+        o.len()
+    };
+    assert!(report.l3_nodes >= union_leaves && report.l3_nodes <= 3 * union_leaves);
+}
+
+#[test]
+fn absurd_channel_metadata_is_refused_never_a_panic() {
+    let (bytes, _) = cook_fire(CookOptions { format: Format::Bc7, groups: vec![ChannelGroup { channels: vec!["temperature".into(), "flames".into()], format: Format::Unorm8 }], ..CookOptions::default() }, &[fire(0)]);
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    let meta = asset.metadata().unwrap();
+    let mutations: Vec<(&str, Box<dyn Fn(&mut vdbcook_vpak::Metadata)>)> = vec![
+        ("no channels", Box::new(|m| m.channels.clear())),
+        ("a million channels", Box::new(|m| m.channels = vec![m.channels[0].clone(); 1 << 20])),
+        ("plane out of range", Box::new(|m| m.channels[0].plane = 99)),
+        ("lanes shared", Box::new(|m| m.channels[2].lane = 0)),
+        ("lane past the plane", Box::new(|m| m.channels[1].lane = 3)),
+        ("bc7 with two lanes", Box::new(|m| m.planes[0].lanes = 2)),
+        ("z-slices on unorm8", Box::new(|m| m.planes[1].z_per_texel = 4)),
+        ("an empty plane", Box::new(|m| m.planes.push(m.planes[0]))),
+        ("more bricks than atlases hold", Box::new(|m| m.brick_count += 1)),
+        ("a huge atlas", Box::new(|m| m.atlases[0].bricks = [u32::MAX; 3])),
+        ("frames missing", Box::new(|m| m.frames.clear())),
+        ("a source past the list", Box::new(|m| m.frames[0].source = Some(7))),
+        ("an odd index offset", Box::new(|m| m.index_offset[1] += 8)),
+    ];
+    for (what, mutate) in mutations {
+        let mut m = meta.clone();
+        mutate(&mut m);
+        let mut sections = asset.to_sections();
+        for s in sections.iter_mut().filter(|s| s.kind == vdbcook_vpak::kind::METADATA) {
+            s.data = m.to_bytes().unwrap();
+        }
+        let sealed = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+        sealed.verify().unwrap();
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| unpack_frame(&sealed, 0).map(|g| g.len())));
+        match r {
+            Ok(Err(e)) => assert!(!e.to_string().is_empty(), "{what}"),
+            Ok(Ok(n)) => panic!("{what}: unpacked {n} grids from an absurd asset"),
+            Err(_) => panic!("{what}: panic"),
+        }
+    }
+}
