@@ -14,11 +14,16 @@
 //! buffers, for every leaf (root children in coordinate order, then mask order):
 //!   leaf mask (64 B), [v < 222: i32 x, y, z origin, i8 buffer count], value buffer of 512 values
 //! ```
+//! A `value` is one scalar, or for vec3 trees three consecutive scalars
+//! (x, y, z); value buffers hold `count × components` scalars.
+//!
 //! Everything is read sequentially by [`scan`], which records each leaf's
-//! value buffer; [`TreeLayout::decode`] then inflates the leaves in parallel.
+//! value buffer; [`TreeLayout::decode`] then inflates the leaves in parallel
+//! and splits vectors into one scalar tree per component (same leaves, masks
+//! and tiles; each its component of every value).
 
 use crate::cursor::Cursor;
-use crate::values::{self, Ctx, ValueBlock, COMPRESS_ZIP, VERSION_NODE_MASK_COMPRESSION};
+use crate::values::{self, Ctx, Value, ValueBlock, COMPRESS_ZIP, MAX_COMPONENTS, VERSION_NODE_MASK_COMPRESSION};
 use crate::Error;
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -30,12 +35,29 @@ struct LeafTopo<'a> {
     values: Option<ValueBlock<'a>>,
 }
 
+/// A tile whose value has every component.
+#[derive(Clone, Copy, Debug)]
+struct VecTile {
+    origin: Coord,
+    dim: u32,
+    value: Value,
+    active: bool,
+}
+
 /// A scanned tree: tiles decoded, leaf buffers located.
 pub(crate) struct TreeLayout<'a> {
-    pub background: f32,
-    pub tiles: Vec<Tile>,
+    tiles: Vec<VecTile>,
     leaves: Vec<LeafTopo<'a>>,
     ctx: Ctx,
+}
+
+/// One component of a decoded tree, as a scalar tree.
+#[derive(Debug)]
+pub(crate) struct Component {
+    pub background: f32,
+    pub tiles: Vec<Tile>,
+    /// Sorted by origin.
+    pub leaves: Vec<Leaf>,
 }
 
 /// Bytes one node of each kind occupies in the topology at the very least,
@@ -64,13 +86,15 @@ fn slot_origin(origin: Coord, i: usize, log2dim: u32, child_dim: i32) -> Coord {
 struct Scanner<'c, 'a> {
     cur: &'c mut Cursor<'a>,
     ctx: Ctx,
-    tiles: Vec<Tile>,
+    tiles: Vec<VecTile>,
 }
 
 impl<'a> Scanner<'_, 'a> {
-    fn tile(&mut self, origin: Coord, dim: u32, value: f32, active: bool) {
+    /// Keeps a tile that is active or differs from the background (in any
+    /// component, so that every component has the same tiles).
+    fn tile(&mut self, origin: Coord, dim: u32, value: Value, active: bool) {
         if active || value != self.ctx.background {
-            self.tiles.push(Tile { origin, dim, value, active });
+            self.tiles.push(VecTile { origin, dim, value, active });
         }
     }
 
@@ -83,15 +107,20 @@ impl<'a> Scanner<'_, 'a> {
         let packed = self.ctx.version < VERSION_NODE_MASK_COMPRESSION;
         let count = if packed { slots - ones(&child_mask) as usize } else { slots };
         let blk = values::scan(self.cur, &self.ctx, count, &value_mask)?;
-        let mut vals = vec![0.0f32; count];
+        let n = self.ctx.components;
+        let mut vals = vec![0.0f32; count * n];
         blk.decode(&self.ctx, &value_mask, &mut vals)?;
         let mut next = 0;
         for i in 0..slots {
             if bit(&child_mask, i) {
                 continue;
             }
-            let v = if packed { vals.get(next).copied().unwrap_or(0.0) } else { vals[i] };
+            let at = if packed { next } else { i };
             next += 1;
+            let mut v = [0.0; MAX_COMPONENTS];
+            if let Some(src) = vals.get(at * n..at * n + n) {
+                v[..n].copy_from_slice(src);
+            }
             self.tile(slot_origin(origin, i, log2dim, child_dim), child_dim as u32, v, bit(&value_mask, i));
         }
         Ok(child_mask)
@@ -122,7 +151,7 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<
     ctx.background = ctx.read_value(cur, "background value")?;
     let num_tiles = cur.u32("root tile count")?;
     let num_children = cur.u32("root child count")?;
-    let tile_bytes = 12 + ctx.value.size() as u64 + 1;
+    let tile_bytes = 12 + ctx.value_size() as u64 + 1;
     cur.check_count("root tile count", u64::from(num_tiles), tile_bytes)?;
     cur.check_count("root child count", u64::from(num_children), 12 + MIN_INTERNAL32_BYTES)?;
 
@@ -175,38 +204,79 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<
             values::scan(cur, &aux, LEAF_VOXELS, &leaf.mask.0)?;
         }
     }
-    Ok(TreeLayout { background: ctx.background, tiles, leaves, ctx })
+    Ok(TreeLayout { tiles, leaves, ctx })
 }
 
 impl TreeLayout<'_> {
-    /// Decodes every leaf (in parallel) and returns them sorted by origin.
-    pub fn decode(mut self) -> Result<(Vec<Tile>, Vec<Leaf>), Error> {
+    /// Decodes every leaf (in parallel) into `N` scalar trees, one per
+    /// component (`N` must be the tree's component count), leaves sorted by origin.
+    pub fn decode<const N: usize>(mut self) -> Result<[Component; N], Error> {
         let ctx = self.ctx;
+        if ctx.components != N || N > MAX_COMPONENTS {
+            return Err(Error::invalid("tree", 0, format!("{} components read as {N}", ctx.components)));
+        }
         // Sort the (small) descriptions first so the decoded leaves are
         // written once, in place, in their final order.
         self.leaves.sort_unstable_by_key(|l| l.origin);
         // The first failing leaf (in leaf order, whatever the thread count).
         let failure: Mutex<Option<(usize, Error)>> = Mutex::new(None);
-        let mut leaves = Vec::with_capacity(self.leaves.len());
-        vdbcook_grid::mem::advise_huge_pages(&leaves);
+        let mut decoded: Vec<[Leaf; N]> = Vec::with_capacity(self.leaves.len());
+        vdbcook_grid::mem::advise_huge_pages(&decoded);
         self.leaves
             .par_iter()
             .enumerate()
             .map(|(i, t)| {
-                let mut leaf = Leaf { origin: t.origin, mask: t.mask, values: [0.0f32; LEAF_VOXELS] };
-                if let Some(Err(e)) = t.values.as_ref().map(|blk| blk.decode(&ctx, &t.mask.0, &mut leaf.values)) {
+                let mut out: [Leaf; N] = std::array::from_fn(|_| Leaf { origin: t.origin, mask: t.mask, values: [0.0f32; LEAF_VOXELS] });
+                let result = t.values.as_ref().map(|blk| {
+                    if let [leaf] = &mut out[..] {
+                        // One component: decode straight into the leaf.
+                        blk.decode(&ctx, &t.mask.0, &mut leaf.values)
+                    } else {
+                        let mut vals = [0.0f32; LEAF_VOXELS * MAX_COMPONENTS];
+                        let vals = &mut vals[..LEAF_VOXELS * N];
+                        blk.decode(&ctx, &t.mask.0, vals)?;
+                        for (v, xyz) in vals.chunks_exact(N).enumerate() {
+                            for (leaf, &x) in out.iter_mut().zip(xyz) {
+                                leaf.values[v] = x;
+                            }
+                        }
+                        Ok(())
+                    }
+                });
+                if let Some(Err(e)) = result {
                     let mut f = failure.lock().unwrap_or_else(|p| p.into_inner());
                     if f.as_ref().is_none_or(|(j, _)| i < *j) {
                         *f = Some((i, e));
                     }
                 }
-                leaf
+                out
             })
-            .collect_into_vec(&mut leaves);
-        match failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
-            Some((_, e)) => Err(e),
-            None => Ok((self.tiles, leaves)),
+            .collect_into_vec(&mut decoded);
+        if let Some((_, e)) = failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e);
         }
+        let background = ctx.background;
+        let tiles = self.tiles;
+        let mut comps: [Component; N] = std::array::from_fn(|c| Component {
+            background: background[c],
+            tiles: tiles.iter().map(|t| Tile { origin: t.origin, dim: t.dim, value: t.value[c], active: t.active }).collect(),
+            leaves: Vec::new(),
+        });
+        if let [only] = &mut comps[..] {
+            // Same size and alignment: collected in place, no second copy of the leaves.
+            only.leaves = decoded.into_iter().filter_map(|l| l.into_iter().next()).collect();
+            return Ok(comps);
+        }
+        for c in comps.iter_mut() {
+            c.leaves.reserve_exact(decoded.len());
+            vdbcook_grid::mem::advise_huge_pages(&c.leaves);
+        }
+        for leaves in decoded {
+            for (c, leaf) in comps.iter_mut().zip(leaves) {
+                c.leaves.push(leaf);
+            }
+        }
+        Ok(comps)
     }
 }
 

@@ -13,6 +13,14 @@
 //! values (background and its negation by default).  Values are half floats
 //! when the grid was saved as half, else the tree's own value type.
 //!
+//! A value has one component (float, double, half) or three (vec3s, vec3d):
+//! vectors are stored as consecutive (x, y, z) triples, in the payload and in
+//! the inactive values alike (OpenVDB reads `sizeof(ValueType)` bytes; a
+//! half-float vec3 grid stores three halves per payload value, while its
+//! inactive values stay at full precision).  Everything below works on flat
+//! arrays of `count × components` scalars, so scalars and vectors share one
+//! code path.
+//!
 //! Reading is split in two: [`scan`] walks the headers sequentially and
 //! records where the payload is; [`ValueBlock::decode`] inflates it and can
 //! run on any thread.
@@ -100,15 +108,24 @@ fn convert(st: ScalarType, bytes: &[u8], out: &mut [f32]) {
     }
 }
 
+/// Most components a value has (vec3).
+pub(crate) const MAX_COMPONENTS: usize = 3;
+
+/// One value: its components, unused ones zero.
+pub(crate) type Value = [f32; MAX_COMPONENTS];
+
 /// What every buffer of one grid shares.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Ctx {
     pub version: u32,
     pub compression: u32,
+    /// Type of each component.
     pub value: ScalarType,
+    /// Components per value: 1 (scalar) or 3 (vec3).
+    pub components: usize,
     /// Values are stored as half floats (`_HalfFloat` grids).
     pub from_half: bool,
-    pub background: f32,
+    pub background: Value,
 }
 
 impl Ctx {
@@ -120,9 +137,25 @@ impl Ctx {
         }
     }
 
-    pub fn read_value(&self, cur: &mut Cursor<'_>, what: &'static str) -> Result<f32, Error> {
-        Ok(self.value.decode(cur.take(self.value.size(), what)?))
+    /// Bytes of one full-precision value (background, tiles, inactive values).
+    pub fn value_size(&self) -> usize {
+        self.value.size() * self.components
     }
+
+    /// Reads one full-precision value.
+    pub fn read_value(&self, cur: &mut Cursor<'_>, what: &'static str) -> Result<Value, Error> {
+        let bytes = cur.take(self.value_size(), what)?;
+        let mut v = [0.0; MAX_COMPONENTS];
+        for (o, b) in v.iter_mut().zip(bytes.chunks_exact(self.value.size())) {
+            *o = self.value.decode(b);
+        }
+        Ok(v)
+    }
+}
+
+/// Component-wise negation (OpenVDB's `math::negative`).
+fn negative(v: Value) -> Value {
+    v.map(|x| -x)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -135,7 +168,7 @@ enum Payload<'a> {
 /// One node's value buffer, located but not yet decoded.
 #[derive(Clone, Debug)]
 pub(crate) struct ValueBlock<'a> {
-    inactive: [f32; 2],
+    inactive: [Value; 2],
     selection: Option<&'a [u8]>,
     /// Number of values in the payload (all, or only the active ones).
     stored: usize,
@@ -155,7 +188,7 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, ctx: &Ctx, count: usize, mask: &[u6
         }
     }
     let bg = ctx.background;
-    let mut inactive = [if meta == NO_MASK_OR_INACTIVE_VALS { bg } else { -bg }, bg];
+    let mut inactive = [if meta == NO_MASK_OR_INACTIVE_VALS { bg } else { negative(bg) }, bg];
     if matches!(meta, NO_MASK_AND_ONE_INACTIVE_VAL | MASK_AND_ONE_INACTIVE_VAL | MASK_AND_TWO_INACTIVE_VALS) {
         inactive[0] = ctx.read_value(cur, "inactive value")?;
         if meta == MASK_AND_TWO_INACTIVE_VALS {
@@ -165,7 +198,7 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, ctx: &Ctx, count: usize, mask: &[u6
     let selection = if matches!(meta, MASK_AND_NO_INACTIVE_VALS | MASK_AND_ONE_INACTIVE_VAL | MASK_AND_TWO_INACTIVE_VALS) { Some(cur.take(count / 8, "selection mask")?) } else { None };
     let mask_compressed = ctx.compression & COMPRESS_ACTIVE_MASK != 0 && meta != NO_MASK_AND_ALL_VALS && ctx.version >= VERSION_NODE_MASK_COMPRESSION;
     let stored = if mask_compressed { mask.iter().map(|w| w.count_ones() as usize).sum() } else { count };
-    let bytes = stored * ctx.stored_type().size();
+    let bytes = stored * ctx.components * ctx.stored_type().size();
     let payload_at = cur.pos();
     let payload = if stored == 0 && ctx.from_half {
         // OpenVDB's half reader returns before touching the stream when
@@ -204,15 +237,17 @@ fn inflate(src: &[u8], out: &mut [u8], offset: usize) -> Result<(), Error> {
     Ok(())
 }
 
-/// Buffers up to this size (a leaf of doubles) are inflated on the stack.
-const STACK_BYTES: usize = 512 * 8;
+/// Buffers up to this size (a leaf of vec3d) are inflated on the stack.
+const STACK_BYTES: usize = 512 * MAX_COMPONENTS * 8;
 
 impl ValueBlock<'_> {
-    /// Decodes into `out` (the node's full value count), rebuilding inactive
-    /// values where only active ones were stored.
+    /// Decodes into `out` (the node's full value count times the
+    /// components, interleaved: x0 y0 z0 x1 …), rebuilding inactive values
+    /// where only active ones were stored.
     pub fn decode(&self, ctx: &Ctx, mask: &[u64], out: &mut [f32]) -> Result<(), Error> {
         let st = ctx.stored_type();
-        let expected = self.stored * st.size();
+        let n = ctx.components;
+        let expected = self.stored * n * st.size();
         let mut stack = [0u8; STACK_BYTES];
         let mut heap = Vec::new();
         let scratch: &mut [u8] = if expected <= STACK_BYTES {
@@ -235,28 +270,31 @@ impl ValueBlock<'_> {
         if bytes.len() != expected {
             return Err(Error::invalid("value buffer", self.offset, format!("{} bytes, expected {expected}", bytes.len())));
         }
-        if self.stored == out.len() {
+        if self.stored * n == out.len() {
             convert(st, bytes, out);
             return Ok(());
         }
-        let mut stack = [0.0f32; 512];
+        let mut stack = [0.0f32; 512 * MAX_COMPONENTS];
         let mut heap = Vec::new();
-        let vals: &mut [f32] = if self.stored <= stack.len() {
-            &mut stack[..self.stored]
+        let vals: &mut [f32] = if self.stored * n <= stack.len() {
+            &mut stack[..self.stored * n]
         } else {
-            heap.resize(self.stored, 0.0);
+            heap.resize(self.stored * n, 0.0);
             &mut heap
         };
         convert(st, bytes, vals);
-        let mut next = vals.iter().copied();
-        for (i, o) in out.iter_mut().enumerate() {
+        let mut next = vals.chunks_exact(n);
+        for (i, o) in out.chunks_exact_mut(n).enumerate() {
             let bit = |m: &[u64]| m.get(i >> 6).is_some_and(|w| (w >> (i & 63)) & 1 == 1);
-            *o = if bit(mask) {
-                next.next().unwrap_or(0.0)
+            if bit(mask) {
+                if let Some(v) = next.next() {
+                    o.copy_from_slice(v);
+                }
             } else {
                 let sel = self.selection.is_some_and(|s| s.get(i >> 3).is_some_and(|b| (b >> (i & 7)) & 1 == 1));
-                self.inactive[usize::from(sel)]
-            };
+                let v = &self.inactive[usize::from(sel)];
+                o.copy_from_slice(&v[..n]);
+            }
         }
         Ok(())
     }
@@ -273,7 +311,7 @@ mod tests {
     use super::*;
 
     fn ctx(compression: u32) -> Ctx {
-        Ctx { version: 224, compression, value: ScalarType::Float, from_half: false, background: 0.5 }
+        Ctx { version: 224, compression, value: ScalarType::Float, components: 1, from_half: false, background: [0.5, 0.0, 0.0] }
     }
 
     #[test]
