@@ -216,45 +216,8 @@ impl TreeLayout<'_> {
             return Err(Error::invalid("tree", 0, format!("{} components read as {N}", ctx.components)));
         }
         // Sort the (small) descriptions first so the decoded leaves are
-        // written once, in place, in their final order.
+        // written once, in their final order.
         self.leaves.sort_unstable_by_key(|l| l.origin);
-        // The first failing leaf (in leaf order, whatever the thread count).
-        let failure: Mutex<Option<(usize, Error)>> = Mutex::new(None);
-        let mut decoded: Vec<[Leaf; N]> = Vec::with_capacity(self.leaves.len());
-        vdbcook_grid::mem::advise_huge_pages(&decoded);
-        self.leaves
-            .par_iter()
-            .enumerate()
-            .map(|(i, t)| {
-                let mut out: [Leaf; N] = std::array::from_fn(|_| Leaf { origin: t.origin, mask: t.mask, values: [0.0f32; LEAF_VOXELS] });
-                let result = t.values.as_ref().map(|blk| {
-                    if let [leaf] = &mut out[..] {
-                        // One component: decode straight into the leaf.
-                        blk.decode(&ctx, &t.mask.0, &mut leaf.values)
-                    } else {
-                        let mut vals = [0.0f32; LEAF_VOXELS * MAX_COMPONENTS];
-                        let vals = &mut vals[..LEAF_VOXELS * N];
-                        blk.decode(&ctx, &t.mask.0, vals)?;
-                        for (v, xyz) in vals.chunks_exact(N).enumerate() {
-                            for (leaf, &x) in out.iter_mut().zip(xyz) {
-                                leaf.values[v] = x;
-                            }
-                        }
-                        Ok(())
-                    }
-                });
-                if let Some(Err(e)) = result {
-                    let mut f = failure.lock().unwrap_or_else(|p| p.into_inner());
-                    if f.as_ref().is_none_or(|(j, _)| i < *j) {
-                        *f = Some((i, e));
-                    }
-                }
-                out
-            })
-            .collect_into_vec(&mut decoded);
-        if let Some((_, e)) = failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
-            return Err(e);
-        }
         let background = ctx.background;
         let tiles = self.tiles;
         let mut comps: [Component; N] = std::array::from_fn(|c| Component {
@@ -263,20 +226,69 @@ impl TreeLayout<'_> {
             leaves: Vec::new(),
         });
         if let [only] = &mut comps[..] {
-            // Same size and alignment: collected in place, no second copy of the leaves.
-            only.leaves = decoded.into_iter().filter_map(|l| l.into_iter().next()).collect();
+            only.leaves = decode_scalar_leaves(&self.leaves, &ctx)?;
             return Ok(comps);
         }
         for c in comps.iter_mut() {
-            c.leaves.reserve_exact(decoded.len());
+            c.leaves.reserve_exact(self.leaves.len());
             vdbcook_grid::mem::advise_huge_pages(&c.leaves);
         }
-        for leaves in decoded {
-            for (c, leaf) in comps.iter_mut().zip(leaves) {
-                c.leaves.push(leaf);
+        // Vectors are decoded in parallel a batch at a time and split into
+        // their components, so no buffer ever holds every component of every leaf.
+        for batch in self.leaves.chunks(VECTOR_BATCH) {
+            let decoded: Vec<Result<[Leaf; N], Error>> = batch
+                .par_iter()
+                .map(|t| {
+                    let mut out: [Leaf; N] = std::array::from_fn(|_| Leaf { origin: t.origin, mask: t.mask, values: [0.0f32; LEAF_VOXELS] });
+                    if let Some(blk) = &t.values {
+                        let mut vals = [0.0f32; LEAF_VOXELS * MAX_COMPONENTS];
+                        let vals = &mut vals[..LEAF_VOXELS * N];
+                        blk.decode(&ctx, &t.mask.0, vals)?;
+                        for (v, xyz) in vals.chunks_exact(N).enumerate() {
+                            for (leaf, &x) in out.iter_mut().zip(xyz) {
+                                leaf.values[v] = x;
+                            }
+                        }
+                    }
+                    Ok(out)
+                })
+                .collect();
+            // The first failing leaf in leaf order, whatever the thread count.
+            for leaves in decoded {
+                for (c, leaf) in comps.iter_mut().zip(leaves?) {
+                    c.leaves.push(leaf);
+                }
             }
         }
         Ok(comps)
+    }
+}
+
+/// Leaves per parallel batch of vector leaves (64 × 6 KiB for vec3).
+const VECTOR_BATCH: usize = 64;
+
+/// Decodes scalar leaves (in parallel) straight into their final vector.
+fn decode_scalar_leaves(topo: &[LeafTopo<'_>], ctx: &Ctx) -> Result<Vec<Leaf>, Error> {
+    // The first failing leaf (in leaf order, whatever the thread count).
+    let failure: Mutex<Option<(usize, Error)>> = Mutex::new(None);
+    let mut leaves = Vec::with_capacity(topo.len());
+    vdbcook_grid::mem::advise_huge_pages(&leaves);
+    topo.par_iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let mut leaf = Leaf { origin: t.origin, mask: t.mask, values: [0.0f32; LEAF_VOXELS] };
+            if let Some(Err(e)) = t.values.as_ref().map(|blk| blk.decode(ctx, &t.mask.0, &mut leaf.values)) {
+                let mut f = failure.lock().unwrap_or_else(|p| p.into_inner());
+                if f.as_ref().is_none_or(|(j, _)| i < *j) {
+                    *f = Some((i, e));
+                }
+            }
+            leaf
+        })
+        .collect_into_vec(&mut leaves);
+    match failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        Some((_, e)) => Err(e),
+        None => Ok(leaves),
     }
 }
 
@@ -299,5 +311,36 @@ mod tests {
         let w = [0b1001u64, 1 << 63];
         assert_eq!(set_bits(&w).collect::<Vec<_>>(), vec![0, 3, 127]);
         assert_eq!(ones(&w), 3);
+    }
+
+    #[test]
+    fn vec3_trees_split_into_components_with_one_topology() {
+        use vdbcook_grid::{Grid, GridClass, Transform};
+        let mut leaf = Leaf { origin: Coord::new(-8, 16, 0), mask: LeafMask::default(), values: [0.0; LEAF_VOXELS] };
+        leaf.mask.set(3, true);
+        let comps: Vec<Grid> = (0..3)
+            .map(|c| {
+                let mut l = leaf.clone();
+                l.values[3] = c as f32 + 0.5;
+                let tiles = vec![Tile { origin: Coord::new(128, 0, 0), dim: 128, value: 10.0 + c as f32, active: true }, Tile { origin: Coord::new(8, 0, 0), dim: 8, value: if c == 2 { 7.0 } else { c as f32 }, active: false }];
+                Grid { name: String::new(), class: GridClass::Staggered, background: c as f32, transform: Transform::identity(), leaves: vec![l], tiles }
+            })
+            .collect();
+        let bytes = crate::write_vdb_grids(&[crate::WriteGrid::Vec3 { name: "v", class: GridClass::Staggered, components: [&comps[0], &comps[1], &comps[2]] }], crate::WriteOptions::default()).unwrap();
+        let file = crate::VdbFile::parse(bytes).unwrap();
+        let info = &file.grids[0];
+        let layout = || scan(&mut Cursor::at(file.bytes(), info.tree_pos).unwrap(), file.ctx(info)).unwrap();
+        // Read with the wrong component count: an error, not a panic.
+        assert!(layout().decode::<1>().is_err());
+        let out = layout().decode::<3>().unwrap();
+        for (c, comp) in out.iter().enumerate() {
+            assert_eq!(comp.background, c as f32);
+            assert_eq!(comp.leaves.len(), 1);
+            assert_eq!((comp.leaves[0].mask, comp.leaves[0].values[3]), (leaf.mask, c as f32 + 0.5));
+            // The inactive tile differs from the background only in z, and is kept in every component.
+            let mut tiles = comp.tiles.clone();
+            tiles.sort_by_key(|t| t.dim);
+            assert_eq!(tiles, comps[c].tiles.iter().rev().copied().collect::<Vec<_>>());
+        }
     }
 }

@@ -394,4 +394,95 @@ mod tests {
         blk.decode(&c, &[0], &mut out).unwrap();
         assert_eq!(out[3], 1.5);
     }
+
+    fn vec3_ctx(compression: u32, value: ScalarType) -> Ctx {
+        Ctx { version: 224, compression, value, components: 3, from_half: false, background: [0.5, -1.0, 2.0] }
+    }
+
+    fn vec3_bytes(v: [f32; 3], st: ScalarType) -> Vec<u8> {
+        v.iter()
+            .flat_map(|&x| match st {
+                ScalarType::Double => f64::from(x).to_le_bytes().to_vec(),
+                ScalarType::Float => x.to_le_bytes().to_vec(),
+                ScalarType::Half => half::f16::from_f32(x).to_bits().to_le_bytes().to_vec(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn vec3_inactive_values_and_selection_are_whole_vectors() {
+        // Active: 0 and 5; two stored inactive vectors, the selection picks the second at 1.
+        let mask = [0b100001u64];
+        for st in [ScalarType::Float, ScalarType::Double] {
+            let mut b = vec![MASK_AND_TWO_INACTIVE_VALS];
+            b.extend(vec3_bytes([7.0, 8.0, 9.0], st));
+            b.extend(vec3_bytes([-7.0, -8.0, -9.0], st));
+            b.extend([0b10, 0, 0, 0, 0, 0, 0, 0]);
+            b.extend(vec3_bytes([1.0, 2.0, 3.0], st));
+            b.extend(vec3_bytes([4.0, 5.0, 6.0], st));
+            let c = vec3_ctx(COMPRESS_ACTIVE_MASK, st);
+            let mut cur = Cursor::new(&b);
+            let blk = scan(&mut cur, &c, 64, &mask).unwrap();
+            assert_eq!((cur.remaining(), blk.stored()), (0, 2), "{st:?}");
+            let mut out = vec![0.0; 64 * 3];
+            blk.decode(&c, &mask, &mut out).unwrap();
+            assert_eq!(&out[..9], &[1.0, 2.0, 3.0, -7.0, -8.0, -9.0, 7.0, 8.0, 9.0]);
+            assert_eq!(&out[15..21], &[4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+        }
+    }
+
+    #[test]
+    fn vec3_default_inactive_values_negate_every_component() {
+        let mask = [1u64];
+        for (meta, want) in [(0u8, [0.5f32, -1.0, 2.0]), (1, [-0.5, 1.0, -2.0])] {
+            let mut b = vec![meta];
+            b.extend(vec3_bytes([3.0, 4.0, 5.0], ScalarType::Float));
+            let c = vec3_ctx(COMPRESS_ACTIVE_MASK, ScalarType::Float);
+            let blk = scan(&mut Cursor::new(&b), &c, 64, &mask).unwrap();
+            let mut out = vec![0.0; 64 * 3];
+            blk.decode(&c, &mask, &mut out).unwrap();
+            assert_eq!(&out[..6], &[3.0, 4.0, 5.0, want[0], want[1], want[2]]);
+        }
+    }
+
+    #[test]
+    fn vec3_half_payload_is_three_halves_per_value_but_inactive_values_are_full() {
+        // Mask-compressed, one stored inactive vector (full precision), one active value as halves.
+        let mask = [1u64];
+        for st in [ScalarType::Float, ScalarType::Double] {
+            let c = Ctx { from_half: true, ..vec3_ctx(COMPRESS_ACTIVE_MASK, st) };
+            let mut b = vec![NO_MASK_AND_ONE_INACTIVE_VAL];
+            b.extend(vec3_bytes([0.1, 0.2, 0.3], st));
+            b.extend(vec3_bytes([1.5, -2.25, 1e-3], ScalarType::Half));
+            let mut cur = Cursor::new(&b);
+            let blk = scan(&mut cur, &c, 64, &mask).unwrap();
+            assert_eq!(cur.remaining(), 0);
+            let mut out = vec![0.0; 64 * 3];
+            blk.decode(&c, &mask, &mut out).unwrap();
+            assert_eq!(&out[..3], &[1.5, -2.25, half::f16::from_f32(1e-3).to_f32()]);
+            assert_eq!(&out[3..6], &[0.1, 0.2, 0.3]);
+        }
+    }
+
+    #[test]
+    fn vec3_compressed_chunks_hold_three_values_per_voxel() {
+        use std::io::Write;
+        let vals: Vec<u8> = (0..64 * 3).flat_map(|i| (i as f32).to_le_bytes()).collect();
+        let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        enc.write_all(&vals).unwrap();
+        let z = enc.finish().unwrap();
+        let mut b = vec![NO_MASK_AND_ALL_VALS];
+        b.extend((z.len() as i64).to_le_bytes());
+        b.extend(&z);
+        let c = vec3_ctx(COMPRESS_ZIP, ScalarType::Float);
+        let blk = scan(&mut Cursor::new(&b), &c, 64, &[0]).unwrap();
+        let mut out = vec![0.0; 64 * 3];
+        blk.decode(&c, &[0], &mut out).unwrap();
+        assert_eq!(out[64 * 3 - 1], 191.0);
+        // A raw chunk sized for scalars is refused.
+        let mut b = vec![NO_MASK_AND_ALL_VALS];
+        b.extend((-(64 * 4i64)).to_le_bytes());
+        b.extend([0; 64 * 4]);
+        assert!(scan(&mut Cursor::new(&b), &c, 64, &[0]).is_err());
+    }
 }
