@@ -85,7 +85,8 @@ fn compare<const N: usize>(comps: &[Grid; N], gi: u32, dump: &Dump<N>, json: &Va
     if json["class"] != comps[0].class.vdb_name() {
         return fail(format!("class: ours {} openvdb {}", comps[0].class.vdb_name(), json["class"]));
     }
-    let bg: Vec<f64> = if N == 1 { vec![json["background"].as_f64().unwrap_or(f64::NAN)] } else { json["background"].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default() };
+    let bg: Vec<f64> =
+        if N == 1 { vec![json["background"].as_f64().unwrap_or(f64::NAN)] } else { json["background"].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default() };
     if bg.len() != N || comps.iter().zip(&bg).any(|(g, &b)| !same(g.background, b, double)) {
         return fail(format!("background: ours {:?} openvdb {}", comps.iter().map(|g| g.background).collect::<Vec<_>>(), json["background"]));
     }
@@ -111,8 +112,10 @@ fn compare<const N: usize>(comps: &[Grid; N], gi: u32, dump: &Dump<N>, json: &Va
     }
     let bits = |v: f64| if double { f64::from(v as f32).to_bits() } else { v.to_bits() };
     let theirs: HashSet<TileKey<N>> = dump.tiles.iter().filter(|t| t.0 == gi).map(|t| (t.1, t.2, t.3.map(bits))).collect();
-    let ours: HashSet<TileKey<N>> =
-        (0..comps[0].tiles.len()).filter(|&i| comps[0].tiles[i].active).map(|i| (comps[0].tiles[i].bbox().min.to_array(), comps[0].tiles[i].bbox().max.to_array(), std::array::from_fn(|c| f64::from(comps[c].tiles[i].value).to_bits()))).collect();
+    let ours: HashSet<TileKey<N>> = (0..comps[0].tiles.len())
+        .filter(|&i| comps[0].tiles[i].active)
+        .map(|i| (comps[0].tiles[i].bbox().min.to_array(), comps[0].tiles[i].bbox().max.to_array(), std::array::from_fn(|c| f64::from(comps[c].tiles[i].value).to_bits())))
+        .collect();
     if ours != theirs {
         return fail(format!("active tiles differ ({} ours, {} openvdb)", ours.len(), theirs.len()));
     }

@@ -322,11 +322,15 @@ mod tests {
             .map(|c| {
                 let mut l = leaf.clone();
                 l.values[3] = c as f32 + 0.5;
-                let tiles = vec![Tile { origin: Coord::new(128, 0, 0), dim: 128, value: 10.0 + c as f32, active: true }, Tile { origin: Coord::new(8, 0, 0), dim: 8, value: if c == 2 { 7.0 } else { c as f32 }, active: false }];
+                let tiles = vec![
+                    Tile { origin: Coord::new(128, 0, 0), dim: 128, value: 10.0 + c as f32, active: true },
+                    Tile { origin: Coord::new(8, 0, 0), dim: 8, value: if c == 2 { 7.0 } else { c as f32 }, active: false },
+                ];
                 Grid { name: String::new(), class: GridClass::Staggered, background: c as f32, transform: Transform::identity(), leaves: vec![l], tiles }
             })
             .collect();
-        let bytes = crate::write_vdb_grids(&[crate::WriteGrid::Vec3 { name: "v", class: GridClass::Staggered, components: [&comps[0], &comps[1], &comps[2]] }], crate::WriteOptions::default()).unwrap();
+        let bytes =
+            crate::write_vdb_grids(&[crate::WriteGrid::Vec3 { name: "v", class: GridClass::Staggered, components: [&comps[0], &comps[1], &comps[2]] }], crate::WriteOptions::default()).unwrap();
         let file = crate::VdbFile::parse(bytes).unwrap();
         let info = &file.grids[0];
         let layout = || scan(&mut Cursor::at(file.bytes(), info.tree_pos).unwrap(), file.ctx(info)).unwrap();

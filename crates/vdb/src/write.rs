@@ -64,7 +64,9 @@ struct Source<'a> {
 impl<'a> Source<'a> {
     fn new(g: &WriteGrid<'a>) -> std::io::Result<Source<'a>> {
         match *g {
-            WriteGrid::Float(grid) => Ok(Source { name: &grid.name, class: grid.class, transform: grid.transform, tree_type: "Tree_float_5_4_3", comps: vec![grid], background: [grid.background, 0.0, 0.0] }),
+            WriteGrid::Float(grid) => {
+                Ok(Source { name: &grid.name, class: grid.class, transform: grid.transform, tree_type: "Tree_float_5_4_3", comps: vec![grid], background: [grid.background, 0.0, 0.0] })
+            }
             WriteGrid::Vec3 { name, class, components } => {
                 let [x, y, z] = components;
                 for (c, g) in [y, z].into_iter().enumerate() {
@@ -334,6 +336,16 @@ fn write_grid(out: &mut Out, src: &Source<'_>, unique_name: &str) -> std::io::Re
         }
     }
     root_tiles.sort_by_key(|t| t.0);
+    // A tile where a child node or leaf also is would make two entries for one slot.
+    let overlap = |o: Coord| invalid(format!("grid \"{}\": the tile at {:?} overlaps a leaf", src.name, o.to_array()));
+    if let Some(t) = root_tiles.iter().find(|t| roots.contains_key(&t.0)) {
+        return Err(overlap(t.0));
+    }
+    for n32 in roots.values() {
+        if n32.tiles.keys().any(|i| n32.children.contains_key(i)) || n32.children.values().any(|n16| n16.tiles.keys().any(|i| n16.leaves.contains_key(i))) {
+            return Err(invalid(format!("grid \"{}\": a tile overlaps a leaf", src.name)));
+        }
+    }
 
     out.string(unique_name);
     out.string(src.tree_type);

@@ -164,7 +164,24 @@ fn vec3_components_must_share_one_topology() {
     missing_tile[2].tiles.remove(0);
     let mut misaligned = vel.clone();
     misaligned[0].tiles[2].origin.x += 8;
-    for (what, c) in [("mask", mask), ("leaves", leaves), ("transform", transform), ("active tile", active_tile), ("missing tile", missing_tile), ("misaligned tile", misaligned)] {
+    let mut over_leaf = vel.clone();
+    for g in over_leaf.iter_mut() {
+        g.tiles[3].origin = g.leaves[2].origin;
+    }
+    let mut over_root_child = vel.clone();
+    for g in over_root_child.iter_mut() {
+        g.tiles[1].origin = vdbcook_grid::Coord::new(-4096, 0, 0);
+    }
+    for (what, c) in [
+        ("mask", mask),
+        ("leaves", leaves),
+        ("transform", transform),
+        ("active tile", active_tile),
+        ("missing tile", missing_tile),
+        ("misaligned tile", misaligned),
+        ("tile over a leaf", over_leaf),
+        ("root tile over a child", over_root_child),
+    ] {
         let e = write(&c).expect_err(what);
         assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput, "{what}: {e}");
         assert!(e.to_string().contains("vel"), "{what}: {e}");
