@@ -31,9 +31,13 @@ fn xyz(b: &[u8], o: usize) -> [i32; 3] {
 /// One oracle dump (scripts/openvdb_oracle.py documents both layouts):
 /// `--voxels` (one value per record) or `--vec3-voxels` (three).
 struct Dump<const N: usize> {
+    /// (grid index, coordinate, values)
     voxels: Vec<(u32, [i32; 3], [f64; N])>,
-    tiles: Vec<(u32, [i32; 3], [i32; 3], [f64; N])>,
+    tiles: Vec<TileRecord<N>>,
 }
+
+/// (grid index, min, max, values)
+type TileRecord<const N: usize> = (u32, [i32; 3], [i32; 3], [f64; N]);
 
 fn read_dump<const N: usize>(path: &Path) -> Dump<N> {
     let b = std::fs::read(path).unwrap();
@@ -224,7 +228,7 @@ fn grid_of(file: &str) -> Grid {
 /// The written grids: what OpenVDB must read back.
 enum Expect {
     Float(Grid),
-    Vec3(&'static str, GridClass, [Grid; 3]),
+    Vec3(&'static str, GridClass, Box<[Grid; 3]>),
 }
 
 /// Our writer's multi-grid files (float and vec3s grids, every class,
@@ -249,9 +253,9 @@ fn openvdb_reads_several_float_and_vec3_grids_we_write() {
     // Every class, and two grids named "vel" (told apart as OpenVDB does).
     let expected = [
         Expect::Float(grid_of("fog_blosc.vdb")),
-        Expect::Vec3("vel", GridClass::Staggered, vel),
+        Expect::Vec3("vel", GridClass::Staggered, Box::new(vel)),
         Expect::Float(grid_of("levelset_half.vdb")),
-        Expect::Vec3("vel", GridClass::Unknown, vel_d),
+        Expect::Vec3("vel", GridClass::Unknown, Box::new(vel_d)),
         Expect::Float(grid_of("tiles_root.vdb")),
     ];
     let info = |e: &Expect| -> (String, GridClass) {
@@ -265,7 +269,7 @@ fn openvdb_reads_several_float_and_vec3_grids_we_write() {
         .iter()
         .map(|e| match e {
             Expect::Float(g) => WriteGrid::Float(g),
-            Expect::Vec3(name, class, [x, y, z]) => WriteGrid::Vec3 { name, class: *class, components: [x, y, z] },
+            Expect::Vec3(name, class, c) => WriteGrid::Vec3 { name, class: *class, components: [&c[0], &c[1], &c[2]] },
         })
         .collect();
     let mut jobs = Vec::new();
@@ -282,7 +286,7 @@ fn openvdb_reads_several_float_and_vec3_grids_we_write() {
                 Expect::Float(g) => assert!(back.read_grid(i).unwrap() == *g, "{name}: float grid differs"),
                 Expect::Vec3(_, _, c) => {
                     let r = back.read_vec3(i).unwrap();
-                    for (a, b) in r.iter().zip(c) {
+                    for (a, b) in r.iter().zip(c.iter()) {
                         assert!(a.leaves == b.leaves && a.tiles == b.tiles && a.background == b.background && a.transform == b.transform, "{name}: component {} differs", a.name);
                     }
                 }

@@ -486,3 +486,21 @@ impl VdbFile {
         read().map_err(|e| e.in_grid(&gname))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tree_types_name_vec3_grids() {
+        let (v, u) = parse_tree_type("Tree_vec3s_5_4_3");
+        assert_eq!((v.name(), v.components()), ("vec3s", 3));
+        assert_eq!(u, Some(Unsupported::Vector("vec3s".into())));
+        let (v, _) = parse_tree_type("Tree_vec3d_5_4_3");
+        assert_eq!(v, ValueType::Vec3(ScalarType::Double));
+        assert_eq!(parse_tree_type("Tree_float_5_4_3"), (ValueType::Scalar(ScalarType::Float), None));
+        assert_eq!(parse_tree_type("Tree_vec3i_5_4_3").1, Some(Unsupported::ValueType("vec3i".into())));
+        assert_eq!(parse_tree_type("Tree_vec3s_4_3_3").1, Some(Unsupported::TreeLayout("Tree_vec3s_4_3_3".into())));
+        assert!(Unsupported::Vector("vec3s".into()).to_string().contains("vec3s"));
+    }
+}
