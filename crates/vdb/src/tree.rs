@@ -83,6 +83,17 @@ fn slot_origin(origin: Coord, i: usize, log2dim: u32, child_dim: i32) -> Coord {
     origin.offset(x * child_dim, y * child_dim, z * child_dim)
 }
 
+/// An internal node's shape and masks, for [`Scanner::node_tiles`].
+struct Node<'m> {
+    origin: Coord,
+    log2dim: u32,
+    child_dim: i32,
+    /// Values stored only for slots without a child (before version 222).
+    packed: bool,
+    child_mask: &'m [u64],
+    value_mask: &'m [u64],
+}
+
 struct Scanner<'c, 'a> {
     cur: &'c mut Cursor<'a>,
     ctx: Ctx,
@@ -110,20 +121,35 @@ impl<'a> Scanner<'_, 'a> {
         let n = self.ctx.components;
         let mut vals = vec![0.0f32; count * n];
         blk.decode(&self.ctx, &value_mask, &mut vals)?;
-        let mut next = 0;
-        for i in 0..slots {
-            if bit(&child_mask, i) {
-                continue;
-            }
-            let at = if packed { next } else { i };
-            next += 1;
-            let mut v = [0.0; MAX_COMPONENTS];
-            if let Some(src) = vals.get(at * n..at * n + n) {
-                v[..n].copy_from_slice(src);
-            }
-            self.tile(slot_origin(origin, i, log2dim, child_dim), child_dim as u32, v, bit(&value_mask, i));
+        let node = Node { origin, log2dim, child_dim, packed, child_mask: &child_mask, value_mask: &value_mask };
+        match n {
+            1 => self.node_tiles::<1>(&node, &vals),
+            _ => self.node_tiles::<MAX_COMPONENTS>(&node, &vals),
         }
         Ok(child_mask)
+    }
+
+    /// Keeps the tiles among an internal node's slots (values of `N` components each).
+    fn node_tiles<const N: usize>(&mut self, node: &Node<'_>, vals: &[f32]) {
+        let background = self.ctx.background;
+        let bg = &background[..N];
+        let mut next = 0;
+        for i in 0..1usize << (3 * node.log2dim) {
+            if bit(node.child_mask, i) {
+                continue;
+            }
+            let at = if node.packed { next } else { i };
+            next += 1;
+            let Some(src) = vals.get(at * N..at * N + N) else { continue };
+            let active = bit(node.value_mask, i);
+            // Most slots are inactive background: skip them before building a tile.
+            if !active && src == bg {
+                continue;
+            }
+            let mut v = [0.0; MAX_COMPONENTS];
+            v[..N].copy_from_slice(src);
+            self.tile(slot_origin(node.origin, i, node.log2dim, node.child_dim), node.child_dim as u32, v, active);
+        }
     }
 
     fn internal32(&mut self, origin: Coord, leaves: &mut Vec<LeafTopo<'a>>) -> Result<(), Error> {

@@ -237,54 +237,70 @@ fn inflate(src: &[u8], out: &mut [u8], offset: usize) -> Result<(), Error> {
     Ok(())
 }
 
-/// Buffers up to this size (a leaf of vec3d) are inflated on the stack.
-const STACK_BYTES: usize = 512 * MAX_COMPONENTS * 8;
+/// Buffers up to these sizes (a leaf of doubles; of vec3d) are inflated on
+/// the stack; scalar leaves only pay for zeroing the smaller one.
+const STACK_BYTES: usize = 512 * 8;
+const STACK_BYTES_VEC3: usize = 512 * MAX_COMPONENTS * 8;
 
 impl ValueBlock<'_> {
     /// Decodes into `out` (the node's full value count times the
     /// components, interleaved: x0 y0 z0 x1 …), rebuilding inactive values
     /// where only active ones were stored.
     pub fn decode(&self, ctx: &Ctx, mask: &[u64], out: &mut [f32]) -> Result<(), Error> {
+        let expected = self.stored * ctx.components * ctx.stored_type().size();
+        match self.payload {
+            Payload::Raw(b) => self.expand(ctx, mask, b, out),
+            _ if expected <= STACK_BYTES => self.inflate_expand(ctx, mask, &mut [0u8; STACK_BYTES][..expected], out),
+            _ if expected <= STACK_BYTES_VEC3 => self.inflate_expand(ctx, mask, &mut [0u8; STACK_BYTES_VEC3][..expected], out),
+            _ => self.inflate_expand(ctx, mask, &mut vec![0u8; expected], out),
+        }
+    }
+
+    /// Decompresses the payload into `scratch` (exactly its expected size), then expands it.
+    fn inflate_expand(&self, ctx: &Ctx, mask: &[u64], scratch: &mut [u8], out: &mut [f32]) -> Result<(), Error> {
+        match self.payload {
+            Payload::Raw(_) => return Err(Error::invalid("value buffer", self.offset, "raw payload passed as compressed")),
+            Payload::Zip(b) => inflate(b, scratch, self.offset)?,
+            Payload::Blosc(b) => vdbcook_blosc::decompress_into(b, scratch).map_err(|error| Error::Blosc { offset: self.offset as u64, error })?,
+        }
+        self.expand(ctx, mask, scratch, out)
+    }
+
+    /// Converts the stored values in `bytes` into `out`, rebuilding the inactive ones.
+    fn expand(&self, ctx: &Ctx, mask: &[u64], bytes: &[u8], out: &mut [f32]) -> Result<(), Error> {
         let st = ctx.stored_type();
-        let n = ctx.components;
-        let expected = self.stored * n * st.size();
-        let mut stack = [0u8; STACK_BYTES];
-        let mut heap = Vec::new();
-        let scratch: &mut [u8] = if expected <= STACK_BYTES {
-            &mut stack[..expected]
-        } else {
-            heap.resize(expected, 0);
-            &mut heap
-        };
-        let bytes: &[u8] = match self.payload {
-            Payload::Raw(b) => b,
-            Payload::Zip(b) => {
-                inflate(b, scratch, self.offset)?;
-                scratch
-            }
-            Payload::Blosc(b) => {
-                vdbcook_blosc::decompress_into(b, scratch).map_err(|error| Error::Blosc { offset: self.offset as u64, error })?;
-                scratch
-            }
-        };
+        let scalars = self.stored * ctx.components;
+        let expected = scalars * st.size();
         if bytes.len() != expected {
             return Err(Error::invalid("value buffer", self.offset, format!("{} bytes, expected {expected}", bytes.len())));
         }
-        if self.stored * n == out.len() {
+        if scalars == out.len() {
             convert(st, bytes, out);
             return Ok(());
         }
-        let mut stack = [0.0f32; 512 * MAX_COMPONENTS];
-        let mut heap = Vec::new();
-        let vals: &mut [f32] = if self.stored * n <= stack.len() {
-            &mut stack[..self.stored * n]
-        } else {
-            heap.resize(self.stored * n, 0.0);
-            &mut heap
-        };
-        convert(st, bytes, vals);
-        let mut next = vals.chunks_exact(n);
-        for (i, o) in out.chunks_exact_mut(n).enumerate() {
+        // Only the active values are stored: convert them into a buffer sized
+        // for them (on the stack up to a leaf's worth), then spread them out.
+        match scalars {
+            n if n <= 512 => self.fill(ctx, mask, bytes, &mut [0.0f32; 512][..n], out),
+            n if n <= 512 * MAX_COMPONENTS => self.fill(ctx, mask, bytes, &mut [0.0f32; 512 * MAX_COMPONENTS][..n], out),
+            n => self.fill(ctx, mask, bytes, &mut vec![0.0f32; n], out),
+        }
+        Ok(())
+    }
+
+    fn fill(&self, ctx: &Ctx, mask: &[u64], bytes: &[u8], vals: &mut [f32], out: &mut [f32]) {
+        convert(ctx.stored_type(), bytes, vals);
+        match ctx.components {
+            1 => self.spread::<1>(vals, mask, out),
+            _ => self.spread::<MAX_COMPONENTS>(vals, mask, out),
+        }
+    }
+
+    /// Places the stored (active) values of `N` components at the active
+    /// positions of `out` and the inactive values elsewhere.
+    fn spread<const N: usize>(&self, vals: &[f32], mask: &[u64], out: &mut [f32]) {
+        let mut next = vals.chunks_exact(N);
+        for (i, o) in out.chunks_exact_mut(N).enumerate() {
             let bit = |m: &[u64]| m.get(i >> 6).is_some_and(|w| (w >> (i & 63)) & 1 == 1);
             if bit(mask) {
                 if let Some(v) = next.next() {
@@ -292,11 +308,9 @@ impl ValueBlock<'_> {
                 }
             } else {
                 let sel = self.selection.is_some_and(|s| s.get(i >> 3).is_some_and(|b| (b >> (i & 7)) & 1 == 1));
-                let v = &self.inactive[usize::from(sel)];
-                o.copy_from_slice(&v[..n]);
+                o.copy_from_slice(&self.inactive[usize::from(sel)][..N]);
             }
         }
-        Ok(())
     }
 
     /// Number of values the payload holds.
