@@ -4,7 +4,8 @@
 Usage (always with the system interpreter, which has pyopenvdb; a pyenv `python3`
 does not):
 
-    /usr/bin/python3 scripts/openvdb_oracle.py FILE.vdb [--voxels OUT.bin] [--crosscheck]
+    /usr/bin/python3 scripts/openvdb_oracle.py FILE.vdb [--voxels OUT.bin]
+        [--vec3-voxels OUT3.bin] [--crosscheck]
 
 The Rust CLI's `vdbcook inspect --json` is tested against this output.
 
@@ -58,11 +59,27 @@ Binary voxel dump (--voxels OUT.bin), all little-endian, packed (no padding):
     tile records, tile_count x 36 bytes, sorted by (grid_index, min x, min y, min z):
         u32 grid_index, i32 min_x, i32 min_y, i32 min_z, i32 max_x, i32 max_y, i32 max_z,
         f64 value
-Only active values of float and double grids are written; grid_index is the index in
+Only active values of float and double grids are written (vec3 grids: see the next
+dump); grid_index is the index in
 the JSON "grids" list (file order, counting grids of every type). A voxel record is a
 single active voxel stored in a leaf node; a tile record is one active tile (any level)
 with its inclusive index-space bounds. Inactive values are never written. An instanced
 grid is dumped like any other grid (its values are its parent's).
+
+Binary vec3 dump (--vec3-voxels OUT3.bin), all little-endian, packed:
+======================================================================
+The same layout with three values, the (x, y, z) components, per record, for the active
+values of vec3s and vec3d grids only (half-float vec3s grids: the decoded halves):
+    header (32 bytes):
+        8 bytes   magic  b"VDBORV01"
+        u32       grid_count, u32 reserved (0), u64 voxel_count, u64 tile_count
+    voxel records, voxel_count x 40 bytes, sorted by (grid_index, x, y, z):
+        u32 grid_index, i32 x, i32 y, i32 z, f64 value_x, f64 value_y, f64 value_z
+    tile records, tile_count x 52 bytes, sorted by (grid_index, min x, min y, min z):
+        u32 grid_index, i32 min_x, i32 min_y, i32 min_z, i32 max_x, i32 max_y, i32 max_z,
+        f64 value_x, f64 value_y, f64 value_z
+vec3s values come from pyopenvdb (float32 widened), vec3d values from the uncompressed
+rewrite described below (float64 as stored).
 
 How the figures are obtained
 ============================
@@ -87,6 +104,11 @@ How the figures are obtained
   printed min/max against `vdb_print -l`.
 * A file that OpenVDB cannot read (e.g. a point grid with an unregistered attribute
   codec) makes the script exit with status 2 and a one-line message on stderr.
+  With `--skip-unreadable`, a file that only vdb_tool cannot rewrite (Blender liquid
+  caches: a readable vec3s `velocity` beside `particles` with the `trnc` codec) is still
+  described: the grids that needed the rewrite get an extra key `"unreadable"` (the
+  reason), null figures and no dump records; the float / vec3s / bool grids, which
+  pyopenvdb loads one by one, are described and dumped as usual.
 
 Surprises found on OpenVDB 10.0.1 (see also fixtures/README.md):
 * Grid.evalMinMax() covers ACTIVE values only (tiles included; inactive values and the
@@ -122,6 +144,8 @@ import pyopenvdb as vdb  # noqa: E402,F401
 
 VDB_MAGIC = 0x56444220
 DUMP_MAGIC = b"VDBORC01"
+VEC3_DUMP_MAGIC = b"VDBORV01"
+VEC3_TYPES = ("vec3s", "vec3d")
 SEP = "\x1e"
 
 # File format version constants (openvdb/version.h)
@@ -513,10 +537,12 @@ def walk_raw_tree(info, g, read_values):
         raise OracleError("value type %s has no raw layout here" % vt)
     dtype, ncomp = VALUE_FORMATS[vt]
     dtype = np.dtype(dtype)
-    if src["half_float"] and dtype.kind == "f":
-        # (the half flag only changes the layout of floating-point values)
-        raise OracleError("walk_raw_tree needs a full-precision grid")
     vsize = dtype.itemsize * ncomp
+    # vdb_tool keeps the half flag of double and vec3d grids: their node values are
+    # then halves (the half flag only changes the layout of floating-point values;
+    # the root's background and tiles stay at full precision).
+    node_dtype = np.dtype("<f2") if src["half_float"] and dtype.kind == "f" else dtype
+    node_vsize = node_dtype.itemsize * ncomp
     dims = tree_config(src["type_name"])       # e.g. [5, 4, 3]
     total = [sum(dims[i:]) for i in range(len(dims))]  # log2 extent of each node level
     data = info["data"]
@@ -548,8 +574,8 @@ def walk_raw_tree(info, g, read_values):
         pos += 1
         if meta != 6:  # NO_MASK_AND_ALL_VALS
             raise OracleError("unexpected value metadata %d in uncompressed node" % meta)
-        values = np.frombuffer(data, dtype=dtype, count=nvals * ncomp, offset=pos)
-        pos += nvals * vsize
+        values = np.frombuffer(data, dtype=node_dtype, count=nvals * ncomp, offset=pos).astype(dtype)
+        pos += nvals * node_vsize
         node = {"level": level, "origin": origin, "child": child, "active": active,
                 "values": values.reshape(nvals, ncomp) if ncomp > 1 else values,
                 "log2": log2, "child_log2": total[level + 1]}
@@ -579,8 +605,8 @@ def walk_raw_tree(info, g, read_values):
             pos += 1
             if meta != 6:
                 raise OracleError("unexpected value metadata %d in uncompressed leaf" % meta)
-            vals = np.frombuffer(data, dtype=dtype, count=leaf_vals * ncomp, offset=pos)
-            pos += leaf_vals * vsize
+            vals = np.frombuffer(data, dtype=node_dtype, count=leaf_vals * ncomp, offset=pos).astype(dtype)
+            pos += leaf_vals * node_vsize
             leaf["values"] = vals.reshape(leaf_vals, ncomp) if ncomp > 1 else vals
         if pos != src["end_pos"]:
             raise OracleError("buffer size mismatch (%d vs end pos %d)" % (pos, src["end_pos"]))
@@ -677,6 +703,8 @@ def stats_from_pyopenvdb(vdb, path, g, want_values):
     bmin, bmax = grid.evalActiveVoxelBoundingBox()
     out["bbox"] = (bmin, bmax) if out["active_voxels"] else None
     scalar = g["value_type"] == "float"
+    if g["value_type"] == "vec3s" and want_values:
+        return _vec3_from_pyopenvdb(grid, g, out)
     # An item with count 1 is a single voxel of a leaf node; every tile (root or
     # internal node level) covers at least one whole leaf (count >= 512).
     values, xyz, tiles = array("d"), array("i"), []
@@ -721,6 +749,30 @@ def stats_from_pyopenvdb(vdb, path, g, want_values):
         if out["active_voxels"]:
             emin, emax = grid.evalMinMax()
             out["evalMinMax"] = (float(emin), float(emax))
+    return out
+
+
+def _vec3_from_pyopenvdb(grid, g, out):
+    """Counts, active tiles and every active (x, y, z) value of a vec3s grid."""
+    values, xyz, tiles = array("d"), array("i"), []
+    n_tile_voxels = 0
+    for item in grid.citerOnValues():
+        cnt = item.count
+        if cnt == 1:
+            values.extend(item.value)
+            xyz.extend(item.min)
+        else:
+            tiles.append((item.min, item.max, item.value, cnt))
+            n_tile_voxels += cnt
+    n_leaf_voxels = int(grid.activeLeafVoxelCount())
+    if n_leaf_voxels + n_tile_voxels != out["active_voxels"] or len(values) != 3 * n_leaf_voxels:
+        raise OracleError("iterator/activeVoxelCount mismatch in %r" % g["unique_name"])
+    out["active_tiles"] = len(tiles)
+    out["tiles"] = tiles
+    out["values"] = (np.frombuffer(values, dtype=np.float64).reshape(-1, 3) if len(values)
+                     else np.zeros((0, 3)))
+    out["coords"] = (np.frombuffer(xyz, dtype=np.intc).astype(np.int64).reshape(-1, 3)
+                     if len(xyz) else np.zeros((0, 3), dtype=np.int64))
     return out
 
 
@@ -802,7 +854,7 @@ def parse_vdb_print(path):
     return blocks
 
 
-def describe(path, want_voxels=False, crosscheck=False):
+def describe(path, want_voxels=False, crosscheck=False, skip_unreadable=False):
     info = parse_file_structure(path)
     vdb = None
     needs_raw = False
@@ -815,8 +867,16 @@ def describe(path, want_voxels=False, crosscheck=False):
     dumps = []  # (grid_index, coords list, values list, tiles)
     with tempfile.TemporaryDirectory(prefix="vdb_oracle_") as tmpdir:
         info_raw = None
+        raw_error = None
         if needs_raw:
-            info_raw = parse_file_structure(run_vdb_tool_none(info, path, tmpdir))
+            try:
+                plain = run_vdb_tool_none(info, path, tmpdir)
+            except OracleError as e:
+                if not skip_unreadable:
+                    raise
+                raw_error = str(e)
+        if needs_raw and raw_error is None:
+            info_raw = parse_file_structure(plain)
             if len(info_raw["grids"]) != len(info["grids"]):
                 raise OracleError("vdb_tool rewrote %d grids, file has %d"
                                   % (len(info_raw["grids"]), len(info["grids"])))
@@ -847,12 +907,23 @@ def describe(path, want_voxels=False, crosscheck=False):
                     raise OracleError("background mismatch %r vs %r"
                                       % (st["background"], entry["background"]))
                 entry["voxel_size"] = st["voxel_size"]
+            elif raw_error is not None:
+                # --skip-unreadable: OpenVDB cannot decode this grid (and vdb_tool
+                # not the file); only its header fields are reported.
+                entry.update({"unreadable": raw_error, "active_voxels": None, "bbox_min": None,
+                              "bbox_max": None, "leaf_count": None, "active_tiles": None,
+                              "min": None, "max": None, "sum": None})
+                grids_json.append(entry)
+                continue
             else:
                 g_raw = raw_by_name.get(oracle_name(g["index"]))
                 if g_raw is None or g_raw["value_type"] != vt:
                     raise OracleError("grid %d (%r) missing from vdb_tool's rewrite"
                                       % (g["index"], g["name"]))
-                st = stats_from_raw(info_raw, g_raw, want_values=(vt == "double"))
+                vec_values = want_voxels and vt == "vec3d"
+                st = stats_from_raw(info_raw, g_raw, want_values=(vt == "double" or vec_values))
+                if vec_values:
+                    st["values"] = st["values"].reshape(-1, 3)
             entry["active_voxels"] = st["active_voxels"]
             if st["bbox"] is not None:
                 entry["bbox_min"] = [int(v) for v in st["bbox"][0]]
@@ -875,7 +946,7 @@ def describe(path, want_voxels=False, crosscheck=False):
                 if "evalMinMax" in st and st["evalMinMax"] != (entry["min"], entry["max"]):
                     raise OracleError("evalMinMax %r disagrees with iterated %r"
                                       % (st["evalMinMax"], (entry["min"], entry["max"])))
-            if want_voxels and scalar:
+            if want_voxels and (scalar or vt in VEC3_TYPES):
                 dumps.append((g["index"], st["coords"], st["values"], st["tiles"]))
             grids_json.append(entry)
         if crosscheck:
@@ -919,13 +990,17 @@ def crosscheck_vdb_print(path, grids_json):
                                  by_name.get(e["name"])))
 
 
-def write_dump(out_path, grid_count, dumps):
-    vox_dt = np.dtype([("g", "<u4"), ("x", "<i4"), ("y", "<i4"), ("z", "<i4"), ("v", "<f8")])
+def write_dump(out_path, grid_count, dumps, components=1):
+    """The --voxels dump (components 1) or the --vec3-voxels dump (components 3)."""
+    vt = ("<f8", (3,)) if components == 3 else "<f8"
+    vox_dt = np.dtype([("g", "<u4"), ("x", "<i4"), ("y", "<i4"), ("z", "<i4"), ("v", vt)])
     tile_dt = np.dtype([("g", "<u4"), ("x0", "<i4"), ("y0", "<i4"), ("z0", "<i4"),
-                        ("x1", "<i4"), ("y1", "<i4"), ("z1", "<i4"), ("v", "<f8")])
-    assert vox_dt.itemsize == 24 and tile_dt.itemsize == 36
+                        ("x1", "<i4"), ("y1", "<i4"), ("z1", "<i4"), ("v", vt)])
+    assert vox_dt.itemsize == 16 + 8 * components and tile_dt.itemsize == 28 + 8 * components
     vox_parts, tile_parts = [], []
     for gi, c, v, tiles in dumps:
+        if (np.ndim(v) == 2) != (components == 3):
+            continue
         if len(v):
             a = np.empty(len(v), dtype=vox_dt)
             a["g"] = gi
@@ -936,15 +1011,16 @@ def write_dump(out_path, grid_count, dumps):
             a = np.empty(len(tiles), dtype=tile_dt)
             a["g"] = gi
             for i, (tmin, tmax, val, _cnt) in enumerate(tiles):
+                tv = np.asarray(val, dtype=np.float64).ravel()
                 a[i] = (gi, tmin[0], tmin[1], tmin[2], tmax[0], tmax[1], tmax[2],
-                        float(np.asarray(val).ravel()[0]))
+                        tv if components == 3 else float(tv[0]))
             tile_parts.append(a)
     vox = np.concatenate(vox_parts) if vox_parts else np.zeros(0, dtype=vox_dt)
     til = np.concatenate(tile_parts) if tile_parts else np.zeros(0, dtype=tile_dt)
     vox = vox[np.lexsort((vox["z"], vox["y"], vox["x"], vox["g"]))]
     til = til[np.lexsort((til["z0"], til["y0"], til["x0"], til["g"]))]
     with open(out_path, "wb") as f:
-        f.write(DUMP_MAGIC)
+        f.write(VEC3_DUMP_MAGIC if components == 3 else DUMP_MAGIC)
         f.write(struct.pack("<IIQQ", grid_count, 0, len(vox), len(til)))
         f.write(vox.tobytes())
         f.write(til.tobytes())
@@ -954,14 +1030,22 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("file")
     ap.add_argument("--voxels", metavar="OUT.bin", help="write the binary active-value dump")
+    ap.add_argument("--vec3-voxels", metavar="OUT3.bin",
+                    help="write the binary active-value dump of the vec3 grids")
+    ap.add_argument("--skip-unreadable", action="store_true",
+                    help="describe the grids OpenVDB can load even when vdb_tool cannot "
+                         "rewrite the file (the others are marked \"unreadable\")")
     ap.add_argument("--crosscheck", action="store_true",
                     help="also compare every grid against `vdb_print -l`")
     args = ap.parse_args(argv)
     try:
-        result, dumps = describe(args.file, want_voxels=bool(args.voxels),
-                                 crosscheck=args.crosscheck)
+        result, dumps = describe(args.file, want_voxels=bool(args.voxels or args.vec3_voxels),
+                                 crosscheck=args.crosscheck,
+                                 skip_unreadable=args.skip_unreadable)
         if args.voxels:
             write_dump(args.voxels, len(result["grids"]), dumps)
+        if args.vec3_voxels:
+            write_dump(args.vec3_voxels, len(result["grids"]), dumps, components=3)
     except OracleError as e:
         print("openvdb_oracle: %s: %s" % (args.file, e), file=sys.stderr)
         return 2

@@ -19,7 +19,9 @@
 //!               (map.rs), then unless an instance: tree topology and buffers (tree.rs)
 //! ```
 //! [`VdbFile::parse`] reads the header, the descriptors, and every grid's
-//! metadata and transform; [`VdbFile::read_grid`] reads one grid's tree.
+//! metadata and transform; [`VdbFile::read_grid`] reads one scalar grid's
+//! tree, [`VdbFile::read_vec3`] a vec3 grid's tree as three scalar grids
+//! (`NAME.x`, `NAME.y`, `NAME.z`), and [`VdbFile::read_channels`] either.
 
 mod cursor;
 mod error;
@@ -32,11 +34,11 @@ mod write;
 pub use error::Error;
 pub use meta::{MetaMap, MetaValue};
 pub use values::ScalarType;
-pub use write::{write_vdb, WriteOptions};
+pub use write::{write_vdb, write_vdb_grids, WriteGrid, WriteOptions};
 
 use cursor::Cursor;
 use std::path::Path;
-use values::{Ctx, COMPRESS_ACTIVE_MASK, COMPRESS_BLOSC, COMPRESS_ZIP};
+use values::{Ctx, COMPRESS_ACTIVE_MASK, COMPRESS_BLOSC, COMPRESS_ZIP, MAX_COMPONENTS};
 use vdbcook_grid::{Grid, GridClass, Transform};
 
 const MAGIC: u64 = 0x5644_4220;
@@ -49,34 +51,57 @@ const UNIQUE_SEP: char = '\u{1e}';
 /// The tree's value type, from the descriptor's type name.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum ValueType {
+    /// `float`, `double` or `half`.
     Scalar(ScalarType),
-    /// Any other type (`vec3s`, `int32`, `bool`, `mask`, `ptdataidx32`, …): listed, not read.
+    /// `vec3s` (`Vec3(Float)`) or `vec3d` (`Vec3(Double)`): three components per value.
+    Vec3(ScalarType),
+    /// Any other type (`int32`, `bool`, `mask`, `vec3i`, `ptdataidx32`, …): listed, not read.
     Other(String),
 }
 
 impl ValueType {
+    /// OpenVDB's name of the type: `float`, `double`, `half`, `vec3s`, `vec3d`, ….
     pub fn name(&self) -> &str {
         match self {
             ValueType::Scalar(s) => s.name(),
+            ValueType::Vec3(ScalarType::Double) => "vec3d",
+            ValueType::Vec3(ScalarType::Half) => "vec3h",
+            ValueType::Vec3(ScalarType::Float) => "vec3s",
             ValueType::Other(s) => s,
+        }
+    }
+
+    /// Components per value: 1 for scalars, 3 for vec3, 0 for types not read.
+    pub fn components(&self) -> usize {
+        match self {
+            ValueType::Scalar(_) => 1,
+            ValueType::Vec3(_) => 3,
+            ValueType::Other(_) => 0,
         }
     }
 }
 
-/// Why a grid's tree is not read.
+/// Suffixes of a vec3 grid's component channels, in component order.
+pub const VEC3_SUFFIXES: [&str; 3] = [".x", ".y", ".z"];
+
+/// Why [`VdbFile::read_grid`] does not return a grid as one scalar [`Grid`].
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Unsupported {
     ValueType(String),
     TreeLayout(String),
     NonLinearMap(String),
+    /// A vec3 grid (`vec3s`, `vec3d`): readable, but as three scalar grids
+    /// ([`VdbFile::read_vec3`], [`VdbFile::read_channels`]).
+    Vector(String),
 }
 
 impl std::fmt::Display for Unsupported {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Unsupported::ValueType(t) => write!(f, "value type {t} is not supported (only float, double and half grids are read)"),
+            Unsupported::ValueType(t) => write!(f, "value type {t} is not supported (only float, double, half and vec3 grids are read)"),
             Unsupported::TreeLayout(t) => write!(f, "tree type {t} is not a 5-4-3 tree"),
             Unsupported::NonLinearMap(m) => write!(f, "non-linear transform {m} is not supported (only linear maps are)"),
+            Unsupported::Vector(t) => write!(f, "value type {t} holds vectors: it is read as three scalar channels (.x, .y, .z), not as one scalar grid"),
         }
     }
 }
@@ -100,7 +125,9 @@ pub struct GridInfo {
     pub metadata: MetaMap,
     /// `None` when the grid is unsupported for a reason that stops its transform from being read.
     pub transform: Option<Transform>,
-    /// `Some` when the grid's tree cannot be read.
+    /// `Some` when [`VdbFile::read_grid`] cannot read the grid's tree as one
+    /// scalar grid; `Some(Unsupported::Vector)` for a vec3 grid, which
+    /// [`VdbFile::read_vec3`] reads (see [`GridInfo::is_readable`]).
     pub unsupported: Option<Unsupported>,
     /// Byte offset of the grid's tree (after the transform).
     tree_pos: usize,
@@ -134,9 +161,35 @@ impl GridInfo {
         v
     }
 
-    /// True for a float, double or half grid with a 5-4-3 tree and a linear map.
+    /// True for a float, double or half grid with a 5-4-3 tree and a linear map
+    /// (what [`VdbFile::read_grid`] reads).
     pub fn is_readable_scalar(&self) -> bool {
         self.unsupported.is_none()
+    }
+
+    /// True for a vec3s or vec3d grid with a 5-4-3 tree and a linear map
+    /// (what [`VdbFile::read_vec3`] reads).
+    pub fn is_readable_vec3(&self) -> bool {
+        matches!(self.unsupported, Some(Unsupported::Vector(_)))
+    }
+
+    /// True for every grid this reader reads: float, double, half and vec3
+    /// grids ([`VdbFile::read_channels`]).
+    pub fn is_readable(&self) -> bool {
+        self.is_readable_scalar() || self.is_readable_vec3()
+    }
+
+    /// Names of the scalar channels [`VdbFile::read_channels`] returns: the
+    /// grid's name, or for a vec3 grid `NAME.x`, `NAME.y`, `NAME.z`; empty
+    /// for grids that are not read.
+    pub fn channel_names(&self) -> Vec<String> {
+        if self.is_readable_scalar() {
+            vec![self.name.clone()]
+        } else if self.is_readable_vec3() {
+            VEC3_SUFFIXES.iter().map(|s| format!("{}{s}", self.name)).collect()
+        } else {
+            Vec::new()
+        }
     }
 }
 
@@ -197,14 +250,18 @@ fn parse_tree_type(tree_type: &str) -> (ValueType, Option<Unsupported>) {
         "float" => ValueType::Scalar(ScalarType::Float),
         "double" => ValueType::Scalar(ScalarType::Double),
         "half" => ValueType::Scalar(ScalarType::Half),
+        "vec3s" => ValueType::Vec3(ScalarType::Float),
+        "vec3d" => ValueType::Vec3(ScalarType::Double),
         other => ValueType::Other(other.to_string()),
     };
     let unsupported = if !layout {
         Some(Unsupported::TreeLayout(tree_type.to_string()))
-    } else if let ValueType::Other(t) = &value {
-        Some(Unsupported::ValueType(t.clone()))
     } else {
-        None
+        match &value {
+            ValueType::Other(t) => Some(Unsupported::ValueType(t.clone())),
+            ValueType::Vec3(_) => Some(Unsupported::Vector(value.name().to_string())),
+            ValueType::Scalar(_) => None,
+        }
     };
     (value, unsupported)
 }
@@ -310,7 +367,7 @@ impl VdbFile {
             *cur = Cursor::at(cur.data(), end_pos as usize).map_err(ctx_err)?;
         } else if info.instance_parent.is_some() {
             *cur = g;
-        } else if info.unsupported.is_some() {
+        } else if !info.is_readable() {
             return Err(ctx_err(Error::Unsupported {
                 grid: info.display_name(),
                 reason: format!("{} (and the file has no grid offsets to skip it)", info.unsupported.as_ref().map(|u| u.to_string()).unwrap_or_default()),
@@ -323,11 +380,12 @@ impl VdbFile {
     }
 
     fn ctx(&self, g: &GridInfo) -> Ctx {
-        let value = match g.value_type {
-            ValueType::Scalar(s) => s,
-            ValueType::Other(_) => ScalarType::Float,
+        let (value, components) = match g.value_type {
+            ValueType::Scalar(s) => (s, 1),
+            ValueType::Vec3(s) => (s, 3),
+            ValueType::Other(_) => (ScalarType::Float, 1),
         };
-        Ctx { version: self.file_version, compression: g.compression, value, from_half: g.half_float && value != ScalarType::Half, background: 0.0 }
+        Ctx { version: self.file_version, compression: g.compression, value, components, from_half: g.half_float && value != ScalarType::Half, background: [0.0; MAX_COMPONENTS] }
     }
 
     /// The whole file's bytes.
@@ -358,14 +416,45 @@ impl VdbFile {
         }
     }
 
-    /// Reads grid `index`'s tree (its instance parent's, for an instance).
+    /// Reads scalar grid `index`'s tree (its instance parent's, for an
+    /// instance).  A vec3 grid is refused: see [`VdbFile::read_vec3`].
     pub fn read_grid(&self, index: usize) -> Result<Grid, Error> {
+        let [grid] = self.read_tree::<1>(index, false)?;
+        Ok(grid)
+    }
+
+    /// Reads vec3 grid `index` as three scalar grids, its x, y and z
+    /// components, named `NAME.x`, `NAME.y` and `NAME.z`: the same leaves,
+    /// active masks and tiles, each with its component of the background and
+    /// of every value, and the grid's class and transform.  A scalar grid is refused.
+    pub fn read_vec3(&self, index: usize) -> Result<[Grid; 3], Error> {
+        self.read_tree::<3>(index, true)
+    }
+
+    /// Reads grid `index` as scalar channels: one grid for a float, double or
+    /// half grid, three ([`VdbFile::read_vec3`]) for a vec3 grid; names as
+    /// [`GridInfo::channel_names`].
+    pub fn read_channels(&self, index: usize) -> Result<Vec<Grid>, Error> {
+        match self.grids.get(index) {
+            Some(info) if info.is_readable_vec3() => Ok(self.read_vec3(index)?.into()),
+            _ => Ok(vec![self.read_grid(index)?]),
+        }
+    }
+
+    /// Reads grid `index`'s tree as `N` component grids (`vec3`: whether a vec3 grid is expected).
+    fn read_tree<const N: usize>(&self, index: usize, vec3: bool) -> Result<[Grid; N], Error> {
         let Some(info) = self.grids.get(index) else {
             return Err(Error::NoSuchGrid { name: format!("#{index}"), available: self.grid_names() });
         };
         let gname = info.display_name();
-        if let Some(u) = &info.unsupported {
-            return Err(Error::Unsupported { grid: gname, reason: u.to_string() });
+        let readable = |g: &GridInfo| if vec3 { g.is_readable_vec3() } else { g.is_readable_scalar() };
+        if !readable(info) {
+            let reason = match &info.unsupported {
+                Some(u @ Unsupported::Vector(_)) => format!("{u}: read it with read_vec3 or read_channels"),
+                Some(u) => u.to_string(),
+                None => format!("value type {} is not a vector", info.value_type.name()),
+            };
+            return Err(Error::Unsupported { grid: gname, reason });
         }
         let source = match &info.instance_parent {
             None => info,
@@ -375,19 +464,43 @@ impl VdbFile {
                     .iter()
                     .find(|g| &g.unique_name == p && g.instance_parent.is_none())
                     .ok_or_else(|| Error::invalid("grid descriptor", 0, format!("instance parent \"{}\" is missing", p.escape_debug())).in_grid(&gname))?;
-                if let Some(u) = &parent.unsupported {
-                    return Err(Error::Unsupported { grid: gname, reason: format!("its instance parent: {u}") });
+                if !readable(parent) {
+                    let why = parent.unsupported.as_ref().map(|u| u.to_string()).unwrap_or_else(|| format!("value type {} is not a vector", parent.value_type.name()));
+                    return Err(Error::Unsupported { grid: gname, reason: format!("its instance parent: {why}") });
                 }
                 parent
             }
         };
-        let read = || -> Result<Grid, Error> {
+        let read = || -> Result<[Grid; N], Error> {
             let mut cur = Cursor::at(&self.data, source.tree_pos)?;
             let layout = tree::scan(&mut cur, self.ctx(source))?;
-            let background = layout.background;
-            let (tiles, leaves) = layout.decode()?;
-            Ok(Grid { name: info.name.clone(), class: info.class, background, transform: info.transform.unwrap_or_else(Transform::identity), leaves, tiles })
+            let comps = layout.decode::<N>()?;
+            let transform = info.transform.unwrap_or_else(Transform::identity);
+            let mut c = 0;
+            Ok(comps.map(|comp| {
+                let name = if vec3 { format!("{}{}", info.name, VEC3_SUFFIXES.get(c).unwrap_or(&"")) } else { info.name.clone() };
+                c += 1;
+                Grid { name, class: info.class, background: comp.background, transform, leaves: comp.leaves, tiles: comp.tiles }
+            }))
         };
         read().map_err(|e| e.in_grid(&gname))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tree_types_name_vec3_grids() {
+        let (v, u) = parse_tree_type("Tree_vec3s_5_4_3");
+        assert_eq!((v.name(), v.components()), ("vec3s", 3));
+        assert_eq!(u, Some(Unsupported::Vector("vec3s".into())));
+        let (v, _) = parse_tree_type("Tree_vec3d_5_4_3");
+        assert_eq!(v, ValueType::Vec3(ScalarType::Double));
+        assert_eq!(parse_tree_type("Tree_float_5_4_3"), (ValueType::Scalar(ScalarType::Float), None));
+        assert_eq!(parse_tree_type("Tree_vec3i_5_4_3").1, Some(Unsupported::ValueType("vec3i".into())));
+        assert_eq!(parse_tree_type("Tree_vec3s_4_3_3").1, Some(Unsupported::TreeLayout("Tree_vec3s_4_3_3".into())));
+        assert!(Unsupported::Vector("vec3s".into()).to_string().contains("vec3s"));
     }
 }

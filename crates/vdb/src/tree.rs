@@ -14,11 +14,16 @@
 //! buffers, for every leaf (root children in coordinate order, then mask order):
 //!   leaf mask (64 B), [v < 222: i32 x, y, z origin, i8 buffer count], value buffer of 512 values
 //! ```
+//! A `value` is one scalar, or for vec3 trees three consecutive scalars
+//! (x, y, z); value buffers hold `count × components` scalars.
+//!
 //! Everything is read sequentially by [`scan`], which records each leaf's
-//! value buffer; [`TreeLayout::decode`] then inflates the leaves in parallel.
+//! value buffer; [`TreeLayout::decode`] then inflates the leaves in parallel
+//! and splits vectors into one scalar tree per component (same leaves, masks
+//! and tiles; each its component of every value).
 
 use crate::cursor::Cursor;
-use crate::values::{self, Ctx, ValueBlock, COMPRESS_ZIP, VERSION_NODE_MASK_COMPRESSION};
+use crate::values::{self, Ctx, Value, ValueBlock, COMPRESS_ZIP, MAX_COMPONENTS, VERSION_NODE_MASK_COMPRESSION};
 use crate::Error;
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -30,12 +35,29 @@ struct LeafTopo<'a> {
     values: Option<ValueBlock<'a>>,
 }
 
+/// A tile whose value has every component.
+#[derive(Clone, Copy, Debug)]
+struct VecTile {
+    origin: Coord,
+    dim: u32,
+    value: Value,
+    active: bool,
+}
+
 /// A scanned tree: tiles decoded, leaf buffers located.
 pub(crate) struct TreeLayout<'a> {
-    pub background: f32,
-    pub tiles: Vec<Tile>,
+    tiles: Vec<VecTile>,
     leaves: Vec<LeafTopo<'a>>,
     ctx: Ctx,
+}
+
+/// One component of a decoded tree, as a scalar tree.
+#[derive(Debug)]
+pub(crate) struct Component {
+    pub background: f32,
+    pub tiles: Vec<Tile>,
+    /// Sorted by origin.
+    pub leaves: Vec<Leaf>,
 }
 
 /// Bytes one node of each kind occupies in the topology at the very least,
@@ -61,16 +83,29 @@ fn slot_origin(origin: Coord, i: usize, log2dim: u32, child_dim: i32) -> Coord {
     origin.offset(x * child_dim, y * child_dim, z * child_dim)
 }
 
+/// An internal node's shape and masks, for [`Scanner::node_tiles`].
+struct Node<'m> {
+    origin: Coord,
+    log2dim: u32,
+    child_dim: i32,
+    /// Values stored only for slots without a child (before version 222).
+    packed: bool,
+    child_mask: &'m [u64],
+    value_mask: &'m [u64],
+}
+
 struct Scanner<'c, 'a> {
     cur: &'c mut Cursor<'a>,
     ctx: Ctx,
-    tiles: Vec<Tile>,
+    tiles: Vec<VecTile>,
 }
 
 impl<'a> Scanner<'_, 'a> {
-    fn tile(&mut self, origin: Coord, dim: u32, value: f32, active: bool) {
+    /// Keeps a tile that is active or differs from the background (in any
+    /// component, so that every component has the same tiles).
+    fn tile(&mut self, origin: Coord, dim: u32, value: Value, active: bool) {
         if active || value != self.ctx.background {
-            self.tiles.push(Tile { origin, dim, value, active });
+            self.tiles.push(VecTile { origin, dim, value, active });
         }
     }
 
@@ -83,18 +118,38 @@ impl<'a> Scanner<'_, 'a> {
         let packed = self.ctx.version < VERSION_NODE_MASK_COMPRESSION;
         let count = if packed { slots - ones(&child_mask) as usize } else { slots };
         let blk = values::scan(self.cur, &self.ctx, count, &value_mask)?;
-        let mut vals = vec![0.0f32; count];
+        let n = self.ctx.components;
+        let mut vals = vec![0.0f32; count * n];
         blk.decode(&self.ctx, &value_mask, &mut vals)?;
-        let mut next = 0;
-        for i in 0..slots {
-            if bit(&child_mask, i) {
-                continue;
-            }
-            let v = if packed { vals.get(next).copied().unwrap_or(0.0) } else { vals[i] };
-            next += 1;
-            self.tile(slot_origin(origin, i, log2dim, child_dim), child_dim as u32, v, bit(&value_mask, i));
+        let node = Node { origin, log2dim, child_dim, packed, child_mask: &child_mask, value_mask: &value_mask };
+        match n {
+            1 => self.node_tiles::<1>(&node, &vals),
+            _ => self.node_tiles::<MAX_COMPONENTS>(&node, &vals),
         }
         Ok(child_mask)
+    }
+
+    /// Keeps the tiles among an internal node's slots (values of `N` components each).
+    fn node_tiles<const N: usize>(&mut self, node: &Node<'_>, vals: &[f32]) {
+        let background = self.ctx.background;
+        let bg = &background[..N];
+        let mut next = 0;
+        for i in 0..1usize << (3 * node.log2dim) {
+            if bit(node.child_mask, i) {
+                continue;
+            }
+            let at = if node.packed { next } else { i };
+            next += 1;
+            let Some(src) = vals.get(at * N..at * N + N) else { continue };
+            let active = bit(node.value_mask, i);
+            // Most slots are inactive background: skip them before building a tile.
+            if !active && src == bg {
+                continue;
+            }
+            let mut v = [0.0; MAX_COMPONENTS];
+            v[..N].copy_from_slice(src);
+            self.tile(slot_origin(node.origin, i, node.log2dim, node.child_dim), node.child_dim as u32, v, active);
+        }
     }
 
     fn internal32(&mut self, origin: Coord, leaves: &mut Vec<LeafTopo<'a>>) -> Result<(), Error> {
@@ -122,7 +177,7 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<
     ctx.background = ctx.read_value(cur, "background value")?;
     let num_tiles = cur.u32("root tile count")?;
     let num_children = cur.u32("root child count")?;
-    let tile_bytes = 12 + ctx.value.size() as u64 + 1;
+    let tile_bytes = 12 + ctx.value_size() as u64 + 1;
     cur.check_count("root tile count", u64::from(num_tiles), tile_bytes)?;
     cur.check_count("root child count", u64::from(num_children), 12 + MIN_INTERNAL32_BYTES)?;
 
@@ -175,38 +230,91 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<
             values::scan(cur, &aux, LEAF_VOXELS, &leaf.mask.0)?;
         }
     }
-    Ok(TreeLayout { background: ctx.background, tiles, leaves, ctx })
+    Ok(TreeLayout { tiles, leaves, ctx })
 }
 
 impl TreeLayout<'_> {
-    /// Decodes every leaf (in parallel) and returns them sorted by origin.
-    pub fn decode(mut self) -> Result<(Vec<Tile>, Vec<Leaf>), Error> {
+    /// Decodes every leaf (in parallel) into `N` scalar trees, one per
+    /// component (`N` must be the tree's component count), leaves sorted by origin.
+    pub fn decode<const N: usize>(mut self) -> Result<[Component; N], Error> {
         let ctx = self.ctx;
-        // Sort the (small) descriptions first so the decoded leaves are
-        // written once, in place, in their final order.
-        self.leaves.sort_unstable_by_key(|l| l.origin);
-        // The first failing leaf (in leaf order, whatever the thread count).
-        let failure: Mutex<Option<(usize, Error)>> = Mutex::new(None);
-        let mut leaves = Vec::with_capacity(self.leaves.len());
-        vdbcook_grid::mem::advise_huge_pages(&leaves);
-        self.leaves
-            .par_iter()
-            .enumerate()
-            .map(|(i, t)| {
-                let mut leaf = Leaf { origin: t.origin, mask: t.mask, values: [0.0f32; LEAF_VOXELS] };
-                if let Some(Err(e)) = t.values.as_ref().map(|blk| blk.decode(&ctx, &t.mask.0, &mut leaf.values)) {
-                    let mut f = failure.lock().unwrap_or_else(|p| p.into_inner());
-                    if f.as_ref().is_none_or(|(j, _)| i < *j) {
-                        *f = Some((i, e));
-                    }
-                }
-                leaf
-            })
-            .collect_into_vec(&mut leaves);
-        match failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
-            Some((_, e)) => Err(e),
-            None => Ok((self.tiles, leaves)),
+        if ctx.components != N || N > MAX_COMPONENTS {
+            return Err(Error::invalid("tree", 0, format!("{} components read as {N}", ctx.components)));
         }
+        // Sort the (small) descriptions first so the decoded leaves are
+        // written once, in their final order.
+        self.leaves.sort_unstable_by_key(|l| l.origin);
+        let background = ctx.background;
+        let tiles = self.tiles;
+        let mut comps: [Component; N] = std::array::from_fn(|c| Component {
+            background: background[c],
+            tiles: tiles.iter().map(|t| Tile { origin: t.origin, dim: t.dim, value: t.value[c], active: t.active }).collect(),
+            leaves: Vec::new(),
+        });
+        if let [only] = &mut comps[..] {
+            only.leaves = decode_scalar_leaves(&self.leaves, &ctx)?;
+            return Ok(comps);
+        }
+        for c in comps.iter_mut() {
+            c.leaves.reserve_exact(self.leaves.len());
+            vdbcook_grid::mem::advise_huge_pages(&c.leaves);
+        }
+        // Vectors are decoded in parallel a batch at a time and split into
+        // their components, so no buffer ever holds every component of every leaf.
+        for batch in self.leaves.chunks(VECTOR_BATCH) {
+            let decoded: Vec<Result<[Leaf; N], Error>> = batch
+                .par_iter()
+                .map(|t| {
+                    let mut out: [Leaf; N] = std::array::from_fn(|_| Leaf { origin: t.origin, mask: t.mask, values: [0.0f32; LEAF_VOXELS] });
+                    if let Some(blk) = &t.values {
+                        let mut vals = [0.0f32; LEAF_VOXELS * MAX_COMPONENTS];
+                        let vals = &mut vals[..LEAF_VOXELS * N];
+                        blk.decode(&ctx, &t.mask.0, vals)?;
+                        for (v, xyz) in vals.chunks_exact(N).enumerate() {
+                            for (leaf, &x) in out.iter_mut().zip(xyz) {
+                                leaf.values[v] = x;
+                            }
+                        }
+                    }
+                    Ok(out)
+                })
+                .collect();
+            // The first failing leaf in leaf order, whatever the thread count.
+            for leaves in decoded {
+                for (c, leaf) in comps.iter_mut().zip(leaves?) {
+                    c.leaves.push(leaf);
+                }
+            }
+        }
+        Ok(comps)
+    }
+}
+
+/// Leaves per parallel batch of vector leaves (64 × 6 KiB for vec3).
+const VECTOR_BATCH: usize = 64;
+
+/// Decodes scalar leaves (in parallel) straight into their final vector.
+fn decode_scalar_leaves(topo: &[LeafTopo<'_>], ctx: &Ctx) -> Result<Vec<Leaf>, Error> {
+    // The first failing leaf (in leaf order, whatever the thread count).
+    let failure: Mutex<Option<(usize, Error)>> = Mutex::new(None);
+    let mut leaves = Vec::with_capacity(topo.len());
+    vdbcook_grid::mem::advise_huge_pages(&leaves);
+    topo.par_iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let mut leaf = Leaf { origin: t.origin, mask: t.mask, values: [0.0f32; LEAF_VOXELS] };
+            if let Some(Err(e)) = t.values.as_ref().map(|blk| blk.decode(ctx, &t.mask.0, &mut leaf.values)) {
+                let mut f = failure.lock().unwrap_or_else(|p| p.into_inner());
+                if f.as_ref().is_none_or(|(j, _)| i < *j) {
+                    *f = Some((i, e));
+                }
+            }
+            leaf
+        })
+        .collect_into_vec(&mut leaves);
+    match failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        Some((_, e)) => Err(e),
+        None => Ok(leaves),
     }
 }
 
@@ -229,5 +337,40 @@ mod tests {
         let w = [0b1001u64, 1 << 63];
         assert_eq!(set_bits(&w).collect::<Vec<_>>(), vec![0, 3, 127]);
         assert_eq!(ones(&w), 3);
+    }
+
+    #[test]
+    fn vec3_trees_split_into_components_with_one_topology() {
+        use vdbcook_grid::{Grid, GridClass, Transform};
+        let mut leaf = Leaf { origin: Coord::new(-8, 16, 0), mask: LeafMask::default(), values: [0.0; LEAF_VOXELS] };
+        leaf.mask.set(3, true);
+        let comps: Vec<Grid> = (0..3)
+            .map(|c| {
+                let mut l = leaf.clone();
+                l.values[3] = c as f32 + 0.5;
+                let tiles = vec![
+                    Tile { origin: Coord::new(128, 0, 0), dim: 128, value: 10.0 + c as f32, active: true },
+                    Tile { origin: Coord::new(8, 0, 0), dim: 8, value: if c == 2 { 7.0 } else { c as f32 }, active: false },
+                ];
+                Grid { name: String::new(), class: GridClass::Staggered, background: c as f32, transform: Transform::identity(), leaves: vec![l], tiles }
+            })
+            .collect();
+        let bytes =
+            crate::write_vdb_grids(&[crate::WriteGrid::Vec3 { name: "v", class: GridClass::Staggered, components: [&comps[0], &comps[1], &comps[2]] }], crate::WriteOptions::default()).unwrap();
+        let file = crate::VdbFile::parse(bytes).unwrap();
+        let info = &file.grids[0];
+        let layout = || scan(&mut Cursor::at(file.bytes(), info.tree_pos).unwrap(), file.ctx(info)).unwrap();
+        // Read with the wrong component count: an error, not a panic.
+        assert!(layout().decode::<1>().is_err());
+        let out = layout().decode::<3>().unwrap();
+        for (c, comp) in out.iter().enumerate() {
+            assert_eq!(comp.background, c as f32);
+            assert_eq!(comp.leaves.len(), 1);
+            assert_eq!((comp.leaves[0].mask, comp.leaves[0].values[3]), (leaf.mask, c as f32 + 0.5));
+            // The inactive tile differs from the background only in z, and is kept in every component.
+            let mut tiles = comp.tiles.clone();
+            tiles.sort_by_key(|t| t.dim);
+            assert_eq!(tiles, comps[c].tiles.iter().rev().copied().collect::<Vec<_>>());
+        }
     }
 }

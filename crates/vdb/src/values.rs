@@ -13,6 +13,14 @@
 //! values (background and its negation by default).  Values are half floats
 //! when the grid was saved as half, else the tree's own value type.
 //!
+//! A value has one component (float, double, half) or three (vec3s, vec3d):
+//! vectors are stored as consecutive (x, y, z) triples, in the payload and in
+//! the inactive values alike (OpenVDB reads `sizeof(ValueType)` bytes; a
+//! half-float vec3 grid stores three halves per payload value, while its
+//! inactive values stay at full precision).  Everything below works on flat
+//! arrays of `count × components` scalars, so scalars and vectors share one
+//! code path.
+//!
 //! Reading is split in two: [`scan`] walks the headers sequentially and
 //! records where the payload is; [`ValueBlock::decode`] inflates it and can
 //! run on any thread.
@@ -100,15 +108,24 @@ fn convert(st: ScalarType, bytes: &[u8], out: &mut [f32]) {
     }
 }
 
+/// Most components a value has (vec3).
+pub(crate) const MAX_COMPONENTS: usize = 3;
+
+/// One value: its components, unused ones zero.
+pub(crate) type Value = [f32; MAX_COMPONENTS];
+
 /// What every buffer of one grid shares.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Ctx {
     pub version: u32,
     pub compression: u32,
+    /// Type of each component.
     pub value: ScalarType,
+    /// Components per value: 1 (scalar) or 3 (vec3).
+    pub components: usize,
     /// Values are stored as half floats (`_HalfFloat` grids).
     pub from_half: bool,
-    pub background: f32,
+    pub background: Value,
 }
 
 impl Ctx {
@@ -120,9 +137,25 @@ impl Ctx {
         }
     }
 
-    pub fn read_value(&self, cur: &mut Cursor<'_>, what: &'static str) -> Result<f32, Error> {
-        Ok(self.value.decode(cur.take(self.value.size(), what)?))
+    /// Bytes of one full-precision value (background, tiles, inactive values).
+    pub fn value_size(&self) -> usize {
+        self.value.size() * self.components
     }
+
+    /// Reads one full-precision value.
+    pub fn read_value(&self, cur: &mut Cursor<'_>, what: &'static str) -> Result<Value, Error> {
+        let bytes = cur.take(self.value_size(), what)?;
+        let mut v = [0.0; MAX_COMPONENTS];
+        for (o, b) in v.iter_mut().zip(bytes.chunks_exact(self.value.size())) {
+            *o = self.value.decode(b);
+        }
+        Ok(v)
+    }
+}
+
+/// Component-wise negation (OpenVDB's `math::negative`).
+fn negative(v: Value) -> Value {
+    v.map(|x| -x)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -135,7 +168,7 @@ enum Payload<'a> {
 /// One node's value buffer, located but not yet decoded.
 #[derive(Clone, Debug)]
 pub(crate) struct ValueBlock<'a> {
-    inactive: [f32; 2],
+    inactive: [Value; 2],
     selection: Option<&'a [u8]>,
     /// Number of values in the payload (all, or only the active ones).
     stored: usize,
@@ -155,7 +188,7 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, ctx: &Ctx, count: usize, mask: &[u6
         }
     }
     let bg = ctx.background;
-    let mut inactive = [if meta == NO_MASK_OR_INACTIVE_VALS { bg } else { -bg }, bg];
+    let mut inactive = [if meta == NO_MASK_OR_INACTIVE_VALS { bg } else { negative(bg) }, bg];
     if matches!(meta, NO_MASK_AND_ONE_INACTIVE_VAL | MASK_AND_ONE_INACTIVE_VAL | MASK_AND_TWO_INACTIVE_VALS) {
         inactive[0] = ctx.read_value(cur, "inactive value")?;
         if meta == MASK_AND_TWO_INACTIVE_VALS {
@@ -165,7 +198,7 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, ctx: &Ctx, count: usize, mask: &[u6
     let selection = if matches!(meta, MASK_AND_NO_INACTIVE_VALS | MASK_AND_ONE_INACTIVE_VAL | MASK_AND_TWO_INACTIVE_VALS) { Some(cur.take(count / 8, "selection mask")?) } else { None };
     let mask_compressed = ctx.compression & COMPRESS_ACTIVE_MASK != 0 && meta != NO_MASK_AND_ALL_VALS && ctx.version >= VERSION_NODE_MASK_COMPRESSION;
     let stored = if mask_compressed { mask.iter().map(|w| w.count_ones() as usize).sum() } else { count };
-    let bytes = stored * ctx.stored_type().size();
+    let bytes = stored * ctx.components * ctx.stored_type().size();
     let payload_at = cur.pos();
     let payload = if stored == 0 && ctx.from_half {
         // OpenVDB's half reader returns before touching the stream when
@@ -204,61 +237,80 @@ fn inflate(src: &[u8], out: &mut [u8], offset: usize) -> Result<(), Error> {
     Ok(())
 }
 
-/// Buffers up to this size (a leaf of doubles) are inflated on the stack.
+/// Buffers up to these sizes (a leaf of doubles; of vec3d) are inflated on
+/// the stack; scalar leaves only pay for zeroing the smaller one.
 const STACK_BYTES: usize = 512 * 8;
+const STACK_BYTES_VEC3: usize = 512 * MAX_COMPONENTS * 8;
 
 impl ValueBlock<'_> {
-    /// Decodes into `out` (the node's full value count), rebuilding inactive
-    /// values where only active ones were stored.
+    /// Decodes into `out` (the node's full value count times the
+    /// components, interleaved: x0 y0 z0 x1 …), rebuilding inactive values
+    /// where only active ones were stored.
     pub fn decode(&self, ctx: &Ctx, mask: &[u64], out: &mut [f32]) -> Result<(), Error> {
+        let expected = self.stored * ctx.components * ctx.stored_type().size();
+        match self.payload {
+            Payload::Raw(b) => self.expand(ctx, mask, b, out),
+            _ if expected <= STACK_BYTES => self.inflate_expand(ctx, mask, &mut [0u8; STACK_BYTES][..expected], out),
+            _ if expected <= STACK_BYTES_VEC3 => self.inflate_expand(ctx, mask, &mut [0u8; STACK_BYTES_VEC3][..expected], out),
+            _ => self.inflate_expand(ctx, mask, &mut vec![0u8; expected], out),
+        }
+    }
+
+    /// Decompresses the payload into `scratch` (exactly its expected size), then expands it.
+    fn inflate_expand(&self, ctx: &Ctx, mask: &[u64], scratch: &mut [u8], out: &mut [f32]) -> Result<(), Error> {
+        match self.payload {
+            Payload::Raw(_) => return Err(Error::invalid("value buffer", self.offset, "raw payload passed as compressed")),
+            Payload::Zip(b) => inflate(b, scratch, self.offset)?,
+            Payload::Blosc(b) => vdbcook_blosc::decompress_into(b, scratch).map_err(|error| Error::Blosc { offset: self.offset as u64, error })?,
+        }
+        self.expand(ctx, mask, scratch, out)
+    }
+
+    /// Converts the stored values in `bytes` into `out`, rebuilding the inactive ones.
+    fn expand(&self, ctx: &Ctx, mask: &[u64], bytes: &[u8], out: &mut [f32]) -> Result<(), Error> {
         let st = ctx.stored_type();
-        let expected = self.stored * st.size();
-        let mut stack = [0u8; STACK_BYTES];
-        let mut heap = Vec::new();
-        let scratch: &mut [u8] = if expected <= STACK_BYTES {
-            &mut stack[..expected]
-        } else {
-            heap.resize(expected, 0);
-            &mut heap
-        };
-        let bytes: &[u8] = match self.payload {
-            Payload::Raw(b) => b,
-            Payload::Zip(b) => {
-                inflate(b, scratch, self.offset)?;
-                scratch
-            }
-            Payload::Blosc(b) => {
-                vdbcook_blosc::decompress_into(b, scratch).map_err(|error| Error::Blosc { offset: self.offset as u64, error })?;
-                scratch
-            }
-        };
+        let scalars = self.stored * ctx.components;
+        let expected = scalars * st.size();
         if bytes.len() != expected {
             return Err(Error::invalid("value buffer", self.offset, format!("{} bytes, expected {expected}", bytes.len())));
         }
-        if self.stored == out.len() {
+        if scalars == out.len() {
             convert(st, bytes, out);
             return Ok(());
         }
-        let mut stack = [0.0f32; 512];
-        let mut heap = Vec::new();
-        let vals: &mut [f32] = if self.stored <= stack.len() {
-            &mut stack[..self.stored]
-        } else {
-            heap.resize(self.stored, 0.0);
-            &mut heap
-        };
-        convert(st, bytes, vals);
-        let mut next = vals.iter().copied();
-        for (i, o) in out.iter_mut().enumerate() {
-            let bit = |m: &[u64]| m.get(i >> 6).is_some_and(|w| (w >> (i & 63)) & 1 == 1);
-            *o = if bit(mask) {
-                next.next().unwrap_or(0.0)
-            } else {
-                let sel = self.selection.is_some_and(|s| s.get(i >> 3).is_some_and(|b| (b >> (i & 7)) & 1 == 1));
-                self.inactive[usize::from(sel)]
-            };
+        // Only the active values are stored: convert them into a buffer sized
+        // for them (on the stack up to a leaf's worth), then spread them out.
+        match scalars {
+            n if n <= 512 => self.fill(ctx, mask, bytes, &mut [0.0f32; 512][..n], out),
+            n if n <= 512 * MAX_COMPONENTS => self.fill(ctx, mask, bytes, &mut [0.0f32; 512 * MAX_COMPONENTS][..n], out),
+            n => self.fill(ctx, mask, bytes, &mut vec![0.0f32; n], out),
         }
         Ok(())
+    }
+
+    fn fill(&self, ctx: &Ctx, mask: &[u64], bytes: &[u8], vals: &mut [f32], out: &mut [f32]) {
+        convert(ctx.stored_type(), bytes, vals);
+        match ctx.components {
+            1 => self.spread::<1>(vals, mask, out),
+            _ => self.spread::<MAX_COMPONENTS>(vals, mask, out),
+        }
+    }
+
+    /// Places the stored (active) values of `N` components at the active
+    /// positions of `out` and the inactive values elsewhere.
+    fn spread<const N: usize>(&self, vals: &[f32], mask: &[u64], out: &mut [f32]) {
+        let mut next = vals.chunks_exact(N);
+        for (i, o) in out.chunks_exact_mut(N).enumerate() {
+            let bit = |m: &[u64]| m.get(i >> 6).is_some_and(|w| (w >> (i & 63)) & 1 == 1);
+            if bit(mask) {
+                if let Some(v) = next.next() {
+                    o.copy_from_slice(v);
+                }
+            } else {
+                let sel = self.selection.is_some_and(|s| s.get(i >> 3).is_some_and(|b| (b >> (i & 7)) & 1 == 1));
+                o.copy_from_slice(&self.inactive[usize::from(sel)][..N]);
+            }
+        }
     }
 
     /// Number of values the payload holds.
@@ -273,7 +325,7 @@ mod tests {
     use super::*;
 
     fn ctx(compression: u32) -> Ctx {
-        Ctx { version: 224, compression, value: ScalarType::Float, from_half: false, background: 0.5 }
+        Ctx { version: 224, compression, value: ScalarType::Float, components: 1, from_half: false, background: [0.5, 0.0, 0.0] }
     }
 
     #[test]
@@ -355,5 +407,96 @@ mod tests {
         let mut out = vec![0.0; 64];
         blk.decode(&c, &[0], &mut out).unwrap();
         assert_eq!(out[3], 1.5);
+    }
+
+    fn vec3_ctx(compression: u32, value: ScalarType) -> Ctx {
+        Ctx { version: 224, compression, value, components: 3, from_half: false, background: [0.5, -1.0, 2.0] }
+    }
+
+    fn vec3_bytes(v: [f32; 3], st: ScalarType) -> Vec<u8> {
+        v.iter()
+            .flat_map(|&x| match st {
+                ScalarType::Double => f64::from(x).to_le_bytes().to_vec(),
+                ScalarType::Float => x.to_le_bytes().to_vec(),
+                ScalarType::Half => half::f16::from_f32(x).to_bits().to_le_bytes().to_vec(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn vec3_inactive_values_and_selection_are_whole_vectors() {
+        // Active: 0 and 5; two stored inactive vectors, the selection picks the second at 1.
+        let mask = [0b100001u64];
+        for st in [ScalarType::Float, ScalarType::Double] {
+            let mut b = vec![MASK_AND_TWO_INACTIVE_VALS];
+            b.extend(vec3_bytes([7.0, 8.0, 9.0], st));
+            b.extend(vec3_bytes([-7.0, -8.0, -9.0], st));
+            b.extend([0b10, 0, 0, 0, 0, 0, 0, 0]);
+            b.extend(vec3_bytes([1.0, 2.0, 3.0], st));
+            b.extend(vec3_bytes([4.0, 5.0, 6.0], st));
+            let c = vec3_ctx(COMPRESS_ACTIVE_MASK, st);
+            let mut cur = Cursor::new(&b);
+            let blk = scan(&mut cur, &c, 64, &mask).unwrap();
+            assert_eq!((cur.remaining(), blk.stored()), (0, 2), "{st:?}");
+            let mut out = vec![0.0; 64 * 3];
+            blk.decode(&c, &mask, &mut out).unwrap();
+            assert_eq!(&out[..9], &[1.0, 2.0, 3.0, -7.0, -8.0, -9.0, 7.0, 8.0, 9.0]);
+            assert_eq!(&out[15..21], &[4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+        }
+    }
+
+    #[test]
+    fn vec3_default_inactive_values_negate_every_component() {
+        let mask = [1u64];
+        for (meta, want) in [(0u8, [0.5f32, -1.0, 2.0]), (1, [-0.5, 1.0, -2.0])] {
+            let mut b = vec![meta];
+            b.extend(vec3_bytes([3.0, 4.0, 5.0], ScalarType::Float));
+            let c = vec3_ctx(COMPRESS_ACTIVE_MASK, ScalarType::Float);
+            let blk = scan(&mut Cursor::new(&b), &c, 64, &mask).unwrap();
+            let mut out = vec![0.0; 64 * 3];
+            blk.decode(&c, &mask, &mut out).unwrap();
+            assert_eq!(&out[..6], &[3.0, 4.0, 5.0, want[0], want[1], want[2]]);
+        }
+    }
+
+    #[test]
+    fn vec3_half_payload_is_three_halves_per_value_but_inactive_values_are_full() {
+        // Mask-compressed, one stored inactive vector (full precision), one active value as halves.
+        let mask = [1u64];
+        for st in [ScalarType::Float, ScalarType::Double] {
+            let c = Ctx { from_half: true, ..vec3_ctx(COMPRESS_ACTIVE_MASK, st) };
+            let mut b = vec![NO_MASK_AND_ONE_INACTIVE_VAL];
+            b.extend(vec3_bytes([0.1, 0.2, 0.3], st));
+            b.extend(vec3_bytes([1.5, -2.25, 1e-3], ScalarType::Half));
+            let mut cur = Cursor::new(&b);
+            let blk = scan(&mut cur, &c, 64, &mask).unwrap();
+            assert_eq!(cur.remaining(), 0);
+            let mut out = vec![0.0; 64 * 3];
+            blk.decode(&c, &mask, &mut out).unwrap();
+            assert_eq!(&out[..3], &[1.5, -2.25, half::f16::from_f32(1e-3).to_f32()]);
+            assert_eq!(&out[3..6], &[0.1, 0.2, 0.3]);
+        }
+    }
+
+    #[test]
+    fn vec3_compressed_chunks_hold_three_values_per_voxel() {
+        use std::io::Write;
+        let vals: Vec<u8> = (0..64 * 3).flat_map(|i| (i as f32).to_le_bytes()).collect();
+        let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        enc.write_all(&vals).unwrap();
+        let z = enc.finish().unwrap();
+        let mut b = vec![NO_MASK_AND_ALL_VALS];
+        b.extend((z.len() as i64).to_le_bytes());
+        b.extend(&z);
+        let c = vec3_ctx(COMPRESS_ZIP, ScalarType::Float);
+        let blk = scan(&mut Cursor::new(&b), &c, 64, &[0]).unwrap();
+        let mut out = vec![0.0; 64 * 3];
+        blk.decode(&c, &[0], &mut out).unwrap();
+        assert_eq!(out[64 * 3 - 1], 191.0);
+        // A raw chunk sized for scalars is refused.
+        let mut b = vec![NO_MASK_AND_ALL_VALS];
+        b.extend((-(64 * 4i64)).to_le_bytes());
+        b.extend([0; 64 * 4]);
+        assert!(scan(&mut Cursor::new(&b), &c, 64, &[0]).is_err());
     }
 }
