@@ -302,11 +302,12 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
 fn check_groups(groups: &[ChannelGroup], ch: &Channels) -> Result<()> {
     let mut seen = std::collections::HashSet::new();
     for name in groups.iter().flat_map(|g| &g.channels) {
-        if !ch.specs.iter().any(|s| &s.name == name) {
+        let named = vdbcook_cook::channels_named(&ch.specs, name);
+        if named.is_empty() {
             let names: Vec<&str> = ch.specs.iter().map(|s| s.name.as_str()).collect();
             return Err(Usage(format!("--group names \"{name}\", which is not a channel of this cook (channels: {})", names.join(", "))).into());
         }
-        if !seen.insert(name) {
+        if !named.into_iter().all(|c| seen.insert(c)) {
             return Err(Usage(format!("--group names \"{name}\" twice")).into());
         }
     }

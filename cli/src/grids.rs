@@ -19,7 +19,7 @@ pub enum GridSelection {
     One(String),
     /// `--grids a,b,c`: those grids, in that order.
     Many(Vec<String>),
-    /// `--grids all`: every float, double and half grid of the first frame, in file order.
+    /// `--grids all`: every float, double, half and vec3 grid of the first frame, in file order.
     All,
 }
 
@@ -62,48 +62,50 @@ fn describe_grids(vdb: &VdbFile) -> String {
     }
 }
 
-fn spec_of(g: &GridInfo) -> ChannelSpec {
-    let value_type = match &g.value_type {
-        ValueType::Scalar(s) => s.name().to_string(),
-        ValueType::Other(t) => t.clone(),
-    };
-    ChannelSpec { name: g.name.clone(), grid: g.name.clone(), component: None, value_type, class: g.class.vdb_name().to_string() }
+/// The channels of a grid: itself, or the x, y, z components of a vec3 grid.
+fn specs_of(g: &GridInfo) -> Vec<ChannelSpec> {
+    let vec3 = matches!(g.value_type, ValueType::Vec3(_));
+    g.channel_names()
+        .into_iter()
+        .enumerate()
+        .map(|(k, name)| ChannelSpec { name, grid: g.name.clone(), component: vec3.then_some(k as u32), value_type: g.value_type.name().to_string(), class: g.class.vdb_name().to_string() })
+        .collect()
 }
 
 /// Resolves the selection against the first frame's file.
 pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channels> {
     let find = |name: &str| -> Result<&GridInfo> {
         let g = vdb.grids.iter().find(|g| g.name == name).ok_or_else(|| Usage(format!("{path}: no grid named \"{name}\" (the file has: {})", describe_grids(vdb))))?;
-        if let Some(u) = &g.unsupported {
-            return Err(Usage(format!("{path}: grid \"{name}\" cannot be cooked: {u}")).into());
+        match &g.unsupported {
+            Some(u) if !g.is_readable() => Err(Usage(format!("{path}: grid \"{name}\" cannot be cooked: {u}")).into()),
+            _ => Ok(g),
         }
-        Ok(g)
     };
     let specs = match sel {
-        GridSelection::Default => vec![spec_of(&vdb.grids[vdb.select(None).with_context(|| path.to_string())?])],
+        GridSelection::Default => specs_of(&vdb.grids[vdb.select(None).with_context(|| path.to_string())?]),
         // One grid missing from a file is that frame's problem (exit 1, or an
         // empty frame with --allow-missing), as it is in any later frame.
         GridSelection::One(name) if !vdb.grids.iter().any(|g| &g.name == name) => {
             return Err(anyhow!("{path}: no grid named \"{name}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", describe_grids(vdb)));
         }
-        GridSelection::One(name) => vec![spec_of(find(name)?)],
+        GridSelection::One(name) => specs_of(find(name)?),
         GridSelection::Many(names) => {
             let mut seen = std::collections::HashSet::new();
             if let Some(dup) = names.iter().find(|n| !seen.insert(n.as_str())) {
                 return Err(Usage(format!("--grids names \"{dup}\" twice")).into());
             }
-            names.iter().map(|n| find(n).map(spec_of)).collect::<Result<_>>()?
+            names.iter().map(|n| find(n).map(specs_of)).collect::<Result<Vec<_>>>()?.concat()
         }
         GridSelection::All => {
             let mut seen = std::collections::HashSet::new();
-            let all: Vec<ChannelSpec> = vdb.grids.iter().filter(|g| g.is_readable_scalar() && seen.insert(g.name.clone())).map(spec_of).collect();
+            let all: Vec<ChannelSpec> = vdb.grids.iter().filter(|g| g.is_readable() && seen.insert(g.name.clone())).flat_map(specs_of).collect();
             if all.is_empty() {
-                return Err(Usage(format!("{path}: --grids all found no float, double or half grid (the file has: {})", describe_grids(vdb))).into());
+                return Err(Usage(format!("{path}: --grids all found no float, double, half or vec3 grid (the file has: {})", describe_grids(vdb))).into());
             }
             all
         }
     };
-    Ok(Channels { several: matches!(sel, GridSelection::Many(_) | GridSelection::All), specs })
+    Ok(Channels { several: specs.len() > 1 || matches!(sel, GridSelection::Many(_) | GridSelection::All), specs })
 }
 
 /// One frame as read: one grid per channel (`None`: missing or empty there).
@@ -137,14 +139,29 @@ pub fn read_frame(path: PathBuf, sel: &GridSelection, channels: &mut Option<Chan
         }
     }
     let Some(ch) = channels.as_ref() else { return Ok(Frame { path, grids: None, source: Some(source) }) };
-    let mut grids = Vec::with_capacity(ch.specs.len());
+    let mut grids: Vec<Option<Grid>> = Vec::with_capacity(ch.specs.len());
+    // Each source grid once (a vec3 grid gives its three channels in order).
+    let mut read: Option<(String, Vec<Grid>)> = None;
     for spec in &ch.specs {
-        match vdb.grids.iter().position(|g| g.name == spec.grid) {
-            Some(i) => grids.push(Some(vdb.read_grid(i).with_context(|| p.clone())?)),
-            None if ch.several => grids.push(None),
-            None if allow_missing => return Ok(Frame { path, grids: None, source: Some(source) }),
-            None => return Err(anyhow!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(&vdb))),
+        let Some(i) = vdb.grids.iter().position(|g| g.name == spec.grid) else {
+            if ch.several {
+                grids.push(None);
+                continue;
+            }
+            if allow_missing {
+                return Ok(Frame { path, grids: None, source: Some(source) });
+            }
+            return Err(anyhow!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(&vdb)));
+        };
+        if read.as_ref().is_none_or(|(name, _)| name != &spec.grid) {
+            read = Some((spec.grid.clone(), vdb.read_channels(i).with_context(|| p.clone())?));
         }
+        let parts = read.as_mut().map(|(_, g)| g).filter(|g| !g.is_empty());
+        let grid = match spec.component {
+            Some(k) => parts.and_then(|g| g.get(k as usize).cloned()),
+            None => parts.map(|g| g.remove(0)),
+        };
+        grids.push(grid);
     }
     Ok(Frame { path, grids: Some(grids), source: Some(source) })
 }

@@ -3,6 +3,7 @@
 use crate::exit;
 use anyhow::{Context, Result};
 use std::path::PathBuf;
+use vdbcook_vdb::WriteGrid;
 
 #[derive(clap::Args)]
 pub struct UnpackArgs {
@@ -12,7 +13,8 @@ pub struct UnpackArgs {
     /// Frame to decode, counted from 0 in the asset's frame order.
     #[arg(long, value_name = "N")]
     pub frame: usize,
-    /// The .vdb file to write (one float grid, zip-compressed).
+    /// The .vdb file to write: one float grid per scalar channel and one vec3s grid per
+    /// vec3 grid, zip-compressed, each with its name, class, background and transform.
     #[arg(short, long, value_name = "OUT.vdb")]
     pub output: PathBuf,
     /// Write values uncompressed instead of zip.
@@ -28,12 +30,40 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
     crate::refuse_existing(&args.output, args.force)?;
     let asset = vdbcook_vpak::Asset::open(&args.asset).with_context(|| name.clone())?;
     let grids = vdbcook_cook::unpack_frame(&asset, args.frame).with_context(|| name.clone())?;
-    let [grid] = &grids[..] else { anyhow::bail!("{name}: unpacking assets of several channels is not supported yet") };
-    let bytes = vdbcook_vdb::write_vdb(grid, vdbcook_vdb::WriteOptions { version: 224, zip: !args.no_zip }).with_context(|| args.output.display().to_string())?;
+    let meta = asset.metadata().with_context(|| name.clone())?;
+    // Scalar channels become float grids; the x, y, z channels of a vec3 grid one vec3s grid again.
+    let mut out: Vec<WriteGrid> = Vec::new();
+    let mut done = vec![false; grids.len()];
+    for (c, ch) in meta.channels.iter().enumerate() {
+        if done[c] {
+            continue;
+        }
+        let parts: Vec<usize> = match ch.component {
+            Some(_) => (0..3).filter_map(|k| meta.channels.iter().position(|o| o.grid == ch.grid && o.component == Some(k))).collect(),
+            None => vec![],
+        };
+        match parts[..] {
+            [x, y, z] => {
+                for k in [x, y, z] {
+                    done[k] = true;
+                }
+                out.push(WriteGrid::Vec3 { name: &ch.grid, class: grids[c].class, components: [&grids[x], &grids[y], &grids[z]] });
+            }
+            _ => {
+                done[c] = true;
+                out.push(WriteGrid::Float(&grids[c]));
+            }
+        }
+    }
+    let bytes = vdbcook_vdb::write_vdb_grids(&out, vdbcook_vdb::WriteOptions { version: 224, zip: !args.no_zip }).with_context(|| args.output.display().to_string())?;
     vdbcook_vpak::write_atomic(&args.output, &bytes, args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
-        let st = grid.stats();
-        crate::write_stdout(&format!("wrote frame {} of {} to {} ({} active voxels, {} leaves)\n", args.frame, name, args.output.display(), st.active_voxels, st.leaf_count)).ok();
+        let (voxels, leaves) = grids.first().map_or((0, 0), |g| {
+            let st = g.stats();
+            (st.active_voxels, st.leaf_count)
+        });
+        let what = if out.len() == 1 { "1 grid".to_string() } else { format!("{} grids", out.len()) };
+        crate::write_stdout(&format!("wrote frame {} of {} to {} ({what}, {voxels} active voxels, {leaves} leaves)\n", args.frame, name, args.output.display())).ok();
     }
     Ok(exit::SUCCESS)
 }

@@ -97,3 +97,57 @@ pub fn gpu_available() -> bool {
         }
     }
 }
+
+pub fn u32_at(b: &[u8], o: usize) -> u32 {
+    u32::from_le_bytes(b[o..o + 4].try_into().unwrap())
+}
+pub fn i32_at(b: &[u8], o: usize) -> i32 {
+    i32::from_le_bytes(b[o..o + 4].try_into().unwrap())
+}
+pub fn f64_at(b: &[u8], o: usize) -> f64 {
+    f64::from_le_bytes(b[o..o + 8].try_into().unwrap())
+}
+pub fn xyz(b: &[u8], o: usize) -> [i32; 3] {
+    [i32_at(b, o), i32_at(b, o + 4), i32_at(b, o + 8)]
+}
+
+/// One oracle dump (scripts/openvdb_oracle.py documents both layouts):
+/// `--voxels` (one value per record) or `--vec3-voxels` (three).
+pub struct Dump<const N: usize> {
+    /// (grid index, coordinate, values)
+    pub voxels: Vec<(u32, [i32; 3], [f64; N])>,
+    pub tiles: Vec<TileRecord<N>>,
+}
+
+/// (grid index, min, max, values)
+pub type TileRecord<const N: usize> = (u32, [i32; 3], [i32; 3], [f64; N]);
+
+pub fn read_dump<const N: usize>(path: &Path) -> Dump<N> {
+    let b = std::fs::read(path).unwrap();
+    assert_eq!(&b[..8], if N == 3 { b"VDBORV01" } else { b"VDBORC01" });
+    let nv = u64::from_le_bytes(b[16..24].try_into().unwrap()) as usize;
+    let nt = u64::from_le_bytes(b[24..32].try_into().unwrap()) as usize;
+    let vals = |o: usize| -> [f64; N] { std::array::from_fn(|c| f64_at(&b, o + 8 * c)) };
+    let mut o = 32;
+    let mut voxels = Vec::with_capacity(nv);
+    for _ in 0..nv {
+        voxels.push((u32_at(&b, o), xyz(&b, o + 4), vals(o + 16)));
+        o += 16 + 8 * N;
+    }
+    let mut tiles = Vec::with_capacity(nt);
+    for _ in 0..nt {
+        tiles.push((u32_at(&b, o), xyz(&b, o + 4), xyz(&b, o + 16), vals(o + 28)));
+        o += 28 + 8 * N;
+    }
+    assert_eq!(o, b.len());
+    Dump { voxels, tiles }
+}
+
+/// The oracle with extra arguments; `Err` with its message when OpenVDB cannot read the file.
+pub fn run_oracle(file: &Path, args: &[&str]) -> Result<serde_json::Value, String> {
+    let out = Command::new("/usr/bin/python3").arg(root().join("scripts/openvdb_oracle.py")).arg(file).args(args).output().expect("run oracle");
+    if !out.status.success() {
+        return Err(format!("OpenVDB cannot read it: {}", String::from_utf8_lossy(&out.stderr).trim()));
+    }
+    Ok(serde_json::from_slice(&out.stdout).expect("oracle JSON"))
+}

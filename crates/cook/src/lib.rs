@@ -285,12 +285,17 @@ impl Cooker {
         for g in &self.opts.groups {
             let mut members = Vec::new();
             for name in &g.channels {
-                let c = self.channels.iter().position(|s| &s.name == name).ok_or_else(|| Error::UnknownChannel(name.clone()))?;
-                if group_of[c].is_some() {
-                    return Err(Error::TwiceGrouped(name.clone()));
+                let named = channels_named(&self.channels, name);
+                if named.is_empty() {
+                    return Err(Error::UnknownChannel(name.clone()));
                 }
-                group_of[c] = Some(groups.len() as u32);
-                members.push(c);
+                for c in named {
+                    if group_of[c].is_some() {
+                        return Err(Error::TwiceGrouped(self.channels[c].name.clone()));
+                    }
+                    group_of[c] = Some(groups.len() as u32);
+                    members.push(c);
+                }
             }
             groups.push((g.format, members));
         }
@@ -530,6 +535,15 @@ impl Cooker {
             timings,
         };
         Ok((sections, report))
+    }
+}
+
+/// The channels a group's name stands for: the channel of that name, or
+/// the three components of the vec3 grid of that name.
+pub fn channels_named(specs: &[ChannelSpec], name: &str) -> Vec<usize> {
+    match specs.iter().position(|s| s.name == name) {
+        Some(c) => vec![c],
+        None => (0..specs.len()).filter(|&c| specs[c].component.is_some() && specs[c].grid == name).collect(),
     }
 }
 

@@ -323,19 +323,24 @@ fn non_finite_values_never_panic_any_format() {
     }
 }
 
-/// Three channels of one frame: density everywhere `frame` has leaves,
-/// temperature (background 0.25) on a shifted subset, flames on a few leaves
-/// and an 8³ tile over one of density's leaves.
+/// Three channels of one frame: density everywhere `smooth_frame` has
+/// leaves, temperature (background 0.25) on every other leaf (one of them
+/// active on half its voxels only), flames on a few leaves of `frame` and an
+/// 8³ tile over one of density's leaves.
 fn fire(shift: i32) -> [Grid; 3] {
     let d = smooth_frame(shift);
-    let mut t = frame(shift + 1);
+    let mut t = smooth_frame(shift + 1);
     t.name = "temperature".into();
     t.background = 0.25;
     t.tiles.clear();
+    t.leaves = t.leaves.into_iter().step_by(2).collect();
     for l in t.leaves.iter_mut() {
         for v in l.values.iter_mut() {
-            *v = *v * 40.0 + 300.0;
+            *v = *v * 40.0 + 3.0;
         }
+    }
+    for i in 0..256 {
+        t.leaves[3].mask.set(i, false); // x < 4: a planar edge inside the leaf
     }
     let mut f = frame(shift);
     f.name = "flames".into();
@@ -395,14 +400,23 @@ fn several_channels_round_trip_in_every_format() {
             let worst = worst_error(f, &back);
             for c in 0..3 {
                 let [lo, hi] = meta.channels[c].value_range;
+                // Block formats have no per-voxel bound (a jump to a channel's
+                // background inside a 4x4 block costs what it costs): their
+                // report must hold and their RMSE stay a small part of the range.
                 let bound = match format {
                     Format::F32 => 0.0,
                     Format::F16 => hi.abs().max(lo.abs()) * 2f32.powi(-11),
                     Format::Unorm8 => (hi - lo) / 255.0 * 0.5,
-                    _ => (hi - lo) / 255.0 * 16.0,
+                    _ => f32::INFINITY,
                 };
                 assert!(worst[c] <= bound + 1e-6, "{format:?} channel {c}: worst {} over bound {bound}", worst[c]);
-                assert!(f64::from(worst[c]) <= report.channels[c].voxel_max_error + 1e-6, "{format:?} channel {c}: the report's max error holds");
+                assert!(
+                    f64::from(worst[c]) <= report.channels[c].voxel_max_error + 1e-4,
+                    "{format:?} channel {c}: worst {} over the report's max error {}",
+                    worst[c],
+                    report.channels[c].voxel_max_error
+                );
+                assert!(report.channels[c].voxel_rmse <= f64::from(hi - lo) * 0.05, "{format:?} channel {c}: rmse {}", report.channels[c].voxel_rmse);
             }
         }
         if format == Format::F32 {
@@ -461,7 +475,10 @@ fn several_channels_are_deterministic_and_share_one_tree() {
 
 #[test]
 fn absurd_channel_metadata_is_refused_never_a_panic() {
-    let (bytes, _) = cook_fire(CookOptions { format: Format::Bc7, groups: vec![ChannelGroup { channels: vec!["temperature".into(), "flames".into()], format: Format::Unorm8 }], ..CookOptions::default() }, &[fire(0)]);
+    let (bytes, _) = cook_fire(
+        CookOptions { format: Format::Bc7, groups: vec![ChannelGroup { channels: vec!["temperature".into(), "flames".into()], format: Format::Unorm8 }], ..CookOptions::default() },
+        &[fire(0)],
+    );
     let asset = Asset::from_bytes(&bytes).unwrap();
     let meta = asset.metadata().unwrap();
     let mutations: Vec<(&str, Box<dyn Fn(&mut vdbcook_vpak::Metadata)>)> = vec![
@@ -470,8 +487,8 @@ fn absurd_channel_metadata_is_refused_never_a_panic() {
         ("plane out of range", Box::new(|m| m.channels[0].plane = 99)),
         ("lanes shared", Box::new(|m| m.channels[2].lane = 0)),
         ("lane past the plane", Box::new(|m| m.channels[1].lane = 3)),
-        ("bc7 with two lanes", Box::new(|m| m.planes[0].lanes = 2)),
-        ("z-slices on unorm8", Box::new(|m| m.planes[1].z_per_texel = 4)),
+        ("bc7 with two lanes", Box::new(|m| m.planes.iter_mut().filter(|p| p.format == Format::Bc7).for_each(|p| p.lanes = 2))),
+        ("z-slices on unorm8", Box::new(|m| m.planes.iter_mut().filter(|p| p.format == Format::Unorm8).for_each(|p| p.z_per_texel = 4))),
         ("an empty plane", Box::new(|m| m.planes.push(m.planes[0]))),
         ("more bricks than atlases hold", Box::new(|m| m.brick_count += 1)),
         ("a huge atlas", Box::new(|m| m.atlases[0].bricks = [u32::MAX; 3])),

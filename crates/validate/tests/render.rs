@@ -236,3 +236,59 @@ fn resealed_corrupt_assets_never_panic_the_renderers() {
     eprintln!("corrupt assets: {changed} changed images, {refused} refused");
     assert!(changed >= 3 && refused >= 3, "changed {changed}, refused {refused}");
 }
+
+/// `files` cooked with the named grids as channels.
+fn cook_channels(files: &[&str], names: &[&str], opts: CookOptions) -> Vec<u8> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let specs = names.iter().map(|n| vdbcook_cook::ChannelSpec { name: n.to_string(), grid: n.to_string(), value_type: "float".into(), ..Default::default() }).collect();
+    let mut c = Cooker::with_channels(opts, specs);
+    for f in files {
+        let v = vdbcook_vdb::open(&root.join(f)).unwrap();
+        let grids: Vec<Option<vdbcook_grid::Grid>> = names.iter().map(|n| v.grids.iter().position(|g| g.name == *n).map(|i| v.read_grid(i).unwrap())).collect();
+        c.push_channels(&grids.iter().map(Option::as_ref).collect::<Vec<_>>(), None).unwrap();
+    }
+    vdbcook_vpak::assemble(&c.finish(&NoProgress).unwrap().0)
+}
+
+#[test]
+fn fire_renders_on_the_gpu_like_its_cpu_twin_in_every_packing() {
+    let Some(r) = renderer() else { return };
+    let soft = Renderer::new(None).unwrap().with_bc_decode(BcDecode::Shader);
+    let Some(samples) = std::env::var_os("CARGO_MANIFEST_DIR").map(|d| Path::new(&d).join("../../../shared/vdb-samples")).filter(|p| p.is_dir()) else {
+        assert!(std::env::var("CI").ok().as_deref() != Some("true"), "CI=true and ../shared/vdb-samples is missing");
+        return;
+    };
+    let fire: Vec<String> = [1, 3].iter().map(|k| samples.join(format!("vfx-toolkit-embergen/embergen_fire_a_{k}.vdb")).to_string_lossy().into_owned()).collect();
+    let smoke: Vec<String> = ["0150", "0152"].iter().map(|k| samples.join(format!("waveletturbulence/fluid_data_{k}.vdb")).to_string_lossy().into_owned()).collect();
+    let group = |names: &[&str], format| vdbcook_cook::ChannelGroup { channels: names.iter().map(|n| n.to_string()).collect(), format };
+    let cases: Vec<(&[String], Vec<&str>, CookOptions)> = vec![
+        (&fire, vec!["temperature", "flames"], CookOptions { format: Format::F16, ..CookOptions::default() }),
+        (&fire, vec!["temperature", "flames"], CookOptions { format: Format::Bc7, groups: vec![group(&["temperature", "flames"], Format::Bc7)], ..CookOptions::default() }),
+        (&fire, vec!["temperature", "flames"], CookOptions { format: Format::Unorm8, groups: vec![group(&["temperature"], Format::Bc4)], max_texture_dim: 40, ..CookOptions::default() }),
+        (&smoke, vec!["density", "temperature", "flame"], CookOptions { format: Format::Unorm8, ..CookOptions::default() }),
+        (&smoke, vec!["density", "temperature", "flame"], CookOptions { format: Format::Bc7, groups: vec![group(&["density", "temperature", "flame"], Format::Bc7)], ..CookOptions::default() }),
+    ];
+    for (files, names, opts) in cases {
+        let paths: Vec<&str> = files.iter().map(String::as_str).collect();
+        let what = format!("{names:?} {:?} {:?}", opts.format, opts.groups);
+        let asset = Asset::from_bytes(&cook_channels(&paths, &names, opts)).unwrap();
+        let scene = Scene::for_asset(&asset.metadata().unwrap());
+        let fire_asset = names.contains(&"flames");
+        if fire_asset {
+            assert!(scene.channels[1] != vdbcook_validate::NONE && scene.channels[2] != vdbcook_validate::NONE, "{what}: temperature and flames glow");
+        }
+        for renderer in [&r, &soft] {
+            let gpu = renderer.upload(&asset).unwrap();
+            for (i, view) in scene.orbit(2).iter().enumerate() {
+                let g = renderer.render(&gpu, &scene, 1, view, 40, 36).unwrap();
+                let c = render_cpu(&asset, &scene, 1, view, 40, 36).unwrap();
+                let m = compare(&c, &g);
+                assert!(m.max_error < 2e-3, "{what} view {i} (shader decode {}): {m:?}", gpu.decodes_in_shader());
+                // Fire is coloured: somewhere red is well above blue.
+                if fire_asset {
+                    assert!(g.pixels.chunks(3).any(|p| p[0] > 0.2 && p[0] > 2.0 * p[2]), "{what}: no fire colour");
+                }
+            }
+        }
+    }
+}

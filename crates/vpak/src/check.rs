@@ -221,14 +221,15 @@ fn check_atlases(meta: &Metadata) -> Result<(), Error> {
     for (i, a) in meta.atlases.iter().enumerate() {
         let bad = |what: String| invalid(format!("atlas {i}: {what}"));
         let [bx, by, bz] = a.bricks.map(u64::from);
-        if bx == 0 || by == 0 || bz == 0 || u64::from(a.count) > bx * by * bz {
+        let capacity = u128::from(bx) * u128::from(by) * u128::from(bz);
+        if bx == 0 || by == 0 || bz == 0 || u128::from(a.count) > capacity {
             return bad(format!("{:?} bricks cannot hold {}", a.bricks, a.count));
         }
         if let Some(f) = first {
             let [fx, fy, _] = f.bricks.map(|b| u64::from(b).max(1));
             let n = u64::from(a.count);
             let need = [n.min(fx), n.div_ceil(fx).min(fy), n.div_ceil(fx * fy)];
-            let fits = if i + 1 < meta.atlases.len() { a.bricks == f.bricks && u64::from(a.count) == bx * by * bz } else { (0..3).all(|k| u64::from(a.bricks[k]) >= need[k]) };
+            let fits = if i + 1 < meta.atlases.len() { a.bricks == f.bricks && u128::from(a.count) == capacity } else { (0..3).all(|k| u64::from(a.bricks[k]) >= need[k]) };
             if !fits || u64::from(a.first_brick) != next_brick {
                 return bad("its layout does not follow the first atlas's".into());
             }

@@ -253,8 +253,10 @@ pub struct AtlasInfo {
 impl AtlasInfo {
     /// Brick position (in bricks) of local brick `i`.
     pub fn position(&self, i: u32) -> [u32; 3] {
-        let [bx, by, _] = self.bricks.map(|b| b.max(1));
-        [i % bx, (i / bx) % by, i / (bx * by)]
+        let [bx, by, _] = self.bricks.map(|b| u64::from(b.max(1)));
+        let i = u64::from(i);
+        // Each part is at most i, so fits u32.
+        [i % bx, (i / bx) % by, i / (bx * by)].map(|p| p as u32)
     }
 }
 
@@ -274,8 +276,8 @@ impl AtlasLayout {
 
     /// True when the layout is self-consistent: no empty axis, and room for its bricks.
     pub fn is_valid(&self) -> bool {
-        let [bx, by, bz] = self.atlas.bricks.map(u64::from);
-        self.plane.is_valid() && bx > 0 && by > 0 && bz > 0 && u64::from(self.atlas.count) <= bx * by * bz
+        let [bx, by, bz] = self.atlas.bricks.map(u128::from);
+        self.plane.is_valid() && bx > 0 && by > 0 && bz > 0 && u128::from(self.atlas.count) <= bx * by * bz
     }
 
     /// Bytes of one row in a slice (texels, or one row of blocks): wgpu's `bytes_per_row`.
