@@ -397,8 +397,7 @@ fn several_channels_round_trip_in_every_format() {
             // Where only other channels are active, a channel reads its background.
             let d_only = f[0].leaves.iter().find(|l| f[1].leaves.iter().all(|t| t.origin != l.origin)).unwrap();
             assert_eq!(back[1].probe(d_only.origin.offset(0, 0, 1)), (0.25, true), "{format:?}");
-            let worst = worst_error(f, &back);
-            for c in 0..3 {
+            for (c, &worst) in worst_error(f, &back).iter().enumerate() {
                 let [lo, hi] = meta.channels[c].value_range;
                 // Block formats have no per-voxel bound (a jump to a channel's
                 // background inside a 4x4 block costs what it costs): their
@@ -409,13 +408,8 @@ fn several_channels_round_trip_in_every_format() {
                     Format::Unorm8 => (hi - lo) / 255.0 * 0.5,
                     _ => f32::INFINITY,
                 };
-                assert!(worst[c] <= bound + 1e-6, "{format:?} channel {c}: worst {} over bound {bound}", worst[c]);
-                assert!(
-                    f64::from(worst[c]) <= report.channels[c].voxel_max_error + 1e-4,
-                    "{format:?} channel {c}: worst {} over the report's max error {}",
-                    worst[c],
-                    report.channels[c].voxel_max_error
-                );
+                assert!(worst <= bound + 1e-6, "{format:?} channel {c}: worst {} over bound {bound}", worst);
+                assert!(f64::from(worst) <= report.channels[c].voxel_max_error + 1e-4, "{format:?} channel {c}: worst {} over the report's max error {}", worst, report.channels[c].voxel_max_error);
                 assert!(report.channels[c].voxel_rmse <= f64::from(hi - lo) * 0.05, "{format:?} channel {c}: rmse {}", report.channels[c].voxel_rmse);
             }
         }
@@ -481,7 +475,8 @@ fn absurd_channel_metadata_is_refused_never_a_panic() {
     );
     let asset = Asset::from_bytes(&bytes).unwrap();
     let meta = asset.metadata().unwrap();
-    let mutations: Vec<(&str, Box<dyn Fn(&mut vdbcook_vpak::Metadata)>)> = vec![
+    type Mutation = Box<dyn Fn(&mut vdbcook_vpak::Metadata)>;
+    let mutations: Vec<(&str, Mutation)> = vec![
         ("no channels", Box::new(|m| m.channels.clear())),
         ("a million channels", Box::new(|m| m.channels = vec![m.channels[0].clone(); 1 << 20])),
         ("plane out of range", Box::new(|m| m.channels[0].plane = 99)),

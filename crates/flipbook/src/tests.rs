@@ -434,9 +434,9 @@ fn channels_share_one_tree_over_the_union_of_their_leaves() {
     assert_eq!(built.frames[0].channel_masks.len(), 6, "two masks per leaf");
     let src = [[Some(leaf(a, 1, 512)), Some(leaf(b, 2, 100)), None], [None, Some(tb), Some(leaf(c, 4, 512))]];
     for (k, o) in [a, b, c].iter().enumerate() {
-        for ch in 0..2 {
+        for (ch, per_leaf) in src.iter().enumerate() {
             for i in 0..512 {
-                let want = match &src[ch][k] {
+                let want = match &per_leaf[k] {
                     Some(l) if l.mask.is_on(i) => l.values[i],
                     _ => built.backgrounds[ch],
                 };
@@ -468,8 +468,8 @@ fn a_tile_over_another_channels_leaf_is_split_and_equal_tiles_merge() {
     let brick = built.pool.brick(leaves[0].2 as usize).unwrap();
     assert!(brick[0].iter().all(|&v| v == 0.25));
     let src = leaf(Coord::new(16, 8, 0), 5, 300);
-    for i in 0..512 {
-        assert_eq!(brick[1][i], if src.mask.is_on(i) { src.values[i] } else { 0.0 });
+    for (i, &v) in brick[1].iter().enumerate() {
+        assert_eq!(v, if src.mask.is_on(i) { src.values[i] } else { 0.0 });
     }
     let values: Vec<([i32; 3], u32, Vec<f32>)> = tiles.iter().map(|&(o, d, i)| (o, d, n.tile(i).unwrap())).collect();
     assert_eq!(values.len(), 4096);

@@ -1,0 +1,576 @@
+#!/usr/bin/python3
+"""Independent reader for vdbcook's `.vpak` volume asset format (version 3).
+
+Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
+that the document is a complete specification: it decodes every channel of a frame.
+
+    /usr/bin/python3 scripts/vpak_read.py ASSET.vpak --frame N --out OUT.npz [--json]
+
+For every channel C (named as in the metadata) OUT.npz holds `C.ijk` (n x 3 int32,
+source index space = asset index + index_offset) and `C.values` (n float32) over the
+frame's active voxels (every active voxel of every L3 node and every voxel of every
+tile), sorted by i, then j, then k. `--json` prints a summary of the metadata.
+
+Dependencies (Debian): python3-numpy, python3-pil (BC7 blocks), python3-xxhash.
+Bad input exits with status 1 and one line `vpak_read.py: FILE: problem` on stderr.
+"""
+
+import argparse
+import json
+import struct
+import sys
+
+import numpy as np
+
+MAGIC = b"VPAK\r\n\x1a\n"
+VERSION = 3
+HEADER_SIZE = 64
+SECTION_ALIGN = 256
+
+# Section kinds (format.md, "Sections").
+K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_RANGES, K_ATLAS = range(1, 11)
+
+L1_WORDS, L2_WORDS, L3_WORDS = 1537, 193, 3
+L1_MASK_WORDS, L2_MASK_WORDS = 1024, 128
+
+F32, F16, UNORM8, BC4, BC7 = range(5)
+FORMAT_NAMES = ["f32", "f16", "unorm8", "bc4", "bc7"]
+# Allowed (lanes, zpt) per format (format.md, planes table).
+FORMAT_RULES = {
+    F32: ({1, 2, 4}, {1}),
+    F16: ({1, 2, 4}, {1}),
+    UNORM8: ({1, 2, 4}, {1}),
+    BC4: ({1}, {1}),
+    BC7: ({4}, {1, 2, 4}),
+}
+
+
+class VpakError(Exception):
+    """A problem with the input asset: reported as one line, never a traceback."""
+
+
+# ---------------------------------------------------------------------------
+# Header and section table
+# ---------------------------------------------------------------------------
+
+def xxh3_64(data):
+    import xxhash  # only needed when checksums are verified
+    return xxhash.xxh3_64_intdigest(data)
+
+
+def read_header(buf):
+    """Check magic, version, file size and header checksum; return the section table."""
+    if len(buf) < HEADER_SIZE:
+        raise VpakError("file too short for a header")
+    if buf[0:8] != MAGIC:
+        raise VpakError("bad magic")
+    version, flags, n, _reserved, file_size, header_sum = struct.unpack_from("<IIIIQQ", buf, 8)
+    if version != VERSION:
+        raise VpakError(f"unsupported format version {version} (this reader reads {VERSION})")
+    if file_size != len(buf):
+        raise VpakError(f"file size {len(buf)} differs from header's {file_size}")
+    table_end = HEADER_SIZE + 32 * n
+    if table_end > len(buf):
+        raise VpakError("section table runs past the end of the file")
+    # Header checksum covers bytes [0, 32) then the section table (not bytes [32, 64)).
+    if xxh3_64(bytes(buf[0:32]) + bytes(buf[HEADER_SIZE:table_end])) != header_sum:
+        raise VpakError("header checksum mismatch")
+    sections = {}
+    for s in range(n):
+        kind, index, offset, size, checksum = struct.unpack_from("<IIQQQ", buf, HEADER_SIZE + 32 * s)
+        if offset % SECTION_ALIGN or offset + size > len(buf):
+            raise VpakError(f"section {s} (kind {kind}) not inside the file at a 256-byte boundary")
+        sections[(kind, index)] = (offset, size, checksum)
+    return sections
+
+
+class Sections:
+    """Section bytes by (kind, index), checksum verified on first use."""
+
+    def __init__(self, buf, table):
+        self.buf, self.table, self.checked = buf, table, set()
+
+    def get(self, kind, index=0):
+        if (kind, index) not in self.table:
+            raise VpakError(f"missing section kind {kind} index {index}")
+        offset, size, checksum = self.table[(kind, index)]
+        data = self.buf[offset:offset + size]
+        if (kind, index) not in self.checked:
+            if xxh3_64(data) != checksum:
+                raise VpakError(f"checksum mismatch in section kind {kind} index {index}")
+            self.checked.add((kind, index))
+        return data
+
+    def u32(self, kind, index=0):
+        data = self.get(kind, index)
+        if len(data) % 4:
+            raise VpakError(f"section kind {kind} is not whole u32 words")
+        return np.frombuffer(data, dtype="<u4")
+
+    def f32(self, kind, index=0):
+        data = self.get(kind, index)
+        if len(data) % 4:
+            raise VpakError(f"section kind {kind} is not whole f32 words")
+        return np.frombuffer(data, dtype="<f4")
+
+
+# ---------------------------------------------------------------------------
+# Metadata: bincode 2 standard configuration (varint integers, little-endian)
+# ---------------------------------------------------------------------------
+
+class Bincode:
+    def __init__(self, data):
+        self.data, self.pos = bytes(data), 0
+
+    def take(self, n):
+        if self.pos + n > len(self.data):
+            raise VpakError("metadata truncated")
+        out = self.data[self.pos:self.pos + n]
+        self.pos += n
+        return out
+
+    def uint(self):
+        # One byte below 251; else marker 251/252/253 then 2/4/8 little-endian bytes.
+        b = self.take(1)[0]
+        if b < 251:
+            return b
+        width = {251: 2, 252: 4, 253: 8}.get(b)
+        if width is None:
+            raise VpakError(f"metadata: bad varint marker {b}")
+        return int.from_bytes(self.take(width), "little")
+
+    def int(self):
+        z = self.uint()  # zigzag: 0, 1, 2, 3 -> 0, -1, 1, -2
+        return (z >> 1) ^ -(z & 1)
+
+    def f32(self):
+        return struct.unpack("<f", self.take(4))[0]
+
+    def f64(self):
+        return struct.unpack("<d", self.take(8))[0]
+
+    def string(self):
+        try:
+            return self.take(self.uint()).decode("utf-8")
+        except UnicodeDecodeError:
+            raise VpakError("metadata: string is not UTF-8") from None
+
+    def option(self, item):
+        tag = self.take(1)[0]
+        if tag > 1:
+            raise VpakError(f"metadata: bad Option tag {tag}")
+        return item() if tag else None
+
+    def vec(self, item):
+        return [item() for _ in range(self.uint())]
+
+    def array(self, item, n):
+        return [item() for _ in range(n)]
+
+
+def decode_metadata(data):
+    r = Bincode(data)
+    m = {}
+    m["tool"] = r.string()
+    m["frame_count"] = r.uint()
+    m["map_type"] = r.string()
+    m["transform"] = r.array(lambda: r.array(r.f64, 4), 4)
+    m["index_offset"] = r.array(r.int, 3)
+    m["index_bbox"] = r.option(lambda: (r.array(r.int, 3), r.array(r.int, 3)))
+
+    def channel():
+        return {
+            "name": r.string(), "grid": r.string(), "component": r.option(r.uint),
+            "value_type": r.string(), "class": r.string(), "background": r.f32(),
+            "value_range": r.array(r.f32, 2), "group": r.uint(), "plane": r.uint(),
+            "lane": r.uint(),
+        }
+
+    m["channels"] = r.vec(channel)
+    m["planes"] = r.vec(lambda: {"format": r.uint(), "lanes": r.uint(), "z_per_texel": r.uint()})
+    m["brick_count"] = r.uint()
+    m["atlases"] = r.vec(lambda: {"bricks": r.array(r.uint, 3), "first_brick": r.uint(), "count": r.uint()})
+    m["settings"] = r.vec(lambda: (r.string(), r.string()))
+    m["sources"] = r.vec(lambda: {"path": r.string(), "bytes": r.uint(), "xxh3_128": r.string()})
+    m["frames"] = r.vec(lambda: {"source": r.option(r.uint), "active_voxels": r.uint(),
+                                 "leaves": r.uint(), "tiles": r.uint()})
+    if r.pos != len(r.data):
+        raise VpakError(f"metadata has {len(r.data) - r.pos} trailing bytes")
+    return m
+
+
+# ---------------------------------------------------------------------------
+# Validation (format.md, "Validation")
+# ---------------------------------------------------------------------------
+
+def validate(m, secs):
+    C, P, A = len(m["channels"]), len(m["planes"]), len(m["atlases"])
+    if not (1 <= C <= 256 and 1 <= P <= 256):
+        raise VpakError("channel or plane count out of 1..256")
+    for p, pl in enumerate(m["planes"]):
+        rule = FORMAT_RULES.get(pl["format"])
+        if rule is None or pl["lanes"] not in rule[0] or pl["z_per_texel"] not in rule[1]:
+            raise VpakError(f"plane {p} has a format/lanes/zpt the table does not allow")
+    used = [set() for _ in range(P)]
+    for c, ch in enumerate(m["channels"]):
+        p = ch["plane"]
+        if p >= P:
+            raise VpakError(f"channel {c} in a missing plane")
+        zpt, lanes = m["planes"][p]["z_per_texel"], m["planes"][p]["lanes"]
+        span = set(range(ch["lane"], ch["lane"] + zpt))
+        if ch["lane"] % zpt or ch["lane"] + zpt > lanes or span & used[p]:
+            raise VpakError(f"channel {c} has bad or shared lanes")
+        used[p] |= span
+    if any(not u for u in used):
+        raise VpakError("a plane holds no channel")
+    # Atlases: consecutive from brick 0, all but the last full and of one shape, and the
+    # last one's bricks placeable with the first one's shape.
+    first = 0
+    for a, at in enumerate(m["atlases"]):
+        bx, by, bz = at["bricks"]
+        if at["first_brick"] != first or at["count"] > bx * by * bz:
+            raise VpakError(f"atlas {a} not consecutive or over-full")
+        if a < A - 1 and (at["bricks"] != m["atlases"][0]["bricks"] or at["count"] != bx * by * bz):
+            raise VpakError(f"atlas {a} is not full with the first atlas's shape")
+        first += at["count"]
+    if A:
+        last, (fx, fy, fz) = m["atlases"][-1], m["atlases"][0]["bricks"]
+        lx, ly, lz = last["bricks"]
+        for i in (0, last["count"] - 1) if last["count"] else ():
+            # positions of local index i in both shapes must agree
+            if (i % fx, (i // fx) % fy, i // (fx * fy)) != (i % lx, (i // lx) % ly, i // (lx * ly)):
+                raise VpakError("last atlas's bricks cannot be placed with the first atlas's shape")
+    if first != m["brick_count"]:
+        raise VpakError("atlases do not cover brick_count bricks")
+    if m["index_offset"][0] % 128 or m["index_offset"][1] % 128 or m["index_offset"][2] % 128:
+        raise VpakError("index_offset not a multiple of 128")
+    if len(m["frames"]) != m["frame_count"]:
+        raise VpakError("frame info list is not frame_count long")
+
+
+# ---------------------------------------------------------------------------
+# Node walk
+# ---------------------------------------------------------------------------
+
+def prefix_count(node, mask_words, k):
+    """Prefix count k: 16-bit half k % 2 of word mask_words + k / 2."""
+    w = int(node[mask_words + k // 2])
+    return (w >> (16 * (k % 2))) & 0xFFFF
+
+
+def occupied_slots(node, mask_words):
+    """Set bits s of the occupancy mask, with their entry offsets (prefix + popcount)."""
+    mask = np.asarray(node[:mask_words], dtype=np.uint32)
+    bits = np.unpackbits(mask.view(np.uint8), bitorder="little")
+    slots = np.nonzero(bits)[0]
+    # Rank of each set bit = its entry offset from `first`; also check the prefix counts.
+    ranks = np.arange(len(slots))
+    words = slots // 32
+    first_in_word = np.searchsorted(slots, words * 32)
+    for wd in np.unique(words)[:4]:  # spot-check a few stored prefixes against popcounts
+        if prefix_count(node, mask_words, int(wd)) != int(first_in_word[np.searchsorted(words, wd)]):
+            raise VpakError("node prefix counts disagree with its occupancy mask")
+    return slots, ranks
+
+
+def slot_entries(node, mask_words, entries, what):
+    slots, ranks = occupied_slots(node, mask_words)
+    first = int(node[-1])
+    idx = first + ranks
+    if len(idx) and idx[-1] >= len(entries):
+        raise VpakError(f"{what} entry index out of range")
+    return slots, entries[idx]
+
+
+def slot_origin(slots, L, shift):
+    """Slot s = (x << 2L) | (y << L) | z; its origin is (x, y, z) << shift voxels."""
+    m = (1 << L) - 1
+    return np.stack([(slots >> (2 * L)) & m, (slots >> L) & m, slots & m], axis=1).astype(np.int64) << shift
+
+
+def l3_active(l3, node_index):
+    """Active-voxel mask (512 bools, leaf order) of L3 node k, from states and sub-masks."""
+    base = 1 + L3_WORDS * node_index
+    states, first = int(l3[base + 1]), int(l3[base + 2])
+    active = np.zeros(512, dtype=bool)
+    x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
+    x, y, z = x.ravel(), y.ravel(), z.ravel()  # leaf order x*64 + y*8 + z
+    sub = (x // 4) * 4 + (y // 4) * 2 + z // 4
+    j = (x % 4) * 16 + (y % 4) * 4 + z % 4
+    r = 0
+    for b in range(8):
+        st = (states >> (2 * b)) & 3
+        sel = sub == b
+        if st == 1:
+            active[sel] = True
+        elif st == 2:
+            w0 = first + 2 * r
+            if w0 + 2 > len(l3):
+                raise VpakError("L3 sub-mask out of range")
+            bits = np.unpackbits(np.asarray(l3[w0:w0 + 2], dtype="<u4").view(np.uint8), bitorder="little")
+            active[sel] = bits[j[sel]].astype(bool)  # bit j%32 of word first+2r+j/32
+            r += 1
+        elif st == 3:
+            raise VpakError("L3 node has an invalid sub-block state")
+    return active
+
+
+def walk_frame(m, secs, frame):
+    """Active voxels of a frame: (asset ijk of tile voxels, tile ids) and (L3 voxels, brick ids)."""
+    frames = secs.u32(K_FRAMES)
+    l1 = secs.u32(K_L1)
+    l1e = secs.u32(K_L1_ENTRIES)
+    l2 = secs.u32(K_L2)
+    l2e = secs.u32(K_L2_ENTRIES)
+    l3 = secs.u32(K_L3)
+    if len(frames) != m["frame_count"]:
+        raise VpakError("frame table is not frame_count long")
+    if len(l1) % L1_WORDS or len(l2) % L2_WORDS:
+        raise VpakError("node arrays are not whole records")
+    if len(l3) < 1 or len(l3) < 1 + L3_WORDS * int(l3[0]):
+        raise VpakError("L3 array shorter than its node count")
+    n1, n2, n3 = len(l1) // L1_WORDS, len(l2) // L2_WORDS, int(l3[0])
+    TILE = 1 << 31
+
+    root = int(frames[frame])
+    if root >= n1:
+        raise VpakError(f"frame {frame} points at missing L1 node {root}")
+    node1 = l1[root * L1_WORDS:(root + 1) * L1_WORDS]
+    slots1, ent1 = slot_entries(node1, L1_MASK_WORDS, l1e, "L1")
+    org1 = slot_origin(slots1, 5, 7)
+
+    tile_parts, leaf_parts = [], []  # (origin, size, tile id) / (origin, l3 node)
+    for o1, e in zip(org1, ent1):
+        e = int(e)
+        if e & TILE:
+            tile_parts.append((o1, 128, e & ~TILE))
+            continue
+        if e >= n2:
+            raise VpakError("L1 entry points at a missing L2 node")
+        node2 = l2[e * L2_WORDS:(e + 1) * L2_WORDS]
+        slots2, ent2 = slot_entries(node2, L2_MASK_WORDS, l2e, "L2")
+        org2 = o1 + slot_origin(slots2, 4, 3)
+        for o2, e2 in zip(org2, ent2):
+            e2 = int(e2)
+            if e2 & TILE:
+                tile_parts.append((o2, 8, e2 & ~TILE))
+            elif e2 >= n3:
+                raise VpakError("L2 entry points at a missing L3 node")
+            else:
+                leaf_parts.append((o2, e2))
+    limit = m["frames"][frame]["leaves"]
+    if len(leaf_parts) > limit:
+        raise VpakError(f"frame {frame} expands to more leaves than its FrameInfo says ({limit})")
+    return tile_parts, leaf_parts
+
+
+# ---------------------------------------------------------------------------
+# Bricks: planes, atlases, texel addressing, block decoding and ranges
+# ---------------------------------------------------------------------------
+
+def decode_bc4(data, W, H, D):
+    """BC4 UNORM to float levels in [0, 1], palette in float (exact weighted means)."""
+    blocks = np.frombuffer(data, dtype=np.uint8).reshape(-1, 8)
+    e0 = blocks[:, 0].astype(np.float64)
+    e1 = blocks[:, 1].astype(np.float64)
+    bits = np.zeros(len(blocks), dtype=np.uint64)
+    for i in range(6):
+        bits |= blocks[:, 2 + i].astype(np.uint64) << np.uint64(8 * i)
+    idx = ((bits[:, None] >> (np.arange(16, dtype=np.uint64) * np.uint64(3))[None, :]) & np.uint64(7)).astype(np.int64)
+    pal = np.zeros((len(blocks), 8))
+    pal[:, 0], pal[:, 1] = e0, e1
+    eight = e0 > e1
+    for k in range(1, 7):  # 8-value mode: (7-k)/7 e0 + k/7 e1
+        pal[:, 1 + k] = np.where(eight, ((7 - k) * e0 + k * e1) / 7, pal[:, 1 + k])
+    for k in range(1, 5):  # 6-value mode: (5-k)/5 e0 + k/5 e1, then 0 and 255
+        pal[:, 1 + k] = np.where(eight, pal[:, 1 + k], ((5 - k) * e0 + k * e1) / 5)
+    pal[:, 6] = np.where(eight, pal[:, 6], 0.0)
+    pal[:, 7] = np.where(eight, pal[:, 7], 255.0)
+    texels = np.take_along_axis(pal, idx, axis=1) / 255.0  # block texel k = (Y%4)*4 + X%4
+    return blocks_to_texture(texels[:, :, None], W, H, D)
+
+
+def decode_bc7(data, W, H, D):
+    """BC7 UNORM to 8-bit RGBA lanes / 255 (Pillow's BCn decoder, slice by slice)."""
+    from PIL import Image
+    # Slices are stored one after another, blocks row-major: the same bytes form one
+    # W x (H*D) image, so one Pillow call decodes every slice.
+    img = Image.frombytes("RGBA", (W, H * D), bytes(data), "bcn", 7)
+    return np.asarray(img, dtype=np.uint8).reshape(D, H, W, 4).astype(np.float64) / 255.0
+
+
+def blocks_to_texture(texels, W, H, D):
+    """(blocks, 16, lanes) in storage order -> (D, H, W, lanes) texel array."""
+    lanes = texels.shape[-1]
+    t = texels.reshape(D, H // 4, W // 4, 4, 4, lanes)  # k = row*4 + col
+    return t.transpose(0, 1, 3, 2, 4, 5).reshape(D, H, W, lanes)
+
+
+def load_plane_texture(secs, m, p, a):
+    """Plane p of atlas a as a float64 array [z, y, x, lane] of levels or values."""
+    pl = m["planes"][p]
+    fmt, lanes, zpt = pl["format"], pl["lanes"], pl["z_per_texel"]
+    bx, by, bz = m["atlases"][a]["bricks"]
+    W, H, D = 8 * bx, 8 * by, (8 // zpt) * bz
+    data = secs.get(K_ATLAS, p * len(m["atlases"]) + a)
+    if fmt in (F32, F16, UNORM8):
+        dtype, size = {F32: ("<f4", 4), F16: ("<f2", 2), UNORM8: ("u1", 1)}[fmt]
+        if len(data) != W * H * D * lanes * size:
+            raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
+        tex = np.frombuffer(data, dtype=dtype).reshape(D, H, W, lanes).astype(np.float64)
+        return tex / 255.0 if fmt == UNORM8 else tex
+    B = 8 if fmt == BC4 else 16
+    if W % 4 or H % 4 or len(data) != (W // 4) * (H // 4) * D * B:
+        raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
+    return decode_bc4(data, W, H, D) if fmt == BC4 else decode_bc7(data, W, H, D)
+
+
+def brick_values(m, secs, bricks):
+    """Values [len(bricks), C, 512] (leaf order) of the given bricks, every channel."""
+    C, A = len(m["channels"]), len(m["atlases"])
+    ranges = secs.f32(K_RANGES)
+    if len(ranges) != m["brick_count"] * C * 2:
+        raise VpakError("brick ranges section has the wrong length")
+    bricks = np.asarray(bricks, dtype=np.int64)
+    if len(bricks) and bricks.max() >= m["brick_count"]:
+        raise VpakError("L3 node points at a missing brick")
+    out = np.zeros((len(bricks), C, 512), dtype=np.float64)
+    x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
+    x, y, z = x.ravel(), y.ravel(), z.ravel()
+    textures = {}
+    for a, at in enumerate(m["atlases"]):
+        sel = np.nonzero((bricks >= at["first_brick"]) & (bricks < at["first_brick"] + at["count"]))[0]
+        if not len(sel):
+            continue
+        bx, by, _ = at["bricks"]
+        i = bricks[sel] - at["first_brick"]
+        px, py, pz = i % bx, (i // bx) % by, i // (bx * by)
+        for c, ch in enumerate(m["channels"]):
+            p = ch["plane"]
+            zpt = m["planes"][p]["z_per_texel"]
+            slices = 8 // zpt
+            if (p, a) not in textures:
+                textures[(p, a)] = load_plane_texture(secs, m, p, a)
+            tex = textures[(p, a)]
+            # texel (8px + x, 8py + y, slices*pz + z/zpt), lane = channel lane + z % zpt
+            X = 8 * px[:, None] + x[None, :]
+            Y = 8 * py[:, None] + y[None, :]
+            Z = slices * pz[:, None] + (z // zpt)[None, :]
+            L = ch["lane"] + (z % zpt)[None, :]
+            out[sel, c, :] = tex[Z, Y, X, np.broadcast_to(L, X.shape)]
+    # Ranged formats: level t over the brick's [min, max] for the channel.
+    for c, ch in enumerate(m["channels"]):
+        if m["planes"][ch["plane"]]["format"] in (UNORM8, BC4, BC7):
+            lo = ranges[2 * (bricks * C + c)].astype(np.float64)[:, None]
+            hi = ranges[2 * (bricks * C + c) + 1].astype(np.float64)[:, None]
+            t = out[:, c, :]
+            out[:, c, :] = np.where(hi > lo, lo + t * (hi - lo), lo)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Frame decoding
+# ---------------------------------------------------------------------------
+
+def read_frame(m, secs, frame):
+    """Per-channel (ijk int32 n x 3, values float32 n), sorted by i, j, k (source space)."""
+    C = len(m["channels"])
+    tile_parts, leaf_parts = walk_frame(m, secs, frame)
+    ijk_parts, val_parts = [], []
+
+    if tile_parts:
+        tiles = secs.f32(K_TILES)
+        if len(tiles) % C:
+            raise VpakError("tiles section is not a multiple of C floats")
+        for origin, size, t in tile_parts:
+            if (t + 1) * C > len(tiles):
+                raise VpakError("tile index out of range")
+            g = np.arange(size)
+            gi, gj, gk = np.meshgrid(g, g, g, indexing="ij")
+            ijk = np.stack([gi.ravel(), gj.ravel(), gk.ravel()], axis=1) + origin
+            ijk_parts.append(ijk)
+            val_parts.append(np.broadcast_to(tiles[t * C:(t + 1) * C].astype(np.float64), (len(ijk), C)))
+
+    if leaf_parts:
+        l3 = secs.u32(K_L3)
+        origins = np.array([o for o, _ in leaf_parts], dtype=np.int64)
+        nodes = [k for _, k in leaf_parts]
+        masks, cache = [], {}
+        for k in nodes:  # identical nodes are shared: decode each mask once
+            if k not in cache:
+                cache[k] = l3_active(l3, k)
+            masks.append(cache[k])
+        masks = np.array(masks)
+        brick_ids = np.array([int(l3[1 + L3_WORDS * k]) for k in nodes], dtype=np.int64)
+        uniq, inv = np.unique(brick_ids, return_inverse=True)
+        vals = brick_values(m, secs, uniq)[inv]  # [leaves, C, 512]
+        x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
+        local = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
+        leaf, vox = np.nonzero(masks)
+        ijk_parts.append(origins[leaf] + local[vox])
+        val_parts.append(vals[leaf, :, vox])
+
+    if ijk_parts:
+        ijk = np.concatenate(ijk_parts) + np.array(m["index_offset"], dtype=np.int64)
+        vals = np.concatenate(val_parts)
+    else:
+        ijk, vals = np.zeros((0, 3), dtype=np.int64), np.zeros((0, C))
+    order = np.lexsort((ijk[:, 2], ijk[:, 1], ijk[:, 0]))
+    ijk, vals = ijk[order].astype(np.int32), vals[order].astype(np.float32)
+    if len(ijk) > 1 and not np.any(np.diff(ijk, axis=0) != 0, axis=1).all():
+        raise VpakError(f"frame {frame} covers a voxel twice")
+    return {ch["name"]: (ijk, vals[:, c]) for c, ch in enumerate(m["channels"])}
+
+
+def summary(m):
+    s = dict(m)
+    for ch in s["channels"]:
+        ch["format"] = FORMAT_NAMES[m["planes"][ch["plane"]]["format"]]
+    s["planes"] = [dict(p, format=FORMAT_NAMES[p["format"]]) for p in m["planes"]]
+    return s
+
+
+def open_asset(path):
+    try:
+        with open(path, "rb") as f:
+            buf = memoryview(f.read())
+    except OSError as e:
+        raise VpakError(e.strerror or str(e)) from None
+    secs = Sections(buf, read_header(buf))
+    m = decode_metadata(secs.get(K_METADATA))
+    validate(m, secs)
+    return m, secs
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description="Decode a .vpak frame (written from docs/format.md).")
+    ap.add_argument("asset")
+    ap.add_argument("--frame", type=int, default=None)
+    ap.add_argument("--out", help="write C.ijk / C.values per channel to this .npz")
+    ap.add_argument("--json", action="store_true", help="print a metadata summary")
+    args = ap.parse_args(argv)
+    try:
+        m, secs = open_asset(args.asset)
+        if args.json:
+            print(json.dumps(summary(m), indent=2))
+        if args.frame is not None or args.out:
+            frame = 0 if args.frame is None else args.frame
+            if not 0 <= frame < m["frame_count"]:
+                raise VpakError(f"frame {frame} out of range (asset has {m['frame_count']})")
+            chans = read_frame(m, secs, frame)
+            if args.out:
+                arrays = {}
+                for name, (ijk, vals) in chans.items():
+                    arrays[f"{name}.ijk"], arrays[f"{name}.values"] = ijk, vals
+                np.savez(args.out, **arrays)
+    except VpakError as e:
+        print(f"vpak_read.py: {args.asset}: {e}", file=sys.stderr)
+        return 1
+    except OSError as e:
+        print(f"vpak_read.py: {args.asset}: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
