@@ -54,8 +54,11 @@ class VpakError(Exception):
 # ---------------------------------------------------------------------------
 
 def xxh3_64(data):
-    import xxhash  # only needed when checksums are verified
-    return xxhash.xxh3_64_intdigest(data)
+    try:
+        import xxhash  # Debian python3-xxhash
+    except ImportError:
+        raise VpakError("cannot verify checksums: install python3-xxhash") from None
+    return xxhash.xxh3_64_intdigest(bytes(data))
 
 
 def read_header(buf):
@@ -236,10 +239,13 @@ def validate(m, secs):
     if A:
         last, (fx, fy, fz) = m["atlases"][-1], m["atlases"][0]["bricks"]
         lx, ly, lz = last["bricks"]
-        for i in (0, last["count"] - 1) if last["count"] else ():
-            # positions of local index i in both shapes must agree
-            if (i % fx, (i // fx) % fy, i // (fx * fy)) != (i % lx, (i // lx) % ly, i // (lx * ly)):
-                raise VpakError("last atlas's bricks cannot be placed with the first atlas's shape")
+        # Every brick of the last atlas must sit where the first atlas's shape puts it
+        # (the shader addresses all atlases with the first one's shape).
+        i = np.arange(last["count"])
+        first_pos = np.stack([i % fx, (i // fx) % fy, i // (fx * fy)])
+        own_pos = np.stack([i % lx, (i // lx) % ly, i // (lx * ly)])
+        if not np.array_equal(first_pos, own_pos) or (len(i) and (first_pos.max(axis=1) >= [lx, ly, lz]).any()):
+            raise VpakError("last atlas's bricks cannot be placed with the first atlas's shape")
     if first != m["brick_count"]:
         raise VpakError("atlases do not cover brick_count bricks")
     if m["index_offset"][0] % 128 or m["index_offset"][1] % 128 or m["index_offset"][2] % 128:
@@ -252,25 +258,22 @@ def validate(m, secs):
 # Node walk
 # ---------------------------------------------------------------------------
 
-def prefix_count(node, mask_words, k):
-    """Prefix count k: 16-bit half k % 2 of word mask_words + k / 2."""
-    w = int(node[mask_words + k // 2])
-    return (w >> (16 * (k % 2))) & 0xFFFF
-
-
 def occupied_slots(node, mask_words):
-    """Set bits s of the occupancy mask, with their entry offsets (prefix + popcount)."""
+    """Set bits s of the occupancy mask, with their ranks (entry offsets from `first`).
+
+    The stored prefix counts are what a GPU reader uses for constant-time lookup; here
+    every one is checked against the mask so a reader that trusts them reads the same.
+    """
     mask = np.asarray(node[:mask_words], dtype=np.uint32)
     bits = np.unpackbits(mask.view(np.uint8), bitorder="little")
     slots = np.nonzero(bits)[0]
-    # Rank of each set bit = its entry offset from `first`; also check the prefix counts.
-    ranks = np.arange(len(slots))
-    words = slots // 32
-    first_in_word = np.searchsorted(slots, words * 32)
-    for wd in np.unique(words)[:4]:  # spot-check a few stored prefixes against popcounts
-        if prefix_count(node, mask_words, int(wd)) != int(first_in_word[np.searchsorted(words, wd)]):
-            raise VpakError("node prefix counts disagree with its occupancy mask")
-    return slots, ranks
+    k = np.arange(mask_words)
+    words = np.asarray(node[mask_words + k // 2], dtype=np.uint32)
+    stored = (words >> (16 * (k % 2)).astype(np.uint32)) & 0xFFFF
+    counted = np.concatenate([[0], np.cumsum(bits.reshape(mask_words, 32).sum(axis=1))[:-1]])
+    if not np.array_equal(stored, counted):
+        raise VpakError("node prefix counts disagree with its occupancy mask")
+    return slots, np.arange(len(slots))
 
 
 def slot_entries(node, mask_words, entries, what):
@@ -392,7 +395,10 @@ def decode_bc4(data, W, H, D):
 
 def decode_bc7(data, W, H, D):
     """BC7 UNORM to 8-bit RGBA lanes / 255 (Pillow's BCn decoder, slice by slice)."""
-    from PIL import Image
+    try:
+        from PIL import Image  # Debian python3-pil
+    except ImportError:
+        raise VpakError("cannot decode BC7: install python3-pil") from None
     # Slices are stored one after another, blocks row-major: the same bytes form one
     # W x (H*D) image, so one Pillow call decodes every slice.
     img = Image.frombytes("RGBA", (W, H * D), bytes(data), "bcn", 7)

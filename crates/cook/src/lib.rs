@@ -277,8 +277,11 @@ impl Cooker {
     }
 
     /// The planes of every channel group, in order: explicit groups first,
-    /// then the other channels in `format` (uncompressed formats together;
-    /// each alone in BC formats).  Returns the specs and each channel's group.
+    /// then the other channels in `format`: together, except that in BC7
+    /// each component of a vec3 grid is alone (measured: packing correlated
+    /// scalars such as density and temperature into one BC7 texture lowers
+    /// their error, packing velocity's uncorrelated components raises it;
+    /// docs/benchmarks.md).  Returns the specs and each channel's group.
     fn plan_planes(&self) -> Result<(Vec<PlaneSpec>, Vec<u32>), Error> {
         let mut group_of: Vec<Option<u32>> = vec![None; self.channels.len()];
         let mut groups: Vec<(Format, Vec<usize>)> = Vec::new();
@@ -299,18 +302,14 @@ impl Cooker {
             }
             groups.push((g.format, members));
         }
-        let rest: Vec<usize> = (0..self.channels.len()).filter(|&c| group_of[c].is_none()).collect();
         let format = self.opts.format;
-        if format.is_block() {
-            for c in rest {
-                group_of[c] = Some(groups.len() as u32);
-                groups.push((format, vec![c]));
-            }
-        } else if !rest.is_empty() {
-            for &c in &rest {
+        let rest: Vec<usize> = (0..self.channels.len()).filter(|&c| group_of[c].is_none()).collect();
+        let (alone, together): (Vec<usize>, Vec<usize>) = rest.into_iter().partition(|&c| format == Format::Bc7 && self.channels[c].component.is_some());
+        for members in [together].into_iter().filter(|m| !m.is_empty()).chain(alone.into_iter().map(|c| vec![c])) {
+            for &c in &members {
                 group_of[c] = Some(groups.len() as u32);
             }
-            groups.push((format, rest));
+            groups.push((format, members));
         }
         let specs = groups.iter().flat_map(|(f, m)| vdbcook_encode::group_planes(*f, m)).collect();
         Ok((specs, group_of.into_iter().map(|g| g.unwrap_or(0)).collect()))

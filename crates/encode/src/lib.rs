@@ -62,33 +62,28 @@ pub struct PlaneSpec {
     pub channels: Vec<usize>,
 }
 
-/// The planes of a group of channels stored in `format`: uncompressed
-/// formats put up to four channels in one texture (R, RG, RGBA; three take
-/// RG and R), BC4 takes one plane per channel, and BC7 up to four channels per
-/// plane, each with `4 / channels` consecutive z-slices in its lanes (one
-/// channel: four z-slices, as single-channel assets; two: two slices each;
-/// three or four: one voxel's channels, the classic channel packing).
+/// The planes of a group of channels stored in `format`: chunks of up to
+/// four channels in order, a chunk of three split into two and one (no lane
+/// to spare). Uncompressed formats put a chunk in one texture (R, RG, RGBA);
+/// BC4 takes one plane per channel; BC7 one plane per chunk, each channel
+/// with `4 / channels` consecutive z-slices in its lanes (one channel: four
+/// z-slices, as single-channel assets; two: two slices each; four: one
+/// voxel's channels, the classic channel packing).
 pub fn group_planes(format: Format, channels: &[usize]) -> Vec<PlaneSpec> {
-    match format {
-        Format::Bc4 => channels.iter().map(|&c| PlaneSpec { plane: Plane { format, lanes: 1, z_per_texel: 1 }, channels: vec![c] }).collect(),
-        Format::Bc7 => channels
-            .chunks(4)
-            .map(|k| {
-                let z_per_texel = match k.len() {
-                    1 => 4,
-                    2 => 2,
-                    _ => 1,
-                };
-                PlaneSpec { plane: Plane { format, lanes: 4, z_per_texel }, channels: k.to_vec() }
-            })
-            .collect(),
-        // Three channels take RG + R rather than RGBA with a lane to spare.
-        _ => channels
-            .chunks(4)
-            .flat_map(|k| if k.len() == 3 { vec![&k[..2], &k[2..]] } else { vec![k] })
-            .map(|k| PlaneSpec { plane: Plane::uncompressed(format, k.len() as u32), channels: k.to_vec() })
-            .collect(),
+    if format == Format::Bc4 {
+        return channels.iter().map(|&c| PlaneSpec { plane: Plane { format, lanes: 1, z_per_texel: 1 }, channels: vec![c] }).collect();
     }
+    channels
+        .chunks(4)
+        .flat_map(|k| if k.len() == 3 { vec![&k[..2], &k[2..]] } else { vec![k] })
+        .map(|k| {
+            let plane = match format {
+                Format::Bc7 => Plane { format, lanes: 4, z_per_texel: 4 / k.len() as u32 },
+                _ => Plane::uncompressed(format, k.len() as u32),
+            };
+            PlaneSpec { plane, channels: k.to_vec() }
+        })
+        .collect()
 }
 
 /// The smallest and largest of a brick's values.
