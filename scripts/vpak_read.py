@@ -83,6 +83,8 @@ def read_header(buf):
         kind, index, offset, size, checksum = struct.unpack_from("<IIQQQ", buf, HEADER_SIZE + 32 * s)
         if offset % SECTION_ALIGN or offset + size > len(buf):
             raise VpakError(f"section {s} (kind {kind}) not inside the file at a 256-byte boundary")
+        if (kind, index) in sections:
+            raise VpakError(f"section kind {kind} index {index} appears twice")
         sections[(kind, index)] = (offset, size, checksum)
     return sections
 
@@ -543,6 +545,10 @@ def open_asset(path):
     except OSError as e:
         raise VpakError(e.strerror or str(e)) from None
     secs = Sections(buf, read_header(buf))
+    # Verify every section up front (in table order) so that a corrupt asset is refused
+    # whichever frame is asked for, not only when the damaged bytes are used.
+    for kind, index in secs.table:
+        secs.get(kind, index)
     m = decode_metadata(secs.get(K_METADATA))
     validate(m, secs)
     return m, secs
