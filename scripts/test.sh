@@ -7,7 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 need=()
-for pkg in python3-openvdb python3-numpy libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1; do
+for pkg in python3-openvdb python3-numpy python3-pil python3-xxhash libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then

@@ -374,24 +374,34 @@ def walk_frame(m, secs, frame):
 # ---------------------------------------------------------------------------
 
 def decode_bc4(data, W, H, D):
-    """BC4 UNORM to float levels in [0, 1], palette in float (exact weighted means)."""
+    """BC4 UNORM blocks to float32 levels in [0, 1], with the palette in float.
+
+    format.md: palette entries are the endpoints and their exact weighted means. The
+    document does not fix the float arithmetic; this order (endpoints e/255 in f32, then
+    ((7-k)*f0 + k*f1) / 7 in f32) was found by experiment to match `vdbcook unpack`
+    bit for bit; other orders differ by 1 ulp.
+    """
     blocks = np.frombuffer(data, dtype=np.uint8).reshape(-1, 8)
-    e0 = blocks[:, 0].astype(np.float64)
-    e1 = blocks[:, 1].astype(np.float64)
+    f0 = (blocks[:, 0] / 255.0).astype(np.float32)
+    f1 = (blocks[:, 1] / 255.0).astype(np.float32)
+    eight = blocks[:, 0] > blocks[:, 1]  # e0 > e1: 8-level mode, else 6 levels + 0 and 1
+    pal = np.zeros((len(blocks), 8), dtype=np.float32)
+    pal[:, 0], pal[:, 1] = f0, f1
+    for k in range(1, 7):
+        mean = (np.float32(7 - k) * f0 + np.float32(k) * f1) / np.float32(7)
+        pal[:, 1 + k] = np.where(eight, mean, pal[:, 1 + k])
+    for k in range(1, 5):
+        mean = (np.float32(5 - k) * f0 + np.float32(k) * f1) / np.float32(5)
+        pal[:, 1 + k] = np.where(eight, pal[:, 1 + k], mean)
+    pal[:, 6] = np.where(eight, pal[:, 6], 0.0)
+    pal[:, 7] = np.where(eight, pal[:, 7], 1.0)
+    # 48 index bits after the endpoints, 3 bits per texel k = (Y%4)*4 + X%4 from bit 0.
     bits = np.zeros(len(blocks), dtype=np.uint64)
     for i in range(6):
         bits |= blocks[:, 2 + i].astype(np.uint64) << np.uint64(8 * i)
-    idx = ((bits[:, None] >> (np.arange(16, dtype=np.uint64) * np.uint64(3))[None, :]) & np.uint64(7)).astype(np.int64)
-    pal = np.zeros((len(blocks), 8))
-    pal[:, 0], pal[:, 1] = e0, e1
-    eight = e0 > e1
-    for k in range(1, 7):  # 8-value mode: (7-k)/7 e0 + k/7 e1
-        pal[:, 1 + k] = np.where(eight, ((7 - k) * e0 + k * e1) / 7, pal[:, 1 + k])
-    for k in range(1, 5):  # 6-value mode: (5-k)/5 e0 + k/5 e1, then 0 and 255
-        pal[:, 1 + k] = np.where(eight, pal[:, 1 + k], ((5 - k) * e0 + k * e1) / 5)
-    pal[:, 6] = np.where(eight, pal[:, 6], 0.0)
-    pal[:, 7] = np.where(eight, pal[:, 7], 255.0)
-    texels = np.take_along_axis(pal, idx, axis=1) / 255.0  # block texel k = (Y%4)*4 + X%4
+    shifts = np.arange(16, dtype=np.uint64) * np.uint64(3)
+    idx = ((bits[:, None] >> shifts[None, :]) & np.uint64(7)).astype(np.int64)
+    texels = np.take_along_axis(pal, idx, axis=1)
     return blocks_to_texture(texels[:, :, None], W, H, D)
 
 
@@ -404,7 +414,7 @@ def decode_bc7(data, W, H, D):
     # Slices are stored one after another, blocks row-major: the same bytes form one
     # W x (H*D) image, so one Pillow call decodes every slice.
     img = Image.frombytes("RGBA", (W, H * D), bytes(data), "bcn", 7)
-    return np.asarray(img, dtype=np.uint8).reshape(D, H, W, 4).astype(np.float64) / 255.0
+    return np.asarray(img, dtype=np.uint8).reshape(D, H, W, 4).astype(np.float32) / np.float32(255)
 
 
 def blocks_to_texture(texels, W, H, D):
@@ -415,7 +425,7 @@ def blocks_to_texture(texels, W, H, D):
 
 
 def load_plane_texture(secs, m, p, a):
-    """Plane p of atlas a as a float64 array [z, y, x, lane] of levels or values."""
+    """Plane p of atlas a as a float32 array [z, y, x, lane] of levels or values."""
     pl = m["planes"][p]
     fmt, lanes, zpt = pl["format"], pl["lanes"], pl["z_per_texel"]
     bx, by, bz = m["atlases"][a]["bricks"]
@@ -425,8 +435,8 @@ def load_plane_texture(secs, m, p, a):
         dtype, size = {F32: ("<f4", 4), F16: ("<f2", 2), UNORM8: ("u1", 1)}[fmt]
         if len(data) != W * H * D * lanes * size:
             raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
-        tex = np.frombuffer(data, dtype=dtype).reshape(D, H, W, lanes).astype(np.float64)
-        return tex / 255.0 if fmt == UNORM8 else tex
+        tex = np.frombuffer(data, dtype=dtype).reshape(D, H, W, lanes).astype(np.float32)
+        return tex / np.float32(255) if fmt == UNORM8 else tex
     B = 8 if fmt == BC4 else 16
     if W % 4 or H % 4 or len(data) != (W // 4) * (H // 4) * D * B:
         raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
@@ -442,7 +452,7 @@ def brick_values(m, secs, bricks):
     bricks = np.asarray(bricks, dtype=np.int64)
     if len(bricks) and bricks.max() >= m["brick_count"]:
         raise VpakError("L3 node points at a missing brick")
-    out = np.zeros((len(bricks), C, 512), dtype=np.float64)
+    out = np.zeros((len(bricks), C, 512), dtype=np.float32)
     x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
     x, y, z = x.ravel(), y.ravel(), z.ravel()
     textures = {}
@@ -466,11 +476,12 @@ def brick_values(m, secs, bricks):
             Z = slices * pz[:, None] + (z // zpt)[None, :]
             L = ch["lane"] + (z % zpt)[None, :]
             out[sel, c, :] = tex[Z, Y, X, np.broadcast_to(L, X.shape)]
-    # Ranged formats: level t over the brick's [min, max] for the channel.
+    # Ranged formats: level t over the brick's [min, max] for the channel. In f32,
+    # min + t * (max - min): found by experiment to match `vdbcook unpack` exactly.
     for c, ch in enumerate(m["channels"]):
         if m["planes"][ch["plane"]]["format"] in (UNORM8, BC4, BC7):
-            lo = ranges[2 * (bricks * C + c)].astype(np.float64)[:, None]
-            hi = ranges[2 * (bricks * C + c) + 1].astype(np.float64)[:, None]
+            lo = ranges[2 * (bricks * C + c)][:, None]
+            hi = ranges[2 * (bricks * C + c) + 1][:, None]
             t = out[:, c, :]
             out[:, c, :] = np.where(hi > lo, lo + t * (hi - lo), lo)
     return out
@@ -497,7 +508,7 @@ def read_frame(m, secs, frame):
             gi, gj, gk = np.meshgrid(g, g, g, indexing="ij")
             ijk = np.stack([gi.ravel(), gj.ravel(), gk.ravel()], axis=1) + origin
             ijk_parts.append(ijk)
-            val_parts.append(np.broadcast_to(tiles[t * C:(t + 1) * C].astype(np.float64), (len(ijk), C)))
+            val_parts.append(np.broadcast_to(tiles[t * C:(t + 1) * C], (len(ijk), C)))
 
     if leaf_parts:
         l3 = secs.u32(K_L3)

@@ -1,0 +1,117 @@
+//! The specification is complete: `scripts/vpak_read.py`, written from
+//! docs/format.md alone (numpy, Pillow, xxhash; nothing shared with the Rust),
+//! decodes every channel of every frame of assets in each format and packing,
+//! and gives the values `vdbcook unpack` writes (read back by OpenVDB), voxel
+//! by voxel, over the same active voxels.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn scratch() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("vdbcook-spec-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn python(args: &[&str]) -> std::process::Output {
+    Command::new("/usr/bin/python3").args(args).current_dir(root()).output().expect("run /usr/bin/python3")
+}
+
+/// The reader's Python modules are there (CI: they must be).
+fn reader_available() -> bool {
+    let ok = python(&["-c", "import numpy, PIL, xxhash, pyopenvdb"]).status.success();
+    assert!(ok || !in_ci(), "CI=true but /usr/bin/python3 lacks numpy, PIL, xxhash or pyopenvdb (scripts/test.sh installs them)");
+    ok
+}
+
+#[test]
+fn the_spec_only_reader_decodes_what_unpack_writes() {
+    let Some(samples) = shared_samples() else { return };
+    if !reader_available() {
+        return;
+    }
+    let w = samples.join("waveletturbulence").to_string_lossy().into_owned();
+    let e: Vec<String> = (0..4).map(|k| samples.join(format!("vfx-toolkit-embergen/embergen_fire_a_{k}.vdb")).to_string_lossy().into_owned()).collect();
+    let smoke = "fixtures/smoke_seq".to_string();
+    let tiles = "fixtures/tiles.vdb".to_string();
+    // (inputs, cook flags): every format, every packing (R/RG/RGBA, BC4 per
+    // channel, BC7 with 4, 2 and 1 z-slices per texel), vec3, mixed groups,
+    // split atlases, tiles and an empty frame.
+    let cases: Vec<(Vec<String>, Vec<&str>)> = vec![
+        (vec![smoke.clone()], vec!["--format", "f32"]),
+        (vec![smoke.clone()], vec!["--format", "bc4", "--max-texture-dim", "24"]),
+        (vec![smoke], vec!["--format", "bc7"]),
+        (vec![w.clone()], vec!["--grids", "all", "--format", "f16"]),
+        (vec![w.clone()], vec!["--grids", "all", "--format", "unorm8", "--max-texture-dim", "16"]),
+        (vec![w.clone()], vec!["--grids", "density,temperature,flame,shadow", "--format", "bc7"]),
+        (vec![w.clone()], vec!["--grids", "density,temperature,velocity", "--format", "bc4", "--group", "velocity=f32", "--group", "density,temperature=bc7"]),
+        (vec![w], vec!["--grids", "density,shadow,temperature,flame", "--format", "f16", "--group", "density,shadow,temperature,flame=bc7"]),
+        (e.clone(), vec!["--grids", "all", "--format", "bc7"]),
+        (e, vec!["--grids", "all", "--format", "unorm8", "--group", "flames=bc4"]),
+        (vec![tiles], vec!["--format", "f16"]),
+    ];
+    let dir = scratch();
+    let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |(k, (inputs, flags))| -> Result<usize, String> {
+        let asset = dir.join(format!("a{k}.vpak"));
+        let mut args = vec!["cook", "-q", "--force", "-o", s(&asset)];
+        args.extend(flags.iter().copied());
+        args.extend(inputs.iter().map(String::as_str));
+        let r = vdbcook(&args);
+        if !r.status.success() {
+            return Err(format!("{flags:?}: cook failed: {}", String::from_utf8_lossy(&r.stderr)));
+        }
+        let meta: serde_json::Value = serde_json::from_slice(&vdbcook(&["inspect", "--json", s(&asset)]).stdout).unwrap();
+        let meta = &meta["files"][0];
+        let mut compared = 0;
+        for frame in 0..meta["frames"].as_u64().unwrap() {
+            let (npz, vdb) = (dir.join(format!("a{k}-{frame}.npz")), dir.join(format!("a{k}-{frame}.vdb")));
+            let out = python(&["scripts/vpak_read.py", s(&asset), "--frame", &frame.to_string(), "--out", s(&npz)]);
+            if !out.status.success() {
+                return Err(format!("{flags:?} frame {frame}: vpak_read.py failed: {}", String::from_utf8_lossy(&out.stderr)));
+            }
+            let r = vdbcook(&["unpack", "-q", "--force", s(&asset), "--frame", &frame.to_string(), "-o", s(&vdb)]);
+            if !r.status.success() {
+                return Err(format!("{flags:?} frame {frame}: unpack failed: {}", String::from_utf8_lossy(&r.stderr)));
+            }
+            let out = python(&["cli/tests/spec_reader_check.py", s(&npz), s(&vdb)]);
+            if !out.status.success() {
+                return Err(format!("{flags:?} frame {frame}: the comparison failed: {}", String::from_utf8_lossy(&out.stderr)));
+            }
+            let cmp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            for ch in meta["channels"].as_array().unwrap() {
+                let name = ch["name"].as_str().unwrap();
+                let c = &cmp[name];
+                let n = c["voxels"].as_u64().ok_or(format!("{flags:?} frame {frame}: the reader gave no channel {name}"))?;
+                // The same active voxels: every voxel the reader gives is active in
+                // the unpacked grid, and the unpacked grid has no others.
+                if c["active_in_unpacked"].as_u64() != Some(n) || c["unpacked_active_voxels"].as_u64() != Some(n) {
+                    return Err(format!("{flags:?} frame {frame} {name}: reader {n} voxels, unpacked {} active of them, {} in all", c["active_in_unpacked"], c["unpacked_active_voxels"]));
+                }
+                // BC4 may be decoded to 8 bits by the reader's library (half a level of
+                // the brick's range, at most the channel's); everything else exactly,
+                // up to float rounding.
+                let range = ch["value_range"][1].as_f64().unwrap() - ch["value_range"][0].as_f64().unwrap();
+                let top = ch["value_range"][0].as_f64().unwrap().abs().max(ch["value_range"][1].as_f64().unwrap().abs());
+                let tol = if ch["format"] == "bc4" { range / 255.0 * 0.5 + 1e-6 } else { top * 1e-6 + 1e-7 };
+                let diff = c["max_diff"].as_f64().unwrap();
+                if diff > tol {
+                    return Err(format!("{flags:?} frame {frame} {name} ({}): values differ by {diff} (tolerance {tol})", ch["format"]));
+                }
+                compared += n as usize;
+            }
+        }
+        Ok(compared)
+    });
+    let mut total = 0;
+    for r in results {
+        total += r.unwrap();
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(total > 500_000, "{total} values compared");
+}
