@@ -67,7 +67,7 @@ def read_header(buf):
         raise VpakError("file too short for a header")
     if buf[0:8] != MAGIC:
         raise VpakError("bad magic")
-    version, flags, n, _reserved, file_size, header_sum = struct.unpack_from("<IIIIQQ", buf, 8)
+    version, _flags, n, _reserved, file_size, header_sum = struct.unpack_from("<IIIIQQ", buf, 8)
     if version != VERSION:
         raise VpakError(f"unsupported format version {version} (this reader reads {VERSION})")
     if file_size != len(buf):
@@ -275,6 +275,8 @@ def occupied_slots(node, mask_words):
     counted = np.concatenate([[0], np.cumsum(bits.reshape(mask_words, 32).sum(axis=1))[:-1]])
     if not np.array_equal(stored, counted):
         raise VpakError("node prefix counts disagree with its occupancy mask")
+    # With the prefixes verified, the document's entry offset
+    # prefix(s / 32) + popcount(mask[s / 32] & ((1 << s % 32) - 1)) is the bit's rank.
     return slots, np.arange(len(slots))
 
 
@@ -321,7 +323,12 @@ def l3_active(l3, node_index):
 
 
 def walk_frame(m, secs, frame):
-    """Active voxels of a frame: (asset ijk of tile voxels, tile ids) and (L3 voxels, brick ids)."""
+    """Walk a frame's L1 node and its L2 children.
+
+    Returns tile_parts [(asset-space origin, edge 128 or 8, tile index)] and leaf_parts
+    [(asset-space origin, L3 node index)]. The frame's L1 node covers asset space
+    [0, 4096)^3; an empty frame is simply an L1 node with no slot set.
+    """
     frames = secs.u32(K_FRAMES)
     l1 = secs.u32(K_L1)
     l1e = secs.u32(K_L1_ENTRIES)

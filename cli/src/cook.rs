@@ -256,8 +256,8 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     let (cooker, channels, read_secs) = feed(opts, files, sel, args.allow_missing, &bars)?;
     if let Some(ch) = &channels {
         check_groups(&args.group, ch)?;
-        if args.clusters.is_some() && ch.specs.len() > 1 {
-            return Err(Usage("--clusters works on one-channel assets for now; cook several grids without it".into()).into());
+        if args.clusters.is_some() && ch.specs.len() > vdbcook_cook::MAX_CLUSTER_CHANNELS {
+            return Err(Usage(format!("--clusters takes at most {} channels; this cook has {}", vdbcook_cook::MAX_CLUSTER_CHANNELS, ch.specs.len())).into());
         }
     }
     let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));

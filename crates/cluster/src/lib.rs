@@ -60,9 +60,9 @@ pub struct Stats {
 }
 
 /// The clustered pool.
-pub struct Clustered {
+pub struct Clustered<const N: usize = BRICK> {
     /// Output bricks: unclustered input bricks in input order, then the used centroids.
-    pub bricks: Vec<Brick>,
+    pub bricks: Vec<[f32; N]>,
     /// For every input brick, its index in `bricks`.
     pub remap: Vec<u32>,
     /// For every input brick, whether it was replaced by a centroid.
@@ -74,8 +74,8 @@ pub struct Clustered {
 /// does not depend on `bound`); stops early, returning a value above `bound`,
 /// once the partial sum exceeds it (or reaches it, when `strict` is false).
 #[inline]
-fn l1_bounded(a: &Brick, b: &Brick, bound: f32, strict: bool) -> f32 {
-    let bound = bound * BRICK as f32;
+fn l1_bounded<const N: usize>(a: &[f32; N], b: &[f32; N], bound: f32, strict: bool) -> f32 {
+    let bound = bound * N as f32;
     let mut total = 0.0f32;
     for (ca, cb) in a.chunks_exact(64).zip(b.chunks_exact(64)) {
         let mut lanes = [0.0f32; 8];
@@ -86,16 +86,16 @@ fn l1_bounded(a: &Brick, b: &Brick, bound: f32, strict: bool) -> f32 {
         }
         total += lanes.iter().sum::<f32>();
         if total > bound || (!strict && total == bound && bound.is_finite()) {
-            return total / BRICK as f32;
+            return total / N as f32;
         }
     }
-    total / BRICK as f32
+    total / N as f32
 }
 
 /// Mean absolute difference of two bricks (the normalised Manhattan distance);
 /// stops early with a value >= `bound` once it is certain to reach it.
 #[inline]
-pub fn l1(a: &Brick, b: &Brick, bound: f32) -> f32 {
+pub fn l1<const N: usize>(a: &[f32; N], b: &[f32; N], bound: f32) -> f32 {
     l1_bounded(a, b, bound, false)
 }
 
@@ -103,7 +103,7 @@ pub fn l1(a: &Brick, b: &Brick, bound: f32) -> f32 {
 /// from `hint` (the previous assignment) gives a tight bound at once, so most
 /// other centroids are abandoned after a few values; the result is the same
 /// as a plain scan.
-fn nearest(b: &Brick, centroids: &[Brick], hint: u32) -> (u32, f32) {
+fn nearest<const N: usize>(b: &[f32; N], centroids: &[[f32; N]], hint: u32) -> (u32, f32) {
     let hint = if (hint as usize) < centroids.len() { hint } else { 0 };
     let mut best = (hint, l1(b, &centroids[hint as usize], f32::INFINITY));
     for (i, c) in centroids.iter().enumerate() {
@@ -122,14 +122,14 @@ fn nearest(b: &Brick, centroids: &[Brick], hint: u32) -> (u32, f32) {
 }
 
 /// Mean, variance, and whether every value is equal.
-fn moments(b: &Brick) -> (f64, f64, bool) {
-    let mean = b.iter().map(|&v| f64::from(v)).sum::<f64>() / BRICK as f64;
-    let var = b.iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / BRICK as f64;
+fn moments<const N: usize>(b: &[f32; N]) -> (f64, f64, bool) {
+    let mean = b.iter().map(|&v| f64::from(v)).sum::<f64>() / N as f64;
+    let var = b.iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / N as f64;
     (mean, var, b.iter().all(|&v| v.to_bits() == b[0].to_bits()))
 }
 
 /// Normalised variance (variance / mean); infinite when the mean is not positive.
-pub fn normalized_variance(b: &Brick) -> f64 {
+pub fn normalized_variance<const N: usize>(b: &[f32; N]) -> f64 {
     let (mean, var, _) = moments(b);
     if var == 0.0 {
         0.0
@@ -164,13 +164,13 @@ pub const SEED_SAMPLE_PER_CLUSTER: usize = 64;
 /// k-means++ seeding on a sample: the first centroid uniformly, each next
 /// one with probability proportional to the squared distance to the nearest
 /// chosen centroid.
-pub fn seed_centroids(data: &[&Brick], k: usize, seed: u64) -> Vec<Brick> {
+pub fn seed_centroids<const N: usize>(data: &[&[f32; N]], k: usize, seed: u64) -> Vec<[f32; N]> {
     let mut rng = Rng(seed);
     if data.is_empty() || k == 0 {
         return Vec::new();
     }
     let want = k.saturating_mul(SEED_SAMPLE_PER_CLUSTER);
-    let sample: Vec<&Brick> = if data.len() <= want {
+    let sample: Vec<&[f32; N]> = if data.len() <= want {
         data.to_vec()
     } else {
         // Partial Fisher-Yates over indices, then back to input order.
@@ -186,8 +186,8 @@ pub fn seed_centroids(data: &[&Brick], k: usize, seed: u64) -> Vec<Brick> {
     kmeans_pp(&sample, k, &mut rng)
 }
 
-fn kmeans_pp(data: &[&Brick], k: usize, rng: &mut Rng) -> Vec<Brick> {
-    let mut centroids: Vec<Brick> = Vec::with_capacity(k);
+fn kmeans_pp<const N: usize>(data: &[&[f32; N]], k: usize, rng: &mut Rng) -> Vec<[f32; N]> {
+    let mut centroids: Vec<[f32; N]> = Vec::with_capacity(k);
     centroids.push(*data[(rng.next() % data.len() as u64) as usize]);
     let mut dist: Vec<f32> = data.par_iter().map(|b| l1(b, &centroids[0], f32::INFINITY)).collect();
     while centroids.len() < k {
@@ -221,7 +221,7 @@ fn kmeans_pp(data: &[&Brick], k: usize, rng: &mut Rng) -> Vec<Brick> {
 
 /// Labels every brick with its nearest centroid; `previous` labels, when
 /// given, only speed the search up.
-pub fn assign(data: &[&Brick], centroids: &[Brick], previous: Option<&[(u32, f32)]>) -> Vec<(u32, f32)> {
+pub fn assign<const N: usize>(data: &[&[f32; N]], centroids: &[[f32; N]], previous: Option<&[(u32, f32)]>) -> Vec<(u32, f32)> {
     match previous {
         Some(p) => data.par_iter().zip(p.par_iter()).map(|(b, &(h, _))| nearest(b, centroids, h)).collect(),
         None => data.par_iter().map(|b| nearest(b, centroids, 0)).collect(),
@@ -229,25 +229,25 @@ pub fn assign(data: &[&Brick], centroids: &[Brick], previous: Option<&[(u32, f32
 }
 
 /// New centroids: the mean of each cluster's bricks (an empty cluster keeps its centroid).
-pub fn update(data: &[&Brick], labels: &[(u32, f32)], centroids: &[Brick]) -> Vec<Brick> {
+pub fn update<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroids: &[[f32; N]]) -> Vec<[f32; N]> {
     let k = centroids.len();
     let partial: Vec<(Vec<f64>, Vec<u64>)> = data
         .par_chunks(CHUNK)
         .zip(labels.par_chunks(CHUNK))
         .map(|(bs, ls)| {
-            let mut sums = vec![0.0f64; k * BRICK];
+            let mut sums = vec![0.0f64; k * N];
             let mut counts = vec![0u64; k];
             for (b, &(l, _)) in bs.iter().zip(ls) {
                 let l = l as usize;
                 counts[l] += 1;
-                for (s, &v) in sums[l * BRICK..(l + 1) * BRICK].iter_mut().zip(b.iter()) {
+                for (s, &v) in sums[l * N..(l + 1) * N].iter_mut().zip(b.iter()) {
                     *s += f64::from(v);
                 }
             }
             (sums, counts)
         })
         .collect();
-    let mut sums = vec![0.0f64; k * BRICK];
+    let mut sums = vec![0.0f64; k * N];
     let mut counts = vec![0u64; k];
     for (s, c) in &partial {
         for (a, b) in sums.iter_mut().zip(s) {
@@ -257,11 +257,20 @@ pub fn update(data: &[&Brick], labels: &[(u32, f32)], centroids: &[Brick]) -> Ve
             *a += b;
         }
     }
-    (0..k).map(|i| if counts[i] == 0 { centroids[i] } else { std::array::from_fn(|v| (sums[i * BRICK + v] / counts[i] as f64) as f32) }).collect()
+    (0..k).map(|i| if counts[i] == 0 { centroids[i] } else { std::array::from_fn(|v| (sums[i * N + v] / counts[i] as f64) as f32) }).collect()
 }
 
 /// Runs the whole procedure; `progress(step, steps)` after each k-means round.
 pub fn cluster(bricks: &[Brick], opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
+    cluster_scaled(bricks, opts, &[1.0], progress)
+}
+
+/// [`cluster`] over items of N values made of 512-value parts (several
+/// channels of a brick, each divided by its own scale so that distances
+/// weigh every channel alike): part `p`'s differences are multiplied by
+/// `scale[p]` (1 past the end) before `max_brick_error` is applied, so the
+/// bound stays in the channels' own units.
+pub fn cluster_scaled<const N: usize>(bricks: &[[f32; N]], opts: &Options, scale: &[f32], progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered<N> {
     let n = bricks.len();
     let mut stats = Stats { bricks_in: n, ..Stats::default() };
     let kind: Vec<u8> = bricks
@@ -292,7 +301,7 @@ pub fn cluster(bricks: &[Brick], opts: &Options, progress: &(dyn Fn(usize, usize
     let mut label: Vec<Option<u32>> = vec![None; n];
     let mut centroids = Vec::new();
     if opts.clusters > 0 && cand.len() > opts.clusters {
-        let data: Vec<&Brick> = cand.iter().map(|&i| &bricks[i]).collect();
+        let data: Vec<&[f32; N]> = cand.iter().map(|&i| &bricks[i]).collect();
         centroids = seed_centroids(&data, opts.clusters, opts.seed);
         let steps = opts.iterations + 1;
         let mut labels = assign(&data, &centroids, None);
@@ -305,7 +314,11 @@ pub fn cluster(bricks: &[Brick], opts: &Options, progress: &(dyn Fn(usize, usize
         // The error bound, brick by brick: the largest voxel difference.
         let over: Vec<bool> = match opts.max_brick_error {
             None => vec![false; data.len()],
-            Some(e) => data.par_iter().zip(labels.par_iter()).map(|(b, &(l, _))| b.iter().zip(centroids[l as usize].iter()).any(|(x, c)| (x - c).abs() > e)).collect(),
+            Some(e) => data
+                .par_iter()
+                .zip(labels.par_iter())
+                .map(|(b, &(l, _))| b.iter().zip(centroids[l as usize].iter()).enumerate().any(|(v, (x, c))| (x - c).abs() * scale.get(v / BRICK).copied().unwrap_or(1.0) > e))
+                .collect(),
         };
         for (j, &i) in cand.iter().enumerate() {
             if over[j] {
@@ -317,7 +330,7 @@ pub fn cluster(bricks: &[Brick], opts: &Options, progress: &(dyn Fn(usize, usize
     }
 
     // Output: unclustered bricks in input order, then the centroids in use.
-    let mut out: Vec<Brick> = Vec::new();
+    let mut out: Vec<[f32; N]> = Vec::new();
     let mut remap = vec![0u32; n];
     let mut merged = vec![false; n];
     for i in 0..n {

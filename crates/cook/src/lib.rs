@@ -42,7 +42,7 @@ pub enum Error {
     UnknownChannel(String),
     #[error("channel \"{0}\" is in two channel groups")]
     TwiceGrouped(String),
-    #[error("clustering assets of several channels is not supported yet ({0} channels)")]
+    #[error("clustering takes at most {MAX_CLUSTER_CHANNELS} channels, the asset has {0}")]
     MultiChannelClustering(usize),
 }
 
@@ -158,7 +158,8 @@ pub struct CookReport {
 }
 
 /// The thesis's Figure 19 table for one cook: bricks before (`bricks_in`) and
-/// after (`bricks_out`), their ratio, and the voxel RMSE with and without clustering.
+/// after (`bricks_out`), their ratio, and the voxel RMSE with and without
+/// clustering (of the first channel; the per-channel figures are in `channels`).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ClusterReport {
     pub clusters: usize,
@@ -322,7 +323,7 @@ impl Cooker {
         let channels = self.channels.len().max(1);
         let (specs, group_of) = self.plan_planes()?;
         let mut built = self.builder.finish()?;
-        if self.opts.clustering.is_some() && channels > 1 {
+        if self.opts.clustering.is_some() && channels > MAX_CLUSTER_CHANNELS {
             return Err(Error::MultiChannelClustering(channels));
         }
         let any_block = specs.iter().any(|s| s.plane.format.is_block());
@@ -333,7 +334,9 @@ impl Cooker {
         let clustered = self.opts.clustering.as_ref().map(|co| {
             let t0 = Instant::now();
             progress.start("clustering", co.iterations as u64 + 1);
-            let c = vdbcook_cluster::cluster(pool, co, &|_, _| progress.advance(1));
+            // Each channel weighs alike: its values divided by its own range.
+            let scales: Vec<f32> = (0..channels).map(|c| self.ranges[c][1] - self.ranges[c][0]).map(|s| if s > 0.0 && s.is_finite() { s } else { 1.0 }).collect();
+            let c = cluster_channels(pool, &scales, co, &|_, _| progress.advance(1));
             progress.finish();
             timings.push(("cluster".into(), t0.elapsed().as_secs_f64()));
             c
@@ -382,9 +385,9 @@ impl Cooker {
             .collect();
         let cluster_report = clustered.as_ref().zip(self.opts.clustering.as_ref()).map(|(c, co)| {
             let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
-            let own: Vec<Brick> = merged.iter().map(|&i| pool[i]).collect();
+            let own: Vec<Brick> = merged.iter().flat_map(|&i| built.pool.brick(i).unwrap_or(&[]).iter().copied()).collect();
             let own_masks: Option<Vec<[u64; 8]>> = pool_masks.as_ref().map(|m| merged.iter().map(|&i| m[i]).collect());
-            let own_enc = Encoded::new(specs.clone(), self.opts.quality, &own, 1, own_masks.as_deref(), &|_| {});
+            let own_enc = Encoded::new(specs.clone(), self.opts.quality, &own, channels, own_masks.as_deref(), &|_| {});
             let mut slot = vec![u32::MAX; c.merged.len()];
             for (k, &i) in merged.iter().enumerate() {
                 slot[i] = k as u32;
@@ -534,6 +537,45 @@ impl Cooker {
             timings,
         };
         Ok((sections, report))
+    }
+}
+
+/// Channels `--clusters` takes (k-means items of 512 values per channel).
+pub const MAX_CLUSTER_CHANNELS: usize = 8;
+
+/// The clustered pool, `channels` [`Brick`]s per brick.
+struct Clustered {
+    bricks: Vec<Brick>,
+    remap: Vec<u32>,
+    merged: Vec<bool>,
+    stats: vdbcook_cluster::Stats,
+}
+
+/// Variance-gated k-means over bricks of `scales.len()` channels: each brick
+/// is one item of its channels' values, each divided by its channel's
+/// `scale` (so distances weigh every channel alike; `max_brick_error` stays
+/// in the channels' units), and the centroids are scaled back.
+fn cluster_channels(pool: &[Brick], scales: &[f32], opts: &vdbcook_cluster::Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
+    fn run<const N: usize>(pool: &[Brick], scales: &[f32], opts: &vdbcook_cluster::Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
+        let c = scales.len();
+        let items: Vec<[f32; N]> = pool.par_chunks(c).map(|b| std::array::from_fn(|v| b[v / 512][v % 512] / scales[v / 512])).collect();
+        let out = vdbcook_cluster::cluster_scaled(&items, opts, scales, progress);
+        let bricks = out.bricks.iter().flat_map(|item| (0..c).map(move |k| std::array::from_fn(|v| item[k * 512 + v] * scales[k]))).collect();
+        Clustered { bricks, remap: out.remap, merged: out.merged, stats: out.stats }
+    }
+    match scales.len() {
+        1 => {
+            // One channel: the values as they are (same results as before channels existed).
+            let out = vdbcook_cluster::cluster(pool, opts, progress);
+            Clustered { bricks: out.bricks, remap: out.remap, merged: out.merged, stats: out.stats }
+        }
+        2 => run::<1024>(pool, scales, opts, progress),
+        3 => run::<1536>(pool, scales, opts, progress),
+        4 => run::<2048>(pool, scales, opts, progress),
+        5 => run::<2560>(pool, scales, opts, progress),
+        6 => run::<3072>(pool, scales, opts, progress),
+        7 => run::<3584>(pool, scales, opts, progress),
+        _ => run::<4096>(pool, scales, opts, progress),
     }
 }
 

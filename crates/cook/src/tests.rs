@@ -508,3 +508,42 @@ fn absurd_channel_metadata_is_refused_never_a_panic() {
         }
     }
 }
+
+#[test]
+fn clustering_runs_over_every_channel_each_on_its_own_scale() {
+    // Four copies of the fire, shifted by tiny amounts: many similar bricks.
+    // Temperature is ~100x larger than density: unnormalised, it alone would
+    // decide every distance; each channel must stay within the error bound in
+    // its own units.
+    let frames: Vec<[Grid; 3]> = (0..4)
+        .map(|k| {
+            let mut f = fire(0);
+            for g in f.iter_mut() {
+                for l in g.leaves.iter_mut() {
+                    for v in l.values.iter_mut() {
+                        *v += 0.0001 * k as f32;
+                    }
+                }
+            }
+            f
+        })
+        .collect();
+    let co = vdbcook_cluster::Options { clusters: 8, iterations: 5, variance_threshold: 10.0, max_brick_error: Some(0.05), seed: 1 };
+    let (bytes, report) = cook_fire(CookOptions { format: Format::F32, clustering: Some(co), ..CookOptions::default() }, &frames);
+    let cr = report.clustering.clone().unwrap();
+    assert!(cr.stats.bricks_out < cr.stats.bricks_in, "{cr:?}");
+    assert!(cr.stats.clustered > 0, "{cr:?}");
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    for (k, f) in frames.iter().enumerate() {
+        let back = unpack_frame(&asset, k).unwrap();
+        for (c, w) in worst_error(f, &back).iter().enumerate() {
+            assert!(*w <= 0.05 + 1e-4, "frame {k} channel {c}: {w} over the bound");
+        }
+    }
+    // Beyond eight channels, clustering is refused with a clear error.
+    let names: Vec<String> = (0..9).map(|i| format!("c{i}")).collect();
+    let mut c = Cooker::with_channels(CookOptions { clustering: Some(vdbcook_cluster::Options::default()), ..CookOptions::default() }, specs(&names.iter().map(String::as_str).collect::<Vec<_>>()));
+    let g = smooth_frame(0);
+    c.push_channels(&vec![Some(&g); 9], None).unwrap();
+    assert!(c.finish(&NoProgress).err().unwrap().to_string().contains("at most 8 channels"));
+}
