@@ -21,7 +21,9 @@ use rayon::prelude::*;
 /// Voxels per brick.
 pub const BRICK_VOXELS: usize = 512;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Format {
     F32,
     F16,
@@ -95,7 +97,9 @@ impl Format {
 /// settings (all four channels carry voxels); for BC4, how far our encoder
 /// searches around each block's least-squares endpoints.  `VeryFast` is the
 /// default: see docs/benchmarks.md for the measurements behind it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Quality {
     UltraFast,
     VeryFast,
