@@ -1,13 +1,15 @@
 //! `vdbcook cook`: a VDB sequence into one .vpak asset.
 
-use crate::inputs::{self, FrameRange};
+use crate::inputs;
 use crate::progress::Bars;
 use crate::validate::ValidateArgs;
 use crate::{exit, report_error, Usage};
 use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
-use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress, Quality};
+use std::path::Path;
+use vdbcook_bake::CookSettings;
+use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress};
 use vdbcook_grid::Grid;
 use vdbcook_vpak::SourceFile;
 
@@ -53,51 +55,15 @@ pub struct CookArgs {
     /// The asset to write.
     #[arg(short, long, value_name = "OUT.vpak")]
     pub output: PathBuf,
-    /// Frames of a frame pattern: A-B or A-B:STEP (e.g. 1-120:2).
-    #[arg(long, value_name = "RANGE")]
-    pub frames: Option<FrameRange>,
-    /// Grid to cook (default: "density", else the first float grid).
-    #[arg(long, value_name = "NAME")]
-    pub grid: Option<String>,
-    /// A frame whose file or grid is missing becomes an empty frame instead of an error.
-    #[arg(long)]
-    pub allow_missing: bool,
-    /// Voxel format of the brick atlas.
-    #[arg(long, default_value = "f16", value_parser = ["f32", "f16", "unorm8", "bc4", "bc7"])]
-    pub format: String,
-    /// Encoder preset of bc7 and bc4 (see the notes below).
-    #[arg(long, default_value = "very-fast", value_parser = ["ultra-fast", "very-fast", "fast", "basic", "slow"])]
-    pub quality: String,
-    /// Merge similar bricks with variance-gated k-means into K centroid bricks (off by default).
-    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
-    pub clusters: Option<u32>,
-    /// k-means iterations.
-    #[arg(long, default_value_t = 5, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=1000))]
-    pub iterations: u32,
-    /// Bricks whose variance / mean exceeds T are never clustered.
-    #[arg(long, default_value_t = 0.01, value_name = "T")]
-    pub variance_threshold: f64,
-    /// A clustered brick whose largest voxel difference from its centroid exceeds E stays unique.
-    #[arg(long, value_name = "E")]
-    pub max_brick_error: Option<f32>,
-    /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
-    #[arg(long, default_value_t = 2048, value_name = "TEXELS", value_parser = clap::value_parser!(u32).range(8..=16384))]
-    pub max_texture_dim: u32,
+    /// Every cook setting (the keys of a bake manifest, too).
+    #[command(flatten)]
+    pub settings: CookSettings,
     /// Replace OUT if it exists.
     #[arg(long)]
     pub force: bool,
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
-    /// After cooking, run `vdbcook validate` on the asset against the inputs (8 views, 512×512).
-    #[arg(long)]
-    pub validate: bool,
-    /// With --validate: exit with code 3 when any image's RMSE is above X.
-    #[arg(long, value_name = "X", requires = "validate")]
-    pub max_rmse: Option<f64>,
-    /// With --validate: exit with code 3 when any image's PSNR (dB) is below Y.
-    #[arg(long, value_name = "Y", requires = "validate")]
-    pub min_psnr: Option<f64>,
 }
 
 /// One frame as read by the reader thread.
@@ -112,8 +78,10 @@ fn hash_hex(bytes: &[u8]) -> String {
 }
 
 /// Reads one frame; `grid_name` is fixed by the first frame that has a grid.
-fn read_frame(path: PathBuf, grid_name: &mut Option<String>, allow_missing: bool) -> Result<Frame> {
+/// The source is recorded by its path relative to `base` when it is below it.
+fn read_frame(path: PathBuf, grid_name: &mut Option<String>, allow_missing: bool, base: Option<&Path>) -> Result<Frame> {
     let p = path.display().to_string();
+    let recorded = base.and_then(|b| path.strip_prefix(b).ok()).map_or_else(|| p.clone(), |r| r.display().to_string());
     if !path.exists() {
         if allow_missing {
             return Ok(Frame { path, grid: None, source: None });
@@ -121,7 +89,7 @@ fn read_frame(path: PathBuf, grid_name: &mut Option<String>, allow_missing: bool
         return Err(anyhow!("{p}: no such file (use --allow-missing to cook it as an empty frame)"));
     }
     let vdb = vdbcook_vdb::open(&path).with_context(|| p.clone())?;
-    let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(vdb.bytes()) };
+    let source = SourceFile { path: recorded, bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(vdb.bytes()) };
     let index = match vdb.select(grid_name.as_deref()) {
         Ok(i) => i,
         Err(_) if allow_missing => return Ok(Frame { path, grid: None, source: Some(source) }),
@@ -135,15 +103,16 @@ fn read_frame(path: PathBuf, grid_name: &mut Option<String>, allow_missing: bool
 }
 
 /// Reads `files` on a thread that stays one frame ahead (at most two source
-/// frames live at once) and pushes each frame into `cooker`. Returns the grid
+/// frames live at once) and pushes each frame into every one of `cookers`
+/// (an asset and its lossless reference share one read). Returns the grid
 /// name used and the seconds spent waiting for frames.
-pub fn feed(cooker: &mut Cooker, files: Vec<PathBuf>, grid: Option<String>, allow_missing: bool, bars: &Bars) -> Result<(Option<String>, f64)> {
+pub fn feed(cookers: &mut [Cooker], files: Vec<PathBuf>, grid: Option<String>, allow_missing: bool, base: Option<PathBuf>, bars: &dyn Progress) -> Result<(Option<String>, f64)> {
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Frame>>(0);
     let total = files.len() as u64;
     let reader = std::thread::spawn(move || {
         let mut grid_name = grid;
         for f in files {
-            let r = read_frame(f, &mut grid_name, allow_missing);
+            let r = read_frame(f, &mut grid_name, allow_missing, base.as_deref());
             let stop = r.is_err();
             if tx.send(r).is_err() || stop {
                 break;
@@ -158,14 +127,14 @@ pub fn feed(cooker: &mut Cooker, files: Vec<PathBuf>, grid: Option<String>, allo
     for r in rx {
         read_secs += wait.elapsed().as_secs_f64();
         let pushed = r.and_then(|frame| {
-            let n = cooker.frame_count();
-            match &frame.grid {
-                Some(g) => cooker.push(g, frame.source).with_context(|| format!("{}: frame {n}", frame.path.display())),
-                None => {
-                    cooker.push_empty(frame.source);
-                    Ok(())
+            for cooker in cookers.iter_mut() {
+                let n = cooker.frame_count();
+                match &frame.grid {
+                    Some(g) => cooker.push(g, frame.source.clone()).with_context(|| format!("{}: frame {n}", frame.path.display()))?,
+                    None => cooker.push_empty(frame.source.clone()),
                 }
             }
+            Ok(())
         });
         if let Err(e) = pushed {
             failure = Some(e);
@@ -185,68 +154,88 @@ pub fn feed(cooker: &mut Cooker, files: Vec<PathBuf>, grid: Option<String>, allo
 /// Cooks `files` losslessly in memory (f32, no clustering): the reference
 /// asset `validate` compares with, and what `render` draws for a .vdb.
 pub fn cook_lossless(files: Vec<PathBuf>, grid: Option<String>, allow_missing: bool, bars: &Bars) -> Result<vdbcook_vpak::Asset> {
-    let mut cooker = Cooker::new(CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() });
-    feed(&mut cooker, files, grid, allow_missing, bars)?;
+    let mut cookers = [reference_cooker()];
+    feed(&mut cookers, files, grid, allow_missing, None, bars)?;
+    let [cooker] = cookers;
+    finish_reference(cooker)
+}
+
+fn reference_cooker() -> Cooker {
+    Cooker::new(CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() })
+}
+
+fn finish_reference(cooker: Cooker) -> Result<vdbcook_vpak::Asset> {
     let (sections, _) = cooker.finish(&vdbcook_cook::NoProgress).map_err(|e| anyhow!(e))?;
     Ok(vdbcook_vpak::Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?)
 }
 
-pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
-    crate::refuse_existing(&args.output, args.force)?;
-    let format = Format::parse(&args.format).ok_or_else(|| Usage(format!("unknown format {}", args.format)))?;
-    let quality = Quality::parse(&args.quality).ok_or_else(|| Usage(format!("unknown quality {}", args.quality)))?;
-    if args.variance_threshold.is_nan() || args.variance_threshold < 0.0 {
-        return Err(Usage(format!("--variance-threshold must be a number >= 0, not {}", args.variance_threshold)).into());
-    }
-    if args.max_brick_error.is_some_and(|e| e.is_nan() || e < 0.0) {
-        return Err(Usage("--max-brick-error must be a number >= 0".into()).into());
-    }
-    let clustering = args.clusters.map(|k| vdbcook_cluster::Options {
-        clusters: k as usize,
-        iterations: args.iterations as usize,
-        variance_threshold: args.variance_threshold,
-        max_brick_error: args.max_brick_error,
-        ..vdbcook_cluster::Options::default()
-    });
-    let files = inputs::expand(&args.inputs, args.frames)?;
-    let started = Instant::now();
-    let bars = Bars::new(quiet);
+/// One asset to cook: typed settings, its frame files and what to record.
+pub struct CookJob<'a> {
+    pub settings: &'a CookSettings,
+    /// The frame files, in order.
+    pub files: Vec<PathBuf>,
+    /// The inputs as the user wrote them (recorded in the metadata).
+    pub inputs: &'a [String],
+    /// Source paths are recorded relative to this directory (a bake's manifest directory).
+    pub base: Option<PathBuf>,
+    /// Also cook the lossless reference (f32, no clustering) from the same reads.
+    pub reference: bool,
+}
 
-    let settings = vec![
-        ("format".to_string(), format.name().to_string()),
-        ("quality".to_string(), if format.is_block() { quality.name().to_string() } else { String::new() }),
-        ("grid".to_string(), args.grid.clone().unwrap_or_default()),
-        ("frames".to_string(), args.frames.map(|f| format!("{}-{}:{}", f.first, f.last, f.step)).unwrap_or_default()),
-        ("allow_missing".to_string(), args.allow_missing.to_string()),
-        ("max_texture_dim".to_string(), args.max_texture_dim.to_string()),
-        ("clusters".to_string(), args.clusters.map(|k| k.to_string()).unwrap_or_default()),
-        ("iterations".to_string(), if args.clusters.is_some() { args.iterations.to_string() } else { String::new() }),
-        ("variance_threshold".to_string(), if args.clusters.is_some() { args.variance_threshold.to_string() } else { String::new() }),
-        ("max_brick_error".to_string(), args.max_brick_error.map(|e| e.to_string()).unwrap_or_default()),
-        ("inputs".to_string(), args.inputs.join(" ")),
-    ];
-    let mut cooker = Cooker::new(CookOptions { format, quality, max_texture_dim: args.max_texture_dim, clustering, settings });
+/// What [`cook_asset`] made: the sections to write, the report, the grid
+/// cooked and, when asked, the reference asset.
+pub struct Cooked {
+    pub sections: Vec<vdbcook_vpak::Section>,
+    pub report: CookReport,
+    pub grid: Option<String>,
+    pub reference: Option<vdbcook_vpak::Asset>,
+}
 
-    let (grid_name, read_secs) = feed(&mut cooker, files, args.grid.clone(), args.allow_missing, &bars)?;
+/// Cooks one asset from typed settings: the one cook path of `cook` and `bake`.
+pub fn cook_asset(job: CookJob, bars: &dyn Progress) -> Result<Cooked> {
+    let s = job.settings;
+    let opts = CookOptions { format: s.format, quality: s.quality, max_texture_dim: s.max_texture_dim, clustering: s.clustering(), settings: s.recorded(job.inputs) };
+    let mut cookers = vec![Cooker::new(opts)];
+    if job.reference {
+        cookers.push(reference_cooker());
+    }
+    let (grid_name, read_secs) = feed(&mut cookers, job.files, s.grid.clone(), s.allow_missing, job.base, bars)?;
+    let mut cookers = cookers.into_iter();
+    let cooker = cookers.next().ok_or_else(|| anyhow!("no cooker"))?;
     if cooker.frame_count() == 0 {
         return Err(anyhow!("no frames to cook"));
     }
-    let (sections, mut report) = cooker.finish(&bars).map_err(|e| anyhow!(e))?;
+    let (sections, mut report) = cooker.finish(bars).map_err(|e| anyhow!(e))?;
     report.timings.insert(0, ("read".into(), read_secs));
+    let reference = cookers.next().map(finish_reference).transpose().context("cooking the reference")?;
+    Ok(Cooked { sections, report, grid: grid_name, reference })
+}
+
+pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
+    crate::refuse_existing(&args.output, args.force)?;
+    let s = &args.settings;
+    if let Err(vdbcook_bake::Error::Setting { name, message }) = s.check() {
+        return Err(Usage(format!("--{} {message}", name.replace('_', "-"))).into());
+    }
+    let files = inputs::expand(&args.inputs, s.frames)?;
+    let started = Instant::now();
+    let bars = Bars::new(quiet);
+    let mut cooked = cook_asset(CookJob { settings: s, files, inputs: &args.inputs, base: None, reference: false }, &bars)?;
+    let report = &mut cooked.report;
     let t0 = Instant::now();
-    vdbcook_vpak::write_file(&args.output, &sections, args.force).with_context(|| args.output.display().to_string())?;
+    vdbcook_vpak::write_file(&args.output, &cooked.sections, args.force).with_context(|| args.output.display().to_string())?;
     report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
     report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
-    let validation = if args.validate {
+    let validation = if s.validate {
         let v = ValidateArgs {
             asset: args.output.clone(),
             source: args.inputs.clone(),
-            source_frames: args.frames,
+            source_frames: s.frames,
             frames: None,
-            views: 8,
-            size: (512, 512),
-            max_rmse: args.max_rmse,
-            min_psnr: args.min_psnr,
+            views: s.views,
+            size: (s.size.width, s.size.height),
+            max_rmse: s.max_rmse,
+            min_psnr: s.min_psnr,
             report: None,
             gpu: Default::default(),
             json: args.json,
@@ -256,11 +245,11 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
         None
     };
     if !quiet {
-        let mut text = if args.json { summary_json(&args, grid_name.as_deref(), &report, validation.as_ref().map(|o| &o.doc)) } else { summary_text(&args, grid_name.as_deref(), &report) };
+        let mut text = if args.json { summary_json(&args, cooked.grid.as_deref(), report, validation.as_ref().map(|o| &o.doc)) } else { summary_text(&args, cooked.grid.as_deref(), report) };
         if let (Some(o), false) = (&validation, args.json) {
             text += &o.text;
         }
-        crate::write_stdout(&text).ok();
+        crate::emit(&text)?;
     }
     Ok(validation.map_or(exit::SUCCESS, |o| crate::validate::gate(&o.gate_failure)))
 }
@@ -310,8 +299,11 @@ fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport, validation:
     format!("{}\n", serde_json::to_string_pretty(&v).unwrap_or_default())
 }
 
-/// Reports a cook failure.
+/// Reports a failure; the exit code. A closed stdout is not one.
 pub fn fail(e: &anyhow::Error) -> u8 {
+    if e.is::<crate::PipeClosed>() {
+        return exit::SUCCESS;
+    }
     report_error(e);
     if e.downcast_ref::<Usage>().is_some() {
         exit::USAGE

@@ -20,6 +20,8 @@ pub enum Status {
     Failed,
     /// Cooked or cached, but a quality gate failed.
     GateFailed,
+    /// Not attempted: an earlier asset failed and the bake was told to stop (`--fail-fast`).
+    Skipped,
 }
 
 impl Status {
@@ -29,6 +31,7 @@ impl Status {
             Status::Cached => "cached",
             Status::Failed => "failed",
             Status::GateFailed => "gate-failed",
+            Status::Skipped => "skipped",
         }
     }
 }
@@ -116,12 +119,13 @@ pub struct Summary {
     pub cached: usize,
     pub failed: usize,
     pub gate_failed: usize,
+    pub skipped: usize,
 }
 
 impl Summary {
     pub fn of(assets: &[AssetReport]) -> Summary {
         let count = |s: Status| assets.iter().filter(|a| a.status == s).count();
-        Summary { assets: assets.len(), baked: count(Status::Baked), cached: count(Status::Cached), failed: count(Status::Failed), gate_failed: count(Status::GateFailed) }
+        Summary { assets: assets.len(), baked: count(Status::Baked), cached: count(Status::Cached), failed: count(Status::Failed), gate_failed: count(Status::GateFailed), skipped: count(Status::Skipped) }
     }
 }
 
@@ -191,9 +195,10 @@ impl Report {
     /// gate is a `<failure>` with its message.
     pub fn to_junit(&self) -> String {
         let failures = self.summary.failed + self.summary.gate_failed;
+        let skipped = self.summary.skipped;
         let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
         let _ = writeln!(s, "<testsuites name=\"vdbcook bake\" tests=\"{}\" failures=\"{failures}\" errors=\"0\" time=\"{:.3}\">", self.assets.len(), self.seconds);
-        let _ = writeln!(s, "  <testsuite name=\"{}\" tests=\"{}\" failures=\"{failures}\" errors=\"0\" skipped=\"0\" time=\"{:.3}\">", xml(&self.manifest), self.assets.len(), self.seconds);
+        let _ = writeln!(s, "  <testsuite name=\"{}\" tests=\"{}\" failures=\"{failures}\" errors=\"0\" skipped=\"{skipped}\" time=\"{:.3}\">", xml(&self.manifest), self.assets.len(), self.seconds);
         for a in &self.assets {
             let _ = write!(s, "    <testcase name=\"{}\" classname=\"vdbcook.bake\" time=\"{:.3}\"", xml(&a.name), a.seconds);
             let msg = a.message.clone().unwrap_or_default();
@@ -203,6 +208,9 @@ impl Report {
                 }
                 Status::GateFailed => {
                     let _ = writeln!(s, ">\n      <failure message=\"{}\" type=\"quality-gate\">{}</failure>\n    </testcase>", xml(&msg), xml(&msg));
+                }
+                Status::Skipped => {
+                    let _ = writeln!(s, ">\n      <skipped message=\"{}\"/>\n    </testcase>", xml(&msg));
                 }
                 Status::Baked | Status::Cached => {
                     let _ = writeln!(s, ">\n      <system-out>{} {} ({} bytes, key {})</system-out>\n    </testcase>", a.status.name(), xml(&a.output), a.bytes.unwrap_or(0), a.cache_key);
@@ -262,8 +270,8 @@ impl Report {
 body{{font-family:sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}th,td{{border:1px solid #ccc;padding:4px 8px;text-align:right;vertical-align:middle}}\
 th{{background:#f3f3f3;cursor:pointer;user-select:none}}th.asc::after{{content:' \\25b2'}}th.desc::after{{content:' \\25bc'}}td:nth-child(2),td:nth-child(3){{text-align:left}}\
 img{{width:96px;height:96px;image-rendering:pixelated;background:#000;display:block}}.sub{{color:#777;font-size:85%}}.none{{color:#999}}\
-tr.failed td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}</style></head><body>\n\
-<h1>vdbcook bake</h1>\n<p>{m}{scope}: {n} assets, {b} baked, {c} cached, {f} failed, {g} failed a quality gate; {t:.1} s; {tool}.</p>\n\
+tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}</style></head><body>\n\
+<h1>vdbcook bake</h1>\n<p>{m}{scope}: {n} assets, {b} baked, {c} cached, {f} failed, {g} failed a quality gate, {k} skipped; {t:.1} s; {tool}.</p>\n\
 <p class='sub'>Click a column heading to sort. Image RMSE / PSNR: the worst of every frame and view against a lossless reference render; voxel RMSE / PSNR over every active voxel.</p>\n\
 <table id='assets'><thead><tr><th>preview</th><th>asset</th><th>status</th><th>frames</th><th>format</th><th>bytes</th><th>bits per active voxel</th>\
 <th>voxel RMSE</th><th>voxel PSNR (dB)</th><th>image RMSE</th><th>image PSNR (dB)</th><th>gate</th><th>cache</th><th>time</th><th>details</th></tr></thead>\n<tbody>\n{rows}</tbody></table>\n\
@@ -277,6 +285,7 @@ tr.failed td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight
             c = s.cached,
             f = s.failed,
             g = s.gate_failed,
+            k = s.skipped,
             t = self.seconds,
             tool = esc(&self.tool),
         )
@@ -286,7 +295,7 @@ tr.failed td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight
 fn gate_text(a: &AssetReport) -> &'static str {
     match (a.status, a.gate.max_rmse.is_some() || a.gate.min_psnr.is_some()) {
         (Status::GateFailed, _) => "failed",
-        (Status::Failed, _) => "",
+        (Status::Failed | Status::Skipped, _) => "",
         (_, true) => "held",
         (_, false) => "none",
     }
