@@ -150,7 +150,10 @@ fn ensure_runtime_dir() {}
 
 fn main() -> ExitCode {
     ensure_runtime_dir();
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return ExitCode::from(clap_exit(&e)),
+    };
     if let Some(n) = cli.threads {
         if n == 0 {
             eprintln!("vdbcook: error: --threads must be at least 1");
@@ -171,6 +174,24 @@ fn main() -> ExitCode {
         Command::Bake(args) => bake::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
     };
     ExitCode::from(code)
+}
+
+/// Prints what clap has to say; the exit code. Help and version go to stdout,
+/// where a failed write is an error like any other (a closed pipe is not).
+fn clap_exit(e: &clap::Error) -> u8 {
+    use std::io::IsTerminal;
+    if e.use_stderr() {
+        let _ = e.print();
+        return exit::USAGE;
+    }
+    if std::io::stdout().is_terminal() {
+        let _ = e.print();
+        return exit::SUCCESS;
+    }
+    match emit(&e.render().to_string()) {
+        Ok(()) => exit::SUCCESS,
+        Err(err) => cook::fail(&err),
+    }
 }
 
 /// Prints an error the house way: one line, prefixed, causes joined by ": ".

@@ -267,7 +267,7 @@ impl Report {
         };
         format!(
             "<!doctype html>\n<html lang='en'><head><meta charset='utf-8'><title>vdbcook bake: {m}</title>\n<style>\
-body{{font-family:sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}th,td{{border:1px solid #ccc;padding:4px 8px;text-align:right;vertical-align:middle}}\
+body{{font-family:sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}th,td{{border:1px solid #ccc;padding:4px 8px;text-align:right;vertical-align:middle}}td{{white-space:nowrap}}\
 th{{background:#f3f3f3;cursor:pointer;user-select:none}}th.asc::after{{content:' \\25b2'}}th.desc::after{{content:' \\25bc'}}td:nth-child(2),td:nth-child(3){{text-align:left}}\
 img{{width:96px;height:96px;image-rendering:pixelated;background:#000;display:block}}.sub{{color:#777;font-size:85%}}.none{{color:#999}}\
 tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}</style></head><body>\n\
