@@ -174,7 +174,14 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
 /// Renders `asset` and its lossless `reference` with the same ray-marcher and
 /// compares them (the work of `validate` once both assets are at hand);
 /// `renderer` is asked for once the frames are known to be in range.
-pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(asset: &Asset, name: &str, reference: &Asset, args: &ValidateArgs, renderer: impl FnOnce() -> Result<R>, bars: &dyn Progress) -> Result<Outcome> {
+pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
+    asset: &Asset,
+    name: &str,
+    reference: &Asset,
+    args: &ValidateArgs,
+    renderer: impl FnOnce() -> Result<R>,
+    bars: &dyn Progress,
+) -> Result<Outcome> {
     let name = name.to_string();
     let meta = asset.metadata().with_context(|| name.clone())?;
     let ref_meta = reference.metadata()?;

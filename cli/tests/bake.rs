@@ -384,7 +384,14 @@ print(json.dumps({"tests": xml.tests, "failures": xml.failures, "cases": out}))
 
     // --fail-fast with one job: after the failure nothing more is started.
     let m3 = dir.join("ff.toml");
-    std::fs::write(&m3, format!("[[asset]]\nname = \"broken\"\noutput = \"b.vpak\"\ninputs = [\"broken.vdb\"]\n\n[[asset]]\nname = \"t\"\noutput = \"t.vpak\"\ninputs = [\"{}\"]\n", root().join("fixtures/tiles.vdb").display())).unwrap();
+    std::fs::write(
+        &m3,
+        format!(
+            "[[asset]]\nname = \"broken\"\noutput = \"b.vpak\"\ninputs = [\"broken.vdb\"]\n\n[[asset]]\nname = \"t\"\noutput = \"t.vpak\"\ninputs = [\"{}\"]\n",
+            root().join("fixtures/tiles.vdb").display()
+        ),
+    )
+    .unwrap();
     let (code, v, _) = bake(&[s(&m3), "--out-dir", s(&dir.join("out3")), "--jobs", "1", "--fail-fast"], &[]);
     assert_eq!(code, Some(1));
     assert_eq!(statuses(&v), [("broken".into(), "failed".into()), ("t".into(), "skipped".into())]);
@@ -418,7 +425,7 @@ fn the_html_report_loads_in_headless_chromium() {
 
     let shot = keep.join("report.png");
     let o = Command::new(chromium)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--enable-logging=stderr", "--v=0", "--window-size=1500,700"])
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--enable-logging=stderr", "--v=0", "--window-size=1800,560"])
         .arg(format!("--screenshot={}", shot.display()))
         .arg(format!("file://{}", html_path.display()))
         .output()

@@ -17,7 +17,7 @@ pub mod report;
 
 pub use key::{cache_key, KeyContext};
 pub use manifest::{line_column, plan, Manifest, ManifestError, PlannedAsset, Sources};
-pub use options::{CookSettings, FrameRange, Size, SettingText};
+pub use options::{CookSettings, FrameRange, SettingText, Size};
 pub use report::{AssetReport, Gate, Record, Report, Status, Summary, Validation};
 
 #[derive(Debug, thiserror::Error)]

@@ -125,7 +125,14 @@ pub struct Summary {
 impl Summary {
     pub fn of(assets: &[AssetReport]) -> Summary {
         let count = |s: Status| assets.iter().filter(|a| a.status == s).count();
-        Summary { assets: assets.len(), baked: count(Status::Baked), cached: count(Status::Cached), failed: count(Status::Failed), gate_failed: count(Status::GateFailed), skipped: count(Status::Skipped) }
+        Summary {
+            assets: assets.len(),
+            baked: count(Status::Baked),
+            cached: count(Status::Cached),
+            failed: count(Status::Failed),
+            gate_failed: count(Status::GateFailed),
+            skipped: count(Status::Skipped),
+        }
     }
 }
 
@@ -245,7 +252,7 @@ impl Report {
                 st = a.status.name(),
                 n = esc(&a.name),
                 out = esc(&a.output),
-                msg = a.message.as_ref().map(|m| format!("<div class='sub'>{}</div>", esc(m))).unwrap_or_default(),
+                msg = a.message.as_ref().map(|m| format!("<div class='sub msg'>{}</div>", esc(m))).unwrap_or_default(),
                 frames = cell(r.frames.map(f64::from), r.frames.map(|f| f.to_string()).unwrap_or_default()),
                 fmt = format!("<td data-v='{0}'>{0}</td>", esc(r.format.as_deref().unwrap_or(""))),
                 bytes = cell(a.bytes.map(|b| b as f64), a.bytes.map(human_bytes).unwrap_or_default()),
@@ -269,7 +276,7 @@ impl Report {
             "<!doctype html>\n<html lang='en'><head><meta charset='utf-8'><title>vdbcook bake: {m}</title>\n<style>\
 body{{font-family:sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}th,td{{border:1px solid #ccc;padding:4px 8px;text-align:right;vertical-align:middle}}td{{white-space:nowrap}}\
 th{{background:#f3f3f3;cursor:pointer;user-select:none}}th.asc::after{{content:' \\25b2'}}th.desc::after{{content:' \\25bc'}}td:nth-child(2),td:nth-child(3){{text-align:left}}\
-img{{width:96px;height:96px;image-rendering:pixelated;background:#000;display:block}}.sub{{color:#777;font-size:85%}}.none{{color:#999}}\
+img{{width:96px;height:96px;image-rendering:pixelated;background:#000;display:block}}.sub{{color:#777;font-size:85%}}.msg{{white-space:normal;min-width:16em;max-width:28em;text-align:left}}.none{{color:#999}}\
 tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}</style></head><body>\n\
 <h1>vdbcook bake</h1>\n<p>{m}{scope}: {n} assets, {b} baked, {c} cached, {f} failed, {g} failed a quality gate, {k} skipped; {t:.1} s; {tool}.</p>\n\
 <p class='sub'>Click a column heading to sort. Image RMSE / PSNR: the worst of every frame and view against a lossless reference render; voxel RMSE / PSNR over every active voxel.</p>\n\
