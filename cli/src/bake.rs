@@ -222,7 +222,7 @@ fn finish(report: &Report, report_dir: &Path, as_json: bool, quiet: bool) -> Res
                 report_dir.join("report.html").display()
             )
         };
-        crate::emit(&text)?;
+        crate::emit_final(&text)?;
     }
     let s = &report.summary;
     Ok(if s.failed + s.skipped > 0 {
@@ -276,7 +276,7 @@ fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, assets: &[Planned
         }
         t
     };
-    crate::emit(&text)?;
+    crate::emit_final(&text)?;
     Ok(exit::SUCCESS)
 }
 
@@ -302,7 +302,7 @@ fn dry_run(args: &BakeArgs, out_dir: &Path, assets: &[PlannedAsset], quiet: bool
     } else {
         rows.iter().map(|(a, out, action)| format!("{action:<10} {}  {}\n", a.name, out.display())).collect()
     };
-    crate::emit(&text)?;
+    crate::emit_final(&text)?;
     Ok(exit::SUCCESS)
 }
 

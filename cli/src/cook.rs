@@ -249,7 +249,7 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
         if let (Some(o), false) = (&validation, args.json) {
             text += &o.text;
         }
-        crate::emit(&text)?;
+        crate::emit_final(&text)?;
     }
     Ok(validation.map_or(exit::SUCCESS, |o| crate::validate::gate(&o.gate_failure)))
 }

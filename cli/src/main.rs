@@ -124,6 +124,15 @@ pub fn emit(text: &str) -> anyhow::Result<()> {
     }
 }
 
+/// [`emit`] for a command's last output: a closed pipe ends it quietly and the
+/// command's exit code stands (a bake with a failed asset still exits 1).
+pub fn emit_final(text: &str) -> anyhow::Result<()> {
+    match emit(text) {
+        Err(e) if e.is::<PipeClosed>() => Ok(()),
+        r => r,
+    }
+}
+
 /// Mesa's Vulkan drivers print a warning on every start when
 /// XDG_RUNTIME_DIR is unset (common in CI and containers); give them a
 /// private one. Runs before any thread exists. Unix only: other systems'

@@ -32,7 +32,7 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
     vdbcook_vpak::write_atomic(&args.output, &bytes, args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
         let st = grid.stats();
-        crate::emit(&format!("wrote frame {} of {} to {} ({} active voxels, {} leaves)\n", args.frame, name, args.output.display(), st.active_voxels, st.leaf_count))?;
+        crate::emit_final(&format!("wrote frame {} of {} to {} ({} active voxels, {} leaves)\n", args.frame, name, args.output.display(), st.active_voxels, st.leaf_count))?;
     }
     Ok(exit::SUCCESS)
 }

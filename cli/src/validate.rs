@@ -145,7 +145,7 @@ pub fn run(args: ValidateArgs, quiet: bool) -> Result<u8> {
     let o = evaluate(args, quiet)?;
     if !quiet {
         let text = if json_out { format!("{}\n", serde_json::to_string_pretty(&o.doc).unwrap_or_default()) } else { o.text };
-        crate::emit(&text)?;
+        crate::emit_final(&text)?;
     }
     Ok(gate(&o.gate_failure))
 }
@@ -386,7 +386,7 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let img = renderer.render(&gpu, &scene, args.frame, &view, args.size.0, args.size.1)?;
     vdbcook_vpak::write_atomic(&args.output, &report::png_grey(&img), args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
-        crate::emit(&format!("rendered frame {} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter))?;
+        crate::emit_final(&format!("rendered frame {} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter))?;
     }
     Ok(exit::SUCCESS)
 }

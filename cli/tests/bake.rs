@@ -560,6 +560,15 @@ fn a_closed_pipe_ends_the_output_quietly() {
         assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "0", "{args:?}: {}", err(&o));
         assert!(!err(&o).contains("error"), "{args:?}: {}", err(&o));
     }
+    // The exit code of the work stands: a bake with a failed asset is still 1.
+    std::fs::write(dir.join("broken.vdb"), b"not a vdb").unwrap();
+    let m = dir.join("broken.toml");
+    std::fs::write(&m, "[[asset]]\nname = \"b\"\noutput = \"b.vpak\"\ninputs = [\"broken.vdb\"]\n").unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_vdbcook")).args(["bake", "--json", s(&m)]).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+    assert_eq!(err(&o).lines().count(), 1, "only the asset's error: {}", err(&o));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

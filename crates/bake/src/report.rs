@@ -246,15 +246,15 @@ impl Report {
                 Some(x) if x.is_finite() => format!("<td data-v='{x}'>{text}</td>"),
                 _ => format!("<td data-v=''>{text}</td>"),
             };
-            let _ = write!(
+            let fmt = format!("<td data-v='{0}'>{0}</td>", esc(r.format.as_deref().unwrap_or("")));
+            let _ = writeln!(
                 rows,
-                "<tr class='{st}'><td>{thumb}</td><td data-v='{n}'>{n}<div class='sub'>{out}</div></td><td data-v='{st}'>{st}{msg}</td>{frames}{fmt}{bytes}{bpv}{vr}{vp}{ir}{ip}<td data-v='{gate}'>{gate}</td><td data-v='{hit}'>{hit}</td>{secs}<td>{link}</td></tr>\n",
+                "<tr class='{st}'><td>{thumb}</td><td data-v='{n}'>{n}<div class='sub'>{out}</div></td><td data-v='{st}'>{st}{msg}</td>{frames}{fmt}{bytes}{bpv}{vr}{vp}{ir}{ip}<td data-v='{gate}'>{gate}</td><td data-v='{hit}'>{hit}</td>{secs}<td>{link}</td></tr>",
                 st = a.status.name(),
                 n = esc(&a.name),
                 out = esc(&a.output),
                 msg = a.message.as_ref().map(|m| format!("<div class='sub msg'>{}</div>", esc(m))).unwrap_or_default(),
                 frames = cell(r.frames.map(f64::from), r.frames.map(|f| f.to_string()).unwrap_or_default()),
-                fmt = format!("<td data-v='{0}'>{0}</td>", esc(r.format.as_deref().unwrap_or(""))),
                 bytes = cell(a.bytes.map(|b| b as f64), a.bytes.map(human_bytes).unwrap_or_default()),
                 bpv = cell(r.bits_per_active_voxel, r.bits_per_active_voxel.map(|b| format!("{b:.3}")).unwrap_or_default()),
                 vr = cell(r.voxel_rmse, r.voxel_rmse.map(sci).unwrap_or_default()),
@@ -311,7 +311,7 @@ fn gate_text(a: &AssetReport) -> &'static str {
 fn psnr_text(rmse: Option<f64>, psnr: Option<f64>) -> String {
     match (rmse, psnr) {
         (_, Some(p)) => format!("{p:.1}"),
-        (Some(r), None) if r == 0.0 => "∞ (exact)".into(),
+        (Some(0.0), None) => "∞ (exact)".into(),
         _ => String::new(),
     }
 }
