@@ -72,7 +72,7 @@ pub struct BakeArgs {
     /// Content-addressed cache: assets are looked up as DIR/KEY.vpak before cooking, and stored there after.
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
-    /// Assets baked at once (default: the number of cores). Each cook also uses every --threads.
+    /// Assets baked at once (default: the number of cores); each cook is parallel over --threads as well.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub jobs: Option<u32>,
     /// Bake only part I of N (from 1): the assets whose manifest position is I-1 modulo N.
