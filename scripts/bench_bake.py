@@ -9,7 +9,8 @@ scripts/make_bench_volume.py, cached in bench-out/), every one validated with a 
 1. Peer: each asset cooked by `vdbcook cook` and then validated by `vdbcook validate`,
    one after another (what a script without `bake` does). Wall time.
 2. `vdbcook bake --jobs N` of the same manifest into an empty directory. Wall time, and
-   the ratio bake / peer (target: <= 0.6 with --jobs 2).
+   the ratio bake / peer (target: <= 0.6 with --jobs 2). Steps 1 and 2 run --runs times
+   in turns (alternating which goes first); the median ratio and the range are printed.
 3. The same bake again with nothing changed: every asset must be `cached`; the ratio to
    the first bake (target: < 2 %).
 4. One input changed (one byte appended to a copy of a sample): exactly one asset must
@@ -20,7 +21,9 @@ Figures go to docs/benchmarks.md by hand, with the date and this command.
 import argparse
 import json
 import os
+import resource
 import shutil
+import statistics
 import subprocess
 import sys
 import time
@@ -37,7 +40,7 @@ ASSETS = [
     ("pyro", ["bake/pyro.vdb"], None, "unorm8", {}),
     ("wavelet_seq", ["waveletturbulence/fluid_data_0###.vdb"], "150-153", "bc7", {}),
     ("embergen_seq", ["vfx-toolkit-embergen/embergen_fire_a_#.vdb"], "1-3", "f16", {}),
-    ("blender_seq", ["csc415-blender/fluid_data_000#.vdb"], "1-2", "bc4", {}),
+    ("elyg_test", ["elyg-visualizer/test.vdb"], None, "bc4", {}),
     ("vscode_smoke", ["vscode-cmaketemplate/smoke.vdb"], None, "f16", {}),
     ("tommy", ["elyg-visualizer/fogTommy.vdb"], None, "unorm8", {}),
     ("plasma", ["plasmadxr/fluid_data_0001.vdb"], None, "bc7", {}),
@@ -51,8 +54,7 @@ def path_of(rel):
 
 
 def prepare():
-    d = os.path.join(OUT, "bake")
-    os.makedirs(d, exist_ok=True)
+    os.makedirs(OUT, exist_ok=True)
     for name, args in [("fog_a.vdb", ["--size", "120", "--seed", "1"]), ("fog_b.vdb", ["--size", "100", "--seed", "2"])]:
         p = os.path.join(OUT, name)
         if not os.path.exists(p):
@@ -72,10 +74,18 @@ def manifest(views, size):
     return "\n".join(lines)
 
 
+CPU = [0.0]
+
+
 def run(cmd):
+    """Runs `cmd`; its wall seconds (its CPU seconds are added to CPU[0])."""
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     res = subprocess.run(cmd, capture_output=True, text=True)
-    return time.perf_counter() - t0, res
+    t = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    CPU[0] += (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return t, res
 
 
 def main():
@@ -84,6 +94,7 @@ def main():
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--views", type=int, default=4)
     ap.add_argument("--size", default="256x256")
+    ap.add_argument("--runs", type=int, default=3)
     a = ap.parse_args()
     prepare()
     work = os.path.join(OUT, "bake-run")
@@ -95,34 +106,62 @@ def main():
     # Warm the page cache for both contenders (--plan reads every input to hash it).
     subprocess.run([a.exe, "bake", m, "--plan"], check=True, capture_output=True)
 
-    # 1. The peer: cook, then validate, one asset after another.
-    seq = os.path.join(work, "by-hand")
-    os.makedirs(seq)
-    t_peer = 0.0
-    for name, inputs, frames, fmt, extra in ASSETS:
-        src = [path_of(i) for i in inputs]
-        fr = ["--frames", frames] if frames else []
-        out = os.path.join(seq, name + ".vpak")
-        cook = [a.exe, "-q", "cook", *src, *fr, "--format", fmt, "-o", out]
-        for k, v in extra.items():
-            cook += ["--" + k.replace("_", "-"), str(v)]
-        t, r = run(cook)
-        if r.returncode != 0:
-            sys.exit(f"cook {name} failed: {r.stderr}")
-        t_peer += t
-        sf = ["--source-frames", frames] if frames else []
-        t, r = run([a.exe, "-q", "validate", out, "--source", *src, *sf, "--views", str(a.views), "--size", a.size, "--max-rmse", "0.25"])
-        if r.returncode != 0:
-            sys.exit(f"validate {name} failed: {r.stderr}")
-        t_peer += t
+    def peer(seq):
+        """Cook, then validate, one asset after another; seconds."""
+        shutil.rmtree(seq, ignore_errors=True)
+        os.makedirs(seq)
+        total = 0.0
+        for name, inputs, frames, fmt, extra in ASSETS:
+            src = [path_of(i) for i in inputs]
+            fr = ["--frames", frames] if frames else []
+            out = os.path.join(seq, name + ".vpak")
+            cook = [a.exe, "-q", "cook", *src, *fr, "--format", fmt, "-o", out]
+            for k, v in extra.items():
+                cook += ["--" + k.replace("_", "-"), str(v)]
+            t, r = run(cook)
+            if r.returncode != 0:
+                sys.exit(f"cook {name} failed: {r.stderr}")
+            total += t
+            sf = ["--source-frames", frames] if frames else []
+            t, r = run([a.exe, "-q", "validate", out, "--source", *src, *sf, "--views", str(a.views), "--size", a.size, "--max-rmse", "0.25"])
+            if r.returncode != 0:
+                sys.exit(f"validate {name} failed: {r.stderr}")
+            total += t
+        return total
 
-    # 2. The bake.
-    bake = [a.exe, "bake", m, "--json", "--jobs", str(a.jobs), "--out-dir", os.path.join(work, "out")]
-    t_bake, r = run(bake)
-    if r.returncode != 0:
-        sys.exit(f"bake failed ({r.returncode}): {r.stderr}")
-    first = json.loads(r.stdout)
-    assert first["summary"]["baked"] == len(ASSETS), first["summary"]
+    out_dir = os.path.join(work, "out")
+    bake = [a.exe, "bake", m, "--json", "--jobs", str(a.jobs), "--out-dir", out_dir]
+
+    def fresh_bake():
+        shutil.rmtree(out_dir, ignore_errors=True)
+        t, r = run(bake)
+        if r.returncode != 0:
+            sys.exit(f"bake failed ({r.returncode}): {r.stderr}")
+        doc = json.loads(r.stdout)
+        assert doc["summary"]["baked"] == len(ASSETS), doc["summary"]
+        return t
+
+    # 1, 2. Peer and bake in turns (the order alternates), on a machine whose load drifts.
+    pairs = []
+    cpus = []
+    for k in range(a.runs):
+        def timed(f):
+            c0 = CPU[0]
+            t = f()
+            return t, CPU[0] - c0
+
+        by_hand = os.path.join(work, "by-hand")
+        if k % 2 == 0:
+            tp, cpu_p = timed(lambda: peer(by_hand))
+            tb, cpu_b = timed(fresh_bake)
+        else:
+            tb, cpu_b = timed(fresh_bake)
+            tp, cpu_p = timed(lambda: peer(by_hand))
+        pairs.append((tp, tb))
+        cpus.append((cpu_p, cpu_b))
+    ratios = sorted(tb / tp for tp, tb in pairs)
+    t_peer = statistics.median(tp for tp, _ in pairs)
+    t_bake = statistics.median(tb for _, tb in pairs)
 
     # 3. Nothing changed.
     t_again, r = run(bake)
@@ -137,8 +176,12 @@ def main():
     rebaked = [x["name"] for x in one["assets"] if x["status"] != "cached"]
 
     print(f"assets: {len(ASSETS)} ({sum(len(x[1]) for x in ASSETS)} inputs), validate {a.views} views at {a.size}, exe {a.exe}")
-    print(f"peer: cook + validate one after another   {t_peer:8.2f} s")
-    print(f"bake --jobs {a.jobs}, empty output directory     {t_bake:8.2f} s   ratio bake/peer {t_bake / t_peer:.3f}")
+    for k, ((tp, tb), (cp, cb)) in enumerate(zip(pairs, cpus)):
+        print(f"run {k + 1}: peer {tp:.2f} s, bake {tb:.2f} s, ratio {tb / tp:.3f}; CPU time peer {cp:.2f} s, bake {cb:.2f} s, ratio {cb / cp:.3f}")
+    cpu_ratios = sorted(cb / cp for cp, cb in cpus)
+    print(f"CPU time (user + system) bake/peer: median {statistics.median(cpu_ratios):.3f}, range {cpu_ratios[0]:.3f}-{cpu_ratios[-1]:.3f}")
+    print(f"peer: cook + validate one after another   {t_peer:8.2f} s (median of {a.runs})")
+    print(f"bake --jobs {a.jobs}, empty output directory     {t_bake:8.2f} s (median)   ratio bake/peer: median {statistics.median(ratios):.3f}, range {ratios[0]:.3f}-{ratios[-1]:.3f}")
     print(f"bake again, nothing changed               {t_again:8.3f} s   ratio to first bake {t_again / t_bake * 100:.2f} %   cached {cached}/{len(ASSETS)}")
     print(f"bake after one input changed              {t_one:8.2f} s   re-baked {len(rebaked)}: {', '.join(rebaked)}")
 
