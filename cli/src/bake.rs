@@ -12,7 +12,7 @@ use serde_json::json;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 use vdbcook_bake::manifest::resolve;
 use vdbcook_bake::{AssetReport, Gate, KeyContext, Manifest, PlannedAsset, Record, Report, Shard, Sources, Status, Validation};
@@ -154,7 +154,7 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
         return dry_run(&args, &out_dir, &selected, quiet);
     }
 
-    let ctx = Ctx { out_dir, report_dir: report_dir.clone(), cache: args.cache.clone(), base, gpu: args.gpu.clone(), renderer: OnceLock::new() };
+    let ctx = Ctx { out_dir, report_dir: report_dir.clone(), cache: args.cache.clone(), base, gpu: args.gpu.clone(), first_error: OnceLock::new(), renderers: Mutex::new(Vec::new()) };
     let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize).clamp(1, selected.len().max(1));
     let show = Shown::new(quiet || args.json, selected.len());
     let next = AtomicUsize::new(0);
@@ -313,13 +313,48 @@ struct Ctx {
     cache: Option<PathBuf>,
     base: PathBuf,
     gpu: GpuArgs,
-    /// One GPU device for every asset, opened on first use.
-    renderer: OnceLock<std::result::Result<Arc<Renderer>, String>>,
+    /// Why no GPU device could be opened, once that happened.
+    first_error: OnceLock<String>,
+    /// Idle GPU devices: each worker borrows its own (on Mesa's CPU driver, one
+    /// device per worker renders in parallel where a shared queue would not).
+    renderers: Mutex<Vec<Renderer>>,
+}
+
+/// A GPU device borrowed from [`Ctx`]; it goes back when dropped.
+struct Lease<'a> {
+    ctx: &'a Ctx,
+    renderer: Option<Renderer>,
+}
+
+impl std::ops::Deref for Lease<'_> {
+    type Target = Renderer;
+    fn deref(&self) -> &Renderer {
+        // Some until drop.
+        self.renderer.as_ref().unwrap_or_else(|| unreachable!("a lease holds its renderer until dropped"))
+    }
+}
+
+impl Drop for Lease<'_> {
+    fn drop(&mut self) {
+        if let (Some(r), Ok(mut pool)) = (self.renderer.take(), self.ctx.renderers.lock()) {
+            pool.push(r);
+        }
+    }
 }
 
 impl Ctx {
-    fn renderer(&self) -> Result<Arc<Renderer>> {
-        self.renderer.get_or_init(|| self.gpu.renderer().map(Arc::new).map_err(|e| one_line(&e))).clone().map_err(|e| anyhow!(e))
+    fn renderer(&self) -> Result<Lease<'_>> {
+        if let Some(e) = self.first_error.get() {
+            return Err(anyhow!(e.clone()));
+        }
+        let idle = self.renderers.lock().ok().and_then(|mut pool| pool.pop());
+        let renderer = match idle {
+            Some(r) => r,
+            None => self.gpu.renderer().inspect_err(|e| {
+                let _ = self.first_error.set(one_line(e));
+            })?,
+        };
+        Ok(Lease { ctx: self, renderer: Some(renderer) })
     }
 }
 
