@@ -249,14 +249,18 @@ fn shards_cover_every_asset_once_and_merge_into_the_whole() {
     let manifest = project(&dir);
     let m = s(&manifest).to_string();
     let whole_dir = dir.join("whole");
-    let (code, whole, e) = bake(&[&m, "--out-dir", s(&whole_dir)], &[]);
+    let (code, whole, e) = bake(&[&m, "--out-dir", s(&whole_dir), "--jobs", "2"], &[]);
     assert_eq!(code, Some(0), "{e}");
     let mut seen = Vec::new();
     let mut reports = Vec::new();
     for i in 1..=3 {
         let d = dir.join(format!("shard{i}"));
-        let (code, v, e) = bake(&[&m, "--out-dir", s(&d), "--shard", &format!("{i}/3")], &[]);
+        let (code, v, e) = bake(&[&m, "--out-dir", s(&d), "--shard", &format!("{i}/3"), "--jobs", "1"], &[]);
         assert_eq!(code, Some(0), "{e}");
+        for a in v["assets"].as_array().unwrap() {
+            let out = a["output"].as_str().unwrap();
+            assert_eq!(std::fs::read(d.join(out)).unwrap(), std::fs::read(whole_dir.join(out)).unwrap(), "{out}: the same bytes with --jobs 1 and 2, whole or sharded");
+        }
         assert_eq!(v["shard"], serde_json::json!({"index": i, "count": 3}));
         seen.extend(statuses(&v).into_iter().map(|(n, _)| n));
         let r = d.join("report.json");
