@@ -339,6 +339,26 @@ mod tests {
         assert!("4x4".parse::<Size>().is_err());
     }
 
+    /// A manifest says `format = "bc7"` where the command line says `--format bc7`.
+    #[cfg(feature = "clap")]
+    #[test]
+    fn manifest_values_are_the_flag_values() {
+        #[derive(serde::Deserialize)]
+        struct T {
+            f: Format,
+            q: Quality,
+        }
+        for f in Format::ALL {
+            let flag = clap::ValueEnum::to_possible_value(&f).unwrap();
+            assert_eq!(flag.get_name(), f.name());
+            for q in Quality::ALL {
+                let flag_q = clap::ValueEnum::to_possible_value(&q).unwrap();
+                let t: T = toml::from_str(&format!("f = \"{}\"\nq = \"{}\"", flag.get_name(), flag_q.get_name())).unwrap();
+                assert_eq!((t.f, t.q), (f, q));
+            }
+        }
+    }
+
     #[test]
     fn one_default_per_setting() {
         let d = CookSettings::default();
