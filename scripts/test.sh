@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # The whole test suite, on a fresh Debian machine with only Rust installed.
 # Installs the Debian packages the tests need (OpenVDB's reference tools,
-# used as the oracle in differential tests, and Mesa's Vulkan drivers for the
-# GPU tests) when they are missing, then runs every test in the workspace.
+# used as the oracle in differential tests, Mesa's Vulkan drivers for the
+# GPU tests, and for `bake`'s reports and docs: junitparser to read the JUnit
+# XML back, Chromium to load the HTML report, make for docs/ci.md's Makefile)
+# when they are missing, then runs every test in the workspace.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 need=()
-for pkg in python3-openvdb python3-numpy python3-pil python3-xxhash libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1; do
+for pkg in python3-openvdb python3-numpy python3-pil python3-xxhash libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1 python3-junitparser chromium make; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then

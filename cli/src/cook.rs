@@ -1,14 +1,15 @@
 //! `vdbcook cook`: a VDB sequence into one .vpak asset.
 
 use crate::grids::{read_frame, Channels, Frame, GridSelection};
-use crate::inputs::{self, FrameRange};
+use crate::inputs;
 use crate::progress::Bars;
 use crate::validate::ValidateArgs;
 use crate::{exit, report_error, Usage};
 use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
-use vdbcook_cook::{ChannelGroup, CookOptions, CookReport, Cooker, Format, Progress, Quality};
+use vdbcook_bake::CookSettings;
+use vdbcook_cook::{ChannelGroup, CookOptions, CookReport, Cooker, Format, Progress};
 use vdbcook_vpak::SourceFile;
 
 pub const AFTER_HELP: &str = "\
@@ -17,12 +18,19 @@ frame pattern (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb) expanded over --fr
 Several files are one animation; files, directories and globs are taken in natural
 order (frame_2 before frame_10), pattern frames in --frames order.
 
-Formats (storage per voxel in the brick atlas):
+Formats (storage per voxel and channel in the brick atlas):
   f32     32 bits  exact
   f16     16 bits  IEEE half (default)
   unorm8   8 bits  8-bit levels over each brick's own [min, max]
   bc4      4 bits  BC4 block compression of those levels, one z-slice per texture slice
-  bc7      2 bits  BC7 with four consecutive z-slices packed into RGBA
+  bc7      2 bits  BC7: RGBA lanes hold channels x z-slices (one channel: four z-slices)
+
+Several grids (--grids density,temperature,flames or --grids all) are channels of one
+tree per frame over the union of their active voxels; a vec3 grid (velocity) gives
+three channels NAME.x, NAME.y, NAME.z. Uncompressed formats put up to four channels in
+one R/RG/RGBA texture; bc4 stores a texture per channel; bc7 packs scalar channels
+together (less error than one texture each) and each velocity component alone.
+--group CHANNELS=FORMAT (repeatable) gives channels a format of their own.
 
 Quality presets (--quality), for the block formats:
   ultra-fast  very-fast (default)  fast  basic  slow
@@ -53,72 +61,37 @@ pub struct CookArgs {
     /// The asset to write.
     #[arg(short, long, value_name = "OUT.vpak")]
     pub output: PathBuf,
-    /// Frames of a frame pattern: A-B or A-B:STEP (e.g. 1-120:2).
-    #[arg(long, value_name = "RANGE")]
-    pub frames: Option<FrameRange>,
-    /// Grid to cook (default: "density", else the first float grid).
-    #[arg(long, value_name = "NAME", conflicts_with = "grids")]
-    pub grid: Option<String>,
-    /// Grids to cook into one asset, as channels of one tree: names as in the files,
-    /// comma-separated, or "all" (every float, double and half grid of the first frame).
-    #[arg(long, value_name = "A,B,...|all")]
-    pub grids: Option<String>,
-    /// Store these channels together in their own format (repeatable), e.g.
-    /// --group temperature,flames=bc7 --group density=bc4; other channels take --format.
-    #[arg(long, value_name = "CHANNELS=FORMAT", value_parser = parse_group)]
-    pub group: Vec<ChannelGroup>,
-    /// A frame whose file or grid is missing becomes an empty frame instead of an error.
-    #[arg(long)]
-    pub allow_missing: bool,
-    /// Voxel format of the brick atlas.
-    #[arg(long, default_value = "f16", value_parser = ["f32", "f16", "unorm8", "bc4", "bc7"])]
-    pub format: String,
-    /// Encoder preset of bc7 and bc4 (see the notes below).
-    #[arg(long, default_value = "very-fast", value_parser = ["ultra-fast", "very-fast", "fast", "basic", "slow"])]
-    pub quality: String,
-    /// Merge similar bricks with variance-gated k-means into K centroid bricks (off by default).
-    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
-    pub clusters: Option<u32>,
-    /// k-means iterations.
-    #[arg(long, default_value_t = 5, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=1000))]
-    pub iterations: u32,
-    /// Bricks whose variance / mean exceeds T are never clustered.
-    #[arg(long, default_value_t = 0.01, value_name = "T")]
-    pub variance_threshold: f64,
-    /// A clustered brick whose largest voxel difference from its centroid exceeds E stays unique.
-    #[arg(long, value_name = "E")]
-    pub max_brick_error: Option<f32>,
-    /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
-    #[arg(long, default_value_t = 2048, value_name = "TEXELS", value_parser = clap::value_parser!(u32).range(8..=16384))]
-    pub max_texture_dim: u32,
+    /// Every cook setting (the keys of a bake manifest, too).
+    #[command(flatten)]
+    pub settings: CookSettings,
     /// Replace OUT if it exists.
     #[arg(long)]
     pub force: bool,
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
-    /// After cooking, run `vdbcook validate` on the asset against the inputs (8 views, 512×512).
-    #[arg(long)]
-    pub validate: bool,
-    /// With --validate: exit with code 3 when any image's RMSE is above X.
-    #[arg(long, value_name = "X", requires = "validate")]
-    pub max_rmse: Option<f64>,
-    /// With --validate: exit with code 3 when any image's PSNR (dB) is below Y.
-    #[arg(long, value_name = "Y", requires = "validate")]
-    pub min_psnr: Option<f64>,
 }
 
 /// Reads `files` on a thread that stays one frame ahead (at most two source
-/// frames live at once) and pushes each frame into a cooker made with `opts`
-/// for the channels the first frame resolves. Returns the cooker, its
+/// frames live at once) and pushes each frame into one cooker per entry of
+/// `opts` (an asset and its lossless reference share one read), made for the
+/// channels the first frame with a file resolves. Source paths are recorded
+/// relative to `base` when they are below it. Returns the cookers, their
 /// channels and the seconds spent waiting for frames.
-pub fn feed(opts: CookOptions, files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, bars: &Bars) -> Result<(Cooker, Option<Channels>, f64)> {
+pub fn feed(opts: Vec<CookOptions>, files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, base: Option<PathBuf>, bars: &dyn Progress) -> Result<(Vec<Cooker>, Option<Channels>, f64)> {
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
     let total = files.len() as u64;
     let reader = std::thread::spawn(move || {
         let mut channels = None;
         for f in files {
-            let r = read_frame(f, &sel, &mut channels, allow_missing);
+            let r = read_frame(f, &sel, &mut channels, allow_missing).map(|mut frame| {
+                if let (Some(s), Some(b)) = (frame.source.as_mut(), base.as_deref()) {
+                    if let Ok(rel) = frame.path.strip_prefix(b) {
+                        s.path = rel.display().to_string();
+                    }
+                }
+                frame
+            });
             let stop = r.is_err();
             if tx.send((r, channels.clone())).is_err() || stop {
                 break;
@@ -129,35 +102,34 @@ pub fn feed(opts: CookOptions, files: Vec<PathBuf>, sel: GridSelection, allow_mi
     let mut read_secs = 0.0;
     let mut wait = Instant::now();
     let mut failure = None;
-    let mut cooker: Option<Cooker> = None;
+    let mut cookers: Vec<Cooker> = Vec::new();
     let mut channels: Option<Channels> = None;
     // Frames before the first one whose file resolves the channels: empty.
     let mut leading: Vec<Option<SourceFile>> = Vec::new();
     for (r, ch) in rx {
         read_secs += wait.elapsed().as_secs_f64();
         let pushed = r.and_then(|frame| {
-            if cooker.is_none() {
+            if cookers.is_empty() {
                 if let Some(ch) = ch {
-                    let mut c = Cooker::with_channels(opts.clone(), ch.specs.clone());
+                    cookers = opts.iter().map(|o| Cooker::with_channels(o.clone(), ch.specs.clone())).collect();
                     for s in leading.drain(..) {
-                        c.push_empty(s);
+                        cookers.iter_mut().for_each(|c| c.push_empty(s.clone()));
                     }
-                    cooker = Some(c);
                     channels = Some(ch);
                 }
             }
-            let Some(c) = cooker.as_mut() else {
+            if cookers.is_empty() {
                 leading.push(frame.source);
                 return Ok(());
-            };
-            let n = c.frame_count();
-            match &frame.grids {
-                Some(g) => c.push_channels(&g.iter().map(Option::as_ref).collect::<Vec<_>>(), frame.source).with_context(|| format!("{}: frame {n}", frame.path.display())),
-                None => {
-                    c.push_empty(frame.source);
-                    Ok(())
+            }
+            for c in cookers.iter_mut() {
+                let n = c.frame_count();
+                match &frame.grids {
+                    Some(g) => c.push_channels(&g.iter().map(Option::as_ref).collect::<Vec<_>>(), frame.source.clone()).with_context(|| format!("{}: frame {n}", frame.path.display()))?,
+                    None => c.push_empty(frame.source.clone()),
                 }
             }
+            Ok(())
         });
         if let Err(e) = pushed {
             failure = Some(e);
@@ -171,14 +143,13 @@ pub fn feed(opts: CookOptions, files: Vec<PathBuf>, sel: GridSelection, allow_mi
     if let Some(e) = failure {
         return Err(e);
     }
-    let cooker = cooker.unwrap_or_else(|| {
-        let mut c = Cooker::new(opts);
+    if cookers.is_empty() {
+        cookers = opts.into_iter().map(Cooker::new).collect();
         for s in leading {
-            c.push_empty(s);
+            cookers.iter_mut().for_each(|c| c.push_empty(s.clone()));
         }
-        c
-    });
-    Ok((cooker, channels, read_secs))
+    }
+    Ok((cookers, channels, read_secs))
 }
 
 /// The selection that reads back every channel of an asset's metadata.
@@ -191,7 +162,7 @@ pub fn selection_of(meta: &vdbcook_vpak::Metadata) -> GridSelection {
     }
     match grids.len() {
         0 => GridSelection::Default,
-        1 if meta.channels.len() == 1 && !grids[0].is_empty() => GridSelection::One(grids.remove(0)),
+        1 if !grids[0].is_empty() => GridSelection::One(grids.remove(0)),
         _ => GridSelection::Many(grids),
     }
 }
@@ -199,103 +170,18 @@ pub fn selection_of(meta: &vdbcook_vpak::Metadata) -> GridSelection {
 /// Cooks `files` losslessly in memory (f32, no clustering): the reference
 /// asset `validate` compares with, and what `render` draws for a .vdb.
 pub fn cook_lossless(files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, bars: &Bars) -> Result<vdbcook_vpak::Asset> {
-    let (cooker, _, _) = feed(CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() }, files, sel, allow_missing, bars)?;
+    let (cookers, _, _) = feed(vec![reference_options()], files, sel, allow_missing, None, bars)?;
+    let cooker = cookers.into_iter().next().ok_or_else(|| anyhow!("no cooker"))?;
+    finish_reference(cooker)
+}
+
+fn reference_options() -> CookOptions {
+    CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() }
+}
+
+fn finish_reference(cooker: Cooker) -> Result<vdbcook_vpak::Asset> {
     let (sections, _) = cooker.finish(&vdbcook_cook::NoProgress).map_err(|e| anyhow!(e))?;
     Ok(vdbcook_vpak::Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?)
-}
-
-/// `--group CHANNELS=FORMAT`: channels given their own format, stored together.
-pub fn parse_group(s: &str) -> Result<ChannelGroup, String> {
-    let bad = || format!("invalid group \"{s}\" (expected CHANNELS=FORMAT, e.g. temperature,flames=bc7; formats: f32, f16, unorm8, bc4, bc7)");
-    let (names, format) = s.rsplit_once('=').ok_or_else(bad)?;
-    let format = Format::parse(format.trim()).ok_or_else(bad)?;
-    let channels: Vec<String> = names.split(',').map(|n| n.trim().to_string()).filter(|n| !n.is_empty()).collect();
-    if channels.is_empty() {
-        return Err(bad());
-    }
-    Ok(ChannelGroup { channels, format })
-}
-
-pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
-    crate::refuse_existing(&args.output, args.force)?;
-    let format = Format::parse(&args.format).ok_or_else(|| Usage(format!("unknown format {}", args.format)))?;
-    let quality = Quality::parse(&args.quality).ok_or_else(|| Usage(format!("unknown quality {}", args.quality)))?;
-    if args.variance_threshold.is_nan() || args.variance_threshold < 0.0 {
-        return Err(Usage(format!("--variance-threshold must be a number >= 0, not {}", args.variance_threshold)).into());
-    }
-    if args.max_brick_error.is_some_and(|e| e.is_nan() || e < 0.0) {
-        return Err(Usage("--max-brick-error must be a number >= 0".into()).into());
-    }
-    let clustering = args.clusters.map(|k| vdbcook_cluster::Options {
-        clusters: k as usize,
-        iterations: args.iterations as usize,
-        variance_threshold: args.variance_threshold,
-        max_brick_error: args.max_brick_error,
-        ..vdbcook_cluster::Options::default()
-    });
-    let files = inputs::expand(&args.inputs, args.frames)?;
-    let sel = GridSelection::from_flags(args.grid.as_deref(), args.grids.as_deref());
-    let started = Instant::now();
-    let bars = Bars::new(quiet);
-
-    let settings = vec![
-        ("format".to_string(), format.name().to_string()),
-        ("quality".to_string(), if format.is_block() { quality.name().to_string() } else { String::new() }),
-        ("grid".to_string(), sel.setting()),
-        ("groups".to_string(), args.group.iter().map(|g| format!("{}={}", g.channels.join(","), g.format.name())).collect::<Vec<_>>().join(" ")),
-        ("frames".to_string(), args.frames.map(|f| format!("{}-{}:{}", f.first, f.last, f.step)).unwrap_or_default()),
-        ("allow_missing".to_string(), args.allow_missing.to_string()),
-        ("max_texture_dim".to_string(), args.max_texture_dim.to_string()),
-        ("clusters".to_string(), args.clusters.map(|k| k.to_string()).unwrap_or_default()),
-        ("iterations".to_string(), if args.clusters.is_some() { args.iterations.to_string() } else { String::new() }),
-        ("variance_threshold".to_string(), if args.clusters.is_some() { args.variance_threshold.to_string() } else { String::new() }),
-        ("max_brick_error".to_string(), args.max_brick_error.map(|e| e.to_string()).unwrap_or_default()),
-        ("inputs".to_string(), args.inputs.join(" ")),
-    ];
-    let opts = CookOptions { format, groups: args.group.clone(), quality, max_texture_dim: args.max_texture_dim, clustering, settings };
-    let (cooker, channels, read_secs) = feed(opts, files, sel, args.allow_missing, &bars)?;
-    if let Some(ch) = &channels {
-        check_groups(&args.group, ch)?;
-        if args.clusters.is_some() && ch.specs.len() > vdbcook_cook::MAX_CLUSTER_CHANNELS {
-            return Err(Usage(format!("--clusters takes at most {} channels; this cook has {}", vdbcook_cook::MAX_CLUSTER_CHANNELS, ch.specs.len())).into());
-        }
-    }
-    let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
-    if cooker.frame_count() == 0 {
-        return Err(anyhow!("no frames to cook"));
-    }
-    let (sections, mut report) = cooker.finish(&bars).map_err(|e| anyhow!(e))?;
-    report.timings.insert(0, ("read".into(), read_secs));
-    let t0 = Instant::now();
-    vdbcook_vpak::write_file(&args.output, &sections, args.force).with_context(|| args.output.display().to_string())?;
-    report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
-    report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
-    let validation = if args.validate {
-        let v = ValidateArgs {
-            asset: args.output.clone(),
-            source: args.inputs.clone(),
-            source_frames: args.frames,
-            frames: None,
-            views: 8,
-            size: (512, 512),
-            max_rmse: args.max_rmse,
-            min_psnr: args.min_psnr,
-            report: None,
-            gpu: Default::default(),
-            json: args.json,
-        };
-        Some(crate::validate::evaluate(v, quiet)?)
-    } else {
-        None
-    };
-    if !quiet {
-        let mut text = if args.json { summary_json(&args, grid_name.as_deref(), &report, validation.as_ref().map(|o| &o.doc)) } else { summary_text(&args, grid_name.as_deref(), &report) };
-        if let (Some(o), false) = (&validation, args.json) {
-            text += &o.text;
-        }
-        crate::write_stdout(&text).ok();
-    }
-    Ok(validation.map_or(exit::SUCCESS, |o| crate::validate::gate(&o.gate_failure)))
 }
 
 /// Every channel an explicit group names exists, once.
@@ -312,6 +198,99 @@ fn check_groups(groups: &[ChannelGroup], ch: &Channels) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// One asset to cook: typed settings, its frame files and what to record.
+pub struct CookJob<'a> {
+    pub settings: &'a CookSettings,
+    /// The frame files, in order.
+    pub files: Vec<PathBuf>,
+    /// The inputs as the user wrote them (recorded in the metadata).
+    pub inputs: &'a [String],
+    /// Source paths are recorded relative to this directory (a bake's manifest directory).
+    pub base: Option<PathBuf>,
+    /// Also cook the lossless reference (f32, no clustering) from the same reads.
+    pub reference: bool,
+}
+
+/// What [`cook_asset`] made: the sections to write, the report, the channels
+/// cooked (names joined by ", ") and, when asked, the reference asset.
+pub struct Cooked {
+    pub sections: Vec<vdbcook_vpak::Section>,
+    pub report: CookReport,
+    pub grid: Option<String>,
+    pub reference: Option<vdbcook_vpak::Asset>,
+}
+
+/// Cooks one asset from typed settings: the one cook path of `cook` and `bake`.
+pub fn cook_asset(job: CookJob, bars: &dyn Progress) -> Result<Cooked> {
+    let s = job.settings;
+    let opts = CookOptions { format: s.format, groups: s.group.clone(), quality: s.quality, max_texture_dim: s.max_texture_dim, clustering: s.clustering(), settings: s.recorded(job.inputs) };
+    let mut all = vec![opts];
+    if job.reference {
+        all.push(reference_options());
+    }
+    let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
+    let (cookers, channels, read_secs) = feed(all, job.files, sel, s.allow_missing, job.base, bars)?;
+    if let Some(ch) = &channels {
+        check_groups(&s.group, ch)?;
+        if s.clusters.is_some() && ch.specs.len() > vdbcook_cook::MAX_CLUSTER_CHANNELS {
+            return Err(Usage(format!("--clusters takes at most {} channels; this cook has {}", vdbcook_cook::MAX_CLUSTER_CHANNELS, ch.specs.len())).into());
+        }
+    }
+    let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
+    let mut cookers = cookers.into_iter();
+    let cooker = cookers.next().ok_or_else(|| anyhow!("no cooker"))?;
+    if cooker.frame_count() == 0 {
+        return Err(anyhow!("no frames to cook"));
+    }
+    let (sections, mut report) = cooker.finish(bars).map_err(|e| anyhow!(e))?;
+    report.timings.insert(0, ("read".into(), read_secs));
+    let reference = cookers.next().map(finish_reference).transpose().context("cooking the reference")?;
+    Ok(Cooked { sections, report, grid: grid_name, reference })
+}
+
+pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
+    crate::refuse_existing(&args.output, args.force)?;
+    let s = &args.settings;
+    if let Err(vdbcook_bake::Error::Setting { name, message }) = s.check() {
+        return Err(Usage(format!("--{} {message}", name.replace('_', "-"))).into());
+    }
+    let files = inputs::expand(&args.inputs, s.frames)?;
+    let started = Instant::now();
+    let bars = Bars::new(quiet);
+    let mut cooked = cook_asset(CookJob { settings: s, files, inputs: &args.inputs, base: None, reference: false }, &bars)?;
+    let report = &mut cooked.report;
+    let t0 = Instant::now();
+    vdbcook_vpak::write_file(&args.output, &cooked.sections, args.force).with_context(|| args.output.display().to_string())?;
+    report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
+    report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
+    let validation = if s.validate {
+        let v = ValidateArgs {
+            asset: args.output.clone(),
+            source: args.inputs.clone(),
+            source_frames: s.frames,
+            frames: None,
+            views: s.views,
+            size: (s.size.width, s.size.height),
+            max_rmse: s.max_rmse,
+            min_psnr: s.min_psnr,
+            report: None,
+            gpu: Default::default(),
+            json: args.json,
+        };
+        Some(crate::validate::evaluate(v, quiet)?)
+    } else {
+        None
+    };
+    if !quiet {
+        let mut text = if args.json { summary_json(&args, cooked.grid.as_deref(), report, validation.as_ref().map(|o| &o.doc)) } else { summary_text(&args, cooked.grid.as_deref(), report) };
+        if let (Some(o), false) = (&validation, args.json) {
+            text += &o.text;
+        }
+        crate::emit_final(&text)?;
+    }
+    Ok(validation.map_or(exit::SUCCESS, |o| crate::validate::gate(&o.gate_failure)))
 }
 
 fn mb(b: u64) -> String {
@@ -377,8 +356,11 @@ fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport, validation:
     format!("{}\n", serde_json::to_string_pretty(&v).unwrap_or_default())
 }
 
-/// Reports a cook failure.
+/// Reports a failure; the exit code. A closed stdout is not one.
 pub fn fail(e: &anyhow::Error) -> u8 {
+    if e.is::<crate::PipeClosed>() {
+        return exit::SUCCESS;
+    }
     report_error(e);
     if e.downcast_ref::<Usage>().is_some() {
         exit::USAGE

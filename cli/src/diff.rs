@@ -73,7 +73,7 @@ pub fn run(args: DiffArgs, quiet: bool) -> Result<u8> {
         } else {
             format!("{} voxels: rmse {:.4e}, psnr {:.2} dB, max error {:.4e}; {} inactive in {}\n", err.count, err.rmse(), err.psnr(peak), err.max_abs, missing, args.b.display())
         };
-        crate::write_stdout(&text).ok();
+        crate::emit_final(&text)?;
     }
     Ok(exit::SUCCESS)
 }

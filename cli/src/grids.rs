@@ -32,16 +32,6 @@ impl GridSelection {
             (None, None) => GridSelection::Default,
         }
     }
-
-    /// The selection as the cook settings record it.
-    pub fn setting(&self) -> String {
-        match self {
-            GridSelection::Default => String::new(),
-            GridSelection::One(g) => g.clone(),
-            GridSelection::Many(g) => g.join(","),
-            GridSelection::All => "all".into(),
-        }
-    }
 }
 
 /// The channels of a cook: which grid each comes from.

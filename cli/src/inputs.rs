@@ -11,43 +11,11 @@ use anyhow::{bail, Context, Result};
 use std::cmp::Ordering;
 use std::path::{Path, PathBuf};
 
-/// An inclusive frame range with a step.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FrameRange {
-    pub first: i64,
-    pub last: i64,
-    pub step: i64,
-}
+pub use vdbcook_bake::FrameRange;
 
-impl std::str::FromStr for FrameRange {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || format!("invalid frame range \"{s}\" (expected A-B or A-B:STEP, e.g. 1-120:2)");
-        let (range, step) = match s.split_once(':') {
-            Some((r, st)) => (r, st.parse::<i64>().map_err(|_| bad())?),
-            None => (s, 1),
-        };
-        // Allow negative frame numbers: split on the '-' that follows the first number.
-        let cut = range.char_indices().skip(1).find(|&(_, c)| c == '-').map(|(i, _)| i);
-        let (a, b) = match cut {
-            Some(i) => (&range[..i], &range[i + 1..]),
-            None => (range, range),
-        };
-        let (first, last) = (a.trim().parse::<i64>().map_err(|_| bad())?, b.trim().parse::<i64>().map_err(|_| bad())?);
-        if step < 1 || last < first {
-            return Err(bad());
-        }
-        if i128::from(last) - i128::from(first) > 1_000_000 * i128::from(step) {
-            return Err(format!("frame range \"{s}\" has more than a million frames"));
-        }
-        Ok(FrameRange { first, last, step })
-    }
-}
-
-impl FrameRange {
-    pub fn frames(&self) -> impl Iterator<Item = i64> + '_ {
-        (self.first..=self.last).step_by(self.step as usize)
-    }
+/// True when `input` is a frame pattern (and not an existing file or directory).
+pub fn is_pattern(input: &str) -> bool {
+    !Path::new(input).exists() && parse_pattern(input).is_some()
 }
 
 /// A frame pattern's pieces: prefix, zero-padded width, suffix.

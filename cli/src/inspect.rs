@@ -1,6 +1,6 @@
 //! `vdbcook inspect`: what a .vdb file holds, as text or JSON.
 
-use crate::{exit, report_error, write_stdout};
+use crate::{emit, exit, report_error};
 use anyhow::Context;
 use serde_json::{json, Map, Value};
 use std::path::Path;
@@ -63,8 +63,10 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
         if is_vpak(path) {
             match crate::inspect_vpak::describe(path, as_json) {
                 Ok(crate::inspect_vpak::Described::Text(t)) => {
-                    if !quiet && write_stdout(&t).is_err() {
-                        return code;
+                    if !quiet {
+                        if let Err(e) = emit(&t) {
+                            return stdout_failed(&e, code);
+                        }
                     }
                 }
                 Ok(crate::inspect_vpak::Described::Json(v)) => docs.push(v),
@@ -81,8 +83,10 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
         });
         match result {
             Ok(Ok(text)) => {
-                if !quiet && write_stdout(&text).is_err() {
-                    return code;
+                if !quiet {
+                    if let Err(e) = emit(&text) {
+                        return stdout_failed(&e, code);
+                    }
                 }
             }
             Ok(Err(doc)) => docs.push(doc),
@@ -94,9 +98,21 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
     }
     if as_json && !quiet {
         let doc = json!({ "files": docs });
-        let _ = write_stdout(&format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default()));
+        if let Err(e) = emit(&format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default())) {
+            return stdout_failed(&e, code);
+        }
     }
     code
+}
+
+/// The exit code after a failed write to stdout: a closed pipe ends the output
+/// quietly; anything else is reported and is a failure.
+fn stdout_failed(e: &anyhow::Error, code: u8) -> u8 {
+    if e.is::<crate::PipeClosed>() {
+        return code;
+    }
+    report_error(e);
+    exit::FAILURE
 }
 
 /// `%g`-style number: `digits` significant digits, trailing zeros dropped.

@@ -1,5 +1,6 @@
 //! The `vdbcook` binary: flags in, library calls, human or JSON text out.
 
+mod bake;
 mod cook;
 mod diff;
 mod grids;
@@ -28,9 +29,11 @@ pub mod exit {
 const AFTER_HELP: &str = "\
 Exit codes:
   0  success
-  1  failure: unreadable or invalid input, I/O error
-  2  usage error (bad flags or arguments)
-  3  quality gate failed (validate --max-rmse / --min-psnr)";
+  1  failure: unreadable or invalid input, I/O error (a failed write to stdout too;
+     a closed pipe just ends the output), or an asset of a bake failed to cook
+  2  usage error (bad flags or arguments, an invalid bake manifest: nothing done)
+  3  quality gate failed (validate / cook --validate / bake with max_rmse or min_psnr),
+     and nothing else did";
 
 #[derive(Parser)]
 #[command(name = "vdbcook", version, about = "Cook OpenVDB volume sequences into compact GPU-ready assets", after_help = AFTER_HELP)]
@@ -70,6 +73,9 @@ enum Command {
     Validate(validate::ValidateArgs),
     /// Render one frame of a .vpak (or a .vdb) to a PNG preview.
     Render(validate::RenderArgs),
+    /// Cook (and validate) every asset of a bake.toml manifest, with a cache, shards and one report.
+    #[command(after_help = bake::AFTER_HELP)]
+    Bake(bake::BakeArgs),
 }
 
 /// A usage problem found after parsing (exit code 2).
@@ -93,32 +99,71 @@ pub fn refuse_existing(path: &std::path::Path, force: bool) -> anyhow::Result<()
     Ok(())
 }
 
-/// Writes to stdout; a closed pipe (`| head`) just ends the output.
-pub fn write_stdout(text: &str) -> std::io::Result<()> {
+/// Stdout was closed by its reader (`| head`): the output ends there, and the
+/// command exits with 0, as ripgrep does.
+#[derive(Debug)]
+pub struct PipeClosed;
+
+impl std::fmt::Display for PipeClosed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("stdout was closed")
+    }
+}
+
+impl std::error::Error for PipeClosed {}
+
+/// Writes to stdout. A closed pipe is [`PipeClosed`]; any other failure (a
+/// full disk: `> /dev/full`) is an error, so a script never gets an empty
+/// report with exit code 0.
+pub fn emit(text: &str) -> anyhow::Result<()> {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
-    out.write_all(text.as_bytes())?;
-    out.flush()
+    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(PipeClosed.into()),
+        Err(e) => Err(anyhow::anyhow!("cannot write to stdout: {e}")),
+    }
+}
+
+/// [`emit`] for a command's last output: a closed pipe ends it quietly and the
+/// command's exit code stands (a bake with a failed asset still exits 1).
+pub fn emit_final(text: &str) -> anyhow::Result<()> {
+    match emit(text) {
+        Err(e) if e.is::<PipeClosed>() => Ok(()),
+        r => r,
+    }
 }
 
 /// Mesa's Vulkan drivers print a warning on every start when
 /// XDG_RUNTIME_DIR is unset (common in CI and containers); give them a
-/// private one. Runs before any thread exists.
+/// private one. Runs before any thread exists. Unix only: other systems'
+/// drivers do not look for it.
+#[cfg(unix)]
 fn ensure_runtime_dir() {
     if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
         return;
     }
     use std::os::unix::fs::{DirBuilderExt, MetadataExt};
-    let dir = std::env::temp_dir().join(format!("vdbcook-runtime-{}", std::fs::metadata("/proc/self").map(|m| m.uid()).unwrap_or(0)));
+    // The user id: the owner of /proc/self, or of $HOME where there is no
+    // /proc (macOS, the BSDs).
+    let home = std::env::var_os("HOME").unwrap_or_default();
+    let uid = std::fs::metadata("/proc/self").or_else(|_| std::fs::metadata(&home)).map(|m| m.uid()).unwrap_or(0);
+    let dir = std::env::temp_dir().join(format!("vdbcook-runtime-{uid}"));
     let _ = std::fs::DirBuilder::new().mode(0o700).create(&dir);
     if dir.is_dir() {
         std::env::set_var("XDG_RUNTIME_DIR", &dir);
     }
 }
 
+#[cfg(not(unix))]
+fn ensure_runtime_dir() {}
+
 fn main() -> ExitCode {
     ensure_runtime_dir();
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return ExitCode::from(clap_exit(&e)),
+    };
     if let Some(n) = cli.threads {
         if n == 0 {
             eprintln!("vdbcook: error: --threads must be at least 1");
@@ -136,12 +181,69 @@ fn main() -> ExitCode {
         Command::Diff(args) => diff::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
         Command::Validate(args) => validate::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
         Command::Render(args) => validate::render(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
+        Command::Bake(args) => bake::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
     };
     ExitCode::from(code)
 }
 
+/// Prints what clap has to say; the exit code. Help and version go to stdout,
+/// where a failed write is an error like any other (a closed pipe is not).
+fn clap_exit(e: &clap::Error) -> u8 {
+    use std::io::IsTerminal;
+    if e.use_stderr() {
+        let _ = e.print();
+        return exit::USAGE;
+    }
+    if std::io::stdout().is_terminal() {
+        let _ = e.print();
+        return exit::SUCCESS;
+    }
+    match emit(&e.render().to_string()) {
+        Ok(()) => exit::SUCCESS,
+        Err(err) => cook::fail(&err),
+    }
+}
+
 /// Prints an error the house way: one line, prefixed, causes joined by ": ".
 pub fn report_error(err: &anyhow::Error) {
-    let msg = format!("{err:#}").replace('\n', " ");
-    eprintln!("vdbcook: error: {msg}");
+    eprintln!("vdbcook: error: {}", one_line(err));
+}
+
+/// The error and its causes joined by ": ", each fact once: a context that the
+/// next cause repeats at its start (a path, "/out/a.vpak" before "/out/a.vpak
+/// already exists") and a cause that the message before it already ends with
+/// (an error whose text includes its source's) are left out.
+pub fn one_line(err: &anyhow::Error) -> String {
+    let parts: Vec<String> = err.chain().map(|e| e.to_string().replace('\n', " ")).collect();
+    let mut kept: Vec<&str> = Vec::new();
+    for (i, p) in parts.iter().enumerate() {
+        if p.is_empty() || kept.last().is_some_and(|k| k.ends_with(p.as_str())) {
+            continue;
+        }
+        if parts.get(i + 1).is_some_and(|n| n == p || n.starts_with(&format!("{p} "))) {
+            continue;
+        }
+        kept.push(p);
+    }
+    kept.join(": ")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn each_fact_once() {
+        let io = || std::io::Error::new(std::io::ErrorKind::StorageFull, "No space left on device (os error 28)");
+        // An error type that prints its source and also returns it.
+        #[derive(Debug, thiserror::Error)]
+        #[error("{0}")]
+        struct Wraps(#[source] std::io::Error);
+        let e = anyhow::Error::new(Wraps(io())).context("x.vpak");
+        assert_eq!(super::one_line(&e), "x.vpak: No space left on device (os error 28)");
+        let e = anyhow::Error::new(vdbcook_vpak::Error::Io(io())).context("x.vpak");
+        assert_eq!(super::one_line(&e), "x.vpak: No space left on device (os error 28)");
+        let e = anyhow::Error::new(vdbcook_vpak::Error::Exists("/out/a.vpak".into())).context("/out/a.vpak");
+        assert_eq!(super::one_line(&e), "/out/a.vpak already exists (use --force to replace it)");
+        let e = anyhow::anyhow!("bad magic").context("frame 3").context("a.vdb");
+        assert_eq!(super::one_line(&e), "a.vdb: frame 3: bad magic");
+    }
 }

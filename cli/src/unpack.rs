@@ -63,7 +63,7 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
             (st.active_voxels, st.leaf_count)
         });
         let what = if out.len() == 1 { "1 grid".to_string() } else { format!("{} grids", out.len()) };
-        crate::write_stdout(&format!("wrote frame {} of {} to {} ({what}, {voxels} active voxels, {leaves} leaves)\n", args.frame, name, args.output.display())).ok();
+        crate::emit_final(&format!("wrote frame {} of {} to {} ({what}, {voxels} active voxels, {leaves} leaves)\n", args.frame, name, args.output.display()))?;
     }
     Ok(exit::SUCCESS)
 }

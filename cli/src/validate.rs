@@ -157,7 +157,7 @@ pub fn run(args: ValidateArgs, quiet: bool) -> Result<u8> {
     let o = evaluate(args, quiet)?;
     if !quiet {
         let text = if json_out { format!("{}\n", serde_json::to_string_pretty(&o.doc).unwrap_or_default()) } else { o.text };
-        crate::write_stdout(&text).ok();
+        crate::emit_final(&text)?;
     }
     Ok(gate(&o.gate_failure))
 }
@@ -180,6 +180,22 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     let meta = asset.metadata().with_context(|| name.clone())?;
     let bars = Bars::new(quiet || args.json);
     let reference = reference(&meta, &args.source, args.source_frames, &bars)?;
+    compare_assets(&asset, &name, &reference, &args, || args.gpu.renderer().map(Box::new), &bars)
+}
+
+/// Renders `asset` and its lossless `reference` with the same ray-marcher and
+/// compares them (the work of `validate` once both assets are at hand);
+/// `renderer` is asked for once the frames are known to be in range.
+pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
+    asset: &Asset,
+    name: &str,
+    reference: &Asset,
+    args: &ValidateArgs,
+    renderer: impl FnOnce() -> Result<R>,
+    bars: &dyn Progress,
+) -> Result<Outcome> {
+    let name = name.to_string();
+    let meta = asset.metadata().with_context(|| name.clone())?;
     let ref_meta = reference.metadata()?;
     if ref_meta.frame_count != meta.frame_count {
         return Err(anyhow!("{name}: the asset has {} frames, the source {}", meta.frame_count, ref_meta.frame_count));
@@ -191,9 +207,9 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     if let Some(&bad) = frames.iter().find(|&&f| f >= meta.frame_count as usize) {
         return Err(Usage(format!("--frames: frame {bad} is out of range (the asset has {} frames, numbered from 0)", meta.frame_count)).into());
     }
-    let renderer = args.gpu.renderer()?;
-    let gpu_asset = renderer.upload(&asset).with_context(|| name.clone())?;
-    let gpu_ref = renderer.upload(&reference).context("reference")?;
+    let renderer = renderer()?;
+    let gpu_asset = renderer.upload(asset).with_context(|| name.clone())?;
+    let gpu_ref = renderer.upload(reference).context("reference")?;
     let scene = Scene::for_asset(&ref_meta);
     let views = scene.orbit(args.views as usize);
     let (w, h) = args.size;
@@ -203,7 +219,7 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     let mut worst_images: Vec<(Shot, Image, Image)> = Vec::new();
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in &frames {
-        voxel.push((f, voxel_errors(&asset, &reference, f)?));
+        voxel.push((f, voxel_errors(asset, reference, f)?));
         let refs = renderer.render_views(&gpu_ref, &scene, f, &views, w, h)?;
         let imgs = renderer.render_views(&gpu_asset, &scene, f, &views, w, h)?;
         for (vi, (r, a)) in refs.into_iter().zip(imgs).enumerate() {
@@ -338,6 +354,16 @@ fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[(S
     write("report.html", html.as_bytes())
 }
 
+/// A small PNG of the middle frame of `asset`, seen by the first of eight orbiting cameras.
+pub fn thumbnail(renderer: &Renderer, asset: &Asset, size: u32) -> Result<Vec<u8>> {
+    let meta = asset.metadata()?;
+    let gpu = renderer.upload(asset)?;
+    let scene = Scene::for_asset(&meta);
+    let view = scene.orbit(8)[0];
+    let img = renderer.render(&gpu, &scene, meta.frame_count as usize / 2, &view, size, size)?;
+    Ok(report::png_rgb(&img))
+}
+
 #[derive(clap::Args)]
 pub struct RenderArgs {
     /// A .vpak asset or a .vdb file.
@@ -389,7 +415,7 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let img = renderer.render(&gpu, &scene, args.frame, &view, args.size.0, args.size.1)?;
     vdbcook_vpak::write_atomic(&args.output, &report::png_rgb(&img), args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
-        crate::write_stdout(&format!("rendered frame {} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter)).ok();
+        crate::emit_final(&format!("rendered frame {} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter))?;
     }
     Ok(exit::SUCCESS)
 }

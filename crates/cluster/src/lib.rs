@@ -31,7 +31,8 @@ pub struct Options {
     /// Number of centroids (k).
     pub clusters: usize,
     pub iterations: usize,
-    /// Bricks with variance / mean above this are never clustered.
+    /// Bricks with variance / mean above this are never clustered (default 0.01,
+    /// the default of `cook --variance-threshold` and of a bake manifest).
     pub variance_threshold: f64,
     /// A clustered brick whose largest absolute difference from its centroid exceeds this stays unique.
     pub max_brick_error: Option<f32>,
@@ -40,7 +41,7 @@ pub struct Options {
 
 impl Default for Options {
     fn default() -> Self {
-        Options { clusters: 256, iterations: 5, variance_threshold: 0.05, max_brick_error: None, seed: 0x5eed }
+        Options { clusters: 256, iterations: 5, variance_threshold: 0.01, max_brick_error: None, seed: 0x5eed }
     }
 }
 

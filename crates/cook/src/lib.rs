@@ -57,11 +57,40 @@ pub trait Progress: Sync {
 pub struct NoProgress;
 impl Progress for NoProgress {}
 
-/// Channels stored together in one format.
-#[derive(Clone, Debug, PartialEq)]
+/// Channels stored together in one format: `CHANNELS=FORMAT` as text, e.g.
+/// `temperature,flames=bc7` (a vec3 grid's name stands for its three channels).
+#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
+#[serde(try_from = "String")]
 pub struct ChannelGroup {
     pub channels: Vec<String>,
     pub format: Format,
+}
+
+impl std::str::FromStr for ChannelGroup {
+    type Err = String;
+    fn from_str(s: &str) -> Result<ChannelGroup, String> {
+        let bad = || format!("invalid group \"{s}\" (expected CHANNELS=FORMAT, e.g. temperature,flames=bc7; formats: f32, f16, unorm8, bc4, bc7)");
+        let (names, format) = s.rsplit_once('=').ok_or_else(bad)?;
+        let format = Format::parse(format.trim()).ok_or_else(bad)?;
+        let channels: Vec<String> = names.split(',').map(|n| n.trim().to_string()).filter(|n| !n.is_empty()).collect();
+        if channels.is_empty() {
+            return Err(bad());
+        }
+        Ok(ChannelGroup { channels, format })
+    }
+}
+
+impl TryFrom<String> for ChannelGroup {
+    type Error = String;
+    fn try_from(s: String) -> Result<ChannelGroup, String> {
+        s.parse()
+    }
+}
+
+impl std::fmt::Display for ChannelGroup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}={}", self.channels.join(","), self.format.name())
+    }
 }
 
 #[derive(Clone, Debug)]

@@ -25,7 +25,9 @@ pub type Brick = [f32; BRICK_VOXELS];
 /// settings (all four channels carry voxels); for BC4, how far our encoder
 /// searches around each block's least-squares endpoints.  `VeryFast` is the
 /// default: see docs/benchmarks.md for the measurements behind it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Quality {
     UltraFast,
     VeryFast,

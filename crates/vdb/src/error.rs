@@ -3,7 +3,9 @@
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{0}")]
+    // Transparent: the I/O error is the message and has no source of its own,
+    // so a `{:#}` chain prints it once.
+    #[error(transparent)]
     Io(#[from] std::io::Error),
     #[error("not an OpenVDB file (magic number {0:#010x}, expected 0x56444220)")]
     NotVdb(u64),

@@ -8,8 +8,11 @@ use serde::{Deserialize, Serialize};
 /// Voxels per brick (an 8³ leaf).
 pub const BRICK_VOXELS: usize = 512;
 
-/// Voxel formats.  The variant order is the format code (metadata and shaders).
+/// Voxel formats.  The variant order is the format code (metadata and
+/// shaders); the names (manifests, flags) are `f32`, `f16`, `unorm8`, `bc4`, `bc7`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Format {
     /// 32-bit float texels.
     F32,

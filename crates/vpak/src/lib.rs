@@ -79,7 +79,9 @@ pub mod kind {
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{0}")]
+    // Transparent: the I/O error is the message and has no source of its own,
+    // so a `{:#}` chain prints it once.
+    #[error(transparent)]
     Io(#[from] std::io::Error),
     #[error("not a .vpak file (bad magic)")]
     Magic,

@@ -1,0 +1,549 @@
+//! `vdbcook bake`: every asset of a manifest, cooked (and validated) in
+//! parallel through the same code as `cook` and `validate`, with a
+//! content-addressed cache, shards, and one report. The plan, the keys and the
+//! reports come from `vdbcook_bake`; this file does the I/O.
+
+use crate::cook::{cook_asset, CookJob};
+use crate::validate::{compare_assets, thumbnail, GpuArgs, ValidateArgs};
+use crate::{exit, one_line, Usage};
+use anyhow::{anyhow, Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde_json::json;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Mutex, OnceLock};
+use std::time::Instant;
+use vdbcook_bake::manifest::resolve;
+use vdbcook_bake::{AssetReport, Gate, KeyContext, Manifest, PlannedAsset, Record, Report, Shard, Sources, Status, Validation};
+use vdbcook_validate::{report::base64, Renderer};
+use vdbcook_vpak::{kind, Asset, Metadata};
+
+pub const AFTER_HELP: &str = "\
+The manifest (TOML) has a [defaults] table and [[asset]] entries. Each entry has a
+name, an output (relative to --out-dir) and inputs (files, directories, globs or frame
+patterns, relative to the manifest), and any cook setting under its flag's name with
+'_' for '-' (frames, grid, allow_missing, format, quality, clusters, iterations,
+variance_threshold, max_brick_error, max_texture_dim), and a quality gate: validate
+(true/false), max_rmse, min_psnr, views, size. An entry's setting overrides
+[defaults], which overrides the built-in default (the same as `vdbcook cook`'s).
+
+  [defaults]
+  format = \"bc7\"
+  validate = true
+  max_rmse = 0.02
+
+  [[asset]]
+  name = \"smoke\"
+  output = \"smoke.vpak\"
+  inputs = [\"vdb/smoke_####.vdb\"]
+  frames = \"1-120\"
+
+Cache: an asset's key is an XXH3-128 hash of its input files' bytes, every setting,
+vdbcook's version and the .vpak format version, and is recorded in the asset. An asset
+whose output already carries its key (and whose checksums hold) is left in place; with
+--cache DIR, one found there is copied; otherwise it is cooked, and stored in DIR.
+Outputs are written atomically and belong to the bake: a stale one is replaced.
+
+Reports: report.json (docs/bake-json.md; --json prints the same), report.xml (JUnit)
+and report.html (sortable, self-contained) in --report-dir, default --out-dir; each
+validated asset's own page in validation/NAME/ there.
+
+Scale-out: --shard I/N takes every N-th asset (round robin in manifest order), so N
+CI jobs bake each asset once; `vdbcook bake --merge shard*/report.json` joins their
+reports. `--plan --json` lists each asset's inputs, output and key, for build systems
+that run `vdbcook bake bake.toml --only NAME` per asset (see docs/ci.md).
+
+Exit codes: 0 every asset baked or cached and every gate held; 1 an asset failed
+(bad input, I/O); 3 only quality gates failed; 2 usage or manifest errors (nothing is
+baked or written).";
+
+#[derive(clap::Args)]
+pub struct BakeArgs {
+    /// The manifest (see below).
+    #[arg(value_name = "bake.toml", required_unless_present = "merge")]
+    pub manifest: Option<PathBuf>,
+    /// Directory the manifest's outputs are relative to (default: the manifest's directory).
+    #[arg(long, value_name = "DIR")]
+    pub out_dir: Option<PathBuf>,
+    /// Directory for report.json, report.xml, report.html and validation pages (default: --out-dir).
+    #[arg(long, value_name = "DIR")]
+    pub report_dir: Option<PathBuf>,
+    /// Content-addressed cache: assets are looked up as DIR/KEY.vpak before cooking, and stored there after.
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
+    /// Assets baked at once (default: the number of cores); each cook is parallel over --threads as well.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub jobs: Option<u32>,
+    /// Bake only part I of N (from 1): the assets whose manifest position is I-1 modulo N.
+    #[arg(long, value_name = "I/N")]
+    pub shard: Option<Shard>,
+    /// Bake only these assets (repeat the flag or separate names with commas).
+    #[arg(long, value_name = "NAME", value_delimiter = ',')]
+    pub only: Vec<String>,
+    /// Check the manifest and the cache and say what would be baked; write nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Print each asset's inputs, output and cache key (with --json: as JSON); bake nothing.
+    #[arg(long)]
+    pub plan: bool,
+    /// Print the report (or the plan, or the dry run) as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Stop starting new assets after the first failure (the rest are reported as skipped).
+    #[arg(long)]
+    pub fail_fast: bool,
+    /// Join the report.json files of shards into one report (written to --report-dir, default ".").
+    #[arg(long, value_name = "REPORT.json", num_args = 1.., conflicts_with_all = ["manifest", "plan", "dry_run", "shard", "only", "cache", "fail_fast"])]
+    pub merge: Vec<PathBuf>,
+    #[command(flatten)]
+    pub gpu: GpuArgs,
+}
+
+/// The version that cache keys include: vdbcook's own, unless the hidden
+/// VDBCOOK_BAKE_TOOL_VERSION variable replaces it (tests use it to play a
+/// newer release; see docs/bake-json.md).
+fn tool_version() -> String {
+    match std::env::var("VDBCOOK_BAKE_TOOL_VERSION") {
+        Ok(v) if !v.is_empty() => format!("vdbcook {v}"),
+        _ => concat!("vdbcook ", env!("CARGO_PKG_VERSION")).to_string(),
+    }
+}
+
+/// The planner's view of the file system.
+struct FsSources;
+
+impl Sources for FsSources {
+    fn expand(&self, inputs: &[String], frames: Option<vdbcook_bake::FrameRange>) -> Result<Vec<PathBuf>, String> {
+        crate::inputs::expand(inputs, frames).map_err(|e| one_line(&e))
+    }
+    fn is_pattern(&self, input: &str) -> bool {
+        crate::inputs::is_pattern(input)
+    }
+    fn read(&self, path: &Path) -> std::io::Result<Option<Vec<u8>>> {
+        match std::fs::read(path) {
+            Ok(b) => Ok(Some(b)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+}
+
+pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
+    if !args.merge.is_empty() {
+        return merge(&args, quiet);
+    }
+    let started = Instant::now();
+    let manifest_path = args.manifest.clone().ok_or_else(|| Usage("a manifest (bake.toml) is needed".into()))?;
+    let mname = manifest_path.display().to_string();
+    let text = std::fs::read_to_string(&manifest_path).map_err(|e| Usage(format!("{mname}: {e}")))?;
+    let base = manifest_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let m = Manifest::parse(&text).map_err(|e| Usage(format!("{mname}:{}", e.located(&text))))?;
+    let planned = vdbcook_bake::plan(&m, &base, &FsSources, &KeyContext::new(tool_version())).map_err(|e| Usage(format!("{mname}:{}", e.located(&text))))?;
+    if let Some(n) = args.only.iter().find(|n| !planned.iter().any(|a| a.name == **n)) {
+        let names: Vec<&str> = planned.iter().map(|a| a.name.as_str()).collect();
+        return Err(Usage(format!("--only: no asset named \"{n}\" in {mname} (it has: {})", names.join(", "))).into());
+    }
+    let selected: Vec<PlannedAsset> = planned.into_iter().filter(|a| args.only.is_empty() || args.only.contains(&a.name)).filter(|a| args.shard.is_none_or(|s| s.takes(a.index))).collect();
+    let out_dir = args.out_dir.clone().unwrap_or_else(|| base.clone());
+    let report_dir = args.report_dir.clone().unwrap_or_else(|| out_dir.clone());
+    if args.plan {
+        return print_plan(&args, &mname, &out_dir, &selected, quiet);
+    }
+    if args.dry_run {
+        return dry_run(&args, &out_dir, &selected, quiet);
+    }
+
+    let ctx = Ctx { out_dir, report_dir: report_dir.clone(), cache: args.cache.clone(), base, gpu: args.gpu.clone(), first_error: OnceLock::new(), renderers: Mutex::new(Vec::new()) };
+    let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize).clamp(1, selected.len().max(1));
+    let show = Shown::new(quiet || args.json, selected.len());
+    let next = AtomicUsize::new(0);
+    let stop = AtomicBool::new(false);
+    let results: Mutex<Vec<AssetReport>> = Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..jobs {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::SeqCst);
+                let Some(a) = selected.get(i) else { break };
+                let r = if stop.load(Ordering::SeqCst) { skipped(a) } else { bake_one(a, &ctx) };
+                if args.fail_fast && r.status == Status::Failed {
+                    stop.store(true, Ordering::SeqCst);
+                }
+                show.finished(&r);
+                if let Ok(mut v) = results.lock() {
+                    v.push(r);
+                }
+            });
+        }
+    });
+    show.done();
+    let assets = results.into_inner().map_err(|_| anyhow!("a bake worker panicked"))?;
+    let report = Report::new(tool_version(), mname, args.shard, assets, started.elapsed().as_secs_f64());
+    write_reports(&report_dir, &report)?;
+    finish(&report, &report_dir, args.json, quiet)
+}
+
+/// Writes report.json, report.xml and report.html into `dir`, each atomically.
+fn write_reports(dir: &Path, report: &Report) -> Result<()> {
+    let d = dir.display().to_string();
+    std::fs::create_dir_all(dir).with_context(|| d.clone())?;
+    for (file, text) in [("report.json", report.to_json()), ("report.xml", report.to_junit()), ("report.html", report.to_html())] {
+        let p = dir.join(file);
+        vdbcook_vpak::write_atomic(&p, text.as_bytes(), true).with_context(|| p.display().to_string())?;
+    }
+    Ok(())
+}
+
+/// Prints the outcome (failures on stderr, the summary or the JSON on stdout); the exit code.
+fn finish(report: &Report, report_dir: &Path, as_json: bool, quiet: bool) -> Result<u8> {
+    for a in &report.assets {
+        match a.status {
+            Status::Failed => eprintln!("vdbcook: error: asset {}: {}", a.name, a.message.as_deref().unwrap_or("failed")),
+            Status::GateFailed => eprintln!("vdbcook: quality gate failed: asset {}: {}", a.name, a.message.as_deref().unwrap_or("")),
+            _ => {}
+        }
+    }
+    if !quiet {
+        let s = &report.summary;
+        let text = if as_json {
+            report.to_json()
+        } else {
+            format!(
+                "{}: {} asset{} in {:.1} s: {} baked, {} cached, {} failed, {} failed a quality gate, {} skipped\n  report  {}\n",
+                report.manifest,
+                s.assets,
+                if s.assets == 1 { "" } else { "s" },
+                report.seconds,
+                s.baked,
+                s.cached,
+                s.failed,
+                s.gate_failed,
+                s.skipped,
+                report_dir.join("report.html").display()
+            )
+        };
+        crate::emit_final(&text)?;
+    }
+    let s = &report.summary;
+    Ok(if s.failed + s.skipped > 0 {
+        exit::FAILURE
+    } else if s.gate_failed > 0 {
+        exit::QUALITY_GATE
+    } else {
+        exit::SUCCESS
+    })
+}
+
+fn merge(args: &BakeArgs, quiet: bool) -> Result<u8> {
+    let mut parts = Vec::new();
+    for p in &args.merge {
+        let name = p.display().to_string();
+        let text = std::fs::read_to_string(p).map_err(|e| Usage(format!("{name}: {e}")))?;
+        parts.push((name.clone(), Report::from_json(&name, &text).map_err(|e| Usage(e.to_string()))?));
+    }
+    let report = Report::merge(parts).map_err(|e| Usage(e.to_string()))?;
+    let dir = args.report_dir.clone().or_else(|| args.out_dir.clone()).unwrap_or_else(|| PathBuf::from("."));
+    write_reports(&dir, &report)?;
+    finish(&report, &dir, args.json, quiet)
+}
+
+fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, assets: &[PlannedAsset], quiet: bool) -> Result<u8> {
+    if quiet {
+        return Ok(exit::SUCCESS);
+    }
+    let text = if args.json {
+        let doc = json!({
+            "version": 1,
+            "manifest": manifest,
+            "out_dir": out_dir.display().to_string(),
+            "shard": args.shard,
+            "assets": assets.iter().map(|a| json!({
+                "index": a.index,
+                "name": a.name,
+                "output": a.output,
+                "output_path": resolve(out_dir, &a.output).display().to_string(),
+                "inputs": a.inputs,
+                "files": a.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
+                "cache_key": a.key,
+                "settings": a.settings.pairs().into_iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
+            })).collect::<Vec<_>>(),
+        });
+        format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default())
+    } else {
+        let mut t = String::new();
+        for a in assets {
+            t += &format!("{}  {}  {} <- {} file{}\n", a.name, a.key, resolve(out_dir, &a.output).display(), a.files.len(), if a.files.len() == 1 { "" } else { "s" });
+        }
+        t
+    };
+    crate::emit_final(&text)?;
+    Ok(exit::SUCCESS)
+}
+
+fn dry_run(args: &BakeArgs, out_dir: &Path, assets: &[PlannedAsset], quiet: bool) -> Result<u8> {
+    let mut rows = Vec::new();
+    for a in assets {
+        let out = resolve(out_dir, &a.output);
+        let action = if cached(&out, &a.key).is_some() {
+            "cached"
+        } else if args.cache.as_ref().is_some_and(|c| cached(&c.join(format!("{}.vpak", a.key)), &a.key).is_some()) {
+            "from-cache"
+        } else {
+            "bake"
+        };
+        rows.push((a, out, action));
+    }
+    if quiet {
+        return Ok(exit::SUCCESS);
+    }
+    let text = if args.json {
+        let doc = json!({ "assets": rows.iter().map(|(a, out, action)| json!({"name": a.name, "action": action, "output": a.output, "output_path": out.display().to_string(), "cache_key": a.key})).collect::<Vec<_>>() });
+        format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default())
+    } else {
+        rows.iter().map(|(a, out, action)| format!("{action:<10} {}  {}\n", a.name, out.display())).collect()
+    };
+    crate::emit_final(&text)?;
+    Ok(exit::SUCCESS)
+}
+
+/// What every worker shares.
+struct Ctx {
+    out_dir: PathBuf,
+    report_dir: PathBuf,
+    cache: Option<PathBuf>,
+    base: PathBuf,
+    gpu: GpuArgs,
+    /// Why no GPU device could be opened, once that happened.
+    first_error: OnceLock<String>,
+    /// Idle GPU devices: each worker borrows its own (on Mesa's CPU driver, one
+    /// device per worker renders in parallel where a shared queue would not).
+    renderers: Mutex<Vec<Renderer>>,
+}
+
+/// A GPU device borrowed from [`Ctx`]; it goes back when dropped.
+struct Lease<'a> {
+    ctx: &'a Ctx,
+    renderer: Option<Renderer>,
+}
+
+impl std::ops::Deref for Lease<'_> {
+    type Target = Renderer;
+    fn deref(&self) -> &Renderer {
+        // Some until drop.
+        self.renderer.as_ref().unwrap_or_else(|| unreachable!("a lease holds its renderer until dropped"))
+    }
+}
+
+impl Drop for Lease<'_> {
+    fn drop(&mut self) {
+        if let (Some(r), Ok(mut pool)) = (self.renderer.take(), self.ctx.renderers.lock()) {
+            pool.push(r);
+        }
+    }
+}
+
+impl Ctx {
+    fn renderer(&self) -> Result<Lease<'_>> {
+        if let Some(e) = self.first_error.get() {
+            return Err(anyhow!(e.clone()));
+        }
+        let idle = self.renderers.lock().ok().and_then(|mut pool| pool.pop());
+        let renderer = match idle {
+            Some(r) => r,
+            None => self.gpu.renderer().inspect_err(|e| {
+                let _ = self.first_error.set(one_line(e));
+            })?,
+        };
+        Ok(Lease { ctx: self, renderer: Some(renderer) })
+    }
+}
+
+/// The record and size of a valid asset at `path` that carries `key`.
+fn cached(path: &Path, key: &str) -> Option<(Record, u64)> {
+    // Opening checks every checksum: a corrupted asset is not a hit.
+    let asset = Asset::open(path).ok()?;
+    let meta = asset.metadata().ok()?;
+    let get = |k: &str| meta.settings.iter().find(|(n, _)| n == k).map(|(_, v)| v.as_str());
+    if get("cache_key")? != key {
+        return None;
+    }
+    Some((Record::from_setting(get("bake_record")?)?, asset.bytes().len() as u64))
+}
+
+fn skipped(a: &PlannedAsset) -> AssetReport {
+    let mut r = blank(a);
+    r.status = Status::Skipped;
+    r.message = Some("not baked: an earlier asset failed (--fail-fast)".into());
+    r
+}
+
+fn blank(a: &PlannedAsset) -> AssetReport {
+    AssetReport {
+        index: a.index,
+        name: a.name.clone(),
+        status: Status::Failed,
+        output: a.output.clone(),
+        bytes: None,
+        cache_key: a.key.clone(),
+        inputs: a.inputs.clone(),
+        files: a.files.len(),
+        record: Record::default(),
+        validate: a.settings.validate,
+        gate: Gate { max_rmse: a.settings.max_rmse, min_psnr: a.settings.min_psnr },
+        message: None,
+        validation_report: None,
+        seconds: 0.0,
+    }
+}
+
+/// Bakes one asset (or finds it cached); never fails: a failure is its status.
+fn bake_one(a: &PlannedAsset, ctx: &Ctx) -> AssetReport {
+    let t0 = Instant::now();
+    let mut r = blank(a);
+    let out = resolve(&ctx.out_dir, &a.output);
+    match obtain(a, ctx, &out) {
+        Ok((status, record, bytes)) => {
+            r.status = if record.gate_failure.is_some() { Status::GateFailed } else { status };
+            r.message = record.gate_failure.clone();
+            r.record = record;
+            r.bytes = Some(bytes);
+        }
+        Err(e) => r.message = Some(one_line(&e)),
+    }
+    let page = Path::new("validation").join(&a.name).join("report.html");
+    if a.settings.validate && ctx.report_dir.join(&page).is_file() {
+        r.validation_report = Some(page.to_string_lossy().replace('\\', "/"));
+    }
+    r.seconds = t0.elapsed().as_secs_f64();
+    r
+}
+
+/// The asset at `out`: left in place, copied from the cache, or cooked.
+fn obtain(a: &PlannedAsset, ctx: &Ctx, out: &Path) -> Result<(Status, Record, u64)> {
+    if let Some((record, bytes)) = cached(out, &a.key) {
+        return Ok((Status::Cached, record, bytes));
+    }
+    let name = out.display().to_string();
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| parent.display().to_string())?;
+    }
+    let cache_file = ctx.cache.as_ref().map(|c| c.join(format!("{}.vpak", a.key)));
+    if let Some(cf) = &cache_file {
+        if let Some((record, bytes)) = cached(cf, &a.key) {
+            let data = std::fs::read(cf).with_context(|| cf.display().to_string())?;
+            vdbcook_vpak::write_atomic(out, &data, true).with_context(|| name.clone())?;
+            return Ok((Status::Cached, record, bytes));
+        }
+    }
+    let (bytes, record) = cook_fresh(a, ctx, &name)?;
+    vdbcook_vpak::write_atomic(out, &bytes, true).with_context(|| name.clone())?;
+    if let (Some(cf), Some(dir)) = (&cache_file, &ctx.cache) {
+        std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+        vdbcook_vpak::write_atomic(cf, &bytes, true).with_context(|| cf.display().to_string())?;
+    }
+    Ok((Status::Baked, record, bytes.len() as u64))
+}
+
+fn finite(x: f64) -> Option<f64> {
+    x.is_finite().then_some(x)
+}
+
+/// Cooks, validates and renders a thumbnail; returns the asset's bytes, with
+/// the key and the record in its metadata.
+fn cook_fresh(a: &PlannedAsset, ctx: &Ctx, name: &str) -> Result<(Vec<u8>, Record)> {
+    let s = &a.settings;
+    let cooked = cook_asset(CookJob { settings: s, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: s.validate }, &vdbcook_cook::NoProgress)?;
+    let r = &cooked.report;
+    let mut record = Record {
+        frames: Some(r.frames as u32),
+        format: Some(r.format.clone()),
+        grid: cooked.grid.clone(),
+        active_voxels: Some(r.active_voxels),
+        bits_per_active_voxel: Some(r.bits_per_active_voxel),
+        voxel_rmse: Some(r.voxel_rmse),
+        voxel_psnr: finite(r.voxel_psnr),
+        ..Record::default()
+    };
+    let mut sections = cooked.sections;
+    let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?;
+    if let Some(reference) = &cooked.reference {
+        let v = ValidateArgs {
+            asset: PathBuf::from(name),
+            source: a.input_paths.clone(),
+            source_frames: s.frames,
+            frames: None,
+            views: s.views,
+            size: (s.size.width, s.size.height),
+            max_rmse: s.max_rmse,
+            min_psnr: s.min_psnr,
+            report: Some(ctx.report_dir.join("validation").join(&a.name)),
+            gpu: ctx.gpu.clone(),
+            json: true,
+        };
+        let o = compare_assets(&asset, &a.output, reference, &v, || ctx.renderer(), &vdbcook_cook::NoProgress).context("validating")?;
+        record.validation = Some(validation_figures(&o.doc));
+        record.gate_failure = o.gate_failure;
+    }
+    // A preview for the report; without a GPU (and no validation asked for) there is none.
+    if let Ok(renderer) = ctx.renderer() {
+        record.thumbnail = thumbnail(&renderer, &asset, 96).ok().map(|png| base64(&png));
+    }
+    drop(asset);
+    let meta_section = sections.iter_mut().find(|x| x.kind == kind::METADATA).ok_or_else(|| anyhow!("the cooked asset has no metadata"))?;
+    let mut meta = Metadata::from_bytes(&meta_section.data)?;
+    meta.settings.push(("cache_key".into(), a.key.clone()));
+    meta.settings.push(("bake_record".into(), record.to_setting()));
+    meta_section.data = meta.to_bytes()?;
+    Ok((vdbcook_vpak::assemble(&sections), record))
+}
+
+/// The image figures of a validation document (docs/validate-json.md).
+fn validation_figures(doc: &serde_json::Value) -> Validation {
+    let images = doc["images"].as_array().map_or(&[][..], |v| &v[..]);
+    let mean = if images.is_empty() { 0.0 } else { images.iter().filter_map(|i| i["rmse"].as_f64()).sum::<f64>() / images.len() as f64 };
+    let size = |k: usize| doc["size"][k].as_u64().unwrap_or(0) as u32;
+    Validation {
+        adapter: doc["adapter"].as_str().unwrap_or("").to_string(),
+        views: doc["views"].as_u64().unwrap_or(0) as u32,
+        size: [size(0), size(1)],
+        images: images.len(),
+        worst_frame: doc["worst"]["frame"].as_u64().unwrap_or(0) as usize,
+        worst_view: doc["worst"]["view"].as_u64().unwrap_or(0) as usize,
+        image_rmse: doc["worst"]["rmse"].as_f64().unwrap_or(0.0),
+        image_psnr: doc["worst"]["psnr"].as_f64(),
+        mean_image_rmse: mean,
+    }
+}
+
+/// Progress on a terminal: one overall bar and a line per finished asset.
+struct Shown {
+    bar: Option<ProgressBar>,
+}
+
+impl Shown {
+    fn new(hidden: bool, total: usize) -> Shown {
+        let visible = !hidden && std::io::stderr().is_terminal() && std::io::stdout().is_terminal();
+        let bar = visible.then(|| {
+            let bar = ProgressBar::with_draw_target(Some(total as u64), ProgressDrawTarget::stderr());
+            let style = ProgressStyle::with_template("{prefix:>15} [{bar:30}] {pos}/{len} {elapsed_precise} (eta {eta})").unwrap_or_else(|_| ProgressStyle::default_bar());
+            bar.set_style(style.progress_chars("=> "));
+            bar.set_prefix("baking");
+            bar
+        });
+        Shown { bar }
+    }
+
+    fn finished(&self, r: &AssetReport) {
+        if let Some(bar) = &self.bar {
+            let size = r.bytes.map(vdbcook_bake::report::human_bytes).unwrap_or_default();
+            bar.println(format!("{:>12} {} {} ({:.1} s)", r.status.name(), r.name, size, r.seconds));
+            bar.inc(1);
+        }
+    }
+
+    fn done(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
+    }
+}

@@ -1,0 +1,384 @@
+//! The typed cook options: one struct, [`CookSettings`], built from `cook`'s
+//! flags (clap) or from a manifest entry (serde), with one default per setting.
+//!
+//! Every setting is declared once, in the `settings!` list at the bottom:
+//! its type, its default, its flag's help and value checks. The macro derives
+//! the struct, its defaults, the manifest tables (every field optional, with
+//! its position in the file) and the canonical `(name, value)` list that cache
+//! keys hash. Adding a setting is one entry there.
+
+use crate::Error;
+use std::fmt;
+use std::ops::RangeInclusive;
+use std::str::FromStr;
+use toml::Spanned;
+pub use vdbcook_cook::ChannelGroup;
+pub use vdbcook_encode::{Format, Quality};
+
+/// An inclusive frame range with a step (`A-B` or `A-B:STEP`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameRange {
+    pub first: i64,
+    pub last: i64,
+    pub step: i64,
+}
+
+impl FromStr for FrameRange {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("invalid frame range \"{s}\" (expected A-B or A-B:STEP, e.g. 1-120:2)");
+        let (range, step) = match s.split_once(':') {
+            Some((r, st)) => (r, st.parse::<i64>().map_err(|_| bad())?),
+            None => (s, 1),
+        };
+        // Allow negative frame numbers: split on the '-' that follows the first number.
+        let cut = range.char_indices().skip(1).find(|&(_, c)| c == '-').map(|(i, _)| i);
+        let (a, b) = match cut {
+            Some(i) => (&range[..i], &range[i + 1..]),
+            None => (range, range),
+        };
+        let (first, last) = (a.trim().parse::<i64>().map_err(|_| bad())?, b.trim().parse::<i64>().map_err(|_| bad())?);
+        if step < 1 || last < first {
+            return Err(bad());
+        }
+        if i128::from(last) - i128::from(first) > 1_000_000 * i128::from(step) {
+            return Err(format!("frame range \"{s}\" has more than a million frames"));
+        }
+        Ok(FrameRange { first, last, step })
+    }
+}
+
+impl fmt::Display for FrameRange {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}-{}:{}", self.first, self.last, self.step)
+    }
+}
+
+impl FrameRange {
+    pub fn frames(&self) -> impl Iterator<Item = i64> + '_ {
+        (self.first..=self.last).step_by(self.step as usize)
+    }
+}
+
+/// An image size, `WxH`, each 8 to 8192.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Size {
+    pub width: u32,
+    pub height: u32,
+}
+
+impl FromStr for Size {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("invalid size \"{s}\" (expected WxH, e.g. 512x512, each 8 to 8192)");
+        let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+        let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
+        if !(8..=8192).contains(&w) || !(8..=8192).contains(&h) {
+            return Err(bad());
+        }
+        Ok(Size { width: w, height: h })
+    }
+}
+
+impl fmt::Display for Size {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}x{}", self.width, self.height)
+    }
+}
+
+/// Types written as a string in a manifest and parsed like the flag.
+macro_rules! deserialize_from_str {
+    ($($t:ty),*) => {$(
+        impl<'de> serde::Deserialize<'de> for $t {
+            fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                let s = String::deserialize(d)?;
+                s.parse().map_err(serde::de::Error::custom)
+            }
+        }
+    )*};
+}
+deserialize_from_str!(FrameRange, Size);
+
+/// A setting's value as canonical text (for cache keys and metadata).
+pub trait SettingText {
+    fn text(&self) -> String;
+}
+
+macro_rules! text_by_display {
+    ($($t:ty),*) => {$( impl SettingText for $t { fn text(&self) -> String { self.to_string() } } )*};
+}
+text_by_display!(bool, u32, f32, f64, String, FrameRange, Size, ChannelGroup);
+
+impl SettingText for Format {
+    fn text(&self) -> String {
+        self.name().to_string()
+    }
+}
+
+impl SettingText for Quality {
+    fn text(&self) -> String {
+        self.name().to_string()
+    }
+}
+
+impl<T: SettingText> SettingText for Option<T> {
+    fn text(&self) -> String {
+        self.as_ref().map(SettingText::text).unwrap_or_default()
+    }
+}
+
+impl<T: SettingText> SettingText for Vec<T> {
+    fn text(&self) -> String {
+        self.iter().map(SettingText::text).collect::<Vec<_>>().join(",")
+    }
+}
+
+/// Accepted ranges, shared by the flags' parsers and the manifest's checks.
+pub const CLUSTERS: RangeInclusive<i64> = 1..=1_000_000;
+pub const ITERATIONS: RangeInclusive<i64> = 0..=1000;
+pub const MAX_TEXTURE_DIM: RangeInclusive<i64> = 8..=16384;
+pub const VIEWS: RangeInclusive<i64> = 1..=360;
+
+macro_rules! settings {
+    ($( $(#[$attr:meta])* $name:ident : $ty:ty = $default:expr ; )*) => {
+        /// Every cook setting of one asset (flags of `vdbcook cook`, keys of a bake manifest).
+        #[derive(Clone, Debug, PartialEq)]
+        #[cfg_attr(feature = "clap", derive(clap::Args))]
+        pub struct CookSettings {
+            $( $(#[$attr])* pub $name: $ty, )*
+        }
+
+        impl Default for CookSettings {
+            fn default() -> Self {
+                CookSettings { $( $name: $default, )* }
+            }
+        }
+
+        impl CookSettings {
+            /// Setting names in canonical order (the manifest's keys).
+            pub const NAMES: &'static [&'static str] = &[$( stringify!($name), )*];
+
+            /// Every setting as (name, value) text, in canonical order.
+            pub fn pairs(&self) -> Vec<(&'static str, String)> {
+                vec![$( (stringify!($name), SettingText::text(&self.$name)), )*]
+            }
+        }
+
+        /// A manifest's `[defaults]` table: any setting, each optional.
+        #[derive(Clone, Debug, Default, serde::Deserialize)]
+        #[serde(deny_unknown_fields)]
+        pub struct SettingsTable {
+            $( #[serde(default)] pub $name: Option<Spanned<$ty>>, )*
+        }
+
+        /// One `[[asset]]` entry: name, output, inputs and any setting.
+        #[derive(Clone, Debug, serde::Deserialize)]
+        #[serde(deny_unknown_fields)]
+        pub struct AssetTable {
+            pub name: Spanned<String>,
+            pub output: Spanned<String>,
+            pub inputs: Spanned<Vec<Spanned<String>>>,
+            $( #[serde(default)] pub $name: Option<Spanned<$ty>>, )*
+        }
+
+        impl SettingsTable {
+            /// Overrides `s` with the settings this table gives.
+            pub fn apply(&self, s: &mut CookSettings) {
+                $( if let Some(v) = &self.$name { s.$name = v.get_ref().clone(); } )*
+            }
+            /// Where the table gives `name`.
+            pub fn span(&self, name: &str) -> Option<std::ops::Range<usize>> {
+                $( if name == stringify!($name) { return self.$name.as_ref().map(|v| v.span()); } )*
+                None
+            }
+        }
+
+        impl AssetTable {
+            pub fn apply(&self, s: &mut CookSettings) {
+                $( if let Some(v) = &self.$name { s.$name = v.get_ref().clone(); } )*
+            }
+            pub fn span(&self, name: &str) -> Option<std::ops::Range<usize>> {
+                $( if name == stringify!($name) { return self.$name.as_ref().map(|v| v.span()); } )*
+                None
+            }
+        }
+    };
+}
+
+fn cook_defaults() -> vdbcook_cook::CookOptions {
+    vdbcook_cook::CookOptions::default()
+}
+
+fn cluster_defaults() -> vdbcook_cluster::Options {
+    vdbcook_cluster::Options::default()
+}
+
+// The one list of settings. Defaults come from the libraries that use them
+// (CookOptions, cluster::Options) or are written here; the flags show them.
+settings! {
+    /// Frames of a frame pattern: A-B or A-B:STEP (e.g. 1-120:2).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "RANGE"))]
+    frames: Option<FrameRange> = None;
+    /// Grid to cook (default: "density", else the first float grid; a vec3 grid gives three channels).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "NAME", conflicts_with = "grids"))]
+    grid: Option<String> = None;
+    /// Grids to cook into one asset, as channels of one tree: names as in the files,
+    /// comma-separated, or "all" (every float, double, half and vec3 grid of the first frame).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "A,B,...|all"))]
+    grids: Option<String> = None;
+    /// Store these channels together in their own format (repeatable), e.g.
+    /// --group temperature,flames=bc7 --group density=bc4; other channels take --format.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "CHANNELS=FORMAT"))]
+    group: Vec<ChannelGroup> = Vec::new();
+    /// A frame whose file or grid is missing becomes an empty frame instead of an error.
+    #[cfg_attr(feature = "clap", arg(long))]
+    allow_missing: bool = false;
+    /// Voxel format of the brick atlas.
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().format))]
+    format: Format = cook_defaults().format;
+    /// Encoder preset of bc7 and bc4 (see the notes below).
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().quality))]
+    quality: Quality = cook_defaults().quality;
+    /// Merge similar bricks with variance-gated k-means into K centroid bricks (off by default).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(CLUSTERS)))]
+    clusters: Option<u32> = None;
+    /// k-means iterations.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().iterations, value_parser = clap::value_parser!(u32).range(ITERATIONS)))]
+    iterations: u32 = cluster_defaults().iterations as u32;
+    /// Bricks whose variance / mean exceeds T are never clustered.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "T", default_value_t = CookSettings::default().variance_threshold))]
+    variance_threshold: f64 = cluster_defaults().variance_threshold;
+    /// A clustered brick whose largest voxel difference from its centroid exceeds E stays unique.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "E"))]
+    max_brick_error: Option<f32> = cluster_defaults().max_brick_error;
+    /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim, value_parser = clap::value_parser!(u32).range(MAX_TEXTURE_DIM)))]
+    max_texture_dim: u32 = cook_defaults().max_texture_dim;
+    /// After cooking, render the asset against its sources on the GPU (see `vdbcook validate`).
+    #[cfg_attr(feature = "clap", arg(long))]
+    validate: bool = false;
+    /// With --validate: exit with code 3 when any image's RMSE is above X.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "X", requires = "validate"))]
+    max_rmse: Option<f64> = None;
+    /// With --validate: exit with code 3 when any image's PSNR (dB) is below Y.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "Y", requires = "validate"))]
+    min_psnr: Option<f64> = None;
+    /// With --validate: cameras orbiting the volume.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().views, requires = "validate", value_parser = clap::value_parser!(u32).range(VIEWS)))]
+    views: u32 = 8;
+    /// With --validate: image size.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "WxH", default_value_t = CookSettings::default().size, requires = "validate"))]
+    size: Size = Size { width: 512, height: 512 };
+}
+
+impl CookSettings {
+    /// Checks what the types do not: ranges and numbers. The error names the setting.
+    pub fn check(&self) -> Result<(), Error> {
+        let bad = |name: &'static str, message: String| Err(Error::Setting { name, message });
+        let within = |v: u32, r: &RangeInclusive<i64>| r.contains(&i64::from(v));
+        if let Some(k) = self.clusters.filter(|&k| !within(k, &CLUSTERS)) {
+            return bad("clusters", format!("{k} is not in {}..={}", CLUSTERS.start(), CLUSTERS.end()));
+        }
+        if !within(self.iterations, &ITERATIONS) {
+            return bad("iterations", format!("{} is not in {}..={}", self.iterations, ITERATIONS.start(), ITERATIONS.end()));
+        }
+        if !within(self.max_texture_dim, &MAX_TEXTURE_DIM) {
+            return bad("max_texture_dim", format!("{} is not in {}..={}", self.max_texture_dim, MAX_TEXTURE_DIM.start(), MAX_TEXTURE_DIM.end()));
+        }
+        if !within(self.views, &VIEWS) {
+            return bad("views", format!("{} is not in {}..={}", self.views, VIEWS.start(), VIEWS.end()));
+        }
+        if self.variance_threshold.is_nan() || self.variance_threshold < 0.0 {
+            return bad("variance_threshold", format!("must be a number >= 0, not {}", self.variance_threshold));
+        }
+        if let Some(e) = self.max_brick_error.filter(|e| e.is_nan() || *e < 0.0) {
+            return bad("max_brick_error", format!("must be a number >= 0, not {e}"));
+        }
+        if let Some(x) = self.max_rmse.filter(|x| x.is_nan() || *x < 0.0) {
+            return bad("max_rmse", format!("must be a number >= 0, not {x}"));
+        }
+        if let Some(y) = self.min_psnr.filter(|y| y.is_nan()) {
+            return bad("min_psnr", format!("must be a number, not {y}"));
+        }
+        Ok(())
+    }
+
+    /// The clustering options, when `clusters` is set.
+    pub fn clustering(&self) -> Option<vdbcook_cluster::Options> {
+        self.clusters.map(|k| vdbcook_cluster::Options {
+            clusters: k as usize,
+            iterations: self.iterations as usize,
+            variance_threshold: self.variance_threshold,
+            max_brick_error: self.max_brick_error,
+            ..vdbcook_cluster::Options::default()
+        })
+    }
+
+    /// The settings a cook records in the asset's metadata (what `cook` has
+    /// always written): settings that do not apply are empty.
+    pub fn recorded(&self, inputs: &[String]) -> Vec<(String, String)> {
+        let clustered = self.clusters.is_some();
+        vec![
+            ("format".into(), self.format.text()),
+            ("quality".into(), if self.format.is_block() { self.quality.text() } else { String::new() }),
+            ("grid".into(), self.grids.clone().or_else(|| self.grid.clone()).unwrap_or_default()),
+            ("groups".into(), self.group.iter().map(ChannelGroup::to_string).collect::<Vec<_>>().join(" ")),
+            ("frames".into(), self.frames.text()),
+            ("allow_missing".into(), self.allow_missing.text()),
+            ("max_texture_dim".into(), self.max_texture_dim.text()),
+            ("clusters".into(), self.clusters.text()),
+            ("iterations".into(), if clustered { self.iterations.text() } else { String::new() }),
+            ("variance_threshold".into(), if clustered { self.variance_threshold.text() } else { String::new() }),
+            ("max_brick_error".into(), self.max_brick_error.text()),
+            ("inputs".into(), inputs.join(" ")),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_ranges_and_sizes_round_trip() {
+        for s in ["1-120:2", "-3-2:1", "5-5:1"] {
+            assert_eq!(s.parse::<FrameRange>().unwrap().to_string(), s);
+        }
+        assert!("9-1".parse::<FrameRange>().is_err());
+        assert_eq!("64x48".parse::<Size>().unwrap(), Size { width: 64, height: 48 });
+        assert!("4x4".parse::<Size>().is_err());
+    }
+
+    /// A manifest says `format = "bc7"` where the command line says `--format bc7`.
+    #[cfg(feature = "clap")]
+    #[test]
+    fn manifest_values_are_the_flag_values() {
+        #[derive(serde::Deserialize)]
+        struct T {
+            f: Format,
+            q: Quality,
+        }
+        for f in Format::ALL {
+            let flag = clap::ValueEnum::to_possible_value(&f).unwrap();
+            assert_eq!(flag.get_name(), f.name());
+            for q in Quality::ALL {
+                let flag_q = clap::ValueEnum::to_possible_value(&q).unwrap();
+                let t: T = toml::from_str(&format!("f = \"{}\"\nq = \"{}\"", flag.get_name(), flag_q.get_name())).unwrap();
+                assert_eq!((t.f, t.q), (f, q));
+            }
+        }
+    }
+
+    #[test]
+    fn one_default_per_setting() {
+        let d = CookSettings::default();
+        assert_eq!(d.variance_threshold, vdbcook_cluster::Options::default().variance_threshold);
+        assert_eq!(d.variance_threshold, 0.01);
+        assert_eq!(d.format, Format::F16);
+        assert_eq!(d.quality, Quality::VeryFast);
+        assert_eq!(d.pairs().len(), CookSettings::NAMES.len());
+        assert!(d.check().is_ok());
+        let bad = CookSettings { variance_threshold: -1.0, ..d };
+        assert!(matches!(bad.check(), Err(Error::Setting { name: "variance_threshold", .. })));
+    }
+}
