@@ -544,6 +544,6 @@ fn clustering_runs_over_every_channel_each_on_its_own_scale() {
     let names: Vec<String> = (0..9).map(|i| format!("c{i}")).collect();
     let mut c = Cooker::with_channels(CookOptions { clustering: Some(vdbcook_cluster::Options::default()), ..CookOptions::default() }, specs(&names.iter().map(String::as_str).collect::<Vec<_>>()));
     let g = smooth_frame(0);
-    c.push_channels(&vec![Some(&g); 9], None).unwrap();
+    c.push_channels(&[Some(&g); 9], None).unwrap();
     assert!(c.finish(&NoProgress).err().unwrap().to_string().contains("at most 8 channels"));
 }

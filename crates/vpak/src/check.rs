@@ -229,7 +229,11 @@ fn check_atlases(meta: &Metadata) -> Result<(), Error> {
             let [fx, fy, _] = f.bricks.map(|b| u64::from(b).max(1));
             let n = u64::from(a.count);
             let need = [n.min(fx), n.div_ceil(fx).min(fy), n.div_ceil(fx * fy)];
-            let fits = if i + 1 < meta.atlases.len() { a.bricks == f.bricks && u128::from(a.count) == capacity } else { (0..3).all(|k| u64::from(a.bricks[k]) >= need[k]) };
+            // The last atlas must put brick i where the first atlas's shape does
+            // (samplers use that shape throughout): one short row, or rows as
+            // wide as the first's, and layers as tall when there are several.
+            let same_places = (n <= bx && n <= fx) || (bx == fx && (n.div_ceil(fx) <= by.min(fy) || by == fy));
+            let fits = if i + 1 < meta.atlases.len() { a.bricks == f.bricks && u128::from(a.count) == capacity } else { same_places && (0..3).all(|k| u64::from(a.bricks[k]) >= need[k]) };
             if !fits || u64::from(a.first_brick) != next_brick {
                 return bad("its layout does not follow the first atlas's".into());
             }
