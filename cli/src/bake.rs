@@ -467,19 +467,7 @@ fn cook_fresh(a: &PlannedAsset, ctx: &Ctx, name: &str) -> Result<(Vec<u8>, Recor
     let mut sections = cooked.sections;
     let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?;
     if let Some(reference) = &cooked.reference {
-        let v = ValidateArgs {
-            asset: PathBuf::from(name),
-            source: a.input_paths.clone(),
-            source_frames: s.frames,
-            frames: None,
-            views: s.views,
-            size: (s.size.width, s.size.height),
-            max_rmse: s.max_rmse,
-            min_psnr: s.min_psnr,
-            report: Some(ctx.report_dir.join("validation").join(&a.name)),
-            gpu: ctx.gpu.clone(),
-            json: true,
-        };
+        let v = ValidateArgs::of_cook(s, PathBuf::from(name), a.input_paths.clone(), Some(ctx.report_dir.join("validation").join(&a.name)), ctx.gpu.clone(), true);
         let o = compare_assets(&asset, &a.output, reference, &v, || ctx.renderer(), &vdbcook_cook::NoProgress).context("validating")?;
         record.validation = Some(validation_figures(&o.doc));
         record.gate_failure = o.gate_failure;

@@ -266,19 +266,7 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
     report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
     let validation = if s.validate {
-        let v = ValidateArgs {
-            asset: args.output.clone(),
-            source: args.inputs.clone(),
-            source_frames: s.frames,
-            frames: None,
-            views: s.views,
-            size: (s.size.width, s.size.height),
-            max_rmse: s.max_rmse,
-            min_psnr: s.min_psnr,
-            report: None,
-            gpu: Default::default(),
-            json: args.json,
-        };
+        let v = ValidateArgs::of_cook(s, args.output.clone(), args.inputs.clone(), None, Default::default(), args.json);
         Some(crate::validate::evaluate(v, quiet)?)
     } else {
         None

@@ -62,6 +62,13 @@ pub struct ValidateArgs {
     pub json: bool,
 }
 
+impl ValidateArgs {
+    /// The validation a cook's settings ask for (`--validate` and its gate, views and size).
+    pub fn of_cook(s: &vdbcook_bake::CookSettings, asset: PathBuf, source: Vec<String>, report: Option<PathBuf>, gpu: GpuArgs, json: bool) -> ValidateArgs {
+        ValidateArgs { asset, source, source_frames: s.frames, frames: None, views: s.views, size: (s.size.width, s.size.height), max_rmse: s.max_rmse, min_psnr: s.min_psnr, report, gpu, json }
+    }
+}
+
 /// The GPU options of `validate` and `render`.
 #[derive(clap::Args, Clone, Default)]
 pub struct GpuArgs {
