@@ -35,6 +35,9 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
+// True when the scene has emission channels (params.channels.y or .z): the
+// emission code folds away at pipeline creation otherwise.
+override GLOWS: bool = true;
 // RGB per pixel, row-major from the top.
 @group(0) @binding(9) var<storage, read_write> image: array<f32>;
 // Optical depth towards the light at each shadow cell centre, x fastest.
@@ -153,6 +156,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var n = 0u;
         var cell = vec3<i32>(-1 << 30);
         var leaf: VpakLeaf;
+
+        // The extinction channel of the cell's brick, resolved once per cell.
+        var ext: VpakBrickChannel;
         loop {
             let t = hit.x + k * step;
             if (t >= hit.y || n >= params.size.z || trans < 1e-3) { break; }
@@ -163,14 +169,27 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (any((ip >> vec3<u32>(3u)) != cell)) {
                 cell = ip >> vec3<u32>(3u);
                 leaf = vpak_leaf(params.info, ip);
+                if (leaf.l3 != VPAK_NONE) {
+                    ext = vpak_brick_channel(params.info, leaf.brick, params.channels.x);
+                }
             }
             if (leaf.empty_dim > 0u && params.size.w == 1u) {
                 let exit = t + cell_exit(p, d, f32(leaf.empty_dim));
                 k = max(k + 1.0, ceil((exit - hit.x) / step - 0.5) + 0.5);
                 continue;
             }
-            radiance += trans * emission_at(leaf, ip) * step;
-            let sigma = max(vpak_leaf_value(params.info, leaf, ip, params.channels.x), 0.0) * params.light.w;
+            if (GLOWS) {
+                radiance += trans * emission_at(leaf, ip) * step;
+            }
+            var e = bitcast<f32>(vpak_channels[params.channels.x].background);
+            if (vpak_leaf_active(leaf, ip)) {
+                if (leaf.tile != VPAK_NONE) {
+                    e = vpak_active_value(params.info, leaf, ip, params.channels.x);
+                } else {
+                    e = vpak_brick_channel_value(params.info, ext, vec3<u32>(ip) & vec3<u32>(7u));
+                }
+            }
+            let sigma = max(e, 0.0) * params.light.w;
             if (sigma > 0.0) {
                 let a = 1.0 - exp(-sigma * step);
                 let lit = 0.25 + 0.75 * exp(-shadow_at(p));

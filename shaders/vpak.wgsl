@@ -4,7 +4,7 @@
 // asset's sections as storage buffers, and calls `vpak_sample` (channel c's
 // value at a voxel) or `vpak_query` (the value plus the size of the empty
 // region around it, for hierarchical empty-space skipping). The atlas files
-// define `vpak_texel(info, slot, atlas, channel, texel)`:
+// define `vpak_texel(info, slot, atlas, format, lanes, texel)`:
 //   vpak_atlas_texture.wgsl  every plane of every atlas as a 3D texture, read
 //                            through the texture unit (BC4/BC7 need
 //                            TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D);
@@ -53,9 +53,9 @@ struct VpakChannel {
     // Plane of the channel, and its first lane there.
     plane: u32,
     lane: u32,
-    // Consecutive z-slices in one texel's lanes (BC7 packing; else 1), and
-    // the slices a brick takes in the plane (8 / z_per_texel).
-    z_per_texel: u32,
+    // log2 of the consecutive z-slices in one texel's lanes (BC7 packing;
+    // else 0), and the slices a brick takes in the plane (8 >> z_shift).
+    z_shift: u32,
     slices: u32,
     // The plane's format code and lanes (1, 2 or 4).
     format: u32,
@@ -74,8 +74,9 @@ struct VpakChannel {
 @group(0) @binding(6) var<storage, read> vpak_tiles: array<u32>;
 @group(0) @binding(7) var<storage, read> vpak_ranges: array<vec2<f32>>;
 @group(0) @binding(14) var<storage, read> vpak_channels: array<VpakChannel>;
-// False when the asset has a single atlas: the atlas selection then folds
-// away at pipeline creation (it costs ~20 % on a CPU driver otherwise).
+// False when the asset has a single texture (one plane of one atlas): the
+// texture selection then folds away at pipeline creation (it costs 2-3x on
+// a CPU driver otherwise).
 override VPAK_MULTI_ATLAS: bool = true;
 
 // Entry of slot `s` in the node at `base` with `mask_words` mask words,
@@ -126,17 +127,52 @@ fn vpak_brick(info: VpakInfo, b: u32) -> VpakBrick {
     return brick;
 }
 
-// Channel `c` of voxel `v` (0..8 on each axis) of `brick`.
-fn vpak_brick_value(info: VpakInfo, brick: VpakBrick, v: vec3<u32>, c: u32) -> f32 {
+// Channel `c` of one brick, resolved once: its texture slot, its first
+// texel there, its lanes and its value range. A marcher keeps it for a cell.
+struct VpakBrickChannel {
+    slot: u32,
+    atlas: u32,
+    origin: vec3<u32>,
+    lane: u32,
+    z_shift: u32,
+    format: u32,
+    lanes: u32,
+    ranged: u32,
+    // min, max - min (ranged formats).
+    range: vec2<f32>,
+}
+
+fn vpak_brick_channel(info: VpakInfo, brick: VpakBrick, c: u32) -> VpakBrickChannel {
     let ch = vpak_channels[c];
-    let slot = ch.plane * info.atlas_count + brick.atlas;
-    let t = vec3<u32>(brick.pos.x * 8u + v.x, brick.pos.y * 8u + v.y, brick.pos.z * ch.slices + v.z / ch.z_per_texel);
-    let level = vpak_texel(info, slot, brick.atlas, ch, vec3<i32>(t))[ch.lane + v.z % ch.z_per_texel];
-    if (ch.ranged == 0u) {
+    var bc: VpakBrickChannel;
+    bc.slot = ch.plane * info.atlas_count + brick.atlas;
+    bc.atlas = brick.atlas;
+    bc.origin = brick.pos * vec3<u32>(8u, 8u, ch.slices);
+    bc.lane = ch.lane;
+    bc.z_shift = ch.z_shift;
+    bc.format = ch.format;
+    bc.lanes = ch.lanes;
+    bc.ranged = ch.ranged;
+    if (ch.ranged != 0u) {
+        let r = vpak_ranges[brick.index * info.channels + c];
+        bc.range = vec2<f32>(r.x, r.y - r.x);
+    }
+    return bc;
+}
+
+// Voxel `v` (0..8 on each axis) of the brick channel `bc`.
+fn vpak_brick_channel_value(info: VpakInfo, bc: VpakBrickChannel, v: vec3<u32>) -> f32 {
+    let t = bc.origin + vec3<u32>(v.x, v.y, v.z >> bc.z_shift);
+    let level = vpak_texel(info, bc.slot, bc.atlas, bc.format, bc.lanes, vec3<i32>(t))[bc.lane + (v.z & ((1u << bc.z_shift) - 1u))];
+    if (bc.ranged == 0u) {
         return level;
     }
-    let range = vpak_ranges[brick.index * info.channels + c];
-    return range.x + level * (range.y - range.x);
+    return bc.range.x + level * bc.range.y;
+}
+
+// Channel `c` of voxel `v` (0..8 on each axis) of `brick`.
+fn vpak_brick_value(info: VpakInfo, brick: VpakBrick, v: vec3<u32>, c: u32) -> f32 {
+    return vpak_brick_channel_value(info, vpak_brick_channel(info, brick, c), v);
 }
 
 // What the tree holds for the 8³ cell of a voxel: an L3 node (`l3` is its

@@ -18,6 +18,9 @@
 
 // Word `i` of texture slot `slot`.
 fn vpak_word(slot: u32, i: u32) -> u32 {
+    if (!VPAK_MULTI_ATLAS || slot == 0u) {
+        return vpak_words0[i];
+    }
     switch slot {
         case 0u: { return vpak_words0[i]; }
         case 1u: { return vpak_words1[i]; }
@@ -35,20 +38,20 @@ fn vpak_byte(slot: u32, b: u32) -> u32 {
     return (vpak_word(slot, b >> 2u) >> (8u * (b & 3u))) & 0xffu;
 }
 
-// Texel `t` of texture slot `slot` (of atlas `atlas`, holding channel `ch`'s
-// plane), as textureLoad on the plane's texture returns it.
-fn vpak_texel(info: VpakInfo, slot: u32, atlas: u32, ch: VpakChannel, t: vec3<i32>) -> vec4<f32> {
+// Texel `t` of texture slot `slot` (of atlas `atlas`, a plane of `format`
+// with `lanes` lanes), as textureLoad on the plane's texture returns it.
+fn vpak_texel(info: VpakInfo, slot: u32, atlas: u32, format: u32, lanes: u32, t: vec3<i32>) -> vec4<f32> {
     let u = vec3<u32>(t);
     // This atlas's size in texels along x and y (8 a brick).
     var size = info.atlas_bricks.xy * 8u;
     if (atlas == info.last_atlas.x) {
         size = info.last_atlas.yz * 8u;
     }
-    if (ch.format == VPAK_BC4 || ch.format == VPAK_BC7) {
+    if (format == VPAK_BC4 || format == VPAK_BC7) {
         let row = size.x / 4u;
         let block = (u.z * (size.y / 4u) + (u.y >> 2u)) * row + (u.x >> 2u);
         let texel = ((u.y & 3u) << 2u) | (u.x & 3u);
-        if (ch.format == VPAK_BC7) {
+        if (format == VPAK_BC7) {
             let w = block * 4u;
             return bc7_texel(vec4<u32>(vpak_word(slot, w), vpak_word(slot, w + 1u), vpak_word(slot, w + 2u), vpak_word(slot, w + 3u)), texel);
         }
@@ -58,11 +61,11 @@ fn vpak_texel(info: VpakInfo, slot: u32, atlas: u32, ch: VpakChannel, t: vec3<i3
     // Uncompressed: `lanes` values of 4, 2 or 1 bytes each, texels x fastest.
     let index = (u.z * size.y + u.y) * size.x + u.x;
     var out = vec4<f32>(0.0, 0.0, 0.0, 1.0);
-    for (var l = 0u; l < ch.lanes; l += 1u) {
-        let k = index * ch.lanes + l;
-        if (ch.format == VPAK_F32) {
+    for (var l = 0u; l < lanes; l += 1u) {
+        let k = index * lanes + l;
+        if (format == VPAK_F32) {
             out[l] = bitcast<f32>(vpak_word(slot, k));
-        } else if (ch.format == VPAK_F16) {
+        } else if (format == VPAK_F16) {
             out[l] = unpack2x16float(vpak_word(slot, k >> 1u))[k & 1u];
         } else {
             out[l] = f32(vpak_byte(slot, k)) / 255.0;

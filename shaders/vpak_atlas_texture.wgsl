@@ -14,8 +14,11 @@
 @group(0) @binding(17) var vpak_atlas6: texture_3d<f32>;
 @group(0) @binding(18) var vpak_atlas7: texture_3d<f32>;
 
-// Texel `t` of texture slot `slot` (of atlas `atlas`, holding channel `ch`'s plane).
-fn vpak_texel(info: VpakInfo, slot: u32, atlas: u32, ch: VpakChannel, t: vec3<i32>) -> vec4<f32> {
+// Texel `t` of texture slot `slot` (of atlas `atlas`, a plane of `format` with `lanes` lanes).
+fn vpak_texel(info: VpakInfo, slot: u32, atlas: u32, format: u32, lanes: u32, t: vec3<i32>) -> vec4<f32> {
+    if (!VPAK_MULTI_ATLAS || slot == 0u) {
+        return textureLoad(vpak_atlas0, t, 0);
+    }
     switch slot {
         case 0u: { return textureLoad(vpak_atlas0, t, 0); }
         case 1u: { return textureLoad(vpak_atlas1, t, 0); }

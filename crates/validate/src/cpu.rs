@@ -75,9 +75,9 @@ impl Sampler<'_> {
         let pos = [i % bx.max(1), (i / bx.max(1)) % by.max(1), i / (bx * by).max(1)].map(|p| p as u32);
         let atlas = atlas as u32;
         let slot = ch.plane.saturating_mul(self.d.c.meta.atlases.len() as u32).saturating_add(atlas);
-        let zpt = ch.z_per_texel.max(1);
-        let t = [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2].saturating_mul(ch.slices).saturating_add(v[2] / zpt)];
-        let level = self.texel(slot, atlas, ch, t)[((ch.lane + v[2] % zpt) & 3) as usize];
+        let shift = ch.z_shift.min(2);
+        let t = [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2].saturating_mul(ch.slices).saturating_add(v[2] >> shift)];
+        let level = self.texel(slot, atlas, ch, t)[((ch.lane + (v[2] & ((1 << shift) - 1))) & 3) as usize];
         if ch.ranged == 0 {
             return level;
         }

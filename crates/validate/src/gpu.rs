@@ -64,11 +64,14 @@ const SLOT_BINDINGS: [u32; crate::MAX_TEXTURES] = [8, 11, 12, 13, 15, 16, 17, 18
 /// Binding of the channel table (`vpak.wgsl`).
 const CHANNEL_BINDING: u32 = 14;
 
-/// The bind group layout and the (march, shadow) pipelines for one atlas and for several.
+/// The bind group layout and the pipelines of one shader, each made on first
+/// use for its entry point and the override constants that fold branches
+/// away: several textures or one, emission channels or none.
 struct Pipelines {
     layout: wgpu::BindGroupLayout,
-    single: (wgpu::ComputePipeline, wgpu::ComputePipeline),
-    multi: (wgpu::ComputePipeline, wgpu::ComputePipeline),
+    module: wgpu::ShaderModule,
+    pipeline_layout: wgpu::PipelineLayout,
+    made: std::sync::Mutex<std::collections::HashMap<(&'static str, bool, bool), wgpu::ComputePipeline>>,
 }
 
 impl Pipelines {
@@ -80,20 +83,26 @@ impl Pipelines {
         entries.extend(SLOT_BINDINGS.map(|b| entry(b, atlas)));
         entries.extend([9, 10].map(|b| entry(b, storage(false))));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
-        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
-        let make = |entry: &str, multi: bool| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pl),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: wgpu::PipelineCompilationOptions { constants: &[("VPAK_MULTI_ATLAS", if multi { 1.0 } else { 0.0 })], ..Default::default() },
-                cache: None,
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("march"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
+        Pipelines { layout, module, pipeline_layout, made: Default::default() }
+    }
+
+    /// The pipeline of `entry` for several textures (`multi`) or one, with emission (`glows`) or without.
+    fn get(&self, device: &wgpu::Device, entry: &'static str, multi: bool, glows: bool) -> wgpu::ComputePipeline {
+        let mut made = self.made.lock().unwrap_or_else(|e| e.into_inner());
+        made.entry((entry, multi, glows))
+            .or_insert_with(|| {
+                let flag = |b: bool| if b { 1.0 } else { 0.0 };
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: Some(&self.pipeline_layout),
+                    module: &self.module,
+                    entry_point: Some(entry),
+                    compilation_options: wgpu::PipelineCompilationOptions { constants: &[("VPAK_MULTI_ATLAS", flag(multi)), ("GLOWS", flag(glows))], ..Default::default() },
+                    cache: None,
+                })
             })
-        };
-        let single = (make("main", false), make("shadow_main", false));
-        let multi = (make("main", true), make("shadow_main", true));
-        Pipelines { layout, single, multi }
+            .clone()
     }
 }
 
@@ -125,6 +134,8 @@ pub struct GpuAsset {
     atlases: Vec<Atlas>,
     frames: Vec<u32>,
     atlas_count: usize,
+    /// Texture slots in use (planes × atlases).
+    slots: usize,
     channels: u32,
     /// The background of the channel that gives extinction.
     background: f32,
@@ -322,6 +333,7 @@ impl Renderer {
             atlases,
             frames: c.frames.to_vec(),
             atlas_count: meta.atlases.len(),
+            slots: meta.atlases.len() * meta.planes.len(),
             channels: meta.channels.len() as u32,
             background: meta.channels.get(extinction).map_or(0.0, |ch| ch.background),
             atlas_bricks: d.atlas_bricks(),
@@ -399,12 +411,14 @@ impl Renderer {
             {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("march"), timestamp_writes: None });
                 pass.set_bind_group(0, &group, &[]);
-                let (march, shadow_pipeline) = if asset.atlas_count > 1 { &pipelines.multi } else { &pipelines.single };
+                let multi = asset.slots > 1;
+                let glows = scene.channels[1] != crate::NONE || scene.channels[2] != crate::NONE;
+                let (march, shadow_pipeline) = (pipelines.get(&self.device, "main", multi, glows), pipelines.get(&self.device, "shadow_main", multi, false));
                 if i == 0 {
-                    pass.set_pipeline(shadow_pipeline);
+                    pass.set_pipeline(&shadow_pipeline);
                     pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);
                 }
-                pass.set_pipeline(march);
+                pass.set_pipeline(&march);
                 pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
             }
             enc.copy_buffer_to_buffer(&out, 0, &read, 0, bytes);

@@ -17,9 +17,9 @@ pub struct GpuChannel {
     pub plane: u32,
     /// First lane of the channel in the plane's texels.
     pub lane: u32,
-    /// Consecutive z-slices per texel (4 or 2 for BC7 planes, else 1).
-    pub z_per_texel: u32,
-    /// Slices one brick takes in the plane (8 / z_per_texel).
+    /// log2 of the consecutive z-slices per texel (2 or 1 for BC7 planes, else 0).
+    pub z_shift: u32,
+    /// Slices one brick takes in the plane (8 >> z_shift).
     pub slices: u32,
     /// Format code of the plane.
     pub format: u32,
@@ -34,7 +34,7 @@ pub struct GpuChannel {
 impl GpuChannel {
     /// The eight words, in field order, as a storage buffer holds them.
     pub fn words(&self) -> [u32; 8] {
-        [self.plane, self.lane, self.z_per_texel, self.slices, self.format, self.lanes, self.ranged, self.background]
+        [self.plane, self.lane, self.z_shift, self.slices, self.format, self.lanes, self.ranged, self.background]
     }
 }
 
@@ -170,7 +170,7 @@ impl<'a> Checked<'a> {
                 GpuChannel {
                     plane: c.plane,
                     lane: c.lane,
-                    z_per_texel: p.z_per_texel,
+                    z_shift: p.z_per_texel.max(1).trailing_zeros(),
                     slices: p.slices_per_brick(),
                     format: p.format.code(),
                     lanes: p.lanes,
