@@ -28,9 +28,10 @@ Formats (storage per voxel and channel in the brick atlas):
 Several grids (--grids density,temperature,flames or --grids all) are channels of one
 tree per frame over the union of their active voxels; a vec3 grid (velocity) gives
 three channels NAME.x, NAME.y, NAME.z. Uncompressed formats put up to four channels in
-one R/RG/RGBA texture; bc4 stores a texture per channel; bc7 packs scalar channels
-together (less error than one texture each) and each velocity component alone.
---group CHANNELS=FORMAT (repeatable) gives channels a format of their own.
+one R/RG/RGBA texture; bc4 and bc7 store a texture per channel. --group
+CHANNELS=FORMAT (repeatable) stores channels together in a format of their own: in
+bc7, two channels take two z-slices each per texel and four take RGBA, which lowers
+the error of correlated channels (density and temperature; temperature and flames).
 
 Quality presets (--quality), for the block formats:
   ultra-fast  very-fast (default)  fast  basic  slow

@@ -307,11 +307,12 @@ impl Cooker {
     }
 
     /// The planes of every channel group, in order: explicit groups first,
-    /// then the other channels in `format`: together, except that in BC7
-    /// each component of a vec3 grid is alone (measured: packing correlated
-    /// scalars such as density and temperature into one BC7 texture lowers
-    /// their error, packing velocity's uncorrelated components raises it;
-    /// docs/benchmarks.md).  Returns the specs and each channel's group.
+    /// then the other channels in `format`: together for the uncompressed
+    /// formats (a texel holds up to four), each alone for BC4 and BC7
+    /// (measured: packing correlated scalars such as density and temperature
+    /// into one BC7 texture lowers their error, but packing uncorrelated ones
+    /// raises it, up to 2.5x on c42; docs/benchmarks.md, so packing is asked
+    /// for with a group).  Returns the specs and each channel's group.
     fn plan_planes(&self) -> Result<(Vec<PlaneSpec>, Vec<u32>), Error> {
         let mut group_of: Vec<Option<u32>> = vec![None; self.channels.len()];
         let mut groups: Vec<(Format, Vec<usize>)> = Vec::new();
@@ -334,7 +335,7 @@ impl Cooker {
         }
         let format = self.opts.format;
         let rest: Vec<usize> = (0..self.channels.len()).filter(|&c| group_of[c].is_none()).collect();
-        let (alone, together): (Vec<usize>, Vec<usize>) = rest.into_iter().partition(|&c| format == Format::Bc7 && self.channels[c].component.is_some());
+        let (alone, together): (Vec<usize>, Vec<usize>) = rest.into_iter().partition(|_| format.is_block());
         for members in [together].into_iter().filter(|m| !m.is_empty()).chain(alone.into_iter().map(|c| vec![c])) {
             for &c in &members {
                 group_of[c] = Some(groups.len() as u32);
