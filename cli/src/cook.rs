@@ -9,7 +9,7 @@ use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
 use vdbcook_bake::CookSettings;
-use vdbcook_cook::{ChannelGroup, CookOptions, CookReport, Cooker, Format, Progress};
+use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress};
 use vdbcook_vpak::SourceFile;
 
 pub const AFTER_HELP: &str = "\
@@ -80,10 +80,12 @@ pub struct CookArgs {
 /// relative to `base` when they are below it. Returns the cookers, their
 /// channels and the seconds spent waiting for frames.
 pub fn feed(opts: Vec<CookOptions>, files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, base: Option<PathBuf>, bars: &dyn Progress) -> Result<(Vec<Cooker>, Option<Channels>, f64)> {
+    // Each frame comes with the channels when they are first resolved.
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
     let total = files.len() as u64;
     let reader = std::thread::spawn(move || {
         let mut channels = None;
+        let mut sent = false;
         for f in files {
             let r = read_frame(f, &sel, &mut channels, allow_missing).map(|mut frame| {
                 if let (Some(s), Some(b)) = (frame.source.as_mut(), base.as_deref()) {
@@ -94,7 +96,9 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<PathBuf>, sel: GridSelection, all
                 frame
             });
             let stop = r.is_err();
-            if tx.send((r, channels.clone())).is_err() || stop {
+            let first = if sent { None } else { channels.clone() };
+            sent |= first.is_some();
+            if tx.send((r, first)).is_err() || stop {
                 break;
             }
         }
@@ -107,17 +111,21 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<PathBuf>, sel: GridSelection, all
     let mut channels: Option<Channels> = None;
     // Frames before the first one whose file resolves the channels: empty.
     let mut leading: Vec<Option<SourceFile>> = Vec::new();
+    // The cookers, for the channels (or, when no frame resolved any, one
+    // channel named by nothing), with the leading empty frames.
+    let start = |specs: Option<&Channels>, leading: &mut Vec<Option<SourceFile>>| -> Vec<Cooker> {
+        let mut made: Vec<Cooker> = opts.iter().map(|o| specs.map_or_else(|| Cooker::new(o.clone()), |ch| Cooker::with_channels(o.clone(), ch.specs.clone()))).collect();
+        for s in leading.drain(..) {
+            made.iter_mut().for_each(|c| c.push_empty(s.clone()));
+        }
+        made
+    };
     for (r, ch) in rx {
         read_secs += wait.elapsed().as_secs_f64();
         let pushed = r.and_then(|frame| {
-            if cookers.is_empty() {
-                if let Some(ch) = ch {
-                    cookers = opts.iter().map(|o| Cooker::with_channels(o.clone(), ch.specs.clone())).collect();
-                    for s in leading.drain(..) {
-                        cookers.iter_mut().for_each(|c| c.push_empty(s.clone()));
-                    }
-                    channels = Some(ch);
-                }
+            if let Some(ch) = ch {
+                cookers = start(Some(&ch), &mut leading);
+                channels = Some(ch);
             }
             if cookers.is_empty() {
                 leading.push(frame.source);
@@ -145,10 +153,7 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<PathBuf>, sel: GridSelection, all
         return Err(e);
     }
     if cookers.is_empty() {
-        cookers = opts.into_iter().map(Cooker::new).collect();
-        for s in leading {
-            cookers.iter_mut().for_each(|c| c.push_empty(s.clone()));
-        }
+        cookers = start(None, &mut leading);
     }
     Ok((cookers, channels, read_secs))
 }
@@ -185,22 +190,6 @@ fn finish_reference(cooker: Cooker) -> Result<vdbcook_vpak::Asset> {
     Ok(vdbcook_vpak::Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?)
 }
 
-/// Every channel an explicit group names exists, once.
-fn check_groups(groups: &[ChannelGroup], ch: &Channels) -> Result<()> {
-    let mut seen = std::collections::HashSet::new();
-    for name in groups.iter().flat_map(|g| &g.channels) {
-        let named = vdbcook_cook::channels_named(&ch.specs, name);
-        if named.is_empty() {
-            let names: Vec<&str> = ch.specs.iter().map(|s| s.name.as_str()).collect();
-            return Err(Usage(format!("--group names \"{name}\", which is not a channel of this cook (channels: {})", names.join(", "))).into());
-        }
-        if !named.into_iter().all(|c| seen.insert(c)) {
-            return Err(Usage(format!("--group names \"{name}\" twice")).into());
-        }
-    }
-    Ok(())
-}
-
 /// One asset to cook: typed settings, its frame files and what to record.
 pub struct CookJob<'a> {
     pub settings: &'a CookSettings,
@@ -233,19 +222,14 @@ pub fn cook_asset(job: CookJob, bars: &dyn Progress) -> Result<Cooked> {
     }
     let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
     let (cookers, channels, read_secs) = feed(all, job.files, sel, s.allow_missing, job.base, bars)?;
-    if let Some(ch) = &channels {
-        check_groups(&s.group, ch)?;
-        if s.clusters.is_some() && ch.specs.len() > vdbcook_cook::MAX_CLUSTER_CHANNELS {
-            return Err(Usage(format!("--clusters takes at most {} channels; this cook has {}", vdbcook_cook::MAX_CLUSTER_CHANNELS, ch.specs.len())).into());
-        }
-    }
     let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
     let mut cookers = cookers.into_iter();
     let cooker = cookers.next().ok_or_else(|| anyhow!("no cooker"))?;
     if cooker.frame_count() == 0 {
         return Err(anyhow!("no frames to cook"));
     }
-    let (sections, mut report) = cooker.finish(bars).map_err(|e| anyhow!(e))?;
+    // A group naming no channel, or too many channels to cluster, is the settings' fault.
+    let (sections, mut report) = cooker.finish(bars).map_err(|e| if e.is_settings_error() { Usage(e.to_string()).into() } else { anyhow!(e) })?;
     report.timings.insert(0, ("read".into(), read_secs));
     let reference = cookers.next().map(finish_reference).transpose().context("cooking the reference")?;
     Ok(Cooked { sections, report, grid: grid_name, reference })

@@ -34,11 +34,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let plane_bytes: Vec<u64> = (0..meta.planes.len()).map(|p| (0..meta.atlases.len()).filter_map(|a| checked.atlas(p, a)).map(|(_, b)| b.len() as u64).sum()).collect();
     let sharing = |p: usize| meta.channels.iter().filter(|c| c.plane as usize == p).count().max(1) as u64;
     let channel_bytes = |c: &vdbcook_vpak::Channel| plane_bytes[c.plane as usize] / sharing(c.plane as usize);
-    let formats = {
-        let mut f: Vec<&str> = meta.planes.iter().map(|p| p.format.name()).collect();
-        f.dedup();
-        f.join("+")
-    };
+    let formats = meta.format_names();
     if as_json {
         return Ok(Described::Json(json!({
             "path": name,

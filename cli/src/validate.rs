@@ -138,13 +138,6 @@ fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize) -> Result<Vec<Er
         .collect())
 }
 
-/// The asset's formats: "f16", or "bc4+bc7" for a mix.
-pub fn formats(meta: &vdbcook_vpak::Metadata) -> String {
-    let mut f: Vec<&str> = meta.planes.iter().map(|p| p.format.name()).collect();
-    f.dedup();
-    f.join("+")
-}
-
 struct Shot {
     frame: usize,
     view: usize,
@@ -259,7 +252,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     // The voxel figures of the channel the images show.
     let shown = vdbcook_validate::extinction_channel(&ref_meta);
     let vox_total = channel_totals.get(shown).copied().unwrap_or_default();
-    let format = formats(&meta);
+    let format = meta.format_names();
     let num = |v: f64| if v.is_finite() { json!(v) } else { serde_json::Value::Null };
     let doc = json!({
         "asset": name,

@@ -15,10 +15,6 @@ fn scratch(tag: &str) -> PathBuf {
     d
 }
 
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
 fn run(args: &[&str], env: &[(&str, &str)]) -> Output {
     let mut c = Command::new(env!("CARGO_BIN_EXE_vdbcook"));
     c.args(args).current_dir(root());
@@ -574,19 +570,6 @@ fn a_closed_pipe_ends_the_output_quietly() {
     assert_eq!(o.status.code(), Some(1), "{}", err(&o));
     assert_eq!(err(&o).lines().count(), 1, "only the asset's error: {}", err(&o));
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// Keys in the first column of the tables under each `## ` heading of a doc.
-fn documented_keys(doc: &str) -> Vec<(String, Vec<String>)> {
-    let mut out: Vec<(String, Vec<String>)> = Vec::new();
-    for line in doc.lines() {
-        if let Some(h) = line.strip_prefix("## ") {
-            out.push((h.to_string(), Vec::new()));
-        } else if let (Some(first), Some((_, keys))) = (line.strip_prefix("| `").map(|l| l.split(" | ").next().unwrap_or("")), out.last_mut()) {
-            keys.extend(format!("`{first}").split('`').skip(1).step_by(2).map(str::to_string));
-        }
-    }
-    out
 }
 
 /// docs/bake-json.md against real output, both ways: every documented key is

@@ -11,15 +11,6 @@ fn scratch(tag: &str) -> PathBuf {
     d
 }
 
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn ok(out: std::process::Output) -> std::process::Output {
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    out
-}
-
 fn sample(rel: &str) -> Option<String> {
     shared_samples().map(|p| p.join(rel).to_string_lossy().into_owned())
 }

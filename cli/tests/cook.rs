@@ -10,15 +10,6 @@ fn scratch() -> PathBuf {
     d
 }
 
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn ok(out: std::process::Output) -> std::process::Output {
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    out
-}
-
 /// Active voxels as (coord, value), and active tiles as (min, max, value).
 type OracleVoxels = (Vec<([i32; 3], f64)>, Vec<([i32; 3], [i32; 3], f64)>);
 

@@ -6,17 +6,13 @@
 
 mod common;
 use common::*;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 
 fn scratch() -> PathBuf {
     let d = std::env::temp_dir().join(format!("vdbcook-spec-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 fn python(args: &[&str]) -> std::process::Output {

@@ -11,10 +11,6 @@ fn scratch(tag: &str) -> PathBuf {
     d
 }
 
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
 fn cook(dir: &Path, format: &str) -> PathBuf {
     let out = dir.join(format!("{format}.vpak"));
     let r = vdbcook(&["cook", "-q", "--force", "--format", format, "-o", s(&out), "fixtures/smoke_seq"]);
@@ -149,19 +145,6 @@ fn cook_validate_adds_the_validation() {
     let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
     assert_eq!(v["validation"]["images"].as_array().unwrap().len(), 8);
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// Keys in the first column of the tables under each `## ` heading of a doc.
-fn documented_keys(doc: &str) -> Vec<(String, Vec<String>)> {
-    let mut out: Vec<(String, Vec<String>)> = Vec::new();
-    for line in doc.lines() {
-        if let Some(h) = line.strip_prefix("## ") {
-            out.push((h.to_string(), Vec::new()));
-        } else if let (Some(first), Some((_, keys))) = (line.strip_prefix("| `").map(|l| l.split(" | ").next().unwrap_or("")), out.last_mut()) {
-            keys.extend(format!("`{first}").split('`').skip(1).step_by(2).map(str::to_string));
-        }
-    }
-    out
 }
 
 #[test]

@@ -151,3 +151,27 @@ pub fn run_oracle(file: &Path, args: &[&str]) -> Result<serde_json::Value, Strin
     }
     Ok(serde_json::from_slice(&out.stdout).expect("oracle JSON"))
 }
+
+/// A path as the `&str` the command line takes.
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The output of a run that must succeed (its stderr is the failure message).
+pub fn ok(out: Output) -> Output {
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    out
+}
+
+/// Keys in the first column of the tables under each `## ` heading of a doc.
+pub fn documented_keys(doc: &str) -> Vec<(String, Vec<String>)> {
+    let mut out: Vec<(String, Vec<String>)> = Vec::new();
+    for line in doc.lines() {
+        if let Some(h) = line.strip_prefix("## ") {
+            out.push((h.to_string(), Vec::new()));
+        } else if let (Some(first), Some((_, keys))) = (line.strip_prefix("| `").map(|l| l.split(" | ").next().unwrap_or("")), out.last_mut()) {
+            keys.extend(format!("`{first}").split('`').skip(1).step_by(2).map(str::to_string));
+        }
+    }
+    out
+}

@@ -38,12 +38,20 @@ pub enum Error {
     TooBig { frame: usize, leaves: u64, bytes: u64, budget: u64 },
     #[error("the asset is inconsistent: {0}")]
     Corrupt(String),
-    #[error("channel group names \"{0}\", which is not a channel of the asset")]
-    UnknownChannel(String),
+    #[error("a channel group names \"{name}\", which is not a channel of this cook (channels: {channels})")]
+    UnknownChannel { name: String, channels: String },
     #[error("channel \"{0}\" is in two channel groups")]
     TwiceGrouped(String),
-    #[error("clustering takes at most {MAX_CLUSTER_CHANNELS} channels, the asset has {0}")]
+    #[error("clustering takes at most {MAX_CLUSTER_CHANNELS} channels, this cook has {0}")]
     MultiChannelClustering(usize),
+}
+
+impl Error {
+    /// True for errors in the settings a cook was given (its channel groups,
+    /// clustering of too many channels) rather than in its input.
+    pub fn is_settings_error(&self) -> bool {
+        matches!(self, Error::UnknownChannel { .. } | Error::TwiceGrouped(_) | Error::MultiChannelClustering(_))
+    }
 }
 
 /// Receives progress from long stages; every method does nothing by default.
@@ -321,7 +329,8 @@ impl Cooker {
             for name in &g.channels {
                 let named = channels_named(&self.channels, name);
                 if named.is_empty() {
-                    return Err(Error::UnknownChannel(name.clone()));
+                    let channels = self.channels.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", ");
+                    return Err(Error::UnknownChannel { name: name.clone(), channels });
                 }
                 for c in named {
                     if group_of[c].is_some() {
@@ -537,10 +546,8 @@ impl Cooker {
             })
             .collect();
         let worst = (0..channels).min_by(|&a, &b| psnr(a).total_cmp(&psnr(b))).unwrap_or(0);
-        let mut formats: Vec<&str> = specs.iter().map(|s| s.plane.format.name()).collect();
-        formats.dedup();
         let report = CookReport {
-            format: formats.join("+"),
+            format: meta.format_names(),
             frames: self.frames.len(),
             empty_frames: self.frames.iter().filter(|f| f.leaves == 0 && f.tiles == 0).count(),
             active_voxels: active,

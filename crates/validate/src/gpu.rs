@@ -137,8 +137,8 @@ pub struct GpuAsset {
     /// Texture slots in use (planes × atlases).
     slots: usize,
     channels: u32,
-    /// The background of the channel that gives extinction.
-    background: f32,
+    /// Each channel's background.
+    backgrounds: Vec<f32>,
     atlas_bricks: [u32; 4],
     last_atlas: [u32; 4],
 }
@@ -327,7 +327,6 @@ impl Renderer {
                 atlases.push(Atlas::Texture { _texture: texture, view });
             }
         }
-        let extinction = crate::extinction_channel(meta);
         Ok(GpuAsset {
             buffers,
             atlases,
@@ -335,7 +334,7 @@ impl Renderer {
             atlas_count: meta.atlases.len(),
             slots: meta.atlases.len() * meta.planes.len(),
             channels: meta.channels.len() as u32,
-            background: meta.channels.get(extinction).map_or(0.0, |ch| ch.background),
+            backgrounds: meta.channels.iter().map(|ch| ch.background).collect(),
             atlas_bricks: d.atlas_bricks(),
             last_atlas: d.last_atlas(),
         })
@@ -363,7 +362,8 @@ impl Renderer {
         v4(&mut p, scene.box_max, scene.shadow_step);
         v4(&mut p, scene.light, scene.density_scale);
         // Skipping empty space is exact only when empty space is zero.
-        p.extend([width, height, scene.max_steps, u32::from(asset.background == 0.0)]);
+        let skip = asset.backgrounds.get(scene.channels[0] as usize).is_some_and(|&b| b == 0.0);
+        p.extend([width, height, scene.max_steps, u32::from(skip)]);
         v4(&mut p, scene.shadow_grid().map(|g| g as f32), scene.shadow_cell);
         p.extend(scene.channels);
         p.push(0);

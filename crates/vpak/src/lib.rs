@@ -200,6 +200,13 @@ impl Metadata {
         self.channels.iter().position(|c| c.name == name)
     }
 
+    /// The planes' formats: "f16", or "bc4+bc7" for a mix (consecutive repeats once).
+    pub fn format_names(&self) -> String {
+        let mut f: Vec<&str> = self.planes.iter().map(|p| p.format.name()).collect();
+        f.dedup();
+        f.join("+")
+    }
+
     /// Largest slices per brick of any plane (what the atlases were planned for).
     pub fn max_slices(&self) -> u32 {
         self.planes.iter().map(Plane::slices_per_brick).max().unwrap_or(8)
