@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (version 3).
+"""Independent reader for vdbcook's `.vpak` volume asset format (version 4).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -23,12 +23,12 @@ import sys
 import numpy as np
 
 MAGIC = b"VPAK\r\n\x1a\n"
-VERSION = 3
+VERSION = 4
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
 
 # Section kinds (format.md, "Sections").
-K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_RANGES, K_ATLAS = range(1, 11)
+K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_RANGES, K_ATLAS, K_TABLE = range(1, 12)
 
 L1_WORDS, L2_WORDS, L3_WORDS = 1537, 193, 3
 L1_MASK_WORDS, L2_MASK_WORDS = 1024, 128
@@ -192,9 +192,15 @@ def decode_metadata(data):
         }
 
     m["channels"] = r.vec(channel)
-    m["planes"] = r.vec(lambda: {"format": r.uint(), "lanes": r.uint(), "z_per_texel": r.uint()})
+    def plane():
+        # PlaneInfo { plane: Plane { format, lanes, z_per_texel }, bricks, atlases }, flattened.
+        pl = {"format": r.uint(), "lanes": r.uint(), "z_per_texel": r.uint()}
+        pl["bricks"] = r.uint()
+        pl["atlases"] = r.vec(lambda: {"bricks": r.array(r.uint, 3), "first_brick": r.uint(), "count": r.uint()})
+        return pl
+
+    m["planes"] = r.vec(plane)
     m["brick_count"] = r.uint()
-    m["atlases"] = r.vec(lambda: {"bricks": r.array(r.uint, 3), "first_brick": r.uint(), "count": r.uint()})
     m["settings"] = r.vec(lambda: (r.string(), r.string()))
     m["sources"] = r.vec(lambda: {"path": r.string(), "bytes": r.uint(), "xxh3_128": r.string()})
     m["frames"] = r.vec(lambda: {"source": r.option(r.uint), "active_voxels": r.uint(),
@@ -209,7 +215,7 @@ def decode_metadata(data):
 # ---------------------------------------------------------------------------
 
 def validate(m, secs):
-    C, P, A = len(m["channels"]), len(m["planes"]), len(m["atlases"])
+    C, P = len(m["channels"]), len(m["planes"])
     if not (1 <= C <= 256 and 1 <= P <= 256):
         raise VpakError("channel or plane count out of 1..256")
     for p, pl in enumerate(m["planes"]):
@@ -228,18 +234,49 @@ def validate(m, secs):
         used[p] |= span
     if any(not u for u in used):
         raise VpakError("a plane holds no channel")
-    # Atlases: consecutive from brick 0, all but the last full and of one shape, and the
-    # last one's bricks placeable with the first one's shape.
-    first = 0
-    for a, at in enumerate(m["atlases"]):
+    for p, pl in enumerate(m["planes"]):
+        validate_plane(m, secs, p, pl)
+    if m["index_offset"][0] % 128 or m["index_offset"][1] % 128 or m["index_offset"][2] % 128:
+        raise VpakError("index_offset not a multiple of 128")
+    if len(m["frames"]) != m["frame_count"]:
+        raise VpakError("frame info list is not frame_count long")
+
+
+def slots_of(pl):
+    """Channel slots S of a plane (range pairs per plane brick)."""
+    return pl["lanes"] // pl["z_per_texel"]
+
+
+def atlas_section(m, p, a):
+    """Section index of atlas a of plane p: the atlases of the planes before it, plus a."""
+    return sum(len(q["atlases"]) for q in m["planes"][:p]) + a
+
+
+def validate_plane(m, secs, p, pl):
+    """Plane bricks, brick table, ranges and atlases of plane p (format.md, "Validation")."""
+    n, bricks = m["brick_count"], pl["bricks"]
+    if bricks > n or (bricks == 0) != (n == 0):
+        raise VpakError(f"plane {p} stores {bricks} plane bricks for {n} bricks")
+    has_table = bricks != n
+    table = secs.u32(K_TABLE, p) if (K_TABLE, p) in secs.table else None
+    if has_table != (table is not None):
+        raise VpakError(f"plane {p}: a brick table must exist exactly when the plane stores fewer bricks")
+    if table is not None and (len(table) != n or (n and table.max() >= bricks)):
+        raise VpakError(f"plane {p}: brick table of the wrong length or past the plane's bricks")
+    if len(secs.f32(K_RANGES, p)) != bricks * slots_of(pl) * 2:
+        raise VpakError(f"plane {p}: brick ranges section has the wrong length")
+    # Atlases: consecutive from plane brick 0, all but the last full and of one shape,
+    # and the last one's bricks placeable with the first one's shape.
+    atlases, first = pl["atlases"], 0
+    for a, at in enumerate(atlases):
         bx, by, bz = at["bricks"]
         if at["first_brick"] != first or at["count"] > bx * by * bz:
-            raise VpakError(f"atlas {a} not consecutive or over-full")
-        if a < A - 1 and (at["bricks"] != m["atlases"][0]["bricks"] or at["count"] != bx * by * bz):
-            raise VpakError(f"atlas {a} is not full with the first atlas's shape")
+            raise VpakError(f"plane {p} atlas {a} not consecutive or over-full")
+        if a < len(atlases) - 1 and (at["bricks"] != atlases[0]["bricks"] or at["count"] != bx * by * bz):
+            raise VpakError(f"plane {p} atlas {a} is not full with the first atlas's shape")
         first += at["count"]
-    if A:
-        last, (fx, fy, fz) = m["atlases"][-1], m["atlases"][0]["bricks"]
+    if atlases:
+        last, (fx, fy, fz) = atlases[-1], atlases[0]["bricks"]
         lx, ly, lz = last["bricks"]
         # Every brick of the last atlas must sit where the first atlas's shape puts it
         # (the shader addresses all atlases with the first one's shape).
@@ -247,13 +284,9 @@ def validate(m, secs):
         first_pos = np.stack([i % fx, (i // fx) % fy, i // (fx * fy)])
         own_pos = np.stack([i % lx, (i // lx) % ly, i // (lx * ly)])
         if not np.array_equal(first_pos, own_pos) or (len(i) and (first_pos.max(axis=1) >= [lx, ly, lz]).any()):
-            raise VpakError("last atlas's bricks cannot be placed with the first atlas's shape")
-    if first != m["brick_count"]:
-        raise VpakError("atlases do not cover brick_count bricks")
-    if m["index_offset"][0] % 128 or m["index_offset"][1] % 128 or m["index_offset"][2] % 128:
-        raise VpakError("index_offset not a multiple of 128")
-    if len(m["frames"]) != m["frame_count"]:
-        raise VpakError("frame info list is not frame_count long")
+            raise VpakError(f"plane {p}: last atlas's bricks cannot be placed with the first atlas's shape")
+    if first != bricks:
+        raise VpakError(f"plane {p}: atlases do not cover the plane's bricks")
 
 
 # ---------------------------------------------------------------------------
@@ -435,9 +468,9 @@ def load_plane_texture(secs, m, p, a):
     """Plane p of atlas a as a float32 array [z, y, x, lane] of levels or values."""
     pl = m["planes"][p]
     fmt, lanes, zpt = pl["format"], pl["lanes"], pl["z_per_texel"]
-    bx, by, bz = m["atlases"][a]["bricks"]
+    bx, by, bz = pl["atlases"][a]["bricks"]
     W, H, D = 8 * bx, 8 * by, (8 // zpt) * bz
-    data = secs.get(K_ATLAS, p * len(m["atlases"]) + a)
+    data = secs.get(K_ATLAS, atlas_section(m, p, a))
     if fmt in (F32, F16, UNORM8):
         dtype, size = {F32: ("<f4", 4), F16: ("<f2", 2), UNORM8: ("u1", 1)}[fmt]
         if len(data) != W * H * D * lanes * size:
@@ -452,10 +485,7 @@ def load_plane_texture(secs, m, p, a):
 
 def brick_values(m, secs, bricks):
     """Values [len(bricks), C, 512] (leaf order) of the given bricks, every channel."""
-    C, A = len(m["channels"]), len(m["atlases"])
-    ranges = secs.f32(K_RANGES)
-    if len(ranges) != m["brick_count"] * C * 2:
-        raise VpakError("brick ranges section has the wrong length")
+    C = len(m["channels"])
     bricks = np.asarray(bricks, dtype=np.int64)
     if len(bricks) and bricks.max() >= m["brick_count"]:
         raise VpakError("L3 node points at a missing brick")
@@ -463,17 +493,20 @@ def brick_values(m, secs, bricks):
     x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
     x, y, z = x.ravel(), y.ravel(), z.ravel()
     textures = {}
-    for a, at in enumerate(m["atlases"]):
-        sel = np.nonzero((bricks >= at["first_brick"]) & (bricks < at["first_brick"] + at["count"]))[0]
-        if not len(sel):
-            continue
-        bx, by, _ = at["bricks"]
-        i = bricks[sel] - at["first_brick"]
-        px, py, pz = i % bx, (i // bx) % by, i // (bx * by)
-        for c, ch in enumerate(m["channels"]):
-            p = ch["plane"]
-            zpt = m["planes"][p]["z_per_texel"]
-            slices = 8 // zpt
+    for c, ch in enumerate(m["channels"]):
+        p = ch["plane"]
+        pl = m["planes"][p]
+        zpt, slices = pl["z_per_texel"], 8 // pl["z_per_texel"]
+        # Brick b's plane brick k: entry b of the plane's brick table, or b without one.
+        table = secs.u32(K_TABLE, p).astype(np.int64) if pl["bricks"] != m["brick_count"] else None
+        k = table[bricks] if table is not None else bricks
+        for a, at in enumerate(pl["atlases"]):
+            sel = np.nonzero((k >= at["first_brick"]) & (k < at["first_brick"] + at["count"]))[0]
+            if not len(sel):
+                continue
+            bx, by, _ = at["bricks"]
+            i = k[sel] - at["first_brick"]
+            px, py, pz = i % bx, (i // bx) % by, i // (bx * by)
             if (p, a) not in textures:
                 textures[(p, a)] = load_plane_texture(secs, m, p, a)
             tex = textures[(p, a)]
@@ -483,12 +516,13 @@ def brick_values(m, secs, bricks):
             Z = slices * pz[:, None] + (z // zpt)[None, :]
             L = ch["lane"] + (z % zpt)[None, :]
             out[sel, c, :] = tex[Z, Y, X, np.broadcast_to(L, X.shape)]
-    # Ranged formats: level t over the brick's [min, max] for the channel. In f32,
-    # min + t * (max - min): found by experiment to match `vdbcook unpack` exactly.
-    for c, ch in enumerate(m["channels"]):
-        if m["planes"][ch["plane"]]["format"] in (UNORM8, BC4, BC7):
-            lo = ranges[2 * (bricks * C + c)][:, None]
-            hi = ranges[2 * (bricks * C + c) + 1][:, None]
+        # Ranged formats: level t over the plane brick's [min, max] for the channel's
+        # slot. In f32, min + t * (max - min): found by experiment to match `vdbcook
+        # unpack` exactly.
+        if pl["format"] in (UNORM8, BC4, BC7):
+            ranges = secs.f32(K_RANGES, p)
+            r = 2 * (k * slots_of(pl) + ch["lane"] // zpt)
+            lo, hi = ranges[r][:, None], ranges[r + 1][:, None]
             t = out[:, c, :]
             out[:, c, :] = np.where(hi > lo, lo + t * (hi - lo), lo)
     return out

@@ -186,7 +186,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if (leaf.tile != VPAK_NONE) {
                     e = vpak_active_value(params.info, leaf, ip, params.channels.x);
                 } else {
-                    e = vpak_brick_channel_value(params.info, ext, vec3<u32>(ip) & vec3<u32>(7u));
+                    e = vpak_brick_channel_value(ext, vec3<u32>(ip) & vec3<u32>(7u));
                 }
             }
             let sigma = max(e, 0.0) * params.light.w;

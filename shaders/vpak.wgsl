@@ -4,23 +4,26 @@
 // asset's sections as storage buffers, and calls `vpak_sample` (channel c's
 // value at a voxel) or `vpak_query` (the value plus the size of the empty
 // region around it, for hierarchical empty-space skipping). The atlas files
-// define `vpak_texel(info, slot, atlas, format, lanes, texel)`:
-//   vpak_atlas_texture.wgsl  every plane of every atlas as a 3D texture, read
+// define `vpak_texel(bc, texel)` (a texel of the brick channel `bc`'s texture):
+//   vpak_atlas_texture.wgsl  every atlas of every plane as a 3D texture, read
 //                            through the texture unit (BC4/BC7 need
 //                            TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D);
-//   vpak_atlas_buffer.wgsl   every plane as a storage buffer of its section's
+//   vpak_atlas_buffer.wgsl   every atlas as a storage buffer of its section's
 //                            bytes, decoded in the shader (include bcdec.wgsl
 //                            too), for GPUs without block-compressed 3D textures.
 //
 // Coordinates are asset index space: source index minus `index_offset`,
 // inside [0, 4096)^3. A frame's tree is walked once per 8³ cell (`vpak_leaf`)
-// and serves every channel of the voxels in it (`vpak_leaf_value`).
-// Texture slot s = plane · atlas_count + atlas holds plane `plane` of atlas
-// `atlas` (the section index of that atlas plane); up to eight are bound.
+// and serves every channel of the voxels in it (`vpak_leaf_value`). A leaf's
+// brick has, in each plane, a plane brick (through the plane's brick table,
+// when it has one), which has a range per channel and a place in one of the
+// plane's atlases. Texture slot s holds atlas section s (the atlases of
+// plane 0, then of plane 1, ...); up to eight are bound.
 
 const VPAK_L1_WORDS: u32 = 1537u;   // 1024 mask words, 512 prefix words, first entry
 const VPAK_L2_WORDS: u32 = 193u;    // 128 mask words, 64 prefix words, first entry
 const VPAK_L3_WORDS: u32 = 3u;      // brick, sub-block states, first sub-mask (after a count)
+// No brick table: brick b is plane brick b.
 const VPAK_TILE: u32 = 0x80000000u;
 const VPAK_NONE: u32 = 0xffffffffu;
 
@@ -34,24 +37,17 @@ const VPAK_BC7: u32 = 4u;
 struct VpakInfo {
     // L1 node of the frame being sampled.
     l1: u32,
-    // Channels of the asset (values per tile, ranges per brick).
+    // Channels of the asset (values per tile).
     channels: u32,
-    // Atlases (texture slot = plane · atlas_count + atlas).
-    atlas_count: u32,
-    _pad: u32,
-    // Size in bricks (x, y, z) of every atlas but possibly the last, and the
-    // bricks each holds (x·y·z). Brick positions in every atlas follow this
-    // shape; the last atlas may be smaller but holds every position used.
-    atlas_bricks: vec4<u32>,
-    // The last atlas: its number, and its own size in bricks along x and y
-    // (the stride of its rows and slices, for vpak_atlas_buffer.wgsl).
-    last_atlas: vec4<u32>,
+    _pad0: u32,
+    _pad1: u32,
 }
 
-// One channel, as the metadata describes it (docs/format.md, "The channel table").
+// One channel and its plane, as the metadata describes them (docs/format.md,
+// "The channel table").
 struct VpakChannel {
-    // Plane of the channel, and its first lane there.
-    plane: u32,
+    // Texture slot of the plane's first atlas, and the channel's first lane there.
+    slot: u32,
     lane: u32,
     // log2 of the consecutive z-slices in one texel's lanes (BC7 packing;
     // else 0), and the slices a brick takes in the plane (8 >> z_shift).
@@ -64,6 +60,19 @@ struct VpakChannel {
     ranged: u32,
     // The channel's background (f32 bits).
     background: u32,
+    // First word of the plane's brick table in vpak_tables, or VPAK_NONE.
+    table: u32,
+    // First range of the plane in vpak_ranges, and ranges per plane brick.
+    range_base: u32,
+    range_slots: u32,
+    plane: u32,
+    // Size in bricks (x, y, z) of the plane's atlases but possibly the last,
+    // and the bricks each holds (x·y·z). Brick positions in every atlas follow
+    // this shape; the last atlas may be smaller but holds every position used.
+    atlas_bricks: vec4<u32>,
+    // The plane's last atlas: its number, and its own size in bricks along x
+    // and y (the stride of its rows and slices, for vpak_atlas_buffer.wgsl).
+    last_atlas: vec4<u32>,
 }
 
 @group(0) @binding(1) var<storage, read> vpak_l1: array<u32>;
@@ -74,7 +83,8 @@ struct VpakChannel {
 @group(0) @binding(6) var<storage, read> vpak_tiles: array<u32>;
 @group(0) @binding(7) var<storage, read> vpak_ranges: array<vec2<f32>>;
 @group(0) @binding(14) var<storage, read> vpak_channels: array<VpakChannel>;
-// False when the asset has a single texture (one plane of one atlas): the
+@group(0) @binding(19) var<storage, read> vpak_tables: array<u32>;
+// False when the asset has a single texture (one plane, one atlas): the
 // texture selection then folds away at pipeline creation (it costs 2-3x on
 // a CPU driver otherwise).
 override VPAK_MULTI_ATLAS: bool = true;
@@ -105,34 +115,14 @@ fn vpak_entry_index(nodes_is_l1: bool, base: u32, mask_words: u32, s: u32) -> u3
     return first + prefix + below;
 }
 
-// Where brick `b` lives: its atlas and its position (in bricks) there.
-struct VpakBrick {
-    index: u32,
-    atlas: u32,
-    pos: vec3<u32>,
-}
-
-fn vpak_brick(info: VpakInfo, b: u32) -> VpakBrick {
-    let bx = info.atlas_bricks.x;
-    let by = info.atlas_bricks.y;
-    var brick: VpakBrick;
-    brick.index = b;
-    brick.atlas = 0u;
-    var i = b;
-    if (VPAK_MULTI_ATLAS && b >= info.atlas_bricks.w) {
-        brick.atlas = b / info.atlas_bricks.w;
-        i = b % info.atlas_bricks.w;
-    }
-    brick.pos = vec3<u32>(i % bx, (i / bx) % by, i / (bx * by));
-    return brick;
-}
-
-// Channel `c` of one brick, resolved once: its texture slot, its first
-// texel there, its lanes and its value range. A marcher keeps it for a cell.
+// Channel `c` of brick `b`, resolved once: its plane brick's texture slot,
+// first texel there and the atlas's size, its lanes and its value range. A
+// marcher keeps it for a cell.
 struct VpakBrickChannel {
     slot: u32,
-    atlas: u32,
     origin: vec3<u32>,
+    // The atlas's size in bricks along x and y (for vpak_atlas_buffer.wgsl).
+    size: vec2<u32>,
     lane: u32,
     z_shift: u32,
     format: u32,
@@ -142,37 +132,52 @@ struct VpakBrickChannel {
     range: vec2<f32>,
 }
 
-fn vpak_brick_channel(info: VpakInfo, brick: VpakBrick, c: u32) -> VpakBrickChannel {
+fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
     let ch = vpak_channels[c];
+    var pb = b;
+    if (ch.table != VPAK_NONE) {
+        pb = vpak_tables[ch.table + b];
+    }
+    var atlas = 0u;
+    var i = pb;
+    if (VPAK_MULTI_ATLAS && pb >= ch.atlas_bricks.w) {
+        atlas = pb / ch.atlas_bricks.w;
+        i = pb % ch.atlas_bricks.w;
+    }
+    let bx = ch.atlas_bricks.x;
+    let by = ch.atlas_bricks.y;
     var bc: VpakBrickChannel;
-    bc.slot = ch.plane * info.atlas_count + brick.atlas;
-    bc.atlas = brick.atlas;
-    bc.origin = brick.pos * vec3<u32>(8u, 8u, ch.slices);
+    bc.slot = ch.slot + atlas;
+    bc.origin = vec3<u32>(i % bx, (i / bx) % by, i / (bx * by)) * vec3<u32>(8u, 8u, ch.slices);
+    bc.size = ch.atlas_bricks.xy;
+    if (atlas == ch.last_atlas.x) {
+        bc.size = ch.last_atlas.yz;
+    }
     bc.lane = ch.lane;
     bc.z_shift = ch.z_shift;
     bc.format = ch.format;
     bc.lanes = ch.lanes;
     bc.ranged = ch.ranged;
     if (ch.ranged != 0u) {
-        let r = vpak_ranges[brick.index * info.channels + c];
+        let r = vpak_ranges[ch.range_base + pb * ch.range_slots + (ch.lane >> ch.z_shift)];
         bc.range = vec2<f32>(r.x, r.y - r.x);
     }
     return bc;
 }
 
 // Voxel `v` (0..8 on each axis) of the brick channel `bc`.
-fn vpak_brick_channel_value(info: VpakInfo, bc: VpakBrickChannel, v: vec3<u32>) -> f32 {
+fn vpak_brick_channel_value(bc: VpakBrickChannel, v: vec3<u32>) -> f32 {
     let t = bc.origin + vec3<u32>(v.x, v.y, v.z >> bc.z_shift);
-    let level = vpak_texel(info, bc.slot, bc.atlas, bc.format, bc.lanes, vec3<i32>(t))[bc.lane + (v.z & ((1u << bc.z_shift) - 1u))];
+    let level = vpak_texel(bc, vec3<i32>(t))[bc.lane + (v.z & ((1u << bc.z_shift) - 1u))];
     if (bc.ranged == 0u) {
         return level;
     }
     return bc.range.x + level * bc.range.y;
 }
 
-// Channel `c` of voxel `v` (0..8 on each axis) of `brick`.
-fn vpak_brick_value(info: VpakInfo, brick: VpakBrick, v: vec3<u32>, c: u32) -> f32 {
-    return vpak_brick_channel_value(info, vpak_brick_channel(info, brick, c), v);
+// Channel `c` of voxel `v` (0..8 on each axis) of brick `b`.
+fn vpak_brick_value(info: VpakInfo, b: u32, v: vec3<u32>, c: u32) -> f32 {
+    return vpak_brick_channel_value(vpak_brick_channel(info, b, c), v);
 }
 
 // What the tree holds for the 8³ cell of a voxel: an L3 node (`l3` is its
@@ -187,7 +192,7 @@ struct VpakLeaf {
     tile: u32,
     empty_dim: u32,
     // The L3 node's brick (when `l3` is set).
-    brick: VpakBrick,
+    brick: u32,
 }
 
 fn vpak_leaf(info: VpakInfo, p: vec3<i32>) -> VpakLeaf {
@@ -223,7 +228,7 @@ fn vpak_leaf(info: VpakInfo, p: vec3<i32>) -> VpakLeaf {
         return leaf;
     }
     leaf.l3 = 1u + e2 * VPAK_L3_WORDS;
-    leaf.brick = vpak_brick(info, vpak_l3[leaf.l3]);
+    leaf.brick = vpak_l3[leaf.l3];
     leaf.states = vpak_l3[leaf.l3 + 1u];
     leaf.masks = vpak_l3[leaf.l3 + 2u];
     return leaf;

@@ -4,8 +4,8 @@
 // For GPUs without block-compressed 3D textures. Each buffer holds an atlas
 // plane's section exactly as stored in the asset (docs/format.md): texels
 // (or 4×4 blocks) row by row, slice by slice, so the texel a textureLoad
-// would return is decoded from the bytes that hold it alone. Slot s
-// (plane · atlas_count + atlas) is bound at 8, 11, 12, 13, 15, 16, 17, 18.
+// would return is decoded from the bytes that hold it alone. Slot s (atlas
+// section s) is bound at 8, 11, 12, 13, 15, 16, 17, 18 for s = 0 to 7.
 
 @group(0) @binding(8) var<storage, read> vpak_words0: array<u32>;
 @group(0) @binding(11) var<storage, read> vpak_words1: array<u32>;
@@ -38,15 +38,15 @@ fn vpak_byte(slot: u32, b: u32) -> u32 {
     return (vpak_word(slot, b >> 2u) >> (8u * (b & 3u))) & 0xffu;
 }
 
-// Texel `t` of texture slot `slot` (of atlas `atlas`, a plane of `format`
-// with `lanes` lanes), as textureLoad on the plane's texture returns it.
-fn vpak_texel(info: VpakInfo, slot: u32, atlas: u32, format: u32, lanes: u32, t: vec3<i32>) -> vec4<f32> {
+// Texel `t` of the brick channel `bc`'s texture, as textureLoad on that
+// texture returns it.
+fn vpak_texel(bc: VpakBrickChannel, t: vec3<i32>) -> vec4<f32> {
     let u = vec3<u32>(t);
-    // This atlas's size in texels along x and y (8 a brick).
-    var size = info.atlas_bricks.xy * 8u;
-    if (atlas == info.last_atlas.x) {
-        size = info.last_atlas.yz * 8u;
-    }
+    let slot = bc.slot;
+    let format = bc.format;
+    let lanes = bc.lanes;
+    // The atlas's size in texels along x and y (8 a brick).
+    let size = bc.size * 8u;
     if (format == VPAK_BC4 || format == VPAK_BC7) {
         let row = size.x / 4u;
         let block = (u.z * (size.y / 4u) + (u.y >> 2u)) * row + (u.x >> 2u);

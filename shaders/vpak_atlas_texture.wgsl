@@ -2,8 +2,8 @@
 //
 // f32, f16 and unorm8 planes are R/RG/RGBA 32Float, 16Float and 8Unorm
 // textures; bc4 planes are Bc4RUnorm and bc7 planes Bc7RgbaUnorm, decoded by
-// the texture unit. Slot s (plane · atlas_count + atlas) is bound at
-// VPAK_SLOT_BINDINGS[s]: 8, 11, 12, 13, 15, 16, 17, 18.
+// the texture unit. Slot s (atlas section s) is bound at binding 8, 11, 12,
+// 13, 15, 16, 17, 18 for s = 0 to 7.
 
 @group(0) @binding(8) var vpak_atlas0: texture_3d<f32>;
 @group(0) @binding(11) var vpak_atlas1: texture_3d<f32>;
@@ -14,12 +14,12 @@
 @group(0) @binding(17) var vpak_atlas6: texture_3d<f32>;
 @group(0) @binding(18) var vpak_atlas7: texture_3d<f32>;
 
-// Texel `t` of texture slot `slot` (of atlas `atlas`, a plane of `format` with `lanes` lanes).
-fn vpak_texel(info: VpakInfo, slot: u32, atlas: u32, format: u32, lanes: u32, t: vec3<i32>) -> vec4<f32> {
-    if (!VPAK_MULTI_ATLAS || slot == 0u) {
+// Texel `t` of the brick channel `bc`'s texture.
+fn vpak_texel(bc: VpakBrickChannel, t: vec3<i32>) -> vec4<f32> {
+    if (!VPAK_MULTI_ATLAS || bc.slot == 0u) {
         return textureLoad(vpak_atlas0, t, 0);
     }
-    switch slot {
+    switch bc.slot {
         case 0u: { return textureLoad(vpak_atlas0, t, 0); }
         case 1u: { return textureLoad(vpak_atlas1, t, 0); }
         case 2u: { return textureLoad(vpak_atlas2, t, 0); }

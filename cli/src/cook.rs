@@ -27,11 +27,12 @@ Formats (storage per voxel and channel in the brick atlas):
 
 Several grids (--grids density,temperature,flames or --grids all) are channels of one
 tree per frame over the union of their active voxels; a vec3 grid (velocity) gives
-three channels NAME.x, NAME.y, NAME.z. Uncompressed formats put up to four channels in
-one R/RG/RGBA texture; bc4 and bc7 store a texture per channel. --group
-CHANNELS=FORMAT (repeatable) stores channels together in a format of their own: in
-bc7, two channels take two z-slices each per texel and four take RGBA, which lowers
-the error of correlated channels (density and temperature; temperature and flames).
+three channels NAME.x, NAME.y, NAME.z. Each channel gets a texture of its own, which
+stores only its own distinct bricks. --group CHANNELS=FORMAT (repeatable) packs
+channels into shared textures in a format of their own: f32/f16/unorm8 up to four
+channels in one RG/RGBA texture; bc7 two channels at two z-slices each per texel, or
+four in RGBA, which lowers the error of correlated channels (density and temperature;
+temperature and flames); bc4 stays one texture per channel.
 
 Quality presets (--quality), for the block formats:
   ultra-fast  very-fast (default)  fast  basic  slow
@@ -276,7 +277,7 @@ fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
     let what = if r.channels.len() == 1 { format!("grid \"{}\"", grid.unwrap_or("")) } else { format!("{} channels", r.channels.len()) };
     let _ = writeln!(s, "cooked {} frame{} of {what} into {} ({}, {})", r.frames, if r.frames == 1 { "" } else { "s" }, args.output.display(), r.format, mb(r.file_bytes));
     let _ = writeln!(s, "  active voxels   {} ({:.3} bits per active voxel)", r.active_voxels, r.bits_per_active_voxel);
-    let _ = writeln!(s, "  bricks          {} leaves -> {} unique -> {} stored in {} atlas{}", r.bricks, r.unique_bricks, r.stored_bricks, r.atlases, if r.atlases == 1 { "" } else { "es" });
+    let _ = writeln!(s, "  bricks          {} leaves -> {} unique -> {} stored in {} texture{}", r.bricks, r.unique_bricks, r.stored_bricks, r.textures, if r.textures == 1 { "" } else { "s" });
     let _ = writeln!(s, "  nodes           L1 {}, L2 {}, L3 {}, tiles {}; tree {} (thesis layout: {})", r.l1_nodes, r.l2_nodes, r.l3_nodes, r.tiles, mb(r.tree_bytes), mb(r.thesis_tree_bytes));
     if r.channels.len() == 1 {
         let _ = writeln!(s, "  voxel error     rmse {:.3e}, psnr {:.1} dB, max {:.3e}", r.voxel_rmse, r.voxel_psnr, r.voxel_max_error);
@@ -284,10 +285,12 @@ fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
         for c in &r.channels {
             let _ = writeln!(
                 s,
-                "  {:<16}{:<7} {:>10}, values [{:.4}, {:.4}], rmse {:.3e}, psnr {:.1} dB, max {:.3e}",
+                "  {:<16}{:<7} {:>10} ({} brick{}), values [{:.4}, {:.4}], rmse {:.3e}, psnr {:.1} dB, max {:.3e}",
                 c.name,
                 c.format,
                 mb(c.bytes),
+                c.bricks,
+                if c.bricks == 1 { "" } else { "s" },
                 c.value_range[0],
                 c.value_range[1],
                 c.voxel_rmse,

@@ -21,17 +21,24 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let l2 = size(kind::L2_NODES) / (L2_WORDS as u64 * 4);
     // The L3 section counts its nodes in its first word (records follow, then sub-masks).
     let l3 = l3_node_count(checked.l3).map_or(0, |n| n as u64);
-    let atlas_bytes = size(kind::ATLAS);
+    let brick_bytes = size(kind::ATLAS) + size(kind::BRICK_RANGES) + size(kind::BRICK_TABLE);
     let file_bytes = asset.bytes().len() as u64;
     let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));
     let nodes = [
         ("l1", l1, size(kind::L1_NODES) + size(kind::L1_ENTRIES)),
         ("l2", l2, size(kind::L2_NODES) + size(kind::L2_ENTRIES)),
         ("l3", l3, size(kind::L3_NODES)),
-        ("bricks", u64::from(meta.brick_count), atlas_bytes + size(kind::BRICK_RANGES)),
+        ("bricks", u64::from(meta.brick_count), brick_bytes),
     ];
-    // Bytes of each plane (all its atlases), and each channel's share of its plane.
-    let plane_bytes: Vec<u64> = (0..meta.planes.len()).map(|p| (0..meta.atlases.len()).filter_map(|a| checked.atlas(p, a)).map(|(_, b)| b.len() as u64).sum()).collect();
+    // Bytes of each plane (its atlases, ranges and brick table), and each channel's share of its plane.
+    let section_bytes = |k: u32, i: u32| asset.sections.iter().filter(|s| s.kind == k && s.index == i).map(|s| s.size).sum::<u64>();
+    let plane_bytes: Vec<u64> = (0..meta.planes.len())
+        .map(|p| {
+            (0..meta.planes[p].atlases.len()).map(|a| section_bytes(kind::ATLAS, meta.atlas_section(p, a))).sum::<u64>()
+                + section_bytes(kind::BRICK_RANGES, p as u32)
+                + section_bytes(kind::BRICK_TABLE, p as u32)
+        })
+        .collect();
     let sharing = |p: usize| meta.channels.iter().filter(|c| c.plane as usize == p).count().max(1) as u64;
     let channel_bytes = |c: &vdbcook_vpak::Channel| plane_bytes[c.plane as usize] / sharing(c.plane as usize);
     let formats = meta.format_names();
@@ -47,9 +54,14 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "channels": meta.channels.iter().map(|c| json!({
                 "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
                 "background": c.background, "value_range": c.value_range, "group": c.group, "plane": c.plane, "lane": c.lane,
-                "format": meta.planes[c.plane as usize].format.name(), "bytes": channel_bytes(c),
+                "format": meta.planes[c.plane as usize].plane.format.name(), "bytes": channel_bytes(c),
             })).collect::<Vec<_>>(),
-            "planes": meta.planes.iter().zip(&plane_bytes).map(|(p, b)| json!({"format": p.format.name(), "lanes": p.lanes, "z_per_texel": p.z_per_texel, "bytes": b})).collect::<Vec<_>>(),
+            "bricks": meta.brick_count,
+            "planes": meta.planes.iter().zip(&plane_bytes).map(|(p, b)| json!({
+                "format": p.plane.format.name(), "lanes": p.plane.lanes, "z_per_texel": p.plane.z_per_texel, "bytes": b, "bricks": p.bricks,
+                "brick_table": p.has_table(meta.brick_count),
+                "atlases": p.atlases.iter().map(|a| json!({"bricks": a.bricks, "first_brick": a.first_brick, "count": a.count})).collect::<Vec<_>>(),
+            })).collect::<Vec<_>>(),
             "map_type": meta.map_type,
             "transform": meta.transform,
             "index_offset": meta.index_offset,
@@ -58,7 +70,6 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "file_bytes": file_bytes,
             "bits_per_active_voxel": if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 },
             "nodes": nodes.iter().map(|(n, c, b)| (n.to_string(), json!({"count": c, "bytes": b}))).collect::<serde_json::Map<_, _>>(),
-            "atlases": meta.atlases.iter().map(|a| json!({"bricks": a.bricks, "first_brick": a.first_brick, "count": a.count})).collect::<Vec<_>>(),
             "sections": asset.sections.iter().map(|s| json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": s.offset, "bytes": s.size, "checksum": format!("{:016x}", s.checksum)})).collect::<Vec<_>>(),
             "settings": meta.settings.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
             "sources": meta.sources.iter().map(|s| json!({"path": s.path, "bytes": s.bytes, "xxh3_128": s.xxh3_128})).collect::<Vec<_>>(),
@@ -89,7 +100,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             s,
             "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} {}",
             c.name,
-            p.format.name(),
+            p.plane.format.name(),
             format!("{}.{}", c.plane, c.lane),
             channel_bytes(c),
             c.class,
@@ -103,13 +114,16 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     }
     let _ = writeln!(s, "  sections:");
     for e in &asset.sections {
-        let label = if e.kind == kind::ATLAS { format!("{} {}", kind::name(e.kind), e.index) } else { kind::name(e.kind).to_string() };
+        let label = if matches!(e.kind, kind::ATLAS | kind::BRICK_RANGES | kind::BRICK_TABLE) { format!("{} {}", kind::name(e.kind), e.index) } else { kind::name(e.kind).to_string() };
         let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}", e.size, e.offset, e.checksum);
     }
-    for (p, plane) in meta.planes.iter().enumerate() {
-        for (a, info) in meta.atlases.iter().enumerate() {
-            let t = AtlasLayout { plane: *plane, atlas: *info }.texels();
-            let _ = writeln!(s, "  atlas {a} plane {p}  {} {}-lane, {} bricks from #{}, {}×{}×{} texels", plane.format.name(), plane.lanes, info.count, info.first_brick, t[0], t[1], t[2]);
+    for (p, info) in meta.planes.iter().enumerate() {
+        let plane = info.plane;
+        let table = if info.has_table(meta.brick_count) { "through a brick table" } else { "one per brick" };
+        let _ = writeln!(s, "  plane {p}  {} {}-lane: {} brick{} ({table})", plane.format.name(), plane.lanes, info.bricks, if info.bricks == 1 { "" } else { "s" });
+        for (a, atlas) in info.atlases.iter().enumerate() {
+            let t = AtlasLayout { plane, atlas: *atlas }.texels();
+            let _ = writeln!(s, "    atlas {a}  {} bricks from #{}, {}×{}×{} texels", atlas.count, atlas.first_brick, t[0], t[1], t[2]);
         }
     }
     let set: Vec<String> = meta.settings.iter().filter(|(_, v)| !v.is_empty()).map(|(k, v)| format!("{k}={v}")).collect();

@@ -53,8 +53,16 @@ fn grids_all_cooks_every_float_grid_into_one_tree() {
         assert!(names.contains(&want), "{names:?}");
     }
     assert_eq!(cooked["channels"].as_array().unwrap().len(), names.len());
-    // unorm8: one RGBA plane holds four scalar channels.
-    assert!(f["planes"].as_array().unwrap().iter().any(|p| p["lanes"] == 4));
+    // A texture per channel, each storing its own distinct bricks: the all-zero
+    // flame is one brick, reached through a brick table.
+    let planes = f["planes"].as_array().unwrap();
+    assert_eq!(planes.len(), names.len());
+    let flame = &planes[f["channels"].as_array().unwrap().iter().find(|c| c["name"] == "flame").unwrap()["plane"].as_u64().unwrap() as usize];
+    assert_eq!((flame["bricks"].as_u64(), flame["brick_table"].as_bool()), (Some(1), Some(true)), "{flame}");
+    // A group packs four scalar channels into one RGBA texture.
+    let grouped = dir.join("g.vpak");
+    ok(vdbcook(&["cook", "-q", "--grids", "all", "--format", "unorm8", "--group", "density,shadow,temperature,flame=unorm8", "-o", s(&grouped), &w]));
+    assert!(inspect(&grouped)["planes"].as_array().unwrap().iter().any(|p| p["lanes"] == 4));
     // One tree: as many leaves as the density alone (every grid shares its leaves here).
     let one = dir.join("d.vpak");
     let d: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["cook", "--json", "--format", "unorm8", "-o", s(&one), &w])).stdout).unwrap();

@@ -226,8 +226,8 @@ settings! {
     /// comma-separated, or "all" (every float, double, half and vec3 grid of the first frame).
     #[cfg_attr(feature = "clap", arg(long, value_name = "A,B,...|all"))]
     grids: Option<String> = None;
-    /// Store these channels together in their own format (repeatable), e.g.
-    /// --group temperature,flames=bc7 --group density=bc4; other channels take --format.
+    /// Pack these channels into shared textures in their own format (repeatable), e.g.
+    /// --group temperature,flames=bc7 --group density=bc4; other channels take --format, a texture each.
     #[cfg_attr(feature = "clap", arg(long, value_name = "CHANNELS=FORMAT"))]
     group: Vec<ChannelGroup> = Vec::new();
     /// A frame whose file or grid is missing becomes an empty frame instead of an error.

@@ -22,7 +22,7 @@ use vdbcook_flipbook::{Builder, Built, HashIndex};
 use vdbcook_grid::{Grid, Transform};
 use vdbcook_vpak::layout::{pack_atlas, plan_atlases, AtlasLayout};
 use vdbcook_vpak::nodes::Nodes;
-use vdbcook_vpak::{kind, Channel, FrameInfo, Metadata, Section, SourceFile};
+use vdbcook_vpak::{kind, Channel, FrameInfo, Metadata, PlaneInfo, Section, SourceFile};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -142,8 +142,11 @@ pub struct ChannelSpec {
 pub struct ChannelReport {
     pub name: String,
     pub format: String,
-    /// Bytes of the atlas planes the channel is stored in, shared equally among their channels.
+    /// Bytes of the plane the channel is stored in (atlases, ranges, brick
+    /// table), shared equally among its channels.
     pub bytes: u64,
+    /// Distinct bricks of the channel's plane.
+    pub bricks: u32,
     pub value_range: [f32; 2],
     /// Voxel-domain error against the source, over the channel's own active voxels.
     pub voxel_rmse: f64,
@@ -164,13 +167,15 @@ pub struct CookReport {
     pub bricks: u64,
     /// Distinct bricks after exact deduplication of the source values.
     pub unique_bricks: usize,
-    /// Bricks stored in the atlases (after deduplicating encoded bricks too).
+    /// Bricks stored (after deduplicating encoded bricks too): what L3 nodes
+    /// index; each plane stores its own distinct ones of these (`channels[c].bricks`).
     pub stored_bricks: usize,
     pub l1_nodes: usize,
     pub l2_nodes: usize,
     pub l3_nodes: usize,
     pub tiles: usize,
-    pub atlases: usize,
+    /// Atlas textures over all planes.
+    pub textures: usize,
     /// (section name, bytes) in file order.
     pub sections: Vec<(String, u64)>,
     pub file_bytes: u64,
@@ -315,12 +320,13 @@ impl Cooker {
     }
 
     /// The planes of every channel group, in order: explicit groups first,
-    /// then the other channels in `format`: together for the uncompressed
-    /// formats (a texel holds up to four), each alone for BC4 and BC7
-    /// (measured: packing correlated scalars such as density and temperature
-    /// into one BC7 texture lowers their error, but packing uncorrelated ones
-    /// raises it, up to 2.5x on c42; docs/benchmarks.md, so packing is asked
-    /// for with a group).  Returns the specs and each channel's group.
+    /// then each other channel alone in `format`, in a texture of its own
+    /// (measured, docs/benchmarks.md: a plane deduplicates its own bricks, so
+    /// a channel alone is stored as compactly as in an asset of its own, where
+    /// channels sharing a texture are stored once per distinct combination;
+    /// and packing uncorrelated channels into BC7's lanes raises their error,
+    /// up to 2.5x on c42).  Packing is asked for with a group.  Returns the
+    /// specs and each channel's group.
     fn plan_planes(&self) -> Result<(Vec<PlaneSpec>, Vec<u32>), Error> {
         let mut group_of: Vec<Option<u32>> = vec![None; self.channels.len()];
         let mut groups: Vec<(Format, Vec<usize>)> = Vec::new();
@@ -342,14 +348,11 @@ impl Cooker {
             }
             groups.push((g.format, members));
         }
-        let format = self.opts.format;
-        let rest: Vec<usize> = (0..self.channels.len()).filter(|&c| group_of[c].is_none()).collect();
-        let (alone, together): (Vec<usize>, Vec<usize>) = rest.into_iter().partition(|_| format.is_block());
-        for members in [together].into_iter().filter(|m| !m.is_empty()).chain(alone.into_iter().map(|c| vec![c])) {
-            for &c in &members {
+        for c in 0..self.channels.len() {
+            if group_of[c].is_none() {
                 group_of[c] = Some(groups.len() as u32);
+                groups.push((self.opts.format, vec![c]));
             }
-            groups.push((format, members));
         }
         let specs = groups.iter().flat_map(|(f, m)| vdbcook_encode::group_planes(*f, m)).collect();
         Ok((specs, group_of.into_iter().map(|g| g.unwrap_or(0)).collect()))
@@ -392,7 +395,17 @@ impl Cooker {
         progress.start("encoding", (work.len() / channels * specs.len()) as u64);
         let encoded = Encoded::new(specs.clone(), self.opts.quality, work, channels, work_masks.as_deref(), &|n| progress.advance(n as u64));
         progress.finish();
-        let (keep, enc_remap) = dedup_encoded(&encoded);
+        let planes = specs.len();
+        let (keep, enc_remap) = distinct(encoded.len(), &|i, buf| brick_bytes(&encoded, 0..planes, i, buf));
+        // Each plane stores its own distinct bricks (a table maps bricks to
+        // them), so a channel that repeats where others change (a constant
+        // flame, a static shadow) is stored once, as in an asset of its own.
+        let plane_keep: Vec<(Vec<usize>, Vec<u32>)> = (0..planes)
+            .map(|p| {
+                let (k, table) = distinct(keep.len(), &|i, buf| brick_bytes(&encoded, p..p + 1, keep[i], buf));
+                (k.into_iter().map(|i| keep[i]).collect(), table)
+            })
+            .collect();
         // Pool brick -> stored brick.
         let remap: Vec<u32> = match &clustered {
             Some(c) => c.remap.iter().map(|&w| enc_remap[w as usize]).collect(),
@@ -454,21 +467,30 @@ impl Cooker {
 
         let unique_bricks = built.pool.len();
         let t0 = Instant::now();
-        let max_slices = specs.iter().map(|s| s.plane.slices_per_brick()).max().unwrap_or(8);
-        let atlases = plan_atlases(max_slices, keep.len() as u32, self.opts.max_texture_dim);
         let mut sections = node_sections(&nodes);
+        let mut plane_infos = Vec::with_capacity(planes);
+        let mut plane_bytes = vec![0u64; planes];
+        let mut atlas_sections = Vec::new();
         let enc = &encoded;
-        let ranges: Vec<u32> = keep.iter().flat_map(|&k| (0..channels).flat_map(move |c| enc.range(k, c))).map(f32::to_bits).collect();
-        sections.push(Section { kind: kind::BRICK_RANGES, index: 0, data: words(&ranges) });
-        let mut plane_bytes = vec![0u64; specs.len()];
-        for (p, spec) in specs.iter().enumerate() {
-            let bricks = encoded.plane(p, &keep);
-            for (a, atlas) in atlases.iter().enumerate() {
+        for (p, (spec, (pkeep, table))) in specs.iter().zip(&plane_keep).enumerate() {
+            let info = PlaneInfo { plane: spec.plane, bricks: pkeep.len() as u32, atlases: plan_atlases(spec.plane.slices_per_brick(), pkeep.len() as u32, self.opts.max_texture_dim) };
+            let slots = info.range_slots() as usize;
+            let ranges: Vec<u32> = pkeep.iter().flat_map(|&k| (0..slots).flat_map(move |s| spec.channels.get(s).map_or([0.0; 2], |&c| enc.range(k, c)))).map(f32::to_bits).collect();
+            plane_bytes[p] += 4 * ranges.len() as u64;
+            sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: words(&ranges) });
+            if info.has_table(keep.len() as u32) {
+                plane_bytes[p] += 4 * table.len() as u64;
+                sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: words(table) });
+            }
+            let bricks = encoded.plane(p, pkeep);
+            for atlas in &info.atlases {
                 let data = pack_atlas(&AtlasLayout { plane: spec.plane, atlas: *atlas }, &bricks);
                 plane_bytes[p] += data.len() as u64;
-                sections.push(Section { kind: kind::ATLAS, index: (p * atlases.len() + a) as u32, data });
+                atlas_sections.push(Section { kind: kind::ATLAS, index: atlas_sections.len() as u32, data });
             }
+            plane_infos.push(info);
         }
+        sections.extend(atlas_sections);
         let stored_bricks = keep.len();
         // The source-precision bricks are not needed any more.
         drop(encoded);
@@ -507,9 +529,8 @@ impl Cooker {
                     lane: place[c].1,
                 })
                 .collect(),
-            planes: specs.iter().map(|s| s.plane).collect(),
+            planes: plane_infos,
             brick_count: stored_bricks as u32,
-            atlases: atlases.clone(),
             settings: self.opts.settings.clone(),
             sources: self.sources.clone(),
             frames: self.frames.clone(),
@@ -538,6 +559,7 @@ impl Cooker {
                     name: ch.name.clone(),
                     format: specs[p].plane.format.name().into(),
                     bytes: plane_bytes[p] / sharing,
+                    bricks: meta.planes[p].bricks,
                     value_range: ch.value_range,
                     voxel_rmse: totals[c].rmse(),
                     voxel_psnr: psnr(c),
@@ -558,7 +580,7 @@ impl Cooker {
             l2_nodes: nodes.l2_count(),
             l3_nodes: nodes.l3_count(),
             tiles: nodes.tile_count(),
-            atlases: atlases.len(),
+            textures: meta.texture_count(),
             sections: report_sections,
             file_bytes,
             tree_bytes,
@@ -638,30 +660,27 @@ fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8])>) -> Vec<
     out
 }
 
-/// Finds the distinct encoded bricks (every plane and every channel range
-/// equal; the first of equal ones, in order): returns their indices and, per
-/// pool brick, its stored index.
-fn dedup_encoded(encoded: &Encoded) -> (Vec<usize>, Vec<u32>) {
-    let planes = encoded.specs.len();
-    let channels = encoded.channels();
-    let sizes: Vec<usize> = encoded.specs.iter().map(|s| s.plane.brick_bytes()).collect();
-    let total: usize = sizes.iter().sum();
-    // A brick's bytes: every plane's encoding, then every channel's range.
-    let bytes_of = |i: usize, buf: &mut Vec<u8>| {
-        buf.clear();
-        buf.resize(total, 0);
-        let mut at = 0;
-        for p in 0..planes {
-            encoded.write(p, i, &mut buf[at..at + sizes[p]]);
-            at += sizes[p];
-        }
-        for c in 0..channels {
+/// Brick `i`'s bytes in `planes`: each plane's encoding, then the range of
+/// each of its channels.
+fn brick_bytes(encoded: &Encoded, planes: std::ops::Range<usize>, i: usize, buf: &mut Vec<u8>) {
+    buf.clear();
+    for p in planes {
+        let spec = &encoded.specs[p];
+        let at = buf.len();
+        buf.resize(at + spec.plane.brick_bytes(), 0);
+        encoded.write(p, i, &mut buf[at..]);
+        for &c in &spec.channels {
             for v in encoded.range(i, c) {
                 buf.extend_from_slice(&v.to_bits().to_le_bytes());
             }
         }
-    };
-    let hashes: Vec<u64> = (0..encoded.len())
+    }
+}
+
+/// Finds the distinct items `0..n` by their bytes (`bytes_of`; the first of
+/// equal ones, in order): returns their indices and, per item, its distinct index.
+fn distinct(n: usize, bytes_of: &(dyn Fn(usize, &mut Vec<u8>) + Sync)) -> (Vec<usize>, Vec<u32>) {
+    let hashes: Vec<u64> = (0..n)
         .into_par_iter()
         .map_init(Vec::new, |buf, i| {
             bytes_of(i, buf);
@@ -669,12 +688,12 @@ fn dedup_encoded(encoded: &Encoded) -> (Vec<usize>, Vec<u32>) {
         })
         .collect();
     let mut index = HashIndex::default();
-    index.reserve(encoded.len());
+    index.reserve(n);
     let mut keep: Vec<usize> = Vec::new();
-    let mut remap = Vec::with_capacity(encoded.len());
+    let mut remap = Vec::with_capacity(n);
     for (i, &h) in hashes.iter().enumerate() {
         let same = |k: u32| {
-            // Equal hashes are rare: encode both again to compare.
+            // Equal hashes are rare: make both again to compare.
             let (mut x, mut y) = (Vec::new(), Vec::new());
             bytes_of(keep[k as usize], &mut x);
             bytes_of(i, &mut y);

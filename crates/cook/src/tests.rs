@@ -1,6 +1,6 @@
 use super::*;
 use vdbcook_grid::{Coord, GridClass, Leaf, LeafMask, Tile};
-use vdbcook_vpak::Asset;
+use vdbcook_vpak::{Asset, Checked};
 
 fn frame(shift: i32) -> Grid {
     let mut leaves = Vec::new();
@@ -70,7 +70,7 @@ fn f32_round_trip_is_exact() {
 fn small_texture_limit_splits_atlases_and_still_round_trips() {
     let frames = [frame(0), frame(3)];
     let (bytes, report) = cook(Format::F16, &frames, 16);
-    assert!(report.atlases > 1, "{report:?}");
+    assert!(report.textures > 1, "{report:?}");
     let asset = Asset::from_bytes(&bytes).unwrap();
     let g = unpack_frame(&asset, 1).unwrap().remove(0);
     for (a, b) in g.leaves.iter().zip(&frames[1].leaves) {
@@ -427,8 +427,8 @@ fn channel_groups_choose_formats_and_planes() {
     let meta = Asset::from_bytes(&bytes).unwrap().metadata().unwrap();
     // temperature + flames share one BC7 plane (two z-slices each per texel); density is BC4.
     assert_eq!(meta.planes.len(), 2);
-    assert_eq!((meta.planes[0].format, meta.planes[0].z_per_texel), (Format::Bc7, 2));
-    assert_eq!(meta.planes[1].format, Format::Bc4);
+    assert_eq!((meta.planes[0].plane.format, meta.planes[0].plane.z_per_texel), (Format::Bc7, 2));
+    assert_eq!(meta.planes[1].plane.format, Format::Bc4);
     assert_eq!((meta.channels[1].plane, meta.channels[1].lane, meta.channels[2].plane, meta.channels[2].lane), (0, 0, 0, 2));
     assert_eq!(meta.channels[0].plane, 1);
     assert_eq!(report.format, "bc7+bc4");
@@ -482,11 +482,14 @@ fn absurd_channel_metadata_is_refused_never_a_panic() {
         ("plane out of range", Box::new(|m| m.channels[0].plane = 99)),
         ("lanes shared", Box::new(|m| m.channels[2].lane = 0)),
         ("lane past the plane", Box::new(|m| m.channels[1].lane = 3)),
-        ("bc7 with two lanes", Box::new(|m| m.planes.iter_mut().filter(|p| p.format == Format::Bc7).for_each(|p| p.lanes = 2))),
-        ("z-slices on unorm8", Box::new(|m| m.planes.iter_mut().filter(|p| p.format == Format::Unorm8).for_each(|p| p.z_per_texel = 4))),
-        ("an empty plane", Box::new(|m| m.planes.push(m.planes[0]))),
-        ("more bricks than atlases hold", Box::new(|m| m.brick_count += 1)),
-        ("a huge atlas", Box::new(|m| m.atlases[0].bricks = [u32::MAX; 3])),
+        ("bc7 with two lanes", Box::new(|m| m.planes.iter_mut().filter(|p| p.plane.format == Format::Bc7).for_each(|p| p.plane.lanes = 2))),
+        ("z-slices on unorm8", Box::new(|m| m.planes.iter_mut().filter(|p| p.plane.format == Format::Unorm8).for_each(|p| p.plane.z_per_texel = 4))),
+        ("an empty plane", Box::new(|m| m.planes.push(m.planes[0].clone()))),
+        ("more bricks than the tables map", Box::new(|m| m.brick_count += 1)),
+        ("more plane bricks than bricks", Box::new(|m| m.planes[0].bricks = m.brick_count + 1)),
+        ("more plane bricks than atlases hold", Box::new(|m| m.planes[1].bricks += 1)),
+        ("a plane of no bricks", Box::new(|m| m.planes[0].bricks = 0)),
+        ("a huge atlas", Box::new(|m| m.planes[0].atlases[0].bricks = [u32::MAX; 3])),
         ("frames missing", Box::new(|m| m.frames.clear())),
         ("a source past the list", Box::new(|m| m.frames[0].source = Some(7))),
         ("an odd index offset", Box::new(|m| m.index_offset[1] += 8)),
@@ -546,4 +549,63 @@ fn clustering_runs_over_every_channel_each_on_its_own_scale() {
     let g = smooth_frame(0);
     c.push_channels(&[Some(&g); 9], None).unwrap();
     assert!(c.finish(&NoProgress).err().unwrap().to_string().contains("at most 8 channels"));
+}
+
+#[test]
+fn each_plane_stores_its_own_distinct_bricks() {
+    // Flames' leaves hold its background, and its one 8³ tile (2.0) lies over
+    // a density leaf, so it becomes a brick: flames has two distinct bricks
+    // (background and 2.0) however many the other channels have. Each plane
+    // stores only its own distinct bricks.
+    let mut frames = [fire(0), fire(1)];
+    for f in frames.iter_mut() {
+        for l in f[2].leaves.iter_mut() {
+            l.values = [f[2].background; 512];
+        }
+    }
+    for format in [Format::F16, Format::Bc4, Format::Bc7] {
+        // All three in one group: f16 packs density and temperature into one RG plane, flames alone (a chunk of three is two and one).
+        let (bytes, report) =
+            cook_fire(CookOptions { format, groups: vec![ChannelGroup { channels: vec!["density".into(), "temperature".into(), "flames".into()], format }], ..CookOptions::default() }, &frames);
+        let asset = Asset::from_bytes(&bytes).unwrap();
+        let meta = asset.metadata().unwrap();
+        let c = Checked::new(&asset).unwrap();
+        let flames = meta.channels[2].plane as usize;
+        assert_eq!(meta.planes[flames].bricks, 2, "{format:?}: {:?}", report.channels);
+        assert!(c.tables[flames].is_some_and(|t| t.len() == meta.brick_count as usize && t.iter().all(|&pb| pb < 2)));
+        let density = meta.channels[0].plane as usize;
+        assert!(meta.planes[density].bricks > 1, "{format:?}");
+        assert!(report.channels[2].bytes * 10 < report.channels[0].bytes, "{format:?}: {:?}", report.channels);
+        // Every channel still reads back as before.
+        for (k, f) in frames.iter().enumerate() {
+            let back = unpack_frame(&asset, k).unwrap();
+            let worst = worst_error(f, &back);
+            assert_eq!(worst[2], 0.0, "{format:?}: a constant channel is exact");
+            assert!(worst[0] < 0.01 && worst[1] < 0.5, "{format:?}: {worst:?}");
+        }
+    }
+}
+
+#[test]
+fn brick_tables_pointing_past_their_plane_are_refused() {
+    let mut frames = [fire(0)];
+    for l in frames[0][2].leaves.iter_mut() {
+        l.values = [0.0; 512];
+    }
+    let (bytes, _) = cook_fire(CookOptions { format: Format::Bc4, ..CookOptions::default() }, &frames);
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    let meta = asset.metadata().unwrap();
+    let plane = meta.channels[2].plane;
+    for (what, value) in [("past the plane", meta.planes[plane as usize].bricks), ("huge", u32::MAX)] {
+        let mut sections = asset.to_sections();
+        let t = sections.iter_mut().find(|s| s.kind == vdbcook_vpak::kind::BRICK_TABLE && s.index == plane).expect("the flames plane has a table");
+        t.data[0..4].copy_from_slice(&value.to_le_bytes());
+        let sealed = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+        let e = unpack_frame(&sealed, 0).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(e.contains("maps to plane brick"), "{what}: {e}");
+        // Without its table, the plane no longer maps every brick.
+        sections.retain(|s| !(s.kind == vdbcook_vpak::kind::BRICK_TABLE && s.index == plane));
+        let sealed = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+        assert!(unpack_frame(&sealed, 0).is_err(), "{what}: a missing table");
+    }
 }

@@ -8,15 +8,16 @@ use vdbcook_vpak::{Asset, GpuChannel};
 struct Sampler<'a> {
     d: AssetData<'a>,
     l1: u32,
-    bricks: [u32; 4],
-    last: [u32; 4],
+    /// The buffers the shader reads: channel table, brick tables, ranges (pairs).
     table: Vec<GpuChannel>,
+    tables: Vec<u32>,
+    ranges: Vec<f32>,
 }
 
 impl Sampler<'_> {
     fn new(d: AssetData<'_>, l1: u32) -> Sampler<'_> {
-        let (bricks, last, table) = (d.atlas_bricks(), d.last_atlas(), d.c.gpu_channels());
-        Sampler { d, l1, bricks, last, table }
+        let (table, tables, ranges) = (d.c.gpu_channels(), d.c.gpu_tables(), d.c.gpu_ranges());
+        Sampler { d, l1, table, tables, ranges }
     }
 
     fn entry(nodes: &[u32], base: usize, mask_words: usize, s: usize) -> Option<usize> {
@@ -31,10 +32,10 @@ impl Sampler<'_> {
         Some(first.saturating_add(prefix).saturating_add(below) as usize)
     }
 
-    /// Texel `t` of texture slot `slot` (of atlas `atlas`), as `vpak_atlas_buffer.wgsl` decodes it.
-    fn texel(&self, slot: u32, atlas: u32, ch: &GpuChannel, [x, y, z]: [u32; 3]) -> [f32; 4] {
+    /// Texel `t` of texture slot `slot` (an atlas of `size` bricks along x
+    /// and y), as `vpak_atlas_buffer.wgsl` decodes it.
+    fn texel(&self, slot: u32, size: [u32; 2], ch: &GpuChannel, [x, y, z]: [u32; 3]) -> [f32; 4] {
         let a = self.d.c.atlases.get(slot as usize).copied().unwrap_or(&[]);
-        let size = if atlas == self.last[0] { [self.last[1], self.last[2]] } else { [self.bricks[0], self.bricks[1]] };
         let [w, h] = size.map(|s| s as usize * 8);
         let (x, y, z) = (x as usize, y as usize, z as usize);
         let mut out = [0.0, 0.0, 0.0, 1.0];
@@ -66,22 +67,24 @@ impl Sampler<'_> {
         out
     }
 
-    /// Channel `c` of voxel `v` of brick `b`, as `vpak_brick_value`.
+    /// Channel `c` of voxel `v` of brick `b`, as `vpak_brick_channel` and `vpak_brick_channel_value`.
     fn brick_value(&self, b: u32, v: [u32; 3], c: usize) -> f32 {
         let Some(ch) = self.table.get(c) else { return 0.0 };
-        let [bx, by, _, per] = self.bricks.map(u64::from);
-        let b64 = u64::from(b);
-        let (atlas, i) = if b64 >= per { (b64 / per.max(1), b64 % per.max(1)) } else { (0, b64) };
+        let pb = if ch.table == u32::MAX { b } else { self.tables.get((ch.table as usize).saturating_add(b as usize)).copied().unwrap_or(0) };
+        let [bx, by, _, per] = ch.atlas_bricks.map(u64::from);
+        let pb64 = u64::from(pb);
+        let (atlas, i) = if pb64 >= per { (pb64 / per.max(1), pb64 % per.max(1)) } else { (0, pb64) };
         let pos = [i % bx.max(1), (i / bx.max(1)) % by.max(1), i / (bx * by).max(1)].map(|p| p as u32);
         let atlas = atlas as u32;
-        let slot = ch.plane.saturating_mul(self.d.c.meta.atlases.len() as u32).saturating_add(atlas);
+        let size = if atlas == ch.last_atlas[0] { [ch.last_atlas[1], ch.last_atlas[2]] } else { [ch.atlas_bricks[0], ch.atlas_bricks[1]] };
         let shift = ch.z_shift.min(2);
         let t = [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2].saturating_mul(ch.slices).saturating_add(v[2] >> shift)];
-        let level = self.texel(slot, atlas, ch, t)[((ch.lane + (v[2] & ((1 << shift) - 1))) & 3) as usize];
+        let level = self.texel(ch.slot.saturating_add(atlas), size, ch, t)[((ch.lane + (v[2] & ((1 << shift) - 1))) & 3) as usize];
         if ch.ranged == 0 {
             return level;
         }
-        let [lo, hi] = self.d.c.range(b, c);
+        let r = (ch.range_base as usize).saturating_add((pb as usize).saturating_mul(ch.range_slots as usize)).saturating_add((ch.lane >> shift) as usize);
+        let (lo, hi) = (self.ranges.get(2 * r).copied().unwrap_or(0.0), self.ranges.get(2 * r + 1).copied().unwrap_or(0.0));
         lo + level * (hi - lo)
     }
 

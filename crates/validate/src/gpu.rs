@@ -1,7 +1,7 @@
 //! The wgpu side: device, pipeline, asset upload, one dispatch per image.
 
 use crate::{AssetData, Error, Image, Scene, View};
-use vdbcook_vpak::Asset;
+use vdbcook_vpak::{Asset, GpuChannel};
 use wgpu::util::DeviceExt;
 
 macro_rules! shader {
@@ -61,8 +61,11 @@ impl BcDecode {
 
 /// Bindings of texture slots 0 to 7 (`vpak_atlas_texture.wgsl`, `vpak_atlas_buffer.wgsl`).
 const SLOT_BINDINGS: [u32; crate::MAX_TEXTURES] = [8, 11, 12, 13, 15, 16, 17, 18];
-/// Binding of the channel table (`vpak.wgsl`).
+/// Bindings of the channel table and the brick tables (`vpak.wgsl`).
 const CHANNEL_BINDING: u32 = 14;
+const TABLE_BINDING: u32 = 19;
+/// Storage buffers of the asset, in the order `GpuAsset::buffers` holds them.
+const BUFFER_BINDINGS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, CHANNEL_BINDING, TABLE_BINDING];
 
 /// The bind group layout and the pipelines of one shader, each made on first
 /// use for its entry point and the override constants that fold branches
@@ -79,7 +82,7 @@ impl Pipelines {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("march"), source: wgpu::ShaderSource::Wgsl(source.into()) });
         let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry { binding, visibility: wgpu::ShaderStages::COMPUTE, ty, count: None };
         let mut entries = vec![entry(0, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None })];
-        entries.extend((1..=7).chain([CHANNEL_BINDING]).map(|b| entry(b, storage(true))));
+        entries.extend(BUFFER_BINDINGS.map(|b| entry(b, storage(true))));
         entries.extend(SLOT_BINDINGS.map(|b| entry(b, atlas)));
         entries.extend([9, 10].map(|b| entry(b, storage(false))));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
@@ -128,19 +131,18 @@ enum Atlas {
 
 /// An asset uploaded for rendering.
 pub struct GpuAsset {
-    /// The node arrays, brick ranges and channel table, in binding order (1 to 7, then 14).
+    /// The node arrays, brick ranges, channel table and brick tables, in `BUFFER_BINDINGS` order.
     buffers: Vec<wgpu::Buffer>,
     /// Texture slots 0 to 7 (unused ones hold a small empty texture or buffer).
     atlases: Vec<Atlas>,
     frames: Vec<u32>,
-    atlas_count: usize,
-    /// Texture slots in use (planes × atlases).
+    /// Texture slots in use (the atlases of the planes bound).
     slots: usize,
+    /// Per channel, whether its plane's atlases are bound.
+    bound: Vec<bool>,
     channels: u32,
     /// Each channel's background.
     backgrounds: Vec<f32>,
-    atlas_bricks: [u32; 4],
-    last_atlas: [u32; 4],
 }
 
 impl GpuAsset {
@@ -265,7 +267,26 @@ impl Renderer {
             Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: &contents, usage: wgpu::BufferUsages::STORAGE }))
         };
         let c = &d.c;
-        let channel_words: Vec<u32> = c.gpu_channels().iter().flat_map(|g| g.words()).collect();
+        let meta = &c.meta;
+        // Bind the atlases of the planes holding the channels the asset's
+        // scene shows (an asset may have more planes than a shader can bind),
+        // and point those channels at their slots.
+        let mut planes: Vec<usize> = Scene::for_asset(meta).channels.iter().filter(|&&ch| ch != crate::NONE).filter_map(|&ch| meta.channels.get(ch as usize)).map(|ch| ch.plane as usize).collect();
+        planes.sort_unstable();
+        planes.dedup();
+        let mut slot_of_plane = vec![u32::MAX; meta.planes.len()];
+        let mut sections = Vec::new();
+        for &p in &planes {
+            slot_of_plane[p] = sections.len() as u32;
+            sections.extend((0..meta.planes[p].atlases.len()).map(|a| (p, a)));
+        }
+        if sections.len() > crate::MAX_TEXTURES {
+            return Err(Error::Textures { planes: planes.len(), textures: sections.len() });
+        }
+        let channels = c.gpu_channels();
+        let bound: Vec<bool> = channels.iter().map(|g| slot_of_plane[g.plane as usize] != u32::MAX).collect();
+        let channel_words: Vec<u32> = channels.iter().flat_map(|g| GpuChannel { slot: slot_of_plane[g.plane as usize], ..*g }.words()).collect();
+        let (ranges, tables) = (c.gpu_ranges(), c.gpu_tables());
         let mut buffers = Vec::new();
         for (what, data) in [
             ("l1 nodes", bytemuck::cast_slice::<u32, u8>(c.l1)),
@@ -274,28 +295,28 @@ impl Renderer {
             ("l2 entries", bytemuck::cast_slice(c.l2_entries)),
             ("l3 nodes", bytemuck::cast_slice(c.l3)),
             ("tiles", bytemuck::cast_slice(c.tiles)),
-            ("brick ranges", bytemuck::cast_slice(c.ranges)),
+            ("brick ranges", bytemuck::cast_slice(&ranges)),
             ("channel table", bytemuck::cast_slice(&channel_words)),
+            ("brick tables", bytemuck::cast_slice(&tables)),
         ] {
             buffers.push(buffer(what, data)?);
         }
-        let meta = &c.meta;
-        let block = meta.planes.iter().any(|p| p.format.is_block());
-        let fits_buffers = c.atlases.iter().all(|a| a.len() as u64 <= limit);
+        let slots: Vec<(vdbcook_vpak::AtlasLayout, &[u8])> = sections.iter().filter_map(|&(p, a)| c.atlas(p, a)).collect();
+        let block = slots.iter().any(|(l, _)| l.plane.format.is_block());
+        let fits_buffers = slots.iter().all(|(_, a)| a.len() as u64 <= limit);
         let in_shader = self.decode.in_shader(block, self.bc, fits_buffers).ok_or_else(|| Error::Unsupported {
             adapter: self.adapter.clone(),
-            format: meta.planes.iter().filter(|p| p.format.is_block()).map(|p| p.format.name()).collect::<Vec<_>>().join("+"),
+            format: slots.iter().filter(|(l, _)| l.plane.format.is_block()).map(|(l, _)| l.plane.format.name()).collect::<Vec<_>>().join("+"),
             feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D (decode them in the shader instead)",
         })?;
         let mut atlases = Vec::with_capacity(crate::MAX_TEXTURES);
         if in_shader {
             // Every slot is bound; unused ones get a small empty buffer.
             for slot in 0..crate::MAX_TEXTURES {
-                atlases.push(Atlas::Buffer(buffer("brick atlas (decoded in the shader; cook with a smaller --max-texture-dim)", c.atlases.get(slot).copied().unwrap_or(&[]))?));
+                atlases.push(Atlas::Buffer(buffer("brick atlas (decoded in the shader; cook with a smaller --max-texture-dim)", slots.get(slot).map_or(&[], |(_, b)| b))?));
             }
         } else {
             let max_dim = self.device.limits().max_texture_dimension_3d;
-            let slots: Vec<(vdbcook_vpak::AtlasLayout, &[u8])> = (0..meta.planes.len()).flat_map(|p| (0..meta.atlases.len()).filter_map(move |a| c.atlas(p, a))).collect();
             if let Some((l, _)) = slots.iter().find(|(l, _)| l.texels().iter().any(|&t| t > max_dim)) {
                 return Err(Error::Texture { size: l.texels(), limit: max_dim });
             }
@@ -331,12 +352,10 @@ impl Renderer {
             buffers,
             atlases,
             frames: c.frames.to_vec(),
-            atlas_count: meta.atlases.len(),
-            slots: meta.atlases.len() * meta.planes.len(),
+            slots: slots.len(),
+            bound,
             channels: meta.channels.len() as u32,
             backgrounds: meta.channels.iter().map(|ch| ch.background).collect(),
-            atlas_bricks: d.atlas_bricks(),
-            last_atlas: d.last_atlas(),
         })
     }
 
@@ -350,9 +369,7 @@ impl Renderer {
         let (r, u, f) = view.basis();
         let tf = (view.fov_deg.to_radians() * 0.5).tan();
         let mut p: Vec<u32> = Vec::with_capacity(56);
-        p.extend([l1, asset.channels, asset.atlas_count as u32, 0]);
-        p.extend(asset.atlas_bricks);
-        p.extend(asset.last_atlas);
+        p.extend([l1, asset.channels, 0, 0]);
         let v4 = |p: &mut Vec<u32>, v: [f32; 3], w: f32| p.extend([v[0].to_bits(), v[1].to_bits(), v[2].to_bits(), w.to_bits()]);
         v4(&mut p, view.eye, 0.0);
         v4(&mut p, r, 0.0);
@@ -376,6 +393,9 @@ impl Renderer {
     /// computed once, then one dispatch per view, all in one submission.
     pub fn render_views(&self, asset: &GpuAsset, scene: &Scene, frame: usize, views: &[View], width: u32, height: u32) -> Result<Vec<Image>, Error> {
         let l1 = *asset.frames.get(frame).ok_or(Error::Frame { frame, count: asset.frames.len() })?;
+        if let Some(&c) = scene.channels.iter().find(|&&c| c != crate::NONE && !asset.bound.get(c as usize).copied().unwrap_or(false)) {
+            return Err(Error::NotUploaded(c));
+        }
         let [gx, gy, gz] = scene.shadow_grid();
         let cells = u64::from(gx) * u64::from(gy) * u64::from(gz);
         let shadow = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("shadow"), size: cells * 4, usage: wgpu::BufferUsages::STORAGE, mapped_at_creation: false });
@@ -395,7 +415,7 @@ impl Renderer {
                 mapped_at_creation: false,
             });
             let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() }];
-            for (b, buf) in (1..=7).chain([CHANNEL_BINDING]).zip(&asset.buffers) {
+            for (&b, buf) in BUFFER_BINDINGS.iter().zip(&asset.buffers) {
                 entries.push(wgpu::BindGroupEntry { binding: b, resource: buf.as_entire_binding() });
             }
             for (k, atlas) in asset.atlases.iter().enumerate() {

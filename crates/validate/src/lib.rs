@@ -24,8 +24,10 @@ pub enum Error {
     Device(String),
     #[error("the adapter \"{adapter}\" cannot sample {format} bricks: it lacks {feature}")]
     Unsupported { adapter: String, format: String, feature: &'static str },
-    #[error("the asset has {planes} planes in {atlases} atlases, {} textures; the renderer binds at most {MAX_TEXTURES} (cook with a larger --max-texture-dim, or fewer channel groups)", .planes * .atlases)]
-    Textures { planes: usize, atlases: usize },
+    #[error("the channels the render shows are in {planes} planes of {textures} atlas textures; the renderer binds at most {MAX_TEXTURES} (cook with a larger --max-texture-dim)")]
+    Textures { planes: usize, textures: usize },
+    #[error("channel {0} is not on the GPU (the asset was uploaded for the channels its own scene shows)")]
+    NotUploaded(u32),
     #[error("a brick atlas of {size:?} texels exceeds the adapter's 3D texture limit of {limit} (cook with a smaller --max-texture-dim)")]
     Texture { size: [u32; 3], limit: u32 },
     #[error("the asset's {what} ({bytes} bytes) exceeds the adapter's limit of {limit} bytes")]
@@ -40,7 +42,7 @@ pub enum Error {
     Asset(#[from] vdbcook_vpak::Error),
 }
 
-/// Textures (atlas planes) the renderer binds.
+/// Atlas textures the renderer binds (those of the planes holding the channels a render shows).
 pub const MAX_TEXTURES: usize = 8;
 
 /// No channel (`VPAK_NONE` in the shaders).
@@ -214,35 +216,11 @@ pub(crate) struct AssetData<'a> {
 
 impl<'a> AssetData<'a> {
     pub fn new(asset: &'a Asset) -> Result<AssetData<'a>, Error> {
-        let c = Checked::new(asset)?;
-        let (planes, atlases) = (c.meta.planes.len(), c.meta.atlases.len());
-        if planes * atlases > MAX_TEXTURES {
-            return Err(Error::Textures { planes, atlases });
-        }
-        Ok(AssetData { c })
+        Ok(AssetData { c: Checked::new(asset)? })
     }
 
     pub fn meta(&self) -> &Metadata {
         &self.c.meta
-    }
-
-    /// Size in bricks of the first atlas and the bricks every full atlas holds.
-    pub fn atlas_bricks(&self) -> [u32; 4] {
-        match self.c.meta.atlases.first() {
-            Some(a) => {
-                let [x, y, z] = a.bricks.map(|b| b.max(1));
-                [x, y, z, x.saturating_mul(y).saturating_mul(z)]
-            }
-            None => [1, 1, 1, 1],
-        }
-    }
-
-    /// The last atlas's number and its own size in bricks along x and y.
-    pub fn last_atlas(&self) -> [u32; 4] {
-        match self.c.meta.atlases.last() {
-            Some(a) => [(self.c.meta.atlases.len() - 1) as u32, a.bricks[0].max(1), a.bricks[1].max(1), 0],
-            None => [0, 1, 1, 0],
-        }
     }
 
     pub fn frame_l1(&self, frame: usize) -> Result<u32, Error> {

@@ -117,7 +117,7 @@ fn several_atlases_render_like_one() {
     for (format, dim) in formats {
         let bytes = cook_dim(&SEQ, format, dim);
         let asset = Asset::from_bytes(&bytes).unwrap();
-        let n = asset.metadata().unwrap().atlases.len();
+        let n = asset.metadata().unwrap().planes[0].atlases.len();
         assert!((2..=4).contains(&n), "{format:?}: {n} atlases");
         let img = r.render(&r.upload(&asset).unwrap(), &scene, 1, &view, 40, 40).unwrap();
         if format == Format::F32 {
@@ -155,12 +155,12 @@ fn bc_bricks_decoded_in_the_shader_render_like_the_texture_unit() {
         let asset = Asset::from_bytes(&bytes).unwrap();
         let meta = asset.metadata().unwrap();
         if dim == 24 {
-            assert!(meta.atlases.len() == 3 && meta.atlases[2].bricks[1] < meta.atlases[0].bricks[1], "{:?}", meta.atlases);
+            assert!(meta.planes[0].atlases.len() == 3 && meta.planes[0].atlases[2].bricks[1] < meta.planes[0].atlases[0].bricks[1], "{:?}", meta.planes[0].atlases);
         }
         if dim == 64 {
             // One atlas of several layers smaller than the limit's 8 × 8 bricks.
-            let [bx, by, bz] = meta.atlases[0].bricks;
-            assert!(meta.atlases.len() == 1 && bz > 1 && bx * by < 64 && bx < 8, "{:?}", meta.atlases);
+            let [bx, by, bz] = meta.planes[0].atlases[0].bricks;
+            assert!(meta.planes[0].atlases.len() == 1 && bz > 1 && bx * by < 64 && bx < 8, "{:?}", meta.planes[0].atlases);
         }
         let in_shader = soft.upload(&asset).unwrap();
         assert!(in_shader.decodes_in_shader());

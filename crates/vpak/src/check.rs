@@ -3,18 +3,21 @@
 //! sampled, unpacked or uploaded, the metadata and every section are checked
 //! against each other.  The first failure is the error.
 
-use crate::layout::{AtlasLayout, Plane};
+use crate::layout::{AtlasLayout, PlaneInfo};
 use crate::nodes::{l3_node_count, Nodes, L1_WORDS, L2_WORDS};
 use crate::{kind, Asset, Error, Metadata};
 
 /// Channels an asset may have (a sanity bound, not a format limit).
 pub const MAX_CHANNELS: usize = 256;
 
-/// What a shader needs to read one channel (`shaders/vpak.wgsl`'s `VpakChannel`).
+/// What a shader needs to read one channel (`shaders/vpak.wgsl`'s
+/// `VpakChannel`): its place in its plane, and the plane's brick table,
+/// ranges and atlases, as offsets into the buffers [`Checked::gpu_tables`]
+/// and [`Checked::gpu_ranges`] make and the texture slots (atlas sections).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct GpuChannel {
-    /// Plane (texture) of the channel.
-    pub plane: u32,
+    /// Texture slot (atlas section index) of the plane's first atlas.
+    pub slot: u32,
     /// First lane of the channel in the plane's texels.
     pub lane: u32,
     /// log2 of the consecutive z-slices per texel (2 or 1 for BC7 planes, else 0).
@@ -29,12 +32,32 @@ pub struct GpuChannel {
     pub ranged: u32,
     /// The channel's background, as f32 bits.
     pub background: u32,
+    /// First word of the plane's brick table in the tables buffer, or `u32::MAX` (no table).
+    pub table: u32,
+    /// First (min, max) pair of the plane in the ranges buffer.
+    pub range_base: u32,
+    /// Pairs per plane brick (the plane's channel slots).
+    pub range_slots: u32,
+    /// The plane.
+    pub plane: u32,
+    /// The plane's first atlas: size in bricks (x, y, z) and bricks per full atlas.
+    pub atlas_bricks: [u32; 4],
+    /// The plane's last atlas: its number and its own size in bricks along x and y, then 0.
+    pub last_atlas: [u32; 4],
 }
 
+/// Words of one [`GpuChannel`].
+pub const GPU_CHANNEL_WORDS: usize = 20;
+
 impl GpuChannel {
-    /// The eight words, in field order, as a storage buffer holds them.
-    pub fn words(&self) -> [u32; 8] {
-        [self.plane, self.lane, self.z_shift, self.slices, self.format, self.lanes, self.ranged, self.background]
+    /// The words, in field order, as a storage buffer holds them.
+    pub fn words(&self) -> [u32; GPU_CHANNEL_WORDS] {
+        let head = [self.slot, self.lane, self.z_shift, self.slices, self.format, self.lanes, self.ranged, self.background, self.table, self.range_base, self.range_slots, self.plane];
+        std::array::from_fn(|i| match i {
+            0..12 => head[i],
+            12..16 => self.atlas_bricks[i - 12],
+            _ => self.last_atlas[i - 16],
+        })
     }
 }
 
@@ -48,9 +71,11 @@ pub struct Checked<'a> {
     pub l2_entries: &'a [u32],
     pub l3: &'a [u32],
     pub tiles: &'a [u32],
-    /// (min, max) per brick per channel: brick b, channel c at `2 · (b · channels + c)`.
-    pub ranges: &'a [f32],
-    /// Plane p of atlas a at `p · atlases + a`.
+    /// Per plane, (min, max) per plane brick per channel slot: plane brick k, slot s at `2 · (k · slots + s)`.
+    pub ranges: Vec<&'a [f32]>,
+    /// Per plane, its brick table (the plane brick of each brick), or `None`: brick b is plane brick b.
+    pub tables: Vec<Option<&'a [u32]>>,
+    /// Atlas textures in section order (plane 0's atlases, then plane 1's, …).
     pub atlases: Vec<&'a [u8]>,
 }
 
@@ -68,7 +93,9 @@ impl<'a> Checked<'a> {
             return invalid(format!("{channels} channels (need 1 to {MAX_CHANNELS})"));
         }
         check_planes(&meta)?;
-        check_atlases(&meta)?;
+        for (p, plane) in meta.planes.iter().enumerate() {
+            check_atlases(p, plane)?;
+        }
         if meta.index_offset.iter().any(|o| o % 128 != 0) {
             return invalid(format!("index offset {:?} is not a multiple of 128", meta.index_offset));
         }
@@ -96,23 +123,38 @@ impl<'a> Checked<'a> {
         if l3_node_count(l3).is_none() {
             return invalid(format!("l3 nodes: {} words cannot hold the {} nodes the section counts", l3.len(), l3.first().copied().unwrap_or(0)));
         }
-        let ranges = asset.f32s(kind::BRICK_RANGES)?;
-        let want = u64::from(meta.brick_count) * channels as u64 * 2;
-        if ranges.len() as u64 != want {
-            return invalid(format!("{} brick range values, {} bricks of {channels} channels need {want}", ranges.len(), meta.brick_count));
+        let (mut ranges, mut tables) = (Vec::with_capacity(meta.planes.len()), Vec::with_capacity(meta.planes.len()));
+        for (p, info) in meta.planes.iter().enumerate() {
+            let r: &[f32] = asset.words(kind::BRICK_RANGES, p as u32)?;
+            let want = u64::from(info.bricks) * u64::from(info.range_slots()) * 2;
+            if r.len() as u64 != want {
+                return invalid(format!("plane {p}: {} brick range values, {} plane bricks of {} slots need {want}", r.len(), info.bricks, info.range_slots()));
+            }
+            ranges.push(r);
+            let table = match asset.words::<u32>(kind::BRICK_TABLE, p as u32) {
+                Err(Error::Missing { .. }) if !info.has_table(meta.brick_count) => None,
+                Ok(_) if !info.has_table(meta.brick_count) => return invalid(format!("plane {p} stores every brick but has a brick table")),
+                Ok(t) if t.len() as u64 != u64::from(meta.brick_count) => return invalid(format!("plane {p}: a brick table of {} entries for {} bricks", t.len(), meta.brick_count)),
+                Ok(t) => match t.iter().position(|&pb| pb >= info.bricks) {
+                    Some(b) => return invalid(format!("plane {p}: brick {b} maps to plane brick {}, the plane has {}", t[b], info.bricks)),
+                    None => Some(t),
+                },
+                Err(e) => return Err(e),
+            };
+            tables.push(table);
         }
-        let mut atlases = Vec::with_capacity(meta.planes.len() * meta.atlases.len());
-        for (p, plane) in meta.planes.iter().enumerate() {
-            for (a, info) in meta.atlases.iter().enumerate() {
+        let mut atlases = Vec::with_capacity(meta.texture_count());
+        for (p, info) in meta.planes.iter().enumerate() {
+            for (a, atlas) in info.atlases.iter().enumerate() {
                 let bytes = asset.section(kind::ATLAS, meta.atlas_section(p, a))?;
-                let layout = AtlasLayout { plane: *plane, atlas: *info };
+                let layout = AtlasLayout { plane: info.plane, atlas: *atlas };
                 if bytes.len() != layout.byte_len() {
-                    return invalid(format!("plane {p} of atlas {a}: {} bytes, its size needs {}", bytes.len(), layout.byte_len()));
+                    return invalid(format!("atlas {a} of plane {p}: {} bytes, its size needs {}", bytes.len(), layout.byte_len()));
                 }
                 atlases.push(bytes);
             }
         }
-        Ok(Checked { frames, l1, l1_entries: asset.u32s(kind::L1_ENTRIES)?, l2, l2_entries: asset.u32s(kind::L2_ENTRIES)?, l3, tiles, ranges, atlases, meta })
+        Ok(Checked { frames, l1, l1_entries: asset.u32s(kind::L1_ENTRIES)?, l2, l2_entries: asset.u32s(kind::L2_ENTRIES)?, l3, tiles, ranges, tables, atlases, meta })
     }
 
     /// The node arrays, copied.
@@ -130,45 +172,87 @@ impl<'a> Checked<'a> {
         }
     }
 
-    /// Plane `plane`'s texture of atlas `atlas`, with its layout.
+    /// Atlas `atlas` of plane `plane`, with its layout.
     pub fn atlas(&self, plane: usize, atlas: usize) -> Option<(AtlasLayout, &'a [u8])> {
-        let layout = AtlasLayout { plane: *self.meta.planes.get(plane)?, atlas: *self.meta.atlases.get(atlas)? };
+        let info = self.meta.planes.get(plane)?;
+        let layout = AtlasLayout { plane: info.plane, atlas: *info.atlases.get(atlas)? };
         Some((layout, self.atlases.get(self.meta.atlas_section(plane, atlas) as usize)?))
     }
 
-    /// The atlas holding brick `b`, and its local index there.
-    pub fn brick_atlas(&self, b: u32) -> Option<(usize, u32)> {
-        let a = self.meta.atlases.iter().position(|a| b >= a.first_brick && b - a.first_brick < a.count)?;
-        Some((a, b - self.meta.atlases[a].first_brick))
+    /// Brick `b`'s plane brick in plane `p`.
+    pub fn plane_brick(&self, p: usize, b: u32) -> Option<u32> {
+        if b >= self.meta.brick_count {
+            return None;
+        }
+        match self.tables.get(p)? {
+            Some(t) => t.get(b as usize).copied(),
+            None => Some(b),
+        }
+    }
+
+    /// Plane `p`'s range of plane brick `pb` in channel slot `slot`.
+    pub fn plane_range(&self, p: usize, pb: u32, slot: u32) -> [f32; 2] {
+        let (Some(r), Some(info)) = (self.ranges.get(p), self.meta.planes.get(p)) else { return [0.0; 2] };
+        let i = 2 * (pb as usize * info.range_slots() as usize + slot as usize);
+        [r.get(i).copied().unwrap_or(0.0), r.get(i + 1).copied().unwrap_or(0.0)]
     }
 
     /// Brick `b`'s range for channel `c`.
     pub fn range(&self, b: u32, c: usize) -> [f32; 2] {
-        let i = 2 * (b as usize * self.meta.channels.len() + c);
-        [self.ranges.get(i).copied().unwrap_or(0.0), self.ranges.get(i + 1).copied().unwrap_or(0.0)]
+        let Some(ch) = self.meta.channels.get(c) else { return [0.0; 2] };
+        let p = ch.plane as usize;
+        let zpt = self.meta.planes.get(p).map_or(1, |i| i.plane.z_per_texel.max(1));
+        self.plane_brick(p, b).map_or([0.0; 2], |pb| self.plane_range(p, pb, ch.lane / zpt))
     }
 
     /// Every channel's values of brick `b` (leaf order), decoded plane by plane.
     pub fn decode_brick(&self, b: u32) -> Option<Vec<[f32; crate::BRICK_VOXELS]>> {
-        let (a, local) = self.brick_atlas(b)?;
         let texels: Vec<Vec<[f32; 4]>> = (0..self.meta.planes.len())
             .map(|p| {
+                let (a, local) = self.meta.planes[p].brick_atlas(self.plane_brick(p, b)?)?;
                 let (layout, bytes) = self.atlas(p, a)?;
                 Some(layout.plane.decode_brick(&crate::layout::unpack_brick(&layout, bytes, local)?))
             })
             .collect::<Option<_>>()?;
-        Some(self.meta.channels.iter().enumerate().map(|(c, ch)| self.meta.planes[ch.plane as usize].channel_values(&texels[ch.plane as usize], ch.lane, self.range(b, c))).collect())
+        Some(self.meta.channels.iter().enumerate().map(|(c, ch)| self.meta.planes[ch.plane as usize].plane.channel_values(&texels[ch.plane as usize], ch.lane, self.range(b, c))).collect())
+    }
+
+    /// The brick tables of the planes that have one, back to back (what
+    /// [`GpuChannel::table`] indexes).
+    pub fn gpu_tables(&self) -> Vec<u32> {
+        self.tables.iter().flatten().flat_map(|t| t.iter().copied()).collect()
+    }
+
+    /// Every plane's ranges, back to back (what [`GpuChannel::range_base`] indexes, in pairs).
+    pub fn gpu_ranges(&self) -> Vec<f32> {
+        self.ranges.iter().flat_map(|r| r.iter().copied()).collect()
     }
 
     /// The channel table a shader reads.
     pub fn gpu_channels(&self) -> Vec<GpuChannel> {
+        // Per plane: its table's first word, its first range pair, its first texture slot.
+        let mut bases = Vec::with_capacity(self.meta.planes.len());
+        let (mut table, mut range) = (0u32, 0u32);
+        for (p, info) in self.meta.planes.iter().enumerate() {
+            let has = self.tables.get(p).is_some_and(Option::is_some);
+            bases.push((if has { table } else { u32::MAX }, range, self.meta.atlas_section(p, 0)));
+            table = table.saturating_add(if has { self.meta.brick_count } else { 0 });
+            range = range.saturating_add(info.bricks.saturating_mul(info.range_slots()));
+        }
         self.meta
             .channels
             .iter()
             .map(|c| {
-                let p: Plane = self.meta.planes[c.plane as usize];
+                let info = &self.meta.planes[c.plane as usize];
+                let p = info.plane;
+                let (table, range_base, slot) = bases[c.plane as usize];
+                let atlas_bricks = info.atlases.first().map_or([1, 1, 1, 1], |a| {
+                    let [x, y, z] = a.bricks.map(|b| b.max(1));
+                    [x, y, z, x.saturating_mul(y).saturating_mul(z)]
+                });
+                let last_atlas = info.atlases.last().map_or([0, 1, 1, 0], |a| [(info.atlases.len() - 1) as u32, a.bricks[0].max(1), a.bricks[1].max(1), 0]);
                 GpuChannel {
-                    plane: c.plane,
+                    slot,
                     lane: c.lane,
                     z_shift: p.z_per_texel.max(1).trailing_zeros(),
                     slices: p.slices_per_brick(),
@@ -176,6 +260,12 @@ impl<'a> Checked<'a> {
                     lanes: p.lanes,
                     ranged: u32::from(p.format.is_ranged()),
                     background: c.background.to_bits(),
+                    table,
+                    range_base,
+                    range_slots: info.range_slots(),
+                    plane: c.plane,
+                    atlas_bricks,
+                    last_atlas,
                 }
             })
             .collect()
@@ -188,12 +278,16 @@ fn check_planes(meta: &Metadata) -> Result<(), Error> {
     if meta.planes.is_empty() || meta.planes.len() > MAX_CHANNELS {
         return invalid(format!("{} planes (need 1 to {MAX_CHANNELS})", meta.planes.len()));
     }
-    if let Some((p, plane)) = meta.planes.iter().enumerate().find(|(_, p)| !p.is_valid()) {
+    if let Some((p, plane)) = meta.planes.iter().enumerate().map(|(p, i)| (p, i.plane)).find(|(_, p)| !p.is_valid()) {
         return invalid(format!("plane {p}: {} with {} lanes and {} z-slices per texel is not a plane the format defines", plane.format.name(), plane.lanes, plane.z_per_texel));
+    }
+    // Every brick has a plane brick in every plane.
+    if let Some((p, info)) = meta.planes.iter().enumerate().find(|(_, i)| i.bricks > meta.brick_count || (i.bricks == 0) != (meta.brick_count == 0)) {
+        return invalid(format!("plane {p} stores {} bricks for the asset's {}", info.bricks, meta.brick_count));
     }
     let mut used = vec![0u32; meta.planes.len()];
     for (c, ch) in meta.channels.iter().enumerate() {
-        let Some(plane) = meta.planes.get(ch.plane as usize) else {
+        let Some(plane) = meta.planes.get(ch.plane as usize).map(|i| i.plane) else {
             return invalid(format!("channel {c} ({}) is in plane {}, the asset has {}", ch.name, ch.plane, meta.planes.len()));
         };
         let z = plane.z_per_texel;
@@ -212,14 +306,15 @@ fn check_planes(meta: &Metadata) -> Result<(), Error> {
     Ok(())
 }
 
-/// Atlas records describe consecutive runs of every brick, and every atlas
-/// but the last has the first one's shape, the last holding every position
-/// that shape gives its bricks (samplers place bricks with the first shape).
-fn check_atlases(meta: &Metadata) -> Result<(), Error> {
-    let first = meta.atlases.first();
+/// Atlas records describe consecutive runs of every plane brick, and every
+/// atlas but the last has the first one's shape, the last holding every
+/// position that shape gives its bricks (samplers place bricks with the
+/// first shape).
+fn check_atlases(p: usize, plane: &PlaneInfo) -> Result<(), Error> {
+    let first = plane.atlases.first();
     let mut next_brick = 0u64;
-    for (i, a) in meta.atlases.iter().enumerate() {
-        let bad = |what: String| invalid(format!("atlas {i}: {what}"));
+    for (i, a) in plane.atlases.iter().enumerate() {
+        let bad = |what: String| invalid(format!("atlas {i} of plane {p}: {what}"));
         let [bx, by, bz] = a.bricks.map(u64::from);
         let capacity = u128::from(bx) * u128::from(by) * u128::from(bz);
         if bx == 0 || by == 0 || bz == 0 || u128::from(a.count) > capacity {
@@ -233,20 +328,20 @@ fn check_atlases(meta: &Metadata) -> Result<(), Error> {
             // (samplers use that shape throughout): one short row, or rows as
             // wide as the first's, and layers as tall when there are several.
             let same_places = (n <= bx && n <= fx) || (bx == fx && (n.div_ceil(fx) <= by.min(fy) || by == fy));
-            let fits = if i + 1 < meta.atlases.len() { a.bricks == f.bricks && u128::from(a.count) == capacity } else { same_places && (0..3).all(|k| u64::from(a.bricks[k]) >= need[k]) };
+            let fits = if i + 1 < plane.atlases.len() { a.bricks == f.bricks && u128::from(a.count) == capacity } else { same_places && (0..3).all(|k| u64::from(a.bricks[k]) >= need[k]) };
             if !fits || u64::from(a.first_brick) != next_brick {
                 return bad("its layout does not follow the first atlas's".into());
             }
         }
         // Texture sizes must be representable (a sampler computes texel coordinates in u32).
-        let slices = u64::from(meta.max_slices());
+        let slices = u64::from(plane.plane.slices_per_brick());
         if bx * 8 > u64::from(u32::MAX) || by * 8 > u64::from(u32::MAX) || bz * slices > u64::from(u32::MAX) {
             return bad(format!("{:?} bricks is too large a texture", a.bricks));
         }
         next_brick += u64::from(a.count);
     }
-    if next_brick != u64::from(meta.brick_count) {
-        return invalid(format!("the atlases hold {next_brick} bricks, the metadata counts {}", meta.brick_count));
+    if next_brick != u64::from(plane.bricks) {
+        return invalid(format!("the atlases of plane {p} hold {next_brick} bricks, the metadata counts {}", plane.bricks));
     }
     Ok(())
 }

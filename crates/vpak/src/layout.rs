@@ -247,7 +247,7 @@ pub fn brick_runs(plane: &Plane) -> (usize, usize, usize) {
 pub struct AtlasInfo {
     /// Bricks along x, y, z.
     pub bricks: [u32; 3],
-    /// Global index of the first brick in this atlas.
+    /// Index of the first plane brick in this atlas.
     pub first_brick: u32,
     /// Bricks stored (the last positions may be empty).
     pub count: u32,
@@ -260,6 +260,36 @@ impl AtlasInfo {
         let i = u64::from(i);
         // Each part is at most i, so fits u32.
         [i % bx, (i / bx) % by, i / (bx * by)].map(|p| p as u32)
+    }
+}
+
+/// A plane as the metadata records it: its texels, the distinct bricks it
+/// stores (each plane deduplicates its own: an L3 node's brick reaches them
+/// through the plane's brick table), and the atlases those fill.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct PlaneInfo {
+    pub plane: Plane,
+    /// Plane bricks (at most the asset's bricks; as many when the plane has no table).
+    pub bricks: u32,
+    /// Consecutive runs of the plane bricks, one 3D texture each.
+    pub atlases: Vec<AtlasInfo>,
+}
+
+impl PlaneInfo {
+    /// True when the plane has a brick table (else brick b is plane brick b).
+    pub fn has_table(&self, brick_count: u32) -> bool {
+        self.bricks != brick_count
+    }
+
+    /// The atlas holding plane brick `pb`, and its local index there.
+    pub fn brick_atlas(&self, pb: u32) -> Option<(usize, u32)> {
+        let a = self.atlases.iter().position(|a| pb >= a.first_brick && pb - a.first_brick < a.count)?;
+        Some((a, pb - self.atlases[a].first_brick))
+    }
+
+    /// Range pairs per plane brick: one per channel slot.
+    pub fn range_slots(&self) -> u32 {
+        self.plane.channel_slots()
     }
 }
 
@@ -376,13 +406,13 @@ fn tightest_shape(n: u32, per: u32, per_z: u32) -> [u32; 3] {
     best
 }
 
-/// Encoded bricks of one plane, by global brick index.
+/// Encoded bricks of one plane, by plane brick index.
 pub trait BrickSource: Sync {
     /// Writes brick `i`'s encoding (`plane.brick_bytes()` bytes) to `out`; false past the end.
     fn write_brick(&self, i: usize, out: &mut [u8]) -> bool;
 }
 
-/// Lays the bricks of one atlas out as texture bytes (global brick
+/// Lays the bricks of one atlas out as texture bytes (plane brick
 /// `first_brick + i` of `bricks` at local position `i`), in parallel over
 /// rows of bricks; each brick's encoding is fetched once.
 pub fn pack_atlas(layout: &AtlasLayout, bricks: &dyn BrickSource) -> Vec<u8> {

@@ -5,7 +5,7 @@
 //! ```text
 //! offset  size   field
 //! 0       8      magic "VPAK\r\n\x1a\n"
-//! 8       4      format version (2)
+//! 8       4      format version (4)
 //! 12      4      flags (0; reserved)
 //! 16      4      section count n
 //! 20      4      reserved (0)
@@ -25,8 +25,8 @@ mod check;
 pub mod layout;
 pub mod nodes;
 
-pub use check::{Checked, GpuChannel, MAX_CHANNELS};
-pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, BRICK_VOXELS, MAX_BRICK_BYTES};
+pub use check::{Checked, GpuChannel, GPU_CHANNEL_WORDS, MAX_CHANNELS};
+pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, PlaneInfo, BRICK_VOXELS, MAX_BRICK_BYTES};
 
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -34,7 +34,8 @@ use std::path::Path;
 pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
 /// 2: compact L3 nodes (sub-block states and sub-masks instead of 512-bit masks).
 /// 3: channels (several grids in one tree), planes, per-channel brick ranges and tile values.
-pub const VERSION: u32 = 3;
+/// 4: each plane stores its own distinct bricks (brick tables), ranges and atlases.
+pub const VERSION: u32 = 4;
 pub const HEADER_LEN: usize = 64;
 pub const ENTRY_LEN: usize = 32;
 /// Every section starts at a multiple of this (GPU upload and mmap friendly).
@@ -55,10 +56,13 @@ pub mod kind {
     pub const L3_NODES: u32 = 7;
     /// One f32 per channel per tile.
     pub const TILES: u32 = 8;
-    /// (f32 min, f32 max) per brick per channel.
+    /// Per plane (`index` = plane): (f32 min, f32 max) per plane brick per channel slot.
     pub const BRICK_RANGES: u32 = 9;
-    /// One plane of one brick atlas (a 3D texture); `index` = plane · atlases + atlas.
+    /// One atlas of one plane (a 3D texture); `index` counts the atlases of
+    /// plane 0, then of plane 1, … ([`super::Metadata::atlas_section`]).
     pub const ATLAS: u32 = 10;
+    /// Per plane with a table (`index` = plane): its plane brick, u32 per brick.
+    pub const BRICK_TABLE: u32 = 11;
 
     pub fn name(k: u32) -> &'static str {
         match k {
@@ -72,6 +76,7 @@ pub mod kind {
             TILES => "tiles",
             BRICK_RANGES => "brick ranges",
             ATLAS => "brick atlas",
+            BRICK_TABLE => "brick table",
             _ => "unknown",
         }
     }
@@ -148,7 +153,7 @@ pub struct Channel {
     pub value_range: [f32; 2],
     /// Channel group (the channels whose format was chosen together).
     pub group: u32,
-    /// Plane (texture) holding the channel, and its first lane there.
+    /// Plane holding the channel, and its first lane there.
     pub plane: u32,
     pub lane: u32,
 }
@@ -168,10 +173,10 @@ pub struct Metadata {
     /// Union of every frame's active bbox in source index space (inclusive), if any.
     pub index_bbox: Option<([i32; 3], [i32; 3])>,
     pub channels: Vec<Channel>,
-    /// Textures per atlas, in section order.
-    pub planes: Vec<Plane>,
+    /// The planes, each with its bricks and atlases.
+    pub planes: Vec<PlaneInfo>,
+    /// Bricks (what L3 nodes index; a brick has a plane brick in every plane).
     pub brick_count: u32,
-    pub atlases: Vec<AtlasInfo>,
     /// Every cook setting, as (name, value) text pairs.
     pub settings: Vec<(String, String)>,
     pub sources: Vec<SourceFile>,
@@ -190,9 +195,16 @@ impl Metadata {
         Ok(m)
     }
 
-    /// The section index of plane `plane`'s texture of atlas `atlas`.
+    /// The section index of atlas `atlas` of plane `plane`: the atlases of
+    /// the planes before it, plus `atlas`.
     pub fn atlas_section(&self, plane: usize, atlas: usize) -> u32 {
-        (plane * self.atlases.len() + atlas) as u32
+        let before: usize = self.planes.iter().take(plane).map(|p| p.atlases.len()).sum();
+        (before + atlas) as u32
+    }
+
+    /// Atlas textures over all planes.
+    pub fn texture_count(&self) -> usize {
+        self.planes.iter().map(|p| p.atlases.len()).sum()
     }
 
     /// The channel named `name`.
@@ -202,14 +214,9 @@ impl Metadata {
 
     /// The planes' formats: "f16", or "bc4+bc7" for a mix (consecutive repeats once).
     pub fn format_names(&self) -> String {
-        let mut f: Vec<&str> = self.planes.iter().map(|p| p.format.name()).collect();
+        let mut f: Vec<&str> = self.planes.iter().map(|p| p.plane.format.name()).collect();
         f.dedup();
         f.join("+")
-    }
-
-    /// Largest slices per brick of any plane (what the atlases were planned for).
-    pub fn max_slices(&self) -> u32 {
-        self.planes.iter().map(Plane::slices_per_brick).max().unwrap_or(8)
     }
 }
 
@@ -459,14 +466,18 @@ impl Asset {
 
     /// Section (`kind`, 0) as `u32`s, without copying.
     pub fn u32s(&self, kind: u32) -> Result<&[u32], Error> {
-        let b = self.section(kind, 0)?;
-        bytemuck::try_cast_slice(b).map_err(|_| Error::Shape { kind, size: b.len(), unit: 4 })
+        self.words(kind, 0)
     }
 
     /// Section (`kind`, 0) as `f32`s, without copying.
     pub fn f32s(&self, kind: u32) -> Result<&[f32], Error> {
-        let b = self.section(kind, 0)?;
-        bytemuck::try_cast_slice(b).map_err(|_| Error::Shape { kind, size: b.len(), unit: 4 })
+        self.words(kind, 0)
+    }
+
+    /// Section (`kind`, `index`) as 4-byte items, without copying.
+    pub fn words<T: bytemuck::Pod>(&self, kind: u32, index: u32) -> Result<&[T], Error> {
+        let b = self.section(kind, index)?;
+        bytemuck::try_cast_slice(b).map_err(|_| Error::Shape { kind, size: b.len(), unit: std::mem::size_of::<T>() })
     }
 
     pub fn metadata(&self) -> Result<Metadata, Error> {
@@ -495,7 +506,6 @@ mod tests {
             channels: vec![],
             planes: vec![],
             brick_count: 0,
-            atlases: vec![],
             settings: vec![("format".into(), "f32".into())],
             sources: vec![],
             frames: vec![],
