@@ -348,9 +348,9 @@ impl Cooker {
             }
             groups.push((g.format, members));
         }
-        for c in 0..self.channels.len() {
-            if group_of[c].is_none() {
-                group_of[c] = Some(groups.len() as u32);
+        for (c, g) in group_of.iter_mut().enumerate() {
+            if g.is_none() {
+                *g = Some(groups.len() as u32);
                 groups.push((self.opts.format, vec![c]));
             }
         }
