@@ -3,13 +3,14 @@
 # Installs the Debian packages the tests need (OpenVDB's reference tools,
 # used as the oracle in differential tests, Mesa's Vulkan drivers for the
 # GPU tests, and for `bake`'s reports and docs: junitparser to read the JUnit
-# XML back, Chromium to load the HTML report, make for docs/ci.md's Makefile)
+# XML back, Chromium to load the HTML report, make for docs/ci.md's Makefile,
+# g++ for NVIDIA's FLIP, which the nv-flip crate compiles from C++)
 # when they are missing, then runs every test in the workspace.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 need=()
-for pkg in python3-openvdb python3-numpy python3-pil python3-xxhash libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1 python3-junitparser chromium make; do
+for pkg in python3-openvdb python3-numpy python3-pil python3-xxhash libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1 python3-junitparser chromium make g++; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || need+=("$pkg")
 done
 if [ ${#need[@]} -gt 0 ]; then

@@ -25,7 +25,7 @@ name, an output (relative to --out-dir) and inputs (files, directories, globs or
 patterns, relative to the manifest), and any cook setting under its flag's name with
 '_' for '-' (frames, grid, allow_missing, format, quality, clusters, iterations,
 variance_threshold, max_brick_error, max_texture_dim), and a quality gate: validate
-(true/false), max_rmse, min_psnr, views, size. An entry's setting overrides
+(true/false), max_rmse, min_psnr, max_flip, views, size. An entry's setting overrides
 [defaults], which overrides the built-in default (the same as `vdbcook cook`'s).
 
   [defaults]
@@ -389,7 +389,7 @@ fn blank(a: &PlannedAsset) -> AssetReport {
         files: a.files.len(),
         record: Record::default(),
         validate: a.settings.validate,
-        gate: Gate { max_rmse: a.settings.max_rmse, min_psnr: a.settings.min_psnr },
+        gate: Gate { max_rmse: a.settings.max_rmse, min_psnr: a.settings.min_psnr, max_flip: a.settings.max_flip },
         message: None,
         validation_report: None,
         seconds: 0.0,
@@ -500,6 +500,7 @@ fn validation_figures(doc: &serde_json::Value) -> Validation {
         image_rmse: doc["worst"]["rmse"].as_f64().unwrap_or(0.0),
         image_psnr: doc["worst"]["psnr"].as_f64(),
         mean_image_rmse: mean,
+        image_flip: doc["worst_flip"]["flip"].as_f64(),
     }
 }
 

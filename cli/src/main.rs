@@ -22,7 +22,7 @@ pub mod exit {
     pub const FAILURE: u8 = 1;
     /// Bad command line (clap exits with 2 itself).
     pub const USAGE: u8 = 2;
-    /// A quality gate (`validate --max-rmse` / `--min-psnr`) failed.
+    /// A quality gate (`validate --max-rmse` / `--min-psnr` / `--max-flip`) failed.
     pub const QUALITY_GATE: u8 = 3;
 }
 
@@ -32,8 +32,8 @@ Exit codes:
   1  failure: unreadable or invalid input, I/O error (a failed write to stdout too;
      a closed pipe just ends the output), or an asset of a bake failed to cook
   2  usage error (bad flags or arguments, an invalid bake manifest: nothing done)
-  3  quality gate failed (validate / cook --validate / bake with max_rmse or min_psnr),
-     and nothing else did";
+  3  quality gate failed (validate / cook --validate / bake with max_rmse, min_psnr or
+     max_flip), and nothing else did";
 
 #[derive(Parser)]
 #[command(name = "vdbcook", version, about = "Cook OpenVDB volume sequences into compact GPU-ready assets", after_help = AFTER_HELP)]

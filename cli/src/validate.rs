@@ -5,11 +5,14 @@ use crate::inputs::{self, FrameRange};
 use crate::progress::Bars;
 use crate::{exit, Usage};
 use anyhow::{anyhow, Context, Result};
+use rayon::prelude::*;
 use serde_json::json;
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 use vdbcook_cook::Progress;
 use vdbcook_encode::ErrorStats;
-use vdbcook_validate::{compare, report, BcDecode, Image, ImageMetrics, Renderer, Scene};
+use vdbcook_validate::flip::DEFAULT_PPD;
+use vdbcook_validate::{compare, flip, report, BcDecode, FlipMap, Image, ImageMetrics, Renderer, Scene};
 use vdbcook_vpak::Asset;
 
 pub const AFTER_HELP: &str = "\
@@ -18,11 +21,15 @@ both assets are rendered by the same deterministic wgpu ray-marcher (emission an
 absorption, one directional light with shadow rays, hierarchical empty-space skipping;
 no noise), from --views cameras orbiting the volume. For each frame and view it
 reports RMSE, PSNR and the largest difference of the images (linear values in [0, 1]),
-and for each frame the voxel-domain RMSE, PSNR and max error; the worst frame is named.
+the mean FLIP error (NVIDIA's perceptual LDR-FLIP, 0 to 1, at 67 pixels per degree:
+a 0.7 m wide 4K monitor seen from 0.7 m), and for each frame the voxel-domain RMSE,
+PSNR and max error; the worst frame is named. FLIP sees the images as the report's
+PNGs show them: linear values clamped to [0, 1], sRGB-encoded, 8 bits.
 
---max-rmse and --min-psnr make validate exit with code 3 when any image is over budget.
---report DIR writes report.json, PNGs of the reference, the asset and an error
-heat-map for the worst views, and a self-contained report.html.
+--max-rmse, --min-psnr and --max-flip make validate exit with code 3 when any image
+is over budget. --report DIR writes report.json, PNGs of the reference, the asset, an
+error heat-map and the FLIP error map for the worst views, and a self-contained
+report.html.
 
 A GPU is not required: Mesa's CPU Vulkan driver (Debian: mesa-vulkan-drivers) works.";
 
@@ -52,6 +59,9 @@ pub struct ValidateArgs {
     /// Exit with code 3 when any image's PSNR (dB) is below Y.
     #[arg(long, value_name = "Y")]
     pub min_psnr: Option<f64>,
+    /// Exit with code 3 when any image's mean FLIP error (0 to 1, at 67 pixels per degree) is above F.
+    #[arg(long, value_name = "F", allow_negative_numbers = true, value_parser = vdbcook_bake::options::parse_flip_budget)]
+    pub max_flip: Option<f64>,
     /// Write report.json, PNGs and report.html into DIR.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
@@ -65,7 +75,20 @@ pub struct ValidateArgs {
 impl ValidateArgs {
     /// The validation a cook's settings ask for (`--validate` and its gate, views and size).
     pub fn of_cook(s: &vdbcook_bake::CookSettings, asset: PathBuf, source: Vec<String>, report: Option<PathBuf>, gpu: GpuArgs, json: bool) -> ValidateArgs {
-        ValidateArgs { asset, source, source_frames: s.frames, frames: None, views: s.views, size: (s.size.width, s.size.height), max_rmse: s.max_rmse, min_psnr: s.min_psnr, report, gpu, json }
+        ValidateArgs {
+            asset,
+            source,
+            source_frames: s.frames,
+            frames: None,
+            views: s.views,
+            size: (s.size.width, s.size.height),
+            max_rmse: s.max_rmse,
+            min_psnr: s.min_psnr,
+            max_flip: s.max_flip,
+            report,
+            gpu,
+            json,
+        }
     }
 }
 
@@ -138,10 +161,21 @@ fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize) -> Result<Vec<Er
         .collect())
 }
 
+#[derive(Clone, Copy)]
 struct Shot {
     frame: usize,
     view: usize,
     metrics: ImageMetrics,
+    /// Mean FLIP error of the image.
+    flip: f64,
+}
+
+/// A view kept for the report: its figures, both images and the FLIP map.
+struct Kept {
+    shot: Shot,
+    reference: Image,
+    asset: Image,
+    flip: FlipMap,
 }
 
 /// What a validation found: the JSON document, a human summary, and the
@@ -207,6 +241,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     if let Some(&bad) = frames.iter().find(|&&f| f >= meta.frame_count as usize) {
         return Err(Usage(format!("--frames: frame {bad} is out of range (the asset has {} frames, numbered from 0)", meta.frame_count)).into());
     }
+    let started = Instant::now();
     let renderer = renderer()?;
     let gpu_asset = renderer.upload(asset).with_context(|| name.clone())?;
     let gpu_ref = renderer.upload(reference).context("reference")?;
@@ -216,26 +251,32 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
 
     let mut shots = Vec::new();
     let mut voxel = Vec::new();
-    let mut worst_images: Vec<(Shot, Image, Image)> = Vec::new();
+    let mut worst_images: Vec<Kept> = Vec::new();
+    let mut flip_secs = 0.0;
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in &frames {
         voxel.push((f, voxel_errors(asset, reference, f)?));
         let refs = renderer.render_views(&gpu_ref, &scene, f, &views, w, h)?;
         let imgs = renderer.render_views(&gpu_asset, &scene, f, &views, w, h)?;
-        for (vi, (r, a)) in refs.into_iter().zip(imgs).enumerate() {
-            let m = compare(&r, &a);
+        // FLIP runs on the CPU, one image per thread: the views of a frame in parallel.
+        let t = Instant::now();
+        let maps: Vec<FlipMap> = refs.par_iter().zip(&imgs).map(|(r, a)| flip(r, a, DEFAULT_PPD)).collect::<Result<_, _>>()?;
+        flip_secs += t.elapsed().as_secs_f64();
+        for (vi, ((r, a), map)) in refs.into_iter().zip(imgs).zip(maps).enumerate() {
+            let shot = Shot { frame: f, view: vi, metrics: compare(&r, &a), flip: map.mean() };
             // Keep the images of the three worst views for the report.
             if args.report.is_some() {
-                worst_images.push((Shot { frame: f, view: vi, metrics: m }, r, a));
-                worst_images.sort_by(|x, y| y.0.metrics.rmse.total_cmp(&x.0.metrics.rmse));
+                worst_images.push(Kept { shot, reference: r, asset: a, flip: map });
+                worst_images.sort_by(|x, y| y.shot.metrics.rmse.total_cmp(&x.shot.metrics.rmse));
                 worst_images.truncate(3);
             }
-            shots.push(Shot { frame: f, view: vi, metrics: m });
+            shots.push(shot);
             bars.advance(1);
         }
     }
     bars.finish();
     let worst = shots.iter().max_by(|a, b| a.metrics.rmse.total_cmp(&b.metrics.rmse));
+    let worst_flip = shots.iter().max_by(|a, b| a.flip.total_cmp(&b.flip));
     if ref_meta.channels.len() != meta.channels.len() {
         return Err(anyhow!("{name}: the asset has {} channels, the source gives {}", meta.channels.len(), ref_meta.channels.len()));
     }
@@ -264,89 +305,108 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         "frames": meta.frame_count,
         "views": args.views,
         "size": [w, h],
-        "images": shots.iter().map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "max_error": s.metrics.max_error})).collect::<Vec<_>>(),
-        "worst": worst.map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr)})),
+        "flip_ppd": DEFAULT_PPD,
+        "images": shots.iter().map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "max_error": s.metrics.max_error, "flip": s.flip})).collect::<Vec<_>>(),
+        "worst": worst.map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "flip": s.flip})),
+        "worst_flip": worst_flip.map(|s| json!({"frame": s.frame, "view": s.view, "flip": s.flip})),
         "voxel": {
             "rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak(shown))), "max_error": vox_total.max_abs,
             "frames": voxel.iter().map(|(f, e)| { let e = e.get(shown).copied().unwrap_or_default(); json!({"frame": f, "rmse": e.rmse(), "psnr": num(e.psnr(peak(shown))), "max_error": e.max_abs}) }).collect::<Vec<_>>(),
         },
         "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": meta.planes.get(ch.plane as usize).map(|p| p.plane.format.name()), "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
-        "gate": {"max_rmse": args.max_rmse, "min_psnr": args.min_psnr},
+        "gate": {"max_rmse": args.max_rmse, "min_psnr": args.min_psnr, "max_flip": args.max_flip},
     });
-    let failed: Vec<&Shot> = shots.iter().filter(|s| args.max_rmse.is_some_and(|x| s.metrics.rmse > x) || args.min_psnr.is_some_and(|y| s.metrics.psnr < y)).collect();
+    let failed: Vec<&Shot> =
+        shots.iter().filter(|s| args.max_rmse.is_some_and(|x| s.metrics.rmse > x) || args.min_psnr.is_some_and(|y| s.metrics.psnr < y) || args.max_flip.is_some_and(|x| s.flip > x)).collect();
     if let Some(dir) = &args.report {
         write_report(dir, &doc, &shots, &worst_images, &format, &name).with_context(|| dir.display().to_string())?;
     }
     let decoder = if gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
     let mut text = format!("{name}: {format} vs lossless reference, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), args.views, renderer.adapter);
     if let Some(s) = worst {
-        text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error);
-        let mean = shots.iter().map(|s| s.metrics.rmse).sum::<f64>() / shots.len() as f64;
-        text += &format!("           mean rmse {:.3e}\n", mean);
+        text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, flip {:.4}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error, s.flip);
+        let mean = |f: fn(&Shot) -> f64| shots.iter().map(f).sum::<f64>() / shots.len() as f64;
+        text += &format!("           mean rmse {:.3e}, mean flip {:.4}\n", mean(|s| s.metrics.rmse), mean(|s| s.flip));
+    }
+    if let Some(s) = worst_flip {
+        text += &format!("  flip     worst: frame {} view {}: flip {:.4} (at {DEFAULT_PPD} pixels per degree)\n", s.frame, s.view, s.flip);
     }
     for (c, (ch, e)) in meta.channels.iter().zip(&channel_totals).enumerate() {
         let label = if meta.channels.len() == 1 { "voxels".to_string() } else { ch.name.clone() };
         text += &format!("  {label:<8} rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", e.rmse(), e.psnr(peak(c)), e.max_abs);
     }
+    text += &format!("  time     {:.2} s to render and compare, FLIP {:.2} s of it\n", started.elapsed().as_secs_f64(), flip_secs);
     if let Some(d) = &args.report {
         text += &format!("  report   {}\n", d.join("report.html").display());
     }
-    let gate_failure = failed.first().map(|s| format!("{} image(s) over budget, first frame {} view {} (rmse {:.3e}, psnr {:.1} dB)", failed.len(), s.frame, s.view, s.metrics.rmse, s.metrics.psnr));
+    let gate_failure = failed
+        .first()
+        .map(|s| format!("{} image(s) over budget, first frame {} view {} (rmse {:.3e}, psnr {:.1} dB, flip {:.4})", failed.len(), s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.flip));
     Ok(Outcome { doc, text, gate_failure })
 }
 
-fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[(Shot, Image, Image)], format: &str, name: &str) -> Result<()> {
+fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[Kept], format: &str, name: &str) -> Result<()> {
     std::fs::create_dir_all(dir)?;
     let write = |file: &str, bytes: &[u8]| vdbcook_vpak::write_atomic(&dir.join(file), bytes, true).map_err(|e| anyhow!(e));
     write("report.json", format!("{}\n", serde_json::to_string_pretty(doc).unwrap_or_default()).as_bytes())?;
     let mut figures = String::new();
-    for (s, r, a) in worst {
+    for k in worst {
+        let s = &k.shot;
         let stem = format!("frame{}_view{}", s.frame, s.view);
-        let (rp, ap, hp) = (report::png_rgb(r), report::png_rgb(a), report::png_heat(r, a, (s.metrics.max_error as f32).max(1e-6)));
+        let (rp, ap, hp, fp) = (report::png_rgb(&k.reference), report::png_rgb(&k.asset), report::png_heat(&k.reference, &k.asset, (s.metrics.max_error as f32).max(1e-6)), report::png_flip(&k.flip));
         write(&format!("{stem}_reference.png"), &rp)?;
         write(&format!("{stem}_asset.png"), &ap)?;
         write(&format!("{stem}_error.png"), &hp)?;
+        write(&format!("{stem}_flip.png"), &fp)?;
         figures += &format!(
-            "<h3>frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}</h3><div class='row'>\
+            "<h3>frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, FLIP {:.4}</h3><div class='row'>\
 <figure><img src='data:image/png;base64,{}'><figcaption>reference (lossless)</figcaption></figure>\
 <figure><img src='data:image/png;base64,{}'><figcaption>asset ({})</figcaption></figure>\
-<figure><img src='data:image/png;base64,{}'><figcaption>|difference|, full scale {:.2e}</figcaption></figure></div>",
+<figure><img src='data:image/png;base64,{}'><figcaption>|difference|, full scale {:.2e}</figcaption></figure>\
+<figure><img src='data:image/png;base64,{}'><figcaption>FLIP error map (magma, 0 to 1): mean {:.4}, max {:.3}</figcaption></figure></div>",
             s.frame,
             s.view,
             s.metrics.rmse,
             s.metrics.psnr,
             s.metrics.max_error,
+            s.flip,
             report::base64(&rp),
             report::base64(&ap),
             report::esc(format),
             report::base64(&hp),
-            s.metrics.max_error
+            s.metrics.max_error,
+            report::base64(&fp),
+            s.flip,
+            k.flip.errors.iter().copied().fold(0.0f32, f32::max)
         );
     }
-    // Worst view per frame.
-    let mut per_frame: Vec<(usize, f64)> = Vec::new();
+    // Worst view per frame: RMSE and FLIP.
+    let mut per_frame: Vec<(usize, f64, f64)> = Vec::new();
     for s in shots {
-        match per_frame.iter_mut().find(|(f, _)| *f == s.frame) {
-            Some(e) => e.1 = e.1.max(s.metrics.rmse),
-            None => per_frame.push((s.frame, s.metrics.rmse)),
+        match per_frame.iter_mut().find(|(f, _, _)| *f == s.frame) {
+            Some(e) => (e.1, e.2) = (e.1.max(s.metrics.rmse), e.2.max(s.flip)),
+            None => per_frame.push((s.frame, s.metrics.rmse, s.flip)),
         }
     }
-    let rows: String = per_frame.iter().map(|(f, r)| format!("<tr><td>{f}</td><td>{r:.4e}</td></tr>")).collect();
+    let rows: String = per_frame.iter().map(|(f, r, fl)| format!("<tr><td>{f}</td><td>{r:.4e}</td><td>{fl:.4}</td></tr>")).collect();
     let v = &doc["voxel"];
     let html = format!(
         "<!doctype html><html><head><meta charset='utf-8'><title>vdbcook validation: {n}</title>\
 <style>body{{font-family:sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}\
 .row{{display:flex;gap:1em}}figure{{margin:0}}img{{image-rendering:pixelated;max-width:300px}}</style></head><body>\
 <h1>vdbcook validation</h1><p>{n}, adapter {ad}</p>\
-<table><tr><th>model</th><th>format</th><th>worst image RMSE</th><th>worst PSNR (dB)</th><th>voxel RMSE</th><th>voxel PSNR (dB)</th></tr>\
-<tr><td>{g}</td><td>{f}</td><td>{wr}</td><td>{wp}</td><td>{vr}</td><td>{vp}</td></tr></table>\
-<h2>Per-frame RMSE (worst view)</h2>{plot}<table><tr><th>frame</th><th>RMSE</th></tr>{rows}</table><h2>Worst views</h2>{figures}</body></html>",
+<table><tr><th>model</th><th>format</th><th>worst image RMSE</th><th>worst PSNR (dB)</th><th>worst FLIP</th><th>voxel RMSE</th><th>voxel PSNR (dB)</th></tr>\
+<tr><td>{g}</td><td>{f}</td><td>{wr}</td><td>{wp}</td><td>{wf}</td><td>{vr}</td><td>{vp}</td></tr></table>\
+<p>FLIP: NVIDIA's perceptual error (LDR-FLIP, mean over the image, 0 to 1) at {ppd} pixels per degree, on the 8-bit sRGB images shown here.</p>\
+<h2>Per-frame error (worst view)</h2>{plot}<table><tr><th>frame</th><th>RMSE</th><th>FLIP</th></tr>{rows}</table><h2>Worst views</h2>{figures}</body></html>",
         n = report::esc(name),
         ad = report::esc(doc["adapter"].as_str().unwrap_or("")),
         g = report::esc(doc["shown"].as_str().unwrap_or("")),
         f = report::esc(format),
         wr = doc["worst"]["rmse"],
         wp = doc["worst"]["psnr"],
+        wf = doc["worst_flip"]["flip"].as_f64().map(|x| format!("{x:.4}")).unwrap_or_default(),
+        ppd = DEFAULT_PPD,
         vr = v["rmse"],
         vp = v["psnr"],
         plot = report::svg_plot(&per_frame.iter().map(|p| p.1).collect::<Vec<_>>(), "image RMSE per frame"),

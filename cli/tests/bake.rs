@@ -123,6 +123,8 @@ fn manifest_errors_name_file_line_and_column_and_write_nothing() {
         ("duplicate output", good.replace("zip.vpak", "./fog.vpak"), ":26:10: duplicate output \"./fog.vpak\""),
         ("duplicate name", good.replace("name = \"zip\"", "name = \"fog\""), ":25:8: duplicate asset name \"fog\""),
         ("bad value", good.replace("clusters = 8", "variance_threshold = -2.0"), ":28:22: variance_threshold: must be a number >= 0"),
+        ("negative flip budget", good.replace("clusters = 8", "max_flip = -0.5"), ":28:12: max_flip: must be a finite number >= 0, not -0.5"),
+        ("infinite flip budget", good.replace("clusters = 8", "max_flip = inf"), ":28:12: max_flip: must be a finite number >= 0, not inf"),
         ("not toml", good.replace("[[asset]]\nname = \"zip\"", "[[asset]\nname = \"zip\""), ":24:"),
     ];
     let out = dir.join("out");
@@ -329,6 +331,35 @@ fn mixed(dir: &Path, gate_only: bool) -> PathBuf {
     }
     std::fs::write(&m, text).unwrap();
     m
+}
+
+#[test]
+fn max_flip_gates_an_asset() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = scratch("flip");
+    let m = dir.join("flip.toml");
+    let f = root().join("fixtures/smoke_seq");
+    let text = format!(
+        "[defaults]\nviews = 2\nsize = \"32x32\"\nformat = \"bc7\"\nvalidate = true\n\n\
+[[asset]]\nname = \"loose\"\noutput = \"loose.vpak\"\ninputs = [\"{f}\"]\nmax_flip = 1.0\n\n\
+[[asset]]\nname = \"tight\"\noutput = \"tight.vpak\"\ninputs = [\"{f}\"]\nmax_flip = 1e-9\n",
+        f = f.display()
+    );
+    std::fs::write(&m, text).unwrap();
+    let (code, v, e) = bake(&[s(&m), "--out-dir", s(&dir.join("out")), "--jobs", "1"], &[]);
+    assert_eq!(code, Some(3), "only a gate failed: {e}");
+    assert_eq!(statuses(&v), [("loose".into(), "baked".into()), ("tight".into(), "gate-failed".into())]);
+    for (a, budget) in v["assets"].as_array().unwrap().iter().zip([1.0, 1e-9]) {
+        assert_eq!(a["gate"]["max_flip"].as_f64(), Some(budget), "{a}");
+        let flip = a["validation"]["image_flip"].as_f64().unwrap();
+        assert!(flip > 1e-9 && flip < 1.0, "{a}");
+    }
+    assert!(v["assets"][1]["message"].as_str().unwrap().contains("flip"), "{v}");
+    let html = std::fs::read_to_string(dir.join("out/report.html")).unwrap();
+    assert!(html.contains("<th>image FLIP</th>"), "the bake report has a FLIP column");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

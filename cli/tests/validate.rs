@@ -37,11 +37,14 @@ fn f32_is_exact_and_the_json_lists_every_image() {
     let images = v["images"].as_array().unwrap();
     assert_eq!(images.len(), 4 * 2);
     for img in images {
-        for k in ["frame", "view", "rmse", "psnr", "max_error"] {
+        for k in ["frame", "view", "rmse", "psnr", "max_error", "flip"] {
             assert!(img.get(k).is_some(), "{img}");
         }
         assert!(img["rmse"].as_f64().unwrap() < 1e-6, "{img}");
+        assert_eq!(img["flip"], 0.0, "the same 8-bit pixels: {img}");
     }
+    assert_eq!(v["worst_flip"]["flip"], 0.0);
+    assert_eq!(v["flip_ppd"], 67.0);
     assert_eq!(v["voxel"]["rmse"], 0.0);
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -65,6 +68,58 @@ fn the_quality_gate_exits_3() {
     let (code, _, _) = validate_json(&bc7, &["--min-psnr", "200"]);
     assert_eq!(code, Some(3));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_flip_gate_exits_3_over_budget_and_0_within() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = scratch("flipgate");
+    let bc4 = cook(&dir, "bc4");
+    let (code, v, err) = validate_json(&bc4, &[]);
+    assert_eq!(code, Some(0), "{err}");
+    let flips: Vec<f64> = v["images"].as_array().unwrap().iter().map(|i| i["flip"].as_f64().unwrap()).collect();
+    let worst = v["worst_flip"]["flip"].as_f64().unwrap();
+    assert!(worst > 0.0 && worst < 1.0, "a lossy asset shows some FLIP error: {worst}");
+    assert_eq!(worst, flips.iter().copied().fold(0.0, f64::max), "worst_flip is the largest image FLIP");
+    assert_eq!(v["gate"]["max_flip"], serde_json::Value::Null);
+    let (code, v, err) = validate_json(&bc4, &["--max-flip", &format!("{}", worst * 0.5)]);
+    assert_eq!(code, Some(3), "{err}");
+    assert!(err.contains("quality gate failed") && err.contains("flip"), "{err}");
+    assert_eq!(v["gate"]["max_flip"].as_f64(), Some(worst * 0.5));
+    let (code, _, err) = validate_json(&bc4, &["--max-flip", &format!("{worst}")]);
+    assert_eq!(code, Some(0), "the budget is inclusive: {err}");
+    // The other gates alone still pass: only FLIP decides here.
+    let (code, _, err) = validate_json(&bc4, &["--max-flip", "0", "--max-rmse", "1"]);
+    assert_eq!(code, Some(3), "{err}");
+
+    // cook --validate takes the same gate.
+    let out = dir.join("again.vpak");
+    let cook_gate =
+        |budget: f64| vdbcook(&["cook", "-q", "--format", "bc4", "--force", "-o", s(&out), "fixtures/smoke_seq", "--validate", "--views", "2", "--size", "64x48", "--max-flip", &format!("{budget}")]);
+    assert_eq!(cook_gate(worst * 0.5).status.code(), Some(3));
+    let r = cook_gate(1.0);
+    assert_eq!(r.status.code(), Some(0), "{}", String::from_utf8_lossy(&r.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn max_flip_must_be_a_finite_budget() {
+    // `--max-flip -0.1` reads as a number too; `-inf` needs `--max-flip=-inf`.
+    let r = vdbcook(&["validate", "x.vpak", "--source", "fixtures/smoke_seq", "--max-flip", "-0.1"]);
+    assert!(r.status.code() == Some(2) && String::from_utf8_lossy(&r.stderr).contains("must be a finite number >= 0, not -0.1"), "{}", String::from_utf8_lossy(&r.stderr));
+    for bad in ["-0.1", "nan", "inf", "-inf", "lots"] {
+        let bad = &format!("--max-flip={bad}");
+        let r = vdbcook(&["validate", "x.vpak", "--source", "fixtures/smoke_seq", bad]);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{bad}: {err}");
+        assert!(err.contains("--max-flip"), "{bad}: {err}");
+        let r = vdbcook(&["cook", "-o", "/nonexistent/x.vpak", "fixtures/tiles.vdb", "--validate", bad]);
+        assert_eq!(r.status.code(), Some(2), "cook {bad}: {}", String::from_utf8_lossy(&r.stderr));
+    }
+    let r = vdbcook(&["cook", "-o", "/nonexistent/x.vpak", "fixtures/tiles.vdb", "--max-flip", "0.1"]);
+    assert_eq!(r.status.code(), Some(2), "--max-flip needs --validate: {}", String::from_utf8_lossy(&r.stderr));
 }
 
 #[test]
@@ -110,7 +165,21 @@ fn report_and_render_write_their_files() {
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(rep.join("report.json")).unwrap()).unwrap();
     assert_eq!(json["images"].as_array().unwrap().len(), 8);
     let pngs = std::fs::read_dir(&rep).unwrap().flatten().filter(|e| e.file_name().to_string_lossy().ends_with(".png")).count();
-    assert_eq!(pngs, 9, "reference, asset and heat-map for the three worst views");
+    assert_eq!(pngs, 12, "reference, asset, heat-map and FLIP map for the three worst views");
+    assert!(html.contains("FLIP error map") && html.contains("worst FLIP"), "the FLIP map is next to the difference");
+    // The JSON's FLIP of a view is FLIP of the two PNGs the report shows.
+    let worst = &json["worst"];
+    let stem = rep.join(format!("frame{}_view{}", worst["frame"], worst["view"]));
+    let pixels = |suffix: &str| {
+        let mut dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(format!("{}_{suffix}.png", stem.display())).unwrap())).read_info().unwrap();
+        let mut buf = vec![0; dec.output_buffer_size().unwrap()];
+        let info = dec.next_frame(&mut buf).unwrap();
+        assert_eq!((info.width, info.height, info.color_type), (32, 32, png::ColorType::Rgb));
+        buf
+    };
+    let map = vdbcook_validate::flip::flip_srgb8(&pixels("reference"), &pixels("asset"), 32, 32, 67.0).unwrap();
+    assert_eq!(Some(map.mean()), worst["flip"].as_f64());
+    assert_eq!(pixels("flip"), map.magma_rgb8());
 
     let png = dir.join("thumb.png");
     let r = vdbcook(&["render", "fixtures/fog_blosc.vdb", "-o", s(&png), "--size", "40x30"]);
@@ -144,6 +213,7 @@ fn cook_validate_adds_the_validation() {
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
     assert_eq!(v["validation"]["images"].as_array().unwrap().len(), 8);
+    assert!(v["validation"]["images"][0]["flip"].is_number() && v["validation"]["gate"]["max_flip"].is_null());
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -174,6 +244,64 @@ fn the_json_follows_the_documented_schema() {
     for k in keys("Voxel figures") {
         assert!(v["voxel"].get(&k).is_some(), "{k} missing in {}", v["voxel"]);
     }
+    for k in ["max_rmse", "min_psnr", "max_flip"] {
+        assert!(v["gate"].get(k).is_some() && doc.contains(&format!("`{k}`")), "gate key {k}: {}", v["gate"]);
+    }
+    for k in ["frame", "view", "flip"] {
+        assert!(v["worst_flip"].get(k).is_some(), "{k} missing in {}", v["worst_flip"]);
+    }
     assert!(["texture", "shader"].contains(&v["bc_decode"].as_str().unwrap()));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_validation_report_shows_the_flip_map_in_headless_chromium() {
+    if !gpu_available() {
+        return;
+    }
+    let chromium = ["chromium", "chromium-browser", "google-chrome"].into_iter().find(|c| std::process::Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()));
+    let Some(chromium) = chromium else {
+        assert!(!in_ci(), "CI=true but there is no chromium (scripts/test.sh installs it)");
+        eprintln!("note: no chromium; skipping the HTML check");
+        return;
+    };
+    let dir = scratch("chromium");
+    let asset = cook(&dir, "bc4");
+    // Kept after the test: the screenshot is for people to look at.
+    let keep = Path::new(env!("CARGO_TARGET_TMPDIR")).join("validate-html");
+    let _ = std::fs::remove_dir_all(&keep);
+    let r = vdbcook(&["validate", "-q", s(&asset), "--source", "fixtures/smoke_seq", "--frames", "3-3", "--views", "2", "--size", "128x128", "--report", s(&keep)]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let html_path = keep.join("report.html");
+    let shot = keep.join("report.png");
+    let o = std::process::Command::new(chromium)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--enable-logging=stderr", "--v=0", "--window-size=1200,900"])
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(format!("file://{}", html_path.display()))
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{log}");
+    assert!(!log.contains("Uncaught"), "{log}");
+    assert!(std::fs::read(&shot).unwrap().starts_with(&[0x89, b'P', b'N', b'G']));
+
+    // Every image decodes, and each view's row has its FLIP map after the difference.
+    let probe = "<script>window.addEventListener('load', function () {\
+var imgs = Array.prototype.slice.call(document.images);\
+var ok = imgs.filter(function (i) { return i.complete && i.naturalWidth > 0; }).length;\
+console.log('probe images ' + ok + '/' + imgs.length);\
+var rows = Array.prototype.map.call(document.querySelectorAll('.row'), function (r) { return Array.prototype.map.call(r.querySelectorAll('figcaption'), function (c) { return c.textContent.replace(/[^A-Za-z ]/g, '').split(' ')[0]; }).join('|'); });\
+console.log('probe rows ' + rows.join(';'));});</script>";
+    let html = std::fs::read_to_string(&html_path).unwrap();
+    let probed = dir.join("probed.html");
+    std::fs::write(&probed, html.replace("</body>", &format!("{probe}</body>"))).unwrap();
+    let o = std::process::Command::new(chromium)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr", "--v=0", "--virtual-time-budget=3000", "--dump-dom"])
+        .arg(format!("file://{}", probed.display()))
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("probe images 8/8"), "two views, four images each: {log}");
+    assert!(log.contains("probe rows reference|asset|difference|FLIP;reference|asset|difference|FLIP"), "{log}");
     let _ = std::fs::remove_dir_all(&dir);
 }

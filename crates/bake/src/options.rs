@@ -139,6 +139,20 @@ pub const ITERATIONS: RangeInclusive<i64> = 0..=1000;
 pub const MAX_TEXTURE_DIM: RangeInclusive<i64> = 8..=16384;
 pub const VIEWS: RangeInclusive<i64> = 1..=360;
 
+/// A FLIP budget (`--max-flip`, `max_flip`): a finite number >= 0 (FLIP errors lie in [0, 1]).
+pub fn flip_budget(x: f64) -> Result<f64, String> {
+    if x.is_finite() && x >= 0.0 {
+        Ok(x)
+    } else {
+        Err(format!("must be a finite number >= 0, not {x}"))
+    }
+}
+
+/// Parses a FLIP budget flag.
+pub fn parse_flip_budget(s: &str) -> Result<f64, String> {
+    flip_budget(s.trim().parse::<f64>().map_err(|_| format!("invalid number \"{s}\""))?)
+}
+
 macro_rules! settings {
     ($( $(#[$attr:meta])* $name:ident : $ty:ty = $default:expr ; )*) => {
         /// Every cook setting of one asset (flags of `vdbcook cook`, keys of a bake manifest).
@@ -263,6 +277,9 @@ settings! {
     /// With --validate: exit with code 3 when any image's PSNR (dB) is below Y.
     #[cfg_attr(feature = "clap", arg(long, value_name = "Y", requires = "validate"))]
     min_psnr: Option<f64> = None;
+    /// With --validate: exit with code 3 when any image's mean FLIP error (0 to 1, at 67 pixels per degree) is above F.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "F", requires = "validate", allow_negative_numbers = true, value_parser = parse_flip_budget))]
+    max_flip: Option<f64> = None;
     /// With --validate: cameras orbiting the volume.
     #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().views, requires = "validate", value_parser = clap::value_parser!(u32).range(VIEWS)))]
     views: u32 = 8;
@@ -299,6 +316,9 @@ impl CookSettings {
         }
         if let Some(y) = self.min_psnr.filter(|y| y.is_nan()) {
             return bad("min_psnr", format!("must be a number, not {y}"));
+        }
+        if let Some(Err(message)) = self.max_flip.map(flip_budget) {
+            return bad("max_flip", message);
         }
         Ok(())
     }
@@ -378,7 +398,16 @@ mod tests {
         assert_eq!(d.quality, Quality::VeryFast);
         assert_eq!(d.pairs().len(), CookSettings::NAMES.len());
         assert!(d.check().is_ok());
-        let bad = CookSettings { variance_threshold: -1.0, ..d };
+        let bad = CookSettings { variance_threshold: -1.0, ..d.clone() };
         assert!(matches!(bad.check(), Err(Error::Setting { name: "variance_threshold", .. })));
+        assert_eq!(d.max_flip, None);
+        for x in [-0.1, f64::NAN, f64::INFINITY] {
+            let bad = CookSettings { max_flip: Some(x), ..d.clone() };
+            assert!(matches!(bad.check(), Err(Error::Setting { name: "max_flip", .. })), "{x}");
+            assert!(parse_flip_budget(&x.to_string()).is_err(), "{x}");
+        }
+        assert!(CookSettings { max_flip: Some(0.0), ..d.clone() }.check().is_ok());
+        assert_eq!(parse_flip_budget("0.05"), Ok(0.05));
+        assert!(parse_flip_budget("x").is_err());
     }
 }

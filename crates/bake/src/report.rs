@@ -49,6 +49,9 @@ pub struct Validation {
     /// `None` for identical images.
     pub image_psnr: Option<f64>,
     pub mean_image_rmse: f64,
+    /// The largest mean FLIP error of an image (`None` in records written before FLIP).
+    #[serde(default)]
+    pub image_flip: Option<f64>,
 }
 
 /// What a cook and its validation found, recorded in the asset itself (a
@@ -83,6 +86,8 @@ impl Record {
 pub struct Gate {
     pub max_rmse: Option<f64>,
     pub min_psnr: Option<f64>,
+    #[serde(default)]
+    pub max_flip: Option<f64>,
 }
 
 /// One asset of the report.
@@ -249,7 +254,7 @@ impl Report {
             let fmt = format!("<td data-v='{0}'>{0}</td>", esc(r.format.as_deref().unwrap_or("")));
             let _ = writeln!(
                 rows,
-                "<tr class='{st}'><td>{thumb}</td><td data-v='{n}'>{n}<div class='sub'>{out}</div></td><td data-v='{st}'>{st}{msg}</td>{frames}{fmt}{bytes}{bpv}{vr}{vp}{ir}{ip}<td data-v='{gate}'>{gate}</td><td data-v='{hit}'>{hit}</td>{secs}<td>{link}</td></tr>",
+                "<tr class='{st}'><td>{thumb}</td><td data-v='{n}'>{n}<div class='sub'>{out}</div></td><td data-v='{st}'>{st}{msg}</td>{frames}{fmt}{bytes}{bpv}{vr}{vp}{ir}{ip}{fl}<td data-v='{gate}'>{gate}</td><td data-v='{hit}'>{hit}</td>{secs}<td>{link}</td></tr>",
                 st = a.status.name(),
                 n = esc(&a.name),
                 out = esc(&a.output),
@@ -261,6 +266,7 @@ impl Report {
                 vp = cell(r.voxel_psnr, psnr_text(r.voxel_rmse, r.voxel_psnr)),
                 ir = cell(v.map(|v| v.image_rmse), v.map(|v| sci(v.image_rmse)).unwrap_or_default()),
                 ip = cell(v.and_then(|v| v.image_psnr), v.map(|v| psnr_text(Some(v.image_rmse), v.image_psnr)).unwrap_or_default()),
+                fl = cell(v.and_then(|v| v.image_flip), v.and_then(|v| v.image_flip).map(|f| format!("{f:.4}")).unwrap_or_default()),
                 gate = gate_text(a),
                 hit = if a.status == Status::Cached { "hit" } else { "" },
                 secs = cell(Some(a.seconds), format!("{:.2} s", a.seconds)),
@@ -279,9 +285,9 @@ th{{background:#f3f3f3;cursor:pointer;user-select:none}}th.asc::after{{content:'
 img{{width:96px;height:96px;image-rendering:pixelated;background:#000;display:block}}.sub{{color:#777;font-size:85%}}.msg{{white-space:normal;min-width:16em;max-width:28em;text-align:left}}.none{{color:#999}}\
 tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}</style></head><body>\n\
 <h1>vdbcook bake</h1>\n<p>{m}{scope}: {n} assets, {b} baked, {c} cached, {f} failed, {g} failed a quality gate, {k} skipped; {t:.1} s; {tool}.</p>\n\
-<p class='sub'>Click a column heading to sort. Image RMSE / PSNR: the worst of every frame and view against a lossless reference render; voxel RMSE / PSNR over every active voxel.</p>\n\
+<p class='sub'>Click a column heading to sort. Image RMSE / PSNR / FLIP: the worst of every frame and view against a lossless reference render (FLIP: NVIDIA's perceptual error, 0 to 1, at 67 pixels per degree); voxel RMSE / PSNR over every active voxel.</p>\n\
 <table id='assets'><thead><tr><th>preview</th><th>asset</th><th>status</th><th>frames</th><th>format</th><th>bytes</th><th>bits per active voxel</th>\
-<th>voxel RMSE</th><th>voxel PSNR (dB)</th><th>image RMSE</th><th>image PSNR (dB)</th><th>gate</th><th>cache</th><th>time</th><th>details</th></tr></thead>\n<tbody>\n{rows}</tbody></table>\n\
+<th>voxel RMSE</th><th>voxel PSNR (dB)</th><th>image RMSE</th><th>image PSNR (dB)</th><th>image FLIP</th><th>gate</th><th>cache</th><th>time</th><th>details</th></tr></thead>\n<tbody>\n{rows}</tbody></table>\n\
 <script>\n(function () {{\n  var table = document.getElementById('assets');\n  var heads = table.tHead.rows[0].cells;\n  for (var i = 0; i < heads.length; i++) {{\n    heads[i].addEventListener('click', sorter(i));\n  }}\n\
   function sorter(col) {{\n    return function () {{\n      var th = heads[col], asc = !th.classList.contains('asc');\n      for (var k = 0; k < heads.length; k++) {{ heads[k].classList.remove('asc', 'desc'); }}\n      th.classList.add(asc ? 'asc' : 'desc');\n\
       var body = table.tBodies[0], rows = Array.prototype.slice.call(body.rows);\n      rows.sort(function (a, b) {{\n        var x = key(a, col), y = key(b, col);\n        if (x.n !== y.n) {{ return x.n ? -1 : 1; }}\n        var c = x.n ? x.v - y.v : String(x.v).localeCompare(String(y.v));\n        return asc ? c : -c;\n      }});\n\
@@ -300,7 +306,7 @@ tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child
 }
 
 fn gate_text(a: &AssetReport) -> &'static str {
-    match (a.status, a.gate.max_rmse.is_some() || a.gate.min_psnr.is_some()) {
+    match (a.status, a.gate.max_rmse.is_some() || a.gate.min_psnr.is_some() || a.gate.max_flip.is_some()) {
         (Status::GateFailed, _) => "failed",
         (Status::Failed | Status::Skipped, _) => "",
         (_, true) => "held",

@@ -8,10 +8,12 @@
 //! decoded in the shader; `march.wgsl` is the marcher.
 
 mod cpu;
+pub mod flip;
 mod gpu;
 pub mod report;
 
 pub use cpu::render_cpu;
+pub use flip::{flip, FlipMap};
 pub use gpu::{shader_sources, BcDecode, GpuAsset, Renderer};
 
 use vdbcook_vpak::{Asset, Checked, Metadata};
@@ -40,6 +42,8 @@ pub enum Error {
     Gpu(String),
     #[error(transparent)]
     Asset(#[from] vdbcook_vpak::Error),
+    #[error("{0}")]
+    Flip(String),
 }
 
 /// Atlas textures the renderer binds (those of the planes holding the channels a render shows).

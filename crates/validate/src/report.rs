@@ -1,19 +1,15 @@
 //! Images as PNG, error heat-maps, and the self-contained HTML report.
 
-use crate::Image;
+use crate::{FlipMap, Image};
 
-/// 8-bit RGB PNG of an image (values clamped to [0, 1], sRGB-encoded).
+/// 8-bit RGB PNG of an image (values clamped to [0, 1], sRGB-encoded: the pixels FLIP compares).
 pub fn png_rgb(img: &Image) -> Vec<u8> {
-    let px: Vec<u8> = img
-        .pixels
-        .iter()
-        .map(|&v| {
-            let v = v.clamp(0.0, 1.0);
-            let s = if v <= 0.003_130_8 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
-            (s * 255.0).round() as u8
-        })
-        .collect();
-    encode(img.width, img.height, png::ColorType::Rgb, &px)
+    encode(img.width, img.height, png::ColorType::Rgb, &crate::flip::srgb8(img))
+}
+
+/// RGB PNG of a FLIP error map through FLIP's magma colour map (black: no error, pale yellow: 1).
+pub fn png_flip(map: &FlipMap) -> Vec<u8> {
+    encode(map.width, map.height, png::ColorType::Rgb, &map.magma_rgb8())
 }
 
 /// RGB heat-map PNG of the largest |a - b| over a pixel's colours, full

@@ -1,0 +1,188 @@
+//! NVIDIA's FLIP (LDR-FLIP, Andersson et al. 2020) through the `nv-flip`
+//! bindings to its C++ reference implementation.
+//!
+//! FLIP judges images as a display shows them: sRGB-encoded values in [0, 1]
+//! seen at a number of pixels per degree of visual angle. The ray-marcher's
+//! images are linear radiance, so both images are first turned into exactly
+//! the 8-bit sRGB pixels of the report's PNGs ([`srgb8`]): linear values
+//! clamped to [0, 1], the sRGB transfer curve, rounded to 8 bits. A
+//! difference below one 8-bit step is invisible to FLIP (RMSE still sees it).
+
+use crate::{Error, Image};
+
+/// Pixels per degree of visual angle FLIP assumes by default: a 0.7 m wide
+/// 4K monitor seen from 0.7 m (the FLIP paper's setting).
+pub const DEFAULT_PPD: f32 = 67.0;
+
+/// One image's FLIP error map: a value in [0, 1] per pixel, row-major from the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlipMap {
+    pub width: u32,
+    pub height: u32,
+    pub errors: Vec<f32>,
+}
+
+impl FlipMap {
+    /// The mean error: the single figure the FLIP authors recommend.
+    pub fn mean(&self) -> f64 {
+        // Summed in f64, in pixel order: deterministic and free of float drift.
+        self.errors.iter().map(|&e| f64::from(e)).sum::<f64>() / self.errors.len().max(1) as f64
+    }
+
+    /// The map through FLIP's magma colour map (as its own tool shows it), 8-bit RGB.
+    pub fn magma_rgb8(&self) -> Vec<u8> {
+        nv_flip::FlipImageFloat::with_data(self.width, self.height, &self.errors).apply_color_lut(&nv_flip::magma_lut()).to_vec()
+    }
+}
+
+/// The sRGB transfer curve of a linear value, clamped to [0, 1], rounded to 8 bits.
+pub fn srgb8_value(v: f32) -> u8 {
+    let v = v.clamp(0.0, 1.0);
+    let s = if v <= 0.003_130_8 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+    (s * 255.0).round() as u8
+}
+
+/// The 8-bit sRGB pixels of a linear image (what the report's PNGs hold).
+pub fn srgb8(img: &Image) -> Vec<u8> {
+    img.pixels.iter().map(|&v| srgb8_value(v)).collect()
+}
+
+/// FLIP of two 8-bit sRGB RGB images of `width` × `height` pixels.
+pub fn flip_srgb8(reference: &[u8], test: &[u8], width: u32, height: u32, ppd: f32) -> Result<FlipMap, Error> {
+    let n = width as usize * height as usize * 3;
+    if reference.len() != n || test.len() != n {
+        return Err(Error::Flip(format!("FLIP needs two {width}x{height} RGB images ({n} bytes), got {} and {} bytes", reference.len(), test.len())));
+    }
+    if !(ppd.is_finite() && ppd > 0.0) {
+        return Err(Error::Flip(format!("FLIP needs a positive number of pixels per degree, not {ppd}")));
+    }
+    if n == 0 {
+        return Ok(FlipMap { width, height, errors: Vec::new() });
+    }
+    let r = nv_flip::FlipImageRgb8::with_data(width, height, reference);
+    let t = nv_flip::FlipImageRgb8::with_data(width, height, test);
+    let map = nv_flip::flip(r, t, ppd);
+    Ok(FlipMap { width, height, errors: map.to_vec() })
+}
+
+/// FLIP of two linear images of the same size, compared as 8-bit sRGB (see the module notes).
+pub fn flip(reference: &Image, test: &Image, ppd: f32) -> Result<FlipMap, Error> {
+    if (reference.width, reference.height) != (test.width, test.height) {
+        return Err(Error::Flip(format!("FLIP compares images of one size, not {}x{} and {}x{}", reference.width, reference.height, test.width, test.height)));
+    }
+    flip_srgb8(&srgb8(reference), &srgb8(test), reference.width, reference.height, ppd)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The synthetic pair of `scripts/flip_oracle.py`, built from integers so
+    /// both languages make the same bytes: a smooth two-axis gradient with a
+    /// soft blob (the kind of content the ray-marcher draws) and a test image
+    /// changed by `case`.
+    fn oracle_pair(case: u32) -> (Vec<u8>, Vec<u8>, u32, u32) {
+        let (w, h) = (96u32, 64u32);
+        let mut r = Vec::new();
+        let mut t = Vec::new();
+        let mut lcg: u32 = 12345;
+        for y in 0..h {
+            for x in 0..w {
+                let (dx, dy) = (x as i32 - 40, y as i32 - 30);
+                let d2 = (dx * dx + dy * dy) as u32;
+                let blob = 200u32.saturating_sub(d2 / 2);
+                let px = [(x * 255 / (w - 1) + blob).min(255), (y * 255 / (h - 1)).min(255), (blob + 30).min(255)];
+                let mut q = px;
+                match case {
+                    // Brightness lowered by 12 steps everywhere.
+                    1 => q = px.map(|v| v.saturating_sub(12)),
+                    // A 16×16 block turned grey.
+                    2 if (48..64).contains(&x) && (16..32).contains(&y) => q = [128, 128, 128],
+                    // Uniform noise of ±8 steps from a 32-bit LCG.
+                    3 => {
+                        for v in &mut q {
+                            lcg = lcg.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                            *v = (*v as i32 + ((lcg >> 24) % 17) as i32 - 8).clamp(0, 255) as u32;
+                        }
+                    }
+                    _ => {}
+                }
+                r.extend(px.map(|v| v as u8));
+                t.extend(q.map(|v| v as u8));
+            }
+        }
+        (r, t, w, h)
+    }
+
+    #[test]
+    fn identical_images_have_no_error() {
+        let (r, t, w, h) = oracle_pair(0);
+        assert_eq!(r, t);
+        let m = flip_srgb8(&r, &t, w, h, DEFAULT_PPD).unwrap();
+        assert_eq!(m.errors.len(), (w * h) as usize);
+        assert_eq!(m.mean(), 0.0);
+        assert!(m.errors.iter().all(|&e| e == 0.0));
+    }
+
+    /// Mean FLIP against NVIDIA's own FLIP 1.7 (PyPI `flip-evaluator`, a
+    /// separate build of the reference code): `python3 scripts/flip_oracle.py`
+    /// prints these numbers for the same pixels.
+    const ORACLE_1: f64 = 0.258_309_66;
+    const ORACLE_2: f64 = 0.041_952_96;
+    const ORACLE_3: f64 = 0.058_293_37;
+
+    #[test]
+    fn flip_matches_the_reference_implementation() {
+        const ORACLE: [(u32, f64); 3] = [(1, ORACLE_1), (2, ORACLE_2), (3, ORACLE_3)];
+        for (case, expected) in ORACLE {
+            let (r, t, w, h) = oracle_pair(case);
+            let m = flip_srgb8(&r, &t, w, h, DEFAULT_PPD).unwrap();
+            assert!((m.mean() - expected).abs() < 1e-6, "case {case}: FLIP {} vs the reference's {expected}", m.mean());
+            assert!(m.errors.iter().all(|e| (0.0..=1.0).contains(e)));
+        }
+        // More change, more error: the block and the noise are plainly visible.
+        let mean = |c| {
+            let (r, t, w, h) = oracle_pair(c);
+            flip_srgb8(&r, &t, w, h, DEFAULT_PPD).unwrap().mean()
+        };
+        assert!(mean(2) > 0.01 && mean(3) > 0.01, "{} {}", mean(2), mean(3));
+    }
+
+    #[test]
+    fn linear_images_are_compared_as_their_pngs() {
+        let img = Image { width: 16, height: 8, pixels: (0..16 * 8 * 3).map(|k| (k % 97) as f32 / 80.0 - 0.1).collect() };
+        let png = crate::report::png_rgb(&img);
+        let mut dec = png::Decoder::new(std::io::Cursor::new(png)).read_info().unwrap();
+        let mut buf = vec![0; dec.output_buffer_size().unwrap()];
+        let info = dec.next_frame(&mut buf).unwrap();
+        assert_eq!(&buf[..info.buffer_size()], srgb8(&img).as_slice());
+        assert_eq!(flip(&img, &img, DEFAULT_PPD).unwrap().mean(), 0.0);
+        // A change below one 8-bit step is invisible to FLIP.
+        let mut tiny = img.clone();
+        tiny.pixels[100] += 1e-5;
+        assert_eq!(flip(&img, &tiny, DEFAULT_PPD).unwrap().mean(), 0.0);
+        let mut dark = img.clone();
+        dark.pixels.iter_mut().for_each(|v| *v *= 0.5);
+        assert!(flip(&img, &dark, DEFAULT_PPD).unwrap().mean() > 0.01);
+    }
+
+    #[test]
+    fn mismatched_inputs_are_errors_not_panics() {
+        let a = Image { width: 8, height: 8, pixels: vec![0.5; 8 * 8 * 3] };
+        let b = Image { width: 8, height: 4, pixels: vec![0.5; 8 * 4 * 3] };
+        assert!(matches!(flip(&a, &b, DEFAULT_PPD), Err(Error::Flip(_))));
+        assert!(matches!(flip_srgb8(&[0; 10], &[0; 12], 2, 2, DEFAULT_PPD), Err(Error::Flip(_))));
+        assert!(matches!(flip(&a, &a, f32::NAN), Err(Error::Flip(_))));
+        assert!(matches!(flip(&a, &a, 0.0), Err(Error::Flip(_))));
+    }
+
+    #[test]
+    fn the_magma_map_is_rgb() {
+        let (r, t, w, h) = oracle_pair(2);
+        let m = flip_srgb8(&r, &t, w, h, DEFAULT_PPD).unwrap();
+        let rgb = m.magma_rgb8();
+        assert_eq!(rgb.len(), (w * h * 3) as usize);
+        // Magma's zero is near-black, its one a pale yellow: an unchanged pixel is dark.
+        assert!(rgb[..3].iter().all(|&c| c < 16), "{:?}", &rgb[..3]);
+    }
+}
