@@ -122,15 +122,28 @@ fn fire_ramp(t: f32) -> vec3<f32> {
     return clamp(vec3<f32>(3.0 * t, 3.0 * t - 1.0, 3.0 * t - 2.0), vec3<f32>(0.0), vec3<f32>(1.0));
 }
 
-// Light emitted per voxel of path at voxel `ip` of the cell `leaf` describes.
-fn emission_at(leaf: VpakLeaf, ip: vec3<i32>) -> vec3<f32> {
+// Channel `c` (whose brick channel in the cell is `bc`, background `bg`) at
+// voxel `ip` of the cell `leaf` describes, `on` saying whether the voxel is active.
+fn cell_value(leaf: VpakLeaf, bc: VpakBrickChannel, on: bool, ip: vec3<i32>, c: u32, bg: f32) -> f32 {
+    if (!on) {
+        return bg;
+    }
+    if (leaf.tile != VPAK_NONE) {
+        return vpak_active_value(params.info, leaf, ip, c);
+    }
+    return vpak_brick_channel_value(bc, vec3<u32>(ip) & vec3<u32>(7u));
+}
+
+// Light emitted per voxel of path by a temperature `t` and a flames value `f`
+// (either absent when its channel is VPAK_NONE).
+fn emission(t_raw: f32, f_raw: f32) -> vec3<f32> {
     var e = vec3<f32>(0.0);
     if (params.channels.y != VPAK_NONE) {
-        let t = clamp(vpak_leaf_value(params.info, leaf, ip, params.channels.y) * params.emission.x, 0.0, 1.0);
+        let t = clamp(t_raw * params.emission.x, 0.0, 1.0);
         e += fire_ramp(t) * t * t;
     }
     if (params.channels.z != VPAK_NONE) {
-        let f = clamp(vpak_leaf_value(params.info, leaf, ip, params.channels.z) * params.emission.y, 0.0, 1.0);
+        let f = clamp(f_raw * params.emission.y, 0.0, 1.0);
         e += vec3<f32>(1.0, 0.55, 0.15) * f;
     }
     return e * params.emission.z;
@@ -157,8 +170,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var cell = vec3<i32>(-1 << 30);
         var leaf: VpakLeaf;
 
-        // The extinction channel of the cell's brick, resolved once per cell.
+        // The shown channels of the cell's brick, resolved once per cell.
         var ext: VpakBrickChannel;
+        var temp: VpakBrickChannel;
+        var flames: VpakBrickChannel;
+        let bg = vec3<f32>(vpak_background(params.channels.x), vpak_background(params.channels.y), vpak_background(params.channels.z));
         loop {
             let t = hit.x + k * step;
             if (t >= hit.y || n >= params.size.z || trans < 1e-3) { break; }
@@ -171,6 +187,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 leaf = vpak_leaf(params.info, ip);
                 if (leaf.l3 != VPAK_NONE) {
                     ext = vpak_brick_channel(params.info, leaf.brick, params.channels.x);
+                    if (GLOWS && params.channels.y != VPAK_NONE) {
+                        temp = vpak_brick_channel(params.info, leaf.brick, params.channels.y);
+                    }
+                    if (GLOWS && params.channels.z != VPAK_NONE) {
+                        flames = vpak_brick_channel(params.info, leaf.brick, params.channels.z);
+                    }
                 }
             }
             if (leaf.empty_dim > 0u && params.size.w == 1u) {
@@ -178,17 +200,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 k = max(k + 1.0, ceil((exit - hit.x) / step - 0.5) + 0.5);
                 continue;
             }
+            let on = vpak_leaf_active(leaf, ip);
             if (GLOWS) {
-                radiance += trans * emission_at(leaf, ip) * step;
-            }
-            var e = bitcast<f32>(vpak_channels[params.channels.x].background);
-            if (vpak_leaf_active(leaf, ip)) {
-                if (leaf.tile != VPAK_NONE) {
-                    e = vpak_active_value(params.info, leaf, ip, params.channels.x);
-                } else {
-                    e = vpak_brick_channel_value(ext, vec3<u32>(ip) & vec3<u32>(7u));
+                var t = 0.0;
+                var f = 0.0;
+                if (params.channels.y != VPAK_NONE) {
+                    t = cell_value(leaf, temp, on, ip, params.channels.y, bg.y);
                 }
+                if (params.channels.z != VPAK_NONE) {
+                    f = cell_value(leaf, flames, on, ip, params.channels.z, bg.z);
+                }
+                radiance += trans * emission(t, f) * step;
             }
+            let e = cell_value(leaf, ext, on, ip, params.channels.x, bg.x);
             let sigma = max(e, 0.0) * params.light.w;
             if (sigma > 0.0) {
                 let a = 1.0 - exp(-sigma * step);

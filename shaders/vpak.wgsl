@@ -266,12 +266,20 @@ fn vpak_active_value(info: VpakInfo, leaf: VpakLeaf, p: vec3<i32>, c: u32) -> f3
     return vpak_brick_value(info, leaf.brick, vec3<u32>(p) & vec3<u32>(7u), c);
 }
 
+// Channel `c`'s background (0 for VPAK_NONE).
+fn vpak_background(c: u32) -> f32 {
+    if (c == VPAK_NONE) {
+        return 0.0;
+    }
+    return bitcast<f32>(vpak_channels[c].background);
+}
+
 // Channel `c` of voxel `p` of the cell `leaf` describes.
 fn vpak_leaf_value(info: VpakInfo, leaf: VpakLeaf, p: vec3<i32>, c: u32) -> f32 {
     if (vpak_leaf_active(leaf, p)) {
         return vpak_active_value(info, leaf, p, c);
     }
-    return bitcast<f32>(vpak_channels[c].background);
+    return vpak_background(c);
 }
 
 // Channel `c`'s value at voxel `p`, and the edge of the empty (background)

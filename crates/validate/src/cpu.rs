@@ -228,7 +228,7 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
         }
         acc
     };
-    // Emission, as `emission_at` in march.wgsl.
+    // Emission, as `emission` and `cell_value` in march.wgsl.
     let [_, temperature, flames] = scene.channels;
     let emission = |p: [i32; 3]| -> [f32; 3] {
         let mut e = [0.0f32; 3];
