@@ -46,7 +46,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "frames": meta.frame_count,
             "channels": meta.channels.iter().map(|c| json!({
                 "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
-                "background": c.background, "value_range": c.value_range, "group": c.group, "plane": c.plane, "lane": c.lane,
+                "background": crate::inspect::num32(c.background), "value_range": c.value_range.map(crate::inspect::num32), "group": c.group, "plane": c.plane, "lane": c.lane,
                 "format": meta.planes[c.plane as usize].format.name(), "bytes": channel_bytes(c),
             })).collect::<Vec<_>>(),
             "planes": meta.planes.iter().zip(&plane_bytes).map(|(p, b)| json!({"format": p.format.name(), "lanes": p.lanes, "z_per_texel": p.z_per_texel, "bytes": b})).collect::<Vec<_>>(),

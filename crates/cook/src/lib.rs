@@ -194,7 +194,7 @@ pub mod figure {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ChannelReport {
     pub name: String,
-    pub format: String,
+    pub format: Format,
     /// Bytes of the atlas planes the channel is stored in, shared equally among their channels.
     pub bytes: u64,
     #[serde(serialize_with = "figure::range")]
@@ -640,7 +640,7 @@ impl Cooker {
                 let sharing = specs[p].channels.len().max(1) as u64;
                 ChannelReport {
                     name: ch.name.clone(),
-                    format: specs[p].plane.format.name().into(),
+                    format: specs[p].plane.format,
                     bytes: plane_bytes[p] / sharing,
                     value_range: ch.value_range,
                     voxel_rmse: totals[c].rmse(),
