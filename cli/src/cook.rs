@@ -9,7 +9,7 @@ use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
 use vdbcook_bake::CookSettings;
-use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress};
+use vdbcook_cook::{ChannelReport, CookOptions, CookReport, Cooker, Figure, Format, Progress};
 use vdbcook_vpak::SourceFile;
 
 pub const AFTER_HELP: &str = "\
@@ -287,7 +287,7 @@ fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
                 s,
                 "  {:<16}{:<7} {:>10} ({} brick{}), values [{:.4}, {:.4}], rmse {:.3e}, psnr {:.1} dB, max {:.3e}",
                 c.name,
-                c.format,
+                c.format.name(),
                 mb(c.bytes),
                 c.bricks,
                 if c.bricks == 1 { "" } else { "s" },
@@ -297,6 +297,11 @@ fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
                 c.voxel_psnr,
                 c.voxel_max_error
             );
+        }
+    }
+    for c in &r.channels {
+        if let Some(t) = non_finite_text(c, r.channels.len() > 1) {
+            let _ = writeln!(s, "  non-finite      {t}");
         }
     }
     if let Some(c) = &r.clustering {
@@ -311,6 +316,18 @@ fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
     s
 }
 
+/// What happened to a channel's NaN and ±inf source voxels, if it had any.
+fn non_finite_text(c: &ChannelReport, name: bool) -> Option<String> {
+    let n = c.non_finite;
+    if n.total() == 0 {
+        return None;
+    }
+    let kinds: Vec<String> = [(n.nan, "NaN"), (n.pos_inf, "+inf"), (n.neg_inf, "-inf")].iter().filter(|(k, _)| *k > 0).map(|(k, what)| format!("{k} {what}")).collect();
+    let stored = if c.format.is_ranged() { format!("{} stores each as the mean of its finite neighbours", c.format.name()) } else { format!("{} keeps them", c.format.name()) };
+    let who = if name { format!("{}: ", c.name) } else { String::new() };
+    Some(format!("{who}{} source voxel{} ({}) left out of the error figures; {stored}", n.total(), if n.total() == 1 { "" } else { "s" }, kinds.join(", ")))
+}
+
 fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport, validation: Option<&serde_json::Value>) -> String {
     let mut v = serde_json::to_value(r).unwrap_or_default();
     if let Some(o) = v.as_object_mut() {
@@ -323,11 +340,8 @@ fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport, validation:
         o.insert("timings".into(), serde_json::json!(r.timings.iter().map(|(n, s)| (n.clone(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>()));
         o.insert(
             "frame_errors".into(),
-            serde_json::json!(r.frame_errors.iter().enumerate().map(|(i, (rmse, max))| serde_json::json!({"frame": i, "rmse": rmse, "max_error": max})).collect::<Vec<_>>()),
+            serde_json::json!(r.frame_errors.iter().enumerate().map(|(i, (rmse, max))| serde_json::json!({"frame": i, "rmse": Figure(*rmse), "max_error": Figure(*max)})).collect::<Vec<_>>()),
         );
-        if !r.voxel_psnr.is_finite() {
-            o.insert("voxel_psnr".into(), serde_json::Value::Null);
-        }
     }
     format!("{}\n", serde_json::to_string_pretty(&v).unwrap_or_default())
 }

@@ -171,6 +171,9 @@ fn file_text(path: &Path, file: &VdbFile, grids: &[GridReport<'_>]) -> String {
         if let (Some(lo), Some(hi)) = (st.min, st.max) {
             let _ = writeln!(s, "    values         min {}, max {}, sum {}", fmt_g(lo, 7), fmt_g(hi, 7), fmt_g(st.sum, 12));
         }
+        if st.non_finite > 0 {
+            let _ = writeln!(s, "    non-finite     {} active value{} (NaN or ±inf)", st.non_finite, if st.non_finite == 1 { "" } else { "s" });
+        }
         if let Some(bg) = g.background {
             let _ = writeln!(s, "    background     {}", fmt_g(f64::from(bg), 7));
         }
@@ -178,8 +181,18 @@ fn file_text(path: &Path, file: &VdbFile, grids: &[GridReport<'_>]) -> String {
     s
 }
 
-fn num(v: f64) -> Value {
-    serde_json::Number::from_f64(v).map(Value::Number).unwrap_or(Value::Null)
+/// A number; NaN and ±inf as the strings `vdbcook_cook::Figure` writes (`null` means "no value").
+pub fn num(v: f64) -> Value {
+    serde_json::to_value(vdbcook_cook::Figure(v)).unwrap_or(Value::Null)
+}
+
+/// [`num`] for an f32, written with its own shortest spelling.
+pub fn num32(v: f32) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        num(f64::from(v))
+    }
 }
 
 fn meta_json(m: &MetaMap) -> Value {
@@ -243,6 +256,7 @@ fn file_json(path: &Path, file: &VdbFile, grids: &[GridReport<'_>]) -> Value {
                 "min": st.and_then(|s| s.min).map(num),
                 "max": st.and_then(|s| s.max).map(num),
                 "sum": st.filter(|s| s.active_voxels > 0).map(|s| num(s.sum)),
+                "non_finite": st.map(|s| s.non_finite),
                 "skipped": g.skipped,
                 "metadata": meta_json(&i.metadata),
             })

@@ -53,7 +53,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "frames": meta.frame_count,
             "channels": meta.channels.iter().map(|c| json!({
                 "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
-                "background": c.background, "value_range": c.value_range, "group": c.group, "plane": c.plane, "lane": c.lane,
+                "background": crate::inspect::num32(c.background), "value_range": c.value_range.map(crate::inspect::num32), "group": c.group, "plane": c.plane, "lane": c.lane,
                 "format": meta.planes[c.plane as usize].plane.format.name(), "bytes": channel_bytes(c),
             })).collect::<Vec<_>>(),
             "bricks": meta.brick_count,

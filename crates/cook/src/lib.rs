@@ -17,6 +17,7 @@ pub use vdbcook_encode::{Format, Quality};
 
 use rayon::prelude::*;
 use std::time::Instant;
+pub use vdbcook_encode::NonFinite;
 use vdbcook_encode::{Brick, Encoded, ErrorStats, PlaneSpec};
 use vdbcook_flipbook::{Builder, Built, HashIndex};
 use vdbcook_grid::{Grid, Transform};
@@ -30,8 +31,10 @@ pub enum Error {
     Tree(#[from] vdbcook_flipbook::Error),
     #[error(transparent)]
     Asset(#[from] vdbcook_vpak::Error),
-    #[error("frame {frame}: grid \"{grid}\" has transform {found}, the first frame's first grid has {expected}")]
-    Transform { frame: usize, grid: String, found: String, expected: String },
+    /// Every grid of every frame needs the asset's transform, which the first
+    /// grid pushed set (`first`: its frame, and the frame's source path).
+    #[error("grid \"{grid}\" has transform {found}, but the asset's transform, set by grid \"{first_grid}\" of {first}, is {expected}")]
+    Transform { grid: String, found: String, first: String, first_grid: String, expected: String },
     #[error("frame {frame} is out of range (the asset has {count} frames, numbered from 0)")]
     NoFrame { frame: usize, count: usize },
     #[error("frame {frame} unpacks to {leaves} leaves ({} MiB in memory), more than the {} MiB this machine has to spare", .bytes >> 20, .budget >> 20)]
@@ -137,21 +140,80 @@ pub struct ChannelSpec {
     pub class: String,
 }
 
+/// A figure as JSON: a number, or (JSON has none, and serde_json would
+/// write `null`, which also means "no value") `"NaN"`, `"Infinity"` or
+/// `"-Infinity"`, the spellings JavaScript's `Number()`, Python's `float()`
+/// and Rust's `f64::from_str` read back.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Figure(pub f64);
+
+impl Figure {
+    /// The string for a non-finite figure; `None` for a finite one.
+    pub fn non_finite_name(x: f64) -> Option<&'static str> {
+        match x {
+            x if x.is_nan() => Some("NaN"),
+            f64::INFINITY => Some("Infinity"),
+            f64::NEG_INFINITY => Some("-Infinity"),
+            _ => None,
+        }
+    }
+}
+
+impl serde::Serialize for Figure {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match Figure::non_finite_name(self.0) {
+            Some(name) => s.serialize_str(name),
+            None => s.serialize_f64(self.0),
+        }
+    }
+}
+
+/// `serialize_with` helpers: figures as [`Figure`]s (f32s keep their shortest f32 spelling).
+pub mod figure {
+    use super::Figure;
+    use serde::Serializer;
+
+    pub fn f64<S: Serializer>(x: &f64, s: S) -> Result<S::Ok, S::Error> {
+        serde::Serialize::serialize(&Figure(*x), s)
+    }
+
+    pub fn range<S: Serializer>(r: &[f32; 2], s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeTuple;
+        let mut t = s.serialize_tuple(2)?;
+        for &x in r {
+            match Figure::non_finite_name(f64::from(x)) {
+                Some(name) => t.serialize_element(name)?,
+                None => t.serialize_element(&x)?,
+            }
+        }
+        t.end()
+    }
+}
+
 /// One channel's figures.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ChannelReport {
     pub name: String,
-    pub format: String,
+    pub format: Format,
     /// Bytes of the plane the channel is stored in (atlases, ranges, brick
     /// table), shared equally among its channels.
     pub bytes: u64,
     /// Distinct bricks of the channel's plane.
     pub bricks: u32,
+    #[serde(serialize_with = "figure::range")]
     pub value_range: [f32; 2],
-    /// Voxel-domain error against the source, over the channel's own active voxels.
+    /// Voxel-domain error against the source, over the channel's own active
+    /// voxels of leaves whose source value is finite.
+    #[serde(serialize_with = "figure::f64")]
     pub voxel_rmse: f64,
+    #[serde(serialize_with = "figure::f64")]
     pub voxel_psnr: f64,
+    #[serde(serialize_with = "figure::f64")]
     pub voxel_max_error: f64,
+    /// Active voxels of leaves (over every frame) whose source value is NaN
+    /// or ±∞: left out of the error figures; `f32` and `f16` keep them, the
+    /// ranged formats store the mean of their finite neighbours.
+    pub non_finite: NonFinite,
 }
 
 /// What a cook did, for people and for `--json`.
@@ -185,11 +247,17 @@ pub struct CookReport {
     pub thesis_tree_bytes: u64,
     pub bits_per_active_voxel: f64,
     /// The first channel's value range.
+    #[serde(serialize_with = "figure::range")]
     pub value_range: [f32; 2],
     /// Voxel-domain error of the channel with the lowest PSNR (the only one, for one channel).
+    #[serde(serialize_with = "figure::f64")]
     pub voxel_rmse: f64,
+    #[serde(serialize_with = "figure::f64")]
     pub voxel_psnr: f64,
+    #[serde(serialize_with = "figure::f64")]
     pub voxel_max_error: f64,
+    /// Non-finite source voxels left out of the error figures, over every channel.
+    pub non_finite_voxels: u64,
     /// Per frame: (rmse, max error) of that channel.
     pub frame_errors: Vec<(f64, f64)>,
     pub channels: Vec<ChannelReport>,
@@ -211,7 +279,9 @@ pub struct ClusterReport {
     #[serde(flatten)]
     pub stats: vdbcook_cluster::Stats,
     pub ratio: f64,
+    #[serde(serialize_with = "figure::f64")]
     pub rmse_without: f64,
+    #[serde(serialize_with = "figure::f64")]
     pub rmse_with: f64,
 }
 
@@ -222,11 +292,19 @@ pub struct Cooker {
     /// Channel names and classes still to be taken from the first grid (single-channel cooks).
     infer: bool,
     builder: Builder,
-    transform: Option<(String, Transform)>,
+    transform: Option<FirstTransform>,
     frames: Vec<FrameInfo>,
     sources: Vec<SourceFile>,
     ranges: Vec<[f32; 2]>,
     build_secs: f64,
+}
+
+/// The asset's transform and the grid that set it.
+#[derive(Clone, Debug)]
+struct FirstTransform {
+    frame: usize,
+    grid: String,
+    transform: Transform,
 }
 
 fn transform_text(t: &Transform) -> String {
@@ -280,9 +358,23 @@ impl Cooker {
         for (c, g) in grids.iter().enumerate() {
             let Some(g) = g else { continue };
             match &self.transform {
-                None => self.transform = Some((g.name.clone(), g.transform)),
-                Some((first, t)) if *t != g.transform => {
-                    return Err(Error::Transform { frame, grid: g.name.clone(), found: transform_text(&g.transform), expected: format!("{} (grid \"{first}\")", transform_text(t)) });
+                None => self.transform = Some(FirstTransform { frame, grid: g.name.clone(), transform: g.transform }),
+                Some(first) if first.transform != g.transform => {
+                    // Name the other frame by its file too: inputs are put in
+                    // natural order, so it need not be the first one given.
+                    let file = self.frames.get(first.frame).and_then(|f| f.source).and_then(|s| self.sources.get(s as usize));
+                    let first_name = match file {
+                        _ if first.frame == frame => "this frame".to_string(),
+                        Some(s) => format!("frame {} ({})", first.frame, s.path),
+                        None => format!("frame {}", first.frame),
+                    };
+                    return Err(Error::Transform {
+                        grid: g.name.clone(),
+                        found: transform_text(&g.transform),
+                        first: first_name,
+                        first_grid: first.grid.clone(),
+                        expected: transform_text(&first.transform),
+                    });
                 }
                 Some(_) => {}
             }
@@ -492,12 +584,28 @@ impl Cooker {
         }
         sections.extend(atlas_sections);
         let stored_bricks = keep.len();
+        let channel_range = |c: usize| if self.ranges[c][0] <= self.ranges[c][1] { self.ranges[c] } else { [built.backgrounds[c]; 2] };
+        // PSNR's peak: the channel's value range over its finite values (an
+        // infinite range would make every PSNR infinite).
+        let peaks: Vec<f64> = (0..channels)
+            .map(|c| {
+                let [lo, hi] = match channel_range(c) {
+                    r if r.iter().all(|v| v.is_finite()) => r,
+                    _ => finite_range(&built, c),
+                };
+                let peak = f64::from(hi - lo);
+                if peak > 0.0 && peak.is_finite() {
+                    peak
+                } else {
+                    1.0
+                }
+            })
+            .collect();
         // The source-precision bricks are not needed any more.
         drop(encoded);
         drop(clustered);
         drop(std::mem::take(&mut built.pool));
-        let (_, transform) = self.transform.clone().unwrap_or_else(|| (String::new(), Transform::identity()));
-        let channel_range = |c: usize| if self.ranges[c][0] <= self.ranges[c][1] { self.ranges[c] } else { [built.backgrounds[c]; 2] };
+        let transform = self.transform.as_ref().map_or_else(Transform::identity, |f| f.transform);
         // Each channel's place: its plane and first lane.
         let mut place = vec![(0u32, 0u32); channels];
         for (p, spec) in specs.iter().enumerate() {
@@ -543,11 +651,7 @@ impl Cooker {
 
         let tree_bytes: u64 = nodes.byte_sizes().iter().map(|(_, b)| *b as u64).sum();
         let active: u64 = self.frames.iter().map(|f| f.active_voxels).sum();
-        let psnr = |c: usize| {
-            let [lo, hi] = channel_range(c);
-            let peak = f64::from(hi - lo);
-            totals[c].psnr(if peak > 0.0 { peak } else { 1.0 })
-        };
+        let psnr = |c: usize| totals[c].psnr(peaks[c]);
         let channel_reports: Vec<ChannelReport> = meta
             .channels
             .iter()
@@ -557,13 +661,14 @@ impl Cooker {
                 let sharing = specs[p].channels.len().max(1) as u64;
                 ChannelReport {
                     name: ch.name.clone(),
-                    format: specs[p].plane.format.name().into(),
+                    format: specs[p].plane.format,
                     bytes: plane_bytes[p] / sharing,
                     bricks: meta.planes[p].bricks,
                     value_range: ch.value_range,
                     voxel_rmse: totals[c].rmse(),
                     voxel_psnr: psnr(c),
                     voxel_max_error: totals[c].max_abs,
+                    non_finite: totals[c].non_finite,
                 }
             })
             .collect();
@@ -590,12 +695,27 @@ impl Cooker {
             voxel_rmse: totals[worst].rmse(),
             voxel_psnr: psnr(worst),
             voxel_max_error: totals[worst].max_abs,
+            non_finite_voxels: totals.iter().map(|t| t.non_finite.total()).sum(),
             frame_errors: frame_err.iter().map(|e| (e[worst].rmse(), e[worst].max_abs)).collect(),
             channels: channel_reports,
             clustering: cluster_report,
             timings,
         };
         Ok((sections, report))
+    }
+}
+
+/// Channel `c`'s range over the finite values of the pool's bricks (their
+/// inactive voxels are filled from the active ones, within their range) and
+/// of the frames' tiles; `[0, 0]` when it has none.
+fn finite_range(built: &Built, c: usize) -> [f32; 2] {
+    let bricks = (0..built.pool.len()).filter_map(|b| built.pool.brick(b)).filter_map(|b| b.get(c)).flat_map(|b| b.iter().copied());
+    let tiles = built.frames.iter().flat_map(|f| f.tiles.iter().filter_map(|t| t.2.get(c).copied()));
+    let [lo, hi] = bricks.chain(tiles).filter(|v| v.is_finite()).fold([f32::INFINITY, f32::NEG_INFINITY], |[lo, hi], v| [lo.min(v), hi.max(v)]);
+    if lo <= hi {
+        [lo, hi]
+    } else {
+        [0.0, 0.0]
     }
 }
 

@@ -111,7 +111,7 @@ fn changing_transform_is_an_error() {
     c.push(&frame(0), None).unwrap();
     let mut f = frame(1);
     f.transform = Transform::scale_translate(vdbcook_grid::MapType::UniformScale, [2.0; 3], [0.0; 3]);
-    assert!(matches!(c.push(&f, None), Err(Error::Transform { frame: 1, .. })));
+    assert!(matches!(c.push(&f, None), Err(Error::Transform { first, .. }) if first == "frame 0"));
 }
 
 /// Smoke-like values: smooth in space, every voxel active.
@@ -587,6 +587,40 @@ fn each_plane_stores_its_own_distinct_bricks() {
 }
 
 #[test]
+fn non_finite_voxels_are_counted_and_left_out_of_the_figures() {
+    // One NaN, one +inf and one -inf among smooth values: in every format
+    // the figures are those of the finite voxels (about what the same grid
+    // without them gets), the PSNR's peak is the finite range, and the
+    // report counts the three.
+    let clean = smooth_frame(0);
+    let mut dirty = clean.clone();
+    for (l, v, x) in [(3, 100, f32::NAN), (3, 101, f32::INFINITY), (17, 300, f32::NEG_INFINITY)] {
+        dirty.leaves[l].values[v] = x;
+    }
+    for format in Format::ALL {
+        let (_, want) = cook(format, std::slice::from_ref(&clean), 2048);
+        let (_, got) = cook(format, std::slice::from_ref(&dirty), 2048);
+        assert_eq!(got.non_finite_voxels, 3);
+        assert_eq!(got.channels[0].non_finite, NonFinite { nan: 1, pos_inf: 1, neg_inf: 1 });
+        assert_eq!(want.non_finite_voxels, 0);
+        assert!(got.voxel_rmse.is_finite() && got.voxel_max_error.is_finite(), "{format:?}: {got:?}");
+        assert!((got.voxel_rmse - want.voxel_rmse).abs() <= want.voxel_rmse * 0.05, "{format:?}: rmse {} against {} without them", got.voxel_rmse, want.voxel_rmse);
+        assert!(got.voxel_max_error <= want.voxel_max_error * 1.25, "{format:?}: max {} against {} without them", got.voxel_max_error, want.voxel_max_error);
+        if format == Format::F32 {
+            assert!(got.voxel_psnr == f64::INFINITY && got.voxel_max_error == 0.0);
+        } else {
+            assert!((got.voxel_psnr - want.voxel_psnr).abs() < 0.5, "{format:?}: psnr {} against {}", got.voxel_psnr, want.voxel_psnr);
+        }
+        // The value range is the truth ([lo, +inf]); JSON spells what it cannot hold.
+        assert_eq!(got.value_range, [-f32::INFINITY, f32::INFINITY]);
+        let json = serde_json::to_value(&got).unwrap();
+        assert_eq!(json["value_range"], serde_json::json!(["-Infinity", "Infinity"]));
+        assert_eq!(json["channels"][0]["non_finite"], serde_json::json!({"nan": 1, "pos_inf": 1, "neg_inf": 1}));
+        assert_eq!(json["voxel_psnr"], if format == Format::F32 { serde_json::json!("Infinity") } else { serde_json::json!(got.voxel_psnr) });
+    }
+}
+
+#[test]
 fn brick_tables_pointing_past_their_plane_are_refused() {
     let mut frames = [fire(0)];
     for l in frames[0][2].leaves.iter_mut() {
@@ -608,4 +642,19 @@ fn brick_tables_pointing_past_their_plane_are_refused() {
         let sealed = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
         assert!(unpack_frame(&sealed, 0).is_err(), "{what}: a missing table");
     }
+}
+
+#[test]
+fn a_transform_mismatch_names_both_frames() {
+    let source = |p: &str| Some(vdbcook_vpak::SourceFile { path: p.into(), bytes: 1, xxh3_128: String::new() });
+    let mut odd = frame(1);
+    odd.transform = Transform::scale_translate(vdbcook_grid::MapType::UniformScale, [0.5; 3], [0.0; 3]);
+    let mut c = Cooker::new(CookOptions::default());
+    c.push(&frame(0), source("a_1.vdb")).unwrap();
+    c.push(&frame(1), source("a_2.vdb")).unwrap();
+    let e = c.push(&odd, source("a_3.vdb")).unwrap_err().to_string();
+    // The caller names this frame and its file; the message names the other.
+    assert!(!e.contains("frame 2") && !e.contains("a_3.vdb"), "{e}");
+    assert!(e.contains("grid \"density\" has transform UniformScaleMap [[0.5"), "{e}");
+    assert!(e.contains("set by grid \"density\" of frame 0 (a_1.vdb), is UniformScaleMap [[1.0"), "{e}");
 }

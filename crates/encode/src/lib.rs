@@ -11,8 +11,11 @@
 //! | `bc4`    | Bc4RUnorm, one plane per channel        | our BC4 encoder over those levels      |
 //! | `bc7`    | Bc7RgbaUnorm, lanes = channels × z-slices | intel_tex_2's BC7 over those levels  |
 //!
-//! Every brick records each channel's [min, max] (the brick range): the
-//! ranged formats need it to decode, and a renderer can skip empty bricks.
+//! Every brick records each channel's [min, max] (the brick range) over its
+//! finite values: the ranged formats need it to decode, and a renderer can
+//! skip empty bricks.  NaN and ±∞ voxels are kept by `f32` and `f16`; the
+//! ranged formats cannot hold them and store each as the mean of its finite
+//! neighbours ([`fill_non_finite`]), so no block is fitted through one.
 
 use half::slice::HalfFloatSliceExt;
 use rayon::prelude::*;
@@ -88,22 +91,84 @@ pub fn group_planes(format: Format, channels: &[usize]) -> Vec<PlaneSpec> {
         .collect()
 }
 
-/// The smallest and largest of a brick's values.
+/// The smallest and largest of a brick's finite values (NaN and ±∞ left
+/// out, so that the ranged formats keep their precision and decode to finite
+/// values); for a brick without any finite value, `[m, m]` with m = `f32::MAX`
+/// if it holds +∞, else `-f32::MAX` if it holds −∞, else 0 (all NaN).
 pub fn range_of(values: &Brick) -> [f32; 2] {
     // Eight independent lanes, so the compiler can vectorise.
     let mut lo = [f32::INFINITY; 8];
     let mut hi = [f32::NEG_INFINITY; 8];
     for c in values.chunks_exact(8) {
         for k in 0..8 {
-            lo[k] = lo[k].min(c[k]);
-            hi[k] = hi[k].max(c[k]);
+            let finite = c[k].is_finite();
+            lo[k] = lo[k].min(if finite { c[k] } else { f32::INFINITY });
+            hi[k] = hi[k].max(if finite { c[k] } else { f32::NEG_INFINITY });
         }
     }
-    [lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max)]
+    let (lo, hi) = (lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max));
+    if lo <= hi {
+        return [lo, hi];
+    }
+    let m = if values.contains(&f32::INFINITY) {
+        f32::MAX
+    } else if values.contains(&f32::NEG_INFINITY) {
+        -f32::MAX
+    } else {
+        0.0
+    };
+    [m, m]
 }
 
-/// A brick's values as levels in [0, 255] over its own range (not rounded).
+/// A brick whose NaN and ±∞ voxels are replaced as the ranged formats store
+/// them: like inactive voxels, each takes the mean of its finite 6-neighbours
+/// (in the order −x, +x, −y, +y, −z, +z), front by front outwards from the
+/// finite voxels, so it lies within their range and a block encoder fits
+/// nothing through it.  `None` when every voxel is finite (the common case)
+/// or none is.
+pub fn fill_non_finite(values: &Brick) -> Option<Brick> {
+    if values.iter().fold(true, |all, v| all & v.is_finite()) {
+        return None;
+    }
+    let mut known = [false; BRICK_VOXELS];
+    for (k, v) in known.iter_mut().zip(values) {
+        *k = v.is_finite();
+    }
+    if !known.contains(&true) {
+        return None;
+    }
+    let mut out = *values;
+    loop {
+        let front: Vec<(usize, f32)> = (0..BRICK_VOXELS)
+            .filter(|&i| !known[i])
+            .filter_map(|i| {
+                let (x, y, z) = (i >> 6, (i >> 3) & 7, i & 7);
+                let near = [(x > 0, i.wrapping_sub(64)), (x < 7, i + 64), (y > 0, i.wrapping_sub(8)), (y < 7, i + 8), (z > 0, i.wrapping_sub(1)), (z < 7, i + 1)];
+                let (mut sum, mut n) = (0.0f32, 0u32);
+                for (inside, j) in near {
+                    if inside && known[j] {
+                        sum += out[j];
+                        n += 1;
+                    }
+                }
+                (n > 0).then(|| (i, sum / n as f32))
+            })
+            .collect();
+        if front.is_empty() {
+            return Some(out);
+        }
+        for (i, v) in front {
+            out[i] = v;
+            known[i] = true;
+        }
+    }
+}
+
+/// A brick's values as levels in [0, 255] over its own range (not rounded);
+/// non-finite voxels as [`fill_non_finite`] replaces them.
 fn levels(values: &Brick, [lo, hi]: [f32; 2]) -> Brick {
+    let filled = fill_non_finite(values);
+    let values = filled.as_ref().unwrap_or(values);
     let span = hi - lo;
     let mut out = [0.0f32; BRICK_VOXELS];
     if span > 0.0 && span.is_finite() {
@@ -336,16 +401,55 @@ pub fn round_trip(format: Format, quality: Quality, values: &Brick) -> Brick {
     e.decode(0).map_or([0.0; BRICK_VOXELS], |d| d[0])
 }
 
-/// Voxel-domain error figures (RMSE, PSNR with the given peak, max abs error).
+/// Counts of non-finite values.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct NonFinite {
+    pub nan: u64,
+    pub pos_inf: u64,
+    pub neg_inf: u64,
+}
+
+impl NonFinite {
+    /// Counts `v` if it is NaN or ±∞.
+    pub fn tally(&mut self, v: f32) {
+        if v.is_nan() {
+            self.nan += 1;
+        } else if v == f32::INFINITY {
+            self.pos_inf += 1;
+        } else if v == f32::NEG_INFINITY {
+            self.neg_inf += 1;
+        }
+    }
+    pub fn total(&self) -> u64 {
+        self.nan + self.pos_inf + self.neg_inf
+    }
+    pub fn merge(&mut self, o: &NonFinite) {
+        self.nan += o.nan;
+        self.pos_inf += o.pos_inf;
+        self.neg_inf += o.neg_inf;
+    }
+}
+
+/// Voxel-domain error figures (RMSE, PSNR with the given peak, max abs
+/// error) over the voxels whose reference value is finite: a NaN or ±∞
+/// reference has no error to measure (and one would make every figure NaN),
+/// so it is only counted, in `non_finite`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ErrorStats {
+    /// Voxels measured (finite reference values).
     pub count: u64,
     pub sum_sq: f64,
     pub max_abs: f64,
+    /// Voxels left out: their reference value is NaN or ±∞.
+    pub non_finite: NonFinite,
 }
 
 impl ErrorStats {
     pub fn add(&mut self, reference: f32, value: f32) {
+        if !reference.is_finite() {
+            self.non_finite.tally(reference);
+            return;
+        }
         let d = f64::from(value) - f64::from(reference);
         self.count += 1;
         self.sum_sq += d * d;
@@ -355,17 +459,25 @@ impl ErrorStats {
     pub fn add_masked(&mut self, reference: &[f32; BRICK_VOXELS], value: &[f32; BRICK_VOXELS], mask: &[u64; 8]) {
         if mask.iter().all(|&w| w == u64::MAX) {
             // Every voxel: eight fixed lanes the compiler can vectorise.
-            let (mut sq, mut mx) = ([0.0f64; 8], [0.0f64; 8]);
+            let (mut sq, mut mx, mut finite) = ([0.0f64; 8], [0.0f64; 8], [0u64; 8]);
             for (r, v) in reference.chunks_exact(8).zip(value.chunks_exact(8)) {
                 for k in 0..8 {
-                    let d = f64::from(v[k]) - f64::from(r[k]);
+                    let ok = r[k].is_finite();
+                    let d = if ok { f64::from(v[k]) - f64::from(r[k]) } else { 0.0 };
                     sq[k] += d * d;
                     mx[k] = mx[k].max(d.abs());
+                    finite[k] += u64::from(ok);
                 }
             }
-            self.count += BRICK_VOXELS as u64;
+            let n: u64 = finite.iter().sum();
+            self.count += n;
             self.sum_sq += sq.iter().sum::<f64>();
             self.max_abs = mx.iter().copied().fold(self.max_abs, f64::max);
+            if n < BRICK_VOXELS as u64 {
+                for &r in reference {
+                    self.non_finite.tally(r);
+                }
+            }
             return;
         }
         for (w, &word) in mask.iter().enumerate() {
@@ -382,6 +494,7 @@ impl ErrorStats {
         self.count += o.count;
         self.sum_sq += o.sum_sq;
         self.max_abs = self.max_abs.max(o.max_abs);
+        self.non_finite.merge(&o.non_finite);
     }
     pub fn rmse(&self) -> f64 {
         if self.count == 0 {
@@ -537,6 +650,126 @@ mod tests {
                 assert!((got - want).abs() < 3.0 / 255.0, "slice {t} lane {l}: {got} vs {want}");
             }
         }
+    }
+
+    /// A random smooth brick (a tilted ramp plus a wave, on a random scale
+    /// and offset), with `noise` levels of its range of noise on top.
+    fn random_brick(rng: &mut vdbcook_testkit::Rng, noise: f32) -> Brick {
+        let (scale, offset) = (0.01 + rng.unit() * 100.0, rng.unit() * 50.0 - 25.0);
+        let (gx, gy, gz, f, p) = (rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() * 0.8, rng.unit() * 6.0);
+        std::array::from_fn(|i| {
+            let (x, y, z) = ((i / 64) as f32, ((i / 8) % 8) as f32, (i % 8) as f32);
+            let v = gx * x + gy * y + gz * z + (f * (x + 2.0 * y - z) + p).sin() + noise / 255.0 * 8.0 * (rng.unit() - 0.5);
+            offset + scale * v
+        })
+    }
+
+    /// The largest error of `decoded` against `source` over the voxels
+    /// where `pick` holds; infinite if one of them decodes to NaN or ±∞.
+    fn worst(source: &Brick, decoded: &Brick, pick: impl Fn(usize) -> bool) -> f32 {
+        (0..BRICK_VOXELS).filter(|&i| pick(i)).map(|i| if decoded[i].is_finite() { (decoded[i] - source[i]).abs() } else { f32::INFINITY }).fold(0.0, f32::max)
+    }
+
+    #[test]
+    fn non_finite_voxels_cost_their_neighbours_nothing_in_any_format() {
+        // Random bricks, each with 1 to 6 voxels set to NaN, +∞ or −∞: in
+        // every format and quality, the finite voxels decode within the
+        // format's bound over the brick's finite range, and about as well as
+        // the same brick without the non-finite voxels; the non-finite ones
+        // decode as documented (kept by f32 and f16, the fill of their finite
+        // neighbours by the ranged formats).
+        let mut rng = vdbcook_testkit::Rng::new(0x4e4e);
+        let specials = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+        for trial in 0..24 {
+            let clean = random_brick(&mut rng, if trial % 3 == 0 { 6.0 } else { 0.0 });
+            let mut dirty = clean;
+            let mut odd = [false; BRICK_VOXELS];
+            for k in 0..1 + rng.below(6) as usize {
+                let i = rng.below(BRICK_VOXELS as u64) as usize;
+                dirty[i] = specials[(trial + k) % 3];
+                odd[i] = true;
+            }
+            let [lo, hi] = range_of(&dirty);
+            assert!(lo.is_finite() && hi.is_finite() && lo <= hi, "{lo} {hi}");
+            let fill = fill_non_finite(&dirty).unwrap();
+            let step = (hi - lo) / 255.0;
+            for format in Format::ALL {
+                for quality in [Quality::UltraFast, Quality::VeryFast, Quality::Slow] {
+                    let d = round_trip(format, quality, &dirty);
+                    let c = round_trip(format, quality, &clean);
+                    let what = format!("brick {trial}, {format:?} {quality:?}");
+                    let finite = |i: usize| !odd[i];
+                    let (got, clean_worst) = (worst(&clean, &d, finite), worst(&clean, &c, finite));
+                    let bound = match format {
+                        Format::F32 => 0.0,
+                        Format::F16 => hi.abs().max(lo.abs()) * 2f32.powi(-11),
+                        Format::Unorm8 => step * 0.501,
+                        // Block formats: their usual error (these smooth bricks
+                        // stay within a few levels), a little either way.
+                        _ => (clean_worst * 1.25).max(clean_worst + 2.0 * step),
+                    };
+                    assert!(got <= bound, "{what}: finite voxels off by {got} (levels: {}), the clean brick's by {clean_worst}", got / step);
+                    for i in (0..BRICK_VOXELS).filter(|&i| odd[i]) {
+                        match format {
+                            Format::F32 => assert_eq!(d[i].to_bits(), dirty[i].to_bits(), "{what}: voxel {i}"),
+                            Format::F16 => assert!(d[i] == dirty[i] || d[i].is_nan() && dirty[i].is_nan(), "{what}: voxel {i}: {} became {}", dirty[i], d[i]),
+                            _ => {
+                                assert!(d[i] >= lo && d[i] <= hi, "{what}: voxel {i}: {} became {}, outside [{lo}, {hi}]", dirty[i], d[i]);
+                                let tol = if format == Format::Unorm8 { step * 0.501 } else { bound };
+                                assert!((d[i] - fill[i]).abs() <= tol, "{what}: voxel {i}: decodes to {}, its fill is {}", d[i], fill[i]);
+                            }
+                        }
+                    }
+                    if !format.is_block() {
+                        break;
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bricks_without_finite_values() {
+        // Decoded by every ranged format as the range's one finite value.
+        for (v, m) in [(f32::INFINITY, f32::MAX), (f32::NEG_INFINITY, -f32::MAX), (f32::NAN, 0.0)] {
+            let b = [v; BRICK_VOXELS];
+            assert_eq!(range_of(&b), [m, m]);
+            assert!(fill_non_finite(&b).is_none());
+            for format in [Format::Unorm8, Format::Bc4, Format::Bc7] {
+                assert!(round_trip(format, Quality::Fast, &b).iter().all(|&d| d == m), "{format:?} {v}");
+            }
+        }
+        let mut mixed = [f32::NAN; BRICK_VOXELS];
+        mixed[7] = f32::NEG_INFINITY;
+        mixed[9] = f32::INFINITY;
+        assert_eq!(range_of(&mixed), [f32::MAX, f32::MAX]);
+        // One finite voxel fills the brick.
+        mixed[100] = 0.5;
+        assert_eq!(range_of(&mixed), [0.5, 0.5]);
+        assert_eq!(fill_non_finite(&mixed), Some([0.5; BRICK_VOXELS]));
+    }
+
+    #[test]
+    fn error_figures_leave_non_finite_references_out() {
+        let mut reference = smoke(3.0);
+        let decoded = reference.map(|v| v + 0.25);
+        reference[3] = f32::NAN;
+        reference[200] = f32::INFINITY;
+        reference[511] = f32::NEG_INFINITY;
+        let mut all = ErrorStats::default();
+        all.add_masked(&reference, &decoded, &[u64::MAX; 8]);
+        // The voxel-by-voxel path (a mask with a voxel missing) agrees.
+        let mut part = ErrorStats::default();
+        let mut mask = [u64::MAX; 8];
+        mask[1] &= !1;
+        part.add_masked(&reference, &decoded, &mask);
+        for (e, n) in [(all, 509), (part, 508)] {
+            assert_eq!(e.count, n);
+            assert_eq!(e.non_finite, NonFinite { nan: 1, pos_inf: 1, neg_inf: 1 });
+            assert!((e.rmse() - 0.25).abs() < 1e-6 && (e.max_abs - 0.25).abs() < 1e-6, "{e:?}");
+        }
+        all.merge(&part);
+        assert_eq!(all.non_finite.total(), 6);
     }
 
     #[test]

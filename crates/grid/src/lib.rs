@@ -165,10 +165,15 @@ pub struct Stats {
     pub leaf_count: u64,
     pub active_tiles: u64,
     pub bbox: Option<Bbox>,
-    /// Minimum, maximum and sum of the active values; `None` for an empty grid.
+    /// Minimum, maximum and sum of the active values; `None` for an empty
+    /// grid.  NaN values have no order: min and max are over the others
+    /// (NaN when every active value is NaN); the sum is plain arithmetic (NaN
+    /// when a value is NaN, or when both infinities are active).
     pub min: Option<f64>,
     pub max: Option<f64>,
     pub sum: f64,
+    /// Active values (a tile's once per voxel it covers) that are NaN or ±∞.
+    pub non_finite: u64,
 }
 
 /// Active-value figures of one leaf (min and max are infinite when it has none).
@@ -179,11 +184,13 @@ pub struct LeafSummary {
     pub max: f32,
     pub sum: f64,
     pub bbox: Option<Bbox>,
+    /// Active values that are NaN or ±∞ (min and max leave NaN out).
+    pub non_finite: u64,
 }
 
 impl LeafSummary {
     pub fn of(leaf: &Leaf) -> LeafSummary {
-        let mut s = LeafSummary { count: 0, min: f32::INFINITY, max: f32::NEG_INFINITY, sum: 0.0, bbox: None };
+        let mut s = LeafSummary { count: 0, min: f32::INFINITY, max: f32::NEG_INFINITY, sum: 0.0, bbox: None, non_finite: 0 };
         let n = leaf.mask.count_on();
         if n == 0 {
             return s;
@@ -195,16 +202,19 @@ impl LeafSummary {
             let mut lo = [f32::INFINITY; 8];
             let mut hi = [f32::NEG_INFINITY; 8];
             let mut sum = [0.0f64; 8];
+            let mut odd = [0u64; 8];
             for chunk in leaf.values.chunks_exact(8) {
                 for k in 0..8 {
                     lo[k] = lo[k].min(chunk[k]);
                     hi[k] = hi[k].max(chunk[k]);
                     sum[k] += f64::from(chunk[k]);
+                    odd[k] += u64::from(!chunk[k].is_finite());
                 }
             }
             s.min = lo.iter().copied().fold(f32::INFINITY, f32::min);
             s.max = hi.iter().copied().fold(f32::NEG_INFINITY, f32::max);
             s.sum = sum.iter().sum();
+            s.non_finite = odd.iter().sum();
             let d = LEAF_DIM - 1;
             s.bbox = Some(Bbox::new(leaf.origin, leaf.origin.offset(d, d, d)));
         } else {
@@ -213,6 +223,7 @@ impl LeafSummary {
                 s.min = s.min.min(v);
                 s.max = s.max.max(v);
                 s.sum += f64::from(v);
+                s.non_finite += u64::from(!v.is_finite());
             }
             s.bbox = leaf.active_bbox();
         }
@@ -238,7 +249,7 @@ impl Grid {
     /// combined in leaf order, so the result does not depend on the thread count.
     pub fn stats(&self) -> Stats {
         let parts: Vec<LeafSummary> = self.leaves.par_iter().map(LeafSummary::of).collect();
-        let mut st = Stats { active_voxels: 0, leaf_count: self.leaves.len() as u64, active_tiles: 0, bbox: None, min: None, max: None, sum: 0.0 };
+        let mut st = Stats { active_voxels: 0, leaf_count: self.leaves.len() as u64, active_tiles: 0, bbox: None, min: None, max: None, sum: 0.0, non_finite: 0 };
         let mut lo = f32::INFINITY;
         let mut hi = f32::NEG_INFINITY;
         let grow = |b: Bbox, bbox: &mut Option<Bbox>| {
@@ -252,6 +263,7 @@ impl Grid {
             lo = lo.min(p.min);
             hi = hi.max(p.max);
             st.sum += p.sum;
+            st.non_finite += p.non_finite;
             if let Some(b) = p.bbox {
                 grow(b, &mut st.bbox);
             }
@@ -263,8 +275,13 @@ impl Grid {
             lo = lo.min(t.value);
             hi = hi.max(t.value);
             st.sum += f64::from(t.value) * t.voxel_count() as f64;
+            if !t.value.is_finite() {
+                st.non_finite += t.voxel_count();
+            }
         }
         if st.active_voxels > 0 {
+            // lo > hi: every active value is NaN.
+            let (lo, hi) = if lo <= hi { (lo, hi) } else { (f32::NAN, f32::NAN) };
             st.min = Some(f64::from(lo));
             st.max = Some(f64::from(hi));
         }
@@ -322,6 +339,34 @@ mod tests {
         assert_eq!(m.count_on(), 5);
         m.set(63, false);
         assert!(!m.is_on(63));
+    }
+
+    #[test]
+    fn stats_count_non_finite_values() {
+        let mut g = Grid {
+            name: "d".into(),
+            class: GridClass::FogVolume,
+            background: 0.0,
+            transform: Transform::identity(),
+            leaves: vec![leaf_with(Coord::new(0, 0, 0), &[(1, 1, 1, f32::NAN), (2, 2, 2, 0.5), (3, 3, 3, f32::NEG_INFINITY)])],
+            tiles: vec![Tile { origin: Coord::new(8, 0, 0), dim: 8, value: f32::INFINITY, active: true }],
+        };
+        // A dense leaf takes the vectorised path.
+        let mut dense = leaf_with(Coord::new(0, 8, 0), &[]);
+        dense.mask = LeafMask([u64::MAX; 8]);
+        dense.values = std::array::from_fn(|i| if i == 9 { f32::NAN } else { 1.0 });
+        g.leaves.push(dense);
+        let s = g.stats();
+        assert_eq!(s.non_finite, 2 + 512 + 1);
+        assert_eq!((s.min, s.max), (Some(f64::NEG_INFINITY), Some(f64::INFINITY)));
+        assert!(s.sum.is_nan());
+        // Every active value NaN: min and max are NaN, not the empty fold's ±∞.
+        g.leaves.truncate(1);
+        g.leaves[0].values = [f32::NAN; 512];
+        g.tiles.clear();
+        let s = g.stats();
+        assert_eq!(s.non_finite, 3);
+        assert!(s.min.unwrap().is_nan() && s.max.unwrap().is_nan());
     }
 
     #[test]
