@@ -114,7 +114,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     }
     let _ = writeln!(s, "  sections:");
     for e in &asset.sections {
-        let label = if matches!(e.kind, kind::ATLAS | kind::BRICK_RANGES | kind::BRICK_TABLE) { format!("{} {}", kind::name(e.kind), e.index) } else { kind::name(e.kind).to_string() };
+        let label = kind::label(e.kind, e.index);
         let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}", e.size, e.offset, e.checksum);
     }
     for (p, info) in meta.planes.iter().enumerate() {

@@ -644,8 +644,7 @@ impl Cooker {
             frames: self.frames.clone(),
         };
         sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()? });
-        let report_sections: Vec<(String, u64)> =
-            sections.iter().map(|s| (if s.kind == kind::ATLAS { format!("{} {}", kind::name(s.kind), s.index) } else { kind::name(s.kind).to_string() }, s.data.len() as u64)).collect();
+        let report_sections: Vec<(String, u64)> = sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect();
         let file_bytes = vdbcook_vpak::file_len(&sections);
         timings.push(("layout".into(), t0.elapsed().as_secs_f64()));
 

@@ -80,6 +80,15 @@ pub mod kind {
             _ => "unknown",
         }
     }
+
+    /// A section's name for people: "l3 nodes", or with its index where a
+    /// kind has several ("brick atlas 3", "brick ranges 0").
+    pub fn label(k: u32, index: u32) -> String {
+        match k {
+            ATLAS | BRICK_RANGES | BRICK_TABLE => format!("{} {index}", name(k)),
+            _ => name(k).to_string(),
+        }
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
