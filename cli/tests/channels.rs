@@ -200,3 +200,25 @@ fn every_sample_with_several_grids_round_trips_through_openvdb() {
     }
     assert!(total > 1_000_000, "{total} values compared");
 }
+
+#[test]
+fn an_asset_with_more_textures_than_the_renderer_binds_validates_its_shown_channels() {
+    // c42 has 27 scalar and vector channels, a texture each: the renderer
+    // binds the textures of the channels its image shows (density,
+    // temperature, flame), not all 27.
+    let Some(c) = sample("c42") else { return };
+    if !gpu_available() {
+        return;
+    }
+    let dir = scratch("many");
+    let out = dir.join("c.vpak");
+    let src = format!("{c}/fluid_data_0001.vdb");
+    ok(vdbcook(&["cook", "-q", "--grids", "all", "--format", "f16", "-o", s(&out), &src]));
+    assert!(inspect(&out)["planes"].as_array().unwrap().len() > vdbcook_validate::MAX_TEXTURES);
+    let r = vdbcook(&["validate", s(&out), "--views", "1", "--size", "24x24", "--json", "--source", &src]);
+    assert_eq!(r.status.code(), Some(0), "{}", String::from_utf8_lossy(&r.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    // f16 of a half-float file: exact, so the images agree.
+    assert_eq!(v["worst"]["rmse"].as_f64(), Some(0.0), "{v}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
