@@ -1,5 +1,6 @@
 //! The `vdbcook` binary: flags in, library calls, human or JSON text out.
 
+mod auto;
 mod bake;
 mod cook;
 mod diff;
