@@ -53,7 +53,20 @@ L3 and L2 nodes and frames are stored once. The output is written to a temporary
 file and renamed; an existing OUT is replaced only with --force.
 
 --validate renders the new asset against its sources on the GPU afterwards (see
-`vdbcook validate --help`); with --max-rmse / --min-psnr a failed gate exits with 3.";
+`vdbcook validate --help`); with --max-rmse / --min-psnr / --max-flip a failed gate
+exits with 3.
+
+--auto searches the formats for the smallest asset that meets the gate (at least one
+of --min-psnr, --max-rmse, --max-flip; --format is not allowed). The frames are read
+once; bc7, bc4, unorm8, f16 and f32 are each cooked in memory at the other settings
+(--quality, --grids, --group, --clusters...; a --group keeps its own format), and
+validated as --validate would, smallest file first, until one's images all meet the
+gate: that one is written, byte for byte what --format would write, and a table gives
+each format's bytes, worst image PSNR, RMSE and FLIP, and pass, fail or not tried.
+When none meets it, nothing is written, the exit code is 3 and the error names the
+best reached: the lowest worst-image RMSE (highest PSNR), or the lowest worst FLIP
+when --max-flip is the only gate. f32 renders exactly unless clustered, so without
+--clusters (or a --group) the search always ends by f32 at the latest.";
 
 #[derive(clap::Args)]
 #[command(group(clap::ArgGroup::new("checks").args(["validate", "auto"]).multiple(true)))]
