@@ -53,9 +53,23 @@ L3 and L2 nodes and frames are stored once. The output is written to a temporary
 file and renamed; an existing OUT is replaced only with --force.
 
 --validate renders the new asset against its sources on the GPU afterwards (see
-`vdbcook validate --help`); with --max-rmse / --min-psnr a failed gate exits with 3.";
+`vdbcook validate --help`); with --max-rmse / --min-psnr / --max-flip a failed gate
+exits with 3.
+
+--auto searches the formats for the smallest asset that meets the gate (at least one
+of --min-psnr, --max-rmse, --max-flip; --format is not allowed). The frames are read
+once; bc7, bc4, unorm8, f16 and f32 are each cooked in memory at the other settings
+(--quality, --grids, --group, --clusters...; a --group keeps its own format), and
+validated as --validate would, smallest file first, until one's images all meet the
+gate: that one is written, byte for byte what --format would write, and a table gives
+each format's bytes, worst image PSNR, RMSE and FLIP, and pass, fail or not tried.
+When none meets it, nothing is written, the exit code is 3 and the error names the
+best reached: the lowest worst-image RMSE (highest PSNR), or the lowest worst FLIP
+when --max-flip is the only gate. f32 renders exactly unless clustered, so without
+--clusters (or a --group) the search always ends by f32 at the latest.";
 
 #[derive(clap::Args)]
+#[command(group(clap::ArgGroup::new("checks").args(["validate", "auto"]).multiple(true)))]
 pub struct CookArgs {
     /// Frame files, directories, globs or frame patterns.
     #[arg(required = true, value_name = "INPUT")]
@@ -66,6 +80,11 @@ pub struct CookArgs {
     /// Every cook setting (the keys of a bake manifest, too).
     #[command(flatten)]
     pub settings: CookSettings,
+    /// Cook every format (bc7, bc4, unorm8, f16, f32) at the other settings, validate them
+    /// smallest file first and write the first whose images meet the gate (--min-psnr,
+    /// --max-rmse and/or --max-flip: at least one is required). Implies --validate; not with --format.
+    #[arg(long, conflicts_with = "format")]
+    pub auto: bool,
     /// Replace OUT if it exists.
     #[arg(long)]
     pub force: bool,
@@ -215,9 +234,22 @@ pub struct Cooked {
 
 /// Cooks one asset from typed settings: the one cook path of `cook` and `bake`.
 pub fn cook_asset(job: CookJob, bars: &dyn Progress) -> Result<Cooked> {
+    let format = job.settings.format;
+    cook_formats(job, &[format], bars)?.into_iter().next().ok_or_else(|| anyhow!("no cooker"))
+}
+
+/// Cooks the asset once per format of `formats` (every other setting as
+/// given) from one read of the frames, in the order given; the reference, when
+/// asked for, comes with the first.
+pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Result<Vec<Cooked>> {
     let s = job.settings;
-    let opts = CookOptions { format: s.format, groups: s.group.clone(), quality: s.quality, max_texture_dim: s.max_texture_dim, clustering: s.clustering(), settings: s.recorded(job.inputs) };
-    let mut all = vec![opts];
+    let mut all: Vec<CookOptions> = formats
+        .iter()
+        .map(|&format| {
+            let fs = CookSettings { format, ..s.clone() };
+            CookOptions { format, groups: s.group.clone(), quality: s.quality, max_texture_dim: s.max_texture_dim, clustering: s.clustering(), settings: fs.recorded(job.inputs) }
+        })
+        .collect();
     if job.reference {
         all.push(reference_options());
     }
@@ -225,15 +257,21 @@ pub fn cook_asset(job: CookJob, bars: &dyn Progress) -> Result<Cooked> {
     let (cookers, channels, read_secs) = feed(all, job.files, sel, s.allow_missing, job.base, bars)?;
     let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
     let mut cookers = cookers.into_iter();
-    let cooker = cookers.next().ok_or_else(|| anyhow!("no cooker"))?;
-    if cooker.frame_count() == 0 {
-        return Err(anyhow!("no frames to cook"));
+    let mut out = Vec::new();
+    for cooker in cookers.by_ref().take(formats.len()) {
+        if cooker.frame_count() == 0 {
+            return Err(anyhow!("no frames to cook"));
+        }
+        // A group naming no channel, or too many channels to cluster, is the settings' fault.
+        let (sections, mut report) = cooker.finish(bars).map_err(|e| if e.is_settings_error() { Usage(e.to_string()).into() } else { anyhow!(e) })?;
+        report.timings.insert(0, ("read".into(), read_secs));
+        out.push(Cooked { sections, report, grid: grid_name.clone(), reference: None });
     }
-    // A group naming no channel, or too many channels to cluster, is the settings' fault.
-    let (sections, mut report) = cooker.finish(bars).map_err(|e| if e.is_settings_error() { Usage(e.to_string()).into() } else { anyhow!(e) })?;
-    report.timings.insert(0, ("read".into(), read_secs));
     let reference = cookers.next().map(finish_reference).transpose().context("cooking the reference")?;
-    Ok(Cooked { sections, report, grid: grid_name, reference })
+    if let Some(first) = out.first_mut() {
+        first.reference = reference;
+    }
+    Ok(out)
 }
 
 pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
@@ -242,9 +280,15 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     if let Err(vdbcook_bake::Error::Setting { name, message }) = s.check() {
         return Err(Usage(format!("--{} {message}", name.replace('_', "-"))).into());
     }
+    if args.auto {
+        crate::auto::check(&args)?;
+    }
     let files = inputs::expand(&args.inputs, s.frames)?;
     let started = Instant::now();
     let bars = Bars::new(quiet);
+    if args.auto {
+        return crate::auto::run(&args, files, started, &bars, quiet);
+    }
     let mut cooked = cook_asset(CookJob { settings: s, files, inputs: &args.inputs, base: None, reference: false }, &bars)?;
     let report = &mut cooked.report;
     let t0 = Instant::now();
@@ -258,7 +302,8 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
         None
     };
     if !quiet {
-        let mut text = if args.json { summary_json(&args, cooked.grid.as_deref(), report, validation.as_ref().map(|o| &o.doc)) } else { summary_text(&args, cooked.grid.as_deref(), report) };
+        let mut text =
+            if args.json { json_text(&summary_json(&args, cooked.grid.as_deref(), report, validation.as_ref().map(|o| &o.doc))) } else { summary_text(&args, cooked.grid.as_deref(), report) };
         if let (Some(o), false) = (&validation, args.json) {
             text += &o.text;
         }
@@ -267,11 +312,11 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     Ok(validation.map_or(exit::SUCCESS, |o| crate::validate::gate(&o.gate_failure)))
 }
 
-fn mb(b: u64) -> String {
+pub fn mb(b: u64) -> String {
     format!("{:.2} MB", b as f64 / 1e6)
 }
 
-fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
+pub fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let what = if r.channels.len() == 1 { format!("grid \"{}\"", grid.unwrap_or("")) } else { format!("{} channels", r.channels.len()) };
@@ -328,7 +373,12 @@ fn non_finite_text(c: &ChannelReport, name: bool) -> Option<String> {
     Some(format!("{who}{} source voxel{} ({}) left out of the error figures; {stored}", n.total(), if n.total() == 1 { "" } else { "s" }, kinds.join(", ")))
 }
 
-fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport, validation: Option<&serde_json::Value>) -> String {
+/// Pretty JSON and a newline.
+pub fn json_text(v: &serde_json::Value) -> String {
+    format!("{}\n", serde_json::to_string_pretty(v).unwrap_or_default())
+}
+
+pub fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport, validation: Option<&serde_json::Value>) -> serde_json::Value {
     let mut v = serde_json::to_value(r).unwrap_or_default();
     if let Some(o) = v.as_object_mut() {
         if let Some(val) = validation {
@@ -343,7 +393,7 @@ fn summary_json(args: &CookArgs, grid: Option<&str>, r: &CookReport, validation:
             serde_json::json!(r.frame_errors.iter().enumerate().map(|(i, (rmse, max))| serde_json::json!({"frame": i, "rmse": Figure(*rmse), "max_error": Figure(*max)})).collect::<Vec<_>>()),
         );
     }
-    format!("{}\n", serde_json::to_string_pretty(&v).unwrap_or_default())
+    v
 }
 
 /// Reports a failure; the exit code. A closed stdout is not one.

@@ -1,5 +1,6 @@
 //! The `vdbcook` binary: flags in, library calls, human or JSON text out.
 
+mod auto;
 mod bake;
 mod cook;
 mod diff;
@@ -33,7 +34,7 @@ Exit codes:
      a closed pipe just ends the output), or an asset of a bake failed to cook
   2  usage error (bad flags or arguments, an invalid bake manifest: nothing done)
   3  quality gate failed (validate / cook --validate / bake with max_rmse, min_psnr or
-     max_flip), and nothing else did";
+     max_flip; cook --auto: no format met the gate), and nothing else did";
 
 #[derive(Parser)]
 #[command(name = "vdbcook", version, about = "Cook OpenVDB volume sequences into compact GPU-ready assets", after_help = AFTER_HELP)]

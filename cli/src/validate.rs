@@ -184,6 +184,17 @@ pub struct Outcome {
     pub doc: serde_json::Value,
     pub text: String,
     pub gate_failure: Option<String>,
+    /// The worst image figures (none without images).
+    pub worst: Option<Worst>,
+}
+
+/// The worst image figures of a validation: the largest RMSE (so the lowest
+/// PSNR) and the largest mean FLIP error, each over every image.
+#[derive(Clone, Copy, Debug)]
+pub struct Worst {
+    pub rmse: f64,
+    pub psnr: f64,
+    pub flip: f64,
 }
 
 pub fn run(args: ValidateArgs, quiet: bool) -> Result<u8> {
@@ -342,7 +353,8 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     let gate_failure = failed
         .first()
         .map(|s| format!("{} image(s) over budget, first frame {} view {} (rmse {:.3e}, psnr {:.1} dB, flip {:.4})", failed.len(), s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.flip));
-    Ok(Outcome { doc, text, gate_failure })
+    let worst = worst.zip(worst_flip).map(|(w, f)| Worst { rmse: w.metrics.rmse, psnr: w.metrics.psnr, flip: f.flip });
+    Ok(Outcome { doc, text, gate_failure, worst })
 }
 
 fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[Kept], format: &str, name: &str) -> Result<()> {

@@ -229,6 +229,8 @@ fn cluster_defaults() -> vdbcook_cluster::Options {
 
 // The one list of settings. Defaults come from the libraries that use them
 // (CookOptions, cluster::Options) or are written here; the flags show them.
+// The gate flags `requires = "checks"`: cook's group of --validate and
+// --auto (a flag of cook alone: a bake does not search formats).
 settings! {
     /// Frames of a frame pattern: A-B or A-B:STEP (e.g. 1-120:2).
     #[cfg_attr(feature = "clap", arg(long, value_name = "RANGE"))]
@@ -271,20 +273,20 @@ settings! {
     /// After cooking, render the asset against its sources on the GPU (see `vdbcook validate`).
     #[cfg_attr(feature = "clap", arg(long))]
     validate: bool = false;
-    /// With --validate: exit with code 3 when any image's RMSE is above X.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "X", requires = "validate"))]
+    /// With --validate (or cook --auto): exit with code 3 when any image's RMSE is above X.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "X", requires = "checks"))]
     max_rmse: Option<f64> = None;
-    /// With --validate: exit with code 3 when any image's PSNR (dB) is below Y.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "Y", requires = "validate"))]
+    /// With --validate (or cook --auto): exit with code 3 when any image's PSNR (dB) is below Y.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "Y", requires = "checks"))]
     min_psnr: Option<f64> = None;
-    /// With --validate: exit with code 3 when any image's mean FLIP error (0 to 1, at 67 pixels per degree) is above F.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "F", requires = "validate", allow_negative_numbers = true, value_parser = parse_flip_budget))]
+    /// With --validate (or cook --auto): exit with code 3 when any image's mean FLIP error (0 to 1, at 67 pixels per degree) is above F.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "F", requires = "checks", allow_negative_numbers = true, value_parser = parse_flip_budget))]
     max_flip: Option<f64> = None;
-    /// With --validate: cameras orbiting the volume.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().views, requires = "validate", value_parser = clap::value_parser!(u32).range(VIEWS)))]
+    /// With --validate (or cook --auto): cameras orbiting the volume.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().views, requires = "checks", value_parser = clap::value_parser!(u32).range(VIEWS)))]
     views: u32 = 8;
-    /// With --validate: image size.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "WxH", default_value_t = CookSettings::default().size, requires = "validate"))]
+    /// With --validate (or cook --auto): image size.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "WxH", default_value_t = CookSettings::default().size, requires = "checks"))]
     size: Size = Size { width: 512, height: 512 };
 }
 
