@@ -54,10 +54,10 @@ pub struct ValidateArgs {
     #[arg(long, default_value = "512x512", value_name = "WxH", value_parser = parse_size)]
     pub size: (u32, u32),
     /// Exit with code 3 when any image's RMSE is above X.
-    #[arg(long, value_name = "X")]
+    #[arg(long, value_name = "X", allow_negative_numbers = true, value_parser = vdbcook_bake::options::parse_rmse_budget)]
     pub max_rmse: Option<f64>,
     /// Exit with code 3 when any image's PSNR (dB) is below Y.
-    #[arg(long, value_name = "Y")]
+    #[arg(long, value_name = "Y", allow_negative_numbers = true, value_parser = vdbcook_bake::options::parse_psnr_floor)]
     pub min_psnr: Option<f64>,
     /// Exit with code 3 when any image's mean FLIP error (0 to 1, at 67 pixels per degree) is above F.
     #[arg(long, value_name = "F", allow_negative_numbers = true, value_parser = vdbcook_bake::options::parse_flip_budget)]

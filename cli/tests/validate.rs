@@ -123,6 +123,19 @@ fn max_flip_must_be_a_finite_budget() {
 }
 
 #[test]
+fn rmse_and_psnr_gates_must_be_numbers_that_can_gate() {
+    // A negative RMSE budget fails every image, a NaN one none: both are
+    // usage errors, in validate and in cook --validate alike.
+    for (flag, want) in [("--max-rmse=-1", "must be a number >= 0, not -1"), ("--max-rmse=nan", "must be a number >= 0, not NaN"), ("--min-psnr=nan", "must be a number, not NaN")] {
+        for args in [vec!["validate", "x.vpak", "--source", "fixtures/smoke_seq", flag], vec!["cook", "-o", "/nonexistent/x.vpak", "fixtures/tiles.vdb", "--validate", flag]] {
+            let r = vdbcook(&args);
+            let err = String::from_utf8_lossy(&r.stderr);
+            assert!(r.status.code() == Some(2) && err.contains(want), "{args:?}: {err}");
+        }
+    }
+}
+
+#[test]
 fn bc_decoded_in_the_shader_reports_what_the_texture_unit_does() {
     if !gpu_available() {
         return;

@@ -148,9 +148,41 @@ pub fn flip_budget(x: f64) -> Result<f64, String> {
     }
 }
 
+/// An RMSE budget (`--max-rmse`, `max_rmse`): a number >= 0.
+pub fn rmse_budget(x: f64) -> Result<f64, String> {
+    if x >= 0.0 {
+        Ok(x)
+    } else {
+        Err(format!("must be a number >= 0, not {x}"))
+    }
+}
+
+/// A PSNR floor (`--min-psnr`, `min_psnr`), in dB: any number but NaN.
+pub fn psnr_floor(y: f64) -> Result<f64, String> {
+    if y.is_nan() {
+        Err(format!("must be a number, not {y}"))
+    } else {
+        Ok(y)
+    }
+}
+
+fn parse_number(s: &str) -> Result<f64, String> {
+    s.trim().parse::<f64>().map_err(|_| format!("invalid number \"{s}\""))
+}
+
 /// Parses a FLIP budget flag.
 pub fn parse_flip_budget(s: &str) -> Result<f64, String> {
-    flip_budget(s.trim().parse::<f64>().map_err(|_| format!("invalid number \"{s}\""))?)
+    flip_budget(parse_number(s)?)
+}
+
+/// Parses an RMSE budget flag.
+pub fn parse_rmse_budget(s: &str) -> Result<f64, String> {
+    rmse_budget(parse_number(s)?)
+}
+
+/// Parses a PSNR floor flag.
+pub fn parse_psnr_floor(s: &str) -> Result<f64, String> {
+    psnr_floor(parse_number(s)?)
 }
 
 macro_rules! settings {
@@ -274,10 +306,10 @@ settings! {
     #[cfg_attr(feature = "clap", arg(long))]
     validate: bool = false;
     /// With --validate (or cook --auto): exit with code 3 when any image's RMSE is above X.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "X", requires = "checks"))]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "X", requires = "checks", allow_negative_numbers = true, value_parser = parse_rmse_budget))]
     max_rmse: Option<f64> = None;
     /// With --validate (or cook --auto): exit with code 3 when any image's PSNR (dB) is below Y.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "Y", requires = "checks"))]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "Y", requires = "checks", allow_negative_numbers = true, value_parser = parse_psnr_floor))]
     min_psnr: Option<f64> = None;
     /// With --validate (or cook --auto): exit with code 3 when any image's mean FLIP error (0 to 1, at 67 pixels per degree) is above F.
     #[cfg_attr(feature = "clap", arg(long, value_name = "F", requires = "checks", allow_negative_numbers = true, value_parser = parse_flip_budget))]
@@ -313,11 +345,11 @@ impl CookSettings {
         if let Some(e) = self.max_brick_error.filter(|e| e.is_nan() || *e < 0.0) {
             return bad("max_brick_error", format!("must be a number >= 0, not {e}"));
         }
-        if let Some(x) = self.max_rmse.filter(|x| x.is_nan() || *x < 0.0) {
-            return bad("max_rmse", format!("must be a number >= 0, not {x}"));
+        if let Some(Err(message)) = self.max_rmse.map(rmse_budget) {
+            return bad("max_rmse", message);
         }
-        if let Some(y) = self.min_psnr.filter(|y| y.is_nan()) {
-            return bad("min_psnr", format!("must be a number, not {y}"));
+        if let Some(Err(message)) = self.min_psnr.map(psnr_floor) {
+            return bad("min_psnr", message);
         }
         if let Some(Err(message)) = self.max_flip.map(flip_budget) {
             return bad("max_flip", message);
