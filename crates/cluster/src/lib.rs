@@ -285,9 +285,11 @@ pub fn cluster_scaled<const N: usize>(bricks: &[[f32; N]], opts: &Options, scale
             } else {
                 f64::INFINITY
             };
+            // A brick with a non-finite value has a NaN variance: kept as it
+            // is, like high-variance bricks (no centroid can stand for it).
             if constant {
                 0
-            } else if nv > opts.variance_threshold {
+            } else if !(nv <= opts.variance_threshold) {
                 1
             } else {
                 2

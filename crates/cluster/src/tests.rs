@@ -125,3 +125,27 @@ fn hinted_search_finds_the_same_nearest_centroid() {
         assert_eq!(assign(&data, &cents, Some(&hints)), plain, "hint {h}");
     }
 }
+
+#[test]
+fn bricks_with_non_finite_values_are_kept_as_they_are() {
+    // A NaN or infinite voxel in a planted near-duplicate: its variance is
+    // NaN or infinite, and no centroid may replace it (nor be dragged by it).
+    let (mut bricks, _) = planted();
+    for (k, x) in [(3, f32::NAN), (50, f32::INFINITY)] {
+        bricks[k][100] = x;
+    }
+    let opts = Options { clusters: 6, iterations: 5, variance_threshold: 0.05, max_brick_error: None, seed: 1 };
+    let c = cluster(&bricks, &opts, &|_, _| {});
+    for k in [3, 50] {
+        assert!(!c.merged[k], "brick {k}");
+        let kept = &c.bricks[c.remap[k] as usize];
+        assert!(kept.iter().zip(&bricks[k]).all(|(a, b)| a.to_bits() == b.to_bits()), "brick {k} is stored as it is");
+    }
+    assert_eq!(c.stats.high_variance, 2, "{:?}", c.stats);
+    // Every centroid is finite.
+    for (i, &m) in c.merged.iter().enumerate() {
+        if m {
+            assert!(c.bricks[c.remap[i] as usize].iter().all(|v| v.is_finite()), "centroid of brick {i}");
+        }
+    }
+}
