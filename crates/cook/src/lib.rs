@@ -35,6 +35,8 @@ pub enum Error {
     /// grid pushed set (`first`: its frame, and the frame's source path).
     #[error("grid \"{grid}\" has transform {found}, but the asset's transform, set by grid \"{first_grid}\" of {first}, is {expected}")]
     Transform { grid: String, found: String, first: String, first_grid: String, expected: String },
+    #[error("{grid} has background {found}, earlier frames {expected} (a channel keeps one background)")]
+    Background { grid: String, found: f32, expected: f32 },
     #[error("frame {frame} is out of range (the asset has {count} frames, numbered from 0)")]
     NoFrame { frame: usize, count: usize },
     #[error("frame {frame} unpacks to {leaves} leaves ({} MiB in memory), more than the {} MiB this machine has to spare", .bytes >> 20, .budget >> 20)]
@@ -388,7 +390,14 @@ impl Cooker {
                 }
             }
         }
-        let fs = self.builder.push(grids)?;
+        let fs = self.builder.push(grids).map_err(|e| match e {
+            // The caller names this frame and its file; name the grid.
+            vdbcook_flipbook::Error::Background { channel, found, expected, .. } => {
+                let grid = self.channels.get(channel).map_or_else(|| format!("channel {channel}"), |s| format!("grid \"{}\"", s.name));
+                Error::Background { grid, found, expected }
+            }
+            e => e.into(),
+        })?;
         for (acc, r) in self.ranges.iter_mut().zip(&fs.ranges) {
             if let Some([lo, hi]) = r {
                 *acc = [acc[0].min(*lo), acc[1].max(*hi)];

@@ -658,3 +658,15 @@ fn a_transform_mismatch_names_both_frames() {
     assert!(e.contains("grid \"density\" has transform UniformScaleMap [[0.5"), "{e}");
     assert!(e.contains("set by grid \"density\" of frame 0 (a_1.vdb), is UniformScaleMap [[1.0"), "{e}");
 }
+
+#[test]
+fn a_background_mismatch_names_the_grid_once() {
+    let mut odd = frame(1);
+    odd.background = 0.5;
+    let mut c = Cooker::new(CookOptions::default());
+    c.push(&frame(0), None).unwrap();
+    let e = c.push(&odd, None).unwrap_err().to_string();
+    // The caller names the frame and its file.
+    assert!(!e.contains("frame 1"), "{e}");
+    assert!(e.contains("grid \"density\" has background 0.5, earlier frames 0"), "{e}");
+}
