@@ -40,6 +40,9 @@ impl Candidate {
 
 pub fn run(args: &CookArgs, files: Vec<PathBuf>, started: Instant, bars: &Bars, quiet: bool) -> Result<u8> {
     let s = &args.settings;
+    // The GPU first: without one, no cooking time is spent for nothing.
+    let v = ValidateArgs::of_cook(s, args.output.clone(), args.inputs.clone(), None, GpuArgs::default(), args.json);
+    let renderer = v.gpu.renderer()?;
     let cooked = cook_formats(CookJob { settings: s, files, inputs: &args.inputs, base: None, reference: true }, &CANDIDATES, bars)?;
     let mut cands: Vec<Candidate> = cooked.into_iter().zip(CANDIDATES).map(|(cooked, format)| Candidate { format, bytes: vdbcook_vpak::file_len(&cooked.sections), cooked, outcome: None }).collect();
     let reference = cands.first_mut().and_then(|c| c.cooked.reference.take()).ok_or_else(|| anyhow!("no reference"))?;
@@ -47,8 +50,6 @@ pub fn run(args: &CookArgs, files: Vec<PathBuf>, started: Instant, bars: &Bars, 
     cands.sort_by_key(|c| c.bytes);
 
     let name = args.output.display().to_string();
-    let v = ValidateArgs::of_cook(s, args.output.clone(), args.inputs.clone(), None, GpuArgs::default(), args.json);
-    let renderer = v.gpu.renderer()?;
     let mut chosen = None;
     for (i, c) in cands.iter_mut().enumerate() {
         let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&c.cooked.sections)).with_context(|| format!("the {} candidate", c.format.name()))?;
