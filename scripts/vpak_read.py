@@ -263,21 +263,27 @@ def validate_plane(m, secs, p, pl):
         raise VpakError(f"plane {p}: a brick table must exist exactly when the plane stores fewer bricks")
     if table is not None and (len(table) != n or (n and table.max() >= bricks)):
         raise VpakError(f"plane {p}: brick table of the wrong length or past the plane's bricks")
-    if len(secs.f32(K_RANGES, p)) != bricks * slots_of(pl) * 2:
+    ranges = secs.f32(K_RANGES, p)
+    if len(ranges) != bricks * slots_of(pl) * 2:
         raise VpakError(f"plane {p}: brick ranges section has the wrong length")
+    if len(ranges) and not (ranges[0::2] <= ranges[1::2]).all():
+        raise VpakError(f"plane {p}: a brick range has min > max (or NaN)")
     # Atlases: consecutive from plane brick 0, all but the last full and of one shape,
     # and the last one's bricks placeable with the first one's shape.
     atlases, first = pl["atlases"], 0
     for a, at in enumerate(atlases):
         bx, by, bz = at["bricks"]
-        if at["first_brick"] != first or at["count"] > bx * by * bz:
-            raise VpakError(f"plane {p} atlas {a} not consecutive or over-full")
+        if at["first_brick"] != first or at["count"] > bx * by * bz or first + at["count"] > bricks:
+            raise VpakError(f"plane {p} atlas {a} not consecutive, over-full or past the plane's bricks")
         if a < len(atlases) - 1 and (at["bricks"] != atlases[0]["bricks"] or at["count"] != bx * by * bz):
             raise VpakError(f"plane {p} atlas {a} is not full with the first atlas's shape")
         first += at["count"]
     if atlases:
         last, (fx, fy, fz) = atlases[-1], atlases[0]["bricks"]
         lx, ly, lz = last["bricks"]
+        # The shader finds a brick's atlas by the first atlas's capacity.
+        if last["count"] > fx * fy * fz:
+            raise VpakError(f"plane {p}: the last atlas holds more bricks than the first")
         # Every brick of the last atlas must sit where the first atlas's shape puts it
         # (the shader addresses all atlases with the first one's shape).
         i = np.arange(last["count"])

@@ -17,8 +17,10 @@
 // and serves every channel of the voxels in it (`vpak_leaf_value`). A leaf's
 // brick has, in each plane, a plane brick (through the plane's brick table,
 // when it has one), which has a range per channel and a place in one of the
-// plane's atlases. Texture slot s holds atlas section s (the atlases of
-// plane 0, then of plane 1, ...); up to eight are bound.
+// plane's atlases. Atlas a of a channel's plane is texture slot
+// `slot + a` (VpakChannel.slot); up to eight slots are bound, so an engine
+// binds the atlases of the planes it samples, each plane's in consecutive
+// slots, and writes each channel's slot accordingly.
 
 const VPAK_L1_WORDS: u32 = 1537u;   // 1024 mask words, 512 prefix words, first entry
 const VPAK_L2_WORDS: u32 = 193u;    // 128 mask words, 64 prefix words, first entry

@@ -4,8 +4,8 @@
 // For GPUs without block-compressed 3D textures. Each buffer holds an atlas
 // plane's section exactly as stored in the asset (docs/format.md): texels
 // (or 4×4 blocks) row by row, slice by slice, so the texel a textureLoad
-// would return is decoded from the bytes that hold it alone. Slot s (atlas
-// section s) is bound at 8, 11, 12, 13, 15, 16, 17, 18 for s = 0 to 7.
+// would return is decoded from the bytes that hold it alone. Slot s
+// is bound at 8, 11, 12, 13, 15, 16, 17, 18 for s = 0 to 7.
 
 @group(0) @binding(8) var<storage, read> vpak_words0: array<u32>;
 @group(0) @binding(11) var<storage, read> vpak_words1: array<u32>;

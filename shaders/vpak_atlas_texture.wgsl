@@ -2,7 +2,7 @@
 //
 // f32, f16 and unorm8 planes are R/RG/RGBA 32Float, 16Float and 8Unorm
 // textures; bc4 planes are Bc4RUnorm and bc7 planes Bc7RgbaUnorm, decoded by
-// the texture unit. Slot s (atlas section s) is bound at binding 8, 11, 12,
+// the texture unit. Slot s is bound at binding 8, 11, 12,
 // 13, 15, 16, 17, 18 for s = 0 to 7.
 
 @group(0) @binding(8) var vpak_atlas0: texture_3d<f32>;

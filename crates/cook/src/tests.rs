@@ -670,3 +670,40 @@ fn a_background_mismatch_names_the_grid_once() {
     assert!(!e.contains("frame 1"), "{e}");
     assert!(e.contains("grid \"density\" has background 0.5, earlier frames 0"), "{e}");
 }
+
+#[test]
+fn what_samplers_would_misread_is_refused() {
+    let (bytes, _) = cook(Format::Unorm8, &[frame(0), frame(3)], 16);
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    let meta = asset.metadata().unwrap();
+    let reseal = |sections: &[vdbcook_vpak::Section]| Asset::from_bytes(&vdbcook_vpak::assemble(sections));
+    let error = |sections: &[vdbcook_vpak::Section]| reseal(sections).map_err(|e| e.to_string()).and_then(|a| unpack_frame(&a, 0).map(|_| ()).map_err(|e| e.to_string())).err().unwrap_or_default();
+    let edit = |kind: u32, f: &dyn Fn(&mut Vec<u8>)| {
+        let mut sections = asset.to_sections();
+        f(&mut sections.iter_mut().find(|s| s.kind == kind).unwrap().data);
+        sections
+    };
+    // An L3 node's brick past the bricks (tables and ranges are indexed by it).
+    let e = error(&edit(vdbcook_vpak::kind::L3_NODES, &|d| d[4..8].copy_from_slice(&meta.brick_count.to_le_bytes())));
+    assert!(e.contains("points at brick"), "{e}");
+    // A reversed range (samplers compute min + t·(max − min)).
+    let e = error(&edit(vdbcook_vpak::kind::BRICK_RANGES, &|d| d[0..4].copy_from_slice(&f32::MAX.to_le_bytes())));
+    assert!(e.contains("brick range 0 is"), "{e}");
+    // A section listed twice.
+    let mut twice = asset.to_sections();
+    twice.push(vdbcook_vpak::Section { kind: vdbcook_vpak::kind::TILES, index: 0, data: vec![] });
+    assert!(error(&twice).contains("listed twice"));
+    // A last atlas holding more bricks than the first (samplers find a
+    // brick's atlas by the first atlas's capacity).
+    let p = &meta.planes[0];
+    let (f, n) = (p.atlases[0], p.bricks);
+    let cap = f.count;
+    assert!(p.atlases.len() > 2 && n > 2 * cap, "{p:?}");
+    let mut m = meta.clone();
+    let [fx, fy, _] = f.bricks;
+    m.planes[0].atlases = vec![f, vdbcook_vpak::AtlasInfo { bricks: [fx, fy, (n - cap).div_ceil(fx * fy)], first_brick: cap, count: n - cap }];
+    let mut sections = asset.to_sections();
+    sections.iter_mut().find(|s| s.kind == vdbcook_vpak::kind::METADATA).unwrap().data = m.to_bytes().unwrap();
+    let e = error(&sections);
+    assert!(e.contains("atlas 1 of plane 0: its layout does not follow the first atlas's"), "{e}");
+}

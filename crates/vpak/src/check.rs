@@ -120,8 +120,12 @@ impl<'a> Checked<'a> {
         let l2 = words(kind::L2_NODES, L2_WORDS, "l2 nodes")?;
         let tiles = words(kind::TILES, channels, "tiles")?;
         let l3 = asset.u32s(kind::L3_NODES)?;
-        if l3_node_count(l3).is_none() {
+        let Some(l3_nodes) = l3_node_count(l3) else {
             return invalid(format!("l3 nodes: {} words cannot hold the {} nodes the section counts", l3.len(), l3.first().copied().unwrap_or(0)));
+        };
+        // Every L3 node's brick exists (samplers index tables and ranges with it).
+        if let Some(k) = (0..l3_nodes).find(|&k| l3[1 + k * crate::nodes::L3_WORDS] >= meta.brick_count) {
+            return invalid(format!("l3 node {k} points at brick {}, the asset has {}", l3[1 + k * crate::nodes::L3_WORDS], meta.brick_count));
         }
         let (mut ranges, mut tables) = (Vec::with_capacity(meta.planes.len()), Vec::with_capacity(meta.planes.len()));
         for (p, info) in meta.planes.iter().enumerate() {
@@ -129,6 +133,10 @@ impl<'a> Checked<'a> {
             let want = u64::from(info.bricks) * u64::from(info.range_slots()) * 2;
             if r.len() as u64 != want {
                 return invalid(format!("plane {p}: {} brick range values, {} plane bricks of {} slots need {want}", r.len(), info.bricks, info.range_slots()));
+            }
+            // Samplers compute min + t·(max − min): a range must be ordered.
+            if let Some(k) = r.chunks_exact(2).position(|m| !(m[0] <= m[1])) {
+                return invalid(format!("plane {p}: brick range {k} is [{}, {}]", r[2 * k], r[2 * k + 1]));
             }
             ranges.push(r);
             let table = match asset.words::<u32>(kind::BRICK_TABLE, p as u32) {
@@ -328,7 +336,13 @@ fn check_atlases(p: usize, plane: &PlaneInfo) -> Result<(), Error> {
             // (samplers use that shape throughout): one short row, or rows as
             // wide as the first's, and layers as tall when there are several.
             let same_places = (n <= bx && n <= fx) || (bx == fx && (n.div_ceil(fx) <= by.min(fy) || by == fy));
-            let fits = if i + 1 < plane.atlases.len() { a.bricks == f.bricks && u128::from(a.count) == capacity } else { same_places && (0..3).all(|k| u64::from(a.bricks[k]) >= need[k]) };
+            // And it holds no more than the first (samplers find a brick's atlas by the first's capacity).
+            let first_capacity = f.bricks.iter().map(|&b| u128::from(b)).product::<u128>();
+            let fits = if i + 1 < plane.atlases.len() {
+                a.bricks == f.bricks && u128::from(a.count) == capacity
+            } else {
+                same_places && u128::from(n) <= first_capacity && (0..3).all(|k| u64::from(a.bricks[k]) >= need[k])
+            };
             if !fits || u64::from(a.first_brick) != next_brick {
                 return bad("its layout does not follow the first atlas's".into());
             }

@@ -111,6 +111,8 @@ pub enum Error {
     SectionBounds { kind: u32, index: u32, offset: u64, size: u64 },
     #[error("section {name} #{index} checksum mismatch (stored {stored:#018x}, computed {computed:#018x})", name = kind::name(*kind))]
     SectionChecksum { kind: u32, index: u32, stored: u64, computed: u64 },
+    #[error("section {name} #{index} is listed twice", name = kind::name(*kind))]
+    DuplicateSection { kind: u32, index: u32 },
     #[error("missing section {name} #{index}", name = kind::name(*kind))]
     Missing { kind: u32, index: u32 },
     #[error("section {name} is {size} bytes, not a whole number of {unit}-byte items", name = kind::name(*kind))]
@@ -448,6 +450,12 @@ impl Asset {
                 return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
             }
             sections.push(s);
+        }
+        // One section per (kind, index): a reader must not have to pick.
+        let mut keys: Vec<(u32, u32)> = sections.iter().map(|s| (s.kind, s.index)).collect();
+        keys.sort_unstable();
+        if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
+            return Err(Error::DuplicateSection { kind: w[0].0, index: w[0].1 });
         }
         a.sections = sections;
         Ok(a)
