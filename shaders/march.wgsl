@@ -38,6 +38,13 @@ struct Params {
 // True when the scene has emission channels (params.channels.y or .z): the
 // emission code folds away at pipeline creation otherwise.
 override GLOWS: bool = true;
+// The texture slots of the shown channels (params.channels x, y, z) when
+// their plane has a single atlas, else VPAK_NONE: a known slot folds the
+// texture selection away at pipeline creation (a switch per fetch costs on
+// a CPU driver).
+override SLOT_X: u32 = 0xffffffffu;
+override SLOT_Y: u32 = 0xffffffffu;
+override SLOT_Z: u32 = 0xffffffffu;
 // RGB per pixel, row-major from the top.
 @group(0) @binding(9) var<storage, read_write> image: array<f32>;
 // Optical depth towards the light at each shadow cell centre, x fastest.
@@ -120,6 +127,15 @@ fn shadow_depth(o: vec3<f32>) -> f32 {
 // then green, then blue rise, so hot cores turn yellow and white.
 fn fire_ramp(t: f32) -> vec3<f32> {
     return clamp(vec3<f32>(3.0 * t, 3.0 * t - 1.0, 3.0 * t - 2.0), vec3<f32>(0.0), vec3<f32>(1.0));
+}
+
+// `bc` in texture slot `slot` when that is known (not VPAK_NONE).
+fn in_slot(bc: VpakBrickChannel, slot: u32) -> VpakBrickChannel {
+    var b = bc;
+    if (slot != VPAK_NONE) {
+        b.slot = slot;
+    }
+    return b;
 }
 
 // Channel `c` (whose brick channel in the cell is `bc`, background `bg`) at
@@ -205,14 +221,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 var t = 0.0;
                 var f = 0.0;
                 if (params.channels.y != VPAK_NONE) {
-                    t = cell_value(leaf, temp, on, ip, params.channels.y, bg.y);
+                    t = cell_value(leaf, in_slot(temp, SLOT_Y), on, ip, params.channels.y, bg.y);
                 }
                 if (params.channels.z != VPAK_NONE) {
-                    f = cell_value(leaf, flames, on, ip, params.channels.z, bg.z);
+                    f = cell_value(leaf, in_slot(flames, SLOT_Z), on, ip, params.channels.z, bg.z);
                 }
                 radiance += trans * emission(t, f) * step;
             }
-            let e = cell_value(leaf, ext, on, ip, params.channels.x, bg.x);
+            let e = cell_value(leaf, in_slot(ext, SLOT_X), on, ip, params.channels.x, bg.x);
             let sigma = max(e, 0.0) * params.light.w;
             if (sigma > 0.0) {
                 let a = 1.0 - exp(-sigma * step);

@@ -289,7 +289,7 @@ pub fn cluster_scaled<const N: usize>(bricks: &[[f32; N]], opts: &Options, scale
             // is, like high-variance bricks (no centroid can stand for it).
             if constant {
                 0
-            } else if !(nv <= opts.variance_threshold) {
+            } else if nv.is_nan() || nv > opts.variance_threshold {
                 1
             } else {
                 2

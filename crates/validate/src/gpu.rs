@@ -67,6 +67,9 @@ const TABLE_BINDING: u32 = 19;
 /// Storage buffers of the asset, in the order `GpuAsset::buffers` holds them.
 const BUFFER_BINDINGS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, CHANNEL_BINDING, TABLE_BINDING];
 
+/// A pipeline's entry point and override constants: several textures, emission, the shown channels' known slots.
+type PipelineKey = (&'static str, bool, bool, [u32; 3]);
+
 /// The bind group layout and the pipelines of one shader, each made on first
 /// use for its entry point and the override constants that fold branches
 /// away: several textures or one, emission channels or none.
@@ -74,7 +77,7 @@ struct Pipelines {
     layout: wgpu::BindGroupLayout,
     module: wgpu::ShaderModule,
     pipeline_layout: wgpu::PipelineLayout,
-    made: std::sync::Mutex<std::collections::HashMap<(&'static str, bool, bool), wgpu::ComputePipeline>>,
+    made: std::sync::Mutex<std::collections::HashMap<PipelineKey, wgpu::ComputePipeline>>,
 }
 
 impl Pipelines {
@@ -90,18 +93,24 @@ impl Pipelines {
         Pipelines { layout, module, pipeline_layout, made: Default::default() }
     }
 
-    /// The pipeline of `entry` for several textures (`multi`) or one, with emission (`glows`) or without.
-    fn get(&self, device: &wgpu::Device, entry: &'static str, multi: bool, glows: bool) -> wgpu::ComputePipeline {
+    /// The pipeline of `entry` for several textures (`multi`) or one, with
+    /// emission (`glows`) or without, with the shown channels' texture slots
+    /// where known (`slots`, `NONE` where not).
+    fn get(&self, device: &wgpu::Device, entry: &'static str, multi: bool, glows: bool, slots: [u32; 3]) -> wgpu::ComputePipeline {
         let mut made = self.made.lock().unwrap_or_else(|e| e.into_inner());
-        made.entry((entry, multi, glows))
+        made.entry((entry, multi, glows, slots))
             .or_insert_with(|| {
                 let flag = |b: bool| if b { 1.0 } else { 0.0 };
+                let [x, y, z] = slots.map(f64::from);
                 device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                     label: Some(entry),
                     layout: Some(&self.pipeline_layout),
                     module: &self.module,
                     entry_point: Some(entry),
-                    compilation_options: wgpu::PipelineCompilationOptions { constants: &[("VPAK_MULTI_ATLAS", flag(multi)), ("GLOWS", flag(glows))], ..Default::default() },
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &[("VPAK_MULTI_ATLAS", flag(multi)), ("GLOWS", flag(glows)), ("SLOT_X", x), ("SLOT_Y", y), ("SLOT_Z", z)],
+                        ..Default::default()
+                    },
                     cache: None,
                 })
             })
@@ -140,6 +149,8 @@ pub struct GpuAsset {
     slots: usize,
     /// Per channel, whether its plane's atlases are bound.
     bound: Vec<bool>,
+    /// Per channel, its texture slot when its plane is bound and has a single atlas, else `NONE`.
+    single_slot: Vec<u32>,
     channels: u32,
     /// Each channel's background.
     backgrounds: Vec<f32>,
@@ -285,6 +296,7 @@ impl Renderer {
         }
         let channels = c.gpu_channels();
         let bound: Vec<bool> = channels.iter().map(|g| slot_of_plane[g.plane as usize] != u32::MAX).collect();
+        let single_slot: Vec<u32> = channels.iter().map(|g| if meta.planes[g.plane as usize].atlases.len() == 1 { slot_of_plane[g.plane as usize] } else { crate::NONE }).collect();
         let channel_words: Vec<u32> = channels.iter().flat_map(|g| GpuChannel { slot: slot_of_plane[g.plane as usize], ..*g }.words()).collect();
         let (ranges, tables) = (c.gpu_ranges(), c.gpu_tables());
         let mut buffers = Vec::new();
@@ -354,6 +366,7 @@ impl Renderer {
             frames: c.frames.to_vec(),
             slots: slots.len(),
             bound,
+            single_slot,
             channels: meta.channels.len() as u32,
             backgrounds: meta.channels.iter().map(|ch| ch.background).collect(),
         })
@@ -433,7 +446,8 @@ impl Renderer {
                 pass.set_bind_group(0, &group, &[]);
                 let multi = asset.slots > 1;
                 let glows = scene.channels[1] != crate::NONE || scene.channels[2] != crate::NONE;
-                let (march, shadow_pipeline) = (pipelines.get(&self.device, "main", multi, glows), pipelines.get(&self.device, "shadow_main", multi, false));
+                let known = scene.channels.map(|c| asset.single_slot.get(c as usize).copied().unwrap_or(crate::NONE));
+                let (march, shadow_pipeline) = (pipelines.get(&self.device, "main", multi, glows, known), pipelines.get(&self.device, "shadow_main", multi, false, [crate::NONE; 3]));
                 if i == 0 {
                     pass.set_pipeline(&shadow_pipeline);
                     pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);

@@ -135,7 +135,7 @@ impl<'a> Checked<'a> {
                 return invalid(format!("plane {p}: {} brick range values, {} plane bricks of {} slots need {want}", r.len(), info.bricks, info.range_slots()));
             }
             // Samplers compute min + t·(max − min): a range must be ordered.
-            if let Some(k) = r.chunks_exact(2).position(|m| !(m[0] <= m[1])) {
+            if let Some(k) = r.chunks_exact(2).position(|m| m[0].partial_cmp(&m[1]).is_none_or(|o| o == std::cmp::Ordering::Greater)) {
                 return invalid(format!("plane {p}: brick range {k} is [{}, {}]", r[2 * k], r[2 * k + 1]));
             }
             ranges.push(r);
