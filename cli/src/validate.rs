@@ -402,6 +402,13 @@ fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[Ke
     }
     let rows: String = per_frame.iter().map(|(f, r, fl)| format!("<tr><td>{f}</td><td>{r:.4e}</td><td>{fl:.4}</td></tr>")).collect();
     let v = &doc["voxel"];
+    // A figure of the JSON as people read it: 4 significant digits (RMSE) or 2 decimals (dB).
+    let show = |x: &serde_json::Value, sci: bool| match x {
+        serde_json::Value::Number(n) => n.as_f64().map(|x| if sci { format!("{x:.4e}") } else { format!("{x:.2}") }).unwrap_or_default(),
+        serde_json::Value::String(s) if s == "Infinity" => "∞ (exact)".into(),
+        serde_json::Value::String(s) => s.clone(),
+        _ => "–".into(),
+    };
     let html = format!(
         "<!doctype html><html><head><meta charset='utf-8'><title>vdbcook validation: {n}</title>\
 <style>body{{font-family:sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}\
@@ -415,13 +422,13 @@ fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[Ke
         ad = report::esc(doc["adapter"].as_str().unwrap_or("")),
         g = report::esc(doc["shown"].as_str().unwrap_or("")),
         f = report::esc(format),
-        wr = doc["worst"]["rmse"],
-        wp = doc["worst"]["psnr"],
+        wr = show(&doc["worst"]["rmse"], true),
+        wp = show(&doc["worst"]["psnr"], false),
         wf = doc["worst_flip"]["flip"].as_f64().map(|x| format!("{x:.4}")).unwrap_or_default(),
         ppd = DEFAULT_PPD,
-        vr = v["rmse"],
-        vp = v["psnr"],
-        plot = report::svg_plot(&per_frame.iter().map(|p| p.1).collect::<Vec<_>>(), "image RMSE per frame"),
+        vr = show(&v["rmse"], true),
+        vp = show(&v["psnr"], false),
+        plot = report::svg_plot(&per_frame.iter().map(|p| p.1).collect::<Vec<_>>(), &per_frame.iter().map(|p| p.0).collect::<Vec<_>>(), "image RMSE per frame"),
     );
     write("report.html", html.as_bytes())
 }

@@ -180,6 +180,9 @@ fn report_and_render_write_their_files() {
     let pngs = std::fs::read_dir(&rep).unwrap().flatten().filter(|e| e.file_name().to_string_lossy().ends_with(".png")).count();
     assert_eq!(pngs, 12, "reference, asset, heat-map and FLIP map for the three worst views");
     assert!(html.contains("FLIP error map") && html.contains("worst FLIP"), "the FLIP map is next to the difference");
+    // Figures as people read them: the worst RMSE with four significant digits.
+    let wr = json["worst"]["rmse"].as_f64().unwrap();
+    assert!(html.contains(&format!("<td>{wr:.4e}</td>")), "{html}");
     // The JSON's FLIP of a view is FLIP of the two PNGs the report shows.
     let worst = &json["worst"];
     let stem = rep.join(format!("frame{}_view{}", worst["frame"], worst["view"]));

@@ -62,18 +62,23 @@ pub fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
-/// An SVG line plot of per-frame values (the worst view's RMSE of each frame).
-pub fn svg_plot(values: &[f64], label: &str) -> String {
+/// An SVG line plot of per-frame values (the worst view's RMSE of each
+/// frame), with a dot per frame (one frame is a dot), labelled with the
+/// first and last frame numbers.
+pub fn svg_plot(values: &[f64], frames: &[usize], label: &str) -> String {
     let (w, h, pad) = (640.0, 220.0, 40.0);
     let max = values.iter().copied().fold(0.0f64, f64::max).max(1e-12);
     let n = values.len().max(2) - 1;
-    let pts: Vec<String> = values.iter().enumerate().map(|(i, v)| format!("{:.1},{:.1}", pad + (w - 2.0 * pad) * i as f64 / n as f64, h - pad - (h - 2.0 * pad) * v / max)).collect();
+    let xy: Vec<(f64, f64)> = values.iter().enumerate().map(|(i, v)| (pad + (w - 2.0 * pad) * i as f64 / n as f64, h - pad - (h - 2.0 * pad) * v / max)).collect();
+    let pts: Vec<String> = xy.iter().map(|(x, y)| format!("{x:.1},{y:.1}")).collect();
+    let dots: String = xy.iter().map(|(x, y)| format!("<circle cx='{x:.1}' cy='{y:.1}' r='3' fill='#c33'/>")).collect();
+    let (first, last) = (frames.first().copied().unwrap_or(0), frames.last().copied().unwrap_or(0));
     format!(
         "<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{h}' style='background:#fff;border:1px solid #ccc'>\
 <text x='{pad}' y='20' font-size='12'>{}: max {:.3e}</text>\
 <line x1='{pad}' y1='{}' x2='{}' y2='{}' stroke='#888'/><line x1='{pad}' y1='{pad}' x2='{pad}' y2='{}' stroke='#888'/>\
-<polyline fill='none' stroke='#c33' stroke-width='2' points='{}'/>\
-<text x='{pad}' y='{}' font-size='11'>frame 0</text><text x='{}' y='{}' font-size='11' text-anchor='end'>frame {}</text></svg>",
+<polyline fill='none' stroke='#c33' stroke-width='2' points='{}'/>{dots}\
+<text x='{pad}' y='{}' font-size='11'>frame {first}</text><text x='{}' y='{}' font-size='11' text-anchor='end'>frame {last}</text></svg>",
         esc(label),
         max,
         h - pad,
@@ -84,7 +89,6 @@ pub fn svg_plot(values: &[f64], label: &str) -> String {
         h - pad + 15.0,
         w - pad,
         h - pad + 15.0,
-        values.len().saturating_sub(1)
     )
 }
 
@@ -110,6 +114,10 @@ mod tests {
         assert_eq!((dec.info().width, dec.info().height), (3, 2));
         let h = png_heat(&img, &Image { width: 3, height: 2, pixels: vec![0.0; 18] }, 1.0);
         assert!(h.starts_with(&[0x89, b'P', b'N', b'G']));
-        assert!(svg_plot(&[0.1, 0.3, 0.2], "rmse").contains("polyline"));
+        let plot = svg_plot(&[0.1, 0.3, 0.2], &[4, 5, 6], "rmse");
+        assert!(plot.contains("polyline") && plot.matches("<circle").count() == 3 && plot.contains("frame 4") && plot.contains("frame 6"));
+        // One frame: a dot, labelled with its number.
+        let one = svg_plot(&[0.2], &[3], "rmse");
+        assert!(one.matches("<circle").count() == 1 && one.contains("frame 3") && !one.contains("frame 0"));
     }
 }
