@@ -2,7 +2,7 @@
 
 # Cook the bundled 4-frame smoke sequence into smoke.vpak.
 run:
-    cargo run --release -- cook fixtures/smoke_seq -o smoke.vpak --force
+    scripts/run.sh
 
 # The whole test suite (installs the Debian packages the tests need).
 test:

@@ -9,17 +9,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-need=()
-for pkg in python3-openvdb python3-numpy python3-pil python3-xxhash libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1 python3-junitparser chromium make g++; do
-    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "ok installed" || need+=("$pkg")
-done
-if [ ${#need[@]} -gt 0 ]; then
-    echo "test.sh: installing Debian packages: ${need[*]}" >&2
-    sudo=""
-    [ "$(id -u)" -ne 0 ] && sudo="sudo"
-    $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
-fi
+. scripts/debian-packages.sh
+need python3-openvdb python3-numpy python3-pil python3-xxhash libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1 python3-junitparser chromium make g++
 
 # Mesa's Vulkan loader wants a runtime directory; the GPU tests run on its
 # CPU driver (lavapipe) when there is no GPU.
