@@ -496,17 +496,19 @@ impl Cooker {
         progress.start("encoding", (work.len() / channels * specs.len()) as u64);
         let encoded = Encoded::new(specs.clone(), self.opts.quality, work, channels, work_masks.as_deref(), &|n| progress.advance(n as u64));
         progress.finish();
-        let planes = specs.len();
-        let (keep, enc_remap) = distinct(encoded.len(), &|i, buf| brick_bytes(&encoded, 0..planes, i, buf));
         // Each plane stores its own distinct bricks (a table maps bricks to
         // them), so a channel that repeats where others change (a constant
         // flame, a static shadow) is stored once, as in an asset of its own.
-        let plane_keep: Vec<(Vec<usize>, Vec<u32>)> = (0..planes)
-            .map(|p| {
-                let (k, table) = distinct(keep.len(), &|i, buf| brick_bytes(&encoded, p..p + 1, keep[i], buf));
-                (k.into_iter().map(|i| keep[i]).collect(), table)
-            })
-            .collect();
+        let plane_ids: Vec<(Vec<usize>, Vec<u32>)> = (0..specs.len()).map(|p| distinct(encoded.len(), &|i, buf| plane_brick_bytes(&encoded, p, i, buf))).collect();
+        // A brick is its plane bricks: the distinct bricks are the distinct
+        // combinations. Plane bricks, numbered by first use, are then numbered
+        // by first use among the distinct bricks too (a plane without repeats
+        // maps brick b to plane brick b).
+        let (keep, enc_remap) = distinct(encoded.len(), &|i, buf| {
+            buf.clear();
+            buf.extend(plane_ids.iter().flat_map(|(_, ids)| ids[i].to_le_bytes()));
+        });
+        let plane_keep: Vec<(Vec<usize>, Vec<u32>)> = plane_ids.into_iter().map(|(k, ids)| (k, keep.iter().map(|&i| ids[i]).collect())).collect();
         // Pool brick -> stored brick.
         let remap: Vec<u32> = match &clustered {
             Some(c) => c.remap.iter().map(|&w| enc_remap[w as usize]).collect(),
@@ -569,8 +571,8 @@ impl Cooker {
         let unique_bricks = built.pool.len();
         let t0 = Instant::now();
         let mut sections = node_sections(&nodes);
-        let mut plane_infos = Vec::with_capacity(planes);
-        let mut plane_bytes = vec![0u64; planes];
+        let mut plane_infos = Vec::with_capacity(specs.len());
+        let mut plane_bytes = vec![0u64; specs.len()];
         let mut atlas_sections = Vec::new();
         let enc = &encoded;
         for (p, (spec, (pkeep, table))) in specs.iter().zip(&plane_keep).enumerate() {
@@ -788,19 +790,15 @@ fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8])>) -> Vec<
     out
 }
 
-/// Brick `i`'s bytes in `planes`: each plane's encoding, then the range of
-/// each of its channels.
-fn brick_bytes(encoded: &Encoded, planes: std::ops::Range<usize>, i: usize, buf: &mut Vec<u8>) {
+/// Brick `i`'s bytes in plane `p`: its encoding, then the range of each of the plane's channels.
+fn plane_brick_bytes(encoded: &Encoded, p: usize, i: usize, buf: &mut Vec<u8>) {
+    let spec = &encoded.specs[p];
     buf.clear();
-    for p in planes {
-        let spec = &encoded.specs[p];
-        let at = buf.len();
-        buf.resize(at + spec.plane.brick_bytes(), 0);
-        encoded.write(p, i, &mut buf[at..]);
-        for &c in &spec.channels {
-            for v in encoded.range(i, c) {
-                buf.extend_from_slice(&v.to_bits().to_le_bytes());
-            }
+    buf.resize(spec.plane.brick_bytes(), 0);
+    encoded.write(p, i, buf);
+    for &c in &spec.channels {
+        for v in encoded.range(i, c) {
+            buf.extend_from_slice(&v.to_bits().to_le_bytes());
         }
     }
 }
