@@ -7,10 +7,7 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 
 fn scratch(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vdbcook-auto-{}-{tag}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    scratch_dir("auto", tag)
 }
 
 /// `cook --auto` on the bundled sequence with two small views; exit code, JSON, stderr.
@@ -135,27 +132,19 @@ fn the_auto_json_follows_the_documented_schema() {
     }
     let dir = scratch("schema");
     let doc = std::fs::read_to_string(root().join("docs/cook-json.md")).unwrap();
-    let section = |name: &str| documented_keys(&doc).into_iter().find(|(h, _)| h.starts_with(name)).map(|(_, k)| k).unwrap_or_else(|| panic!("no section {name}"));
-    let both_ways = |obj: &Value, documented: &[String], what: &str| {
-        for k in documented {
-            assert!(obj.get(k).is_some(), "{what}: documented key {k} is missing: {obj}");
-        }
-        for k in obj.as_object().unwrap().keys() {
-            assert!(documented.contains(k), "{what}: key {k} is not documented");
-        }
-    };
+    let section = |name: &str| doc_section(&doc, name);
     let (code, v, err) = auto(&dir.join("a.vpak"), &["--max-flip", "1"]);
     assert_eq!(code, Some(0), "{err}");
-    both_ways(&v, &section("Top level"), "top level");
-    both_ways(&v["auto"], &section("Auto search"), "auto");
+    assert_documented(&v, &section("Top level"), "top level");
+    assert_documented(&v["auto"], &section("Auto search"), "auto");
     for c in candidates(&v) {
-        both_ways(c, &section("Auto candidates"), "candidate");
+        assert_documented(c, &section("Auto candidates"), "candidate");
     }
     let (code, v, err) = auto(&dir.join("b.vpak"), &["--max-flip", "0", "--clusters", "2"]);
     assert_eq!(code, Some(3), "{err}");
     let keys: Vec<&String> = v.as_object().unwrap().keys().collect();
     assert_eq!(keys, ["auto", "output"], "only the search when nothing is written");
-    both_ways(&v["auto"], &section("Auto search"), "auto");
+    assert_documented(&v["auto"], &section("Auto search"), "auto");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -9,10 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
 fn scratch(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vdbcook-bake-{}-{tag}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    scratch_dir("bake", tag)
 }
 
 fn run(args: &[&str], env: &[(&str, &str)]) -> Output {
@@ -615,23 +612,14 @@ fn the_json_follows_the_documented_schema() {
     let (_, v, e) = bake(&[s(&m), "--out-dir", s(&dir.join("out"))], &[]);
     assert_eq!(v["assets"].as_array().map(Vec::len), Some(3), "{e}");
     let doc = std::fs::read_to_string(root().join("docs/bake-json.md")).unwrap();
-    let sections = documented_keys(&doc);
-    let keys = |name: &str| sections.iter().find(|(h, _)| h.starts_with(name)).map(|(_, k)| k.clone()).unwrap_or_else(|| panic!("no section {name}"));
-    let both_ways = |obj: &Value, documented: &[String], what: &str| {
-        for k in documented {
-            assert!(obj.get(k).is_some(), "{what}: documented key {k} is missing: {obj}");
-        }
-        for k in obj.as_object().unwrap().keys() {
-            assert!(documented.contains(k), "{what}: key {k} is not documented");
-        }
-    };
-    both_ways(&v, &keys("Top level"), "top level");
-    both_ways(&v["summary"], &keys("Summary"), "summary");
+    let keys = |name: &str| doc_section(&doc, name);
+    assert_documented(&v, &keys("Top level"), "top level");
+    assert_documented(&v["summary"], &keys("Summary"), "summary");
     for a in v["assets"].as_array().unwrap() {
-        both_ways(a, &keys("Asset entries"), "asset");
-        both_ways(&a["gate"], &keys("Gate"), "gate");
+        assert_documented(a, &keys("Asset entries"), "asset");
+        assert_documented(&a["gate"], &keys("Gate"), "gate");
         if a["validation"].is_object() {
-            both_ways(&a["validation"], &keys("Validation"), "validation");
+            assert_documented(&a["validation"], &keys("Validation"), "validation");
         }
         assert!(["baked", "cached", "failed", "gate-failed", "skipped"].contains(&a["status"].as_str().unwrap()));
     }

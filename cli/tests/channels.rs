@@ -6,9 +6,7 @@ use common::*;
 use std::path::{Path, PathBuf};
 
 fn scratch(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vdbcook-channels-{}-{tag}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    scratch_dir("channels", tag)
 }
 
 fn sample(rel: &str) -> Option<String> {

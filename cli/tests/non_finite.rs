@@ -11,9 +11,7 @@ use std::path::{Path, PathBuf};
 use vdbcook_grid::{Coord, Grid, GridClass, Leaf, LeafMask, Transform};
 
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vdbcook-non-finite-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    scratch_dir("non-finite", name)
 }
 
 /// Voxels made NaN and +inf in [`dirty`], both inside one brick.
@@ -146,42 +144,28 @@ fn a_transform_mismatch_names_both_files() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Every documented key is in `obj` and every key of `obj` is documented.
-fn both_ways(obj: &Value, documented: &[String], what: &str) {
-    for k in documented {
-        assert!(obj.get(k).is_some(), "{what}: documented key {k} is missing: {obj}");
-    }
-    for k in obj.as_object().unwrap().keys() {
-        assert!(documented.contains(k), "{what}: key {k} is not documented");
-    }
-}
-
-fn section(doc: &str, name: &str) -> Vec<String> {
-    documented_keys(doc).into_iter().find(|(h, _)| h.starts_with(name)).map(|(_, k)| k).unwrap_or_else(|| panic!("no section {name}"))
-}
-
 #[test]
 fn cook_json_follows_the_documented_schema() {
     let dir = scratch("cook-schema");
     let p = write(&dir, "dirty.vdb", &dirty());
     let doc = std::fs::read_to_string(root().join("docs/cook-json.md")).unwrap();
-    let mut top = section(&doc, "Top level");
+    let mut top = doc_section(&doc, "Top level");
     top.retain(|k| k != "validation" && k != "auto"); // only with --validate or --auto (a GPU)
     let v = cook_json(&p, &dir.join("x.vpak"), &["--format", "bc4", "--clusters", "4"]);
-    both_ways(&v, &top, "top level");
-    both_ways(&v["channels"][0], &section(&doc, "Channel objects"), "channel");
-    both_ways(&v["clustering"], &section(&doc, "Clustering"), "clustering");
+    assert_documented(&v, &top, "top level");
+    assert_documented(&v["channels"][0], &doc_section(&doc, "Channel objects"), "channel");
+    assert_documented(&v["clustering"], &doc_section(&doc, "Clustering"), "clustering");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn inspect_json_follows_the_documented_schema() {
     let doc = std::fs::read_to_string(root().join("docs/inspect-json.md")).unwrap();
-    let keys = section(&doc, "Grid objects");
+    let keys = doc_section(&doc, "Grid objects");
     let v: Value = serde_json::from_slice(&ok(vdbcook(&["inspect", "--json", "fixtures/multi_grid.vdb", "fixtures/tiles.vdb"])).stdout).unwrap();
     for f in v["files"].as_array().unwrap() {
         for g in f["grids"].as_array().unwrap() {
-            both_ways(g, &keys, "grid");
+            assert_documented(g, &keys, "grid");
         }
     }
 }

@@ -6,9 +6,7 @@ use common::*;
 use std::path::{Path, PathBuf};
 
 fn scratch(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vdbcook-validate-{}-{tag}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    scratch_dir("validate", tag)
 }
 
 fn cook(dir: &Path, format: &str) -> PathBuf {
@@ -242,16 +240,10 @@ fn the_json_follows_the_documented_schema() {
     let (code, v, err) = validate_json(&cook(&dir, "unorm8"), &[]);
     assert_eq!(code, Some(0), "{err}");
     let doc = std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/validate-json.md")).unwrap();
-    let sections = documented_keys(&doc);
-    let keys = |name: &str| sections.iter().find(|(h, _)| h.starts_with(name)).map(|(_, k)| k.clone()).unwrap_or_else(|| panic!("no section {name}"));
+    let keys = |name: &str| doc_section(&doc, name);
     let top = keys("Top level");
     assert!(top.len() >= 12, "{top:?}");
-    for k in &top {
-        assert!(v.get(k).is_some(), "documented key {k} is missing: {v}");
-    }
-    for k in v.as_object().unwrap().keys() {
-        assert!(top.contains(k), "key {k} is not documented");
-    }
+    assert_documented(&v, &top, "top level");
     for img in v["images"].as_array().unwrap() {
         for k in keys("Image entries") {
             assert!(img.get(&k).is_some(), "{k} missing in {img}");

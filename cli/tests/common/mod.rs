@@ -157,10 +157,33 @@ pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// A fresh scratch directory for test `tag` of the suite `suite`, unique to this run.
+pub fn scratch_dir(suite: &str, tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("vdbcook-{suite}-{}-{tag}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
 /// The output of a run that must succeed (its stderr is the failure message).
 pub fn ok(out: Output) -> Output {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     out
+}
+
+/// The documented keys of the section of `doc` whose heading starts with `name`.
+pub fn doc_section(doc: &str, name: &str) -> Vec<String> {
+    documented_keys(doc).into_iter().find(|(h, _)| h.starts_with(name)).map(|(_, k)| k).unwrap_or_else(|| panic!("no section {name}"))
+}
+
+/// Every documented key is in `obj` and every key of `obj` is documented.
+pub fn assert_documented(obj: &serde_json::Value, documented: &[String], what: &str) {
+    for k in documented {
+        assert!(obj.get(k).is_some(), "{what}: documented key {k} is missing: {obj}");
+    }
+    for k in obj.as_object().unwrap().keys() {
+        assert!(documented.contains(k), "{what}: key {k} is not documented");
+    }
 }
 
 /// Keys in the first column of the tables under each `## ` heading of a doc.
