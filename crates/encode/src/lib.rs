@@ -130,38 +130,17 @@ pub fn fill_non_finite(values: &Brick) -> Option<Brick> {
     if values.iter().fold(true, |all, v| all & v.is_finite()) {
         return None;
     }
-    let mut known = [false; BRICK_VOXELS];
-    for (k, v) in known.iter_mut().zip(values) {
-        *k = v.is_finite();
+    let mut known = [0u64; 8];
+    for (i, v) in values.iter().enumerate() {
+        known[i >> 6] |= u64::from(v.is_finite()) << (i & 63);
     }
-    if !known.contains(&true) {
+    if known == [0; 8] {
         return None;
     }
     let mut out = *values;
-    loop {
-        let front: Vec<(usize, f32)> = (0..BRICK_VOXELS)
-            .filter(|&i| !known[i])
-            .filter_map(|i| {
-                let (x, y, z) = (i >> 6, (i >> 3) & 7, i & 7);
-                let near = [(x > 0, i.wrapping_sub(64)), (x < 7, i + 64), (y > 0, i.wrapping_sub(8)), (y < 7, i + 8), (z > 0, i.wrapping_sub(1)), (z < 7, i + 1)];
-                let (mut sum, mut n) = (0.0f32, 0u32);
-                for (inside, j) in near {
-                    if inside && known[j] {
-                        sum += out[j];
-                        n += 1;
-                    }
-                }
-                (n > 0).then(|| (i, sum / n as f32))
-            })
-            .collect();
-        if front.is_empty() {
-            return Some(out);
-        }
-        for (i, v) in front {
-            out[i] = v;
-            known[i] = true;
-        }
-    }
+    // Fronts reach every voxel of a brick (at most 21 steps apart).
+    vdbcook_grid::fill_from_neighbours(&mut out, known, BRICK_VOXELS);
+    Some(out)
 }
 
 /// A brick's values as levels in [0, 255] over its own range (not rounded);

@@ -45,56 +45,7 @@ pub fn brick_of_leaf(leaf: &vdbcook_grid::Leaf) -> Brick {
         sum += f64::from(leaf.values[i]);
     }
     let mean = if n > 0 { (sum / f64::from(n)) as f32 } else { 0.0 };
-    // Word x of a mask holds the 64 voxels (y, z) of slab x, bit y·8 + z.
-    const NOT_Z0: u64 = 0xfefe_fefe_fefe_fefe;
-    const NOT_Z7: u64 = 0x7f7f_7f7f_7f7f_7f7f;
-    let mut known = leaf.mask.0;
-    for _ in 0..FILL_PASSES {
-        // The unknown voxels next to a known one: each takes the mean of its
-        // known neighbours (in the order -x, +x, -y, +y, -z, +z), which this
-        // pass does not change.
-        let mut front = [0u64; 8];
-        for x in 0..8 {
-            let k = known[x];
-            let near = (if x > 0 { known[x - 1] } else { 0 }) | (if x < 7 { known[x + 1] } else { 0 }) | k << 8 | k >> 8 | (k << 1 & NOT_Z0) | (k >> 1 & NOT_Z7);
-            front[x] = near & !k;
-        }
-        if front == [0; 8] {
-            break;
-        }
-        for i in vdbcook_grid::set_bits(&front) {
-            let (x, y, z) = (i >> 6, (i >> 3) & 7, i & 7);
-            let (mut acc, mut cnt) = (0.0f32, 0u32);
-            let mut visit = |j: usize| {
-                if known[j >> 6] >> (j & 63) & 1 == 1 {
-                    acc += b[j];
-                    cnt += 1;
-                }
-            };
-            if x > 0 {
-                visit(i - 64);
-            }
-            if x < 7 {
-                visit(i + 64);
-            }
-            if y > 0 {
-                visit(i - 8);
-            }
-            if y < 7 {
-                visit(i + 8);
-            }
-            if z > 0 {
-                visit(i - 1);
-            }
-            if z < 7 {
-                visit(i + 1);
-            }
-            b[i] = acc / cnt as f32;
-        }
-        for (k, f) in known.iter_mut().zip(front) {
-            *k |= f;
-        }
-    }
+    let known = vdbcook_grid::fill_from_neighbours(&mut b, leaf.mask.0, FILL_PASSES);
     for i in vdbcook_grid::set_bits(&known.map(|k| !k)) {
         b[i] = mean;
     }

@@ -83,6 +83,62 @@ pub fn set_bits(words: &[u64]) -> impl Iterator<Item = usize> + '_ {
     })
 }
 
+/// Fills the unknown voxels of a leaf-ordered brick from the known ones
+/// (`known`: a mask in [`LeafMask`]'s layout), front by front outwards: each
+/// unknown voxel next to a known one takes the mean of its known
+/// 6-neighbours (in the order −x, +x, −y, +y, −z, +z), which that pass does
+/// not change.  Stops after `passes` fronts or when no unknown voxel touches
+/// a known one; returns the mask of the voxels known then.
+pub fn fill_from_neighbours(values: &mut [f32; LEAF_VOXELS], mut known: [u64; 8], passes: usize) -> [u64; 8] {
+    // Word x of a mask holds the 64 voxels (y, z) of slab x, bit y·8 + z.
+    const NOT_Z0: u64 = 0xfefe_fefe_fefe_fefe;
+    const NOT_Z7: u64 = 0x7f7f_7f7f_7f7f_7f7f;
+    for _ in 0..passes {
+        let mut front = [0u64; 8];
+        for x in 0..8 {
+            let k = known[x];
+            let near = (if x > 0 { known[x - 1] } else { 0 }) | (if x < 7 { known[x + 1] } else { 0 }) | k << 8 | k >> 8 | (k << 1 & NOT_Z0) | (k >> 1 & NOT_Z7);
+            front[x] = near & !k;
+        }
+        if front == [0; 8] {
+            break;
+        }
+        for i in set_bits(&front) {
+            let (x, y, z) = (i >> 6, (i >> 3) & 7, i & 7);
+            let (mut acc, mut cnt) = (0.0f32, 0u32);
+            let mut visit = |j: usize| {
+                if known[j >> 6] >> (j & 63) & 1 == 1 {
+                    acc += values[j];
+                    cnt += 1;
+                }
+            };
+            if x > 0 {
+                visit(i - 64);
+            }
+            if x < 7 {
+                visit(i + 64);
+            }
+            if y > 0 {
+                visit(i - 8);
+            }
+            if y < 7 {
+                visit(i + 8);
+            }
+            if z > 0 {
+                visit(i - 1);
+            }
+            if z < 7 {
+                visit(i + 1);
+            }
+            values[i] = acc / cnt as f32;
+        }
+        for (k, f) in known.iter_mut().zip(front) {
+            *k |= f;
+        }
+    }
+    known
+}
+
 /// A 512-bit voxel mask in OpenVDB's layout: bit `i` is bit `i % 64` of word `i / 64`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct LeafMask(pub [u64; 8]);
