@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (version 4).
+"""Independent reader for vdbcook's `.vpak` volume asset format (version 5).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -23,18 +23,21 @@ import sys
 import numpy as np
 
 MAGIC = b"VPAK\r\n\x1a\n"
-VERSION = 4
+VERSION = 5
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
 
 # Section kinds (format.md, "Sections").
-K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_RANGES, K_ATLAS, K_TABLE = range(1, 12)
+K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_RANGES, K_ATLAS, K_TABLE, K_CHANNEL_TABLE = range(1, 13)
+# Channel table entries: the plane's choice in bits 28..31, the plane brick below.
+CHOICE_SHIFT, PLANE_BRICK_MASK, MAX_ALTERNATES = 28, (1 << 28) - 1, 15
 
 L1_WORDS, L2_WORDS, L3_WORDS = 1537, 193, 3
 L1_MASK_WORDS, L2_MASK_WORDS = 1024, 128
 
-F32, F16, UNORM8, BC4, BC7 = range(5)
-FORMAT_NAMES = ["f32", "f16", "unorm8", "bc4", "bc7"]
+F32, F16, UNORM8, BC4, BC7, UNORM16, CONSTANT = range(7)
+FORMAT_NAMES = ["f32", "f16", "unorm8", "bc4", "bc7", "unorm16", "constant"]
+RANGED = (UNORM8, BC4, BC7, UNORM16)
 # Allowed (lanes, zpt) per format (format.md, planes table).
 FORMAT_RULES = {
     F32: ({1, 2, 4}, {1}),
@@ -42,6 +45,8 @@ FORMAT_RULES = {
     UNORM8: ({1, 2, 4}, {1}),
     BC4: ({1}, {1}),
     BC7: ({4}, {1, 2, 4}),
+    UNORM16: ({1, 2, 4}, {1}),
+    CONSTANT: ({1}, {1}),
 }
 
 
@@ -188,7 +193,7 @@ def decode_metadata(data):
             "name": r.string(), "grid": r.string(), "component": r.option(r.uint),
             "value_type": r.string(), "class": r.string(), "background": r.f32(),
             "value_range": r.array(r.f32, 2), "group": r.uint(), "plane": r.uint(),
-            "lane": r.uint(),
+            "lane": r.uint(), "alternates": r.vec(r.uint),
         }
 
     m["channels"] = r.vec(channel)
@@ -224,6 +229,15 @@ def validate(m, secs):
             raise VpakError(f"plane {p} has a format/lanes/zpt the table does not allow")
     used = [set() for _ in range(P)]
     for c, ch in enumerate(m["channels"]):
+        if ch["alternates"]:
+            # A channel in several planes has each of them to itself, from lane 0.
+            if len(ch["alternates"]) > MAX_ALTERNATES or ch["lane"] != 0:
+                raise VpakError(f"channel {c} has too many alternates or does not start at lane 0")
+            for p in channel_planes(ch):
+                if p >= P or used[p]:
+                    raise VpakError(f"channel {c} names a missing or shared plane {p}")
+                used[p] = set(range(4))
+            continue
         p = ch["plane"]
         if p >= P:
             raise VpakError(f"channel {c} in a missing plane")
@@ -236,10 +250,33 @@ def validate(m, secs):
         raise VpakError("a plane holds no channel")
     for p, pl in enumerate(m["planes"]):
         validate_plane(m, secs, p, pl)
+    for c, ch in enumerate(m["channels"]):
+        present = (K_CHANNEL_TABLE, c) in secs.table
+        if present != bool(ch["alternates"]):
+            raise VpakError(f"channel {c}: a channel table must exist exactly when it has alternates")
+        if present:
+            t = secs.u32(K_CHANNEL_TABLE, c).astype(np.int64)
+            planes = channel_planes(ch)
+            choice, k = t >> CHOICE_SHIFT, t & PLANE_BRICK_MASK
+            if len(t) != m["brick_count"] or (len(t) and choice.max() >= len(planes)):
+                raise VpakError(f"channel {c}: channel table of the wrong length or naming a missing plane")
+            limit = np.array([m["planes"][p]["bricks"] for p in planes])[choice]
+            if (k >= limit).any():
+                raise VpakError(f"channel {c}: channel table entry past its plane's bricks")
     if m["index_offset"][0] % 128 or m["index_offset"][1] % 128 or m["index_offset"][2] % 128:
         raise VpakError("index_offset not a multiple of 128")
     if len(m["frames"]) != m["frame_count"]:
         raise VpakError("frame info list is not frame_count long")
+
+
+def channel_planes(ch):
+    """A channel's planes: its plane, then its alternates (choices 0, 1, ...)."""
+    return [ch["plane"]] + list(ch["alternates"])
+
+
+def mixed_plane(m, p):
+    """True when plane p belongs to a channel with alternates (its channel table addresses it)."""
+    return any(ch["alternates"] and p in channel_planes(ch) for ch in m["channels"])
 
 
 def slots_of(pl):
@@ -257,7 +294,7 @@ def validate_plane(m, secs, p, pl):
     n, bricks = m["brick_count"], pl["bricks"]
     if bricks > n or (bricks == 0) != (n == 0):
         raise VpakError(f"plane {p} stores {bricks} plane bricks for {n} bricks")
-    has_table = bricks != n
+    has_table = bricks != n and not mixed_plane(m, p)
     table = secs.u32(K_TABLE, p) if (K_TABLE, p) in secs.table else None
     if has_table != (table is not None):
         raise VpakError(f"plane {p}: a brick table must exist exactly when the plane stores fewer bricks")
@@ -268,6 +305,10 @@ def validate_plane(m, secs, p, pl):
         raise VpakError(f"plane {p}: brick ranges section has the wrong length")
     if len(ranges) and not (ranges[0::2] <= ranges[1::2]).all():
         raise VpakError(f"plane {p}: a brick range has min > max (or NaN)")
+    if pl["format"] == CONSTANT:
+        if pl["atlases"] or (len(ranges) and not (ranges[0::2] == ranges[1::2]).all()):
+            raise VpakError(f"plane {p}: a constant plane with atlases or a range with min != max")
+        return
     # Atlases: consecutive from plane brick 0, all but the last full and of one shape,
     # and the last one's bricks placeable with the first one's shape.
     atlases, first = pl["atlases"], 0
@@ -477,16 +518,55 @@ def load_plane_texture(secs, m, p, a):
     bx, by, bz = pl["atlases"][a]["bricks"]
     W, H, D = 8 * bx, 8 * by, (8 // zpt) * bz
     data = secs.get(K_ATLAS, atlas_section(m, p, a))
-    if fmt in (F32, F16, UNORM8):
-        dtype, size = {F32: ("<f4", 4), F16: ("<f2", 2), UNORM8: ("u1", 1)}[fmt]
+    if fmt in (F32, F16, UNORM8, UNORM16):
+        dtype, size = {F32: ("<f4", 4), F16: ("<f2", 2), UNORM8: ("u1", 1), UNORM16: ("<u2", 2)}[fmt]
         if len(data) != W * H * D * lanes * size:
             raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
         tex = np.frombuffer(data, dtype=dtype).reshape(D, H, W, lanes).astype(np.float32)
-        return tex / np.float32(255) if fmt == UNORM8 else tex
+        scale = {UNORM8: 255, UNORM16: 65535}.get(fmt)
+        return tex / np.float32(scale) if scale else tex
     B = 8 if fmt == BC4 else 16
     if W % 4 or H % 4 or len(data) != (W // 4) * (H // 4) * D * B:
         raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
     return decode_bc4(data, W, H, D) if fmt == BC4 else decode_bc7(data, W, H, D)
+
+
+def plane_values(m, secs, p, lane, k, textures):
+    """Values [len(k), 512] (leaf order) of the channel at `lane` of plane p, for plane bricks k."""
+    pl = m["planes"][p]
+    zpt, slices = pl["z_per_texel"], 8 // pl["z_per_texel"]
+    out = np.zeros((len(k), 512), dtype=np.float32)
+    ranges = secs.f32(K_RANGES, p)
+    r = 2 * (k * slots_of(pl) + lane // zpt)
+    if pl["format"] == CONSTANT:
+        # No texels: every voxel is the range's min.
+        out[:] = ranges[r][:, None]
+        return out
+    x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
+    x, y, z = x.ravel(), y.ravel(), z.ravel()
+    for a, at in enumerate(pl["atlases"]):
+        sel = np.nonzero((k >= at["first_brick"]) & (k < at["first_brick"] + at["count"]))[0]
+        if not len(sel):
+            continue
+        bx, by, _ = at["bricks"]
+        i = k[sel] - at["first_brick"]
+        px, py, pz = i % bx, (i // bx) % by, i // (bx * by)
+        if (p, a) not in textures:
+            textures[(p, a)] = load_plane_texture(secs, m, p, a)
+        tex = textures[(p, a)]
+        # texel (8px + x, 8py + y, slices*pz + z/zpt), lane = channel lane + z % zpt
+        X = 8 * px[:, None] + x[None, :]
+        Y = 8 * py[:, None] + y[None, :]
+        Z = slices * pz[:, None] + (z // zpt)[None, :]
+        L = lane + (z % zpt)[None, :]
+        out[sel, :] = tex[Z, Y, X, np.broadcast_to(L, X.shape)]
+    # Ranged formats: level t over the plane brick's [min, max] for the channel's
+    # slot. In f32, min + t * (max - min): found by experiment to match `vdbcook
+    # unpack` exactly.
+    if pl["format"] in RANGED:
+        lo, hi = ranges[r][:, None], ranges[r + 1][:, None]
+        out = np.where(hi > lo, lo + out * (hi - lo), lo)
+    return out
 
 
 def brick_values(m, secs, bricks):
@@ -496,41 +576,22 @@ def brick_values(m, secs, bricks):
     if len(bricks) and bricks.max() >= m["brick_count"]:
         raise VpakError("L3 node points at a missing brick")
     out = np.zeros((len(bricks), C, 512), dtype=np.float32)
-    x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
-    x, y, z = x.ravel(), y.ravel(), z.ravel()
     textures = {}
     for c, ch in enumerate(m["channels"]):
+        if ch["alternates"]:
+            # Per-brick formats: the channel table names the plane and the plane brick.
+            e = secs.u32(K_CHANNEL_TABLE, c).astype(np.int64)[bricks]
+            choice, k = e >> CHOICE_SHIFT, e & PLANE_BRICK_MASK
+            for j, p in enumerate(channel_planes(ch)):
+                sel = np.nonzero(choice == j)[0]
+                if len(sel):
+                    out[sel, c, :] = plane_values(m, secs, p, 0, k[sel], textures)
+            continue
         p = ch["plane"]
-        pl = m["planes"][p]
-        zpt, slices = pl["z_per_texel"], 8 // pl["z_per_texel"]
         # Brick b's plane brick k: entry b of the plane's brick table, or b without one.
-        table = secs.u32(K_TABLE, p).astype(np.int64) if pl["bricks"] != m["brick_count"] else None
+        table = secs.u32(K_TABLE, p).astype(np.int64) if m["planes"][p]["bricks"] != m["brick_count"] else None
         k = table[bricks] if table is not None else bricks
-        for a, at in enumerate(pl["atlases"]):
-            sel = np.nonzero((k >= at["first_brick"]) & (k < at["first_brick"] + at["count"]))[0]
-            if not len(sel):
-                continue
-            bx, by, _ = at["bricks"]
-            i = k[sel] - at["first_brick"]
-            px, py, pz = i % bx, (i // bx) % by, i // (bx * by)
-            if (p, a) not in textures:
-                textures[(p, a)] = load_plane_texture(secs, m, p, a)
-            tex = textures[(p, a)]
-            # texel (8px + x, 8py + y, slices*pz + z/zpt), lane = channel lane + z % zpt
-            X = 8 * px[:, None] + x[None, :]
-            Y = 8 * py[:, None] + y[None, :]
-            Z = slices * pz[:, None] + (z // zpt)[None, :]
-            L = ch["lane"] + (z % zpt)[None, :]
-            out[sel, c, :] = tex[Z, Y, X, np.broadcast_to(L, X.shape)]
-        # Ranged formats: level t over the plane brick's [min, max] for the channel's
-        # slot. In f32, min + t * (max - min): found by experiment to match `vdbcook
-        # unpack` exactly.
-        if pl["format"] in (UNORM8, BC4, BC7):
-            ranges = secs.f32(K_RANGES, p)
-            r = 2 * (k * slots_of(pl) + ch["lane"] // zpt)
-            lo, hi = ranges[r][:, None], ranges[r + 1][:, None]
-            t = out[:, c, :]
-            out[:, c, :] = np.where(hi > lo, lo + t * (hi - lo), lo)
+        out[:, c, :] = plane_values(m, secs, p, ch["lane"], k, textures)
     return out
 
 
@@ -591,7 +652,7 @@ def read_frame(m, secs, frame):
 def summary(m):
     s = dict(m)
     for ch in s["channels"]:
-        ch["format"] = FORMAT_NAMES[m["planes"][ch["plane"]]["format"]]
+        ch["format"] = "+".join(FORMAT_NAMES[m["planes"][p]["format"]] for p in channel_planes(ch))
     s["planes"] = [dict(p, format=FORMAT_NAMES[p["format"]]) for p in m["planes"]]
     return s
 

@@ -15,8 +15,10 @@
 // Coordinates are asset index space: source index minus `index_offset`,
 // inside [0, 4096)^3. A frame's tree is walked once per 8³ cell (`vpak_leaf`)
 // and serves every channel of the voxels in it (`vpak_leaf_value`). A leaf's
-// brick has, in each plane, a plane brick (through the plane's brick table,
-// when it has one), which has a range per channel and a place in one of the
+// brick has, for each channel, a plane brick in one of the channel's planes
+// (through the plane's brick table, when it has one; for a channel stored in
+// several planes, per-brick formats, through the channel's table, which also
+// picks the plane), which has a range per channel and a place in one of the
 // plane's atlases. Atlas a of a channel's plane is texture slot
 // `slot + a` (VpakChannel.slot); up to eight slots are bound, so an engine
 // binds the atlases of the planes it samples, each plane's in consecutive
@@ -35,6 +37,11 @@ const VPAK_F16: u32 = 1u;
 const VPAK_UNORM8: u32 = 2u;
 const VPAK_BC4: u32 = 3u;
 const VPAK_BC7: u32 = 4u;
+const VPAK_UNORM16: u32 = 5u;
+const VPAK_CONSTANT: u32 = 6u;
+// Channel table entries: the plane's choice above bit 28, the plane brick below.
+const VPAK_CHOICE_SHIFT: u32 = 28u;
+const VPAK_PLANE_BRICK: u32 = 0x0fffffffu;
 
 struct VpakInfo {
     // L1 node of the frame being sampled.
@@ -74,7 +81,10 @@ struct VpakChannel {
     atlas_bricks: vec4<u32>,
     // The plane's last atlas: its number, and its own size in bricks along x
     // and y (the stride of its rows and slices, for vpak_atlas_buffer.wgsl).
-    last_atlas: vec4<u32>,
+    last_atlas: vec3<u32>,
+    // For a channel stored in several planes: the record of its first
+    // alternate plane (`table` is then its channel table); else VPAK_NONE.
+    alternates: u32,
 }
 
 @group(0) @binding(1) var<storage, read> vpak_l1: array<u32>;
@@ -135,9 +145,17 @@ struct VpakBrickChannel {
 }
 
 fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
-    let ch = vpak_channels[c];
+    var ch = vpak_channels[c];
     var pb = b;
-    if (ch.table != VPAK_NONE) {
+    if (ch.alternates != VPAK_NONE) {
+        // Per-brick formats: the channel table picks the plane and its brick.
+        let e = vpak_tables[ch.table + b];
+        pb = e & VPAK_PLANE_BRICK;
+        let choice = e >> VPAK_CHOICE_SHIFT;
+        if (choice != 0u) {
+            ch = vpak_channels[ch.alternates + choice - 1u];
+        }
+    } else if (ch.table != VPAK_NONE) {
         pb = vpak_tables[ch.table + b];
     }
     var atlas = 0u;
@@ -169,6 +187,9 @@ fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
 
 // Voxel `v` (0..8 on each axis) of the brick channel `bc`.
 fn vpak_brick_channel_value(bc: VpakBrickChannel, v: vec3<u32>) -> f32 {
+    if (bc.format == VPAK_CONSTANT) {
+        return bc.range.x;
+    }
     let t = bc.origin + vec3<u32>(v.x, v.y, v.z >> bc.z_shift);
     let level = vpak_texel(bc, vec3<i32>(t))[bc.lane + (v.z & ((1u << bc.z_shift) - 1u))];
     if (bc.ranged == 0u) {

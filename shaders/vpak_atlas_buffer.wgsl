@@ -58,7 +58,8 @@ fn vpak_texel(bc: VpakBrickChannel, t: vec3<i32>) -> vec4<f32> {
         let w = block * 2u;
         return vec4<f32>(bc4_texel(vec2<u32>(vpak_word(slot, w), vpak_word(slot, w + 1u)), texel), 0.0, 0.0, 1.0);
     }
-    // Uncompressed: `lanes` values of 4, 2 or 1 bytes each, texels x fastest.
+    // Uncompressed: `lanes` values of 4, 2 or 1 bytes each, texels x fastest
+    // (VPAK_CONSTANT planes have no texels and are never fetched).
     let index = (u.z * size.y + u.y) * size.x + u.x;
     var out = vec4<f32>(0.0, 0.0, 0.0, 1.0);
     for (var l = 0u; l < lanes; l += 1u) {
@@ -67,6 +68,8 @@ fn vpak_texel(bc: VpakBrickChannel, t: vec3<i32>) -> vec4<f32> {
             out[l] = bitcast<f32>(vpak_word(slot, k));
         } else if (format == VPAK_F16) {
             out[l] = unpack2x16float(vpak_word(slot, k >> 1u))[k & 1u];
+        } else if (format == VPAK_UNORM16) {
+            out[l] = f32((vpak_word(slot, k >> 1u) >> (16u * (k & 1u))) & 0xffffu) / 65535.0;
         } else {
             out[l] = f32(vpak_byte(slot, k)) / 255.0;
         }

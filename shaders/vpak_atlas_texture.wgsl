@@ -1,7 +1,7 @@
 // vpak_atlas_texture.wgsl: atlas planes as 3D textures (include after vpak.wgsl).
 //
-// f32, f16 and unorm8 planes are R/RG/RGBA 32Float, 16Float and 8Unorm
-// textures; bc4 planes are Bc4RUnorm and bc7 planes Bc7RgbaUnorm, decoded by
+// f32, f16, unorm16 and unorm8 planes are R/RG/RGBA 32Float, 16Float,
+// 16Unorm (wgpu feature TEXTURE_FORMAT_16BIT_NORM) and 8Unorm textures; bc4 planes are Bc4RUnorm and bc7 planes Bc7RgbaUnorm, decoded by
 // the texture unit. Slot s is bound at binding 8, 11, 12,
 // 13, 15, 16, 17, 18 for s = 0 to 7.
 

@@ -21,6 +21,8 @@ order (frame_2 before frame_10), pattern frames in --frames order.
 Formats (storage per voxel and channel in the brick atlas):
   f32     32 bits  exact
   f16     16 bits  IEEE half (default)
+  unorm16 16 bits  16-bit levels over each brick's own [min, max] (error range / 131070,
+                   where f16's grows with the value; NanoVDB's Fp16)
   unorm8   8 bits  8-bit levels over each brick's own [min, max]
   bc4      4 bits  BC4 block compression of those levels, one z-slice per texture slice
   bc7      2 bits  BC7: RGBA lanes hold channels x z-slices (one channel: four z-slices)
@@ -33,6 +35,15 @@ channels into shared textures in a format of their own: f32/f16/unorm8 up to fou
 channels in one RG/RGBA texture; bc7 two channels at two z-slices each per texel, or
 four in RGBA, which lowers the error of correlated channels (density and temperature;
 temperature and flames); bc4 stays one texture per channel.
+
+--max-error E chooses the format brick by brick instead of --format: every brick of
+every channel is stored in the cheapest of constant (no texels), bc7, bc4, unorm8,
+unorm16, f16 and f32 whose voxels all decode within E (absolute, in the grid's units)
+of the source, counting the voxels readers see (active in some channel); a voxel that
+is NaN or +-inf must decode to itself, so its brick is f16 or f32. A channel's bricks
+then sit in one texture per format chosen, and a table per channel says which holds
+each brick. With --clusters, a merged brick whose centroid decodes further than E from
+it is stored on its own. The summary gives bricks and bytes per format.
 
 Quality presets (--quality), for the block formats:
   ultra-fast  very-fast (default)  fast  basic  slow
@@ -247,7 +258,15 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         .iter()
         .map(|&format| {
             let fs = CookSettings { format, ..s.clone() };
-            CookOptions { format, groups: s.group.clone(), quality: s.quality, max_texture_dim: s.max_texture_dim, clustering: s.clustering(), settings: fs.recorded(job.inputs) }
+            CookOptions {
+                format,
+                groups: s.group.clone(),
+                quality: s.quality,
+                max_texture_dim: s.max_texture_dim,
+                clustering: s.clustering(),
+                max_error: s.max_error,
+                settings: fs.recorded(job.inputs),
+            }
         })
         .collect();
     if job.reference {
@@ -332,7 +351,7 @@ pub fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> Stri
                 s,
                 "  {:<16}{:<7} {:>10} ({} brick{}), values [{:.4}, {:.4}], rmse {:.3e}, psnr {:.1} dB, max {:.3e}",
                 c.name,
-                c.format.name(),
+                c.format,
                 mb(c.bytes),
                 c.bricks,
                 if c.bricks == 1 { "" } else { "s" },
@@ -343,6 +362,12 @@ pub fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> Stri
                 c.voxel_max_error
             );
         }
+    }
+    // Per-brick formats: what each format holds.
+    for c in r.channels.iter().filter(|c| c.formats.len() > 1) {
+        let f: Vec<String> = c.formats.iter().map(|f| format!("{} {} ({})", f.format.name(), f.bricks, mb(f.bytes))).collect();
+        let who = if r.channels.len() > 1 { format!("{}: ", c.name) } else { String::new() };
+        let _ = writeln!(s, "  brick formats   {who}{}", f.join(", "));
     }
     for c in &r.channels {
         if let Some(t) = non_finite_text(c, r.channels.len() > 1) {
@@ -368,7 +393,8 @@ fn non_finite_text(c: &ChannelReport, name: bool) -> Option<String> {
         return None;
     }
     let kinds: Vec<String> = [(n.nan, "NaN"), (n.pos_inf, "+inf"), (n.neg_inf, "-inf")].iter().filter(|(k, _)| *k > 0).map(|(k, what)| format!("{k} {what}")).collect();
-    let stored = if c.format.is_ranged() { format!("{} stores each as the mean of its finite neighbours", c.format.name()) } else { format!("{} keeps them", c.format.name()) };
+    // Per-brick formats store bricks with non-finite voxels in f16 or f32, which keep them.
+    let stored = if c.formats.iter().all(|f| f.format.is_ranged()) { format!("{} stores each as the mean of its finite neighbours", c.format) } else { format!("{} keeps them", c.format) };
     let who = if name { format!("{}: ", c.name) } else { String::new() };
     Some(format!("{who}{} source voxel{} ({}) left out of the error figures; {stored}", n.total(), if n.total() == 1 { "" } else { "s" }, kinds.join(", ")))
 }

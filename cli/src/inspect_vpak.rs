@@ -40,7 +40,9 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         })
         .collect();
     let sharing = |p: usize| meta.channels.iter().filter(|c| c.plane as usize == p).count().max(1) as u64;
-    let channel_bytes = |c: &vdbcook_vpak::Channel| plane_bytes[c.plane as usize] / sharing(c.plane as usize);
+    // A channel's share of each of its planes, and its channel table (per-brick formats).
+    let channel_bytes = |c: usize| meta.channel_planes(c).iter().map(|&p| plane_bytes[p as usize] / sharing(p as usize)).sum::<u64>() + section_bytes(kind::CHANNEL_TABLE, c as u32);
+    let channel_format = |c: usize| meta.channel_planes(c).iter().map(|&p| meta.planes[p as usize].plane.format.name()).collect::<Vec<_>>().join("+");
     let formats = meta.format_names();
     if as_json {
         return Ok(Described::Json(json!({
@@ -51,15 +53,15 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "tool": meta.tool,
             "format": formats,
             "frames": meta.frame_count,
-            "channels": meta.channels.iter().map(|c| json!({
+            "channels": meta.channels.iter().enumerate().map(|(i, c)| json!({
                 "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
                 "background": crate::inspect::num32(c.background), "value_range": c.value_range.map(crate::inspect::num32), "group": c.group, "plane": c.plane, "lane": c.lane,
-                "format": meta.planes[c.plane as usize].plane.format.name(), "bytes": channel_bytes(c),
+                "alternates": c.alternates, "format": channel_format(i), "bytes": channel_bytes(i),
             })).collect::<Vec<_>>(),
             "bricks": meta.brick_count,
-            "planes": meta.planes.iter().zip(&plane_bytes).map(|(p, b)| json!({
+            "planes": meta.planes.iter().zip(&plane_bytes).enumerate().map(|(i, (p, b))| json!({
                 "format": p.plane.format.name(), "lanes": p.plane.lanes, "z_per_texel": p.plane.z_per_texel, "bytes": b, "bricks": p.bricks,
-                "brick_table": p.has_table(meta.brick_count),
+                "brick_table": meta.plane_has_table(i),
                 "atlases": p.atlases.iter().map(|a| json!({"bricks": a.bricks, "first_brick": a.first_brick, "count": a.count})).collect::<Vec<_>>(),
             })).collect::<Vec<_>>(),
             "map_type": meta.map_type,
@@ -94,15 +96,15 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     }
     let _ = writeln!(s, "  size           {} bytes, {} active voxels, {:.3} bits per active voxel", file_bytes, active, if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 });
     let _ = writeln!(s, "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} background", "channel", "format", "plane", "bytes", "class", "values");
-    for c in &meta.channels {
-        let p = &meta.planes[c.plane as usize];
+    for (i, c) in meta.channels.iter().enumerate() {
+        let planes = meta.channel_planes(i).iter().map(|p| p.to_string()).collect::<Vec<_>>().join(",");
         let _ = writeln!(
             s,
             "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} {}",
             c.name,
-            p.plane.format.name(),
-            format!("{}.{}", c.plane, c.lane),
-            channel_bytes(c),
+            channel_format(i),
+            if c.alternates.is_empty() { format!("{}.{}", c.plane, c.lane) } else { planes },
+            channel_bytes(i),
             c.class,
             format!("[{}, {}]", c.value_range[0], c.value_range[1]),
             c.background
@@ -119,7 +121,13 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     }
     for (p, info) in meta.planes.iter().enumerate() {
         let plane = info.plane;
-        let table = if info.has_table(meta.brick_count) { "through a brick table" } else { "one per brick" };
+        let table = if meta.plane_has_table(p) {
+            "through a brick table"
+        } else if meta.is_mixed_plane(p) {
+            "through its channel's table"
+        } else {
+            "one per brick"
+        };
         let _ = writeln!(s, "  plane {p}  {} {}-lane: {} brick{} ({table})", plane.format.name(), plane.lanes, info.bricks, if info.bricks == 1 { "" } else { "s" });
         for (a, atlas) in info.atlases.iter().enumerate() {
             let t = AtlasLayout { plane, atlas: *atlas }.texels();

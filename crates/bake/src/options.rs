@@ -180,6 +180,20 @@ pub fn parse_rmse_budget(s: &str) -> Result<f64, String> {
     rmse_budget(parse_number(s)?)
 }
 
+/// A per-voxel error bound (`--max-error`, `max_error`): a finite number >= 0.
+pub fn max_error_bound(e: f32) -> Result<f32, String> {
+    if e >= 0.0 && e.is_finite() {
+        Ok(e)
+    } else {
+        Err(format!("must be a finite number >= 0, not {e}"))
+    }
+}
+
+/// Parses a per-voxel error bound flag.
+pub fn parse_max_error(s: &str) -> Result<f32, String> {
+    max_error_bound(parse_number(s)? as f32)
+}
+
 /// Parses a PSNR floor flag.
 pub fn parse_psnr_floor(s: &str) -> Result<f64, String> {
     psnr_floor(parse_number(s)?)
@@ -284,6 +298,10 @@ settings! {
     /// Voxel format of the brick atlas.
     #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().format))]
     format: Format = cook_defaults().format;
+    /// Store every brick in the cheapest format (constant, bc7, bc4, unorm8, unorm16, f16, f32)
+    /// whose active voxels all decode within E of the source (absolute); --format is not used.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "E", allow_negative_numbers = true, value_parser = parse_max_error, conflicts_with_all = ["format", "group"]))]
+    max_error: Option<f32> = None;
     /// Encoder preset of bc7 and bc4 (see the notes below).
     #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().quality))]
     quality: Quality = cook_defaults().quality;
@@ -345,6 +363,12 @@ impl CookSettings {
         if let Some(e) = self.max_brick_error.filter(|e| e.is_nan() || *e < 0.0) {
             return bad("max_brick_error", format!("must be a number >= 0, not {e}"));
         }
+        if let Some(Err(message)) = self.max_error.map(max_error_bound) {
+            return bad("max_error", message);
+        }
+        if self.max_error.is_some() && !self.group.is_empty() {
+            return bad("max_error", "chooses every brick's format: it takes no channel groups".into());
+        }
         if let Some(Err(message)) = self.max_rmse.map(rmse_budget) {
             return bad("max_rmse", message);
         }
@@ -373,8 +397,9 @@ impl CookSettings {
     pub fn recorded(&self, inputs: &[String]) -> Vec<(String, String)> {
         let clustered = self.clusters.is_some();
         vec![
-            ("format".into(), self.format.text()),
-            ("quality".into(), if self.format.is_block() { self.quality.text() } else { String::new() }),
+            ("format".into(), if self.max_error.is_some() { String::new() } else { self.format.text() }),
+            ("max_error".into(), self.max_error.text()),
+            ("quality".into(), if self.format.is_block() || self.max_error.is_some() { self.quality.text() } else { String::new() }),
             ("grid".into(), self.grids.clone().or_else(|| self.grid.clone()).unwrap_or_default()),
             ("groups".into(), self.group.iter().map(ChannelGroup::to_string).collect::<Vec<_>>().join(" ")),
             ("frames".into(), self.frames.text()),

@@ -49,13 +49,21 @@ pub enum Error {
     TwiceGrouped(String),
     #[error("clustering takes at most {MAX_CLUSTER_CHANNELS} channels, this cook has {0}")]
     MultiChannelClustering(usize),
+    #[error("format constant is chosen per brick by a maximum error, not for a whole channel")]
+    ConstantFormat,
+    #[error("a maximum error of {0} is not a bound (need a finite value of 0 or more)")]
+    MaxError(f32),
+    #[error("a maximum error chooses every brick's format: it takes no channel groups")]
+    MaxErrorGroups,
+    #[error("a plane of {0} bricks is more than a channel table can address")]
+    TooManyPlaneBricks(u32),
 }
 
 impl Error {
     /// True for errors in the settings a cook was given (its channel groups,
     /// clustering of too many channels) rather than in its input.
     pub fn is_settings_error(&self) -> bool {
-        matches!(self, Error::UnknownChannel { .. } | Error::TwiceGrouped(_) | Error::MultiChannelClustering(_))
+        matches!(self, Error::UnknownChannel { .. } | Error::TwiceGrouped(_) | Error::MultiChannelClustering(_) | Error::ConstantFormat | Error::MaxError(_) | Error::MaxErrorGroups)
     }
 }
 
@@ -82,9 +90,9 @@ pub struct ChannelGroup {
 impl std::str::FromStr for ChannelGroup {
     type Err = String;
     fn from_str(s: &str) -> Result<ChannelGroup, String> {
-        let bad = || format!("invalid group \"{s}\" (expected CHANNELS=FORMAT, e.g. temperature,flames=bc7; formats: f32, f16, unorm8, bc4, bc7)");
+        let bad = || format!("invalid group \"{s}\" (expected CHANNELS=FORMAT, e.g. temperature,flames=bc7; formats: f32, f16, unorm16, unorm8, bc4, bc7)");
         let (names, format) = s.rsplit_once('=').ok_or_else(bad)?;
-        let format = Format::parse(format.trim()).ok_or_else(bad)?;
+        let format = Format::parse(format.trim()).filter(|f| Format::ALL.contains(f)).ok_or_else(bad)?;
         let channels: Vec<String> = names.split(',').map(|n| n.trim().to_string()).filter(|n| !n.is_empty()).collect();
         if channels.is_empty() {
             return Err(bad());
@@ -118,13 +126,17 @@ pub struct CookOptions {
     pub max_texture_dim: u32,
     /// Merge similar bricks with variance-gated k-means before encoding.
     pub clustering: Option<vdbcook_cluster::Options>,
+    /// Per-brick formats: every brick channel in the cheapest format whose
+    /// shown voxels decode within this absolute error (`format` and `groups`
+    /// are not used); merged bricks (`clustering`) are held to it too.
+    pub max_error: Option<f32>,
     /// Every setting, recorded verbatim in the asset's metadata.
     pub settings: Vec<(String, String)>,
 }
 
 impl Default for CookOptions {
     fn default() -> Self {
-        CookOptions { format: Format::F16, groups: Vec::new(), quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, settings: Vec::new() }
+        CookOptions { format: Format::F16, groups: Vec::new(), quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, max_error: None, settings: Vec::new() }
     }
 }
 
@@ -192,16 +204,28 @@ pub mod figure {
     }
 }
 
+/// One format of a channel: its plane's distinct bricks and bytes (shared
+/// equally among the plane's channels).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FormatShare {
+    pub format: Format,
+    pub bricks: u32,
+    pub bytes: u64,
+}
+
 /// One channel's figures.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ChannelReport {
     pub name: String,
-    pub format: Format,
-    /// Bytes of the plane the channel is stored in (atlases, ranges, brick
-    /// table), shared equally among its channels.
+    /// Its format, or its formats cheapest first ("constant+bc7+unorm16", per-brick formats).
+    pub format: String,
+    /// Bytes of the planes the channel is stored in (atlases, ranges, brick
+    /// tables; a plane's shared equally among its channels) and of its channel table.
     pub bytes: u64,
-    /// Distinct bricks of the channel's plane.
+    /// Distinct bricks of the channel's planes.
     pub bricks: u32,
+    /// Per format: the channel's bricks and bytes in it.
+    pub formats: Vec<FormatShare>,
     #[serde(serialize_with = "figure::range")]
     pub value_range: [f32; 2],
     /// Voxel-domain error against the source, over the channel's own active
@@ -429,6 +453,17 @@ impl Cooker {
     /// up to 2.5x on c42).  Packing is asked for with a group.  Returns the
     /// specs and each channel's group.
     fn plan_planes(&self) -> Result<(Vec<PlaneSpec>, Vec<u32>), Error> {
+        if self.opts.format == Format::Constant || self.opts.groups.iter().any(|g| g.format == Format::Constant) {
+            return Err(Error::ConstantFormat);
+        }
+        if let Some(e) = self.opts.max_error {
+            if !(e >= 0.0 && e.is_finite()) {
+                return Err(Error::MaxError(e));
+            }
+            if !self.opts.groups.is_empty() {
+                return Err(Error::MaxErrorGroups);
+            }
+        }
         let mut group_of: Vec<Option<u32>> = vec![None; self.channels.len()];
         let mut groups: Vec<(Format, Vec<usize>)> = Vec::new();
         for g in &self.opts.groups {
@@ -470,11 +505,12 @@ impl Cooker {
             return Err(Error::MultiChannelClustering(channels));
         }
         let any_block = specs.iter().any(|s| s.plane.format.is_block());
+        let max_error = self.opts.max_error;
 
         // Optionally merge similar bricks; then encode every brick and store
         // identical encodings once.
         let pool = built.pool.bricks();
-        let clustered = self.opts.clustering.as_ref().map(|co| {
+        let mut clustered = self.opts.clustering.as_ref().map(|co| {
             let t0 = Instant::now();
             progress.start("clustering", co.iterations as u64 + 1);
             // Each channel weighs alike: its values divided by its own range.
@@ -484,30 +520,108 @@ impl Cooker {
             timings.push(("cluster".into(), t0.elapsed().as_secs_f64()));
             c
         });
-        let work: &[Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
         // Which voxels of each brick some L3 node shows (block encoders may
-        // spend nothing on the others).
-        let pool_masks = any_block.then(|| union_masks(built.pool.len(), built.l3.iter().map(|l| (l.brick as usize, l.mask))));
-        let work_masks = pool_masks.as_ref().map(|m| match &clustered {
-            Some(c) => union_masks(work.len(), c.remap.iter().zip(m).map(|(&w, &mask)| (w as usize, mask))),
-            None => m.clone(),
-        });
+        // spend nothing on the others; per-brick formats bound only these).
+        let pool_masks = (any_block || max_error.is_some()).then(|| union_masks(built.pool.len(), built.l3.iter().map(|l| (l.brick as usize, l.mask))));
+        let masks_of = |clustered: &Option<Clustered>, n: usize| {
+            pool_masks.as_ref().map(|m| match clustered {
+                Some(c) => union_masks(n, c.remap.iter().zip(m).map(|(&w, &mask)| (w as usize, mask))),
+                None => m.clone(),
+            })
+        };
         let t0 = Instant::now();
-        progress.start("encoding", (work.len() / channels * specs.len()) as u64);
-        let encoded = Encoded::new(specs.clone(), self.opts.quality, work, channels, work_masks.as_deref(), &|n| progress.advance(n as u64));
-        progress.finish();
+        let encoded = match max_error {
+            None => {
+                let work: &[Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
+                let work_masks = masks_of(&clustered, work.len() / channels);
+                progress.start("encoding", (work.len() / channels * specs.len()) as u64);
+                let encoded = Encoded::new(specs.clone(), self.opts.quality, work, channels, work_masks.as_deref(), &|n| progress.advance(n as u64));
+                progress.finish();
+                encoded
+            }
+            Some(e) => {
+                let quality = self.opts.quality;
+                let choose = |bricks: &[Brick], masks: &[[u64; 8]]| {
+                    progress.start("choosing formats", (bricks.len() / channels) as u64);
+                    let c = vdbcook_encode::cheapest_all(bricks, channels, masks, e, quality, &|n| progress.advance(n as u64));
+                    progress.finish();
+                    c
+                };
+                let pool_masks = pool_masks.as_deref().unwrap_or(&[]);
+                let choices = match clustered.as_mut() {
+                    None => choose(pool, pool_masks),
+                    Some(c) => {
+                        let work_masks = union_masks(c.bricks.len() / channels, c.remap.iter().zip(pool_masks).map(|(&w, &mask)| (w as usize, mask)));
+                        let mut choices = choose(&c.bricks, &work_masks);
+                        // Merged bricks are held to the bound too: one that its
+                        // cluster's stored brick leaves past it is stored on its own.
+                        let strays: Vec<usize> = (0..c.merged.len())
+                            .into_par_iter()
+                            .filter(|&i| {
+                                let w = c.remap[i] as usize;
+                                c.merged[i]
+                                    && !(0..channels).all(|ch| {
+                                        let choice = &choices[w * channels + ch];
+                                        vdbcook_encode::within(&pool[i * channels + ch], &vdbcook_encode::decode_one(choice.format, &choice.bytes, choice.range), &pool_masks[i], e)
+                                    })
+                            })
+                            .collect();
+                        let first = c.bricks.len();
+                        for (k, &i) in strays.iter().enumerate() {
+                            c.remap[i] = (first / channels + k) as u32;
+                            c.merged[i] = false;
+                            c.bricks.extend_from_slice(&pool[i * channels..(i + 1) * channels]);
+                        }
+                        let stray_masks: Vec<[u64; 8]> = strays.iter().map(|&i| pool_masks[i]).collect();
+                        choices.extend(choose(&c.bricks[first..], &stray_masks));
+                        c.stats.over_error += strays.len();
+                        c.stats.clustered -= strays.len();
+                        // Centroids all of whose bricks strayed are not stored.
+                        let mut out: Vec<u32> = c.remap.clone();
+                        out.sort_unstable();
+                        out.dedup();
+                        let merged_into: std::collections::BTreeSet<u32> = c.remap.iter().zip(&c.merged).filter(|(_, &m)| m).map(|(&w, _)| w).collect();
+                        c.stats.centroids = merged_into.len();
+                        c.stats.bricks_out = out.len();
+                        choices
+                    }
+                };
+                let work: &[Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
+                Encoded::from_choices(work, channels, choices, &used_work(&clustered, work.len() / channels))
+            }
+        };
+        let used = used_work(&clustered, encoded.len());
+        let specs = encoded.specs.clone();
         // Each plane stores its own distinct bricks (a table maps bricks to
         // them), so a channel that repeats where others change (a constant
         // flame, a static shadow) is stored once, as in an asset of its own.
-        let plane_ids: Vec<(Vec<usize>, Vec<u32>)> = (0..specs.len()).map(|p| distinct(encoded.len(), &|i, buf| plane_brick_bytes(&encoded, p, i, buf))).collect();
+        // With per-brick formats a plane holds only the bricks that chose it
+        // (the others map to u32::MAX).
+        let plane_ids: Vec<(Vec<usize>, Vec<u32>)> = (0..specs.len())
+            .map(|p| {
+                let members: Vec<usize> = (0..encoded.len()).filter(|&i| used[i] && encoded.holds(p, i)).collect();
+                let (keep, ids) = distinct(members.len(), &|j, buf| plane_brick_bytes(&encoded, p, members[j], buf));
+                let mut all = vec![u32::MAX; encoded.len()];
+                for (&i, id) in members.iter().zip(ids) {
+                    all[i] = id;
+                }
+                (keep.into_iter().map(|j| members[j]).collect(), all)
+            })
+            .collect();
         // A brick is its plane bricks: the distinct bricks are the distinct
         // combinations. Plane bricks, numbered by first use, are then numbered
         // by first use among the distinct bricks too (a plane without repeats
         // maps brick b to plane brick b).
-        let (keep, enc_remap) = distinct(encoded.len(), &|i, buf| {
+        let used_bricks: Vec<usize> = (0..encoded.len()).filter(|&i| used[i]).collect();
+        let (keep, used_remap) = distinct(used_bricks.len(), &|j, buf| {
             buf.clear();
-            buf.extend(plane_ids.iter().flat_map(|(_, ids)| ids[i].to_le_bytes()));
+            buf.extend(plane_ids.iter().flat_map(|(_, ids)| ids[used_bricks[j]].to_le_bytes()));
         });
+        let keep: Vec<usize> = keep.into_iter().map(|j| used_bricks[j]).collect();
+        let mut enc_remap = vec![u32::MAX; encoded.len()];
+        for (&i, id) in used_bricks.iter().zip(used_remap) {
+            enc_remap[i] = id;
+        }
         let plane_keep: Vec<(Vec<usize>, Vec<u32>)> = plane_ids.into_iter().map(|(k, ids)| (k, keep.iter().map(|&i| ids[i]).collect())).collect();
         // Pool brick -> stored brick.
         let remap: Vec<u32> = match &clustered {
@@ -542,7 +656,12 @@ impl Cooker {
             let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
             let own: Vec<Brick> = merged.iter().flat_map(|&i| built.pool.brick(i).unwrap_or(&[]).iter().copied()).collect();
             let own_masks: Option<Vec<[u64; 8]>> = pool_masks.as_ref().map(|m| merged.iter().map(|&i| m[i]).collect());
-            let own_enc = Encoded::new(specs.clone(), self.opts.quality, &own, channels, own_masks.as_deref(), &|_| {});
+            let own_enc = match self.opts.max_error {
+                None => Encoded::new(specs.clone(), self.opts.quality, &own, channels, own_masks.as_deref(), &|_| {}),
+                Some(e) => {
+                    Encoded::from_choices(&own, channels, vdbcook_encode::cheapest_all(&own, channels, own_masks.as_deref().unwrap_or(&[]), e, self.opts.quality, &|_| {}), &vec![true; merged.len()])
+                }
+            };
             let mut slot = vec![u32::MAX; c.merged.len()];
             for (k, &i) in merged.iter().enumerate() {
                 slot[i] = k as u32;
@@ -575,13 +694,26 @@ impl Cooker {
         let mut plane_bytes = vec![0u64; specs.len()];
         let mut atlas_sections = Vec::new();
         let enc = &encoded;
+        // Each channel's planes, in spec order: the first is its `plane`, the
+        // others (per-brick formats) its alternates, reached through its channel table.
+        let mut planes_of: Vec<Vec<usize>> = vec![Vec::new(); channels];
+        for (p, spec) in specs.iter().enumerate() {
+            for &c in &spec.channels {
+                planes_of[c].push(p);
+            }
+        }
+        let mixed_plane = |p: usize| specs[p].channels.first().is_some_and(|&c| planes_of[c].len() > 1);
         for (p, (spec, (pkeep, table))) in specs.iter().zip(&plane_keep).enumerate() {
-            let info = PlaneInfo { plane: spec.plane, bricks: pkeep.len() as u32, atlases: plan_atlases(spec.plane.slices_per_brick(), pkeep.len() as u32, self.opts.max_texture_dim) };
+            let atlases = match spec.plane.format {
+                Format::Constant => Vec::new(),
+                _ => plan_atlases(spec.plane.slices_per_brick(), pkeep.len() as u32, self.opts.max_texture_dim),
+            };
+            let info = PlaneInfo { plane: spec.plane, bricks: pkeep.len() as u32, atlases };
             let slots = info.range_slots() as usize;
             let ranges: Vec<u32> = pkeep.iter().flat_map(|&k| (0..slots).flat_map(move |s| spec.channels.get(s).map_or([0.0; 2], |&c| enc.range(k, c)))).map(f32::to_bits).collect();
             plane_bytes[p] += 4 * ranges.len() as u64;
             sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: words(&ranges) });
-            if info.has_table(keep.len() as u32) {
+            if info.bricks as usize != keep.len() && !mixed_plane(p) {
                 plane_bytes[p] += 4 * table.len() as u64;
                 sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: words(table) });
             }
@@ -592,6 +724,22 @@ impl Cooker {
                 atlas_sections.push(Section { kind: kind::ATLAS, index: atlas_sections.len() as u32, data });
             }
             plane_infos.push(info);
+        }
+        let mut channel_table_bytes = vec![0u64; channels];
+        for (c, planes) in planes_of.iter().enumerate().filter(|(_, planes)| planes.len() > 1) {
+            let mut table = vec![0u32; keep.len()];
+            for (j, &p) in planes.iter().enumerate() {
+                if plane_infos[p].bricks > vdbcook_vpak::PLANE_BRICK_MASK {
+                    return Err(Error::TooManyPlaneBricks(plane_infos[p].bricks));
+                }
+                for (entry, &pb) in table.iter_mut().zip(&plane_keep[p].1) {
+                    if pb != u32::MAX {
+                        *entry = (j as u32) << vdbcook_vpak::CHOICE_SHIFT | pb;
+                    }
+                }
+            }
+            channel_table_bytes[c] = 4 * table.len() as u64;
+            sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: words(&table) });
         }
         sections.extend(atlas_sections);
         let stored_bricks = keep.len();
@@ -617,9 +765,9 @@ impl Cooker {
         drop(clustered);
         drop(std::mem::take(&mut built.pool));
         let transform = self.transform.as_ref().map_or_else(Transform::identity, |f| f.transform);
-        // Each channel's place: its plane and first lane.
+        // Each channel's place: its (first) plane and first lane there.
         let mut place = vec![(0u32, 0u32); channels];
-        for (p, spec) in specs.iter().enumerate() {
+        for (p, spec) in specs.iter().enumerate().rev() {
             for (slot, &c) in spec.channels.iter().enumerate() {
                 place[c] = (p as u32, slot as u32 * spec.plane.z_per_texel);
             }
@@ -646,6 +794,7 @@ impl Cooker {
                     group: group_of[c],
                     plane: place[c].0,
                     lane: place[c].1,
+                    alternates: planes_of[c].iter().skip(1).map(|&p| p as u32).collect(),
                 })
                 .collect(),
             planes: plane_infos,
@@ -667,13 +816,14 @@ impl Cooker {
             .iter()
             .enumerate()
             .map(|(c, ch)| {
-                let p = ch.plane as usize;
-                let sharing = specs[p].channels.len().max(1) as u64;
+                let formats: Vec<FormatShare> =
+                    planes_of[c].iter().map(|&p| FormatShare { format: specs[p].plane.format, bricks: meta.planes[p].bricks, bytes: plane_bytes[p] / specs[p].channels.len().max(1) as u64 }).collect();
                 ChannelReport {
                     name: ch.name.clone(),
-                    format: specs[p].plane.format,
-                    bytes: plane_bytes[p] / sharing,
-                    bricks: meta.planes[p].bricks,
+                    format: formats.iter().map(|f| f.format.name()).collect::<Vec<_>>().join("+"),
+                    bytes: formats.iter().map(|f| f.bytes).sum::<u64>() + channel_table_bytes[c],
+                    bricks: formats.iter().map(|f| f.bricks).sum(),
+                    formats,
                     value_range: ch.value_range,
                     voxel_rmse: totals[c].rmse(),
                     voxel_psnr: psnr(c),
@@ -726,6 +876,24 @@ fn finite_range(built: &Built, c: usize) -> [f32; 2] {
         [lo, hi]
     } else {
         [0.0, 0.0]
+    }
+}
+
+/// Per work brick (`n` of them), whether some pool brick uses it: with
+/// per-brick formats, a centroid all of whose bricks strayed past the bound
+/// is not stored.
+fn used_work(clustered: &Option<Clustered>, n: usize) -> Vec<bool> {
+    match clustered {
+        Some(c) => {
+            let mut used = vec![false; n];
+            for &w in &c.remap {
+                if let Some(u) = used.get_mut(w as usize) {
+                    *u = true;
+                }
+            }
+            used
+        }
+        None => vec![true; n],
     }
 }
 

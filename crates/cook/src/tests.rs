@@ -406,6 +406,7 @@ fn several_channels_round_trip_in_every_format() {
                     Format::F32 => 0.0,
                     Format::F16 => hi.abs().max(lo.abs()) * 2f32.powi(-11),
                     Format::Unorm8 => (hi - lo) / 255.0 * 0.5,
+                    Format::Unorm16 => (hi - lo) / 65535.0 * 0.5 + hi.abs().max(lo.abs()) * 1e-6,
                     _ => f32::INFINITY,
                 };
                 assert!(worst <= bound + 1e-6, "{format:?} channel {c}: worst {} over bound {bound}", worst);
@@ -706,4 +707,183 @@ fn what_samplers_would_misread_is_refused() {
     sections.iter_mut().find(|s| s.kind == vdbcook_vpak::kind::METADATA).unwrap().data = m.to_bytes().unwrap();
     let e = error(&sections);
     assert!(e.contains("atlas 1 of plane 0: its layout does not follow the first atlas's"), "{e}");
+}
+
+fn max_error_options(e: f32) -> CookOptions {
+    CookOptions { max_error: Some(e), quality: Quality::Fast, ..CookOptions::default() }
+}
+
+#[test]
+fn per_brick_formats_keep_every_voxel_within_the_bound() {
+    // Noisy, smooth and constant bricks of three channels of very different
+    // ranges, at bounds from loose to tight: every active source voxel of every
+    // channel unpacks within E, the channels spread over several formats, and
+    // a looser bound never costs more.
+    let mut frames = [fire(0), fire(2)];
+    for l in frames[0][0].leaves.iter_mut().step_by(5) {
+        l.values = [0.03; 512];
+    }
+    let mut last = u64::MAX;
+    for e in [0.0001f32, 0.001, 0.01, 0.1] {
+        let (bytes, report) = cook_fire(max_error_options(e), &frames);
+        let asset = Asset::from_bytes(&bytes).unwrap();
+        let meta = asset.metadata().unwrap();
+        for (k, f) in frames.iter().enumerate() {
+            let back = unpack_frame(&asset, k).unwrap();
+            for (c, &worst) in worst_error(f, &back).iter().enumerate() {
+                assert!(worst <= e, "E = {e}: channel {c} ({}) is off by {worst}", report.channels[c].format);
+            }
+        }
+        for (c, ch) in report.channels.iter().enumerate() {
+            assert!(ch.voxel_max_error <= f64::from(e), "E = {e}: {} reports {}", ch.name, ch.voxel_max_error);
+            assert_eq!(ch.formats.len(), 1 + meta.channels[c].alternates.len());
+            assert_eq!(ch.format, ch.formats.iter().map(|f| f.format.name()).collect::<Vec<_>>().join("+"));
+        }
+        let formats: std::collections::BTreeSet<Format> = report.channels.iter().flat_map(|c| c.formats.iter().map(|f| f.format)).collect();
+        assert!(formats.len() >= if e <= 0.01 { 3 } else { 2 }, "E = {e}: {formats:?}");
+        assert!(report.file_bytes <= last, "E = {e}: {} bytes, tighter bound {last}", report.file_bytes);
+        last = report.file_bytes;
+    }
+    // The density bricks set to a constant are stored without texels.
+    let (bytes, report) = cook_fire(max_error_options(0.001), &frames);
+    assert!(report.channels[0].formats.iter().any(|f| f.format == Format::Constant && f.bricks >= 1), "{:?}", report.channels[0].formats);
+    let meta = Asset::from_bytes(&bytes).unwrap().metadata().unwrap();
+    assert!(meta.planes.iter().filter(|p| p.plane.format == Format::Constant).all(|p| p.atlases.is_empty()));
+}
+
+#[test]
+fn per_brick_formats_are_deterministic() {
+    let frames = [fire(0), fire(1)];
+    let run = |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| cook_fire(max_error_options(0.002), &frames).0);
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(3));
+}
+
+#[test]
+fn clustered_bricks_are_held_to_the_bound_too() {
+    // Clustering with no error bound of its own merges bricks far apart; with
+    // a maximum error, a merged brick its cluster leaves past E is stored on its own.
+    let frames: Vec<Grid> = (0..6).map(smooth_frame).chain((0..3).map(frame)).collect();
+    let co = vdbcook_cluster::Options { clusters: 4, iterations: 3, variance_threshold: 10.0, max_brick_error: None, seed: 3 };
+    for e in [0.005f32, 0.05] {
+        let mut c = Cooker::new(CookOptions { clustering: Some(co.clone()), ..max_error_options(e) });
+        for f in &frames {
+            c.push(f, None).unwrap();
+        }
+        let (sections, report) = c.finish(&NoProgress).unwrap();
+        let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+        let cr = report.clustering.unwrap();
+        assert!(cr.stats.over_error > 0 || e > 0.01, "E = {e}: {cr:?}");
+        assert!(cr.stats.clustered > 0 || e < 0.01, "E = {e}: {cr:?}");
+        // Every brick not merged is its own, plus the centroids still used.
+        assert_eq!(cr.stats.bricks_out, cr.stats.bricks_in - cr.stats.clustered + cr.stats.centroids, "E = {e}: {cr:?}");
+        for (k, f) in frames.iter().enumerate() {
+            let back = unpack_frame(&asset, k).unwrap();
+            for l in &f.leaves {
+                for i in l.mask.iter_on() {
+                    let (x, y, z) = vdbcook_grid::leaf_local(i);
+                    let (v, on) = back[0].probe(l.origin.offset(x, y, z));
+                    assert!(on && (v - l.values[i]).abs() <= e, "E = {e} frame {k}: {v} for {}", l.values[i]);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn a_maximum_error_is_checked_with_the_settings() {
+    for (opts, want) in [
+        (max_error_options(-1.0), "a maximum error of -1 is not a bound"),
+        (max_error_options(f32::NAN), "a maximum error of NaN is not a bound"),
+        (max_error_options(f32::INFINITY), "a maximum error of inf is not a bound"),
+        (CookOptions { groups: vec!["density,flames=bc7".parse().unwrap()], ..max_error_options(0.01) }, "takes no channel groups"),
+        (CookOptions { format: Format::Constant, ..CookOptions::default() }, "format constant is chosen per brick"),
+    ] {
+        let mut c = Cooker::with_channels(opts, specs(&["density", "temperature", "flames"]));
+        let f = fire(0);
+        c.push_channels(&[Some(&f[0]), Some(&f[1]), Some(&f[2])], None).unwrap();
+        let e = c.finish(&NoProgress).err().unwrap();
+        assert!(e.is_settings_error() && e.to_string().contains(want), "{e}");
+    }
+    assert!("density=constant".parse::<ChannelGroup>().is_err());
+}
+
+#[test]
+fn absurd_per_brick_format_metadata_is_refused_never_a_panic() {
+    let mut frames = [fire(0)];
+    for l in frames[0][0].leaves.iter_mut().step_by(4) {
+        l.values = [0.02; 512];
+    }
+    let (bytes, _) = cook_fire(max_error_options(0.001), &frames);
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    let meta = asset.metadata().unwrap();
+    let mixed = meta.channels.iter().position(|c| !c.alternates.is_empty()).expect("a channel in several planes");
+    let constant = meta.planes.iter().position(|p| p.plane.format == Format::Constant).expect("a constant plane");
+    let other = (mixed + 1) % meta.channels.len();
+    type Mutation = Box<dyn Fn(&mut vdbcook_vpak::Metadata, &mut Vec<vdbcook_vpak::Section>)>;
+    let table = move |sections: &mut Vec<vdbcook_vpak::Section>| sections.iter().position(|s| s.kind == kind::CHANNEL_TABLE && s.index == mixed as u32).unwrap();
+    let mutations: Vec<(&str, Mutation)> = vec![
+        ("an alternate past the planes", Box::new(move |m, _| m.channels[mixed].alternates[0] = 99)),
+        ("an alternate shared with another channel", Box::new(move |m, _| m.channels[mixed].alternates[0] = m.channels[other].plane)),
+        (
+            "a plane twice",
+            Box::new(move |m, _| {
+                let p = m.channels[mixed].plane;
+                m.channels[mixed].alternates.push(p);
+            }),
+        ),
+        ("sixteen alternates", Box::new(move |m, _| m.channels[mixed].alternates = vec![m.channels[mixed].alternates[0]; 16])),
+        ("no alternates but a channel table", Box::new(move |m, _| m.channels[mixed].alternates.clear())),
+        (
+            "alternates but no channel table",
+            Box::new(move |_, s| {
+                let t = table(s);
+                s.remove(t);
+            }),
+        ),
+        (
+            "a choice past the alternates",
+            Box::new(move |_, s| {
+                let t = table(s);
+                s[t].data[0..4].copy_from_slice(&(15u32 << 28).to_le_bytes());
+            }),
+        ),
+        (
+            "a plane brick past its plane",
+            Box::new(move |_, s| {
+                let t = table(s);
+                s[t].data[0..4].copy_from_slice(&0x0fff_ffffu32.to_le_bytes());
+            }),
+        ),
+        ("a constant plane with an atlas", Box::new(move |m, _| m.planes[constant].atlases = m.planes.iter().find(|p| !p.atlases.is_empty()).unwrap().atlases.clone())),
+        (
+            "a constant plane with a span",
+            Box::new(move |m, s| {
+                let r = s.iter_mut().find(|s| s.kind == kind::BRICK_RANGES && s.index == constant as u32).unwrap();
+                let hi = f32::from_le_bytes(r.data[4..8].try_into().unwrap()) + 1.0;
+                r.data[4..8].copy_from_slice(&hi.to_le_bytes());
+                let _ = m;
+            }),
+        ),
+        (
+            "a mixed plane with a brick table",
+            Box::new(move |m, s| s.push(vdbcook_vpak::Section { kind: kind::BRICK_TABLE, index: m.channels[mixed].plane, data: vec![0; 4 * m.brick_count as usize] })),
+        ),
+    ];
+    for (what, mutate) in mutations {
+        let mut m = meta.clone();
+        let mut sections = asset.to_sections();
+        mutate(&mut m, &mut sections);
+        for s in sections.iter_mut().filter(|s| s.kind == kind::METADATA) {
+            s.data = m.to_bytes().unwrap();
+        }
+        let sealed = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| unpack_frame(&sealed, 0).map(|g| g.len())));
+        match r {
+            Ok(Err(e)) => assert!(!e.to_string().is_empty(), "{what}"),
+            Ok(Ok(n)) => panic!("{what}: unpacked {n} grids from an absurd asset"),
+            Err(_) => panic!("{what}: panic"),
+        }
+    }
 }

@@ -58,6 +58,8 @@ impl Quality {
 }
 
 mod bc;
+mod choose;
+pub use choose::{cheapest, cheapest_all, decode_one, single_plane, within, Choice};
 
 /// A plane and the channels in its slots, in lane order (`channel_slots` of
 /// them at most; a BC7 plane of 3 channels leaves its fourth slot empty).
@@ -143,17 +145,17 @@ pub fn fill_non_finite(values: &Brick) -> Option<Brick> {
     Some(out)
 }
 
-/// A brick's values as levels in [0, 255] over its own range (not rounded);
+/// A brick's values as levels in [0, top] over its own range (not rounded);
 /// non-finite voxels as [`fill_non_finite`] replaces them.
-fn levels(values: &Brick, [lo, hi]: [f32; 2]) -> Brick {
+fn levels(values: &Brick, [lo, hi]: [f32; 2], top: f32) -> Brick {
     let filled = fill_non_finite(values);
     let values = filled.as_ref().unwrap_or(values);
     let span = hi - lo;
     let mut out = [0.0f32; BRICK_VOXELS];
     if span > 0.0 && span.is_finite() {
-        let scale = 255.0 / span;
+        let scale = top / span;
         for (o, &v) in out.iter_mut().zip(values) {
-            *o = ((v - lo) * scale).clamp(0.0, 255.0);
+            *o = ((v - lo) * scale).clamp(0.0, top);
         }
     }
     out
@@ -161,7 +163,12 @@ fn levels(values: &Brick, [lo, hi]: [f32; 2]) -> Brick {
 
 /// 8-bit levels of a brick over its own range.
 fn quantise(values: &Brick, range: [f32; 2]) -> [u8; BRICK_VOXELS] {
-    levels(values, range).map(|l| l.round() as u8)
+    levels(values, range, 255.0).map(|l| l.round() as u8)
+}
+
+/// 16-bit levels of a brick over its own range.
+fn quantise16(values: &Brick, range: [f32; 2]) -> [u16; BRICK_VOXELS] {
+    levels(values, range, 65535.0).map(|l| l.round() as u16)
 }
 
 /// BC7 texels of bricks (per brick, its channels' 8-bit levels in slot
@@ -216,21 +223,31 @@ fn encode_texels(plane: &Plane, slots: &[(&Brick, [f32; 2])], out: &mut [u8]) {
                     put(out, t, &v.to_le_bytes());
                 }
             }
-            _ => {
+            Format::Unorm16 => {
+                for (t, q) in swap_xz(&quantise16(values, *range)).iter().enumerate() {
+                    put(out, t, &q.to_le_bytes());
+                }
+            }
+            Format::Unorm8 => {
                 for (t, q) in swap_xz(&quantise(values, *range)).iter().enumerate() {
                     put(out, t, &[*q]);
                 }
             }
+            // No texels; block formats are encoded elsewhere.
+            Format::Constant | Format::Bc4 | Format::Bc7 => {}
         }
     }
 }
 
 /// The encoded bricks of one plane: kept (block formats, whose encoders are
-/// slow) or made from the pool whenever asked for (uncompressed formats, so
-/// no copy of the pool is kept).
+/// slow), made from the pool whenever asked for (uncompressed formats, so
+/// no copy of the pool is kept), or, with per-brick formats, kept for the
+/// bricks that chose the plane's format (`at[i]`: brick i's place among
+/// them, or `u32::MAX`).
 enum PlaneData {
     Kept(Vec<u8>),
     OnDemand,
+    Chosen { bytes: Vec<u8>, at: Vec<u32> },
 }
 
 /// Every plane of every brick of a pool (`channels` [`Brick`]s per brick),
@@ -274,7 +291,7 @@ impl<'a> Encoded<'a> {
                 match spec.plane.format {
                     Format::Bc4 => {
                         let c = spec.channels[0];
-                        let lv: Vec<Brick> = (first..first + count).map(|b| levels(slot(b, c).0, slot(b, c).1)).collect();
+                        let lv: Vec<Brick> = (first..first + count).map(|b| levels(slot(b, c).0, slot(b, c).1, 255.0)).collect();
                         bc::encode_bc4(quality, &lv, masks.and_then(|m| m.get(first..first + count)), out);
                     }
                     _ => {
@@ -319,6 +336,10 @@ impl<'a> Encoded<'a> {
         }
         match data {
             PlaneData::Kept(d) => out.copy_from_slice(&d[i * bb..(i + 1) * bb]),
+            PlaneData::Chosen { bytes, at } => match at[i] {
+                u32::MAX => return false,
+                k => out.copy_from_slice(&bytes[k as usize * bb..(k as usize + 1) * bb]),
+            },
             PlaneData::OnDemand => {
                 let slots: Vec<(&Brick, [f32; 2])> = spec.channels.iter().map(|&c| (&self.bricks[i * self.channels + c], self.range(i, c))).collect();
                 encode_texels(&spec.plane, &slots, out);
@@ -327,11 +348,24 @@ impl<'a> Encoded<'a> {
         true
     }
 
+    /// True when plane `p` stores brick `i` (with per-brick formats, the
+    /// planes of the formats it did not choose do not).
+    pub fn holds(&self, p: usize, i: usize) -> bool {
+        match self.planes.get(p) {
+            Some(PlaneData::Chosen { at, .. }) => at.get(i).is_some_and(|&k| k != u32::MAX),
+            Some(_) => i < self.len(),
+            None => false,
+        }
+    }
+
     /// Brick `i` decoded back to values, one [`Brick`] per channel.
     pub fn decode(&self, i: usize) -> Option<Vec<Brick>> {
         let mut out = vec![[0.0f32; BRICK_VOXELS]; self.channels];
         let mut buf = vec![0u8; MAX_BRICK_BYTES];
         for (p, spec) in self.specs.iter().enumerate() {
+            if !self.holds(p, i) {
+                continue;
+            }
             let data = &mut buf[..spec.plane.brick_bytes()];
             if !self.write(p, i, data) {
                 return None;
@@ -347,6 +381,36 @@ impl<'a> Encoded<'a> {
     /// Plane `p` of the bricks `keep[0]`, `keep[1]`, …, renumbered from 0, for `vdbcook_vpak::layout::pack_atlas`.
     pub fn plane<'s>(&'s self, p: usize, keep: &'s [usize]) -> PlaneBricks<'s> {
         PlaneBricks { encoded: self, plane: p, keep }
+    }
+}
+
+impl<'a> Encoded<'a> {
+    /// Per-brick formats: `choices[i · channels + c]` is channel c of brick
+    /// i ([`cheapest`]); each channel is stored in one plane of its own per
+    /// format its bricks chose, in [`Format::BY_COST`] order.  Bricks not
+    /// `used` are in no plane.
+    pub fn from_choices(bricks: &'a [Brick], channels: usize, choices: Vec<Choice>, used: &[bool]) -> Encoded<'a> {
+        let channels = channels.max(1);
+        let n = bricks.len() / channels;
+        let ranges = choices.iter().map(|ch| ch.range).collect();
+        let (mut specs, mut planes) = (Vec::new(), Vec::new());
+        for c in 0..channels {
+            for format in Format::BY_COST {
+                let members: Vec<usize> = (0..n).filter(|&i| used.get(i).copied().unwrap_or(true) && choices[i * channels + c].format == format).collect();
+                if members.is_empty() {
+                    continue;
+                }
+                let mut at = vec![u32::MAX; n];
+                let mut bytes = Vec::with_capacity(members.len() * single_plane(format).brick_bytes());
+                for (k, &i) in members.iter().enumerate() {
+                    at[i] = k as u32;
+                    bytes.extend_from_slice(&choices[i * channels + c].bytes);
+                }
+                specs.push(PlaneSpec { plane: single_plane(format), channels: vec![c] });
+                planes.push(PlaneData::Chosen { bytes, at });
+            }
+        }
+        Encoded { specs, bricks, channels, ranges, planes }
     }
 }
 
@@ -524,6 +588,20 @@ mod tests {
         }
         let flat = [0.25f32; BRICK_VOXELS];
         assert_eq!(round_trip(Format::Unorm8, Quality::Fast, &flat), flat);
+    }
+
+    #[test]
+    fn unorm16_within_half_a_step_of_the_brick_range() {
+        // NanoVDB's Fp16 bound, range / 131070, where f16's error grows with the value.
+        let b: Brick = std::array::from_fn(|i| 1000.0 + (i as f32 * 0.37).sin() * 3.0);
+        let [lo, hi] = range_of(&b);
+        let step = (hi - lo) / 65535.0;
+        let d = round_trip(Format::Unorm16, Quality::Fast, &b);
+        let f16 = round_trip(Format::F16, Quality::Fast, &b);
+        let worst = |d: &Brick| b.iter().zip(d).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        // Half a step, and the f32 rounding of min + t·(max − min) near 1000.
+        assert!(worst(&d) <= step * 0.5 + 1000.0 * f32::EPSILON, "{} step {step}", worst(&d));
+        assert!(worst(&f16) > 50.0 * worst(&d), "f16 {} unorm16 {}", worst(&f16), worst(&d));
     }
 
     #[test]
@@ -749,6 +827,79 @@ mod tests {
         }
         all.merge(&part);
         assert_eq!(all.non_finite.total(), 6);
+    }
+
+    /// A random brick of one of the kinds `--max-error` meets: smooth,
+    /// noisy, constant, with extreme values, with non-finite voxels.
+    fn kind_of_brick(rng: &mut vdbcook_testkit::Rng, kind: u64) -> Brick {
+        match kind {
+            0 => random_brick(rng, 0.0),
+            1 => random_brick(rng, 40.0),
+            2 => [rng.unit() * 10.0 - 5.0; BRICK_VOXELS],
+            3 => {
+                let mut b = random_brick(rng, 2.0);
+                let big = [f32::MAX, -f32::MAX, 3e38, 1e-30];
+                for _ in 0..1 + rng.below(4) {
+                    b[rng.below(BRICK_VOXELS as u64) as usize] = big[rng.below(4) as usize];
+                }
+                b
+            }
+            _ => {
+                let mut b = random_brick(rng, 1.0);
+                let odd = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+                for _ in 0..1 + rng.below(3) {
+                    b[rng.below(BRICK_VOXELS as u64) as usize] = odd[rng.below(3) as usize];
+                }
+                b
+            }
+        }
+    }
+
+    #[test]
+    fn per_brick_formats_meet_the_bound_with_the_cheapest_format() {
+        // For random bricks (five kinds, fully or partly shown) and random
+        // bounds E: every shown voxel, decoded through the plane the choice
+        // lands in, is within E (NaN and ±∞ decode to themselves); and every
+        // cheaper format, encoded and decoded on its own, breaks E somewhere.
+        let mut rng = vdbcook_testkit::Rng::new(0xe4405);
+        let mut seen = std::collections::BTreeSet::new();
+        for trial in 0..120u64 {
+            let brick = kind_of_brick(&mut rng, trial % 5);
+            let mask: [u64; 8] = if trial % 3 == 0 { std::array::from_fn(|_| rng.next_u64() & rng.next_u64()) } else { [u64::MAX; 8] };
+            let e = 10f32.powf(-6.0 + 6.0 * rng.unit());
+            let choice = cheapest(&brick, &mask, e, Quality::VeryFast);
+            seen.insert(choice.format);
+            let encoded = Encoded::from_choices(std::slice::from_ref(&brick), 1, vec![choice.clone()], &[true]);
+            assert_eq!(encoded.specs.len(), 1);
+            assert_eq!(encoded.specs[0].plane, single_plane(choice.format));
+            let decoded = encoded.decode(0).unwrap()[0];
+            for i in (0..BRICK_VOXELS).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 1) {
+                let (v, d) = (brick[i], decoded[i]);
+                let ok = if v.is_nan() {
+                    d.is_nan()
+                } else if v.is_infinite() {
+                    d == v
+                } else {
+                    (f64::from(d) - f64::from(v)).abs() <= f64::from(e)
+                };
+                assert!(ok, "trial {trial}: {} voxel {i}: {v} decodes to {d}, bound {e}", choice.format.name());
+            }
+            let cost = |f: Format| Format::BY_COST.iter().position(|&g| g == f).unwrap();
+            for cheaper in Format::BY_COST.into_iter().take(cost(choice.format)) {
+                let meets = match cheaper {
+                    // A constant within E exists exactly when the shown voxels are finite and span at most 2E.
+                    Format::Constant => {
+                        let shown: Vec<f32> = (0..BRICK_VOXELS).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 1).map(|i| brick[i]).collect();
+                        let (lo, hi) = shown.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+                        shown.iter().all(|v| v.is_finite()) && f64::from(hi) - f64::from(lo) <= 2.0 * f64::from(e) * 0.999
+                    }
+                    f => within(&brick, &round_trip(f, Quality::VeryFast, &brick), &mask, e),
+                };
+                assert!(!meets, "trial {trial}: chose {} but {} meets {e}", choice.format.name(), cheaper.name());
+            }
+        }
+        // The trials reach most of the ladder.
+        assert!(seen.len() >= 5, "{seen:?}");
     }
 
     #[test]

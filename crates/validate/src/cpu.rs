@@ -39,7 +39,7 @@ impl Sampler<'_> {
         let [w, h] = size.map(|s| s as usize * 8);
         let (x, y, z) = (x as usize, y as usize, z as usize);
         let mut out = [0.0, 0.0, 0.0, 1.0];
-        if ch.format >= 3 {
+        if ch.format == 3 || ch.format == 4 {
             let bb = if ch.format == 3 { 8 } else { 16 };
             let at = ((z * (h / 4) + y / 4) * (w / 4) + x / 4) * bb;
             let Some(block) = a.get(at..at + bb) else { return out };
@@ -61,6 +61,7 @@ impl Sampler<'_> {
             *v = match ch.format {
                 0 => a.get(k * 4..k * 4 + 4).map_or(0.0, |b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
                 1 => a.get(k * 2..k * 2 + 2).map_or(0.0, |b| half_to_f32(u16::from_le_bytes([b[0], b[1]]))),
+                5 => a.get(k * 2..k * 2 + 2).map_or(0.0, |b| f32::from(u16::from_le_bytes([b[0], b[1]])) / 65535.0),
                 _ => a.get(k).map_or(0.0, |&q| f32::from(q) / 255.0),
             };
         }
@@ -69,8 +70,21 @@ impl Sampler<'_> {
 
     /// Channel `c` of voxel `v` of brick `b`, as `vpak_brick_channel` and `vpak_brick_channel_value`.
     fn brick_value(&self, b: u32, v: [u32; 3], c: usize) -> f32 {
-        let Some(ch) = self.table.get(c) else { return 0.0 };
-        let pb = if ch.table == u32::MAX { b } else { self.tables.get((ch.table as usize).saturating_add(b as usize)).copied().unwrap_or(0) };
+        let Some(mut ch) = self.table.get(c) else { return 0.0 };
+        let entry = |b: u32| self.tables.get((ch.table as usize).saturating_add(b as usize)).copied().unwrap_or(0);
+        let pb = if ch.alternates != u32::MAX {
+            // Per-brick formats: the channel table picks the plane and its brick.
+            let e = entry(b);
+            if e >> vdbcook_vpak::CHOICE_SHIFT != 0 {
+                let Some(alt) = self.table.get((ch.alternates as usize).saturating_add((e >> vdbcook_vpak::CHOICE_SHIFT) as usize - 1)) else { return 0.0 };
+                ch = alt;
+            }
+            e & vdbcook_vpak::PLANE_BRICK_MASK
+        } else if ch.table == u32::MAX {
+            b
+        } else {
+            entry(b)
+        };
         let [bx, by, _, per] = ch.atlas_bricks.map(u64::from);
         let pb64 = u64::from(pb);
         let (atlas, i) = if pb64 >= per { (pb64 / per.max(1), pb64 % per.max(1)) } else { (0, pb64) };
@@ -78,6 +92,10 @@ impl Sampler<'_> {
         let atlas = atlas as u32;
         let size = if atlas == ch.last_atlas[0] { [ch.last_atlas[1], ch.last_atlas[2]] } else { [ch.atlas_bricks[0], ch.atlas_bricks[1]] };
         let shift = ch.z_shift.min(2);
+        if ch.format == vdbcook_vpak::Format::Constant.code() {
+            let r = (ch.range_base as usize).saturating_add(pb as usize);
+            return self.ranges.get(2 * r).copied().unwrap_or(0.0);
+        }
         let t = [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2].saturating_mul(ch.slices).saturating_add(v[2] >> shift)];
         let level = self.texel(ch.slot.saturating_add(atlas), size, ch, t)[((ch.lane + (v[2] & ((1 << shift) - 1))) & 3) as usize];
         if ch.ranged == 0 {
@@ -90,7 +108,7 @@ impl Sampler<'_> {
 
     /// Channel `c`'s value and the empty-region edge, as `vpak_query`.
     fn query(&self, p: [i32; 3], c: usize) -> (f32, u32) {
-        let channels = self.table.len();
+        let channels = self.d.c.meta.channels.len();
         let bg = self.table.get(c).map_or(0.0, |ch| f32::from_bits(ch.background));
         let tile = |e: u32| f32::from_bits(self.d.c.tiles.get(((e & 0x7fff_ffff) as usize).saturating_mul(channels).saturating_add(c)).copied().unwrap_or(0));
         if p.iter().any(|&c| !(0..4096).contains(&c)) {

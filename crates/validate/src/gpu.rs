@@ -128,6 +128,8 @@ pub struct Renderer {
     buffers: std::sync::OnceLock<Pipelines>,
     bc: BcSupport,
     decode: BcDecode,
+    /// TEXTURE_FORMAT_16BIT_NORM (unorm16 atlases as textures; else decoded in the shader).
+    norm16: bool,
     /// "name (backend, device type)".
     pub adapter: String,
 }
@@ -177,8 +179,13 @@ fn texture_format(p: &vdbcook_vpak::Plane) -> wgpu::TextureFormat {
         (Format::Unorm8, 1) => T::R8Unorm,
         (Format::Unorm8, 2) => T::Rg8Unorm,
         (Format::Unorm8, _) => T::Rgba8Unorm,
+        (Format::Unorm16, 1) => T::R16Unorm,
+        (Format::Unorm16, 2) => T::Rg16Unorm,
+        (Format::Unorm16, _) => T::Rgba16Unorm,
         (Format::Bc4, _) => T::Bc4RUnorm,
         (Format::Bc7, _) => T::Bc7RgbaUnorm,
+        // Constant planes have no atlases.
+        (Format::Constant, _) => T::R8Unorm,
     }
 }
 
@@ -212,10 +219,11 @@ impl Renderer {
         let adapter_name = format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
         let want = wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D;
         let bc = BcSupport { textures: adapter.features().contains(want), cpu: info.device_type == wgpu::DeviceType::Cpu };
+        let norm16 = adapter.features().contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM);
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("vdbcook"),
-            required_features: if bc.textures { want } else { wgpu::Features::empty() },
+            required_features: if bc.textures { want } else { wgpu::Features::empty() } | if norm16 { wgpu::Features::TEXTURE_FORMAT_16BIT_NORM } else { wgpu::Features::empty() },
             required_limits: limits,
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -227,7 +235,7 @@ impl Renderer {
             TEXTURE_SHADER,
             wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D3, multisampled: false },
         );
-        Ok(Renderer { device, queue, textures, buffers: std::sync::OnceLock::new(), bc, decode: BcDecode::Auto, adapter: adapter_name })
+        Ok(Renderer { device, queue, textures, buffers: std::sync::OnceLock::new(), bc, decode: BcDecode::Auto, norm16, adapter: adapter_name })
     }
 
     /// Chooses where BC4/BC7 bricks of assets uploaded from now on are decoded.
@@ -282,7 +290,7 @@ impl Renderer {
         // Bind the atlases of the planes holding the channels the asset's
         // scene shows (an asset may have more planes than a shader can bind),
         // and point those channels at their slots.
-        let mut planes: Vec<usize> = Scene::for_asset(meta).channels.iter().filter(|&&ch| ch != crate::NONE).filter_map(|&ch| meta.channels.get(ch as usize)).map(|ch| ch.plane as usize).collect();
+        let mut planes: Vec<usize> = Scene::for_asset(meta).channels.iter().filter(|&&ch| ch != crate::NONE).flat_map(|&ch| meta.channel_planes(ch as usize)).map(|p| p as usize).collect();
         planes.sort_unstable();
         planes.dedup();
         let mut slot_of_plane = vec![u32::MAX; meta.planes.len()];
@@ -296,7 +304,9 @@ impl Renderer {
         }
         let channels = c.gpu_channels();
         let bound: Vec<bool> = channels.iter().map(|g| slot_of_plane[g.plane as usize] != u32::MAX).collect();
-        let single_slot: Vec<u32> = channels.iter().map(|g| if meta.planes[g.plane as usize].atlases.len() == 1 { slot_of_plane[g.plane as usize] } else { crate::NONE }).collect();
+        // A channel in several planes (per-brick formats) changes slots from brick to brick.
+        let single_slot: Vec<u32> =
+            channels.iter().map(|g| if meta.planes[g.plane as usize].atlases.len() == 1 && g.alternates == u32::MAX { slot_of_plane[g.plane as usize] } else { crate::NONE }).collect();
         let channel_words: Vec<u32> = channels.iter().flat_map(|g| GpuChannel { slot: slot_of_plane[g.plane as usize], ..*g }.words()).collect();
         let (ranges, tables) = (c.gpu_ranges(), c.gpu_tables());
         let mut buffers = Vec::new();
@@ -316,10 +326,19 @@ impl Renderer {
         let slots: Vec<(vdbcook_vpak::AtlasLayout, &[u8])> = sections.iter().filter_map(|&(p, a)| c.atlas(p, a)).collect();
         let block = slots.iter().any(|(l, _)| l.plane.format.is_block());
         let fits_buffers = slots.iter().all(|(_, a)| a.len() as u64 <= limit);
-        let in_shader = self.decode.in_shader(block, self.bc, fits_buffers).ok_or_else(|| Error::Unsupported {
-            adapter: self.adapter.clone(),
-            format: slots.iter().filter(|(l, _)| l.plane.format.is_block()).map(|(l, _)| l.plane.format.name()).collect::<Vec<_>>().join("+"),
-            feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D (decode them in the shader instead)",
+        // Without 16-bit normalised textures, unorm16 atlases are decoded in the shader.
+        let no_norm16 = !self.norm16 && slots.iter().any(|(l, _)| l.plane.format == vdbcook_vpak::Format::Unorm16);
+        let in_shader = match no_norm16 {
+            true => (self.decode != BcDecode::Texture).then_some(true),
+            false => self.decode.in_shader(block, self.bc, fits_buffers),
+        }
+        .ok_or_else(|| match no_norm16 {
+            true => Error::Unsupported { adapter: self.adapter.clone(), format: "unorm16".into(), feature: "TEXTURE_FORMAT_16BIT_NORM (decode them in the shader instead)" },
+            false => Error::Unsupported {
+                adapter: self.adapter.clone(),
+                format: slots.iter().filter(|(l, _)| l.plane.format.is_block()).map(|(l, _)| l.plane.format.name()).collect::<Vec<_>>().join("+"),
+                feature: "TEXTURE_COMPRESSION_BC and TEXTURE_COMPRESSION_BC_SLICED_3D (decode them in the shader instead)",
+            },
         })?;
         let mut atlases = Vec::with_capacity(crate::MAX_TEXTURES);
         if in_shader {

@@ -3,9 +3,9 @@
 //! sampled, unpacked or uploaded, the metadata and every section are checked
 //! against each other.  The first failure is the error.
 
-use crate::layout::{AtlasLayout, PlaneInfo};
+use crate::layout::{AtlasLayout, Format, PlaneInfo};
 use crate::nodes::{l3_node_count, Nodes, L1_WORDS, L2_WORDS};
-use crate::{kind, Asset, Error, Metadata};
+use crate::{kind, Asset, Error, Metadata, CHOICE_SHIFT, MAX_ALTERNATES, PLANE_BRICK_MASK};
 
 /// Channels an asset may have (a sanity bound, not a format limit).
 pub const MAX_CHANNELS: usize = 256;
@@ -42,8 +42,12 @@ pub struct GpuChannel {
     pub plane: u32,
     /// The plane's first atlas: size in bricks (x, y, z) and bricks per full atlas.
     pub atlas_bricks: [u32; 4],
-    /// The plane's last atlas: its number and its own size in bricks along x and y, then 0.
-    pub last_atlas: [u32; 4],
+    /// The plane's last atlas: its number and its own size in bricks along x and y.
+    pub last_atlas: [u32; 3],
+    /// For a channel stored in several planes: the record of its first
+    /// alternate plane (records past the channels'; alternate j at
+    /// `alternates + j − 1`), and `table` is its channel table; else `u32::MAX`.
+    pub alternates: u32,
 }
 
 /// Words of one [`GpuChannel`].
@@ -56,7 +60,8 @@ impl GpuChannel {
         std::array::from_fn(|i| match i {
             0..12 => head[i],
             12..16 => self.atlas_bricks[i - 12],
-            _ => self.last_atlas[i - 16],
+            16..19 => self.last_atlas[i - 16],
+            _ => self.alternates,
         })
     }
 }
@@ -73,8 +78,11 @@ pub struct Checked<'a> {
     pub tiles: &'a [u32],
     /// Per plane, (min, max) per plane brick per channel slot: plane brick k, slot s at `2 · (k · slots + s)`.
     pub ranges: Vec<&'a [f32]>,
-    /// Per plane, its brick table (the plane brick of each brick), or `None`: brick b is plane brick b.
+    /// Per plane, its brick table (the plane brick of each brick), or `None`:
+    /// brick b is plane brick b, unless a channel table addresses the plane.
     pub tables: Vec<Option<&'a [u32]>>,
+    /// Per channel, its channel table when it is stored in several planes.
+    pub channel_tables: Vec<Option<&'a [u32]>>,
     /// Atlas textures in section order (plane 0's atlases, then plane 1's, …).
     pub atlases: Vec<&'a [u8]>,
 }
@@ -139,9 +147,10 @@ impl<'a> Checked<'a> {
                 return invalid(format!("plane {p}: brick range {k} is [{}, {}]", r[2 * k], r[2 * k + 1]));
             }
             ranges.push(r);
+            let has_table = meta.plane_has_table(p);
             let table = match asset.words::<u32>(kind::BRICK_TABLE, p as u32) {
-                Err(Error::Missing { .. }) if !info.has_table(meta.brick_count) => None,
-                Ok(_) if !info.has_table(meta.brick_count) => return invalid(format!("plane {p} stores every brick but has a brick table")),
+                Err(Error::Missing { .. }) if !has_table => None,
+                Ok(_) if !has_table => return invalid(format!("plane {p} has a brick table it must not have (it stores every brick, or a channel table addresses it)")),
                 Ok(t) if t.len() as u64 != u64::from(meta.brick_count) => return invalid(format!("plane {p}: a brick table of {} entries for {} bricks", t.len(), meta.brick_count)),
                 Ok(t) => match t.iter().position(|&pb| pb >= info.bricks) {
                     Some(b) => return invalid(format!("plane {p}: brick {b} maps to plane brick {}, the plane has {}", t[b], info.bricks)),
@@ -150,6 +159,29 @@ impl<'a> Checked<'a> {
                 Err(e) => return Err(e),
             };
             tables.push(table);
+            if info.plane.format == Format::Constant {
+                if let Some(k) = r.chunks_exact(2).position(|m| m[0] != m[1]) {
+                    return invalid(format!("plane {p} is constant, but its brick range {k} is [{}, {}]", r[2 * k], r[2 * k + 1]));
+                }
+            }
+        }
+        let mut channel_tables = Vec::with_capacity(channels);
+        for (c, ch) in meta.channels.iter().enumerate() {
+            let table = match asset.words::<u32>(kind::CHANNEL_TABLE, c as u32) {
+                Err(Error::Missing { .. }) if ch.alternates.is_empty() => None,
+                Ok(_) if ch.alternates.is_empty() => return invalid(format!("channel {c} ({}) is in one plane but has a channel table", ch.name)),
+                Ok(t) if t.len() as u64 != u64::from(meta.brick_count) => return invalid(format!("channel {c} ({}): a channel table of {} entries for {} bricks", ch.name, t.len(), meta.brick_count)),
+                Ok(t) => {
+                    let planes = meta.channel_planes(c);
+                    let bad = t.iter().position(|&e| planes.get((e >> CHOICE_SHIFT) as usize).is_none_or(|&p| e & PLANE_BRICK_MASK >= meta.planes[p as usize].bricks));
+                    if let Some(b) = bad {
+                        return invalid(format!("channel {c} ({}): brick {b}'s entry {:#010x} names no plane brick of the channel's {} planes", ch.name, t[b], planes.len()));
+                    }
+                    Some(t)
+                }
+                Err(e) => return Err(e),
+            };
+            channel_tables.push(table);
         }
         let mut atlases = Vec::with_capacity(meta.texture_count());
         for (p, info) in meta.planes.iter().enumerate() {
@@ -162,7 +194,7 @@ impl<'a> Checked<'a> {
                 atlases.push(bytes);
             }
         }
-        Ok(Checked { frames, l1, l1_entries: asset.u32s(kind::L1_ENTRIES)?, l2, l2_entries: asset.u32s(kind::L2_ENTRIES)?, l3, tiles, ranges, tables, atlases, meta })
+        Ok(Checked { frames, l1, l1_entries: asset.u32s(kind::L1_ENTRIES)?, l2, l2_entries: asset.u32s(kind::L2_ENTRIES)?, l3, tiles, ranges, tables, channel_tables, atlases, meta })
     }
 
     /// The node arrays, copied.
@@ -187,14 +219,24 @@ impl<'a> Checked<'a> {
         Some((layout, self.atlases.get(self.meta.atlas_section(plane, atlas) as usize)?))
     }
 
-    /// Brick `b`'s plane brick in plane `p`.
-    pub fn plane_brick(&self, p: usize, b: u32) -> Option<u32> {
+    /// Where channel `c` of brick `b` is stored: the plane, and the plane brick there.
+    pub fn channel_brick(&self, c: usize, b: u32) -> Option<(usize, u32)> {
+        let ch = self.meta.channels.get(c)?;
         if b >= self.meta.brick_count {
             return None;
         }
+        if let Some(t) = self.channel_tables.get(c)? {
+            let e = *t.get(b as usize)?;
+            let p = match (e >> CHOICE_SHIFT) as usize {
+                0 => ch.plane,
+                j => *ch.alternates.get(j - 1)?,
+            };
+            return Some((p as usize, e & PLANE_BRICK_MASK));
+        }
+        let p = ch.plane as usize;
         match self.tables.get(p)? {
-            Some(t) => t.get(b as usize).copied(),
-            None => Some(b),
+            Some(t) => Some((p, *t.get(b as usize)?)),
+            None => Some((p, b)),
         }
     }
 
@@ -205,30 +247,40 @@ impl<'a> Checked<'a> {
         [r.get(i).copied().unwrap_or(0.0), r.get(i + 1).copied().unwrap_or(0.0)]
     }
 
+    /// Channel `c`'s first lane in plane `p` (0 in a channel's alternate planes).
+    fn lane_in(&self, c: usize, p: usize) -> u32 {
+        self.meta.channels.get(c).map_or(0, |ch| if ch.plane as usize == p { ch.lane } else { 0 })
+    }
+
     /// Brick `b`'s range for channel `c`.
     pub fn range(&self, b: u32, c: usize) -> [f32; 2] {
-        let Some(ch) = self.meta.channels.get(c) else { return [0.0; 2] };
-        let p = ch.plane as usize;
+        let Some((p, pb)) = self.channel_brick(c, b) else { return [0.0; 2] };
         let zpt = self.meta.planes.get(p).map_or(1, |i| i.plane.z_per_texel.max(1));
-        self.plane_brick(p, b).map_or([0.0; 2], |pb| self.plane_range(p, pb, ch.lane / zpt))
+        self.plane_range(p, pb, self.lane_in(c, p) / zpt)
     }
 
-    /// Every channel's values of brick `b` (leaf order), decoded plane by plane.
+    /// Every channel's values of brick `b` (leaf order), each decoded from its plane brick.
     pub fn decode_brick(&self, b: u32) -> Option<Vec<[f32; crate::BRICK_VOXELS]>> {
-        let texels: Vec<Vec<[f32; 4]>> = (0..self.meta.planes.len())
-            .map(|p| {
-                let (a, local) = self.meta.planes[p].brick_atlas(self.plane_brick(p, b)?)?;
-                let (layout, bytes) = self.atlas(p, a)?;
-                Some(layout.plane.decode_brick(&crate::layout::unpack_brick(&layout, bytes, local)?))
+        // Each plane holds one plane brick of a brick: decode it once for all its channels.
+        let mut texels: Vec<Option<Vec<[f32; 4]>>> = vec![None; self.meta.planes.len()];
+        (0..self.meta.channels.len())
+            .map(|c| {
+                let (p, pb) = self.channel_brick(c, b)?;
+                let plane = self.meta.planes.get(p)?.plane;
+                if texels[p].is_none() && plane.format != Format::Constant {
+                    let (a, local) = self.meta.planes[p].brick_atlas(pb)?;
+                    let (layout, bytes) = self.atlas(p, a)?;
+                    texels[p] = Some(plane.decode_brick(&crate::layout::unpack_brick(&layout, bytes, local)?));
+                }
+                Some(plane.channel_values(texels[p].as_deref().unwrap_or(&[]), self.lane_in(c, p), self.range(b, c)))
             })
-            .collect::<Option<_>>()?;
-        Some(self.meta.channels.iter().enumerate().map(|(c, ch)| self.meta.planes[ch.plane as usize].plane.channel_values(&texels[ch.plane as usize], ch.lane, self.range(b, c))).collect())
+            .collect()
     }
 
-    /// The brick tables of the planes that have one, back to back (what
-    /// [`GpuChannel::table`] indexes).
+    /// The brick tables of the planes that have one, then the channel tables,
+    /// back to back (what [`GpuChannel::table`] indexes).
     pub fn gpu_tables(&self) -> Vec<u32> {
-        self.tables.iter().flatten().flat_map(|t| t.iter().copied()).collect()
+        self.tables.iter().chain(&self.channel_tables).flatten().flat_map(|t| t.iter().copied()).collect()
     }
 
     /// Every plane's ranges, back to back (what [`GpuChannel::range_base`] indexes, in pairs).
@@ -236,7 +288,8 @@ impl<'a> Checked<'a> {
         self.ranges.iter().flat_map(|r| r.iter().copied()).collect()
     }
 
-    /// The channel table a shader reads.
+    /// The channel table a shader reads: one record per channel, then one
+    /// per alternate plane of the channels stored in several planes.
     pub fn gpu_channels(&self) -> Vec<GpuChannel> {
         // Per plane: its table's first word, its first range pair, its first texture slot.
         let mut bases = Vec::with_capacity(self.meta.planes.len());
@@ -247,36 +300,52 @@ impl<'a> Checked<'a> {
             table = table.saturating_add(if has { self.meta.brick_count } else { 0 });
             range = range.saturating_add(info.bricks.saturating_mul(info.range_slots()));
         }
-        self.meta
-            .channels
-            .iter()
-            .map(|c| {
-                let info = &self.meta.planes[c.plane as usize];
-                let p = info.plane;
-                let (table, range_base, slot) = bases[c.plane as usize];
-                let atlas_bricks = info.atlases.first().map_or([1, 1, 1, 1], |a| {
-                    let [x, y, z] = a.bricks.map(|b| b.max(1));
-                    [x, y, z, x.saturating_mul(y).saturating_mul(z)]
-                });
-                let last_atlas = info.atlases.last().map_or([0, 1, 1, 0], |a| [(info.atlases.len() - 1) as u32, a.bricks[0].max(1), a.bricks[1].max(1), 0]);
-                GpuChannel {
-                    slot,
-                    lane: c.lane,
-                    z_shift: p.z_per_texel.max(1).trailing_zeros(),
-                    slices: p.slices_per_brick(),
-                    format: p.format.code(),
-                    lanes: p.lanes,
-                    ranged: u32::from(p.format.is_ranged()),
-                    background: c.background.to_bits(),
-                    table,
-                    range_base,
-                    range_slots: info.range_slots(),
-                    plane: c.plane,
-                    atlas_bricks,
-                    last_atlas,
-                }
-            })
-            .collect()
+        // Channel tables follow the planes' tables.
+        let mut channel_table = Vec::with_capacity(self.channel_tables.len());
+        for t in &self.channel_tables {
+            channel_table.push(if t.is_some() { table } else { u32::MAX });
+            table = table.saturating_add(if t.is_some() { self.meta.brick_count } else { 0 });
+        }
+        let record = |p: usize, lane: u32, background: f32, table: u32, alternates: u32| {
+            let info = &self.meta.planes[p];
+            let plane = info.plane;
+            let (plane_table, range_base, slot) = bases[p];
+            let atlas_bricks = info.atlases.first().map_or([1, 1, 1, 1], |a| {
+                let [x, y, z] = a.bricks.map(|b| b.max(1));
+                [x, y, z, x.saturating_mul(y).saturating_mul(z)]
+            });
+            let last_atlas = info.atlases.last().map_or([0, 1, 1], |a| [(info.atlases.len() - 1) as u32, a.bricks[0].max(1), a.bricks[1].max(1)]);
+            GpuChannel {
+                slot,
+                lane,
+                z_shift: plane.z_per_texel.max(1).trailing_zeros(),
+                slices: plane.slices_per_brick(),
+                format: plane.format.code(),
+                lanes: plane.lanes,
+                ranged: u32::from(plane.format.is_ranged()),
+                background: background.to_bits(),
+                table: if table == u32::MAX { plane_table } else { table },
+                range_base,
+                range_slots: info.range_slots(),
+                plane: p as u32,
+                atlas_bricks,
+                last_atlas,
+                alternates,
+            }
+        };
+        let channels = &self.meta.channels;
+        let mut out: Vec<GpuChannel> = Vec::with_capacity(channels.len());
+        let mut next = channels.len() as u32;
+        for (c, ch) in channels.iter().enumerate() {
+            let alternates = if ch.alternates.is_empty() { u32::MAX } else { next };
+            next = next.saturating_add(ch.alternates.len() as u32);
+            out.push(record(ch.plane as usize, ch.lane, ch.background, channel_table[c], alternates));
+        }
+        for ch in channels {
+            // An alternate's plane brick comes from the channel table.
+            out.extend(ch.alternates.iter().map(|&p| GpuChannel { table: u32::MAX, ..record(p as usize, 0, ch.background, u32::MAX, u32::MAX) }));
+        }
+        out
     }
 }
 
@@ -295,6 +364,21 @@ fn check_planes(meta: &Metadata) -> Result<(), Error> {
     }
     let mut used = vec![0u32; meta.planes.len()];
     for (c, ch) in meta.channels.iter().enumerate() {
+        if !ch.alternates.is_empty() {
+            // A channel in several planes has each of them to itself, from lane 0.
+            let planes = meta.channel_planes(c);
+            if ch.alternates.len() > MAX_ALTERNATES || ch.lane != 0 {
+                return invalid(format!("channel {c} ({}) has {} alternate planes and starts at lane {} (at most {MAX_ALTERNATES}, from lane 0)", ch.name, ch.alternates.len(), ch.lane));
+            }
+            for &p in &planes {
+                match used.get_mut(p as usize) {
+                    None => return invalid(format!("channel {c} ({}) is in plane {p}, the asset has {}", ch.name, meta.planes.len())),
+                    Some(u) if *u != 0 => return invalid(format!("channel {c} ({}) is in several planes, but shares plane {p}", ch.name)),
+                    Some(u) => *u = u32::MAX,
+                }
+            }
+            continue;
+        }
         let Some(plane) = meta.planes.get(ch.plane as usize).map(|i| i.plane) else {
             return invalid(format!("channel {c} ({}) is in plane {}, the asset has {}", ch.name, ch.plane, meta.planes.len()));
         };
@@ -319,6 +403,12 @@ fn check_planes(meta: &Metadata) -> Result<(), Error> {
 /// position that shape gives its bricks (samplers place bricks with the
 /// first shape).
 fn check_atlases(p: usize, plane: &PlaneInfo) -> Result<(), Error> {
+    if plane.plane.format == Format::Constant {
+        if !plane.atlases.is_empty() {
+            return invalid(format!("plane {p} is constant but has {} atlases", plane.atlases.len()));
+        }
+        return Ok(());
+    }
     let first = plane.atlases.first();
     let mut next_brick = 0u64;
     for (i, a) in plane.atlases.iter().enumerate() {

@@ -9,7 +9,9 @@ use serde::{Deserialize, Serialize};
 pub const BRICK_VOXELS: usize = 512;
 
 /// Voxel formats.  The variant order is the format code (metadata and
-/// shaders); the names (manifests, flags) are `f32`, `f16`, `unorm8`, `bc4`, `bc7`.
+/// shaders); the names (manifests, flags) are `f32`, `f16`, `unorm8`, `bc4`,
+/// `bc7`, `unorm16` and `constant` (chosen per brick by `cook --max-error`,
+/// never for a whole channel).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
@@ -24,17 +26,29 @@ pub enum Format {
     Bc4,
     /// BC7: four lanes (RGBA), 16 bytes per 4×4 texels.
     Bc7,
+    /// 16-bit levels over each brick's channel range (the peer of NanoVDB's
+    /// Fp16: its error is range / 131070 where f16's grows with the value).
+    Unorm16,
+    /// No texels: every voxel of the plane brick is its range's minimum.
+    #[cfg_attr(feature = "clap", value(skip))]
+    Constant,
 }
 
 impl Format {
-    pub const ALL: [Format; 5] = [Format::F32, Format::F16, Format::Unorm8, Format::Bc4, Format::Bc7];
+    /// The formats a whole channel may be stored in (every format but `Constant`).
+    pub const ALL: [Format; 6] = [Format::F32, Format::F16, Format::Unorm8, Format::Bc4, Format::Bc7, Format::Unorm16];
+    /// Every format, in code order.
+    pub const CODES: [Format; 7] = [Format::F32, Format::F16, Format::Unorm8, Format::Bc4, Format::Bc7, Format::Unorm16, Format::Constant];
+    /// What `cook --max-error` tries for a brick, cheapest first (stored
+    /// bytes per voxel: 0, 1/4, 1/2, 1, 2, 2, 4).
+    pub const BY_COST: [Format; 7] = [Format::Constant, Format::Bc7, Format::Bc4, Format::Unorm8, Format::Unorm16, Format::F16, Format::F32];
 
     pub fn code(self) -> u32 {
         self as u32
     }
 
     pub fn from_code(code: u32) -> Option<Format> {
-        Format::ALL.get(code as usize).copied()
+        Format::CODES.get(code as usize).copied()
     }
 
     pub fn name(self) -> &'static str {
@@ -44,11 +58,13 @@ impl Format {
             Format::Unorm8 => "unorm8",
             Format::Bc4 => "bc4",
             Format::Bc7 => "bc7",
+            Format::Unorm16 => "unorm16",
+            Format::Constant => "constant",
         }
     }
 
     pub fn parse(s: &str) -> Option<Format> {
-        Format::ALL.into_iter().find(|f| f.name() == s)
+        Format::CODES.into_iter().find(|f| f.name() == s)
     }
 
     /// True for the block-compressed formats.
@@ -66,9 +82,9 @@ impl Format {
     pub fn lane_bytes(self) -> usize {
         match self {
             Format::F32 => 4,
-            Format::F16 => 2,
+            Format::F16 | Format::Unorm16 => 2,
             Format::Unorm8 => 1,
-            Format::Bc4 | Format::Bc7 => 0,
+            Format::Bc4 | Format::Bc7 | Format::Constant => 0,
         }
     }
 
@@ -84,7 +100,7 @@ impl Format {
     /// The lane counts a plane of this format may have.
     pub fn allowed_lanes(self) -> &'static [u32] {
         match self {
-            Format::Bc4 => &[1],
+            Format::Bc4 | Format::Constant => &[1],
             Format::Bc7 => &[4],
             _ => &[1, 2, 4],
         }
@@ -203,7 +219,10 @@ impl Plane {
                 *v = match self.format {
                     Format::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
                     Format::F16 => half::f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32(),
-                    _ => f32::from(b[0]) / 255.0,
+                    Format::Unorm16 => f32::from(u16::from_le_bytes([b[0], b[1]])) / 65535.0,
+                    Format::Unorm8 => f32::from(b[0]) / 255.0,
+                    // No texels (the value is the range's minimum).
+                    _ => 0.0,
                 };
             }
         }
@@ -214,6 +233,9 @@ impl Plane {
     /// decoded texels: its lanes, mapped through `range` for ranged formats.
     pub fn channel_values(&self, texels: &[[f32; 4]], first_lane: u32, [lo, hi]: [f32; 2]) -> [f32; BRICK_VOXELS] {
         let ranged = self.format.is_ranged();
+        if self.format == Format::Constant {
+            return [lo; BRICK_VOXELS];
+        }
         std::array::from_fn(|i| {
             let v = [(i / 64) as u32, ((i / 8) % 8) as u32, (i % 8) as u32];
             let ([x, y, s], lane) = self.locate(v, first_lane);
@@ -271,16 +293,11 @@ pub struct PlaneInfo {
     pub plane: Plane,
     /// Plane bricks (at most the asset's bricks; as many when the plane has no table).
     pub bricks: u32,
-    /// Consecutive runs of the plane bricks, one 3D texture each.
+    /// Consecutive runs of the plane bricks, one 3D texture each (none for `constant`).
     pub atlases: Vec<AtlasInfo>,
 }
 
 impl PlaneInfo {
-    /// True when the plane has a brick table (else brick b is plane brick b).
-    pub fn has_table(&self, brick_count: u32) -> bool {
-        self.bricks != brick_count
-    }
-
     /// The atlas holding plane brick `pb`, and its local index there.
     pub fn brick_atlas(&self, pb: u32) -> Option<(usize, u32)> {
         let a = self.atlases.iter().position(|a| pb >= a.first_brick && pb - a.first_brick < a.count)?;

@@ -35,7 +35,9 @@ pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
 /// 2: compact L3 nodes (sub-block states and sub-masks instead of 512-bit masks).
 /// 3: channels (several grids in one tree), planes, per-channel brick ranges and tile values.
 /// 4: each plane stores its own distinct bricks (brick tables), ranges and atlases.
-pub const VERSION: u32 = 4;
+/// 5: per-brick formats (a channel in several planes, a channel table choosing per
+///    brick), `unorm16` and `constant` planes.
+pub const VERSION: u32 = 5;
 pub const HEADER_LEN: usize = 64;
 pub const ENTRY_LEN: usize = 32;
 /// Every section starts at a multiple of this (GPU upload and mmap friendly).
@@ -63,6 +65,10 @@ pub mod kind {
     pub const ATLAS: u32 = 10;
     /// Per plane with a table (`index` = plane): its plane brick, u32 per brick.
     pub const BRICK_TABLE: u32 = 11;
+    /// Per channel stored in several planes (`index` = channel): u32 per
+    /// brick, the plane (bits 28 to 31: 0 the channel's `plane`, j its
+    /// `alternates[j − 1]`) and the plane brick there (bits 0 to 27).
+    pub const CHANNEL_TABLE: u32 = 12;
 
     pub fn name(k: u32) -> &'static str {
         match k {
@@ -77,6 +83,7 @@ pub mod kind {
             BRICK_RANGES => "brick ranges",
             ATLAS => "brick atlas",
             BRICK_TABLE => "brick table",
+            CHANNEL_TABLE => "channel table",
             _ => "unknown",
         }
     }
@@ -85,7 +92,7 @@ pub mod kind {
     /// kind has several ("brick atlas 3", "brick ranges 0").
     pub fn label(k: u32, index: u32) -> String {
         match k {
-            ATLAS | BRICK_RANGES | BRICK_TABLE => format!("{} {index}", name(k)),
+            ATLAS | BRICK_RANGES | BRICK_TABLE | CHANNEL_TABLE => format!("{} {index}", name(k)),
             _ => name(k).to_string(),
         }
     }
@@ -167,7 +174,19 @@ pub struct Channel {
     /// Plane holding the channel, and its first lane there.
     pub plane: u32,
     pub lane: u32,
+    /// Further planes holding some of the channel's bricks (per-brick
+    /// formats), each with the channel alone from lane 0; when there are
+    /// any, the channel's table (section [`kind::CHANNEL_TABLE`]) says which
+    /// plane holds each brick.
+    pub alternates: Vec<u32>,
 }
+
+/// Channel table entries: the choice of plane in the top bits, the plane brick below.
+pub const CHOICE_SHIFT: u32 = 28;
+/// The plane brick bits of a channel table entry.
+pub const PLANE_BRICK_MASK: u32 = (1 << CHOICE_SHIFT) - 1;
+/// Alternates a channel may have (choices 1 to 15).
+pub const MAX_ALTERNATES: usize = 15;
 
 /// Everything about the asset that is not a GPU array.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -216,6 +235,23 @@ impl Metadata {
     /// Atlas textures over all planes.
     pub fn texture_count(&self) -> usize {
         self.planes.iter().map(|p| p.atlases.len()).sum()
+    }
+
+    /// Channel `c`'s planes: its `plane`, then its `alternates` (choice 0, 1, …).
+    pub fn channel_planes(&self, c: usize) -> Vec<u32> {
+        self.channels.get(c).map_or_else(Vec::new, |ch| std::iter::once(ch.plane).chain(ch.alternates.iter().copied()).collect())
+    }
+
+    /// True when plane `p` holds a channel stored in several planes (whose
+    /// channel table, not a brick table of the plane's own, addresses it).
+    pub fn is_mixed_plane(&self, p: usize) -> bool {
+        self.channels.iter().any(|ch| !ch.alternates.is_empty() && (ch.plane as usize == p || ch.alternates.iter().any(|&a| a as usize == p)))
+    }
+
+    /// True when plane `p` has a brick table: it stores fewer bricks than the
+    /// asset has, and no channel table addresses it.
+    pub fn plane_has_table(&self, p: usize) -> bool {
+        self.planes.get(p).is_some_and(|i| i.bricks != self.brick_count) && !self.is_mixed_plane(p)
     }
 
     /// The channel named `name`.

@@ -1,0 +1,114 @@
+//! Per-brick formats (`cook --max-error E`): each brick channel takes the
+//! cheapest encoding of [`Format::BY_COST`] whose every shown voxel decodes,
+//! exactly as a reader decodes it, within E of the source.  NaN and ±∞
+//! voxels must decode to themselves (only `f16` and `f32` keep them).
+
+use super::{bc, bc7_texels, encode_texels, group_planes, levels, quantise, range_of, Brick, Format, Plane, Quality, BRICK_VOXELS};
+use rayon::prelude::*;
+
+/// One brick channel's chosen encoding.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Choice {
+    pub format: Format,
+    /// The plane brick's range (`[v, v]` for a constant v).
+    pub range: [f32; 2],
+    /// Its texels or blocks ([`single_plane`]`(format).brick_bytes()` bytes; none for a constant).
+    pub bytes: Vec<u8>,
+}
+
+/// The plane a channel takes alone in `format` (BC7: four z-slices per texel).
+pub fn single_plane(format: Format) -> Plane {
+    match format {
+        Format::Constant => Plane { format, lanes: 1, z_per_texel: 1 },
+        _ => group_planes(format, &[0])[0].plane,
+    }
+}
+
+fn encode_one(format: Format, quality: Quality, values: &Brick, range: [f32; 2], mask: &[u64; 8]) -> Vec<u8> {
+    let plane = single_plane(format);
+    let mut out = vec![0u8; plane.brick_bytes()];
+    match format {
+        Format::Bc4 => bc::encode_bc4(quality, &[levels(values, range, 255.0)], Some(std::slice::from_ref(mask)), &mut out),
+        Format::Bc7 => bc::encode_bc7(quality, 2, &bc7_texels(&[vec![quantise(values, range)]], 4), &mut out),
+        _ => encode_texels(&plane, &[(values, range)], &mut out),
+    }
+    out
+}
+
+/// A single-channel brick's values from its encoding in `format` (as readers decode them).
+pub fn decode_one(format: Format, bytes: &[u8], range: [f32; 2]) -> Brick {
+    let plane = single_plane(format);
+    plane.channel_values(&plane.decode_brick(bytes), 0, range)
+}
+
+/// True when every voxel of `mask` decodes within `max_error` of its
+/// source value (computed in f64, so no rounding of the difference hides
+/// an excess), a NaN to a NaN and ±∞ to itself.
+pub fn within(values: &Brick, decoded: &Brick, mask: &[u64; 8], max_error: f32) -> bool {
+    let e = f64::from(max_error);
+    (0..BRICK_VOXELS).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 1).all(|i| {
+        let (v, d) = (values[i], decoded[i]);
+        if v.is_nan() {
+            d.is_nan()
+        } else if v.is_infinite() {
+            d == v
+        } else {
+            d.is_finite() && (f64::from(d) - f64::from(v)).abs() <= e
+        }
+    })
+}
+
+/// The constant nearest every shown voxel (the middle of their range), if
+/// they are all finite.
+fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<f32> {
+    let mut lo_hi: Option<[f32; 2]> = None;
+    for i in (0..BRICK_VOXELS).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 1) {
+        let v = values[i];
+        if !v.is_finite() {
+            return None;
+        }
+        lo_hi = Some(lo_hi.map_or([v, v], |[lo, hi]| [lo.min(v), hi.max(v)]));
+    }
+    // No voxel shown: any value will do; the brick's smallest keeps it in range.
+    let [lo, hi] = lo_hi.unwrap_or_else(|| range_of(values));
+    // Halves first: the difference of two large values may overflow.
+    Some(lo / 2.0 + hi / 2.0)
+}
+
+/// The cheapest encoding of one brick channel whose voxels of `mask`
+/// decode within `max_error` of `values` (`f32` always does).
+pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality) -> Choice {
+    let range = range_of(values);
+    for format in Format::BY_COST.into_iter().filter(|&f| f != Format::F32) {
+        let range = match format {
+            Format::Constant => match constant_of(values, mask) {
+                Some(v) => [v, v],
+                None => continue,
+            },
+            _ => range,
+        };
+        let bytes = encode_one(format, quality, values, range, mask);
+        if within(values, &decode_one(format, &bytes, range), mask, max_error) {
+            return Choice { format, range, bytes };
+        }
+    }
+    // Exact, NaN and ±∞ included.
+    Choice { format: Format::F32, range, bytes: encode_one(Format::F32, quality, values, range, mask) }
+}
+
+/// [`cheapest`] for every channel of every brick (`channels` [`Brick`]s a
+/// brick, `masks[i]` the voxels brick i shows), in parallel;
+/// `progress(n)` after each `n` bricks.
+pub fn cheapest_all(bricks: &[Brick], channels: usize, masks: &[[u64; 8]], max_error: f32, quality: Quality, progress: &(dyn Fn(usize) + Sync)) -> Vec<Choice> {
+    let channels = channels.max(1);
+    bricks
+        .par_chunks(channels)
+        .enumerate()
+        .flat_map_iter(|(i, brick)| {
+            let mask = masks.get(i).copied().unwrap_or([u64::MAX; 8]);
+            let out: Vec<Choice> = brick.iter().map(|v| cheapest(v, &mask, max_error, quality)).collect();
+            progress(1);
+            out
+        })
+        .collect()
+}
