@@ -34,9 +34,9 @@ import subprocess
 import sys
 
 import numpy as np
-import pyopenvdb as vdb
 
 from bench_size import EXE, INPUTS, OUT, ROOT, grid_args, nanovdb, run
+from vdb_values import dense
 
 
 def partitions2():
@@ -47,23 +47,6 @@ def partitions2():
     words = [int(w, 16) & 0xFFFF for w in re.findall(r"0x([0-9a-fA-F]+)u", body)]
     assert len(words) == 64, "expected 64 partitions, found %d" % len(words)
     return np.array([[(w >> t) & 1 for t in range(16)] for w in words], float)
-
-
-def dense(path, grid):
-    """Values and active mask over the leaf-aligned bounding box of the active voxels."""
-    g = vdb.read(path, grid)
-    lo, hi = g.evalActiveVoxelBoundingBox()
-    lo = np.array(lo) // 8 * 8
-    hi = (np.array(hi) // 8 + 1) * 8
-    shape = tuple(int(n) for n in hi - lo)
-    vals = np.zeros(shape, np.float32)
-    g.copyToArray(vals, ijk=tuple(int(c) for c in lo))
-    act = np.zeros(shape, bool)
-    for it in g.iterOnValues():  # voxels and tiles
-        a = np.array(it["min"]) - lo
-        b = np.array(it["max"]) - lo + 1
-        act[a[0]:b[0], a[1]:b[1], a[2]:b[2]] = True
-    return vals.astype(np.float64), act
 
 
 def blocks(a):

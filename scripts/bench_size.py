@@ -35,6 +35,13 @@ def grid_args(path):
     return ["--grid", "flames"] if "embergen" in path else []
 
 
+def brick_formats(report):
+    """A --max-error cook's bricks per format, e.g. 'const 40, bc7 30, u8 148' ("" for several channels)."""
+    short = {"constant": "const", "unorm8": "u8", "unorm16": "u16"}
+    fs = report["channels"][0]["formats"] if len(report["channels"]) == 1 else []
+    return ", ".join("%s %d" % (short.get(f["format"], f["format"]), f["bricks"]) for f in fs)
+
+
 # The inputs of the size table (bc7_floor.py uses the same ones, but fog_300).
 INPUTS = [
     os.path.join(ROOT, "fixtures/fog_blosc.vdb"),

@@ -523,10 +523,13 @@ mod tests {
         assert_eq!(Plane { format: Format::Bc7, lanes: 4, z_per_texel: 2 }.brick_bytes(), 256);
         assert_eq!(Plane { format: Format::Bc4, lanes: 1, z_per_texel: 1 }.brick_bytes(), 256);
         assert_eq!(Plane::uncompressed(Format::F16, 3).brick_bytes(), 512 * 8);
-        for code in 0..5 {
+        assert_eq!(Plane { format: Format::Unorm16, lanes: 2, z_per_texel: 1 }.brick_bytes(), 512 * 4);
+        assert_eq!(Plane { format: Format::Constant, lanes: 1, z_per_texel: 1 }.brick_bytes(), 0);
+        assert!(!Plane { format: Format::Constant, lanes: 2, z_per_texel: 1 }.is_valid());
+        for code in 0..7 {
             assert_eq!(Format::from_code(code).map(Format::code), Some(code));
         }
-        assert_eq!(Format::from_code(5), None);
+        assert_eq!(Format::from_code(7), None);
     }
 
     #[test]
