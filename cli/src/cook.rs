@@ -247,7 +247,7 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         .iter()
         .map(|&format| {
             let fs = CookSettings { format, ..s.clone() };
-            CookOptions { format, groups: s.group.clone(), quality: s.quality, max_texture_dim: s.max_texture_dim, clustering: s.clustering(), settings: fs.recorded(job.inputs) }
+            CookOptions { format, groups: s.group.clone(), quality: s.quality, max_texture_dim: s.max_texture_dim, clustering: s.clustering(), settings: fs.recorded(job.inputs), levels: s.lods }
         })
         .collect();
     if job.reference {
@@ -348,6 +348,10 @@ pub fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> Stri
         if let Some(t) = non_finite_text(c, r.channels.len() > 1) {
             let _ = writeln!(s, "  non-finite      {t}");
         }
+    }
+    if !r.levels.is_empty() {
+        let per: Vec<String> = r.levels.iter().map(|l| format!("{} ({}x: {} leaves, rmse {:.3e})", l.level, l.voxel_scale, l.leaves, l.voxel_rmse)).collect();
+        let _ = writeln!(s, "  levels          {}", per.join(", "));
     }
     if let Some(c) = &r.clustering {
         let _ = writeln!(
