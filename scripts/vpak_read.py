@@ -4,12 +4,13 @@
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
 
-    /usr/bin/python3 scripts/vpak_read.py ASSET.vpak --frame N --out OUT.npz [--json]
+    /usr/bin/python3 scripts/vpak_read.py ASSET.vpak --frame N [--lod K] --out OUT.npz [--json]
 
 For every channel C (named as in the metadata) OUT.npz holds `C.ijk` (n x 3 int32,
 source index space = asset index + index_offset) and `C.values` (n float32) over the
 frame's active voxels (every active voxel of every L3 node and every voxel of every
-tile), sorted by i, then j, then k. `--json` prints a summary of the metadata.
+tile), sorted by i, then j, then k. With `--lod K`, the frame's level K instead, in
+that level's index space (level index = level asset index + index_offset >> K). `--json` prints a summary of the metadata.
 
 Dependencies (Debian): python3-numpy, python3-pil (BC7 blocks), python3-xxhash.
 Bad input exits with status 1 and one line `vpak_read.py: FILE: problem` on stderr.
@@ -24,6 +25,7 @@ import numpy as np
 
 MAGIC = b"VPAK\r\n\x1a\n"
 VERSION = 5
+MAX_LEVELS = 5
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
 
@@ -208,8 +210,13 @@ def decode_metadata(data):
     m["brick_count"] = r.uint()
     m["settings"] = r.vec(lambda: (r.string(), r.string()))
     m["sources"] = r.vec(lambda: {"path": r.string(), "bytes": r.uint(), "xxh3_128": r.string()})
+    def level():
+        return {"active_voxels": r.uint(), "leaves": r.uint(), "tiles": r.uint()}
+
     m["frames"] = r.vec(lambda: {"source": r.option(r.uint), "active_voxels": r.uint(),
-                                 "leaves": r.uint(), "tiles": r.uint()})
+                                 "leaves": r.uint(), "tiles": r.uint(), "coarse": r.vec(level)})
+    m["levels"] = r.uint()
+    m["level_filters"] = r.vec(r.uint)
     if r.pos != len(r.data):
         raise VpakError(f"metadata has {len(r.data) - r.pos} trailing bytes")
     return m
@@ -267,6 +274,13 @@ def validate(m, secs):
         raise VpakError("index_offset not a multiple of 128")
     if len(m["frames"]) != m["frame_count"]:
         raise VpakError("frame info list is not frame_count long")
+    L = m["levels"]
+    if not 1 <= L <= MAX_LEVELS:
+        raise VpakError(f"{L} levels (need 1 to {MAX_LEVELS})")
+    if len(m["level_filters"]) != (C if L > 1 else 0) or any(f > 1 for f in m["level_filters"]):
+        raise VpakError("level filters are not one per channel (with levels > 1) or unknown")
+    if any(len(f["coarse"]) != L - 1 for f in m["frames"]):
+        raise VpakError("a frame's level figures do not match the levels")
 
 
 def channel_planes(ch):
@@ -402,7 +416,7 @@ def l3_active(l3, node_index):
     return active
 
 
-def walk_frame(m, secs, frame):
+def walk_frame(m, secs, frame, lod=0):
     """Walk a frame's L1 node and its L2 children.
 
     Returns tile_parts [(asset-space origin, edge 128 or 8, tile index)] and leaf_parts
@@ -415,8 +429,8 @@ def walk_frame(m, secs, frame):
     l2 = secs.u32(K_L2)
     l2e = secs.u32(K_L2_ENTRIES)
     l3 = secs.u32(K_L3)
-    if len(frames) != m["frame_count"]:
-        raise VpakError("frame table is not frame_count long")
+    if len(frames) != m["frame_count"] * m["levels"]:
+        raise VpakError("frame table is not frame_count x levels long")
     if len(l1) % L1_WORDS or len(l2) % L2_WORDS:
         raise VpakError("node arrays are not whole records")
     if len(l3) < 1 or len(l3) < 1 + L3_WORDS * int(l3[0]):
@@ -424,7 +438,7 @@ def walk_frame(m, secs, frame):
     n1, n2, n3 = len(l1) // L1_WORDS, len(l2) // L2_WORDS, int(l3[0])
     TILE = 1 << 31
 
-    root = int(frames[frame])
+    root = int(frames[lod * m["frame_count"] + frame])
     if root >= n1:
         raise VpakError(f"frame {frame} points at missing L1 node {root}")
     node1 = l1[root * L1_WORDS:(root + 1) * L1_WORDS]
@@ -450,7 +464,7 @@ def walk_frame(m, secs, frame):
                 raise VpakError("L2 entry points at a missing L3 node")
             else:
                 leaf_parts.append((o2, e2))
-    limit = m["frames"][frame]["leaves"]
+    limit = m["frames"][frame]["leaves"] if lod == 0 else m["frames"][frame]["coarse"][lod - 1]["leaves"]
     if len(leaf_parts) > limit:
         raise VpakError(f"frame {frame} expands to more leaves than its FrameInfo says ({limit})")
     return tile_parts, leaf_parts
@@ -599,10 +613,10 @@ def brick_values(m, secs, bricks):
 # Frame decoding
 # ---------------------------------------------------------------------------
 
-def read_frame(m, secs, frame):
-    """Per-channel (ijk int32 n x 3, values float32 n), sorted by i, j, k (source space)."""
+def read_frame(m, secs, frame, lod=0):
+    """Per-channel (ijk int32 n x 3, values float32 n), sorted by i, j, k (source space of the level)."""
     C = len(m["channels"])
-    tile_parts, leaf_parts = walk_frame(m, secs, frame)
+    tile_parts, leaf_parts = walk_frame(m, secs, frame, lod)
     ijk_parts, val_parts = [], []
 
     if tile_parts:
@@ -638,7 +652,7 @@ def read_frame(m, secs, frame):
         val_parts.append(vals[leaf, :, vox])
 
     if ijk_parts:
-        ijk = np.concatenate(ijk_parts) + np.array(m["index_offset"], dtype=np.int64)
+        ijk = np.concatenate(ijk_parts) + (np.array(m["index_offset"], dtype=np.int64) >> lod)
         vals = np.concatenate(val_parts)
     else:
         ijk, vals = np.zeros((0, 3), dtype=np.int64), np.zeros((0, C))
@@ -677,6 +691,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description="Decode a .vpak frame (written from docs/format.md).")
     ap.add_argument("asset")
     ap.add_argument("--frame", type=int, default=None)
+    ap.add_argument("--lod", type=int, default=0, help="level of detail (0: the frame itself)")
     ap.add_argument("--out", help="write C.ijk / C.values per channel to this .npz")
     ap.add_argument("--json", action="store_true", help="print a metadata summary")
     args = ap.parse_args(argv)
@@ -688,7 +703,9 @@ def main(argv=None):
             frame = 0 if args.frame is None else args.frame
             if not 0 <= frame < m["frame_count"]:
                 raise VpakError(f"frame {frame} out of range (asset has {m['frame_count']})")
-            chans = read_frame(m, secs, frame)
+            if not 0 <= args.lod < m["levels"]:
+                raise VpakError(f"level {args.lod} out of range (asset has {m['levels']})")
+            chans = read_frame(m, secs, frame, args.lod)
             if args.out:
                 arrays = {}
                 for name, (ijk, vals) in chans.items():

@@ -266,6 +266,7 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
                 clustering: s.clustering(),
                 max_error: s.max_error,
                 settings: fs.recorded(job.inputs),
+                levels: s.lods,
             }
         })
         .collect();
@@ -373,6 +374,10 @@ pub fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> Stri
         if let Some(t) = non_finite_text(c, r.channels.len() > 1) {
             let _ = writeln!(s, "  non-finite      {t}");
         }
+    }
+    if !r.levels.is_empty() {
+        let per: Vec<String> = r.levels.iter().map(|l| format!("{} ({}x: {} leaves, rmse {:.3e})", l.level, l.voxel_scale, l.leaves, l.voxel_rmse)).collect();
+        let _ = writeln!(s, "  levels          {}", per.join(", "));
     }
     if let Some(c) = &r.clustering {
         let _ = writeln!(

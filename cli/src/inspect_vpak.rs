@@ -44,6 +44,17 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let channel_bytes = |c: usize| meta.channel_planes(c).iter().map(|&p| plane_bytes[p as usize] / sharing(p as usize)).sum::<u64>() + section_bytes(kind::CHANNEL_TABLE, c as u32);
     let channel_format = |c: usize| meta.channel_planes(c).iter().map(|&p| meta.planes[p as usize].plane.format.name()).collect::<Vec<_>>().join("+");
     let formats = meta.format_names();
+    // Levels of detail: figures over every frame, and the bytes each level needs on its own.
+    let levels: Vec<(u32, u64, u64, u64, u64)> = (0..meta.levels)
+        .map(|k| {
+            let fig = |f: &vdbcook_vpak::FrameInfo| match k {
+                0 => (u64::from(f.leaves), u64::from(f.tiles), f.active_voxels),
+                _ => f.coarse.get(k as usize - 1).map_or((0, 0, 0), |c| (u64::from(c.leaves), u64::from(c.tiles), c.active_voxels)),
+            };
+            let (l, t, a) = meta.frames.iter().map(fig).fold((0u64, 0u64, 0u64), |acc, x| (acc.0 + x.0, acc.1 + x.1, acc.2.saturating_add(x.2)));
+            (k, l, t, a, checked.level_bytes(k))
+        })
+        .collect();
     if as_json {
         return Ok(Described::Json(json!({
             "path": name,
@@ -75,7 +86,10 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "sections": asset.sections.iter().map(|s| json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": s.offset, "bytes": s.size, "checksum": format!("{:016x}", s.checksum)})).collect::<Vec<_>>(),
             "settings": meta.settings.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
             "sources": meta.sources.iter().map(|s| json!({"path": s.path, "bytes": s.bytes, "xxh3_128": s.xxh3_128})).collect::<Vec<_>>(),
-            "frame_info": meta.frames.iter().map(|f| json!({"source": f.source, "active_voxels": f.active_voxels, "leaves": f.leaves, "tiles": f.tiles})).collect::<Vec<_>>(),
+            "frame_info": meta.frames.iter().map(|f| json!({"source": f.source, "active_voxels": f.active_voxels, "leaves": f.leaves, "tiles": f.tiles,
+                "coarse": f.coarse.iter().map(|c| json!({"active_voxels": c.active_voxels, "leaves": c.leaves, "tiles": c.tiles})).collect::<Vec<_>>()})).collect::<Vec<_>>(),
+            "level_filters": meta.level_filters.iter().map(|f| f.name()).collect::<Vec<_>>(),
+            "levels": levels.iter().map(|&(k, l, t, a, b)| json!({"level": k, "voxel_scale": 1u64 << k, "leaves": l, "tiles": t, "active_voxels": a, "bytes": b})).collect::<Vec<_>>(),
         })));
     }
     use std::fmt::Write;
@@ -113,6 +127,15 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let _ = writeln!(s, "  {:<12} {:>10} {:>14}", "level", "count", "bytes");
     for (n, c, b) in nodes {
         let _ = writeln!(s, "  {n:<12} {c:>10} {b:>14}");
+    }
+    if meta.levels > 1 {
+        let filters: Vec<&str> = meta.level_filters.iter().map(|f| f.name()).collect();
+        let _ = writeln!(s, "  levels of detail: {} (filters: {}); bytes: what a level needs on its own", meta.levels, filters.join(", "));
+        let _ = writeln!(s, "  {:<5} {:>6} {:>10} {:>8} {:>14} {:>14} {:>9}", "lod", "voxel", "leaves", "tiles", "active voxels", "bytes", "of lod 0");
+        let base = levels.first().map_or(1, |l| l.4.max(1));
+        for &(k, l, t, a, b) in &levels {
+            let _ = writeln!(s, "  {k:<5} {:>6} {l:>10} {t:>8} {a:>14} {b:>14} {:>8.1}%", format!("{}x", 1u64 << k), b as f64 * 100.0 / base as f64);
+        }
     }
     let _ = writeln!(s, "  sections:");
     for e in &asset.sections {

@@ -139,6 +139,23 @@ pub const ITERATIONS: RangeInclusive<i64> = 0..=1000;
 pub const MAX_TEXTURE_DIM: RangeInclusive<i64> = 8..=16384;
 pub const VIEWS: RangeInclusive<i64> = 1..=360;
 
+/// A level count (`--lods`, `lods`): 1 to `vdbcook_vpak::MAX_LEVELS`.
+pub fn lods(n: u32) -> Result<u32, String> {
+    let max = vdbcook_vpak::MAX_LEVELS;
+    match n {
+        0 => Err("0 is not a level count: 1 keeps the frames alone, N adds levels 1 to N-1".into()),
+        n if n > max => {
+            Err(format!("{n} is more levels than the tree has: at most {max} (level {}'s voxels are {} source voxels wide, and its bricks span a whole L1 slot)", max - 1, 1u32 << (max - 1)))
+        }
+        n => Ok(n),
+    }
+}
+
+/// Parses a level count flag.
+pub fn parse_lods(s: &str) -> Result<u32, String> {
+    lods(s.trim().parse::<u32>().map_err(|_| format!("invalid level count \"{s}\" (expected a whole number, 1 to {})", vdbcook_vpak::MAX_LEVELS))?)
+}
+
 /// A FLIP budget (`--max-flip`, `max_flip`): a finite number >= 0 (FLIP errors lie in [0, 1]).
 pub fn flip_budget(x: f64) -> Result<f64, String> {
     if x.is_finite() && x >= 0.0 {
@@ -317,6 +334,10 @@ settings! {
     /// A clustered brick whose largest voxel difference from its centroid exceeds E stays unique.
     #[cfg_attr(feature = "clap", arg(long, value_name = "E"))]
     max_brick_error: Option<f32> = cluster_defaults().max_brick_error;
+    /// Levels of detail: N > 1 adds levels 1 to N-1 to every frame, level k with voxels 2^k
+    /// times as large (each the mean of its 2x2x2 children; level sets: of the active ones).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().lods, value_parser = parse_lods))]
+    lods: u32 = cook_defaults().levels;
     /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
     #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim, value_parser = clap::value_parser!(u32).range(MAX_TEXTURE_DIM)))]
     max_texture_dim: u32 = cook_defaults().max_texture_dim;
@@ -353,6 +374,9 @@ impl CookSettings {
         }
         if !within(self.max_texture_dim, &MAX_TEXTURE_DIM) {
             return bad("max_texture_dim", format!("{} is not in {}..={}", self.max_texture_dim, MAX_TEXTURE_DIM.start(), MAX_TEXTURE_DIM.end()));
+        }
+        if let Err(message) = lods(self.lods) {
+            return bad("lods", message);
         }
         if !within(self.views, &VIEWS) {
             return bad("views", format!("{} is not in {}..={}", self.views, VIEWS.start(), VIEWS.end()));
@@ -405,6 +429,7 @@ impl CookSettings {
             ("frames".into(), self.frames.text()),
             ("allow_missing".into(), self.allow_missing.text()),
             ("max_texture_dim".into(), self.max_texture_dim.text()),
+            ("lods".into(), self.lods.text()),
             ("clusters".into(), self.clusters.text()),
             ("iterations".into(), if clustered { self.iterations.text() } else { String::new() }),
             ("variance_threshold".into(), if clustered { self.variance_threshold.text() } else { String::new() }),

@@ -12,7 +12,7 @@
 
 mod unpack;
 
-pub use unpack::unpack_frame;
+pub use unpack::{unpack_frame, unpack_level};
 pub use vdbcook_encode::{Format, Quality};
 
 use rayon::prelude::*;
@@ -20,10 +20,11 @@ use std::time::Instant;
 pub use vdbcook_encode::NonFinite;
 use vdbcook_encode::{Brick, Encoded, ErrorStats, PlaneSpec};
 use vdbcook_flipbook::{Builder, Built, HashIndex};
-use vdbcook_grid::{Grid, Transform};
+use vdbcook_grid::lod::{self, Filter};
+use vdbcook_grid::{Grid, GridClass, Transform};
 use vdbcook_vpak::layout::{pack_atlas, plan_atlases, AtlasLayout};
 use vdbcook_vpak::nodes::Nodes;
-use vdbcook_vpak::{kind, Channel, FrameInfo, Metadata, PlaneInfo, Section, SourceFile};
+use vdbcook_vpak::{kind, Channel, FrameInfo, LevelFigures, LevelFilter, Metadata, PlaneInfo, Section, SourceFile};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -57,13 +58,17 @@ pub enum Error {
     MaxErrorGroups,
     #[error("a plane of {0} bricks is more than a channel table can address")]
     TooManyPlaneBricks(u32),
+    #[error("{0} levels of detail asked for: an asset has 1 (no coarser level) to {max} (level {top}'s voxels are {scale} source voxels wide and its bricks span a whole L1 slot, the coarsest the tree's 128-voxel alignment allows)", max = vdbcook_vpak::MAX_LEVELS, top = vdbcook_vpak::MAX_LEVELS - 1, scale = 1u32 << (vdbcook_vpak::MAX_LEVELS - 1))]
+    Levels(u32),
+    #[error("level {level} of frame {frame} is out of range (the asset has {levels} levels, numbered from 0)")]
+    NoLevel { frame: usize, level: u32, levels: u32 },
 }
 
 impl Error {
     /// True for errors in the settings a cook was given (its channel groups,
     /// clustering of too many channels) rather than in its input.
     pub fn is_settings_error(&self) -> bool {
-        matches!(self, Error::UnknownChannel { .. } | Error::TwiceGrouped(_) | Error::MultiChannelClustering(_) | Error::ConstantFormat | Error::MaxError(_) | Error::MaxErrorGroups)
+        matches!(self, Error::UnknownChannel { .. } | Error::TwiceGrouped(_) | Error::MultiChannelClustering(_) | Error::ConstantFormat | Error::MaxError(_) | Error::MaxErrorGroups | Error::Levels(_))
     }
 }
 
@@ -132,11 +137,15 @@ pub struct CookOptions {
     pub max_error: Option<f32>,
     /// Every setting, recorded verbatim in the asset's metadata.
     pub settings: Vec<(String, String)>,
+    /// Levels of detail (1: none; at most `vdbcook_vpak::MAX_LEVELS`): levels
+    /// 1 … levels − 1 of every frame, each filtered from the one before
+    /// (`vdbcook_grid::lod`), are trees of the asset too.
+    pub levels: u32,
 }
 
 impl Default for CookOptions {
     fn default() -> Self {
-        CookOptions { format: Format::F16, groups: Vec::new(), quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, max_error: None, settings: Vec::new() }
+        CookOptions { format: Format::F16, groups: Vec::new(), quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, max_error: None, settings: Vec::new(), levels: 1 }
     }
 }
 
@@ -286,11 +295,32 @@ pub struct CookReport {
     pub non_finite_voxels: u64,
     /// Per frame: (rmse, max error) of that channel.
     pub frame_errors: Vec<(f64, f64)>,
+    /// The coarser levels (levels of detail), level 1 first; empty without them.
+    pub levels: Vec<LevelReport>,
     pub channels: Vec<ChannelReport>,
     /// What clustering did, when it ran.
     pub clustering: Option<ClusterReport>,
     /// (stage, seconds).
     pub timings: Vec<(String, f64)>,
+}
+
+/// A coarser level's figures, over every frame.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct LevelReport {
+    pub level: u32,
+    /// Source voxels per level voxel along each axis (2^level).
+    pub voxel_scale: u32,
+    pub leaves: u64,
+    pub tiles: u64,
+    pub active_voxels: u64,
+    /// Voxel-domain error of what is stored against the level filtered from
+    /// the source (the channel with the lowest PSNR).
+    #[serde(serialize_with = "figure::f64")]
+    pub voxel_rmse: f64,
+    #[serde(serialize_with = "figure::f64")]
+    pub voxel_psnr: f64,
+    #[serde(serialize_with = "figure::f64")]
+    pub voxel_max_error: f64,
 }
 
 /// The thesis's Figure 19 table for one cook: bricks before (`bricks_in`) and
@@ -323,6 +353,8 @@ pub struct Cooker {
     sources: Vec<SourceFile>,
     ranges: Vec<[f32; 2]>,
     build_secs: f64,
+    /// Time spent filtering and pushing the coarser levels.
+    level_secs: f64,
 }
 
 /// The asset's transform and the grid that set it.
@@ -358,6 +390,7 @@ impl Cooker {
             sources: Vec::new(),
             ranges: vec![[f32::INFINITY, f32::NEG_INFINITY]; n],
             build_secs: 0.0,
+            level_secs: 0.0,
         }
     }
 
@@ -427,17 +460,59 @@ impl Cooker {
                 *acc = [acc[0].min(*lo), acc[1].max(*hi)];
             }
         }
+        let coarse = self.push_levels(grids)?;
         let source = self.add_source(source);
-        self.frames.push(FrameInfo { source, active_voxels: fs.active_voxels, leaves: fs.leaves as u32, tiles: fs.tiles as u32 });
+        self.frames.push(FrameInfo { source, active_voxels: fs.active_voxels, leaves: fs.leaves as u32, tiles: fs.tiles as u32, coarse });
         self.build_secs += t0.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// The filter of each channel's coarser levels, by its class.
+    fn filters(&self) -> Vec<Filter> {
+        self.channels.iter().map(|s| Filter::for_class(GridClass::from_vdb_name(&s.class))).collect()
+    }
+
+    /// Filters a frame's grids to levels 1 … levels − 1 (each from the one
+    /// before) and pushes each level's tree.
+    fn push_levels(&mut self, grids: &[Option<&Grid>]) -> Result<Vec<LevelFigures>, Error> {
+        let levels = self.opts.levels;
+        if levels == 0 || levels > vdbcook_vpak::MAX_LEVELS {
+            return Err(Error::Levels(levels));
+        }
+        let t0 = Instant::now();
+        let filters = self.filters();
+        let mut figures = Vec::with_capacity(levels as usize - 1);
+        let mut prev: Vec<Option<Grid>> = Vec::new();
+        for k in 1..levels {
+            let next: Vec<Option<Grid>> = grids
+                .par_iter()
+                .enumerate()
+                .map(|(c, g)| {
+                    let filter = filters.get(c).copied().unwrap_or(Filter::Mean);
+                    match prev.get(c) {
+                        Some(p) => p.as_ref().map(|p| lod::coarsen(p, filter)),
+                        None => g.map(|g| lod::coarsen(g, filter)),
+                    }
+                })
+                .collect();
+            let refs: Vec<Option<&Grid>> = next.iter().map(Option::as_ref).collect();
+            let fs = self.builder.push_level(k, &refs)?;
+            figures.push(LevelFigures { active_voxels: fs.active_voxels, leaves: fs.leaves as u32, tiles: fs.tiles as u32 });
+            prev = next;
+        }
+        self.level_secs += t0.elapsed().as_secs_f64();
+        Ok(figures)
     }
 
     /// Adds an empty frame (a source without the grids, with `--allow-missing`).
     pub fn push_empty(&mut self, source: Option<SourceFile>) {
         self.builder.push_empty();
+        let levels = self.opts.levels.clamp(1, vdbcook_vpak::MAX_LEVELS);
+        for k in 1..levels {
+            self.builder.push_empty_level(k);
+        }
         let source = self.add_source(source);
-        self.frames.push(FrameInfo { source, active_voxels: 0, leaves: 0, tiles: 0 });
+        self.frames.push(FrameInfo { source, active_voxels: 0, leaves: 0, tiles: 0, coarse: vec![LevelFigures::default(); levels as usize - 1] });
     }
 
     pub fn frame_count(&self) -> usize {
@@ -497,7 +572,11 @@ impl Cooker {
     /// Encodes, lays out and serialises the asset.
     /// Returns the asset's sections (write them with `vdbcook_vpak::write_file`) and the report.
     pub fn finish(self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
-        let mut timings = vec![("build".to_string(), self.build_secs)];
+        if self.opts.levels == 0 || self.opts.levels > vdbcook_vpak::MAX_LEVELS {
+            return Err(Error::Levels(self.opts.levels));
+        }
+        let mut timings = vec![("build".to_string(), self.build_secs - self.level_secs), ("levels".to_string(), self.level_secs)];
+        let filters = self.filters();
         let channels = self.channels.len().max(1);
         let (specs, group_of) = self.plan_planes()?;
         let mut built = self.builder.finish()?;
@@ -642,7 +721,19 @@ impl Cooker {
         // encoded on their own).
         let t0 = Instant::now();
         let decode_stored = |b: u32| remap.get(b as usize).and_then(|&i| keep.get(i as usize)).and_then(|&k| encoded.decode(k));
-        let frame_err = voxel_errors(&built, &decode_stored);
+        // Per tree (frames and levels, in push order); the frame figures are level 0's.
+        let tree_err = voxel_errors(&built, &decode_stored);
+        let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
+        let frame_err: Vec<&Vec<ErrorStats>> = tree_err.iter().zip(&tree_level).filter(|(_, &l)| l == 0).map(|(e, _)| e).collect();
+        let level_err: Vec<Vec<ErrorStats>> = (1..self.opts.levels)
+            .map(|k| {
+                let mut t = vec![ErrorStats::default(); channels];
+                for (e, _) in tree_err.iter().zip(&tree_level).filter(|(_, &l)| l == k) {
+                    t.iter_mut().zip(e).for_each(|(t, e)| t.merge(e));
+                }
+                t
+            })
+            .collect();
         let totals: Vec<ErrorStats> = (0..channels)
             .map(|c| {
                 let mut t = ErrorStats::default();
@@ -671,7 +762,7 @@ impl Cooker {
                 _ => decode_stored(b),
             };
             let mut without = ErrorStats::default();
-            for e in voxel_errors(&built, &decode_unclustered) {
+            for (e, _) in voxel_errors(&built, &decode_unclustered).iter().zip(&tree_level).filter(|(_, &l)| l == 0) {
                 without.merge(&e[0]);
             }
             ClusterReport {
@@ -802,6 +893,8 @@ impl Cooker {
             settings: self.opts.settings.clone(),
             sources: self.sources.clone(),
             frames: self.frames.clone(),
+            levels: self.opts.levels,
+            level_filters: if self.opts.levels > 1 { filters.into_iter().map(level_filter).collect() } else { Vec::new() },
         };
         sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()? });
         let report_sections: Vec<(String, u64)> = sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect();
@@ -857,11 +950,37 @@ impl Cooker {
             voxel_max_error: totals[worst].max_abs,
             non_finite_voxels: totals.iter().map(|t| t.non_finite.total()).sum(),
             frame_errors: frame_err.iter().map(|e| (e[worst].rmse(), e[worst].max_abs)).collect(),
+            levels: level_err
+                .iter()
+                .enumerate()
+                .map(|(i, e)| {
+                    let k = i as u32 + 1;
+                    let w = (0..channels).min_by(|&a, &b| e[a].psnr(peaks[a]).total_cmp(&e[b].psnr(peaks[b]))).unwrap_or(0);
+                    let fig = |f: fn(&LevelFigures) -> u64| self.frames.iter().filter_map(|fr| fr.coarse.get(i)).map(f).sum::<u64>();
+                    LevelReport {
+                        level: k,
+                        voxel_scale: 1 << k,
+                        leaves: fig(|f| u64::from(f.leaves)),
+                        tiles: fig(|f| u64::from(f.tiles)),
+                        active_voxels: fig(|f| f.active_voxels),
+                        voxel_rmse: e[w].rmse(),
+                        voxel_psnr: e[w].psnr(peaks[w]),
+                        voxel_max_error: e[w].max_abs,
+                    }
+                })
+                .collect(),
             channels: channel_reports,
             clustering: cluster_report,
             timings,
         };
         Ok((sections, report))
+    }
+}
+
+fn level_filter(f: Filter) -> LevelFilter {
+    match f {
+        Filter::Mean => LevelFilter::Mean,
+        Filter::ActiveMean => LevelFilter::ActiveMean,
     }
 }
 

@@ -494,6 +494,11 @@ fn absurd_channel_metadata_is_refused_never_a_panic() {
         ("frames missing", Box::new(|m| m.frames.clear())),
         ("a source past the list", Box::new(|m| m.frames[0].source = Some(7))),
         ("an odd index offset", Box::new(|m| m.index_offset[1] += 8)),
+        ("no level", Box::new(|m| m.levels = 0)),
+        ("levels the frame table lacks", Box::new(|m| m.levels = 2)),
+        ("too many levels", Box::new(|m| m.levels = vdbcook_vpak::MAX_LEVELS + 1)),
+        ("level filters without levels", Box::new(|m| m.level_filters = vec![vdbcook_vpak::LevelFilter::Mean; 3])),
+        ("figures of a level the asset lacks", Box::new(|m| m.frames[0].coarse.push(Default::default()))),
     ];
     for (what, mutate) in mutations {
         let mut m = meta.clone();
@@ -885,5 +890,117 @@ fn absurd_per_brick_format_metadata_is_refused_never_a_panic() {
             Ok(Ok(n)) => panic!("{what}: unpacked {n} grids from an absurd asset"),
             Err(_) => panic!("{what}: panic"),
         }
+    }
+fn cook_levels(format: Format, frames: &[Grid], levels: u32) -> (Vec<u8>, CookReport) {
+    let mut c = Cooker::new(CookOptions { format, levels, ..CookOptions::default() });
+    for f in frames {
+        c.push(f, None).unwrap();
+    }
+    let (sections, report) = c.finish(&NoProgress).unwrap();
+    (vdbcook_vpak::assemble(&sections), report)
+}
+
+/// The grid as a reader sees it: inactive voxels at the background, leaves without an active voxel gone.
+fn as_read(g: &Grid) -> (Vec<Leaf>, Vec<Tile>) {
+    let leaves = g
+        .leaves
+        .iter()
+        .filter(|l| !l.mask.is_empty())
+        .map(|l| {
+            let mut l = l.clone();
+            for v in 0..512 {
+                if !l.mask.is_on(v) {
+                    l.values[v] = g.background;
+                }
+            }
+            l
+        })
+        .collect();
+    let mut tiles: Vec<Tile> = g.tiles.iter().filter(|t| t.active).copied().collect();
+    tiles.sort_by_key(|t| (t.origin, t.dim));
+    (leaves, tiles)
+}
+
+#[test]
+fn every_level_unpacks_to_the_filtered_source_exactly_in_f32() {
+    let frames = [frame(0), frame(1), frame(2)];
+    let levels = vdbcook_vpak::MAX_LEVELS;
+    let (bytes, report) = cook_levels(Format::F32, &frames, levels);
+    assert_eq!(report.levels.len(), levels as usize - 1);
+    assert!(report.levels.iter().all(|l| l.voxel_rmse == 0.0 && l.leaves > 0), "{:?}", report.levels);
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    let checked = Checked::new(&asset).unwrap();
+    assert_eq!((checked.meta.levels, checked.frames.len()), (levels, 3 * levels as usize));
+    assert_eq!(checked.meta.level_filters, vec![vdbcook_vpak::LevelFilter::Mean]);
+    for (f, src) in frames.iter().enumerate() {
+        let mut want = src.clone();
+        for k in 0..levels {
+            if k > 0 {
+                want = vdbcook_grid::lod::coarsen(&want, vdbcook_grid::lod::Filter::Mean);
+            }
+            let g = unpack_level(&asset, f, k).unwrap().remove(0);
+            let (leaves, tiles) = as_read(&want);
+            assert_eq!(g.leaves, leaves, "frame {f} level {k}: leaves");
+            let mut got_tiles = g.tiles.clone();
+            got_tiles.sort_by_key(|t| (t.origin, t.dim));
+            assert_eq!(got_tiles, tiles, "frame {f} level {k}: tiles");
+            assert_eq!(g.transform.matrix, checked.meta.level_transform(k));
+            let t = vdbcook_grid::lod::coarsen_transform(&vdbcook_grid::Transform::identity());
+            if k == 1 {
+                assert_eq!(g.transform, t, "level 1's transform is the coarsened one");
+            }
+            assert_eq!(checked.meta.level_leaves(f, k) as usize, leaves.len());
+        }
+    }
+    // Level 0 is what a cook without levels stores; the levels add trees, not other bricks for level 0.
+    let (plain, _) = cook_levels(Format::F32, &frames, 1);
+    let plain = Asset::from_bytes(&plain).unwrap();
+    for f in 0..3 {
+        assert_eq!(unpack_frame(&plain, f).unwrap(), unpack_frame(&asset, f).unwrap());
+    }
+    assert!(matches!(unpack_level(&asset, 0, levels), Err(Error::NoLevel { .. })));
+    assert!(matches!(unpack_level(&plain, 0, 1), Err(Error::NoLevel { .. })));
+    // Per level bytes: each level alone is smaller than level 0, and every one is counted.
+    let bytes0 = checked.level_bytes(0);
+    for k in 1..levels {
+        assert!(checked.level_bytes(k) > 0 && checked.level_bytes(k) < bytes0, "level {k}");
+    }
+}
+
+#[test]
+fn levels_are_deterministic_and_lossy_formats_report_their_error() {
+    let frames = [frame(0), frame(1)];
+    let run = |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| cook_levels(Format::Bc4, &frames, 4).0);
+    assert_eq!(run(1), run(3));
+    let (_, report) = cook_levels(Format::Unorm8, &frames, 4);
+    assert!(report.levels.iter().all(|l| l.voxel_rmse > 0.0 && l.voxel_max_error < 0.1 / 255.0), "{:?}", report.levels);
+}
+
+#[test]
+fn a_level_count_out_of_range_is_a_settings_error() {
+    for levels in [0, vdbcook_vpak::MAX_LEVELS + 1] {
+        let mut c = Cooker::new(CookOptions { levels, ..CookOptions::default() });
+        let e = c.push(&frame(0), None).unwrap_err();
+        assert!(e.is_settings_error() && e.to_string().contains("levels of detail"), "{e}");
+    }
+}
+
+#[test]
+fn level_sets_get_the_active_mean_and_empty_frames_every_level() {
+    let mut ls = frame(0);
+    ls.class = GridClass::LevelSet;
+    ls.background = 0.3;
+    let mut c = Cooker::new(CookOptions { format: Format::F32, levels: 3, ..CookOptions::default() });
+    c.push(&ls, None).unwrap();
+    c.push_empty(None);
+    let (sections, _) = c.finish(&NoProgress).unwrap();
+    let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
+    let meta = Checked::new(&asset).unwrap().meta;
+    assert_eq!(meta.level_filters, vec![vdbcook_vpak::LevelFilter::ActiveMean]);
+    let want = vdbcook_grid::lod::coarsen(&ls, vdbcook_grid::lod::Filter::ActiveMean);
+    assert_eq!(unpack_level(&asset, 0, 1).unwrap()[0].leaves, as_read(&want).0);
+    for k in 0..3 {
+        let g = unpack_level(&asset, 1, k).unwrap().remove(0);
+        assert!(g.leaves.is_empty() && g.tiles.is_empty(), "level {k} of the empty frame");
     }
 }

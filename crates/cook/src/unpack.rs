@@ -26,24 +26,35 @@ const MAX_TILES: usize = 1 << 22;
 /// active voxels (the union of the channels'), holding the channel's
 /// background where its own grid was inactive.
 pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Vec<Grid>, Error> {
+    unpack_level(asset, frame, 0)
+}
+
+/// [`unpack_frame`] at level of detail `level` (0: the frame itself): the
+/// grids are in the level's index space, with the level's transform (voxels
+/// 2^level times as large, a voxel's centre at its children's centre).
+pub fn unpack_level(asset: &Asset, frame: usize, level: u32) -> Result<Vec<Grid>, Error> {
     let checked = Checked::new(asset)?;
     let meta = &checked.meta;
     if frame >= meta.frame_count as usize {
         return Err(Error::NoFrame { frame, count: meta.frame_count as usize });
     }
+    if level >= meta.levels {
+        return Err(Error::NoLevel { frame, level, levels: meta.levels });
+    }
     let channels = meta.channels.len();
     // The metadata says how many leaves the frame has: decode no more. Shared
     // nodes let a small asset describe a huge frame (legitimately, for
     // repeated leaves): refuse what would not fit in memory before expanding it.
-    let want = meta.frames.get(frame).map_or(0, |f| u64::from(f.leaves));
+    let want = u64::from(meta.level_leaves(frame, level));
     let (bytes, budget) = (want.saturating_mul(LEAF_COST).saturating_mul(channels as u64), memory_budget());
     if bytes > budget {
         return Err(Error::TooBig { frame, leaves: want, bytes, budget });
     }
     let want = want as usize;
     let nodes = checked.nodes();
-    let (leaves, tiles) =
-        nodes.frame_contents(frame, want, MAX_TILES).ok_or_else(|| Error::Corrupt(format!("frame {frame} holds more than the {want} leaves or {MAX_TILES} tiles its metadata allows")))?;
+    let (leaves, tiles) = nodes
+        .tree_contents(meta.tree_index(frame, level), meta.level_offset(level), want, MAX_TILES)
+        .ok_or_else(|| Error::Corrupt(format!("frame {frame} holds more than the {want} leaves or {MAX_TILES} tiles its metadata allows")))?;
     if leaves.len() != want {
         return Err(Error::Corrupt(format!("frame {frame} holds {} leaves, its metadata says {want}", leaves.len())));
     }
@@ -61,6 +72,11 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Vec<Grid>, Error> {
     }
     let tile_values: Vec<Vec<f32>> = tiles.iter().map(|&(_, _, t)| nodes.tile(t).ok_or_else(|| Error::Corrupt(format!("tile {t} is past the end of the tiles")))).collect::<Result<_, _>>()?;
     let map_type = MapType::from_vdb_name(&meta.map_type).unwrap_or(MapType::Affine);
+    let transform = match level {
+        0 => Transform { map_type, matrix: meta.transform },
+        // The map type a coarsened transform takes; the matrix straight from the metadata.
+        _ => Transform { map_type: vdbcook_grid::lod::coarsen_transform(&Transform { map_type, matrix: meta.transform }).map_type, matrix: meta.level_transform(level) },
+    };
     Ok(meta
         .channels
         .iter()
@@ -72,7 +88,7 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Vec<Grid>, Error> {
                 name: ch.name.clone(),
                 class: GridClass::from_vdb_name(&ch.class),
                 background: ch.background,
-                transform: Transform { map_type, matrix: meta.transform },
+                transform,
                 leaves,
                 tiles: tiles.iter().zip(&tile_values).map(|(&(o, dim, _), v)| Tile { origin: Coord::new(o[0], o[1], o[2]), dim, value: v[c], active: true }).collect(),
             }

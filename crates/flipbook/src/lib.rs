@@ -237,6 +237,9 @@ pub struct FrameLeaves {
     /// Active tiles: origin, edge (8, 128 or 4096), one value per channel.
     pub tiles: Vec<(Coord, u32, Vec<f32>)>,
     pub active_voxels: u64,
+    /// Level of detail: coordinates are in level `level`'s index space
+    /// (source index >> level, see `vdbcook_grid::lod`).
+    pub level: u32,
 }
 
 /// Per-frame figures reported by [`Builder::push`].
@@ -262,6 +265,8 @@ pub struct Builder {
     frames: Vec<FrameLeaves>,
     bbox: Option<Bbox>,
     leaves_in: u64,
+    /// Level of the tree being pushed.
+    level: u32,
 }
 
 impl Default for Builder {
@@ -282,7 +287,7 @@ struct Merged {
 impl Builder {
     pub fn new(channels: usize) -> Builder {
         let channels = channels.max(1);
-        Builder { channels, backgrounds: vec![None; channels], pool: BrickPool::new(channels), l3: Vec::new(), l3_index: Interner::default(), frames: Vec::new(), bbox: None, leaves_in: 0 }
+        Builder { channels, backgrounds: vec![None; channels], pool: BrickPool::new(channels), l3: Vec::new(), l3_index: Interner::default(), frames: Vec::new(), bbox: None, leaves_in: 0, level: 0 }
     }
 
     pub fn channels(&self) -> usize {
@@ -293,6 +298,15 @@ impl Builder {
     /// this frame).  Only active values are kept: inactive voxels take the
     /// background, inactive tiles are dropped, leaves with no active voxel vanish.
     pub fn push(&mut self, grids: &[Option<&Grid>]) -> Result<FrameStats, Error> {
+        self.push_level(0, grids)
+    }
+
+    /// Adds a frame's tree at a coarser level (`level` > 0: the grids are the
+    /// frame's filtered to that level, in its index space), an ordinary tree
+    /// over the same pool.  Push every level of a frame before the next frame;
+    /// [`Built::nodes`] lists the trees level by level.
+    pub fn push_level(&mut self, level: u32, grids: &[Option<&Grid>]) -> Result<FrameStats, Error> {
+        self.level = level;
         if grids.len() != self.channels {
             return Err(Error::Channels { found: grids.len(), expected: self.channels });
         }
@@ -325,7 +339,7 @@ impl Builder {
         let c = self.channels;
         let before = self.pool.len();
         let n = leaves.len() / c;
-        let mut fl = FrameLeaves { channel_masks, ..FrameLeaves::default() };
+        let mut fl = FrameLeaves { channel_masks, level: self.level, ..FrameLeaves::default() };
         // Room for every leaf being new, so the pool never moves while it grows
         // (untouched capacity costs no memory).
         self.pool.bricks.reserve(n * c);
@@ -375,7 +389,9 @@ impl Builder {
                 }
                 fl.leaves.push((leaf.origin, id));
                 fl.active_voxels += u64::from(leaf.mask.count_on());
-                self.grow(Bbox::new(leaf.origin, leaf.origin.offset(7, 7, 7)));
+                if fl.level == 0 {
+                    self.grow(Bbox::new(leaf.origin, leaf.origin.offset(7, 7, 7)));
+                }
             }
             self.pool.bricks.truncate(next * c);
         }
@@ -385,7 +401,9 @@ impl Builder {
             for (acc, &v) in ranges.iter_mut().zip(&values) {
                 *acc = [acc[0].min(v), acc[1].max(v)];
             }
-            self.grow(t.bbox());
+            if fl.level == 0 {
+                self.grow(t.bbox());
+            }
             fl.tiles.push((origin, dim, values));
         }
         self.leaves_in += fl.leaves.len() as u64;
@@ -398,6 +416,11 @@ impl Builder {
     /// Adds a frame with nothing in it (a missing grid with `--allow-missing`).
     pub fn push_empty(&mut self) {
         self.frames.push(FrameLeaves::default());
+    }
+
+    /// Adds an empty tree at level `level` (of an empty frame).
+    pub fn push_empty_level(&mut self, level: u32) {
+        self.frames.push(FrameLeaves { level, ..FrameLeaves::default() });
     }
 
     fn grow(&mut self, b: Bbox) {
@@ -605,8 +628,11 @@ impl Built {
         };
         let mut l2_table = Interner::default();
         let mut l1_table = Interner::default();
-        let local = |c: Coord| [c.x.wrapping_sub(off.x), c.y.wrapping_sub(off.y), c.z.wrapping_sub(off.z)];
+        let mut trees: Vec<(u32, u32)> = Vec::with_capacity(self.frames.len());
         for fl in &self.frames {
+            // Level k's index space is the asset's >> k (the offset, a multiple of 128, shifts exactly).
+            let lo = Coord::new(off.x >> fl.level, off.y >> fl.level, off.z >> fl.level);
+            let local = |c: Coord| [c.x.wrapping_sub(lo.x), c.y.wrapping_sub(lo.y), c.z.wrapping_sub(lo.z)];
             // (l1 slot, l2 slot, entry), or a tile for a whole l1 slot.
             let mut l2s: Vec<(usize, usize, u32)> = Vec::with_capacity(fl.leaves.len());
             let mut l1_tiles: BTreeMap<usize, u32> = BTreeMap::new();
@@ -629,7 +655,7 @@ impl Built {
                         let span = i64::from(*dim);
                         for s in 0..L1_SLOTS {
                             let (x, y, z) = ((s >> 10) as i64 * 128, ((s >> 5) & 31) as i64 * 128, (s & 31) as i64 * 128);
-                            let w = [i64::from(off.x) + x, i64::from(off.y) + y, i64::from(off.z) + z];
+                            let w = [i64::from(lo.x) + x, i64::from(lo.y) + y, i64::from(lo.z) + z];
                             let o = [i64::from(o.x), i64::from(o.y), i64::from(o.z)];
                             if (0..3).all(|a| w[a] >= o[a] && w[a] < o[a] + span) {
                                 l1_tiles.insert(s, t);
@@ -660,8 +686,11 @@ impl Built {
             }
             l1_occ.sort_unstable_by_key(|e| e.0);
             let id = intern_node(&mut l1_table, &mut n.l1, &mut n.l1_entries, L1_SLOTS, &l1_occ)?;
-            n.frames.push(id);
+            trees.push((fl.level, id));
         }
+        // Level by level, frames in order within each (the frames section's order).
+        trees.sort_by_key(|t| t.0);
+        n.frames = trees.into_iter().map(|t| t.1).collect();
         Ok(n)
     }
 }

@@ -10,6 +10,7 @@
 //! space.
 
 mod coord;
+pub mod lod;
 pub mod mem;
 mod transform;
 

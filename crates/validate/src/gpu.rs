@@ -382,7 +382,8 @@ impl Renderer {
         Ok(GpuAsset {
             buffers,
             atlases,
-            frames: c.frames.to_vec(),
+            // Level 0's trees (the frames section lists coarser levels after them).
+            frames: c.frames.get(..c.meta.frame_count as usize).unwrap_or(&[]).to_vec(),
             slots: slots.len(),
             bound,
             single_slot,

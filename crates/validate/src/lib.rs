@@ -228,6 +228,6 @@ impl<'a> AssetData<'a> {
     }
 
     pub fn frame_l1(&self, frame: usize) -> Result<u32, Error> {
-        self.c.frames.get(frame).copied().ok_or(Error::Frame { frame, count: self.c.frames.len() })
+        self.c.tree(frame, 0).ok_or(Error::Frame { frame, count: self.c.meta.frame_count as usize })
     }
 }

@@ -5,7 +5,7 @@
 
 use crate::layout::{AtlasLayout, Format, PlaneInfo};
 use crate::nodes::{l3_node_count, Nodes, L1_WORDS, L2_WORDS};
-use crate::{kind, Asset, Error, Metadata, CHOICE_SHIFT, MAX_ALTERNATES, PLANE_BRICK_MASK};
+use crate::{kind, Asset, Error, Metadata, CHOICE_SHIFT, MAX_ALTERNATES, MAX_LEVELS, PLANE_BRICK_MASK};
 
 /// Channels an asset may have (a sanity bound, not a format limit).
 pub const MAX_CHANNELS: usize = 256;
@@ -113,9 +113,19 @@ impl<'a> Checked<'a> {
         if let Some(f) = meta.frames.iter().position(|f| f.source.is_some_and(|s| s as usize >= meta.sources.len())) {
             return invalid(format!("frame {f} names a source the asset does not list"));
         }
+        if meta.levels == 0 || meta.levels > MAX_LEVELS {
+            return invalid(format!("{} levels of detail (need 1 to {MAX_LEVELS})", meta.levels));
+        }
+        let filters = if meta.levels > 1 { channels } else { 0 };
+        if meta.level_filters.len() != filters {
+            return invalid(format!("{} level filters for {channels} channels and {} levels (need {filters})", meta.level_filters.len(), meta.levels));
+        }
+        if let Some(f) = meta.frames.iter().position(|f| f.coarse.len() + 1 != meta.levels as usize) {
+            return invalid(format!("frame {f} has figures for {} levels, the asset has {}", meta.frames[f].coarse.len() + 1, meta.levels));
+        }
         let frames = asset.u32s(kind::FRAMES)?;
-        if frames.len() != meta.frame_count as usize {
-            return invalid(format!("{} frames in the frame table, {} in the metadata", frames.len(), meta.frame_count));
+        if frames.len() as u64 != u64::from(meta.frame_count) * u64::from(meta.levels) {
+            return invalid(format!("{} trees in the frame table, {} frames × {} levels in the metadata", frames.len(), meta.frame_count, meta.levels));
         }
         let words = |k: u32, unit: usize, what: &str| -> Result<&'a [u32], Error> {
             let w = asset.u32s(k)?;
@@ -195,6 +205,48 @@ impl<'a> Checked<'a> {
             }
         }
         Ok(Checked { frames, l1, l1_entries: asset.u32s(kind::L1_ENTRIES)?, l2, l2_entries: asset.u32s(kind::L2_ENTRIES)?, l3, tiles, ranges, tables, channel_tables, atlases, meta })
+    }
+
+    /// The L1 node of frame `frame` at level `level`.
+    pub fn tree(&self, frame: usize, level: u32) -> Option<u32> {
+        if frame >= self.meta.frame_count as usize || level >= self.meta.levels {
+            return None;
+        }
+        self.frames.get(self.meta.tree_index(frame, level)).copied()
+    }
+
+    /// Bytes level `level` needs on its own: the node arrays of its trees
+    /// (every frame's) and, in every plane, its distinct plane bricks with
+    /// their ranges, each counted once (what an engine that loads only this
+    /// level uploads; levels share what they have in common, so the levels'
+    /// figures add up to more than the asset).
+    pub fn level_bytes(&self, level: u32) -> u64 {
+        let roots: Vec<u32> = (0..self.meta.frame_count as usize).filter_map(|f| self.tree(f, level)).collect();
+        let nodes = Nodes {
+            channels: self.meta.channels.len(),
+            frames: Vec::new(),
+            l1: self.l1.to_vec(),
+            l1_entries: self.l1_entries.to_vec(),
+            l2: self.l2.to_vec(),
+            l2_entries: self.l2_entries.to_vec(),
+            l3: self.l3.to_vec(),
+            tiles: self.tiles.to_vec(),
+            offset: self.meta.index_offset,
+        };
+        let usage = nodes.usage(&roots);
+        let mut bytes = usage.tree_bytes(self.meta.channels.len());
+        // Every channel's plane bricks (per-brick formats spread a channel over
+        // several planes), each counted once, and the channel tables' entries.
+        let channels = self.meta.channels.len();
+        let mut plane_bricks: Vec<(usize, u32)> = usage.bricks.iter().flat_map(|&b| (0..channels).filter_map(move |c| self.channel_brick(c, b))).collect();
+        plane_bricks.sort_unstable();
+        plane_bricks.dedup();
+        for (p, _) in plane_bricks {
+            let info = &self.meta.planes[p];
+            bytes += info.plane.brick_bytes() as u64 + 8 * u64::from(info.range_slots());
+        }
+        let tables = self.channel_tables.iter().filter(|t| t.is_some()).count() as u64;
+        bytes + 4 * tables * usage.bricks.len() as u64
     }
 
     /// The node arrays, copied.

@@ -5,7 +5,7 @@
 //! ```text
 //! offset  size   field
 //! 0       8      magic "VPAK\r\n\x1a\n"
-//! 8       4      format version (4)
+//! 8       4      format version (5)
 //! 12      4      flags (0; reserved)
 //! 16      4      section count n
 //! 20      4      reserved (0)
@@ -36,8 +36,13 @@ pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
 /// 3: channels (several grids in one tree), planes, per-channel brick ranges and tile values.
 /// 4: each plane stores its own distinct bricks (brick tables), ranges and atlases.
 /// 5: per-brick formats (a channel in several planes, a channel table choosing per
-///    brick), `unorm16` and `constant` planes.
+///    brick), `unorm16` and `constant` planes; levels of detail (a tree per frame
+///    and level; `Metadata::levels`, `FrameInfo::coarse`).
 pub const VERSION: u32 = 5;
+/// Levels an asset may have: level 4's bricks span 128³ source voxels, one
+/// L1 slot, and the asset's index offset (a multiple of 128) keeps every
+/// level's leaves on its L3 grid only up to there.
+pub const MAX_LEVELS: u32 = 5;
 pub const HEADER_LEN: usize = 64;
 pub const ENTRY_LEN: usize = 32;
 /// Every section starts at a multiple of this (GPU upload and mmap friendly).
@@ -49,7 +54,7 @@ const MAX_SECTIONS: u32 = 1 << 16;
 pub mod kind {
     /// bincode-2 (standard config) serialisation of [`super::Metadata`].
     pub const METADATA: u32 = 1;
-    /// u32 per frame: its L1 node.
+    /// u32 per frame and level: its L1 node; level k of frame f at `k · frame_count + f`.
     pub const FRAMES: u32 = 2;
     pub const L1_NODES: u32 = 3;
     pub const L1_ENTRIES: u32 = 4;
@@ -150,6 +155,35 @@ pub struct FrameInfo {
     pub active_voxels: u64,
     pub leaves: u32,
     pub tiles: u32,
+    /// The same figures for levels 1, 2, … (`Metadata::levels` − 1 of them).
+    pub coarse: Vec<LevelFigures>,
+}
+
+/// A coarser level's figures of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LevelFigures {
+    pub active_voxels: u64,
+    pub leaves: u32,
+    pub tiles: u32,
+}
+
+/// How a channel's coarser levels were made from the finer ones (see
+/// `vdbcook_grid::lod`): the variant index is the code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LevelFilter {
+    /// The mean of the eight children, an inactive one counting as the background (fog and the rest).
+    Mean,
+    /// The mean of the active children (level sets).
+    ActiveMean,
+}
+
+impl LevelFilter {
+    pub fn name(self) -> &'static str {
+        match self {
+            LevelFilter::Mean => "mean",
+            LevelFilter::ActiveMean => "active mean",
+        }
+    }
 }
 
 /// One channel: a scalar grid, or one component of a vec3 grid.
@@ -211,6 +245,11 @@ pub struct Metadata {
     pub settings: Vec<(String, String)>,
     pub sources: Vec<SourceFile>,
     pub frames: Vec<FrameInfo>,
+    /// Levels of detail: 1 (no coarser level) to [`MAX_LEVELS`]. Level k has
+    /// voxels 2^k source voxels wide; see docs/format.md, "Levels".
+    pub levels: u32,
+    /// Per channel, the filter of its coarser levels (empty when `levels` is 1).
+    pub level_filters: Vec<LevelFilter>,
 }
 
 impl Metadata {
@@ -252,6 +291,44 @@ impl Metadata {
     /// asset has, and no channel table addresses it.
     pub fn plane_has_table(&self, p: usize) -> bool {
         self.planes.get(p).is_some_and(|i| i.bricks != self.brick_count) && !self.is_mixed_plane(p)
+    }
+
+    /// Index-to-world matrix of level `level`: index i of the level is at
+    /// source index `2^level · i + (2^level − 1) / 2` (a coarse voxel's centre
+    /// is its children's centre).
+    pub fn level_transform(&self, level: u32) -> [[f64; 4]; 4] {
+        let m = &self.transform;
+        let s = f64::from(1u32 << level.min(31));
+        let mut c = *m;
+        for (row, src) in c.iter_mut().zip(m).take(3) {
+            for (v, w) in row.iter_mut().zip(src) {
+                *v = s * w;
+            }
+        }
+        for col in 0..4 {
+            c[3][col] = m[3][col] + (s - 1.0) / 2.0 * (m[0][col] + m[1][col] + m[2][col]);
+        }
+        c
+    }
+
+    /// Level `level`'s index offset: level index = level asset index + offset >> level.
+    pub fn level_offset(&self, level: u32) -> [i32; 3] {
+        self.index_offset.map(|o| o >> level.min(31))
+    }
+
+    /// The L1 node of frame `frame` at level `level` is entry
+    /// `level · frame_count + frame` of the frames section.
+    pub fn tree_index(&self, frame: usize, level: u32) -> usize {
+        level as usize * self.frame_count as usize + frame
+    }
+
+    /// Leaves of frame `frame` at level `level` (0 past the end).
+    pub fn level_leaves(&self, frame: usize, level: u32) -> u32 {
+        let Some(f) = self.frames.get(frame) else { return 0 };
+        match level {
+            0 => f.leaves,
+            k => f.coarse.get(k as usize - 1).map_or(0, |c| c.leaves),
+        }
     }
 
     /// The channel named `name`.
@@ -562,6 +639,8 @@ mod tests {
             settings: vec![("format".into(), "f32".into())],
             sources: vec![],
             frames: vec![],
+            levels: 1,
+            level_filters: vec![],
         };
         assemble(&[
             Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap() },

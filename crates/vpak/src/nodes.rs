@@ -185,6 +185,31 @@ pub struct Nodes {
     pub tiles: Vec<u32>,
 }
 
+/// What some trees of a flip-book use ([`Nodes::usage`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Usage {
+    pub trees: usize,
+    pub l1: usize,
+    pub l1_entries: usize,
+    pub l2: usize,
+    pub l2_entries: usize,
+    pub l3: usize,
+    /// Sub-masks (2 words each) of the L3 nodes: sub-blocks partly active.
+    pub l3_sub_masks: usize,
+    pub tiles: usize,
+    /// The distinct bricks, ascending.
+    pub bricks: Vec<u32>,
+}
+
+impl Usage {
+    /// Bytes of the node arrays these trees need on their own (frame entries,
+    /// L1, L2 and L3 nodes with their entries and sub-masks, tiles of `channels` floats).
+    pub fn tree_bytes(&self, channels: usize) -> u64 {
+        let words = self.trees + self.l1 * L1_WORDS + self.l1_entries + self.l2 * L2_WORDS + self.l2_entries + 1 + self.l3 * L3_WORDS + 2 * self.l3_sub_masks + self.tiles * channels;
+        4 * words as u64
+    }
+}
+
 /// A frame's leaves (source origin, active mask, brick) and active tiles
 /// (source origin, edge in voxels, tile index).
 pub type FrameContents = (Vec<([i32; 3], [u64; 8], u32)>, Vec<([i32; 3], u32, u32)>);
@@ -242,11 +267,18 @@ impl Nodes {
     /// than `max_leaves` leaves or `max_tiles` tiles (shared nodes let a
     /// small, corrupt asset claim billions, so callers bound what they decode).
     pub fn frame_contents(&self, frame: usize, max_leaves: usize, max_tiles: usize) -> Option<FrameContents> {
+        self.tree_contents(frame, self.offset, max_leaves, max_tiles)
+    }
+
+    /// [`Nodes::frame_contents`] of entry `tree` of the frames array (a
+    /// frame at a level, see `Metadata::tree_index`), placed at `offset`
+    /// (the level's offset, `Metadata::level_offset`).
+    pub fn tree_contents(&self, tree: usize, offset: [i32; 3], max_leaves: usize, max_tiles: usize) -> Option<FrameContents> {
         let mut leaves = Vec::new();
         let mut tiles = Vec::new();
-        let Some(&l1) = self.frames.get(frame) else { return Some((leaves, tiles)) };
+        let Some(&l1) = self.frames.get(tree) else { return Some((leaves, tiles)) };
         let node = self.l1.get(l1 as usize * L1_WORDS..(l1 as usize + 1) * L1_WORDS).unwrap_or(&[]);
-        let o = self.offset;
+        let o = offset;
         let at = |base: [i32; 3], d: [i32; 3]| [base[0].wrapping_add(d[0]), base[1].wrapping_add(d[1]), base[2].wrapping_add(d[2])];
         for w in 0..L1_MASK_WORDS {
             let mut bits = node.get(w).copied().unwrap_or(0);
@@ -278,6 +310,55 @@ impl Nodes {
             }
         }
         Some((leaves, tiles))
+    }
+
+    /// What the trees rooted at `roots` (L1 node ids) use, each node, tile
+    /// and brick counted once however many of them share it.
+    pub fn usage(&self, roots: &[u32]) -> Usage {
+        use std::collections::BTreeSet;
+        let (mut l1s, mut l2s, mut l3s, mut tiles) = (BTreeSet::new(), BTreeSet::new(), BTreeSet::new(), BTreeSet::new());
+        let mut u = Usage { trees: roots.len(), ..Usage::default() };
+        // A node's occupied slots: children and tiles collected, the count returned.
+        fn slots(id: u32, words: &[u32], mask_words: usize, lookup_slot: &dyn Fn(u32, usize) -> Slot, children: &mut BTreeSet<u32>, tiles: &mut BTreeSet<u32>) -> usize {
+            let node = words.get(id as usize * (mask_words + mask_words / 2 + 1)..).unwrap_or(&[]);
+            let mut n = 0;
+            for w in 0..mask_words {
+                let mut bits = node.get(w).copied().unwrap_or(0);
+                while bits != 0 {
+                    let s = w * 32 + bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    n += 1;
+                    match lookup_slot(id, s) {
+                        Slot::Child(c) => {
+                            children.insert(c);
+                        }
+                        Slot::Tile(t) => {
+                            tiles.insert(t);
+                        }
+                        Slot::Empty => {}
+                    }
+                }
+            }
+            n
+        }
+        for &r in roots {
+            if l1s.insert(r) {
+                u.l1_entries += slots(r, &self.l1, L1_MASK_WORDS, &|id, s| self.l1_slot(id, s), &mut l2s, &mut tiles);
+            }
+        }
+        for &c in &l2s {
+            u.l2_entries += slots(c, &self.l2, L2_MASK_WORDS, &|id, s| self.l2_slot(id, s), &mut l3s, &mut tiles);
+        }
+        let mut bricks = BTreeSet::new();
+        for &c in &l3s {
+            if let Some((mask, brick)) = self.l3_node(c) {
+                bricks.insert(brick);
+                u.l3_sub_masks += (0..8).filter(|&b| !matches!(sub_mask(&mask, b), 0 | u64::MAX)).count();
+            }
+        }
+        (u.l1, u.l2, u.l3, u.tiles) = (l1s.len(), l2s.len(), l3s.len(), tiles.len());
+        u.bricks = bricks.into_iter().collect();
+        u
     }
 
     /// Bytes of each node array, for reports.

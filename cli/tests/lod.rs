@@ -1,0 +1,181 @@
+//! Levels of detail (`cook --lods`, `unpack --lod`, `inspect`): every level of
+//! real samples and fixtures, unpacked to a .vdb, is read by OpenVDB and
+//! compared with the level computed independently in numpy from the source as
+//! OpenVDB reads it (cli/tests/lod_check.py: active set, values, voxel size,
+//! and the world position of a level voxel against the centre of its source
+//! voxels); the spec-only reader decodes every level as `unpack --lod` writes
+//! it; errors and determinism.
+
+mod common;
+use common::*;
+use std::process::Command;
+
+fn python(args: &[&str]) -> std::process::Output {
+    Command::new("/usr/bin/python3").args(args).current_dir(root()).output().expect("run /usr/bin/python3")
+}
+
+fn json(out: std::process::Output) -> serde_json::Value {
+    serde_json::from_slice(&ok(out).stdout).expect("JSON")
+}
+
+#[test]
+fn every_level_is_the_filtered_source_as_openvdb_reads_it() {
+    if !oracle_available() {
+        return;
+    }
+    let samples = shared_samples();
+    // (source, cook flags, grid checked, filter, tolerance relative to the largest value).
+    let mut cases: Vec<(String, Vec<&str>, &str, &str, f64)> = vec![(root().join("fixtures/smoke_seq/smoke_0002.vdb").display().to_string(), vec!["--format", "f32"], "density", "mean", 1e-6)];
+    if let Some(sm) = &samples {
+        let p = |f: &str| sm.join(f).display().to_string();
+        cases.extend([
+            // An affine map and active tiles.
+            (p("elyg-visualizer/test.vdb"), vec!["--format", "f32"], "density", "mean", 1e-6),
+            // A half-float level set: the active mean.
+            (p("mjurczyk-openvdb/sphere.vdb"), vec!["--format", "f32"], "ls_sphere", "active", 1e-6),
+            // A constant region of tiles and leaves, in half precision.
+            (p("hsim/writer.vdb"), vec!["--format", "f16"], "temperature", "mean", 1e-3),
+            // Two channels of one tree (translated transform), lossy.
+            (p("vfx-toolkit-embergen/embergen_fire_a_2.vdb"), vec!["--grids", "all", "--format", "f32"], "flames", "mean", 1e-6),
+            (p("vfx-toolkit-embergen/embergen_fire_a_2.vdb"), vec!["--grids", "all", "--format", "unorm8"], "temperature", "mean", 0.5 / 255.0 + 1e-6),
+        ]);
+    }
+    let dir = scratch_dir("lod", "oracle");
+    let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |(n, (source, flags, grid, filter, tol))| -> Result<usize, String> {
+        let asset = dir.join(format!("a{n}.vpak"));
+        let mut args = vec!["cook", "-q", "-o", s(&asset), "--lods", "5"];
+        args.extend(flags.iter().copied());
+        args.push(source);
+        let r = vdbcook(&args);
+        if !r.status.success() {
+            return Err(format!("{source}: cook failed: {}", String::from_utf8_lossy(&r.stderr)));
+        }
+        let meta = json(vdbcook(&["inspect", "--json", s(&asset)]));
+        let levels = meta["files"][0]["levels"].as_array().unwrap().clone();
+        assert_eq!(levels.len(), 5, "{source}");
+        let mut compared = 0;
+        for k in 0..5u32 {
+            let vdb = dir.join(format!("a{n}-{k}.vdb"));
+            let r = vdbcook(&["unpack", "-q", s(&asset), "--frame", "0", "--lod", &k.to_string(), "-o", s(&vdb)]);
+            if !r.status.success() {
+                return Err(format!("{source} level {k}: unpack failed: {}", String::from_utf8_lossy(&r.stderr)));
+            }
+            let out = python(&["cli/tests/lod_check.py", source, grid, &k.to_string(), filter, s(&vdb)]);
+            if !out.status.success() {
+                return Err(format!("{source} level {k}: lod_check.py failed: {}", String::from_utf8_lossy(&out.stderr)));
+            }
+            let c: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            let what = format!("{source} {grid} level {k}: {c}");
+            let n = c["reference_voxels"].as_u64().unwrap();
+            if n == 0 || c["missing"] != 0 || c["extra_not_background"] != 0 {
+                return Err(format!("{what}: not the same active voxels"));
+            }
+            // With several channels a voxel active in another channel's level is active here too, at the background.
+            let multi = flags.contains(&"all");
+            if !multi && c["extra"] != 0 {
+                return Err(format!("{what}: extra active voxels"));
+            }
+            let max = c["max_value"].as_f64().unwrap().max(1e-30);
+            if c["max_diff"].as_f64().unwrap() > tol * max {
+                return Err(format!("{what}: values differ"));
+            }
+            // OpenVDB reads the level with voxels 2^k times as large, centred on their source voxels.
+            let (vs, src) = (c["voxel_size"].as_array().unwrap(), c["source_voxel_size"].as_array().unwrap());
+            for a in 0..3 {
+                let (v, w) = (vs[a].as_f64().unwrap(), src[a].as_f64().unwrap() * f64::from(1u32 << k));
+                if (v - w).abs() > 1e-9 * w {
+                    return Err(format!("{what}: voxel size {v}, want {w}"));
+                }
+            }
+            if c["world_error"].as_f64().unwrap() > 1e-9 {
+                return Err(format!("{what}: a level voxel is not at the centre of its source voxels"));
+            }
+            // inspect's level figures agree with what OpenVDB counts (the checked channel is the whole tree with one channel).
+            if !multi && levels[k as usize]["active_voxels"].as_u64() != Some(n) {
+                return Err(format!("{what}: inspect says {} active voxels", levels[k as usize]["active_voxels"]));
+            }
+            compared += n as usize;
+        }
+        Ok(compared)
+    });
+    let total: usize = results.into_iter().map(|r| r.unwrap()).sum();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(total > 10_000, "{total} level voxels compared");
+}
+
+#[test]
+fn the_spec_only_reader_decodes_every_level_as_unpack_writes_it() {
+    let ok_py = python(&["-c", "import numpy, PIL, xxhash, pyopenvdb"]).status.success();
+    assert!(ok_py || !in_ci(), "CI=true but /usr/bin/python3 lacks numpy, PIL, xxhash or pyopenvdb");
+    if !ok_py {
+        return;
+    }
+    let dir = scratch_dir("lod", "spec");
+    let asset = dir.join("s.vpak");
+    ok(vdbcook(&["cook", "-q", "-o", s(&asset), "--lods", "4", "--format", "bc7", "fixtures/smoke_seq"]));
+    let mut compared = 0;
+    for frame in [0, 3] {
+        for k in 0..4 {
+            let (npz, vdb) = (dir.join(format!("{frame}-{k}.npz")), dir.join(format!("{frame}-{k}.vdb")));
+            let out = python(&["scripts/vpak_read.py", s(&asset), "--frame", &frame.to_string(), "--lod", &k.to_string(), "--out", s(&npz)]);
+            assert!(out.status.success(), "vpak_read.py: {}", String::from_utf8_lossy(&out.stderr));
+            ok(vdbcook(&["unpack", "-q", s(&asset), "--frame", &frame.to_string(), "--lod", &k.to_string(), "-o", s(&vdb)]));
+            let c: serde_json::Value = serde_json::from_slice(&ok(python(&["cli/tests/spec_reader_check.py", s(&npz), s(&vdb)])).stdout).unwrap();
+            let d = &c["density"];
+            let n = d["voxels"].as_u64().unwrap();
+            assert!(n > 0 && d["active_in_unpacked"] == n && d["unpacked_active_voxels"] == n, "frame {frame} level {k}: {c}");
+            assert!(d["max_diff"].as_f64().unwrap() <= 1e-6, "frame {frame} level {k}: {c}");
+            compared += n;
+        }
+    }
+    let out = python(&["scripts/vpak_read.py", s(&asset), "--frame", "0", "--lod", "4", "--out", s(&dir.join("x.npz"))]);
+    assert_eq!(out.status.code(), Some(1), "a level past the asset's is refused");
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(compared > 1000);
+}
+
+#[test]
+fn level_counts_out_of_range_are_usage_errors_and_levels_are_deterministic() {
+    let dir = scratch_dir("lod", "errors");
+    let out = dir.join("x.vpak");
+    for (n, says) in [("0", "0 is not a level count"), ("6", "at most 5"), ("x", "invalid level count")] {
+        let r = vdbcook(&["cook", "-o", s(&out), "--lods", n, "fixtures/smoke_seq"]);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "--lods {n}: {err}");
+        assert!(err.contains(says), "--lods {n}: {err}");
+        assert!(!out.exists(), "nothing written");
+    }
+    let bake = dir.join("bake.toml");
+    std::fs::write(&bake, format!("[[asset]]\nname = \"a\"\noutput = \"a.vpak\"\ninputs = [\"{}\"]\nlods = 9\n", root().join("fixtures/smoke_seq").display())).unwrap();
+    let r = vdbcook(&["bake", s(&bake)]);
+    assert_eq!(r.status.code(), Some(2), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("lods"), "{}", String::from_utf8_lossy(&r.stderr));
+    // The same bytes on one thread and two; level 0 of a cook with levels is level 0 of one without.
+    let (a, b, plain) = (dir.join("a.vpak"), dir.join("b.vpak"), dir.join("p.vpak"));
+    ok(vdbcook(&["cook", "-q", "-j", "1", "-o", s(&a), "--lods", "5", "--format", "bc4", "fixtures/smoke_seq"]));
+    ok(vdbcook(&["cook", "-q", "-j", "2", "-o", s(&b), "--lods", "5", "--format", "bc4", "fixtures/smoke_seq"]));
+    assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(), "thread count changed the asset");
+    ok(vdbcook(&["cook", "-q", "-o", s(&plain), "--format", "bc4", "fixtures/smoke_seq"]));
+    let (u, v) = (dir.join("u.vdb"), dir.join("v.vdb"));
+    ok(vdbcook(&["unpack", "-q", s(&a), "--frame", "2", "-o", s(&u)]));
+    ok(vdbcook(&["unpack", "-q", s(&plain), "--frame", "2", "-o", s(&v)]));
+    assert!(std::fs::read(&u).unwrap() == std::fs::read(&v).unwrap(), "level 0 is the frame itself");
+    // A level past the asset's: one line naming the file, exit 1, nothing written.
+    let w = dir.join("w.vdb");
+    let r = vdbcook(&["unpack", s(&plain), "--frame", "0", "--lod", "1", "-o", s(&w)]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("vdbcook: error: ") && err.contains("p.vpak") && err.contains("level 1 of frame 0 is out of range") && err.lines().count() == 1, "{err}");
+    assert!(!w.exists());
+    // The cook report gives the levels (JSON as docs/cook-json.md says).
+    let j = json(vdbcook(&["cook", "--json", "--force", "-o", s(&a), "--lods", "3", "--format", "f32", "fixtures/smoke_seq"]));
+    let levels = j["levels"].as_array().unwrap();
+    assert_eq!(levels.len(), 2);
+    let doc = std::fs::read_to_string(root().join("docs/cook-json.md")).unwrap();
+    for l in levels {
+        assert_documented(l, &doc_section(&doc, "Level objects"), "level");
+        assert_eq!(l["voxel_rmse"], 0.0, "f32 stores each level exactly");
+    }
+    assert!(j["timings"]["levels"].as_f64().unwrap() > 0.0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
