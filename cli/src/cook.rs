@@ -93,8 +93,9 @@ pub struct CookArgs {
     pub settings: CookSettings,
     /// Cook every format (bc7, bc4, unorm8, f16, f32) at the other settings, validate them
     /// smallest file first and write the first whose images meet the gate (--min-psnr,
-    /// --max-rmse and/or --max-flip: at least one is required). Implies --validate; not with --format.
-    #[arg(long, conflicts_with = "format")]
+    /// --max-rmse and/or --max-flip: at least one is required). Implies --validate; not with
+    /// --format or --max-error.
+    #[arg(long, conflicts_with_all = ["format", "max_error"])]
     pub auto: bool,
     /// Replace OUT if it exists.
     #[arg(long)]

@@ -21,7 +21,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let l2 = size(kind::L2_NODES) / (L2_WORDS as u64 * 4);
     // The L3 section counts its nodes in its first word (records follow, then sub-masks).
     let l3 = l3_node_count(checked.l3).map_or(0, |n| n as u64);
-    let brick_bytes = size(kind::ATLAS) + size(kind::BRICK_RANGES) + size(kind::BRICK_TABLE);
+    let brick_bytes = size(kind::ATLAS) + size(kind::BRICK_RANGES) + size(kind::BRICK_TABLE) + size(kind::CHANNEL_TABLE);
     let file_bytes = asset.bytes().len() as u64;
     let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));
     let nodes = [

@@ -120,6 +120,7 @@ fn bad_bounds_and_conflicting_flags_are_usage_errors() {
         (vec!["--max-error", "x"], "--max-error"),
         (vec!["--max-error", "0.01", "--format", "bc4"], "cannot be used with"),
         (vec!["--max-error", "0.01", "--group", "density=bc7"], "cannot be used with"),
+        (vec!["--max-error", "0.01", "--auto", "--min-psnr", "40"], "cannot be used with"),
     ] {
         let mut args = vec!["cook", "--force", "-o", s(&asset), &input];
         args.extend(flags.iter().copied());

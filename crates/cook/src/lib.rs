@@ -62,6 +62,8 @@ pub enum Error {
     Levels(u32),
     #[error("level {level} of frame {frame} is out of range (the asset has {levels} levels, numbered from 0)")]
     NoLevel { frame: usize, level: u32, levels: u32 },
+    #[error("the channels' bricks need {0} texture planes, more than an asset may have ({max}): cook fewer channels at once", max = vdbcook_vpak::MAX_CHANNELS)]
+    TooManyPlanes(usize),
 }
 
 impl Error {
@@ -671,6 +673,9 @@ impl Cooker {
         };
         let used = used_work(&clustered, encoded.len());
         let specs = encoded.specs.clone();
+        if specs.len() > vdbcook_vpak::MAX_CHANNELS {
+            return Err(Error::TooManyPlanes(specs.len()));
+        }
         // Each plane stores its own distinct bricks (a table maps bricks to
         // them), so a channel that repeats where others change (a constant
         // flame, a static shadow) is stored once, as in an asset of its own.
@@ -1036,7 +1041,12 @@ fn cluster_channels(pool: &[Brick], scales: &[f32], opts: &vdbcook_cluster::Opti
         let c = scales.len();
         let items: Vec<[f32; N]> = pool.par_chunks(c).map(|b| std::array::from_fn(|v| b[v / 512][v % 512] / scales[v / 512])).collect();
         let out = vdbcook_cluster::cluster_scaled(&items, opts, scales, progress);
-        let bricks = out.bricks.iter().flat_map(|item| (0..c).map(move |k| std::array::from_fn(|v| item[k * 512 + v] * scales[k]))).collect();
+        let mut bricks: Vec<Brick> = out.bricks.iter().flat_map(|item| (0..c).map(move |k| std::array::from_fn(|v| item[k * 512 + v] * scales[k]))).collect();
+        // A brick not merged keeps its own values exactly (v / s · s need not be v).
+        for (i, _) in out.merged.iter().enumerate().filter(|(_, &m)| !m) {
+            let w = out.remap[i] as usize;
+            bricks[w * c..(w + 1) * c].copy_from_slice(&pool[i * c..(i + 1) * c]);
+        }
         Clustered { bricks, remap: out.remap, merged: out.merged, stats: out.stats }
     }
     match scales.len() {

@@ -891,6 +891,8 @@ fn absurd_per_brick_format_metadata_is_refused_never_a_panic() {
             Err(_) => panic!("{what}: panic"),
         }
     }
+}
+
 fn cook_levels(format: Format, frames: &[Grid], levels: u32) -> (Vec<u8>, CookReport) {
     let mut c = Cooker::new(CookOptions { format, levels, ..CookOptions::default() });
     for f in frames {
@@ -1003,4 +1005,18 @@ fn level_sets_get_the_active_mean_and_empty_frames_every_level() {
         let g = unpack_level(&asset, 1, k).unwrap().remove(0);
         assert!(g.leaves.is_empty() && g.tiles.is_empty(), "level {k} of the empty frame");
     }
+}
+
+#[test]
+fn a_zero_bound_is_exact_even_with_several_channels_clustered() {
+    // Several channels are clustered in scaled units (v / s · s need not be
+    // v): with E = 0 every voxel of every channel still unpacks exactly.
+    let frames = [fire(0), fire(1), fire(3)];
+    let co = vdbcook_cluster::Options { clusters: 6, iterations: 3, variance_threshold: 0.002, max_brick_error: None, seed: 5 };
+    let (bytes, report) = cook_fire(CookOptions { clustering: Some(co), ..max_error_options(0.0) }, &frames);
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    for (k, f) in frames.iter().enumerate() {
+        assert_eq!(worst_error(f, &unpack_frame(&asset, k).unwrap()), [0.0; 3], "frame {k}");
+    }
+    assert!(report.channels.iter().all(|c| c.voxel_max_error == 0.0));
 }

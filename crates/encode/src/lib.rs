@@ -389,7 +389,7 @@ impl<'a> Encoded<'a> {
     /// i ([`cheapest`]); each channel is stored in one plane of its own per
     /// format its bricks chose, in [`Format::BY_COST`] order.  Bricks not
     /// `used` are in no plane.
-    pub fn from_choices(bricks: &'a [Brick], channels: usize, choices: Vec<Choice>, used: &[bool]) -> Encoded<'a> {
+    pub fn from_choices(bricks: &'a [Brick], channels: usize, mut choices: Vec<Choice>, used: &[bool]) -> Encoded<'a> {
         let channels = channels.max(1);
         let n = bricks.len() / channels;
         let ranges = choices.iter().map(|ch| ch.range).collect();
@@ -404,7 +404,7 @@ impl<'a> Encoded<'a> {
                 let mut bytes = Vec::with_capacity(members.len() * single_plane(format).brick_bytes());
                 for (k, &i) in members.iter().enumerate() {
                     at[i] = k as u32;
-                    bytes.extend_from_slice(&choices[i * channels + c].bytes);
+                    bytes.extend_from_slice(&std::mem::take(&mut choices[i * channels + c].bytes));
                 }
                 specs.push(PlaneSpec { plane: single_plane(format), channels: vec![c] });
                 planes.push(PlaneData::Chosen { bytes, at });

@@ -26,7 +26,7 @@ pub enum Error {
     Device(String),
     #[error("the adapter \"{adapter}\" cannot sample {format} bricks: it lacks {feature}")]
     Unsupported { adapter: String, format: String, feature: &'static str },
-    #[error("the channels the render shows are in {planes} planes of {textures} atlas textures; the renderer binds at most {MAX_TEXTURES} (cook with a larger --max-texture-dim)")]
+    #[error("the channels the render shows are in {planes} planes of {textures} atlas textures; the renderer binds at most {MAX_TEXTURES} (a larger --max-texture-dim puts a plane in fewer atlases; cook --max-error gives a channel a texture per format its bricks chose, so several shown channels cooked with it may need more)")]
     Textures { planes: usize, textures: usize },
     #[error("channel {0} is not on the GPU (the asset was uploaded for the channels its own scene shows)")]
     NotUploaded(u32),
