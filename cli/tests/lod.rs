@@ -112,20 +112,25 @@ fn the_spec_only_reader_decodes_every_level_as_unpack_writes_it() {
     }
     let dir = scratch_dir("lod", "spec");
     let asset = dir.join("s.vpak");
-    ok(vdbcook(&["cook", "-q", "-o", s(&asset), "--lods", "4", "--format", "bc7", "fixtures/smoke_seq"]));
     let mut compared = 0;
-    for frame in [0, 3] {
-        for k in 0..4 {
-            let (npz, vdb) = (dir.join(format!("{frame}-{k}.npz")), dir.join(format!("{frame}-{k}.vdb")));
-            let out = python(&["scripts/vpak_read.py", s(&asset), "--frame", &frame.to_string(), "--lod", &k.to_string(), "--out", s(&npz)]);
-            assert!(out.status.success(), "vpak_read.py: {}", String::from_utf8_lossy(&out.stderr));
-            ok(vdbcook(&["unpack", "-q", s(&asset), "--frame", &frame.to_string(), "--lod", &k.to_string(), "-o", s(&vdb)]));
-            let c: serde_json::Value = serde_json::from_slice(&ok(python(&["cli/tests/spec_reader_check.py", s(&npz), s(&vdb)])).stdout).unwrap();
-            let d = &c["density"];
-            let n = d["voxels"].as_u64().unwrap();
-            assert!(n > 0 && d["active_in_unpacked"] == n && d["unpacked_active_voxels"] == n, "frame {frame} level {k}: {c}");
-            assert!(d["max_diff"].as_f64().unwrap() <= 1e-6, "frame {frame} level {k}: {c}");
-            compared += n;
+    // Levels with one format, and with per-brick formats (coarse bricks choose theirs too).
+    for format in [&["--format", "bc7"][..], &["--max-error", "0.002"]] {
+        let mut args = vec!["cook", "-q", "--force", "-o", s(&asset), "--lods", "4", "fixtures/smoke_seq"];
+        args.extend(format);
+        ok(vdbcook(&args));
+        for frame in [0, 3] {
+            for k in 0..4 {
+                let (npz, vdb) = (dir.join(format!("{frame}-{k}.npz")), dir.join(format!("{frame}-{k}.vdb")));
+                let out = python(&["scripts/vpak_read.py", s(&asset), "--frame", &frame.to_string(), "--lod", &k.to_string(), "--out", s(&npz)]);
+                assert!(out.status.success(), "{format:?} vpak_read.py: {}", String::from_utf8_lossy(&out.stderr));
+                ok(vdbcook(&["unpack", "-q", "--force", s(&asset), "--frame", &frame.to_string(), "--lod", &k.to_string(), "-o", s(&vdb)]));
+                let c: serde_json::Value = serde_json::from_slice(&ok(python(&["cli/tests/spec_reader_check.py", s(&npz), s(&vdb)])).stdout).unwrap();
+                let d = &c["density"];
+                let n = d["voxels"].as_u64().unwrap();
+                assert!(n > 0 && d["active_in_unpacked"] == n && d["unpacked_active_voxels"] == n, "frame {frame} level {k}: {c}");
+                assert!(d["max_diff"].as_f64().unwrap() <= 1e-6, "{format:?} frame {frame} level {k}: {c}");
+                compared += n;
+            }
         }
     }
     let out = python(&["scripts/vpak_read.py", s(&asset), "--frame", "0", "--lod", "4", "--out", s(&dir.join("x.npz"))]);
