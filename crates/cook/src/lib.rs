@@ -604,17 +604,14 @@ impl Cooker {
         // Which voxels of each brick some L3 node shows (block encoders may
         // spend nothing on the others; per-brick formats bound only these).
         let pool_masks = (any_block || max_error.is_some()).then(|| union_masks(built.pool.len(), built.l3.iter().map(|l| (l.brick as usize, l.mask))));
-        let masks_of = |clustered: &Option<Clustered>, n: usize| {
-            pool_masks.as_ref().map(|m| match clustered {
-                Some(c) => union_masks(n, c.remap.iter().zip(m).map(|(&w, &mask)| (w as usize, mask))),
-                None => m.clone(),
-            })
-        };
         let t0 = Instant::now();
         let encoded = match max_error {
             None => {
                 let work: &[Brick] = clustered.as_ref().map_or(pool, |c| &c.bricks[..]);
-                let work_masks = masks_of(&clustered, work.len() / channels);
+                let work_masks = pool_masks.as_ref().map(|m| match &clustered {
+                    Some(c) => union_masks(work.len() / channels, c.remap.iter().zip(m).map(|(&w, &mask)| (w as usize, mask))),
+                    None => m.clone(),
+                });
                 progress.start("encoding", (work.len() / channels * specs.len()) as u64);
                 let encoded = Encoded::new(specs.clone(), self.opts.quality, work, channels, work_masks.as_deref(), &|n| progress.advance(n as u64));
                 progress.finish();
@@ -658,12 +655,9 @@ impl Cooker {
                         c.stats.over_error += strays.len();
                         c.stats.clustered -= strays.len();
                         // Centroids all of whose bricks strayed are not stored.
-                        let mut out: Vec<u32> = c.remap.clone();
-                        out.sort_unstable();
-                        out.dedup();
                         let merged_into: std::collections::BTreeSet<u32> = c.remap.iter().zip(&c.merged).filter(|(_, &m)| m).map(|(&w, _)| w).collect();
                         c.stats.centroids = merged_into.len();
-                        c.stats.bricks_out = out.len();
+                        c.stats.bricks_out = c.merged.iter().filter(|&&m| !m).count() + merged_into.len();
                         choices
                     }
                 };
