@@ -1,6 +1,5 @@
 //! `vdbcook validate` and `vdbcook render`: the GPU check of what a cook cost.
 
-use crate::cook::cook_lossless;
 use crate::inputs::{self, FrameRange};
 use crate::progress::Bars;
 use crate::{exit, Usage};
@@ -65,6 +64,10 @@ pub struct ValidateArgs {
     /// Write report.json, PNGs and report.html into DIR.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
+    /// Level of detail to check (0, the default: the frames themselves; k: the asset's
+    /// level k against the source filtered losslessly to level k, as `cook --lods` does).
+    #[arg(long, value_name = "K", default_value_t = 0, value_parser = vdbcook_bake::options::parse_lod)]
+    pub lod: u32,
     #[command(flatten)]
     pub gpu: GpuArgs,
     /// Print the report as JSON on stdout.
@@ -86,6 +89,7 @@ impl ValidateArgs {
             min_psnr: s.min_psnr,
             max_flip: s.max_flip,
             report,
+            lod: 0,
             gpu,
             json,
         }
@@ -135,17 +139,17 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
 }
 
 /// Cooks the source frames losslessly in memory: the reference asset.
-fn reference(meta: &vdbcook_vpak::Metadata, source: &[String], frames: Option<FrameRange>, bars: &Bars) -> Result<Asset> {
+fn reference(meta: &vdbcook_vpak::Metadata, source: &[String], frames: Option<FrameRange>, lod: u32, bars: &Bars) -> Result<Asset> {
     let files = inputs::expand(source, frames)?;
     let allow_missing = meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
-    cook_lossless(files, crate::cook::selection_of(meta), allow_missing, bars).context("cooking the reference")
+    crate::cook::cook_lossless_levels(files, crate::cook::selection_of(meta), allow_missing, lod + 1, bars).context("cooking the reference")
 }
 
 /// Voxel-domain error of each channel of the asset's frame against the
 /// reference's, over the reference's active voxels.
-fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize) -> Result<Vec<ErrorStats>> {
-    let a = vdbcook_cook::unpack_frame(asset, frame).map_err(|e| anyhow!(e))?;
-    let r = vdbcook_cook::unpack_frame(reference, frame).map_err(|e| anyhow!(e))?;
+fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize, lod: u32) -> Result<Vec<ErrorStats>> {
+    let a = vdbcook_cook::unpack_level(asset, frame, lod).map_err(|e| anyhow!(e))?;
+    let r = vdbcook_cook::unpack_level(reference, frame, lod).map_err(|e| anyhow!(e))?;
     Ok(r.iter()
         .zip(&a)
         .map(|(r, a)| {
@@ -224,7 +228,10 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     let asset = Asset::open(&args.asset).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
     let bars = Bars::new(quiet || args.json);
-    let reference = reference(&meta, &args.source, args.source_frames, &bars)?;
+    if args.lod >= meta.levels {
+        return Err(anyhow!("{name}: level {} is out of range (it has {} levels of detail, numbered from 0)", args.lod, meta.levels));
+    }
+    let reference = reference(&meta, &args.source, args.source_frames, args.lod, &bars)?;
     compare_assets(&asset, &name, &reference, &args, || args.gpu.renderer().map(Box::new), &bars)
 }
 
@@ -266,9 +273,9 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     let mut flip_secs = 0.0;
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in &frames {
-        voxel.push((f, voxel_errors(asset, reference, f)?));
-        let refs = renderer.render_views(&gpu_ref, &scene, f, &views, w, h)?;
-        let imgs = renderer.render_views(&gpu_asset, &scene, f, &views, w, h)?;
+        voxel.push((f, voxel_errors(asset, reference, f, args.lod)?));
+        let refs = renderer.render_views_level(&gpu_ref, &scene, f, args.lod, &views, w, h)?;
+        let imgs = renderer.render_views_level(&gpu_asset, &scene, f, args.lod, &views, w, h)?;
         // FLIP runs on the CPU, one image per thread: the views of a frame in parallel.
         let t = Instant::now();
         let maps: Vec<FlipMap> = refs.par_iter().zip(&imgs).map(|(r, a)| flip(r, a, DEFAULT_PPD)).collect::<Result<_, _>>()?;
@@ -314,6 +321,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         "channels": meta.channels.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
         "shown": meta.channels.get(shown).map(|c| c.name.clone()),
         "frames": meta.frame_count,
+        "level": args.lod,
         "views": args.views,
         "size": [w, h],
         "flip_ppd": DEFAULT_PPD,
@@ -333,7 +341,8 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         write_report(dir, &doc, &shots, &worst_images, &format, &name).with_context(|| dir.display().to_string())?;
     }
     let decoder = if gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
-    let mut text = format!("{name}: {format} vs lossless reference, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), args.views, renderer.adapter);
+    let level = if args.lod > 0 { format!(" at level {}", args.lod) } else { String::new() };
+    let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), args.views, renderer.adapter);
     if let Some(s) = worst {
         text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, flip {:.4}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error, s.flip);
         let mean = |f: fn(&Shot) -> f64| shots.iter().map(f).sum::<f64>() / shots.len() as f64;
@@ -465,6 +474,11 @@ pub struct RenderArgs {
     /// Grid of a .vdb input (default: "density", else the first float grid).
     #[arg(long, value_name = "NAME")]
     pub grid: Option<String>,
+    /// Level of detail to draw (0, the default: the frame itself; k: voxels 2^k times as
+    /// large, each sample reading the level's voxel that covers it). A .vdb input is
+    /// filtered to that level as `cook --lods` does.
+    #[arg(long, value_name = "K", default_value_t = 0, value_parser = vdbcook_bake::options::parse_lod)]
+    pub lod: u32,
     #[command(flatten)]
     pub gpu: GpuArgs,
     /// Replace OUT if it exists.
@@ -481,20 +495,24 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let asset = if crate::inspect::is_vpak(&args.input) {
         Asset::open(&args.input).with_context(|| name.clone())?
     } else {
-        cook_lossless(vec![args.input.clone()], crate::grids::GridSelection::from_flags(args.grid.as_deref(), None), false, &Bars::new(true))?
+        crate::cook::cook_lossless_levels(vec![args.input.clone()], crate::grids::GridSelection::from_flags(args.grid.as_deref(), None), false, args.lod + 1, &Bars::new(true))?
     };
     let meta = asset.metadata().with_context(|| name.clone())?;
     if args.frame >= meta.frame_count as usize {
         return Err(anyhow!("{name}: frame {} is out of range (it has {} frames, numbered from 0)", args.frame, meta.frame_count));
     }
+    if args.lod >= meta.levels {
+        return Err(anyhow!("{name}: level {} is out of range (it has {} levels of detail, numbered from 0; cook it with --lods {})", args.lod, meta.levels, args.lod + 1));
+    }
     let renderer = args.gpu.renderer()?;
     let gpu = renderer.upload(&asset).with_context(|| name.clone())?;
     let scene = Scene::for_asset(&meta);
     let view = scene.orbit(args.views as usize)[args.view as usize];
-    let img = renderer.render(&gpu, &scene, args.frame, &view, args.size.0, args.size.1)?;
+    let img = renderer.render_views_level(&gpu, &scene, args.frame, args.lod, std::slice::from_ref(&view), args.size.0, args.size.1)?.pop().ok_or_else(|| anyhow!("no image"))?;
     vdbcook_vpak::write_atomic(&args.output, &report::png_rgb(&img), args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
-        crate::emit_final(&format!("rendered frame {} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter))?;
+        let level = if args.lod > 0 { format!(" at level {}", args.lod) } else { String::new() };
+        crate::emit_final(&format!("rendered frame {}{level} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter))?;
     }
     Ok(exit::SUCCESS)
 }
