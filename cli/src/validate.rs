@@ -68,6 +68,10 @@ pub struct ValidateArgs {
     /// level k against the source filtered losslessly to level k, as `cook --lods` does).
     #[arg(long, value_name = "K", default_value_t = 0, value_parser = vdbcook_bake::options::parse_lod)]
     pub lod: u32,
+    /// Check every level of detail of the asset, each against the source filtered to it,
+    /// and show the levels side by side (the rest of the report is level 0's).
+    #[arg(long, conflicts_with_all = ["lod", "report"])]
+    pub every_lod: bool,
     #[command(flatten)]
     pub gpu: GpuArgs,
     /// Print the report as JSON on stdout.
@@ -90,6 +94,7 @@ impl ValidateArgs {
             max_flip: s.max_flip,
             report,
             lod: 0,
+            every_lod: false,
             gpu,
             json,
         }
@@ -231,8 +236,45 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     if args.lod >= meta.levels {
         return Err(anyhow!("{name}: level {} is out of range (it has {} levels of detail, numbered from 0)", args.lod, meta.levels));
     }
+    if args.every_lod {
+        return evaluate_levels(&args, &asset, &name, meta.levels, &bars);
+    }
     let reference = reference(&meta, &args.source, args.source_frames, args.lod, &bars)?;
     compare_assets(&asset, &name, &reference, &args, || args.gpu.renderer().map(Box::new), &bars)
+}
+
+/// `validate --every-lod`: every level against the source filtered to it (one
+/// reference with every level), level 0's report with the levels side by side.
+fn evaluate_levels(args: &ValidateArgs, asset: &Asset, name: &str, levels: u32, bars: &Bars) -> Result<Outcome> {
+    let meta = asset.metadata().with_context(|| name.to_string())?;
+    let reference = reference(&meta, &args.source, args.source_frames, levels - 1, bars)?;
+    let renderer = args.gpu.renderer()?;
+    let mut outs = Vec::with_capacity(levels as usize);
+    for lod in 0..levels {
+        let a = ValidateArgs { lod, every_lod: false, ..args.clone() };
+        outs.push(compare_assets(asset, name, &reference, &a, || Ok(&renderer), bars)?);
+    }
+    let rows: Vec<serde_json::Value> = outs.iter().filter_map(|o| o.doc["levels"].get(0).cloned()).collect();
+    let mut first = outs.remove(0);
+    first.doc["levels"] = json!(rows);
+    let f = |v: &serde_json::Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.3e}"));
+    let db = |v: &serde_json::Value| v.as_f64().map_or("inf".to_string(), |x| format!("{x:.1}"));
+    first.text += &format!("  levels   {:>5} {:>11} {:>9} {:>8} {:>11} {:>9}\n", "level", "worst rmse", "psnr dB", "flip", "voxel rmse", "psnr dB");
+    for r in &rows {
+        first.text += &format!(
+            "           {:>5} {:>11} {:>9} {:>8} {:>11} {:>9}\n",
+            r["level"],
+            f(&r["worst"]["rmse"]),
+            db(&r["worst"]["psnr"]),
+            r["worst_flip"]["flip"].as_f64().map_or("-".to_string(), |x| format!("{x:.4}")),
+            f(&r["voxel"]["rmse"]),
+            db(&r["voxel"]["psnr"])
+        );
+    }
+    if first.gate_failure.is_none() {
+        first.gate_failure = outs.iter().enumerate().find_map(|(k, o)| o.gate_failure.as_ref().map(|g| format!("level {}: {g}", k + 1)));
+    }
+    Ok(first)
 }
 
 /// Renders `asset` and its lossless `reference` with the same ray-marcher and
@@ -334,6 +376,12 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         },
         "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": meta.planes.get(ch.plane as usize).map(|p| p.plane.format.name()), "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
         "gate": {"max_rmse": args.max_rmse, "min_psnr": args.min_psnr, "max_flip": args.max_flip},
+        "levels": [{
+            "level": args.lod,
+            "worst": worst.map(|s| json!({"rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "flip": s.flip})),
+            "worst_flip": worst_flip.map(|s| json!({"flip": s.flip})),
+            "voxel": {"rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak(shown))), "max_error": vox_total.max_abs},
+        }],
     });
     let failed: Vec<&Shot> =
         shots.iter().filter(|s| args.max_rmse.is_some_and(|x| s.metrics.rmse > x) || args.min_psnr.is_some_and(|y| s.metrics.psnr < y) || args.max_flip.is_some_and(|x| s.flip > x)).collect();

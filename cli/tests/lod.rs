@@ -227,6 +227,22 @@ fn validate_checks_a_level_against_the_filtered_source() {
         assert!(worst > 0.0 && worst < 0.05, "bc7 level {level}: {v}");
         assert!(v["voxel"]["rmse"].as_f64().unwrap() > 0.0);
     }
+    // Every level at once, side by side: f32 exact at every level, bc7 not, each level's figures its own.
+    let v = json(vdbcook(&["validate", s(&exact), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "2", "--size", "48x48", "--json"]));
+    assert_documented(&v, &doc_section(&doc, "Top level"), "validate --every-lod");
+    let rows = v["levels"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    assert!(rows.iter().enumerate().all(|(k, r)| r["level"] == k as u64 && r["worst"]["rmse"] == 0.0 && r["voxel"]["rmse"] == 0.0), "{v}");
+    let r = vdbcook(&["validate", s(&lossy), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "2", "--size", "48x48"]);
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(r.status.success() && text.contains("levels") && text.lines().filter(|l| l.trim_start().starts_with(['0', '1', '2'])).count() >= 3, "{text}");
+    let v = json(vdbcook(&["validate", s(&lossy), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "2", "--size", "48x48", "--json"]));
+    let rmse: Vec<f64> = v["levels"].as_array().unwrap().iter().map(|r| r["worst"]["rmse"].as_f64().unwrap()).collect();
+    assert!(rmse.iter().all(|&x| x > 0.0) && rmse[0] == v["worst"]["rmse"].as_f64().unwrap(), "{v}");
+    let r = vdbcook(&["validate", s(&lossy), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "1", "--size", "16x16", "--max-rmse", "1e-9"]);
+    assert_eq!(r.status.code(), Some(3), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = vdbcook(&["validate", s(&lossy), "--source", "fixtures/smoke_seq", "--every-lod", "--lod", "1"]);
+    assert_eq!(r.status.code(), Some(2), "{}", String::from_utf8_lossy(&r.stderr));
     let r = vdbcook(&["validate", s(&exact), "--source", "fixtures/smoke_seq", "--lod", "3"]);
     let err = String::from_utf8_lossy(&r.stderr);
     assert_eq!(r.status.code(), Some(1), "{err}");
