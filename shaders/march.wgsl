@@ -196,7 +196,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (t >= hit.y || n >= params.size.z || trans < 1e-3) { break; }
             n += 1u;
             let p = o + d * t;
-            let ip = vec3<i32>(floor(p));
+            // The voxel of the level drawn (params.info.level) that holds the sample.
+            let ip = vpak_level_point(params.info, vec3<i32>(floor(p)));
             // The L1/L2 walk is done once per 8³ cell the ray enters.
             if (any((ip >> vec3<u32>(3u)) != cell)) {
                 cell = ip >> vec3<u32>(3u);
@@ -212,7 +213,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
             if (leaf.empty_dim > 0u && params.size.w == 1u) {
-                let exit = t + cell_exit(p, d, f32(leaf.empty_dim));
+                let exit = t + cell_exit(p, d, f32(leaf.empty_dim << params.info.level));
                 k = max(k + 1.0, ceil((exit - hit.x) / step - 0.5) + 0.5);
                 continue;
             }

@@ -44,11 +44,16 @@ const VPAK_CHOICE_SHIFT: u32 = 28u;
 const VPAK_PLANE_BRICK: u32 = 0x0fffffffu;
 
 struct VpakInfo {
-    // L1 node of the frame being sampled.
+    // L1 node of the frame being sampled (at `level`: entry
+    // level · frame_count + frame of the frames section).
     l1: u32,
     // Channels of the asset (values per tile).
     channels: u32,
-    _pad0: u32,
+    // Level of detail of that tree (0: the frame itself). `vpak_query` takes
+    // level-0 asset coordinates and reads the level's voxel that covers them
+    // (level index = asset index >> level); `vpak_leaf` and the functions
+    // that take its result work in the level's own coordinates.
+    level: u32,
     _pad1: u32,
 }
 
@@ -314,11 +319,18 @@ struct VpakQuery {
 }
 
 fn vpak_query(info: VpakInfo, p: vec3<i32>, c: u32) -> VpakQuery {
-    let leaf = vpak_leaf(info, p);
+    let lp = vpak_level_point(info, p);
+    let leaf = vpak_leaf(info, lp);
     var q: VpakQuery;
-    q.value = vpak_leaf_value(info, leaf, p, c);
-    q.empty_dim = leaf.empty_dim;
+    q.value = vpak_leaf_value(info, leaf, lp, c);
+    // The empty region's edge in level-0 voxels.
+    q.empty_dim = leaf.empty_dim << info.level;
     return q;
+}
+
+// The voxel of `info.level` that covers level-0 asset voxel `p`.
+fn vpak_level_point(info: VpakInfo, p: vec3<i32>) -> vec3<i32> {
+    return p >> vec3<u32>(info.level);
 }
 
 fn vpak_sample(info: VpakInfo, p: vec3<i32>, c: u32) -> f32 {

@@ -205,10 +205,10 @@ pub fn selection_of(meta: &vdbcook_vpak::Metadata) -> GridSelection {
     }
 }
 
-/// Cooks `files` losslessly in memory (f32, no clustering): the reference
+/// Cooks `files` losslessly in memory (f32, no clustering) with `levels` levels of detail: the reference
 /// asset `validate` compares with, and what `render` draws for a .vdb.
-pub fn cook_lossless(files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, bars: &Bars) -> Result<vdbcook_vpak::Asset> {
-    let (cookers, _, _) = feed(vec![reference_options()], files, sel, allow_missing, None, bars)?;
+pub fn cook_lossless_levels(files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, levels: u32, bars: &Bars) -> Result<vdbcook_vpak::Asset> {
+    let (cookers, _, _) = feed(vec![CookOptions { levels, ..reference_options() }], files, sel, allow_missing, None, bars)?;
     let cooker = cookers.into_iter().next().ok_or_else(|| anyhow!("no cooker"))?;
     finish_reference(cooker)
 }

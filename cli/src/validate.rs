@@ -1,6 +1,5 @@
 //! `vdbcook validate` and `vdbcook render`: the GPU check of what a cook cost.
 
-use crate::cook::cook_lossless;
 use crate::inputs::{self, FrameRange};
 use crate::progress::Bars;
 use crate::{exit, Usage};
@@ -65,6 +64,14 @@ pub struct ValidateArgs {
     /// Write report.json, PNGs and report.html into DIR.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
+    /// Level of detail to check (0, the default: the frames themselves; k: the asset's
+    /// level k against the source filtered losslessly to level k, as `cook --lods` does).
+    #[arg(long, value_name = "K", default_value_t = 0, value_parser = vdbcook_bake::options::parse_lod)]
+    pub lod: u32,
+    /// Check every level of detail of the asset, each against the source filtered to it,
+    /// and show the levels side by side (the rest of the report is level 0's).
+    #[arg(long, conflicts_with_all = ["lod", "report"])]
+    pub every_lod: bool,
     #[command(flatten)]
     pub gpu: GpuArgs,
     /// Print the report as JSON on stdout.
@@ -86,6 +93,8 @@ impl ValidateArgs {
             min_psnr: s.min_psnr,
             max_flip: s.max_flip,
             report,
+            lod: 0,
+            every_lod: false,
             gpu,
             json,
         }
@@ -135,17 +144,17 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
 }
 
 /// Cooks the source frames losslessly in memory: the reference asset.
-fn reference(meta: &vdbcook_vpak::Metadata, source: &[String], frames: Option<FrameRange>, bars: &Bars) -> Result<Asset> {
+fn reference(meta: &vdbcook_vpak::Metadata, source: &[String], frames: Option<FrameRange>, lod: u32, bars: &Bars) -> Result<Asset> {
     let files = inputs::expand(source, frames)?;
     let allow_missing = meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
-    cook_lossless(files, crate::cook::selection_of(meta), allow_missing, bars).context("cooking the reference")
+    crate::cook::cook_lossless_levels(files, crate::cook::selection_of(meta), allow_missing, lod + 1, bars).context("cooking the reference")
 }
 
 /// Voxel-domain error of each channel of the asset's frame against the
 /// reference's, over the reference's active voxels.
-fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize) -> Result<Vec<ErrorStats>> {
-    let a = vdbcook_cook::unpack_frame(asset, frame).map_err(|e| anyhow!(e))?;
-    let r = vdbcook_cook::unpack_frame(reference, frame).map_err(|e| anyhow!(e))?;
+fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize, lod: u32) -> Result<Vec<ErrorStats>> {
+    let a = vdbcook_cook::unpack_level(asset, frame, lod).map_err(|e| anyhow!(e))?;
+    let r = vdbcook_cook::unpack_level(reference, frame, lod).map_err(|e| anyhow!(e))?;
     Ok(r.iter()
         .zip(&a)
         .map(|(r, a)| {
@@ -224,8 +233,48 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     let asset = Asset::open(&args.asset).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
     let bars = Bars::new(quiet || args.json);
-    let reference = reference(&meta, &args.source, args.source_frames, &bars)?;
+    if args.lod >= meta.levels {
+        return Err(anyhow!("{name}: level {} is out of range (it has {} levels of detail, numbered from 0)", args.lod, meta.levels));
+    }
+    if args.every_lod {
+        return evaluate_levels(&args, &asset, &name, meta.levels, &bars);
+    }
+    let reference = reference(&meta, &args.source, args.source_frames, args.lod, &bars)?;
     compare_assets(&asset, &name, &reference, &args, || args.gpu.renderer().map(Box::new), &bars)
+}
+
+/// `validate --every-lod`: every level against the source filtered to it (one
+/// reference with every level), level 0's report with the levels side by side.
+fn evaluate_levels(args: &ValidateArgs, asset: &Asset, name: &str, levels: u32, bars: &Bars) -> Result<Outcome> {
+    let meta = asset.metadata().with_context(|| name.to_string())?;
+    let reference = reference(&meta, &args.source, args.source_frames, levels - 1, bars)?;
+    let renderer = args.gpu.renderer()?;
+    let mut outs = Vec::with_capacity(levels as usize);
+    for lod in 0..levels {
+        let a = ValidateArgs { lod, every_lod: false, ..args.clone() };
+        outs.push(compare_assets(asset, name, &reference, &a, || Ok(&renderer), bars)?);
+    }
+    let rows: Vec<serde_json::Value> = outs.iter().filter_map(|o| o.doc["levels"].get(0).cloned()).collect();
+    let mut first = outs.remove(0);
+    first.doc["levels"] = json!(rows);
+    let f = |v: &serde_json::Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.3e}"));
+    let db = |v: &serde_json::Value| v.as_f64().map_or("inf".to_string(), |x| format!("{x:.1}"));
+    first.text += &format!("  levels   {:>5} {:>11} {:>9} {:>8} {:>11} {:>9}\n", "level", "worst rmse", "psnr dB", "flip", "voxel rmse", "psnr dB");
+    for r in &rows {
+        first.text += &format!(
+            "           {:>5} {:>11} {:>9} {:>8} {:>11} {:>9}\n",
+            r["level"],
+            f(&r["worst"]["rmse"]),
+            db(&r["worst"]["psnr"]),
+            r["worst_flip"]["flip"].as_f64().map_or("-".to_string(), |x| format!("{x:.4}")),
+            f(&r["voxel"]["rmse"]),
+            db(&r["voxel"]["psnr"])
+        );
+    }
+    if first.gate_failure.is_none() {
+        first.gate_failure = outs.iter().enumerate().find_map(|(k, o)| o.gate_failure.as_ref().map(|g| format!("level {}: {g}", k + 1)));
+    }
+    Ok(first)
 }
 
 /// Renders `asset` and its lossless `reference` with the same ray-marcher and
@@ -266,9 +315,9 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     let mut flip_secs = 0.0;
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in &frames {
-        voxel.push((f, voxel_errors(asset, reference, f)?));
-        let refs = renderer.render_views(&gpu_ref, &scene, f, &views, w, h)?;
-        let imgs = renderer.render_views(&gpu_asset, &scene, f, &views, w, h)?;
+        voxel.push((f, voxel_errors(asset, reference, f, args.lod)?));
+        let refs = renderer.render_views_level(&gpu_ref, &scene, f, args.lod, &views, w, h)?;
+        let imgs = renderer.render_views_level(&gpu_asset, &scene, f, args.lod, &views, w, h)?;
         // FLIP runs on the CPU, one image per thread: the views of a frame in parallel.
         let t = Instant::now();
         let maps: Vec<FlipMap> = refs.par_iter().zip(&imgs).map(|(r, a)| flip(r, a, DEFAULT_PPD)).collect::<Result<_, _>>()?;
@@ -314,6 +363,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         "channels": meta.channels.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
         "shown": meta.channels.get(shown).map(|c| c.name.clone()),
         "frames": meta.frame_count,
+        "level": args.lod,
         "views": args.views,
         "size": [w, h],
         "flip_ppd": DEFAULT_PPD,
@@ -326,6 +376,12 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         },
         "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": meta.channel_planes(c).iter().filter_map(|&p| meta.planes.get(p as usize)).map(|p| p.plane.format.name()).collect::<Vec<_>>().join("+"), "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
         "gate": {"max_rmse": args.max_rmse, "min_psnr": args.min_psnr, "max_flip": args.max_flip},
+        "levels": [{
+            "level": args.lod,
+            "worst": worst.map(|s| json!({"rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "flip": s.flip})),
+            "worst_flip": worst_flip.map(|s| json!({"flip": s.flip})),
+            "voxel": {"rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak(shown))), "max_error": vox_total.max_abs},
+        }],
     });
     let failed: Vec<&Shot> =
         shots.iter().filter(|s| args.max_rmse.is_some_and(|x| s.metrics.rmse > x) || args.min_psnr.is_some_and(|y| s.metrics.psnr < y) || args.max_flip.is_some_and(|x| s.flip > x)).collect();
@@ -333,7 +389,8 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         write_report(dir, &doc, &shots, &worst_images, &format, &name).with_context(|| dir.display().to_string())?;
     }
     let decoder = if gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
-    let mut text = format!("{name}: {format} vs lossless reference, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), args.views, renderer.adapter);
+    let level = if args.lod > 0 { format!(" at level {}", args.lod) } else { String::new() };
+    let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), args.views, renderer.adapter);
     if let Some(s) = worst {
         text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, flip {:.4}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error, s.flip);
         let mean = |f: fn(&Shot) -> f64| shots.iter().map(f).sum::<f64>() / shots.len() as f64;
@@ -465,6 +522,11 @@ pub struct RenderArgs {
     /// Grid of a .vdb input (default: "density", else the first float grid).
     #[arg(long, value_name = "NAME")]
     pub grid: Option<String>,
+    /// Level of detail to draw (0, the default: the frame itself; k: voxels 2^k times as
+    /// large, each sample reading the level's voxel that covers it). A .vdb input is
+    /// filtered to that level as `cook --lods` does.
+    #[arg(long, value_name = "K", default_value_t = 0, value_parser = vdbcook_bake::options::parse_lod)]
+    pub lod: u32,
     #[command(flatten)]
     pub gpu: GpuArgs,
     /// Replace OUT if it exists.
@@ -481,20 +543,24 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let asset = if crate::inspect::is_vpak(&args.input) {
         Asset::open(&args.input).with_context(|| name.clone())?
     } else {
-        cook_lossless(vec![args.input.clone()], crate::grids::GridSelection::from_flags(args.grid.as_deref(), None), false, &Bars::new(true))?
+        crate::cook::cook_lossless_levels(vec![args.input.clone()], crate::grids::GridSelection::from_flags(args.grid.as_deref(), None), false, args.lod + 1, &Bars::new(true))?
     };
     let meta = asset.metadata().with_context(|| name.clone())?;
     if args.frame >= meta.frame_count as usize {
         return Err(anyhow!("{name}: frame {} is out of range (it has {} frames, numbered from 0)", args.frame, meta.frame_count));
     }
+    if args.lod >= meta.levels {
+        return Err(anyhow!("{name}: level {} is out of range (it has {} levels of detail, numbered from 0; cook it with --lods {})", args.lod, meta.levels, args.lod + 1));
+    }
     let renderer = args.gpu.renderer()?;
     let gpu = renderer.upload(&asset).with_context(|| name.clone())?;
     let scene = Scene::for_asset(&meta);
     let view = scene.orbit(args.views as usize)[args.view as usize];
-    let img = renderer.render(&gpu, &scene, args.frame, &view, args.size.0, args.size.1)?;
+    let img = renderer.render_views_level(&gpu, &scene, args.frame, args.lod, std::slice::from_ref(&view), args.size.0, args.size.1)?.pop().ok_or_else(|| anyhow!("no image"))?;
     vdbcook_vpak::write_atomic(&args.output, &report::png_rgb(&img), args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
-        crate::emit_final(&format!("rendered frame {} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter))?;
+        let level = if args.lod > 0 { format!(" at level {}", args.lod) } else { String::new() };
+        crate::emit_final(&format!("rendered frame {}{level} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter))?;
     }
     Ok(exit::SUCCESS)
 }

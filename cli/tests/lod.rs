@@ -184,3 +184,73 @@ fn level_counts_out_of_range_are_usage_errors_and_levels_are_deterministic() {
     assert!(j["timings"]["levels"].as_f64().unwrap() > 0.0);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn render_draws_a_level() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = scratch_dir("lod", "render");
+    let asset = dir.join("s.vpak");
+    ok(vdbcook(&["cook", "-q", "-o", s(&asset), "--lods", "3", "fixtures/smoke_seq"]));
+    let (a, b) = (dir.join("l0.png"), dir.join("l2.png"));
+    ok(vdbcook(&["render", "-q", s(&asset), "--frame", "1", "--size", "64x64", "-o", s(&a)]));
+    ok(vdbcook(&["render", "-q", s(&asset), "--frame", "1", "--lod", "2", "--size", "64x64", "-o", s(&b)]));
+    assert!(std::fs::read(&a).unwrap() != std::fs::read(&b).unwrap(), "level 2 draws another image");
+    // A .vdb is filtered to the level asked for, as cook --lods does.
+    let c = dir.join("vdb_l2.png");
+    ok(vdbcook(&["render", "-q", "fixtures/smoke_seq/smoke_0002.vdb", "--lod", "2", "--size", "64x64", "-o", s(&c)]));
+    assert!(std::fs::metadata(&c).unwrap().len() > 0);
+    let r = vdbcook(&["render", s(&asset), "--lod", "3", "-o", s(&dir.join("x.png"))]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(1), "{err}");
+    assert!(err.contains("level 3 is out of range") && err.contains("--lods 4") && err.lines().count() == 1, "{err}");
+    let r = vdbcook(&["render", s(&asset), "--lod", "7", "-o", s(&dir.join("x.png"))]);
+    assert_eq!(r.status.code(), Some(2), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(!dir.join("x.png").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn validate_checks_a_level_against_the_filtered_source() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = scratch_dir("lod", "validate");
+    let (exact, lossy) = (dir.join("f32.vpak"), dir.join("bc7.vpak"));
+    ok(vdbcook(&["cook", "-q", "-o", s(&exact), "--lods", "3", "--format", "f32", "fixtures/smoke_seq"]));
+    ok(vdbcook(&["cook", "-q", "-o", s(&lossy), "--lods", "3", "--format", "bc7", "fixtures/smoke_seq"]));
+    let doc = std::fs::read_to_string(root().join("docs/validate-json.md")).unwrap();
+    for level in ["1", "2"] {
+        let v = json(vdbcook(&["validate", s(&exact), "--source", "fixtures/smoke_seq", "--lod", level, "--views", "2", "--size", "48x48", "--json"]));
+        assert_documented(&v, &doc_section(&doc, "Top level"), "validate --lod");
+        assert_eq!(v["level"].to_string(), level);
+        assert!(v["images"].as_array().unwrap().iter().all(|i| i["rmse"] == 0.0), "f32 level {level} renders exactly: {v}");
+        assert_eq!(v["voxel"]["rmse"], 0.0);
+        let v = json(vdbcook(&["validate", s(&lossy), "--source", "fixtures/smoke_seq", "--lod", level, "--views", "2", "--size", "48x48", "--json"]));
+        let worst = v["worst"]["rmse"].as_f64().unwrap();
+        assert!(worst > 0.0 && worst < 0.05, "bc7 level {level}: {v}");
+        assert!(v["voxel"]["rmse"].as_f64().unwrap() > 0.0);
+    }
+    // Every level at once, side by side: f32 exact at every level, bc7 not, each level's figures its own.
+    let v = json(vdbcook(&["validate", s(&exact), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "2", "--size", "48x48", "--json"]));
+    assert_documented(&v, &doc_section(&doc, "Top level"), "validate --every-lod");
+    let rows = v["levels"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    assert!(rows.iter().enumerate().all(|(k, r)| r["level"] == k as u64 && r["worst"]["rmse"] == 0.0 && r["voxel"]["rmse"] == 0.0), "{v}");
+    let r = vdbcook(&["validate", s(&lossy), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "2", "--size", "48x48"]);
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(r.status.success() && text.contains("levels") && text.lines().filter(|l| l.trim_start().starts_with(['0', '1', '2'])).count() >= 3, "{text}");
+    let v = json(vdbcook(&["validate", s(&lossy), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "2", "--size", "48x48", "--json"]));
+    let rmse: Vec<f64> = v["levels"].as_array().unwrap().iter().map(|r| r["worst"]["rmse"].as_f64().unwrap()).collect();
+    assert!(rmse.iter().all(|&x| x > 0.0) && rmse[0] == v["worst"]["rmse"].as_f64().unwrap(), "{v}");
+    let r = vdbcook(&["validate", s(&lossy), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "1", "--size", "16x16", "--max-rmse", "1e-9"]);
+    assert_eq!(r.status.code(), Some(3), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = vdbcook(&["validate", s(&lossy), "--source", "fixtures/smoke_seq", "--every-lod", "--lod", "1"]);
+    assert_eq!(r.status.code(), Some(2), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = vdbcook(&["validate", s(&exact), "--source", "fixtures/smoke_seq", "--lod", "3"]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(1), "{err}");
+    assert!(err.contains("level 3 is out of range") && err.lines().count() == 1, "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

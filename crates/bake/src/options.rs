@@ -151,6 +151,15 @@ pub fn lods(n: u32) -> Result<u32, String> {
     }
 }
 
+/// Parses a level flag (`render --lod`, `unpack --lod`): 0 to `MAX_LEVELS` − 1.
+pub fn parse_lod(s: &str) -> Result<u32, String> {
+    let max = vdbcook_vpak::MAX_LEVELS - 1;
+    match s.trim().parse::<u32>() {
+        Ok(k) if k <= max => Ok(k),
+        _ => Err(format!("invalid level \"{s}\" (expected 0 to {max}: 0 is the frame itself)")),
+    }
+}
+
 /// Parses a level count flag.
 pub fn parse_lods(s: &str) -> Result<u32, String> {
     lods(s.trim().parse::<u32>().map_err(|_| format!("invalid level count \"{s}\" (expected a whole number, 1 to {})", vdbcook_vpak::MAX_LEVELS))?)

@@ -8,6 +8,8 @@ use vdbcook_vpak::{Asset, GpuChannel};
 struct Sampler<'a> {
     d: AssetData<'a>,
     l1: u32,
+    /// Level of detail of the tree `l1` (0: the frame itself).
+    level: u32,
     /// The buffers the shader reads: channel table, brick tables, ranges (pairs).
     table: Vec<GpuChannel>,
     tables: Vec<u32>,
@@ -15,9 +17,9 @@ struct Sampler<'a> {
 }
 
 impl Sampler<'_> {
-    fn new(d: AssetData<'_>, l1: u32) -> Sampler<'_> {
+    fn new(d: AssetData<'_>, l1: u32, level: u32) -> Sampler<'_> {
         let (table, tables, ranges) = (d.c.gpu_channels(), d.c.gpu_tables(), d.c.gpu_ranges());
-        Sampler { d, l1, table, tables, ranges }
+        Sampler { d, l1, level, table, tables, ranges }
     }
 
     fn entry(nodes: &[u32], base: usize, mask_words: usize, s: usize) -> Option<usize> {
@@ -106,8 +108,15 @@ impl Sampler<'_> {
         lo + level * (hi - lo)
     }
 
-    /// Channel `c`'s value and the empty-region edge, as `vpak_query`.
+    /// Channel `c`'s value and the empty-region edge (in level-0 voxels) at
+    /// level-0 voxel `p`, as `vpak_query`: the level's voxel that covers it.
     fn query(&self, p: [i32; 3], c: usize) -> (f32, u32) {
+        let (v, empty) = self.query_level(p.map(|x| x >> self.level), c);
+        (v, empty << self.level)
+    }
+
+    /// [`Sampler::query`] at a voxel of the level.
+    fn query_level(&self, p: [i32; 3], c: usize) -> (f32, u32) {
         let channels = self.d.c.meta.channels.len();
         let bg = self.table.get(c).map_or(0.0, |ch| f32::from_bits(ch.background));
         let tile = |e: u32| f32::from_bits(self.d.c.tiles.get(((e & 0x7fff_ffff) as usize).saturating_mul(channels).saturating_add(c)).copied().unwrap_or(0));
@@ -193,11 +202,16 @@ fn at(o: [f32; 3], d: [f32; 3], t: f32) -> [f32; 3] {
 
 /// Renders like the GPU path.
 pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width: u32, height: u32) -> Result<Image, Error> {
+    render_cpu_level(asset, scene, frame, 0, view, width, height)
+}
+
+/// [`render_cpu`] of level of detail `level` of the frame, as `render_views_level`.
+pub fn render_cpu_level(asset: &Asset, scene: &Scene, frame: usize, level: u32, view: &View, width: u32, height: u32) -> Result<Image, Error> {
     let d = AssetData::new(asset)?;
-    let l1 = d.frame_l1(frame)?;
+    let l1 = d.tree_l1(frame, level)?;
     let ext = scene.channels[0] as usize;
     let skip = d.meta().channels.get(ext).is_some_and(|c| c.background == 0.0);
-    let s = Sampler::new(d, l1);
+    let s = Sampler::new(d, l1, level);
     let (r, u, f) = view.basis();
     let tf = (view.fov_deg.to_radians() * 0.5).tan();
     let aspect = width as f32 / height as f32;
@@ -335,8 +349,8 @@ mod tests {
             let bytes = vdbcook_vpak::assemble(&c.finish(&NoProgress).unwrap().0);
             let asset = Asset::from_bytes(&bytes).unwrap();
             let d = AssetData::new(&asset).unwrap();
-            let (l1, offset) = (d.frame_l1(0).unwrap(), d.meta().index_offset);
-            let s = Sampler::new(d, l1);
+            let (l1, offset) = (d.tree_l1(0, 0).unwrap(), d.meta().index_offset);
+            let s = Sampler::new(d, l1, 0);
             let b = grid.stats().bbox.unwrap();
             let mut active = 0u64;
             for x in b.min.x - 8..=b.max.x + 8 {
@@ -347,6 +361,32 @@ mod tests {
                         let (got, _) = s.query([x - offset[0], y - offset[1], z - offset[2]], 0);
                         assert_eq!(got.to_bits(), want.to_bits(), "{f}: voxel ({x}, {y}, {z})");
                         active += u64::from(on);
+                    }
+                }
+            }
+            // Every level of detail, as `unpack_level` gives it (the twin takes level-0 coordinates).
+            let mut c = Cooker::new(CookOptions { format: Format::F32, levels: 4, ..CookOptions::default() });
+            c.push(&grid, None).unwrap();
+            let levels = Asset::from_bytes(&vdbcook_vpak::assemble(&c.finish(&NoProgress).unwrap().0)).unwrap();
+            for level in 1..4u32 {
+                let g = vdbcook_cook::unpack_level(&levels, 0, level).unwrap().remove(0);
+                let d = AssetData::new(&levels).unwrap();
+                let s = Sampler::new(d, AssetData::new(&levels).unwrap().tree_l1(0, level).unwrap(), level);
+                let lo = offset.map(|o| o >> level);
+                let b = g.stats().bbox.unwrap();
+                for x in b.min.x - 2..=b.max.x + 2 {
+                    for y in b.min.y - 2..=b.max.y + 2 {
+                        for z in b.min.z - 2..=b.max.z + 2 {
+                            let (value, on) = g.probe(Coord::new(x, y, z));
+                            let want = if on { value } else { g.background };
+                            // Every level-0 voxel this level voxel covers reads it.
+                            let fine = [(x - lo[0]) << level, (y - lo[1]) << level, (z - lo[2]) << level];
+                            let k = (1 << level) - 1;
+                            for p in [fine, [fine[0] + k, fine[1] + k, fine[2] + k]] {
+                                let (got, _) = s.query(p, 0);
+                                assert_eq!(got.to_bits(), want.to_bits(), "{f}: level {level} voxel ({x}, {y}, {z})");
+                            }
+                        }
                     }
                 }
             }

@@ -146,7 +146,10 @@ pub struct GpuAsset {
     buffers: Vec<wgpu::Buffer>,
     /// Texture slots 0 to 7 (unused ones hold a small empty texture or buffer).
     atlases: Vec<Atlas>,
+    /// Every tree: level k of frame f at `k · frame_count + f`.
     frames: Vec<u32>,
+    frame_count: usize,
+    levels: u32,
     /// Texture slots in use (the atlases of the planes bound).
     slots: usize,
     /// Per channel, whether its plane's atlases are bound.
@@ -382,8 +385,9 @@ impl Renderer {
         Ok(GpuAsset {
             buffers,
             atlases,
-            // Level 0's trees (the frames section lists coarser levels after them).
-            frames: c.frames.get(..c.meta.frame_count as usize).unwrap_or(&[]).to_vec(),
+            frames: c.frames.to_vec(),
+            frame_count: c.meta.frame_count as usize,
+            levels: c.meta.levels,
             slots: slots.len(),
             bound,
             single_slot,
@@ -398,11 +402,11 @@ impl Renderer {
         v.pop().ok_or_else(|| Error::Gpu("no image".into()))
     }
 
-    fn params(&self, asset: &GpuAsset, scene: &Scene, l1: u32, view: &View, width: u32, height: u32) -> wgpu::Buffer {
+    fn params(&self, asset: &GpuAsset, scene: &Scene, (l1, level): (u32, u32), view: &View, width: u32, height: u32) -> wgpu::Buffer {
         let (r, u, f) = view.basis();
         let tf = (view.fov_deg.to_radians() * 0.5).tan();
         let mut p: Vec<u32> = Vec::with_capacity(56);
-        p.extend([l1, asset.channels, 0, 0]);
+        p.extend([l1, asset.channels, level, 0]);
         let v4 = |p: &mut Vec<u32>, v: [f32; 3], w: f32| p.extend([v[0].to_bits(), v[1].to_bits(), v[2].to_bits(), w.to_bits()]);
         v4(&mut p, view.eye, 0.0);
         v4(&mut p, r, 0.0);
@@ -425,7 +429,20 @@ impl Renderer {
     /// Renders frame `frame` of `asset` from every view: the shadow grid is
     /// computed once, then one dispatch per view, all in one submission.
     pub fn render_views(&self, asset: &GpuAsset, scene: &Scene, frame: usize, views: &[View], width: u32, height: u32) -> Result<Vec<Image>, Error> {
-        let l1 = *asset.frames.get(frame).ok_or(Error::Frame { frame, count: asset.frames.len() })?;
+        self.render_views_level(asset, scene, frame, 0, views, width, height)
+    }
+
+    /// [`Renderer::render_views`] of level of detail `level` of the frame: each
+    /// sample reads the level's voxel that covers it (nearest voxel, as at level 0).
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_views_level(&self, asset: &GpuAsset, scene: &Scene, frame: usize, level: u32, views: &[View], width: u32, height: u32) -> Result<Vec<Image>, Error> {
+        if level >= asset.levels {
+            return Err(Error::Level { level, levels: asset.levels });
+        }
+        if frame >= asset.frame_count {
+            return Err(Error::Frame { frame, count: asset.frame_count });
+        }
+        let l1 = *asset.frames.get(level as usize * asset.frame_count + frame).ok_or(Error::Frame { frame, count: asset.frame_count })?;
         if let Some(&c) = scene.channels.iter().find(|&&c| c != crate::NONE && !asset.bound.get(c as usize).copied().unwrap_or(false)) {
             return Err(Error::NotUploaded(c));
         }
@@ -438,7 +455,7 @@ impl Renderer {
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("march") });
         let mut reads = Vec::with_capacity(views.len());
         for (i, view) in views.iter().enumerate() {
-            let params = self.params(asset, scene, l1, view, width, height);
+            let params = self.params(asset, scene, (l1, level), view, width, height);
             let out =
                 self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("image"), size: bytes, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
             let read = self.device.create_buffer(&wgpu::BufferDescriptor {

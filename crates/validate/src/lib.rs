@@ -12,7 +12,7 @@ pub mod flip;
 mod gpu;
 pub mod report;
 
-pub use cpu::render_cpu;
+pub use cpu::{render_cpu, render_cpu_level};
 pub use flip::{flip, FlipMap};
 pub use gpu::{shader_sources, BcDecode, GpuAsset, Renderer};
 
@@ -38,6 +38,8 @@ pub enum Error {
     Corrupt(String),
     #[error("frame {frame} is out of range (the asset has {count})")]
     Frame { frame: usize, count: usize },
+    #[error("level {level} is out of range (the asset has {levels} levels of detail, numbered from 0)")]
+    Level { level: u32, levels: u32 },
     #[error("GPU error: {0}")]
     Gpu(String),
     #[error(transparent)]
@@ -227,7 +229,11 @@ impl<'a> AssetData<'a> {
         &self.c.meta
     }
 
-    pub fn frame_l1(&self, frame: usize) -> Result<u32, Error> {
-        self.c.tree(frame, 0).ok_or(Error::Frame { frame, count: self.c.meta.frame_count as usize })
+    /// The L1 node of frame `frame` at level of detail `level`.
+    pub fn tree_l1(&self, frame: usize, level: u32) -> Result<u32, Error> {
+        if level >= self.c.meta.levels {
+            return Err(Error::Level { level, levels: self.c.meta.levels });
+        }
+        self.c.tree(frame, level).ok_or(Error::Frame { frame, count: self.c.meta.frame_count as usize })
     }
 }

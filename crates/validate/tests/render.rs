@@ -5,7 +5,7 @@
 
 use std::path::Path;
 use vdbcook_cook::{CookOptions, Cooker, Format, NoProgress};
-use vdbcook_validate::{compare, render_cpu, BcDecode, Renderer, Scene};
+use vdbcook_validate::{compare, render_cpu, render_cpu_level, BcDecode, Renderer, Scene};
 use vdbcook_vpak::Asset;
 
 fn cook(files: &[&str], format: Format) -> Vec<u8> {
@@ -42,6 +42,41 @@ fn wgsl_parses_and_validates() {
     for source in vdbcook_validate::shader_sources() {
         let module = naga::front::wgsl::parse_str(source).expect("WGSL parses");
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all()).validate(&module).expect("WGSL validates");
+    }
+}
+
+/// Levels of detail: the GPU draws each level as its CPU twin does; coarser
+/// levels give other images (blurrier) that stay close to level 0's, since the
+/// box mean keeps the optical depth; a level the asset lacks is an error.
+#[test]
+fn every_level_renders_on_the_gpu_like_its_cpu_twin() {
+    let Some(r) = renderer() else { return };
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    for format in [Format::F32, Format::Bc7] {
+        let mut c = Cooker::new(CookOptions { format, levels: 4, ..CookOptions::default() });
+        for f in SEQ {
+            let v = vdbcook_vdb::open(&root.join(f)).unwrap();
+            c.push(&v.read_grid(v.select(None).unwrap()).unwrap(), None).unwrap();
+        }
+        let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&c.finish(&NoProgress).unwrap().0)).unwrap();
+        let scene = Scene::for_asset(&asset.metadata().unwrap());
+        let gpu = r.upload(&asset).unwrap();
+        let views = scene.orbit(2);
+        let base = r.render_views_level(&gpu, &scene, 1, 0, &views, 48, 40).unwrap();
+        assert_eq!(base, r.render_views(&gpu, &scene, 1, &views, 48, 40).unwrap(), "level 0 is the frame");
+        for level in 1..4 {
+            let imgs = r.render_views_level(&gpu, &scene, 1, level, &views, 48, 40).unwrap();
+            for (i, (g, view)) in imgs.iter().zip(&views).enumerate() {
+                let cpu = render_cpu_level(&asset, &scene, 1, level, view, 48, 40).unwrap();
+                let m = compare(&cpu, g);
+                assert!(m.max_error < 2e-3, "{format:?} level {level} view {i}: {m:?}");
+                let d = compare(&base[i], g);
+                assert!(d.rmse > 0.0, "{format:?} level {level} view {i}: the same image as level 0");
+                assert!(d.psnr > 15.0, "{format:?} level {level} view {i}: far from level 0: {d:?}");
+            }
+        }
+        assert!(r.render_views_level(&gpu, &scene, 1, 4, &views, 48, 40).is_err());
+        assert!(render_cpu_level(&asset, &scene, 0, 4, &views[0], 8, 8).is_err());
     }
 }
 
