@@ -42,7 +42,6 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let sharing = |p: usize| meta.channels.iter().filter(|c| c.plane as usize == p).count().max(1) as u64;
     // A channel's share of each of its planes, and its channel table (per-brick formats).
     let channel_bytes = |c: usize| meta.channel_planes(c).iter().map(|&p| plane_bytes[p as usize] / sharing(p as usize)).sum::<u64>() + section_bytes(kind::CHANNEL_TABLE, c as u32);
-    let channel_format = |c: usize| meta.channel_planes(c).iter().map(|&p| meta.planes[p as usize].plane.format.name()).collect::<Vec<_>>().join("+");
     let formats = meta.format_names();
     // Levels of detail: figures over every frame, and the bytes each level needs on its own.
     let levels: Vec<(u32, u64, u64, u64, u64)> = (0..meta.levels)
@@ -67,7 +66,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "channels": meta.channels.iter().enumerate().map(|(i, c)| json!({
                 "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
                 "background": crate::inspect::num32(c.background), "value_range": c.value_range.map(crate::inspect::num32), "group": c.group, "plane": c.plane, "lane": c.lane,
-                "alternates": c.alternates, "format": channel_format(i), "bytes": channel_bytes(i),
+                "alternates": c.alternates, "format": meta.channel_format_names(i), "bytes": channel_bytes(i),
             })).collect::<Vec<_>>(),
             "bricks": meta.brick_count,
             "planes": meta.planes.iter().zip(&plane_bytes).enumerate().map(|(i, (p, b))| json!({
@@ -116,7 +115,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             s,
             "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} {}",
             c.name,
-            channel_format(i),
+            meta.channel_format_names(i),
             if c.alternates.is_empty() { format!("{}.{}", c.plane, c.lane) } else { planes },
             channel_bytes(i),
             c.class,

@@ -374,7 +374,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
             "rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak(shown))), "max_error": vox_total.max_abs,
             "frames": voxel.iter().map(|(f, e)| { let e = e.get(shown).copied().unwrap_or_default(); json!({"frame": f, "rmse": e.rmse(), "psnr": num(e.psnr(peak(shown))), "max_error": e.max_abs}) }).collect::<Vec<_>>(),
         },
-        "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": meta.channel_planes(c).iter().filter_map(|&p| meta.planes.get(p as usize)).map(|p| p.plane.format.name()).collect::<Vec<_>>().join("+"), "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
+        "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": meta.channel_format_names(c), "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
         "gate": {"max_rmse": args.max_rmse, "min_psnr": args.min_psnr, "max_flip": args.max_flip},
         "levels": [{
             "level": args.lod,

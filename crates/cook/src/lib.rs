@@ -856,12 +856,15 @@ impl Cooker {
         drop(std::mem::take(&mut built.pool));
         let transform = self.transform.as_ref().map_or_else(Transform::identity, |f| f.transform);
         // Each channel's place: its (first) plane and first lane there.
-        let mut place = vec![(0u32, 0u32); channels];
-        for (p, spec) in specs.iter().enumerate().rev() {
-            for (slot, &c) in spec.channels.iter().enumerate() {
-                place[c] = (p as u32, slot as u32 * spec.plane.z_per_texel);
-            }
-        }
+        let place: Vec<(u32, u32)> = planes_of
+            .iter()
+            .enumerate()
+            .map(|(c, planes)| {
+                let p = planes.first().copied().unwrap_or(0);
+                let slot = specs[p].channels.iter().position(|&k| k == c).unwrap_or(0) as u32;
+                (p as u32, slot * specs[p].plane.z_per_texel)
+            })
+            .collect();
         let meta = Metadata {
             tool: concat!("vdbcook ", env!("CARGO_PKG_VERSION")).to_string(),
             frame_count: self.frames.len() as u32,

@@ -3,7 +3,7 @@
 //! exactly as a reader decodes it, within E of the source.  NaN and ±∞
 //! voxels must decode to themselves (only `f16` and `f32` keep them).
 
-use super::{bc, bc7_texels, encode_texels, group_planes, levels, quantise, range_of, Brick, Format, Plane, Quality, BRICK_VOXELS};
+use super::{bc, bc7_texels, encode_texels, group_planes, levels, quantise, range_of, Brick, Format, Plane, Quality};
 use rayon::prelude::*;
 
 /// One brick channel's chosen encoding.
@@ -46,7 +46,7 @@ pub fn decode_one(format: Format, bytes: &[u8], range: [f32; 2]) -> Brick {
 /// an excess), a NaN to a NaN and ±∞ to itself.
 pub fn within(values: &Brick, decoded: &Brick, mask: &[u64; 8], max_error: f32) -> bool {
     let e = f64::from(max_error);
-    (0..BRICK_VOXELS).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 1).all(|i| {
+    vdbcook_grid::set_bits(mask).all(|i| {
         let (v, d) = (values[i], decoded[i]);
         if v.is_nan() {
             d.is_nan()
@@ -62,7 +62,7 @@ pub fn within(values: &Brick, decoded: &Brick, mask: &[u64; 8], max_error: f32) 
 /// they are all finite.
 fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<f32> {
     let mut lo_hi: Option<[f32; 2]> = None;
-    for i in (0..BRICK_VOXELS).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 1) {
+    for i in vdbcook_grid::set_bits(mask) {
         let v = values[i];
         if !v.is_finite() {
             return None;

@@ -127,14 +127,7 @@ pub fn coarsen(g: &Grid, filter: Filter) -> Grid {
     }
     for (o, d, v) in big {
         // 128³ tiles filling the cube (d is a multiple of 128).
-        let n = (d / 128) as i32;
-        for x in 0..n {
-            for y in 0..n {
-                for z in 0..n {
-                    tiles.push(Tile { origin: o.offset(x * 128, y * 128, z * 128), dim: 128, value: v, active: true });
-                }
-            }
-        }
+        fill_cube(&mut tiles, o, d, 128, v);
     }
     for (region, cs) in cubes {
         // Cubes of one value filling their 128³ region are one tile; else 8³ tiles.
@@ -145,18 +138,23 @@ pub fn coarsen(g: &Grid, filter: Filter) -> Grid {
             continue;
         }
         for (o, d, v) in cs {
-            let n = (d / 8) as i32;
-            for x in 0..n {
-                for y in 0..n {
-                    for z in 0..n {
-                        tiles.push(Tile { origin: o.offset(x * 8, y * 8, z * 8), dim: 8, value: v, active: true });
-                    }
-                }
-            }
+            fill_cube(&mut tiles, o, d, 8, v);
         }
     }
     tiles.sort_by_key(|t| (t.origin, t.dim));
     Grid { name: g.name.clone(), class: g.class, background: bg, transform: coarsen_transform(&g.transform), leaves, tiles }
+}
+
+/// Active tiles of edge `dim` filling the cube of edge `d` (a multiple of `dim`) at `o`.
+fn fill_cube(tiles: &mut Vec<Tile>, o: Coord, d: u32, dim: u32, value: f32) {
+    let (n, step) = ((d / dim) as i32, dim as i32);
+    for x in 0..n {
+        for y in 0..n {
+            for z in 0..n {
+                tiles.push(Tile { origin: o.offset(x * step, y * step, z * step), dim, value, active: true });
+            }
+        }
+    }
 }
 
 /// One coarse leaf from the fine leaves and 8³ tiles that feed it; a leaf

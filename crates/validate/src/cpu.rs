@@ -94,17 +94,16 @@ impl Sampler<'_> {
         let atlas = atlas as u32;
         let size = if atlas == ch.last_atlas[0] { [ch.last_atlas[1], ch.last_atlas[2]] } else { [ch.atlas_bricks[0], ch.atlas_bricks[1]] };
         let shift = ch.z_shift.min(2);
+        let r = (ch.range_base as usize).saturating_add((pb as usize).saturating_mul(ch.range_slots as usize)).saturating_add((ch.lane >> shift) as usize);
+        let (lo, hi) = (self.ranges.get(2 * r).copied().unwrap_or(0.0), self.ranges.get(2 * r + 1).copied().unwrap_or(0.0));
         if ch.format == vdbcook_vpak::Format::Constant.code() {
-            let r = (ch.range_base as usize).saturating_add(pb as usize);
-            return self.ranges.get(2 * r).copied().unwrap_or(0.0);
+            return lo;
         }
         let t = [pos[0] * 8 + v[0], pos[1] * 8 + v[1], pos[2].saturating_mul(ch.slices).saturating_add(v[2] >> shift)];
         let level = self.texel(ch.slot.saturating_add(atlas), size, ch, t)[((ch.lane + (v[2] & ((1 << shift) - 1))) & 3) as usize];
         if ch.ranged == 0 {
             return level;
         }
-        let r = (ch.range_base as usize).saturating_add((pb as usize).saturating_mul(ch.range_slots as usize)).saturating_add((ch.lane >> shift) as usize);
-        let (lo, hi) = (self.ranges.get(2 * r).copied().unwrap_or(0.0), self.ranges.get(2 * r + 1).copied().unwrap_or(0.0));
         lo + level * (hi - lo)
     }
 

@@ -222,18 +222,7 @@ impl<'a> Checked<'a> {
     /// figures add up to more than the asset).
     pub fn level_bytes(&self, level: u32) -> u64 {
         let roots: Vec<u32> = (0..self.meta.frame_count as usize).filter_map(|f| self.tree(f, level)).collect();
-        let nodes = Nodes {
-            channels: self.meta.channels.len(),
-            frames: Vec::new(),
-            l1: self.l1.to_vec(),
-            l1_entries: self.l1_entries.to_vec(),
-            l2: self.l2.to_vec(),
-            l2_entries: self.l2_entries.to_vec(),
-            l3: self.l3.to_vec(),
-            tiles: self.tiles.to_vec(),
-            offset: self.meta.index_offset,
-        };
-        let usage = nodes.usage(&roots);
+        let usage = self.nodes().usage(&roots);
         let mut bytes = usage.tree_bytes(self.meta.channels.len());
         // Every channel's plane bricks (per-brick formats spread a channel over
         // several planes), each counted once, and the channel tables' entries.

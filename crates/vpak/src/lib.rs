@@ -281,6 +281,11 @@ impl Metadata {
         self.channels.get(c).map_or_else(Vec::new, |ch| std::iter::once(ch.plane).chain(ch.alternates.iter().copied()).collect())
     }
 
+    /// Channel `c`'s formats: "bc4", or "constant+bc7+unorm16" for a channel with alternates.
+    pub fn channel_format_names(&self, c: usize) -> String {
+        self.channel_planes(c).iter().filter_map(|&p| self.planes.get(p as usize)).map(|p| p.plane.format.name()).collect::<Vec<_>>().join("+")
+    }
+
     /// True when plane `p` holds a channel stored in several planes (whose
     /// channel table, not a brick table of the plane's own, addresses it).
     pub fn is_mixed_plane(&self, p: usize) -> bool {
