@@ -24,7 +24,7 @@ import sys
 import numpy as np
 
 MAGIC = b"VPAK\r\n\x1a\n"
-VERSION = 5
+VERSION = 6
 MAX_LEVELS = 5
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
@@ -217,6 +217,7 @@ def decode_metadata(data):
                                  "leaves": r.uint(), "tiles": r.uint(), "coarse": r.vec(level)})
     m["levels"] = r.uint()
     m["level_filters"] = r.vec(r.uint)
+    m["first_level"] = r.uint()
     if r.pos != len(r.data):
         raise VpakError(f"metadata has {len(r.data) - r.pos} trailing bytes")
     return m
@@ -281,6 +282,8 @@ def validate(m, secs):
         raise VpakError("level filters are not one per channel (with levels > 1) or unknown")
     if any(len(f["coarse"]) != L - 1 for f in m["frames"]):
         raise VpakError("a frame's level figures do not match the levels")
+    if not m["first_level"] < L:
+        raise VpakError(f"first stored level {m['first_level']} of {L} levels")
 
 
 def channel_planes(ch):
@@ -429,8 +432,8 @@ def walk_frame(m, secs, frame, lod=0):
     l2 = secs.u32(K_L2)
     l2e = secs.u32(K_L2_ENTRIES)
     l3 = secs.u32(K_L3)
-    if len(frames) != m["frame_count"] * m["levels"]:
-        raise VpakError("frame table is not frame_count x levels long")
+    if len(frames) != m["frame_count"] * (m["levels"] - m["first_level"]):
+        raise VpakError("frame table is not frame_count x stored levels long")
     if len(l1) % L1_WORDS or len(l2) % L2_WORDS:
         raise VpakError("node arrays are not whole records")
     if len(l3) < 1 or len(l3) < 1 + L3_WORDS * int(l3[0]):
@@ -438,7 +441,7 @@ def walk_frame(m, secs, frame, lod=0):
     n1, n2, n3 = len(l1) // L1_WORDS, len(l2) // L2_WORDS, int(l3[0])
     TILE = 1 << 31
 
-    root = int(frames[lod * m["frame_count"] + frame])
+    root = int(frames[(lod - m["first_level"]) * m["frame_count"] + frame])
     if root >= n1:
         raise VpakError(f"frame {frame} points at missing L1 node {root}")
     node1 = l1[root * L1_WORDS:(root + 1) * L1_WORDS]
@@ -691,7 +694,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description="Decode a .vpak frame (written from docs/format.md).")
     ap.add_argument("asset")
     ap.add_argument("--frame", type=int, default=None)
-    ap.add_argument("--lod", type=int, default=0, help="level of detail (0: the frame itself)")
+    ap.add_argument("--lod", type=int, default=None, help="level of detail (0: the frame itself; default: the asset's first stored level)")
     ap.add_argument("--out", help="write C.ijk / C.values per channel to this .npz")
     ap.add_argument("--json", action="store_true", help="print a metadata summary")
     args = ap.parse_args(argv)
@@ -703,9 +706,10 @@ def main(argv=None):
             frame = 0 if args.frame is None else args.frame
             if not 0 <= frame < m["frame_count"]:
                 raise VpakError(f"frame {frame} out of range (asset has {m['frame_count']})")
-            if not 0 <= args.lod < m["levels"]:
-                raise VpakError(f"level {args.lod} out of range (asset has {m['levels']})")
-            chans = read_frame(m, secs, frame, args.lod)
+            lod = m["first_level"] if args.lod is None else args.lod
+            if not m["first_level"] <= lod < m["levels"]:
+                raise VpakError(f"level {lod} is not stored (asset has levels {m['first_level']} to {m['levels'] - 1})")
+            chans = read_frame(m, secs, frame, lod)
             if args.out:
                 arrays = {}
                 for name, (ijk, vals) in chans.items():

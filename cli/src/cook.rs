@@ -63,6 +63,16 @@ Frames are streamed: at most two source frames are held at once. Identical brick
 L3 and L2 nodes and frames are stored once. The output is written to a temporary
 file and renamed; an existing OUT is replaced only with --force.
 
+--lods N adds levels of detail 1 to N-1 to every frame: level k has voxels 2^k source
+voxels wide, each the mean of its 2x2x2 children (level sets: of the active ones), in
+trees over the same brick pool. --max-bytes B keeps the finest levels whose asset fits
+in B bytes: when the whole asset is larger, it is cooked again without level 0 (and the
+bricks only level 0 used), then without level 1, and so on; the coarsest level always
+stays. The asset then starts at its first kept level (render, unpack and validate read
+that one by default); the summary names the levels left out and each size tried. When
+even the coarsest level alone is larger than B, nothing is written and the cook exits
+with 1, naming that smallest size. Without --lods, --max-bytes only checks the size.
+
 --validate renders the new asset against its sources on the GPU afterwards (see
 `vdbcook validate --help`); with --max-rmse / --min-psnr / --max-flip a failed gate
 exits with 3.
@@ -94,8 +104,8 @@ pub struct CookArgs {
     /// Cook every format (bc7, bc4, unorm8, f16, f32) at the other settings, validate them
     /// smallest file first and write the first whose images meet the gate (--min-psnr,
     /// --max-rmse and/or --max-flip: at least one is required). Implies --validate; not with
-    /// --format or --max-error.
-    #[arg(long, conflicts_with_all = ["format", "max_error"])]
+    /// --format, --max-error or --max-bytes.
+    #[arg(long, conflicts_with_all = ["format", "max_error", "max_bytes"])]
     pub auto: bool,
     /// Replace OUT if it exists.
     #[arg(long)]
@@ -268,6 +278,7 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
                 max_error: s.max_error,
                 settings: fs.recorded(job.inputs),
                 levels: s.lods,
+                max_bytes: s.max_bytes.map(|b| b.0),
             }
         })
         .collect();
@@ -375,6 +386,18 @@ pub fn summary_text(args: &CookArgs, grid: Option<&str>, r: &CookReport) -> Stri
         if let Some(t) = non_finite_text(c, r.channels.len() > 1) {
             let _ = writeln!(s, "  non-finite      {t}");
         }
+    }
+    if let Some(b) = &r.budget {
+        let tries: Vec<String> = b.tries.iter().map(|t| format!("from level {}: {}", t.first_level, mb(t.bytes))).collect();
+        let last = r.first_level as usize + r.levels.len();
+        let kept = if r.levels.is_empty() { format!("level {last} kept") } else { format!("levels {} to {last} kept", r.first_level) };
+        let dropped = match b.dropped.as_slice() {
+            [] => String::new(),
+            [k] => format!(", level {k} left out"),
+            [a, .., z] => format!(", levels {a} to {z} left out"),
+        };
+        let figures = if r.first_level > 0 { format!("; the error figures above are level {}'s", r.first_level) } else { String::new() };
+        let _ = writeln!(s, "  byte budget     {}: {kept}{dropped} ({}){figures}", mb(b.max_bytes), tries.join(", "));
     }
     if !r.levels.is_empty() {
         let per: Vec<String> = r.levels.iter().map(|l| format!("{} ({}x: {} leaves, rmse {:.3e})", l.level, l.voxel_scale, l.leaves, l.voxel_rmse)).collect();

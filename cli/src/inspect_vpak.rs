@@ -44,7 +44,8 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let channel_bytes = |c: usize| meta.channel_planes(c).iter().map(|&p| plane_bytes[p as usize] / sharing(p as usize)).sum::<u64>() + section_bytes(kind::CHANNEL_TABLE, c as u32);
     let formats = meta.format_names();
     // Levels of detail: figures over every frame, and the bytes each level needs on its own.
-    let levels: Vec<(u32, u64, u64, u64, u64)> = (0..meta.levels)
+    let levels: Vec<(u32, u64, u64, u64, u64)> = meta
+        .stored_levels()
         .map(|k| {
             let fig = |f: &vdbcook_vpak::FrameInfo| match k {
                 0 => (u64::from(f.leaves), u64::from(f.tiles), f.active_voxels),
@@ -87,6 +88,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "sources": meta.sources.iter().map(|s| json!({"path": s.path, "bytes": s.bytes, "xxh3_128": s.xxh3_128})).collect::<Vec<_>>(),
             "frame_info": meta.frames.iter().map(|f| json!({"source": f.source, "active_voxels": f.active_voxels, "leaves": f.leaves, "tiles": f.tiles,
                 "coarse": f.coarse.iter().map(|c| json!({"active_voxels": c.active_voxels, "leaves": c.leaves, "tiles": c.tiles})).collect::<Vec<_>>()})).collect::<Vec<_>>(),
+            "first_level": meta.first_level,
             "level_filters": meta.level_filters.iter().map(|f| f.name()).collect::<Vec<_>>(),
             "levels": levels.iter().map(|&(k, l, t, a, b)| json!({"level": k, "voxel_scale": 1u64 << k, "leaves": l, "tiles": t, "active_voxels": a, "bytes": b})).collect::<Vec<_>>(),
         })));
@@ -129,8 +131,9 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     }
     if meta.levels > 1 {
         let filters: Vec<&str> = meta.level_filters.iter().map(|f| f.name()).collect();
-        let _ = writeln!(s, "  levels of detail: {} (filters: {}); bytes: what a level needs on its own", meta.levels, filters.join(", "));
-        let _ = writeln!(s, "  {:<5} {:>6} {:>10} {:>8} {:>14} {:>14} {:>9}", "lod", "voxel", "leaves", "tiles", "active voxels", "bytes", "of lod 0");
+        let stored = if meta.first_level > 0 { format!(", {} stored (finer ones left out to fit a byte budget)", meta.stored_levels_text()) } else { String::new() };
+        let _ = writeln!(s, "  levels of detail: {}{stored} (filters: {}); bytes: what a level needs on its own", meta.levels, filters.join(", "));
+        let _ = writeln!(s, "  {:<5} {:>6} {:>10} {:>8} {:>14} {:>14} {:>9}", "lod", "voxel", "leaves", "tiles", "active voxels", "bytes", format!("of lod {}", meta.first_level));
         let base = levels.first().map_or(1, |l| l.4.max(1));
         for &(k, l, t, a, b) in &levels {
             let _ = writeln!(s, "  {k:<5} {:>6} {l:>10} {t:>8} {a:>14} {b:>14} {:>8.1}%", format!("{}x", 1u64 << k), b as f64 * 100.0 / base as f64);

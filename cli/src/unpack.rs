@@ -13,10 +13,11 @@ pub struct UnpackArgs {
     /// Frame to decode, counted from 0 in the asset's frame order.
     #[arg(long, value_name = "N")]
     pub frame: usize,
-    /// Level of detail to decode (0, the default: the frame itself; k: voxels 2^k times
-    /// as large, in the level's index space, with a transform to match).
-    #[arg(long, value_name = "K", default_value_t = 0)]
-    pub lod: u32,
+    /// Level of detail to decode (0: the frame itself; k: voxels 2^k times as large, in the
+    /// level's index space, with a transform to match). Default: the asset's finest level (0
+    /// unless `cook --max-bytes` left finer ones out).
+    #[arg(long, value_name = "K", value_parser = vdbcook_bake::options::parse_lod)]
+    pub lod: Option<u32>,
     /// The .vdb file to write: one float grid per scalar channel and one vec3s grid per
     /// vec3 grid, zip-compressed, each with its name, class, background and transform.
     #[arg(short, long, value_name = "OUT.vdb")]
@@ -33,8 +34,9 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
     let name = args.asset.display().to_string();
     crate::refuse_existing(&args.output, args.force)?;
     let asset = vdbcook_vpak::Asset::open(&args.asset).with_context(|| name.clone())?;
-    let grids = vdbcook_cook::unpack_level(&asset, args.frame, args.lod).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
+    let lod = args.lod.unwrap_or(meta.first_level);
+    let grids = vdbcook_cook::unpack_level(&asset, args.frame, lod).with_context(|| name.clone())?;
     // Scalar channels become float grids; the x, y, z channels of a vec3 grid one vec3s grid again.
     let mut out: Vec<WriteGrid> = Vec::new();
     let mut done = vec![false; grids.len()];
@@ -67,7 +69,7 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
             (st.active_voxels, st.leaf_count)
         });
         let what = if out.len() == 1 { "1 grid".to_string() } else { format!("{} grids", out.len()) };
-        let level = if args.lod > 0 { format!(" at level {}", args.lod) } else { String::new() };
+        let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
         crate::emit_final(&format!("wrote frame {}{level} of {} to {} ({what}, {voxels} active voxels, {leaves} leaves)\n", args.frame, name, args.output.display()))?;
     }
     Ok(exit::SUCCESS)

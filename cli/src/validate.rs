@@ -64,10 +64,11 @@ pub struct ValidateArgs {
     /// Write report.json, PNGs and report.html into DIR.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
-    /// Level of detail to check (0, the default: the frames themselves; k: the asset's
-    /// level k against the source filtered losslessly to level k, as `cook --lods` does).
-    #[arg(long, value_name = "K", default_value_t = 0, value_parser = vdbcook_bake::options::parse_lod)]
-    pub lod: u32,
+    /// Level of detail to check (0: the frames themselves; k: the asset's level k against the
+    /// source filtered losslessly to level k, as `cook --lods` does). Default: the asset's
+    /// finest level (0 unless `cook --max-bytes` left finer ones out).
+    #[arg(long, value_name = "K", value_parser = vdbcook_bake::options::parse_lod)]
+    pub lod: Option<u32>,
     /// Check every level of detail of the asset, each against the source filtered to it,
     /// and show the levels side by side (the rest of the report is level 0's).
     #[arg(long, conflicts_with_all = ["lod", "report"])]
@@ -93,7 +94,7 @@ impl ValidateArgs {
             min_psnr: s.min_psnr,
             max_flip: s.max_flip,
             report,
-            lod: 0,
+            lod: None,
             every_lod: false,
             gpu,
             json,
@@ -233,25 +234,26 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     let asset = Asset::open(&args.asset).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
     let bars = Bars::new(quiet || args.json);
-    if args.lod >= meta.levels {
-        return Err(anyhow!("{name}: level {} is out of range (it has {} levels of detail, numbered from 0)", args.lod, meta.levels));
+    let lod = args.lod.unwrap_or(meta.first_level);
+    if let Some(why) = meta.missing_level(lod) {
+        return Err(anyhow!("{name}: {why}"));
     }
     if args.every_lod {
-        return evaluate_levels(&args, &asset, &name, meta.levels, &bars);
+        return evaluate_levels(&args, &asset, &name, meta.stored_levels(), &bars);
     }
-    let reference = reference(&meta, &args.source, args.source_frames, args.lod, &bars)?;
+    let reference = reference(&meta, &args.source, args.source_frames, lod, &bars)?;
     compare_assets(&asset, &name, &reference, &args, || args.gpu.renderer().map(Box::new), &bars)
 }
 
 /// `validate --every-lod`: every level against the source filtered to it (one
 /// reference with every level), level 0's report with the levels side by side.
-fn evaluate_levels(args: &ValidateArgs, asset: &Asset, name: &str, levels: u32, bars: &Bars) -> Result<Outcome> {
+fn evaluate_levels(args: &ValidateArgs, asset: &Asset, name: &str, levels: std::ops::Range<u32>, bars: &Bars) -> Result<Outcome> {
     let meta = asset.metadata().with_context(|| name.to_string())?;
-    let reference = reference(&meta, &args.source, args.source_frames, levels - 1, bars)?;
+    let reference = reference(&meta, &args.source, args.source_frames, levels.end - 1, bars)?;
     let renderer = args.gpu.renderer()?;
-    let mut outs = Vec::with_capacity(levels as usize);
-    for lod in 0..levels {
-        let a = ValidateArgs { lod, every_lod: false, ..args.clone() };
+    let mut outs = Vec::with_capacity(levels.len());
+    for lod in levels.clone() {
+        let a = ValidateArgs { lod: Some(lod), every_lod: false, ..args.clone() };
         outs.push(compare_assets(asset, name, &reference, &a, || Ok(&renderer), bars)?);
     }
     let rows: Vec<serde_json::Value> = outs.iter().filter_map(|o| o.doc["levels"].get(0).cloned()).collect();
@@ -272,7 +274,7 @@ fn evaluate_levels(args: &ValidateArgs, asset: &Asset, name: &str, levels: u32, 
         );
     }
     if first.gate_failure.is_none() {
-        first.gate_failure = outs.iter().enumerate().find_map(|(k, o)| o.gate_failure.as_ref().map(|g| format!("level {}: {g}", k + 1)));
+        first.gate_failure = outs.iter().zip(levels.skip(1)).find_map(|(o, k)| o.gate_failure.as_ref().map(|g| format!("level {k}: {g}")));
     }
     Ok(first)
 }
@@ -291,6 +293,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     let name = name.to_string();
     let meta = asset.metadata().with_context(|| name.clone())?;
     let ref_meta = reference.metadata()?;
+    let lod = args.lod.unwrap_or(meta.first_level);
     if ref_meta.frame_count != meta.frame_count {
         return Err(anyhow!("{name}: the asset has {} frames, the source {}", meta.frame_count, ref_meta.frame_count));
     }
@@ -315,9 +318,9 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     let mut flip_secs = 0.0;
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in &frames {
-        voxel.push((f, voxel_errors(asset, reference, f, args.lod)?));
-        let refs = renderer.render_views_level(&gpu_ref, &scene, f, args.lod, &views, w, h)?;
-        let imgs = renderer.render_views_level(&gpu_asset, &scene, f, args.lod, &views, w, h)?;
+        voxel.push((f, voxel_errors(asset, reference, f, lod)?));
+        let refs = renderer.render_views_level(&gpu_ref, &scene, f, lod, &views, w, h)?;
+        let imgs = renderer.render_views_level(&gpu_asset, &scene, f, lod, &views, w, h)?;
         // FLIP runs on the CPU, one image per thread: the views of a frame in parallel.
         let t = Instant::now();
         let maps: Vec<FlipMap> = refs.par_iter().zip(&imgs).map(|(r, a)| flip(r, a, DEFAULT_PPD)).collect::<Result<_, _>>()?;
@@ -363,7 +366,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         "channels": meta.channels.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
         "shown": meta.channels.get(shown).map(|c| c.name.clone()),
         "frames": meta.frame_count,
-        "level": args.lod,
+        "level": lod,
         "views": args.views,
         "size": [w, h],
         "flip_ppd": DEFAULT_PPD,
@@ -377,7 +380,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": meta.channel_format_names(c), "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
         "gate": {"max_rmse": args.max_rmse, "min_psnr": args.min_psnr, "max_flip": args.max_flip},
         "levels": [{
-            "level": args.lod,
+            "level": lod,
             "worst": worst.map(|s| json!({"rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "flip": s.flip})),
             "worst_flip": worst_flip.map(|s| json!({"flip": s.flip})),
             "voxel": {"rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak(shown))), "max_error": vox_total.max_abs},
@@ -389,7 +392,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         write_report(dir, &doc, &shots, &worst_images, &format, &name).with_context(|| dir.display().to_string())?;
     }
     let decoder = if gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
-    let level = if args.lod > 0 { format!(" at level {}", args.lod) } else { String::new() };
+    let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
     let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), args.views, renderer.adapter);
     if let Some(s) = worst {
         text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, flip {:.4}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error, s.flip);
@@ -522,11 +525,12 @@ pub struct RenderArgs {
     /// Grid of a .vdb input (default: "density", else the first float grid).
     #[arg(long, value_name = "NAME")]
     pub grid: Option<String>,
-    /// Level of detail to draw (0, the default: the frame itself; k: voxels 2^k times as
-    /// large, each sample reading the level's voxel that covers it). A .vdb input is
-    /// filtered to that level as `cook --lods` does.
-    #[arg(long, value_name = "K", default_value_t = 0, value_parser = vdbcook_bake::options::parse_lod)]
-    pub lod: u32,
+    /// Level of detail to draw (0: the frame itself; k: voxels 2^k times as large, each
+    /// sample reading the level's voxel that covers it). Default: the asset's finest level
+    /// (0 unless `cook --max-bytes` left finer ones out). A .vdb input is filtered to that
+    /// level as `cook --lods` does.
+    #[arg(long, value_name = "K", value_parser = vdbcook_bake::options::parse_lod)]
+    pub lod: Option<u32>,
     #[command(flatten)]
     pub gpu: GpuArgs,
     /// Replace OUT if it exists.
@@ -543,23 +547,25 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let asset = if crate::inspect::is_vpak(&args.input) {
         Asset::open(&args.input).with_context(|| name.clone())?
     } else {
-        crate::cook::cook_lossless_levels(vec![args.input.clone()], crate::grids::GridSelection::from_flags(args.grid.as_deref(), None), false, args.lod + 1, &Bars::new(true))?
+        crate::cook::cook_lossless_levels(vec![args.input.clone()], crate::grids::GridSelection::from_flags(args.grid.as_deref(), None), false, args.lod.unwrap_or(0) + 1, &Bars::new(true))?
     };
     let meta = asset.metadata().with_context(|| name.clone())?;
+    let lod = args.lod.unwrap_or(meta.first_level);
     if args.frame >= meta.frame_count as usize {
         return Err(anyhow!("{name}: frame {} is out of range (it has {} frames, numbered from 0)", args.frame, meta.frame_count));
     }
-    if args.lod >= meta.levels {
-        return Err(anyhow!("{name}: level {} is out of range (it has {} levels of detail, numbered from 0; cook it with --lods {})", args.lod, meta.levels, args.lod + 1));
+    if let Some(why) = meta.missing_level(lod) {
+        let hint = if lod >= meta.levels { format!("; cook it with --lods {}", lod + 1) } else { String::new() };
+        return Err(anyhow!("{name}: {why}{hint}"));
     }
     let renderer = args.gpu.renderer()?;
     let gpu = renderer.upload(&asset).with_context(|| name.clone())?;
     let scene = Scene::for_asset(&meta);
     let view = scene.orbit(args.views as usize)[args.view as usize];
-    let img = renderer.render_views_level(&gpu, &scene, args.frame, args.lod, std::slice::from_ref(&view), args.size.0, args.size.1)?.pop().ok_or_else(|| anyhow!("no image"))?;
+    let img = renderer.render_views_level(&gpu, &scene, args.frame, lod, std::slice::from_ref(&view), args.size.0, args.size.1)?.pop().ok_or_else(|| anyhow!("no image"))?;
     vdbcook_vpak::write_atomic(&args.output, &report::png_rgb(&img), args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
-        let level = if args.lod > 0 { format!(" at level {}", args.lod) } else { String::new() };
+        let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
         crate::emit_final(&format!("rendered frame {}{level} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.0, args.size.1, renderer.adapter))?;
     }
     Ok(exit::SUCCESS)

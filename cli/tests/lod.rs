@@ -170,7 +170,7 @@ fn level_counts_out_of_range_are_usage_errors_and_levels_are_deterministic() {
     let r = vdbcook(&["unpack", s(&plain), "--frame", "0", "--lod", "1", "-o", s(&w)]);
     let err = String::from_utf8_lossy(&r.stderr);
     assert_eq!(r.status.code(), Some(1), "{err}");
-    assert!(err.starts_with("vdbcook: error: ") && err.contains("p.vpak") && err.contains("level 1 of frame 0 is out of range") && err.lines().count() == 1, "{err}");
+    assert!(err.starts_with("vdbcook: error: ") && err.contains("p.vpak") && err.contains("level 1 is out of range") && err.lines().count() == 1, "{err}");
     assert!(!w.exists());
     // The cook report gives the levels (JSON as docs/cook-json.md says).
     let j = json(vdbcook(&["cook", "--json", "--force", "-o", s(&a), "--lods", "3", "--format", "f32", "fixtures/smoke_seq"]));
@@ -252,5 +252,109 @@ fn validate_checks_a_level_against_the_filtered_source() {
     let err = String::from_utf8_lossy(&r.stderr);
     assert_eq!(r.status.code(), Some(1), "{err}");
     assert!(err.contains("level 3 is out of range") && err.lines().count() == 1, "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `cook --max-bytes`: the finest levels that fit stay, the asset starts at
+/// its first kept level and every reader reads that one by default; a budget
+/// below the coarsest level alone writes nothing and names the smallest size.
+#[test]
+fn a_byte_budget_leaves_out_the_finest_levels() {
+    let dir = scratch_dir("lod", "budget");
+    let (full, cut) = (dir.join("full.vpak"), dir.join("cut.vpak"));
+    let cook = |out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec!["cook", "--force", "-o", s(out), "--lods", "4", "--format", "f32", "fixtures/smoke_seq"];
+        args.extend(extra);
+        vdbcook(&args)
+    };
+    let j = json(cook(&full, &["--json"]));
+    let full_bytes = j["file_bytes"].as_u64().unwrap();
+    assert!(j["budget"].is_null() && j["first_level"] == 0, "{j}");
+    let budget = (full_bytes - 1).to_string();
+    let j = json(cook(&cut, &["--json", "--max-bytes", &budget]));
+    let doc = std::fs::read_to_string(root().join("docs/cook-json.md")).unwrap();
+    let mut top = doc_section(&doc, "Top level");
+    top.retain(|k| k != "validation" && k != "auto");
+    assert_documented(&j, &top, "cook --max-bytes");
+    let cut_bytes = std::fs::metadata(&cut).unwrap().len();
+    assert!(cut_bytes < full_bytes && j["file_bytes"] == cut_bytes, "{j}");
+    assert_eq!((j["first_level"].as_u64(), j["budget"]["dropped"].clone()), (Some(1), serde_json::json!([0])), "{j}");
+    let tries = j["budget"]["tries"].as_array().unwrap();
+    assert!(tries.len() == 2 && tries[0]["bytes"] == full_bytes && tries[1]["bytes"] == cut_bytes, "{j}");
+    assert_eq!(j["levels"].as_array().unwrap().iter().map(|l| l["level"].as_u64().unwrap()).collect::<Vec<_>>(), [2, 3]);
+    // The text summary says what was left out; the same settings in human units give the same asset.
+    let r = cook(&dir.join("cut2.vpak"), &["--max-bytes", &format!("{}kB", (full_bytes - 1) as f64 / 1000.0)]);
+    let text = String::from_utf8_lossy(&ok(r).stdout).to_string();
+    assert!(text.contains("byte budget") && text.contains("levels 1 to 3 kept, level 0 left out"), "{text}");
+    assert!(std::fs::read(dir.join("cut2.vpak")).unwrap() == std::fs::read(&cut).unwrap());
+    // inspect: the stored levels.
+    let i = json(vdbcook(&["inspect", "--json", s(&cut)]))["files"][0].clone();
+    assert_eq!(i["first_level"], 1, "{i}");
+    assert_eq!(i["levels"].as_array().unwrap().iter().map(|l| l["level"].as_u64().unwrap()).collect::<Vec<_>>(), [1, 2, 3]);
+    // unpack reads level 1 by default, the same level as the full asset's; level 0 is refused in one line.
+    let (a, b, c) = (dir.join("a.vdb"), dir.join("b.vdb"), dir.join("c.vdb"));
+    let out = ok(vdbcook(&["unpack", s(&cut), "--frame", "2", "-o", s(&a)]));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("at level 1"));
+    ok(vdbcook(&["unpack", "-q", s(&full), "--frame", "2", "--lod", "1", "-o", s(&b)]));
+    assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(), "level 1 of the cut asset is the full asset's");
+    let r = vdbcook(&["unpack", s(&cut), "--frame", "2", "--lod", "0", "-o", s(&c)]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(1), "{err}");
+    assert!(err.contains("cut.vpak") && err.contains("level 0 is not in the asset") && err.contains("left out") && err.lines().count() == 1, "{err}");
+    assert!(!c.exists());
+    // The spec-only reader follows first_level too.
+    if python(&["-c", "import numpy, xxhash"]).status.success() {
+        let npz = dir.join("a.npz");
+        let out = python(&["scripts/vpak_read.py", s(&cut), "--frame", "2", "--out", s(&npz)]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        if python(&["-c", "import pyopenvdb"]).status.success() {
+            let c: serde_json::Value = serde_json::from_slice(&ok(python(&["cli/tests/spec_reader_check.py", s(&npz), s(&a)])).stdout).unwrap();
+            assert!(c["density"]["voxels"].as_u64().unwrap() > 0 && c["density"]["max_diff"].as_f64().unwrap() == 0.0, "{c}");
+        }
+        let out = python(&["scripts/vpak_read.py", s(&cut), "--frame", "2", "--lod", "0", "--out", s(&npz)]);
+        assert_eq!(out.status.code(), Some(1), "level 0 is refused by the spec reader");
+    } else {
+        assert!(!in_ci(), "CI=true but /usr/bin/python3 lacks numpy or xxhash");
+    }
+    // Too small for the coarsest level alone: exit 1, one line, nothing written.
+    let none = dir.join("none.vpak");
+    let r = cook(&none, &["--max-bytes", "1000"]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(1), "{err}");
+    assert!(err.contains("no asset fits in 1000 bytes") && err.contains("level 3 alone") && err.lines().count() == 1, "{err}");
+    assert!(!none.exists());
+    // Not a budget, or with --auto: usage errors.
+    for bad in ["0", "-5", "abc", "1.5XB"] {
+        let r = cook(&none, &["--max-bytes", bad]);
+        assert_eq!(r.status.code(), Some(2), "--max-bytes {bad}: {}", String::from_utf8_lossy(&r.stderr));
+    }
+    let r = vdbcook(&["cook", "-o", s(&none), "--auto", "--min-psnr", "30", "--max-bytes", "1MB", "fixtures/smoke_seq"]);
+    assert_eq!(r.status.code(), Some(2), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(!none.exists());
+    // A bake manifest takes the same setting, as bytes or as text.
+    let bake = dir.join("bake.toml");
+    let src = root().join("fixtures/smoke_seq").display().to_string();
+    std::fs::write(&bake, format!("[[asset]]\nname = \"a\"\noutput = \"a.vpak\"\ninputs = [\"{src}\"]\nlods = 4\nformat = \"f32\"\nmax_bytes = {}\n\n[[asset]]\nname = \"b\"\noutput = \"b.vpak\"\ninputs = [\"{src}\"]\nmax_bytes = \"0\"\n", full_bytes - 1)).unwrap();
+    let r = vdbcook(&["bake", s(&bake)]);
+    assert_eq!(r.status.code(), Some(2), "{}", String::from_utf8_lossy(&r.stderr));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("bake.toml:13") && err.contains("byte budget \"0\""), "{err}");
+    std::fs::write(&bake, format!("[[asset]]\nname = \"a\"\noutput = \"a.vpak\"\ninputs = [\"{src}\"]\nlods = 4\nformat = \"f32\"\nmax_bytes = {}\n", full_bytes - 1)).unwrap();
+    ok(vdbcook(&["bake", "-q", s(&bake)]));
+    let baked = json(vdbcook(&["inspect", "--json", s(&dir.join("a.vpak"))]))["files"][0].clone();
+    assert!(baked["first_level"] == 1 && std::fs::metadata(dir.join("a.vpak")).unwrap().len() < full_bytes, "{baked}");
+    // render and validate draw level 1 by default.
+    if gpu_available() {
+        let (p, q) = (dir.join("p.png"), dir.join("q.png"));
+        ok(vdbcook(&["render", "-q", s(&cut), "--frame", "1", "--size", "48x48", "-o", s(&p)]));
+        ok(vdbcook(&["render", "-q", s(&full), "--frame", "1", "--lod", "1", "--size", "48x48", "-o", s(&q)]));
+        assert!(std::fs::read(&p).unwrap() == std::fs::read(&q).unwrap(), "render draws the first stored level");
+        let v = json(vdbcook(&["validate", s(&cut), "--source", "fixtures/smoke_seq", "--views", "2", "--size", "48x48", "--json"]));
+        assert!(v["level"] == 1 && v["voxel"]["rmse"] == 0.0 && v["images"].as_array().unwrap().iter().all(|i| i["rmse"] == 0.0), "{v}");
+        let v = json(vdbcook(&["validate", s(&cut), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "1", "--size", "32x32", "--json"]));
+        assert_eq!(v["levels"].as_array().unwrap().iter().map(|l| l["level"].as_u64().unwrap()).collect::<Vec<_>>(), [1, 2, 3], "{v}");
+        let r = vdbcook(&["render", s(&cut), "--lod", "0", "-o", s(&dir.join("x.png"))]);
+        assert_eq!(r.status.code(), Some(1), "{}", String::from_utf8_lossy(&r.stderr));
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -86,6 +86,61 @@ impl fmt::Display for Size {
     }
 }
 
+/// A byte budget (`--max-bytes`, `max_bytes`): a whole number of bytes, or a
+/// number with a unit: kB, MB, GB (powers of 1000; k, M, G alone too) or
+/// KiB, MiB, GiB (powers of 1024). More than 0.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ByteBudget(pub u64);
+
+impl FromStr for ByteBudget {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("invalid byte budget \"{s}\" (expected bytes, or a number with kB, MB, GB, KiB, MiB or GiB, e.g. 1.5MB)");
+        let t = s.trim();
+        let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
+        let (number, unit) = (t[..split].trim(), t[split..].trim());
+        let scale: f64 = match unit {
+            "" | "B" | "b" => 1.0,
+            "k" | "K" | "kB" | "KB" => 1e3,
+            "M" | "MB" => 1e6,
+            "G" | "GB" => 1e9,
+            "KiB" => 1024.0,
+            "MiB" => 1024.0 * 1024.0,
+            "GiB" => 1024.0 * 1024.0 * 1024.0,
+            _ => return Err(bad()),
+        };
+        let n: f64 = number.parse().map_err(|_| bad())?;
+        let bytes = (n * scale).floor();
+        if !(bytes >= 1.0 && bytes < 2f64.powi(63)) {
+            return Err(format!("byte budget \"{s}\" must be at least 1 byte"));
+        }
+        Ok(ByteBudget(bytes as u64))
+    }
+}
+
+impl fmt::Display for ByteBudget {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.0)
+    }
+}
+
+/// A manifest writes it as a number of bytes or as the flag's text.
+impl<'de> serde::Deserialize<'de> for ByteBudget {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(serde::Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Bytes(u64),
+            Text(String),
+        }
+        match Raw::deserialize(d)? {
+            Raw::Bytes(0) => Err(serde::de::Error::custom("a byte budget must be at least 1 byte")),
+            Raw::Bytes(b) => Ok(ByteBudget(b)),
+            Raw::Text(t) => t.parse().map_err(serde::de::Error::custom),
+        }
+    }
+}
+
 /// Types written as a string in a manifest and parsed like the flag.
 macro_rules! deserialize_from_str {
     ($($t:ty),*) => {$(
@@ -107,7 +162,7 @@ pub trait SettingText {
 macro_rules! text_by_display {
     ($($t:ty),*) => {$( impl SettingText for $t { fn text(&self) -> String { self.to_string() } } )*};
 }
-text_by_display!(bool, u32, f32, f64, String, FrameRange, Size, ChannelGroup);
+text_by_display!(bool, u32, f32, f64, String, FrameRange, Size, ChannelGroup, ByteBudget);
 
 impl SettingText for Format {
     fn text(&self) -> String {
@@ -347,6 +402,11 @@ settings! {
     /// times as large (each the mean of its 2x2x2 children; level sets: of the active ones).
     #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().lods, value_parser = parse_lods))]
     lods: u32 = cook_defaults().levels;
+    /// Byte budget B (bytes, or e.g. 500kB, 1.5MB, 2MiB): keep the finest levels of detail
+    /// (of --lods) whose asset fits, leaving out the finer ones; the coarsest always stays, and
+    /// when even it alone is larger the cook fails (exit 1) naming the smallest size reachable.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "B"))]
+    max_bytes: Option<ByteBudget> = None;
     /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
     #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim, value_parser = clap::value_parser!(u32).range(MAX_TEXTURE_DIM)))]
     max_texture_dim: u32 = cook_defaults().max_texture_dim;
@@ -439,6 +499,7 @@ impl CookSettings {
             ("allow_missing".into(), self.allow_missing.text()),
             ("max_texture_dim".into(), self.max_texture_dim.text()),
             ("lods".into(), self.lods.text()),
+            ("max_bytes".into(), self.max_bytes.text()),
             ("clusters".into(), self.clusters.text()),
             ("iterations".into(), if clustered { self.iterations.text() } else { String::new() }),
             ("variance_threshold".into(), if clustered { self.variance_threshold.text() } else { String::new() }),
@@ -502,5 +563,23 @@ mod tests {
         assert!(CookSettings { max_flip: Some(0.0), ..d.clone() }.check().is_ok());
         assert_eq!(parse_flip_budget("0.05"), Ok(0.05));
         assert!(parse_flip_budget("x").is_err());
+    }
+
+    #[test]
+    fn byte_budgets_read_units() {
+        for (text, bytes) in [("1000", 1000), ("500kB", 500_000), ("1.5M", 1_500_000), ("1.5 MB", 1_500_000), ("2MiB", 2 << 20), ("1GiB", 1 << 30), ("7 B", 7), ("2.5", 2)] {
+            assert_eq!(text.parse::<ByteBudget>(), Ok(ByteBudget(bytes)), "{text}");
+        }
+        for text in ["0", "-5", "0.5", "1.5XB", "MB", "", "nan", "inf"] {
+            assert!(text.parse::<ByteBudget>().is_err(), "{text}");
+        }
+        #[derive(serde::Deserialize)]
+        struct T {
+            b: ByteBudget,
+        }
+        assert_eq!(toml::from_str::<T>("b = 250_000").unwrap().b, ByteBudget(250_000));
+        assert_eq!(toml::from_str::<T>("b = \"3MiB\"").unwrap().b, ByteBudget(3 << 20));
+        assert!(toml::from_str::<T>("b = 0").is_err());
+        assert!(toml::from_str::<T>("b = -1").is_err());
     }
 }

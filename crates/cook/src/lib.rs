@@ -60,8 +60,10 @@ pub enum Error {
     TooManyPlaneBricks(u32),
     #[error("{0} levels of detail asked for: an asset has 1 (no coarser level) to {max} (level {top}'s voxels are {scale} source voxels wide and its bricks span a whole L1 slot, the coarsest the tree's 128-voxel alignment allows)", max = vdbcook_vpak::MAX_LEVELS, top = vdbcook_vpak::MAX_LEVELS - 1, scale = 1u32 << (vdbcook_vpak::MAX_LEVELS - 1))]
     Levels(u32),
-    #[error("level {level} of frame {frame} is out of range (the asset has {levels} levels, numbered from 0)")]
-    NoLevel { frame: usize, level: u32, levels: u32 },
+    #[error("{0}")]
+    NoLevel(String),
+    #[error("no asset fits in {budget} bytes: the smallest reachable, level {level} alone, is {smallest} bytes")]
+    OverBudget { budget: u64, smallest: u64, level: u32 },
     #[error("the channels' bricks need {0} texture planes, more than an asset may have ({max}): cook fewer channels at once", max = vdbcook_vpak::MAX_CHANNELS)]
     TooManyPlanes(usize),
 }
@@ -139,6 +141,9 @@ pub struct CookOptions {
     pub max_error: Option<f32>,
     /// Every setting, recorded verbatim in the asset's metadata.
     pub settings: Vec<(String, String)>,
+    /// A byte budget for the asset: the finest levels of detail that do not
+    /// fit are left out (the coarsest always stays; [`Error::OverBudget`] when it alone does not fit).
+    pub max_bytes: Option<u64>,
     /// Levels of detail (1: none; at most `vdbcook_vpak::MAX_LEVELS`): levels
     /// 1 … levels − 1 of every frame, each filtered from the one before
     /// (`vdbcook_grid::lod`), are trees of the asset too.
@@ -147,7 +152,7 @@ pub struct CookOptions {
 
 impl Default for CookOptions {
     fn default() -> Self {
-        CookOptions { format: Format::F16, groups: Vec::new(), quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, max_error: None, settings: Vec::new(), levels: 1 }
+        CookOptions { format: Format::F16, groups: Vec::new(), quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, max_error: None, settings: Vec::new(), levels: 1, max_bytes: None }
     }
 }
 
@@ -297,13 +302,35 @@ pub struct CookReport {
     pub non_finite_voxels: u64,
     /// Per frame: (rmse, max error) of that channel.
     pub frame_errors: Vec<(f64, f64)>,
-    /// The coarser levels (levels of detail), level 1 first; empty without them.
+    /// The stored levels coarser than the first (levels of detail), finest
+    /// first; empty without them.  The figures above are the first level's.
     pub levels: Vec<LevelReport>,
+    /// The finest level stored: 0 unless `max_bytes` left levels out.
+    pub first_level: u32,
+    /// What `max_bytes` did, when it was given.
+    pub budget: Option<BudgetReport>,
     pub channels: Vec<ChannelReport>,
     /// What clustering did, when it ran.
     pub clustering: Option<ClusterReport>,
     /// (stage, seconds).
     pub timings: Vec<(String, f64)>,
+}
+
+/// How `CookOptions::max_bytes` was met.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BudgetReport {
+    pub max_bytes: u64,
+    /// The levels left out (the finest ones), none when everything fit.
+    pub dropped: Vec<u32>,
+    /// The asset sizes tried, finest first level first; the last one is the asset written.
+    pub tries: Vec<BudgetTry>,
+}
+
+/// One size `max_bytes` tried: the asset of levels `first_level` and coarser.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct BudgetTry {
+    pub first_level: u32,
+    pub bytes: u64,
 }
 
 /// A coarser level's figures, over every frame.
@@ -573,15 +600,41 @@ impl Cooker {
 
     /// Encodes, lays out and serialises the asset.
     /// Returns the asset's sections (write them with `vdbcook_vpak::write_file`) and the report.
-    pub fn finish(self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
-        if self.opts.levels == 0 || self.opts.levels > vdbcook_vpak::MAX_LEVELS {
-            return Err(Error::Levels(self.opts.levels));
+    /// With `max_bytes`, the finest levels that fit are kept (see [`CookReport::budget`]).
+    pub fn finish(mut self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
+        let levels = self.opts.levels;
+        if levels == 0 || levels > vdbcook_vpak::MAX_LEVELS {
+            return Err(Error::Levels(levels));
         }
-        let mut timings = vec![("build".to_string(), self.build_secs - self.level_secs), ("levels".to_string(), self.level_secs)];
+        let timings = vec![("build".to_string(), self.build_secs - self.level_secs), ("levels".to_string(), self.level_secs)];
+        let built = std::mem::take(&mut self.builder).finish()?;
+        let Some(budget) = self.opts.max_bytes else { return self.assemble(&built, 0, timings, progress) };
+        // Each try leaves out one more of the finest levels (and the bricks
+        // only they used); the coarsest level always stays.
+        let started = Instant::now();
+        let mut tries = Vec::new();
+        let mut candidate = built;
+        for first in 0..levels {
+            if first > 0 {
+                candidate = candidate.from_level(first)?;
+            }
+            let t0 = Instant::now();
+            let (sections, mut report) = self.assemble(&candidate, first, timings.clone(), progress)?;
+            tries.push(BudgetTry { first_level: first, bytes: report.file_bytes });
+            if report.file_bytes <= budget {
+                report.timings.push(("earlier tries".into(), (t0 - started).as_secs_f64()));
+                report.budget = Some(BudgetReport { max_bytes: budget, dropped: (0..first).collect(), tries });
+                return Ok((sections, report));
+            }
+        }
+        Err(Error::OverBudget { budget, smallest: tries.last().map_or(0, |t| t.bytes), level: levels - 1 })
+    }
+
+    /// Encodes, lays out and serialises the trees of `built`, whose finest level is `first`.
+    fn assemble(&self, built: &Built, first: u32, mut timings: Vec<(String, f64)>, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
         let filters = self.filters();
         let channels = self.channels.len().max(1);
         let (specs, group_of) = self.plan_planes()?;
-        let mut built = self.builder.finish()?;
         if self.opts.clustering.is_some() && channels > MAX_CLUSTER_CHANNELS {
             return Err(Error::MultiChannelClustering(channels));
         }
@@ -721,10 +774,10 @@ impl Cooker {
         let t0 = Instant::now();
         let decode_stored = |b: u32| remap.get(b as usize).and_then(|&i| keep.get(i as usize)).and_then(|&k| encoded.decode(k));
         // Per tree (frames and levels, in push order); the frame figures are level 0's.
-        let tree_err = voxel_errors(&built, &decode_stored);
+        let tree_err = voxel_errors(built, &decode_stored);
         let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
-        let frame_err: Vec<&Vec<ErrorStats>> = tree_err.iter().zip(&tree_level).filter(|(_, &l)| l == 0).map(|(e, _)| e).collect();
-        let level_err: Vec<Vec<ErrorStats>> = (1..self.opts.levels)
+        let frame_err: Vec<&Vec<ErrorStats>> = tree_err.iter().zip(&tree_level).filter(|(_, &l)| l == first).map(|(e, _)| e).collect();
+        let level_err: Vec<Vec<ErrorStats>> = (first + 1..self.opts.levels)
             .map(|k| {
                 let mut t = vec![ErrorStats::default(); channels];
                 for (e, _) in tree_err.iter().zip(&tree_level).filter(|(_, &l)| l == k) {
@@ -761,7 +814,7 @@ impl Cooker {
                 _ => decode_stored(b),
             };
             let mut without = ErrorStats::default();
-            for (e, _) in voxel_errors(&built, &decode_unclustered).iter().zip(&tree_level).filter(|(_, &l)| l == 0) {
+            for (e, _) in voxel_errors(built, &decode_unclustered).iter().zip(&tree_level).filter(|(_, &l)| l == first) {
                 without.merge(&e[0]);
             }
             ClusterReport {
@@ -840,7 +893,7 @@ impl Cooker {
             .map(|c| {
                 let [lo, hi] = match channel_range(c) {
                     r if r.iter().all(|v| v.is_finite()) => r,
-                    _ => finite_range(&built, c),
+                    _ => finite_range(built, c),
                 };
                 let peak = f64::from(hi - lo);
                 if peak > 0.0 && peak.is_finite() {
@@ -853,7 +906,6 @@ impl Cooker {
         // The source-precision bricks are not needed any more.
         drop(encoded);
         drop(clustered);
-        drop(std::mem::take(&mut built.pool));
         let transform = self.transform.as_ref().map_or_else(Transform::identity, |f| f.transform);
         // Each channel's place: its (first) plane and first lane there.
         let place: Vec<(u32, u32)> = planes_of
@@ -897,6 +949,7 @@ impl Cooker {
             frames: self.frames.clone(),
             levels: self.opts.levels,
             level_filters: if self.opts.levels > 1 { filters.into_iter().map(level_filter).collect() } else { Vec::new() },
+            first_level: first,
         };
         sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()? });
         let report_sections: Vec<(String, u64)> = sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect();
@@ -956,9 +1009,9 @@ impl Cooker {
                 .iter()
                 .enumerate()
                 .map(|(i, e)| {
-                    let k = i as u32 + 1;
+                    let k = first + 1 + i as u32;
                     let w = (0..channels).min_by(|&a, &b| e[a].psnr(peaks[a]).total_cmp(&e[b].psnr(peaks[b]))).unwrap_or(0);
-                    let fig = |f: fn(&LevelFigures) -> u64| self.frames.iter().filter_map(|fr| fr.coarse.get(i)).map(f).sum::<u64>();
+                    let fig = |f: fn(&LevelFigures) -> u64| self.frames.iter().filter_map(|fr| fr.coarse.get(k as usize - 1)).map(f).sum::<u64>();
                     LevelReport {
                         level: k,
                         voxel_scale: 1 << k,
@@ -971,6 +1024,8 @@ impl Cooker {
                     }
                 })
                 .collect(),
+            first_level: first,
+            budget: None,
             channels: channel_reports,
             clustering: cluster_report,
             timings,

@@ -499,6 +499,7 @@ fn absurd_channel_metadata_is_refused_never_a_panic() {
         ("too many levels", Box::new(|m| m.levels = vdbcook_vpak::MAX_LEVELS + 1)),
         ("level filters without levels", Box::new(|m| m.level_filters = vec![vdbcook_vpak::LevelFilter::Mean; 3])),
         ("figures of a level the asset lacks", Box::new(|m| m.frames[0].coarse.push(Default::default()))),
+        ("a first level past the levels", Box::new(|m| m.first_level = m.levels)),
     ];
     for (what, mutate) in mutations {
         let mut m = meta.clone();
@@ -976,6 +977,66 @@ fn levels_are_deterministic_and_lossy_formats_report_their_error() {
     assert_eq!(run(1), run(3));
     let (_, report) = cook_levels(Format::Unorm8, &frames, 4);
     assert!(report.levels.iter().all(|l| l.voxel_rmse > 0.0 && l.voxel_max_error < 0.1 / 255.0), "{:?}", report.levels);
+}
+
+/// `max_bytes`: each try leaves out one more of the finest levels; what stays
+/// is the full asset's levels value for value, over only the bricks they use;
+/// below the coarsest level alone, the error names that size.
+#[test]
+fn a_byte_budget_keeps_the_finest_levels_that_fit() {
+    let frames = [frame(0), frame(1), frame(2)];
+    let levels = 4;
+    let cook = |max_bytes: Option<u64>| {
+        let mut c = Cooker::new(CookOptions { format: Format::F32, levels, max_bytes, ..CookOptions::default() });
+        for f in &frames {
+            c.push(f, None).unwrap();
+        }
+        c.finish(&NoProgress).map(|(s, r)| (vdbcook_vpak::assemble(&s), r))
+    };
+    let (full, _) = cook(None).unwrap();
+    let full_asset = Asset::from_bytes(&full).unwrap();
+    let full_checked = Checked::new(&full_asset).unwrap();
+    // A budget the whole asset meets changes nothing.
+    let (same, r) = cook(Some(full.len() as u64)).unwrap();
+    assert!(same == full, "a budget that fits changes the asset");
+    let b = r.budget.unwrap();
+    assert!(b.dropped.is_empty() && b.tries.len() == 1 && b.tries[0].bytes == full.len() as u64, "{b:?}");
+    // Each budget one byte below the last asset leaves out exactly one more level.
+    let mut last = full.len() as u64;
+    for first in 1..levels {
+        let (bytes, r) = cook(Some(last - 1)).unwrap();
+        assert!((bytes.len() as u64) < last, "level {first}: {} bytes", bytes.len());
+        let b = r.budget.clone().unwrap();
+        assert_eq!(b.dropped, (0..first).collect::<Vec<_>>());
+        assert_eq!(b.tries.first().unwrap().bytes, full.len() as u64);
+        assert_eq!(b.tries.last().unwrap().bytes, bytes.len() as u64);
+        assert_eq!((r.first_level, r.levels.len()), (first, (levels - first - 1) as usize));
+        assert!(r.levels.iter().zip(first + 1..).all(|(l, k)| l.level == k), "{:?}", r.levels);
+        let asset = Asset::from_bytes(&bytes).unwrap();
+        let checked = Checked::new(&asset).unwrap();
+        assert_eq!((checked.meta.first_level, checked.meta.levels, checked.frames.len()), (first, levels, 3 * (levels - first) as usize));
+        for f in 0..frames.len() {
+            for k in 0..levels {
+                match k < first {
+                    true => assert!(matches!(unpack_level(&asset, f, k), Err(Error::NoLevel(ref why)) if why.contains("left out")), "frame {f} level {k}"),
+                    false => assert_eq!(unpack_level(&asset, f, k).unwrap(), unpack_level(&full_asset, f, k).unwrap(), "frame {f} level {k}"),
+                }
+            }
+        }
+        // Only the bricks the stored levels use: those the full asset's trees of these levels reach.
+        let full_checked = &full_checked;
+        let roots: Vec<u32> = (first..levels).flat_map(|k| (0..frames.len()).filter_map(move |f| full_checked.tree(f, k))).collect();
+        assert_eq!(checked.meta.brick_count as usize, full_checked.nodes().usage(&roots).bricks.len());
+        last = bytes.len() as u64;
+    }
+    // Not even the coarsest level alone fits: the error says how small an asset can be.
+    match cook(Some(last - 1)) {
+        Err(Error::OverBudget { budget, smallest, level }) => assert_eq!((budget, smallest, level), (last - 1, last, levels - 1)),
+        other => panic!("{:?}", other.map(|(b, _)| b.len())),
+    }
+    // Any thread count, the same bytes.
+    let run = |threads| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| cook(Some(full.len() as u64 / 2)).unwrap().0);
+    assert!(run(1) == run(3), "thread count changed the asset");
 }
 
 #[test]

@@ -38,8 +38,8 @@ pub fn unpack_level(asset: &Asset, frame: usize, level: u32) -> Result<Vec<Grid>
     if frame >= meta.frame_count as usize {
         return Err(Error::NoFrame { frame, count: meta.frame_count as usize });
     }
-    if level >= meta.levels {
-        return Err(Error::NoLevel { frame, level, levels: meta.levels });
+    if let Some(why) = meta.missing_level(level) {
+        return Err(Error::NoLevel(why));
     }
     let channels = meta.channels.len();
     // The metadata says how many leaves the frame has: decode no more. Shared

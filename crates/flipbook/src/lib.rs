@@ -599,6 +599,42 @@ fn intern_node(table: &mut Interner, nodes: &mut Vec<u32>, entries: &mut Vec<u32
 }
 
 impl Built {
+    /// The trees of levels `first` and coarser, with only the L3 nodes and
+    /// bricks they use (each kept in its order, so ids stay deterministic);
+    /// the index space, bounding box and backgrounds are the frames' own.
+    pub fn from_level(&self, first: u32) -> Result<Built, Error> {
+        let frames: Vec<FrameLeaves> = self.frames.iter().filter(|f| f.level >= first).cloned().collect();
+        let mut l3_new = vec![u32::MAX; self.l3.len()];
+        for f in &frames {
+            for &(_, id) in &f.leaves {
+                if let Some(slot) = l3_new.get_mut(id as usize) {
+                    *slot = 0;
+                }
+            }
+        }
+        let mut brick_new = vec![u32::MAX; self.pool.len()];
+        let mut pool = BrickPool::new(self.channels);
+        let mut l3 = Vec::new();
+        for (old, new) in l3_new.iter_mut().enumerate().filter(|(_, n)| **n != u32::MAX) {
+            let node = self.l3[old];
+            let b = node.brick as usize;
+            if brick_new[b] == u32::MAX {
+                brick_new[b] = pool.insert(self.pool.brick(b).ok_or(Error::Overflow { what: "bricks" })?)?;
+            }
+            *new = l3.len() as u32;
+            l3.push(L3 { mask: node.mask, brick: brick_new[b] });
+        }
+        let frames = frames
+            .into_iter()
+            .map(|mut f| {
+                f.leaves.iter_mut().for_each(|(_, id)| *id = l3_new[*id as usize]);
+                f
+            })
+            .collect::<Vec<_>>();
+        let leaves_in = frames.iter().map(|f| f.leaves.len() as u64).sum();
+        Ok(Built { channels: self.channels, backgrounds: self.backgrounds.clone(), pool, l3, frames, bbox: self.bbox, offset: self.offset, leaves_in })
+    }
+
     /// Lays out the node arrays; `brick_of(l3.brick)` gives each brick's final id.
     pub fn nodes(&self, brick_of: impl Fn(u32) -> u32) -> Result<Nodes, Error> {
         let off = self.offset;

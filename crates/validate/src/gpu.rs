@@ -146,10 +146,11 @@ pub struct GpuAsset {
     buffers: Vec<wgpu::Buffer>,
     /// Texture slots 0 to 7 (unused ones hold a small empty texture or buffer).
     atlases: Vec<Atlas>,
-    /// Every tree: level k of frame f at `k · frame_count + f`.
+    /// Every tree, as the frames section lists them (`Metadata::tree_index`).
     frames: Vec<u32>,
     frame_count: usize,
-    levels: u32,
+    /// The frames' and levels' layout (`Metadata::tree_index`, `missing_level`).
+    meta: vdbcook_vpak::Metadata,
     /// Texture slots in use (the atlases of the planes bound).
     slots: usize,
     /// Per channel, whether its plane's atlases are bound.
@@ -387,7 +388,7 @@ impl Renderer {
             atlases,
             frames: c.frames.to_vec(),
             frame_count: c.meta.frame_count as usize,
-            levels: c.meta.levels,
+            meta: c.meta.clone(),
             slots: slots.len(),
             bound,
             single_slot,
@@ -436,13 +437,13 @@ impl Renderer {
     /// sample reads the level's voxel that covers it (nearest voxel, as at level 0).
     #[allow(clippy::too_many_arguments)]
     pub fn render_views_level(&self, asset: &GpuAsset, scene: &Scene, frame: usize, level: u32, views: &[View], width: u32, height: u32) -> Result<Vec<Image>, Error> {
-        if level >= asset.levels {
-            return Err(Error::Level { level, levels: asset.levels });
+        if let Some(why) = asset.meta.missing_level(level) {
+            return Err(Error::Level(why));
         }
         if frame >= asset.frame_count {
             return Err(Error::Frame { frame, count: asset.frame_count });
         }
-        let l1 = *asset.frames.get(level as usize * asset.frame_count + frame).ok_or(Error::Frame { frame, count: asset.frame_count })?;
+        let l1 = *asset.frames.get(asset.meta.tree_index(frame, level)).ok_or(Error::Frame { frame, count: asset.frame_count })?;
         if let Some(&c) = scene.channels.iter().find(|&&c| c != crate::NONE && !asset.bound.get(c as usize).copied().unwrap_or(false)) {
             return Err(Error::NotUploaded(c));
         }

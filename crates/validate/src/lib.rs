@@ -38,8 +38,9 @@ pub enum Error {
     Corrupt(String),
     #[error("frame {frame} is out of range (the asset has {count})")]
     Frame { frame: usize, count: usize },
-    #[error("level {level} is out of range (the asset has {levels} levels of detail, numbered from 0)")]
-    Level { level: u32, levels: u32 },
+    /// A level the asset does not store (the text says which it does).
+    #[error("{0}")]
+    Level(String),
     #[error("GPU error: {0}")]
     Gpu(String),
     #[error(transparent)]
@@ -231,8 +232,8 @@ impl<'a> AssetData<'a> {
 
     /// The L1 node of frame `frame` at level of detail `level`.
     pub fn tree_l1(&self, frame: usize, level: u32) -> Result<u32, Error> {
-        if level >= self.c.meta.levels {
-            return Err(Error::Level { level, levels: self.c.meta.levels });
+        if let Some(why) = self.c.meta.missing_level(level) {
+            return Err(Error::Level(why));
         }
         self.c.tree(frame, level).ok_or(Error::Frame { frame, count: self.c.meta.frame_count as usize })
     }

@@ -123,9 +123,13 @@ impl<'a> Checked<'a> {
         if let Some(f) = meta.frames.iter().position(|f| f.coarse.len() + 1 != meta.levels as usize) {
             return invalid(format!("frame {f} has figures for {} levels, the asset has {}", meta.frames[f].coarse.len() + 1, meta.levels));
         }
+        if meta.first_level >= meta.levels {
+            return invalid(format!("first stored level {} of {} levels", meta.first_level, meta.levels));
+        }
+        let stored = meta.levels - meta.first_level;
         let frames = asset.u32s(kind::FRAMES)?;
-        if frames.len() as u64 != u64::from(meta.frame_count) * u64::from(meta.levels) {
-            return invalid(format!("{} trees in the frame table, {} frames × {} levels in the metadata", frames.len(), meta.frame_count, meta.levels));
+        if frames.len() as u64 != u64::from(meta.frame_count) * u64::from(stored) {
+            return invalid(format!("{} trees in the frame table, {} frames × {stored} stored levels in the metadata", frames.len(), meta.frame_count));
         }
         let words = |k: u32, unit: usize, what: &str| -> Result<&'a [u32], Error> {
             let w = asset.u32s(k)?;
@@ -209,7 +213,7 @@ impl<'a> Checked<'a> {
 
     /// The L1 node of frame `frame` at level `level`.
     pub fn tree(&self, frame: usize, level: u32) -> Option<u32> {
-        if frame >= self.meta.frame_count as usize || level >= self.meta.levels {
+        if frame >= self.meta.frame_count as usize || !self.meta.stored_levels().contains(&level) {
             return None;
         }
         self.frames.get(self.meta.tree_index(frame, level)).copied()

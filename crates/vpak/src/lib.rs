@@ -5,7 +5,7 @@
 //! ```text
 //! offset  size   field
 //! 0       8      magic "VPAK\r\n\x1a\n"
-//! 8       4      format version (5)
+//! 8       4      format version (6)
 //! 12      4      flags (0; reserved)
 //! 16      4      section count n
 //! 20      4      reserved (0)
@@ -38,7 +38,8 @@ pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
 /// 5: per-brick formats (a channel in several planes, a channel table choosing per
 ///    brick), `unorm16` and `constant` planes; levels of detail (a tree per frame
 ///    and level; `Metadata::levels`, `FrameInfo::coarse`).
-pub const VERSION: u32 = 5;
+/// 6: `Metadata::first_level`: an asset may leave out its finest levels (`cook --max-bytes`).
+pub const VERSION: u32 = 6;
 /// Levels an asset may have: level 4's bricks span 128³ source voxels, one
 /// L1 slot, and the asset's index offset (a multiple of 128) keeps every
 /// level's leaves on its L3 grid only up to there.
@@ -54,7 +55,8 @@ const MAX_SECTIONS: u32 = 1 << 16;
 pub mod kind {
     /// bincode-2 (standard config) serialisation of [`super::Metadata`].
     pub const METADATA: u32 = 1;
-    /// u32 per frame and level: its L1 node; level k of frame f at `k · frame_count + f`.
+    /// u32 per frame and stored level: its L1 node; level k of frame f at
+    /// `(k − first_level) · frame_count + f` ([`super::Metadata::tree_index`]).
     pub const FRAMES: u32 = 2;
     pub const L1_NODES: u32 = 3;
     pub const L1_ENTRIES: u32 = 4;
@@ -250,6 +252,9 @@ pub struct Metadata {
     pub levels: u32,
     /// Per channel, the filter of its coarser levels (empty when `levels` is 1).
     pub level_filters: Vec<LevelFilter>,
+    /// The finest level stored: 0, unless finer levels were left out to fit
+    /// a byte budget (`cook --max-bytes`); levels `first_level .. levels` are stored.
+    pub first_level: u32,
 }
 
 impl Metadata {
@@ -321,10 +326,36 @@ impl Metadata {
         self.index_offset.map(|o| o >> level.min(31))
     }
 
-    /// The L1 node of frame `frame` at level `level` is entry
-    /// `level · frame_count + frame` of the frames section.
+    /// The levels the asset stores, finest first.
+    pub fn stored_levels(&self) -> std::ops::Range<u32> {
+        self.first_level..self.levels
+    }
+
+    /// "levels 2 to 4", "level 3", or "levels 0 to 1" for the level range: how
+    /// errors and reports name what an asset stores.
+    pub fn stored_levels_text(&self) -> String {
+        let r = self.stored_levels();
+        match r.len() {
+            1 => format!("level {}", r.start),
+            _ => format!("levels {} to {}", r.start, r.end.saturating_sub(1)),
+        }
+    }
+
+    /// Why level `level` cannot be read, when the asset does not store it.
+    pub fn missing_level(&self, level: u32) -> Option<String> {
+        if self.stored_levels().contains(&level) {
+            return None;
+        }
+        Some(match level >= self.levels {
+            true => format!("level {level} is out of range: the asset stores {}", self.stored_levels_text()),
+            false => format!("level {level} is not in the asset: it stores {} (finer levels were left out to fit a byte budget)", self.stored_levels_text()),
+        })
+    }
+
+    /// The L1 node of frame `frame` at stored level `level` is entry
+    /// `(level − first_level) · frame_count + frame` of the frames section.
     pub fn tree_index(&self, frame: usize, level: u32) -> usize {
-        level as usize * self.frame_count as usize + frame
+        level.saturating_sub(self.first_level) as usize * self.frame_count as usize + frame
     }
 
     /// Leaves of frame `frame` at level `level` (0 past the end).
@@ -646,6 +677,7 @@ mod tests {
             frames: vec![],
             levels: 1,
             level_filters: vec![],
+            first_level: 0,
         };
         assemble(&[
             Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap() },
