@@ -75,7 +75,9 @@ with 1, naming that smallest size. Without --lods, --max-bytes only checks the s
 
 --validate renders the new asset against its sources on the GPU afterwards (see
 `vdbcook validate --help`); with --max-rmse / --min-psnr / --max-flip a failed gate
-exits with 3.
+exits with 3. With --lods N (N > 1) every level is checked against the source filtered
+to it, as `validate --every-lod` does: the gate holds at every level, and the summary
+(and `validation.levels` in the JSON) gives each level's figures.
 
 --auto searches the formats for the smallest asset that meets the gate (at least one
 of --min-psnr, --max-rmse, --max-flip; --format is not allowed). The frames are read
@@ -283,7 +285,8 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         })
         .collect();
     if job.reference {
-        all.push(reference_options());
+        // As many levels as the asset: its validation checks each.
+        all.push(CookOptions { levels: s.lods, ..reference_options() });
     }
     let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
     let (cookers, channels, read_secs) = feed(all, job.files, sel, s.allow_missing, job.base, bars)?;

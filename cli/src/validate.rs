@@ -11,7 +11,7 @@ use std::time::Instant;
 use vdbcook_cook::Progress;
 use vdbcook_encode::ErrorStats;
 use vdbcook_validate::flip::DEFAULT_PPD;
-use vdbcook_validate::{compare, flip, report, BcDecode, FlipMap, Image, ImageMetrics, Renderer, Scene};
+use vdbcook_validate::{compare, flip, report, BcDecode, FlipMap, GpuAsset, Image, ImageMetrics, Renderer, Scene};
 use vdbcook_vpak::Asset;
 
 pub const AFTER_HELP: &str = "\
@@ -29,6 +29,15 @@ PNGs show them: linear values clamped to [0, 1], sRGB-encoded, 8 bits.
 is over budget. --report DIR writes report.json, PNGs of the reference, the asset, an
 error heat-map and the FLIP error map for the worst views, and a self-contained
 report.html.
+
+--lod K checks level of detail K (of an asset cooked with --lods) against the source
+filtered losslessly to it; --every-lod checks every level so, the gate holding at each
+(a failure names the level), with a table of the levels' worst image and voxel figures.
+With --report, report.html gains a summary row per level (voxel size, figures, pass or
+fail) and a section with level 0's worst view rendered at every level, side by side:
+a column per level (its PNGs level{K}_frame{F}_view{V}_{reference,asset,error,flip}.png;
+the difference maps on one scale). cook --lods N --validate (N > 1) checks every level
+too.
 
 A GPU is not required: Mesa's CPU Vulkan driver (Debian: mesa-vulkan-drivers) works.";
 
@@ -61,7 +70,8 @@ pub struct ValidateArgs {
     /// Exit with code 3 when any image's mean FLIP error (0 to 1, at 67 pixels per degree) is above F.
     #[arg(long, value_name = "F", allow_negative_numbers = true, value_parser = vdbcook_bake::options::parse_flip_budget)]
     pub max_flip: Option<f64>,
-    /// Write report.json, PNGs and report.html into DIR.
+    /// Write report.json, PNGs and report.html into DIR (with --every-lod: a row per level
+    /// and the worst view at every level, side by side).
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
     /// Level of detail to check (0: the frames themselves; k: the asset's level k against the
@@ -69,9 +79,11 @@ pub struct ValidateArgs {
     /// finest level (0 unless `cook --max-bytes` left finer ones out).
     #[arg(long, value_name = "K", value_parser = vdbcook_bake::options::parse_lod)]
     pub lod: Option<u32>,
-    /// Check every level of detail of the asset, each against the source filtered to it,
-    /// and show the levels side by side (the rest of the report is level 0's).
-    #[arg(long, conflicts_with_all = ["lod", "report"])]
+    /// Check every level of detail of the asset, each against the source filtered to it
+    /// (the gate holds at every level), and show the levels side by side: a table in the
+    /// text, `levels` in the JSON, and with --report a row per level and the finest level's
+    /// worst view at every level (the rest of the report is the finest level's).
+    #[arg(long, conflicts_with = "lod")]
     pub every_lod: bool,
     #[command(flatten)]
     pub gpu: GpuArgs,
@@ -81,7 +93,8 @@ pub struct ValidateArgs {
 }
 
 impl ValidateArgs {
-    /// The validation a cook's settings ask for (`--validate` and its gate, views and size).
+    /// The validation a cook's settings ask for (`--validate` and its gate, views and
+    /// size): every level of an asset with levels of detail, the gate holding at each.
     pub fn of_cook(s: &vdbcook_bake::CookSettings, asset: PathBuf, source: Vec<String>, report: Option<PathBuf>, gpu: GpuArgs, json: bool) -> ValidateArgs {
         ValidateArgs {
             asset,
@@ -95,7 +108,7 @@ impl ValidateArgs {
             max_flip: s.max_flip,
             report,
             lod: None,
-            every_lod: false,
+            every_lod: s.lods > 1,
             gpu,
             json,
         }
@@ -238,49 +251,40 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     if let Some(why) = meta.missing_level(lod) {
         return Err(anyhow!("{name}: {why}"));
     }
-    if args.every_lod {
-        return evaluate_levels(&args, &asset, &name, meta.stored_levels(), &bars);
-    }
-    let reference = reference(&meta, &args.source, args.source_frames, lod, &bars)?;
+    // One reference, filtered down to the coarsest level checked, serves every level.
+    let coarsest = if args.every_lod { meta.stored_levels().end.saturating_sub(1) } else { lod };
+    let reference = reference(&meta, &args.source, args.source_frames, coarsest, &bars)?;
     compare_assets(&asset, &name, &reference, &args, || args.gpu.renderer().map(Box::new), &bars)
 }
 
-/// `validate --every-lod`: every level against the source filtered to it (one
-/// reference with every level), level 0's report with the levels side by side.
-fn evaluate_levels(args: &ValidateArgs, asset: &Asset, name: &str, levels: std::ops::Range<u32>, bars: &Bars) -> Result<Outcome> {
-    let meta = asset.metadata().with_context(|| name.to_string())?;
-    let reference = reference(&meta, &args.source, args.source_frames, levels.end - 1, bars)?;
-    let renderer = args.gpu.renderer()?;
-    let mut outs = Vec::with_capacity(levels.len());
-    for lod in levels.clone() {
-        let a = ValidateArgs { lod: Some(lod), every_lod: false, ..args.clone() };
-        outs.push(compare_assets(asset, name, &reference, &a, || Ok(&renderer), bars)?);
-    }
-    let rows: Vec<serde_json::Value> = outs.iter().filter_map(|o| o.doc["levels"].get(0).cloned()).collect();
-    let mut first = outs.remove(0);
-    first.doc["levels"] = json!(rows);
-    let f = |v: &serde_json::Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.3e}"));
-    let db = |v: &serde_json::Value| v.as_f64().map_or("inf".to_string(), |x| format!("{x:.1}"));
-    first.text += &format!("  levels   {:>5} {:>11} {:>9} {:>8} {:>11} {:>9}\n", "level", "worst rmse", "psnr dB", "flip", "voxel rmse", "psnr dB");
-    for r in &rows {
-        first.text += &format!(
-            "           {:>5} {:>11} {:>9} {:>8} {:>11} {:>9}\n",
-            r["level"],
-            f(&r["worst"]["rmse"]),
-            db(&r["worst"]["psnr"]),
-            r["worst_flip"]["flip"].as_f64().map_or("-".to_string(), |x| format!("{x:.4}")),
-            f(&r["voxel"]["rmse"]),
-            db(&r["voxel"]["psnr"])
-        );
-    }
-    if first.gate_failure.is_none() {
-        first.gate_failure = outs.iter().zip(levels.skip(1)).find_map(|(o, k)| o.gate_failure.as_ref().map(|g| format!("level {k}: {g}")));
-    }
-    Ok(first)
+/// The two assets of a comparison, on the host and on the GPU.
+struct Pair<'a> {
+    name: &'a str,
+    asset: &'a Asset,
+    reference: &'a Asset,
+    meta: &'a vdbcook_vpak::Metadata,
+    ref_meta: &'a vdbcook_vpak::Metadata,
+    gpu_asset: &'a GpuAsset,
+    gpu_ref: &'a GpuAsset,
+    renderer: &'a Renderer,
+}
+
+/// One level's comparison: its outcome (a document with one `levels` row)
+/// and, for the report, every image's figures and the views kept.
+struct LevelRun {
+    lod: u32,
+    outcome: Outcome,
+    shots: Vec<Shot>,
+    /// The finest level's three worst views (worst first); a coarser level's
+    /// view of the finest level's worst one.
+    kept: Vec<Kept>,
 }
 
 /// Renders `asset` and its lossless `reference` with the same ray-marcher and
-/// compares them (the work of `validate` once both assets are at hand);
+/// compares them (the work of `validate`, `cook --validate`, `cook --auto`
+/// and `bake` once both assets are at hand): at `args.lod` (default: the first stored level), or with
+/// `args.every_lod` at every stored level, each against the reference
+/// filtered to it (the reference must hold them), the gate holding at each.
 /// `renderer` is asked for once the frames are known to be in range.
 pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     asset: &Asset,
@@ -290,12 +294,14 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     renderer: impl FnOnce() -> Result<R>,
     bars: &dyn Progress,
 ) -> Result<Outcome> {
-    let name = name.to_string();
-    let meta = asset.metadata().with_context(|| name.clone())?;
+    let meta = asset.metadata().with_context(|| name.to_string())?;
     let ref_meta = reference.metadata()?;
     let lod = args.lod.unwrap_or(meta.first_level);
     if ref_meta.frame_count != meta.frame_count {
         return Err(anyhow!("{name}: the asset has {} frames, the source {}", meta.frame_count, ref_meta.frame_count));
+    }
+    if ref_meta.channels.len() != meta.channels.len() {
+        return Err(anyhow!("{name}: the asset has {} channels, the source gives {}", meta.channels.len(), ref_meta.channels.len()));
     }
     let frames: Vec<usize> = match args.frames {
         Some(r) => r.frames().map(|f| usize::try_from(f).unwrap_or(usize::MAX)).collect(),
@@ -304,34 +310,118 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     if let Some(&bad) = frames.iter().find(|&&f| f >= meta.frame_count as usize) {
         return Err(Usage(format!("--frames: frame {bad} is out of range (the asset has {} frames, numbered from 0)", meta.frame_count)).into());
     }
-    let started = Instant::now();
+    let levels = if args.every_lod { meta.stored_levels() } else { lod..lod + 1 };
+    if levels.end > ref_meta.levels.min(meta.levels) {
+        return Err(anyhow!("{name}: level {} is out of range (the asset has {} levels of detail, the reference {})", levels.end - 1, meta.levels, ref_meta.levels));
+    }
     let renderer = renderer()?;
-    let gpu_asset = renderer.upload(asset).with_context(|| name.clone())?;
+    let gpu_asset = renderer.upload(asset).with_context(|| name.to_string())?;
     let gpu_ref = renderer.upload(reference).context("reference")?;
-    let scene = Scene::for_asset(&ref_meta);
+    let pair = Pair { name, asset, reference, meta: &meta, ref_meta: &ref_meta, gpu_asset: &gpu_asset, gpu_ref: &gpu_ref, renderer: &renderer };
+    let mut runs: Vec<LevelRun> = Vec::new();
+    for lod in levels {
+        // Coarser levels keep the finest level's worst view: the report shows it at every level.
+        let focus = runs.first().and_then(|r| r.kept.first()).map(|k| (k.shot.frame, k.shot.view));
+        runs.push(compare_level(&pair, args, lod, &frames, focus, bars)?);
+    }
+    let mut out = combine(&runs, args)?;
+    if let Some(dir) = &args.report {
+        write_report(dir, &out.doc, &runs).with_context(|| dir.display().to_string())?;
+        out.text += &format!("  report   {}\n", dir.join("report.html").display());
+    }
+    Ok(out)
+}
+
+/// Whether any gate was given.
+fn gated(args: &ValidateArgs) -> bool {
+    args.max_rmse.is_some() || args.min_psnr.is_some() || args.max_flip.is_some()
+}
+
+/// One outcome of the levels compared: the first level's report with every
+/// level's row in `levels` (and, for several levels, a table of them in the
+/// text), the first level over budget as the gate failure, and the worst
+/// figures over every level.
+fn combine(runs: &[LevelRun], args: &ValidateArgs) -> Result<Outcome> {
+    let first = runs.first().ok_or_else(|| anyhow!("no level to compare"))?;
+    if !args.every_lod {
+        let o = &first.outcome;
+        return Ok(Outcome { doc: o.doc.clone(), text: o.text.clone(), gate_failure: o.gate_failure.clone(), worst: o.worst });
+    }
+    let rows: Vec<serde_json::Value> = runs.iter().filter_map(|r| r.outcome.doc["levels"].get(0).cloned()).collect();
+    let mut doc = first.outcome.doc.clone();
+    doc["levels"] = json!(rows);
+    let f = |v: &serde_json::Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.3e}"));
+    let db = |v: &serde_json::Value| v.as_f64().map_or("inf".to_string(), |x| format!("{x:.1}"));
+    let gate_col = |r: &LevelRun| match (gated(args), &r.outcome.gate_failure) {
+        (false, _) => String::new(),
+        (true, None) => format!(" {:>5}", "pass"),
+        (true, Some(_)) => format!(" {:>5}", "FAIL"),
+    };
+    let mut text = first.outcome.text.clone();
+    let head = if gated(args) { format!(" {:>5}", "gate") } else { String::new() };
+    text += &format!("  levels   {:>5} {:>6} {:>11} {:>9} {:>8} {:>11} {:>9}{head}\n", "level", "voxel", "worst rmse", "psnr dB", "flip", "voxel rmse", "psnr dB");
+    for (r, row) in runs.iter().zip(&rows) {
+        text += &format!(
+            "           {:>5} {:>6} {:>11} {:>9} {:>8} {:>11} {:>9}{}\n",
+            r.lod,
+            format!("{}x", 1u64 << r.lod),
+            f(&row["worst"]["rmse"]),
+            db(&row["worst"]["psnr"]),
+            row["worst_flip"]["flip"].as_f64().map_or("-".to_string(), |x| format!("{x:.4}")),
+            f(&row["voxel"]["rmse"]),
+            db(&row["voxel"]["psnr"]),
+            gate_col(r)
+        );
+    }
+    let over: Vec<&LevelRun> = runs.iter().filter(|r| r.outcome.gate_failure.is_some()).collect();
+    let gate_failure = over.first().and_then(|r| r.outcome.gate_failure.as_ref().map(|g| (r.lod, g))).map(|(lod, g)| {
+        let also = if over.len() > 1 { format!(" (levels over budget: {})", over.iter().map(|r| r.lod.to_string()).collect::<Vec<_>>().join(", ")) } else { String::new() };
+        format!("level {lod}: {g}{also}")
+    });
+    // The gate holds at every level, so a search (`cook --auto`) ranks by the worst of them.
+    let worst = runs
+        .iter()
+        .map(|r| r.outcome.worst)
+        .collect::<Option<Vec<Worst>>>()
+        .and_then(|w| w.into_iter().reduce(|a, b| Worst { rmse: a.rmse.max(b.rmse), psnr: a.psnr.min(b.psnr), flip: a.flip.max(b.flip) }));
+    Ok(Outcome { doc, text, gate_failure, worst })
+}
+
+/// Compares level `lod` of the pair over `frames`; with a report, keeps the
+/// three worst views, or only the `focus` view (frame, view) when one is given.
+fn compare_level(p: &Pair, args: &ValidateArgs, lod: u32, frames: &[usize], focus: Option<(usize, usize)>, bars: &dyn Progress) -> Result<LevelRun> {
+    let (name, meta, ref_meta, renderer) = (p.name, p.meta, p.ref_meta, p.renderer);
+    let started = Instant::now();
+    let scene = Scene::for_asset(ref_meta);
     let views = scene.orbit(args.views as usize);
     let (w, h) = args.size;
 
     let mut shots = Vec::new();
     let mut voxel = Vec::new();
-    let mut worst_images: Vec<Kept> = Vec::new();
+    let mut kept: Vec<Kept> = Vec::new();
     let mut flip_secs = 0.0;
     bars.start("rendering", (frames.len() * views.len()) as u64);
-    for &f in &frames {
-        voxel.push((f, voxel_errors(asset, reference, f, lod)?));
-        let refs = renderer.render_views_level(&gpu_ref, &scene, f, lod, &views, w, h)?;
-        let imgs = renderer.render_views_level(&gpu_asset, &scene, f, lod, &views, w, h)?;
+    for &f in frames {
+        voxel.push((f, voxel_errors(p.asset, p.reference, f, lod)?));
+        let refs = renderer.render_views_level(p.gpu_ref, &scene, f, lod, &views, w, h)?;
+        let imgs = renderer.render_views_level(p.gpu_asset, &scene, f, lod, &views, w, h)?;
         // FLIP runs on the CPU, one image per thread: the views of a frame in parallel.
         let t = Instant::now();
         let maps: Vec<FlipMap> = refs.par_iter().zip(&imgs).map(|(r, a)| flip(r, a, DEFAULT_PPD)).collect::<Result<_, _>>()?;
         flip_secs += t.elapsed().as_secs_f64();
         for (vi, ((r, a), map)) in refs.into_iter().zip(imgs).zip(maps).enumerate() {
             let shot = Shot { frame: f, view: vi, metrics: compare(&r, &a), flip: map.mean() };
-            // Keep the images of the three worst views for the report.
             if args.report.is_some() {
-                worst_images.push(Kept { shot, reference: r, asset: a, flip: map });
-                worst_images.sort_by(|x, y| y.shot.metrics.rmse.total_cmp(&x.shot.metrics.rmse));
-                worst_images.truncate(3);
+                let k = Kept { shot, reference: r, asset: a, flip: map };
+                match focus {
+                    Some(fv) if fv != (f, vi) => {}
+                    Some(_) => kept.push(k),
+                    None => {
+                        kept.push(k);
+                        kept.sort_by(|x, y| y.shot.metrics.rmse.total_cmp(&x.shot.metrics.rmse));
+                        kept.truncate(3);
+                    }
+                }
             }
             shots.push(shot);
             bars.advance(1);
@@ -340,9 +430,6 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     bars.finish();
     let worst = shots.iter().max_by(|a, b| a.metrics.rmse.total_cmp(&b.metrics.rmse));
     let worst_flip = shots.iter().max_by(|a, b| a.flip.total_cmp(&b.flip));
-    if ref_meta.channels.len() != meta.channels.len() {
-        return Err(anyhow!("{name}: the asset has {} channels, the source gives {}", meta.channels.len(), ref_meta.channels.len()));
-    }
     let peak = |c: usize| ref_meta.channels.get(c).map_or(1.0, |ch| f64::from(ch.value_range[1] - ch.value_range[0]).max(1e-12));
     let channel_totals: Vec<ErrorStats> = (0..meta.channels.len())
         .map(|c| {
@@ -354,14 +441,14 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         })
         .collect();
     // The voxel figures of the channel the images show.
-    let shown = vdbcook_validate::extinction_channel(&ref_meta);
+    let shown = vdbcook_validate::extinction_channel(ref_meta);
     let vox_total = channel_totals.get(shown).copied().unwrap_or_default();
     let format = meta.format_names();
     let num = |v: f64| if v.is_finite() { json!(v) } else { serde_json::Value::Null };
     let doc = json!({
         "asset": name,
         "adapter": renderer.adapter,
-        "bc_decode": if gpu_asset.decodes_in_shader() { "shader" } else { "texture" },
+        "bc_decode": if p.gpu_asset.decodes_in_shader() { "shader" } else { "texture" },
         "format": format,
         "channels": meta.channels.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
         "shown": meta.channels.get(shown).map(|c| c.name.clone()),
@@ -388,10 +475,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     });
     let failed: Vec<&Shot> =
         shots.iter().filter(|s| args.max_rmse.is_some_and(|x| s.metrics.rmse > x) || args.min_psnr.is_some_and(|y| s.metrics.psnr < y) || args.max_flip.is_some_and(|x| s.flip > x)).collect();
-    if let Some(dir) = &args.report {
-        write_report(dir, &doc, &shots, &worst_images, &format, &name).with_context(|| dir.display().to_string())?;
-    }
-    let decoder = if gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
+    let decoder = if p.gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
     let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
     let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), args.views, renderer.adapter);
     if let Some(s) = worst {
@@ -407,61 +491,68 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
         text += &format!("  {label:<8} rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", e.rmse(), e.psnr(peak(c)), e.max_abs);
     }
     text += &format!("  time     {:.2} s to render and compare, FLIP {:.2} s of it\n", started.elapsed().as_secs_f64(), flip_secs);
-    if let Some(d) = &args.report {
-        text += &format!("  report   {}\n", d.join("report.html").display());
-    }
     let gate_failure = failed
         .first()
         .map(|s| format!("{} image(s) over budget, first frame {} view {} (rmse {:.3e}, psnr {:.1} dB, flip {:.4})", failed.len(), s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.flip));
     let worst = worst.zip(worst_flip).map(|(w, f)| Worst { rmse: w.metrics.rmse, psnr: w.metrics.psnr, flip: f.flip });
-    Ok(Outcome { doc, text, gate_failure, worst })
+    Ok(LevelRun { lod, outcome: Outcome { doc, text, gate_failure, worst }, shots, kept })
 }
 
-fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[Kept], format: &str, name: &str) -> Result<()> {
+/// Writes a view's four images into the report directory as
+/// `{stem}_reference.png`, `_asset`, `_error` (|difference| over `scale`) and
+/// `_flip`; returns their figures (inline image and caption) for the HTML.
+fn view_figures(write: &dyn Fn(&str, &[u8]) -> Result<()>, stem: &str, k: &Kept, format: &str, scale: f32) -> Result<Vec<String>> {
+    let max_flip = k.flip.errors.iter().copied().fold(0.0f32, f32::max);
+    [
+        ("reference", report::png_rgb(&k.reference), "reference (lossless)".to_string()),
+        ("asset", report::png_rgb(&k.asset), format!("asset ({})", report::esc(format))),
+        ("error", report::png_heat(&k.reference, &k.asset, scale), format!("|difference|, full scale {scale:.2e}")),
+        ("flip", report::png_flip(&k.flip), format!("FLIP error map (magma, 0 to 1): mean {:.4}, max {max_flip:.3}", k.shot.flip)),
+    ]
+    .into_iter()
+    .map(|(kind, png, caption)| {
+        write(&format!("{stem}_{kind}.png"), &png)?;
+        Ok(format!("<figure><img src='data:image/png;base64,{}'><figcaption>{caption}</figcaption></figure>", report::base64(&png)))
+    })
+    .collect()
+}
+
+/// report.json, the PNGs and report.html: the summary (a row per level), the
+/// first level's per-frame plot and worst views, and with several levels the
+/// first level's worst view at every level, side by side.
+fn write_report(dir: &Path, doc: &serde_json::Value, runs: &[LevelRun]) -> Result<()> {
+    let first = runs.first().ok_or_else(|| anyhow!("no level to report"))?;
+    let (format, name) = (doc["format"].as_str().unwrap_or(""), doc["asset"].as_str().unwrap_or(""));
     std::fs::create_dir_all(dir)?;
     let write = |file: &str, bytes: &[u8]| vdbcook_vpak::write_atomic(&dir.join(file), bytes, true).map_err(|e| anyhow!(e));
     write("report.json", format!("{}\n", serde_json::to_string_pretty(doc).unwrap_or_default()).as_bytes())?;
+    // "at level k" in headings only when there are levels to tell apart.
+    let at = |lod: u32| if runs.len() > 1 { format!(", level {lod}") } else { String::new() };
     let mut figures = String::new();
-    for k in worst {
+    for k in &first.kept {
         let s = &k.shot;
-        let stem = format!("frame{}_view{}", s.frame, s.view);
-        let (rp, ap, hp, fp) = (report::png_rgb(&k.reference), report::png_rgb(&k.asset), report::png_heat(&k.reference, &k.asset, (s.metrics.max_error as f32).max(1e-6)), report::png_flip(&k.flip));
-        write(&format!("{stem}_reference.png"), &rp)?;
-        write(&format!("{stem}_asset.png"), &ap)?;
-        write(&format!("{stem}_error.png"), &hp)?;
-        write(&format!("{stem}_flip.png"), &fp)?;
+        let figs = view_figures(&write, &format!("frame{}_view{}", s.frame, s.view), k, format, (s.metrics.max_error as f32).max(1e-6))?;
         figures += &format!(
-            "<h3>frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, FLIP {:.4}</h3><div class='row'>\
-<figure><img src='data:image/png;base64,{}'><figcaption>reference (lossless)</figcaption></figure>\
-<figure><img src='data:image/png;base64,{}'><figcaption>asset ({})</figcaption></figure>\
-<figure><img src='data:image/png;base64,{}'><figcaption>|difference|, full scale {:.2e}</figcaption></figure>\
-<figure><img src='data:image/png;base64,{}'><figcaption>FLIP error map (magma, 0 to 1): mean {:.4}, max {:.3}</figcaption></figure></div>",
+            "<h3>frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, FLIP {:.4}</h3><div class='row'>{}</div>",
             s.frame,
             s.view,
             s.metrics.rmse,
             s.metrics.psnr,
             s.metrics.max_error,
             s.flip,
-            report::base64(&rp),
-            report::base64(&ap),
-            report::esc(format),
-            report::base64(&hp),
-            s.metrics.max_error,
-            report::base64(&fp),
-            s.flip,
-            k.flip.errors.iter().copied().fold(0.0f32, f32::max)
+            figs.concat()
         );
     }
+    let side = if runs.len() > 1 { levels_side_by_side(&write, runs, format)? } else { String::new() };
     // Worst view per frame: RMSE and FLIP.
     let mut per_frame: Vec<(usize, f64, f64)> = Vec::new();
-    for s in shots {
+    for s in &first.shots {
         match per_frame.iter_mut().find(|(f, _, _)| *f == s.frame) {
             Some(e) => (e.1, e.2) = (e.1.max(s.metrics.rmse), e.2.max(s.flip)),
             None => per_frame.push((s.frame, s.metrics.rmse, s.flip)),
         }
     }
     let rows: String = per_frame.iter().map(|(f, r, fl)| format!("<tr><td>{f}</td><td>{r:.4e}</td><td>{fl:.4}</td></tr>")).collect();
-    let v = &doc["voxel"];
     // A figure of the JSON as people read it: 4 significant digits (RMSE) or 2 decimals (dB).
     let show = |x: &serde_json::Value, sci: bool| match x {
         serde_json::Value::Number(n) => n.as_f64().map(|x| if sci { format!("{x:.4e}") } else { format!("{x:.2}") }).unwrap_or_default(),
@@ -469,28 +560,74 @@ fn write_report(dir: &Path, doc: &serde_json::Value, shots: &[Shot], worst: &[Ke
         serde_json::Value::String(s) => s.clone(),
         _ => "–".into(),
     };
+    let gated = ["max_rmse", "min_psnr", "max_flip"].iter().any(|k| !doc["gate"][k].is_null());
+    let levels = doc["levels"].as_array().map_or(&[][..], |v| &v[..]);
+    let summary: String = runs
+        .iter()
+        .zip(levels)
+        .map(|(r, l)| {
+            let gate = match (gated, &r.outcome.gate_failure) {
+                (false, _) => String::new(),
+                (true, None) => "<td class='pass'>pass</td>".into(),
+                (true, Some(_)) => "<td class='fail'>fail</td>".into(),
+            };
+            format!(
+                "<tr><td>{}</td><td>{}×</td><td>{g}</td><td>{f}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>{gate}</tr>",
+                r.lod,
+                1u64 << r.lod,
+                show(&l["worst"]["rmse"], true),
+                show(&l["worst"]["psnr"], false),
+                l["worst_flip"]["flip"].as_f64().map(|x| format!("{x:.4}")).unwrap_or_default(),
+                show(&l["voxel"]["rmse"], true),
+                show(&l["voxel"]["psnr"], false),
+                g = report::esc(doc["shown"].as_str().unwrap_or("")),
+                f = report::esc(format),
+            )
+        })
+        .collect();
     let html = format!(
         "<!doctype html><html><head><meta charset='utf-8'><title>vdbcook validation: {n}</title>\
 <style>body{{font-family:sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}\
-.row{{display:flex;gap:1em}}figure{{margin:0}}img{{image-rendering:pixelated;max-width:300px}}</style></head><body>\
+.row{{display:flex;gap:1em}}figure{{margin:0}}figcaption{{font-size:small;max-width:300px}}img{{image-rendering:pixelated;max-width:300px;min-width:160px}}\
+td.pass{{color:#060}}td.fail{{color:#b00;font-weight:bold}}table.levels td,table.levels th{{text-align:left;vertical-align:top}}table.levels th{{font-weight:normal;font-size:small}}</style></head><body>\
 <h1>vdbcook validation</h1><p>{n}, adapter {ad}</p>\
-<table><tr><th>model</th><th>format</th><th>worst image RMSE</th><th>worst PSNR (dB)</th><th>worst FLIP</th><th>voxel RMSE</th><th>voxel PSNR (dB)</th></tr>\
-<tr><td>{g}</td><td>{f}</td><td>{wr}</td><td>{wp}</td><td>{wf}</td><td>{vr}</td><td>{vp}</td></tr></table>\
-<p>FLIP: NVIDIA's perceptual error (LDR-FLIP, mean over the image, 0 to 1) at {ppd} pixels per degree, on the 8-bit sRGB images shown here.</p>\
-<h2>Per-frame error (worst view)</h2>{plot}<table><tr><th>frame</th><th>RMSE</th><th>FLIP</th></tr>{rows}</table><h2>Worst views</h2>{figures}</body></html>",
+<table><tr><th>level</th><th>voxel size (source voxels)</th><th>model</th><th>format</th><th>worst image RMSE</th><th>worst PSNR (dB)</th><th>worst FLIP</th><th>voxel RMSE</th><th>voxel PSNR (dB)</th>{gh}</tr>{summary}</table>\
+<p>FLIP: NVIDIA's perceptual error (LDR-FLIP, mean over the image, 0 to 1) at {ppd} pixels per degree, on the 8-bit sRGB images shown here.{lv}</p>\
+<h2>Per-frame error (worst view{l0})</h2>{plot}<table><tr><th>frame</th><th>RMSE</th><th>FLIP</th></tr>{rows}</table>{side}<h2>Worst views{l0}</h2>{figures}</body></html>",
         n = report::esc(name),
         ad = report::esc(doc["adapter"].as_str().unwrap_or("")),
-        g = report::esc(doc["shown"].as_str().unwrap_or("")),
-        f = report::esc(format),
-        wr = show(&doc["worst"]["rmse"], true),
-        wp = show(&doc["worst"]["psnr"], false),
-        wf = doc["worst_flip"]["flip"].as_f64().map(|x| format!("{x:.4}")).unwrap_or_default(),
+        gh = if gated { "<th>gate</th>" } else { "" },
         ppd = DEFAULT_PPD,
-        vr = show(&v["rmse"], true),
-        vp = show(&v["psnr"], false),
+        lv = if runs.len() > 1 { " Level k has voxels 2<sup>k</sup> times the source's, and is compared with the source filtered to it." } else { "" },
+        l0 = at(first.lod),
         plot = report::svg_plot(&per_frame.iter().map(|p| p.1).collect::<Vec<_>>(), &per_frame.iter().map(|p| p.0).collect::<Vec<_>>(), "image RMSE per frame"),
     );
     write("report.html", html.as_bytes())
+}
+
+/// The report's "Levels side by side": the first level's worst view at every
+/// level, a column per level (its PNGs named `level{k}_frame{f}_view{v}_*.png`)
+/// and a row per kind of image.
+fn levels_side_by_side(write: &dyn Fn(&str, &[u8]) -> Result<()>, runs: &[LevelRun], format: &str) -> Result<String> {
+    let views: Vec<(&LevelRun, &Kept)> = runs.iter().filter_map(|r| r.kept.first().map(|k| (r, k))).collect();
+    let Some((first, focus)) = views.first() else { return Ok(String::new()) };
+    // One scale for every level's |difference|, so that the levels compare by eye.
+    let scale = views.iter().map(|(_, k)| k.shot.metrics.max_error as f32).fold(1e-6, f32::max);
+    let mut head = String::new();
+    let mut cols = Vec::new();
+    for (r, k) in &views {
+        let s = &k.shot;
+        cols.push(view_figures(write, &format!("level{}_frame{}_view{}", r.lod, s.frame, s.view), k, format, scale)?);
+        let w = r.outcome.worst.map_or(String::new(), |w| format!("<br>level's worst image: rmse {:.3e}, FLIP {:.4}", w.rmse, w.flip));
+        head += &format!("<th><b>level {}</b> (voxels {}×)<br>this view: rmse {:.3e}, psnr {:.1} dB, FLIP {:.4}{w}</th>", r.lod, 1u64 << r.lod, s.metrics.rmse, s.metrics.psnr, s.flip);
+    }
+    let body: String =
+        (0..cols.first().map_or(0, Vec::len)).map(|i| format!("<tr>{}</tr>", cols.iter().map(|c| format!("<td>{}</td>", c.get(i).map_or("", String::as_str))).collect::<String>())).collect();
+    Ok(format!(
+        "<h2>Levels side by side</h2><p>Frame {} view {} (the worst view of level {}) at every level, each against the source filtered to that level; \
+the |difference| maps share one scale (full scale {scale:.2e}).</p><table class='levels'><tr>{head}</tr>{body}</table>",
+        focus.shot.frame, focus.shot.view, first.lod
+    ))
 }
 
 /// A small PNG of the middle frame of `asset`, seen by the first of eight orbiting cameras.

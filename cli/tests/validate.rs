@@ -262,17 +262,57 @@ fn the_json_follows_the_documented_schema() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The first Chromium on the PATH; none outside CI skips (in CI it fails).
+fn chromium() -> Option<&'static str> {
+    let found = ["chromium", "chromium-browser", "google-chrome"].into_iter().find(|c| std::process::Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()));
+    if found.is_none() {
+        assert!(!in_ci(), "CI=true but there is no chromium (scripts/test.sh installs it)");
+        eprintln!("note: no chromium; skipping the HTML check");
+    }
+    found
+}
+
+/// Screenshots `html` into `shot` with headless Chromium: it loads without a script error.
+fn screenshot(chromium: &str, html: &Path, shot: &Path, size: &str) {
+    let o = std::process::Command::new(chromium)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--enable-logging=stderr", "--v=0", &format!("--window-size={size}")])
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(format!("file://{}", html.display()))
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{log}");
+    assert!(!log.contains("Uncaught"), "{log}");
+    assert!(std::fs::read(shot).unwrap().starts_with(&[0x89, b'P', b'N', b'G']));
+}
+
+/// Loads a copy of `html` (in `dir`) in headless Chromium with a probe that logs
+/// "probe images OK/ALL" (images decoded) and "probe rows" (the first word of
+/// each caption of each `.row`, `|` between captions, `;` between rows); the log.
+fn probe(chromium: &str, html: &Path, dir: &Path) -> String {
+    let probe = "<script>window.addEventListener('load', function () {\
+var imgs = Array.prototype.slice.call(document.images);\
+var ok = imgs.filter(function (i) { return i.complete && i.naturalWidth > 0; }).length;\
+console.log('probe images ' + ok + '/' + imgs.length);\
+var rows = Array.prototype.map.call(document.querySelectorAll('.row'), function (r) { return Array.prototype.map.call(r.querySelectorAll('figcaption'), function (c) { return c.textContent.replace(/[^A-Za-z ]/g, '').split(' ')[0]; }).join('|'); });\
+console.log('probe rows ' + rows.join(';'));});</script>";
+    let text = std::fs::read_to_string(html).unwrap();
+    let probed = dir.join("probed.html");
+    std::fs::write(&probed, text.replace("</body>", &format!("{probe}</body>"))).unwrap();
+    let o = std::process::Command::new(chromium)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr", "--v=0", "--virtual-time-budget=3000", "--dump-dom"])
+        .arg(format!("file://{}", probed.display()))
+        .output()
+        .unwrap();
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
 #[test]
 fn the_validation_report_shows_the_flip_map_in_headless_chromium() {
     if !gpu_available() {
         return;
     }
-    let chromium = ["chromium", "chromium-browser", "google-chrome"].into_iter().find(|c| std::process::Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()));
-    let Some(chromium) = chromium else {
-        assert!(!in_ci(), "CI=true but there is no chromium (scripts/test.sh installs it)");
-        eprintln!("note: no chromium; skipping the HTML check");
-        return;
-    };
+    let Some(chromium) = chromium() else { return };
     let dir = scratch("chromium");
     let asset = cook(&dir, "bc4");
     // Kept after the test: the screenshot is for people to look at.
@@ -280,36 +320,116 @@ fn the_validation_report_shows_the_flip_map_in_headless_chromium() {
     let _ = std::fs::remove_dir_all(&keep);
     let r = vdbcook(&["validate", "-q", s(&asset), "--source", "fixtures/smoke_seq", "--frames", "3-3", "--views", "2", "--size", "128x128", "--report", s(&keep)]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let html_path = keep.join("report.html");
-    let shot = keep.join("report.png");
-    let o = std::process::Command::new(chromium)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--enable-logging=stderr", "--v=0", "--window-size=1200,900"])
-        .arg(format!("--screenshot={}", shot.display()))
-        .arg(format!("file://{}", html_path.display()))
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{log}");
-    assert!(!log.contains("Uncaught"), "{log}");
-    assert!(std::fs::read(&shot).unwrap().starts_with(&[0x89, b'P', b'N', b'G']));
-
+    screenshot(chromium, &keep.join("report.html"), &keep.join("report.png"), "1200,900");
     // Every image decodes, and each view's row has its FLIP map after the difference.
-    let probe = "<script>window.addEventListener('load', function () {\
-var imgs = Array.prototype.slice.call(document.images);\
-var ok = imgs.filter(function (i) { return i.complete && i.naturalWidth > 0; }).length;\
-console.log('probe images ' + ok + '/' + imgs.length);\
-var rows = Array.prototype.map.call(document.querySelectorAll('.row'), function (r) { return Array.prototype.map.call(r.querySelectorAll('figcaption'), function (c) { return c.textContent.replace(/[^A-Za-z ]/g, '').split(' ')[0]; }).join('|'); });\
-console.log('probe rows ' + rows.join(';'));});</script>";
-    let html = std::fs::read_to_string(&html_path).unwrap();
-    let probed = dir.join("probed.html");
-    std::fs::write(&probed, html.replace("</body>", &format!("{probe}</body>"))).unwrap();
-    let o = std::process::Command::new(chromium)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr", "--v=0", "--virtual-time-budget=3000", "--dump-dom"])
-        .arg(format!("file://{}", probed.display()))
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&o.stderr);
+    let log = probe(chromium, &keep.join("report.html"), &dir);
     assert!(log.contains("probe images 8/8"), "two views, four images each: {log}");
     assert!(log.contains("probe rows reference|asset|difference|FLIP;reference|asset|difference|FLIP"), "{log}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Decoded RGB pixels of a report PNG.
+fn png_pixels(path: &Path) -> Vec<u8> {
+    let mut dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))).read_info().unwrap();
+    let mut buf = vec![0; dec.output_buffer_size().unwrap()];
+    dec.next_frame(&mut buf).unwrap();
+    buf
+}
+
+#[test]
+fn every_lod_report_shows_the_levels_side_by_side() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = scratch("every-lod-report");
+    let asset = dir.join("bc7.vpak");
+    let r = vdbcook(&["cook", "-q", "--force", "--lods", "3", "--format", "bc7", "-o", s(&asset), "fixtures/smoke_seq"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    // Kept after the test: the screenshot is for people to look at.
+    let rep = Path::new(env!("CARGO_TARGET_TMPDIR")).join("validate-levels-html");
+    let _ = std::fs::remove_dir_all(&rep);
+    let r = vdbcook(&["validate", s(&asset), "--source", "fixtures/smoke_seq", "--every-lod", "--views", "2", "--size", "64x64", "--report", s(&rep)]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(String::from_utf8_lossy(&r.stdout).contains(&format!("report   {}", rep.join("report.html").display())));
+
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(rep.join("report.json")).unwrap()).unwrap();
+    let levels = json["levels"].as_array().unwrap();
+    assert_eq!(levels.len(), 3, "{json}");
+    for (k, l) in levels.iter().enumerate() {
+        assert_eq!(l["level"], k as u64);
+        for fig in [&l["worst"]["rmse"], &l["worst"]["psnr"], &l["worst"]["flip"], &l["worst_flip"]["flip"], &l["voxel"]["rmse"], &l["voxel"]["psnr"]] {
+            assert!(fig.as_f64().is_some_and(f64::is_finite), "level {k}: {l}");
+        }
+        assert!(l["worst"]["rmse"].as_f64().unwrap() > 0.0, "bc7 is lossy at level {k}: {l}");
+    }
+
+    let html = std::fs::read_to_string(rep.join("report.html")).unwrap();
+    assert!(html.contains("Levels side by side"), "{html}");
+    // The summary table: a row per level with its voxel size and worst RMSE.
+    for (k, l) in levels.iter().enumerate() {
+        let row = format!("<tr><td>{k}</td><td>{}×</td>", 1 << k);
+        assert!(html.contains(&row), "{row} missing");
+        assert!(html.contains(&format!("<td>{:.4e}</td>", l["worst"]["rmse"].as_f64().unwrap())), "level {k}'s worst RMSE");
+    }
+    // A column per level, captioned with the level and its figures: level 0's worst view at every level.
+    let (f, v) = (&json["worst"]["frame"], &json["worst"]["view"]);
+    for (k, l) in levels.iter().enumerate() {
+        assert!(html.contains(&format!("<b>level {k}</b> (voxels {}×)", 1 << k)), "level {k}'s column");
+        let w = &l["worst"];
+        assert!(html.contains(&format!("level's worst image: rmse {:.3e}, FLIP {:.4}", w["rmse"].as_f64().unwrap(), l["worst_flip"]["flip"].as_f64().unwrap())), "level {k}'s caption");
+        for kind in ["reference", "asset", "error", "flip"] {
+            assert!(rep.join(format!("level{k}_frame{f}_view{v}_{kind}.png")).is_file(), "level {k} {kind}");
+        }
+    }
+    let files: Vec<String> = std::fs::read_dir(&rep).unwrap().flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(files.iter().filter(|n| n.starts_with("level") && n.ends_with(".png")).count(), 3 * 4, "{files:?}");
+    assert_eq!(files.iter().filter(|n| n.starts_with("frame") && n.ends_with(".png")).count(), 3 * 4, "level 0's three worst views: {files:?}");
+    assert_eq!(html.matches("data:image/png;base64,").count(), 3 * 4 + 3 * 4, "every PNG is inline");
+    // Level 0's column is the worst view itself; a coarser level draws another image.
+    let level_png = |k: usize, kind: &str| png_pixels(&rep.join(format!("level{k}_frame{f}_view{v}_{kind}.png")));
+    assert_eq!(level_png(0, "asset"), png_pixels(&rep.join(format!("frame{f}_view{v}_asset.png"))));
+    assert_ne!(level_png(0, "reference"), level_png(2, "reference"), "level 2's reference is the filtered source");
+
+    if let Some(chromium) = chromium() {
+        screenshot(chromium, &rep.join("report.html"), &rep.join("report.png"), "1400,2000");
+        let log = probe(chromium, &rep.join("report.html"), &dir);
+        assert!(log.contains("probe images 24/24"), "three worst views and three levels, four images each: {log}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn cook_validate_with_levels_gates_every_level() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = scratch("cook-lods-gate");
+    let out = dir.join("s.vpak");
+    let cook = |extra: &[&str]| {
+        let mut args = vec!["cook", "--force", "--lods", "3", "--format", "bc7", "-o", s(&out), "fixtures/smoke_seq", "--validate", "--views", "2", "--size", "64x64"];
+        args.extend(extra);
+        vdbcook(&args)
+    };
+    let r = cook(&["--json"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let levels = v["validation"]["levels"].as_array().unwrap();
+    assert_eq!(levels.len(), 3, "every level is checked: {v}");
+    let rmse: Vec<f64> = levels.iter().map(|l| l["worst"]["rmse"].as_f64().unwrap()).collect();
+    assert!(rmse.iter().all(|x| x.is_finite() && *x > 0.0), "{rmse:?}");
+    assert_eq!(rmse[0], v["validation"]["worst"]["rmse"].as_f64().unwrap(), "the rest is level 0's");
+    // A budget level 0 meets and a coarser level does not.
+    let (coarse, worst) = rmse.iter().enumerate().skip(1).max_by(|a, b| a.1.total_cmp(b.1)).map(|(k, x)| (k, *x)).unwrap();
+    assert!(worst > rmse[0], "this fixture's coarse levels render worse than level 0: {rmse:?}");
+    let budget = format!("{}", (rmse[0] + worst) / 2.0);
+    let r = vdbcook(&["validate", s(&out), "--source", "fixtures/smoke_seq", "--views", "2", "--size", "64x64", "--max-rmse", &budget]);
+    assert_eq!(r.status.code(), Some(0), "level 0 alone is within the budget: {}", String::from_utf8_lossy(&r.stderr));
+    let r = cook(&["--max-rmse", &budget]);
+    let (text, err) = (String::from_utf8_lossy(&r.stdout), String::from_utf8_lossy(&r.stderr));
+    assert_eq!(r.status.code(), Some(3), "{text}{err}");
+    let failing: Vec<usize> = (1..3).filter(|&k| rmse[k] > (rmse[0] + worst) / 2.0).collect();
+    assert!(failing.contains(&coarse));
+    assert!(err.contains(&format!("quality gate failed: level {}: ", failing[0])), "{err}");
+    assert!(text.contains("levels") && text.lines().filter(|l| l.trim_end().ends_with("FAIL")).count() == failing.len(), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
