@@ -34,8 +34,28 @@ K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_R
 # Channel table entries: the plane's choice in bits 28..31, the plane brick below.
 CHOICE_SHIFT, PLANE_BRICK_MASK, MAX_ALTERNATES = 28, (1 << 28) - 1, 15
 
-L1_WORDS, L2_WORDS, L3_WORDS = 1537, 193, 3
-L1_MASK_WORDS, L2_MASK_WORDS = 1024, 128
+L2_WORDS, L3_WORDS = 193, 3
+L2_MASK_WORDS = 128
+
+
+def l1_node_len(L):
+    """Words of an L1 node of 2^L slots per axis: L, mask, prefix counts, first entry."""
+    mask_words = (1 << (3 * L)) // 32
+    return 1 + mask_words + mask_words // 2 + 1
+
+
+def l1_starts(l1):
+    """The word each L1 node starts at (they differ in size); raises unless the array is whole nodes."""
+    starts, at = [], 0
+    while at < len(l1):
+        L = int(l1[at])
+        if not 2 <= L <= 5:
+            raise VpakError(f"L1 node at word {at} has L = {L} (need 2 to 5)")
+        starts.append(at)
+        at += l1_node_len(L)
+    if at != len(l1):
+        raise VpakError("L1 nodes are not whole")
+    return starts
 
 F32, F16, UNORM8, BC4, BC7, UNORM16, CONSTANT = range(7)
 FORMAT_NAMES = ["f32", "f16", "unorm8", "bc4", "bc7", "unorm16", "constant"]
@@ -424,7 +444,7 @@ def walk_frame(m, secs, frame, lod=0):
 
     Returns tile_parts [(asset-space origin, edge 128 or 8, tile index)] and leaf_parts
     [(asset-space origin, L3 node index)]. The frame's L1 node covers asset space
-    [0, 4096)^3; an empty frame is simply an L1 node with no slot set.
+    [0, 128 * 2^L)^3; an empty frame is simply an L1 node with no slot set.
     """
     frames = secs.u32(K_FRAMES)
     l1 = secs.u32(K_L1)
@@ -434,19 +454,20 @@ def walk_frame(m, secs, frame, lod=0):
     l3 = secs.u32(K_L3)
     if len(frames) != m["frame_count"] * (m["levels"] - m["first_level"]):
         raise VpakError("frame table is not frame_count x stored levels long")
-    if len(l1) % L1_WORDS or len(l2) % L2_WORDS:
+    if len(l2) % L2_WORDS:
         raise VpakError("node arrays are not whole records")
     if len(l3) < 1 or len(l3) < 1 + L3_WORDS * int(l3[0]):
         raise VpakError("L3 array shorter than its node count")
-    n1, n2, n3 = len(l1) // L1_WORDS, len(l2) // L2_WORDS, int(l3[0])
+    n2, n3 = len(l2) // L2_WORDS, int(l3[0])
     TILE = 1 << 31
 
     root = int(frames[(lod - m["first_level"]) * m["frame_count"] + frame])
-    if root >= n1:
-        raise VpakError(f"frame {frame} points at missing L1 node {root}")
-    node1 = l1[root * L1_WORDS:(root + 1) * L1_WORDS]
-    slots1, ent1 = slot_entries(node1, L1_MASK_WORDS, l1e, "L1")
-    org1 = slot_origin(slots1, 5, 7)
+    if root not in set(l1_starts(l1)):
+        raise VpakError(f"frame {frame} points at word {root} of the L1 nodes, where no node starts")
+    L = int(l1[root])
+    node1 = l1[root + 1:root + l1_node_len(L)]
+    slots1, ent1 = slot_entries(node1, (1 << (3 * L)) // 32, l1e, "L1")
+    org1 = slot_origin(slots1, L, 7)
 
     tile_parts, leaf_parts = [], []  # (origin, size, tile id) / (origin, l3 node)
     for o1, e in zip(org1, ent1):

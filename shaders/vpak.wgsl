@@ -24,7 +24,6 @@
 // binds the atlases of the planes it samples, each plane's in consecutive
 // slots, and writes each channel's slot accordingly.
 
-const VPAK_L1_WORDS: u32 = 1537u;   // 1024 mask words, 512 prefix words, first entry
 const VPAK_L2_WORDS: u32 = 193u;    // 128 mask words, 64 prefix words, first entry
 const VPAK_L3_WORDS: u32 = 3u;      // brick, sub-block states, first sub-mask (after a count)
 // No brick table: brick b is plane brick b.
@@ -44,8 +43,9 @@ const VPAK_CHOICE_SHIFT: u32 = 28u;
 const VPAK_PLANE_BRICK: u32 = 0x0fffffffu;
 
 struct VpakInfo {
-    // L1 node of the frame being sampled (at `level`: entry
-    // level · frame_count + frame of the frames section).
+    // L1 node of the frame being sampled: the word of the L1 array it starts
+    // at (at `level`: entry (level − first_level) · frame_count + frame of the
+    // frames section).
     l1: u32,
     // Channels of the asset (values per tile).
     channels: u32,
@@ -233,8 +233,15 @@ fn vpak_leaf(info: VpakInfo, p: vec3<i32>) -> VpakLeaf {
         return leaf;
     }
     let u = vec3<u32>(p);
-    let s1 = (((u.x >> 7u) & 31u) << 10u) | (((u.y >> 7u) & 31u) << 5u) | ((u.z >> 7u) & 31u);
-    let i1 = vpak_entry_index(true, info.l1 * VPAK_L1_WORDS, 1024u, s1);
+    // The L1 node has 2^L slots per axis (L, 2 to 5, is its first word): past them is empty.
+    let log2 = vpak_l1[info.l1];
+    let c1 = u >> vec3<u32>(7u);
+    if (any(c1 >= vec3<u32>(1u << log2))) {
+        leaf.empty_dim = 128u;
+        return leaf;
+    }
+    let s1 = (c1.x << (2u * log2)) | (c1.y << log2) | c1.z;
+    let i1 = vpak_entry_index(true, info.l1 + 1u, (1u << (3u * log2)) >> 5u, s1);
     if (i1 == VPAK_NONE) {
         leaf.empty_dim = 128u;
         return leaf;

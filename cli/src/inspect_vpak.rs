@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::path::Path;
-use vdbcook_vpak::nodes::{l3_node_count, L1_WORDS, L2_WORDS};
+use vdbcook_vpak::nodes::{l1_records, l3_node_count, L2_WORDS};
 use vdbcook_vpak::{kind, Asset, AtlasLayout, Checked};
 
 pub enum Described {
@@ -17,7 +17,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let checked = Checked::new(&asset).with_context(|| name.clone())?;
     let meta = &checked.meta;
     let size = |k: u32| asset.sections.iter().filter(|s| s.kind == k).map(|s| s.size).sum::<u64>();
-    let l1 = size(kind::L1_NODES) / (L1_WORDS as u64 * 4);
+    let l1 = l1_records(checked.l1).map_or(0, |r| r.len() as u64);
     let l2 = size(kind::L2_NODES) / (L2_WORDS as u64 * 4);
     // The L3 section counts its nodes in its first word (records follow, then sub-masks).
     let l3 = l3_node_count(checked.l3).map_or(0, |n| n as u64);

@@ -222,7 +222,7 @@ fn corrupted_assets_never_panic_even_unverified() {
 /// unpack must refuse it by the metadata's leaf count, not decode it.
 #[test]
 fn sealed_fan_out_assets_are_refused_not_expanded() {
-    use vdbcook_vpak::nodes::{L1_MASK_WORDS, L2_MASK_WORDS};
+    use vdbcook_vpak::nodes::{l1_mask_words, L1_LOG2, L2_MASK_WORDS};
     let (bytes, _) = cook(Format::F32, &[frame(0)], 2048);
     let asset = Asset::from_bytes(&bytes).unwrap();
     let mut sections = asset.to_sections();
@@ -238,7 +238,7 @@ fn sealed_fan_out_assets_are_refused_not_expanded() {
     for s in sections.iter_mut() {
         match s.kind {
             vdbcook_vpak::kind::FRAMES => s.data = words(vec![0]),
-            vdbcook_vpak::kind::L1_NODES => s.data = words(full(L1_MASK_WORDS)),
+            vdbcook_vpak::kind::L1_NODES => s.data = words([vec![L1_LOG2], full(l1_mask_words(L1_LOG2))].concat()),
             vdbcook_vpak::kind::L1_ENTRIES => s.data = words(vec![0; 32768]),
             vdbcook_vpak::kind::L2_NODES => s.data = words(full(L2_MASK_WORDS)),
             vdbcook_vpak::kind::L2_ENTRIES => s.data = words(vec![0; 4096]),

@@ -577,10 +577,13 @@ pub struct Built {
     pub leaves_in: u64,
 }
 
-/// Interns a node given its occupied slots (ascending) and their entries.
-fn intern_node(table: &mut Interner, nodes: &mut Vec<u32>, entries: &mut Vec<u32>, slots: usize, occupied: &[(usize, u32)]) -> Result<u32, Error> {
+/// Interns a node given its occupied slots (ascending) and their entries
+/// (`shape`: what else tells nodes apart, an L1 node's size); `words(slots,
+/// first)` encodes a new one. Returns its id and whether it is new.
+fn intern_node(table: &mut Interner, nodes: &mut Vec<u32>, entries: &mut Vec<u32>, shape: u32, occupied: &[(usize, u32)], words: impl Fn(&[usize], u32) -> Vec<u32>) -> Result<(u32, bool), Error> {
     // The key is the node's shape and content; `first` is assigned only when new.
-    let mut key: Vec<u32> = Vec::with_capacity(occupied.len() * 2);
+    let mut key: Vec<u32> = Vec::with_capacity(occupied.len() * 2 + 1);
+    key.push(shape);
     for &(s, e) in occupied {
         key.push(s as u32);
         key.push(e);
@@ -590,12 +593,13 @@ fn intern_node(table: &mut Interner, nodes: &mut Vec<u32>, entries: &mut Vec<u32
         let first = u32::try_from(entries.len()).map_err(|_| Error::Overflow { what: "node entries" })?;
         entries.extend(occupied.iter().map(|&(_, e)| e));
         let slots_on: Vec<usize> = occupied.iter().map(|&(s, _)| s).collect();
-        nodes.extend(nodes::node_words(&slots_on, slots, first));
+        nodes.extend(words(&slots_on, first));
+        u32::try_from(nodes.len()).map_err(|_| Error::Overflow { what: "node words" })?;
     }
     if id >= TILE_FLAG {
         return Err(Error::Overflow { what: "nodes" });
     }
-    Ok(id)
+    Ok((id, new))
 }
 
 impl Built {
@@ -664,6 +668,8 @@ impl Built {
         };
         let mut l2_table = Interner::default();
         let mut l1_table = Interner::default();
+        // Where each distinct L1 node starts in the L1 array (they differ in size).
+        let mut l1_starts: Vec<u32> = Vec::new();
         let mut trees: Vec<(u32, u32)> = Vec::with_capacity(self.frames.len());
         for fl in &self.frames {
             // Level k's index space is the asset's >> k (the offset, a multiple of 128, shifts exactly).
@@ -711,7 +717,7 @@ impl Built {
                         _ => occ.push((e.1, e.2)),
                     }
                 }
-                let id = intern_node(&mut l2_table, &mut n.l2, &mut n.l2_entries, L2_SLOTS, &occ)?;
+                let (id, _) = intern_node(&mut l2_table, &mut n.l2, &mut n.l2_entries, 0, &occ, |slots, first| nodes::node_words(slots, L2_SLOTS, first))?;
                 l1_occ.push((node[0].0, id));
             }
             let with_l2 = l1_occ.len();
@@ -721,8 +727,17 @@ impl Built {
                 }
             }
             l1_occ.sort_unstable_by_key(|e| e.0);
-            let id = intern_node(&mut l1_table, &mut n.l1, &mut n.l1_entries, L1_SLOTS, &l1_occ)?;
-            trees.push((fl.level, id));
+            // The smallest node that holds every occupied slot; renumbering
+            // the slots for it keeps their order.
+            let coords = |s: usize| [s >> (2 * L1_LOG2), (s >> L1_LOG2) & 31, s & 31];
+            let log2 = nodes::l1_log2_for(l1_occ.iter().flat_map(|e| coords(e.0)).max().unwrap_or(0) as u32);
+            let occ: Vec<(usize, u32)> = l1_occ.iter().map(|&(s, e)| (coords(s).iter().fold(0, |acc, &c| (acc << log2) | c), e)).collect();
+            let start = n.l1.len() as u32;
+            let (id, new) = intern_node(&mut l1_table, &mut n.l1, &mut n.l1_entries, log2, &occ, |slots, first| nodes::l1_node_words(log2, slots, first))?;
+            if new {
+                l1_starts.push(start);
+            }
+            trees.push((fl.level, l1_starts[id as usize]));
         }
         // Level by level, frames in order within each (the frames section's order).
         trees.sort_by_key(|t| t.0);

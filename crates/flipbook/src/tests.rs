@@ -161,8 +161,8 @@ fn root_tiles_fill_the_l1_slots_they_cover() {
     assert_eq!(leaves.len(), 1);
     // Slot 0 holds the leaf's L2 node; the other 32767 slots are the tile.
     assert_eq!(tiles.len(), 32767);
-    assert!(matches!(n.l1_slot(n.frames[0], 0), Slot::Child(_)));
-    let Slot::Tile(t) = n.l1_slot(n.frames[0], 5) else { panic!("slot 5 is no tile") };
+    assert!(matches!(n.l1_slot(n.frames[0], [0, 0, 0]), Slot::Child(_)));
+    let Slot::Tile(t) = n.l1_slot(n.frames[0], [0, 0, 5]) else { panic!("slot 5 is no tile") };
     assert_eq!(n.tile(t), Some(vec![1.0]));
 }
 

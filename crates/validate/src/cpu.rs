@@ -123,8 +123,15 @@ impl Sampler<'_> {
             return (bg, 128);
         }
         let u = p.map(|c| c as u32);
-        let s1 = (((u[0] >> 7) & 31) << 10 | ((u[1] >> 7) & 31) << 5 | ((u[2] >> 7) & 31)) as usize;
-        let Some(i1) = Self::entry(self.d.c.l1, self.l1 as usize * 1537, 1024, s1) else { return (bg, 128) };
+        // The L1 node's size (its first word): past its slots is empty.
+        let at = self.l1 as usize;
+        let log2 = self.d.c.l1.get(at).copied().unwrap_or(0).min(5);
+        let c1 = u.map(|v| v >> 7);
+        if c1.iter().any(|&v| v >> log2 != 0) {
+            return (bg, 128);
+        }
+        let s1 = (c1[0] << (2 * log2) | c1[1] << log2 | c1[2]) as usize;
+        let Some(i1) = Self::entry(self.d.c.l1, at + 1, (1 << (3 * log2)) / 32, s1) else { return (bg, 128) };
         let e1 = self.d.c.l1_entries.get(i1).copied().unwrap_or(0);
         if e1 & 0x8000_0000 != 0 {
             return (tile(e1), 0);

@@ -4,7 +4,7 @@
 //! against each other.  The first failure is the error.
 
 use crate::layout::{AtlasLayout, Format, PlaneInfo};
-use crate::nodes::{l3_node_count, Nodes, L1_WORDS, L2_WORDS};
+use crate::nodes::{l1_records, l3_node_count, Nodes, L2_WORDS};
 use crate::{kind, Asset, Error, Metadata, CHOICE_SHIFT, MAX_ALTERNATES, MAX_LEVELS, PLANE_BRICK_MASK};
 
 /// Channels an asset may have (a sanity bound, not a format limit).
@@ -138,7 +138,13 @@ impl<'a> Checked<'a> {
             }
             Ok(w)
         };
-        let l1 = words(kind::L1_NODES, L1_WORDS, "l1 nodes")?;
+        let l1 = asset.u32s(kind::L1_NODES)?;
+        // L1 nodes differ in size: the array must be whole nodes, and every
+        // tree must start at one (samplers read its L from the frame entry).
+        let Some(starts) = l1_records(l1) else { return invalid(format!("l1 nodes: {} words are not a sequence of whole L1 nodes", l1.len())) };
+        if let Some(t) = frames.iter().position(|f| starts.binary_search(f).is_err()) {
+            return invalid(format!("tree {t} of the frame table points at word {} of the l1 nodes, where no node starts", frames[t]));
+        }
         let l2 = words(kind::L2_NODES, L2_WORDS, "l2 nodes")?;
         let tiles = words(kind::TILES, channels, "tiles")?;
         let l3 = asset.u32s(kind::L3_NODES)?;

@@ -38,7 +38,8 @@ pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
 /// 5: per-brick formats (a channel in several planes, a channel table choosing per
 ///    brick), `unorm16` and `constant` planes; levels of detail (a tree per frame
 ///    and level; `Metadata::levels`, `FrameInfo::coarse`).
-/// 6: `Metadata::first_level`: an asset may leave out its finest levels (`cook --max-bytes`).
+/// 6: `Metadata::first_level`: an asset may leave out its finest levels (`cook --max-bytes`);
+///    L1 nodes of 4³ to 32³ slots, as many as the tree needs (frame entries are word offsets).
 pub const VERSION: u32 = 6;
 /// Levels an asset may have: level 4's bricks span 128³ source voxels, one
 /// L1 slot, and the asset's index offset (a multiple of 128) keeps every
@@ -55,7 +56,7 @@ const MAX_SECTIONS: u32 = 1 << 16;
 pub mod kind {
     /// bincode-2 (standard config) serialisation of [`super::Metadata`].
     pub const METADATA: u32 = 1;
-    /// u32 per frame and stored level: its L1 node; level k of frame f at
+    /// u32 per frame and stored level: the word its L1 node starts at; level k of frame f at
     /// `(k − first_level) · frame_count + f` ([`super::Metadata::tree_index`]).
     pub const FRAMES: u32 = 2;
     pub const L1_NODES: u32 = 3;

@@ -2,12 +2,15 @@
 //! and their decoding (used by every reader).  Specified in `docs/format.md`.
 //!
 //! ```text
-//! L1 node  (32³ slots of 128³ voxels)  L1_WORDS = 1024 + 512 + 1
-//!   [0, 1024)     occupancy mask: bit s of word s/32 set when slot s holds a child or a tile
-//!   [1024, 1536)  prefix counts: u16 pairs, count k = set bits in mask words [0, k)
-//!                 (word 1024 + k/2, bits 16·(k%2)..)
-//!   1536          first entry: index into l1_entries of slot rank 0
-//! L2 node  (16³ slots of 8³ voxels)    L2_WORDS = 128 + 64 + 1, same shape, entries in l2_entries
+//! L1 node  (n³ slots of 128³ voxels, n = 2^L, L = 2 to 5: the smallest that holds
+//!           the tree; M = n³/32 mask words)  l1_node_len(L) = 1 + M + M/2 + 1 words
+//!   0             L
+//!   [1, 1 + M)    occupancy mask: bit s of word s/32 set when slot s holds a child or a tile
+//!   [1 + M, ..)   prefix counts: u16 pairs, count k = set bits in mask words [0, k)
+//!                 (word 1 + M + k/2, bits 16·(k%2)..)
+//!   1 + M + M/2   first entry: index into l1_entries of slot rank 0
+//!   The frames array holds each tree's L1 node as the word it starts at.
+//! L2 node  (16³ slots of 8³ voxels)    L2_WORDS = 128 + 64 + 1, the same after L, entries in l2_entries
 //! entry    bit 31 clear: child index (L2 node for L1 entries, L3 node for L2 entries)
 //!          bit 31 set:   tile index (low 31 bits) into `tiles`
 //! L3 array word 0: the number n of L3 nodes; node k is words [1 + 3k, 4 + 3k):
@@ -21,14 +24,56 @@
 //! ```
 //! Voxels are x·64 + y·8 + z in a leaf.
 
+/// Slots per axis of the largest L1 node (32: 4096 voxels), and of the
+/// smallest (4: 512 voxels; two mask words, so the prefix layout is L2's).
 pub const L1_LOG2: u32 = 5;
+pub const L1_MIN_LOG2: u32 = 2;
 pub const L2_LOG2: u32 = 4;
 pub const L1_SLOTS: usize = 1 << (3 * L1_LOG2);
 pub const L2_SLOTS: usize = 1 << (3 * L2_LOG2);
-pub const L1_MASK_WORDS: usize = L1_SLOTS / 32;
 pub const L2_MASK_WORDS: usize = L2_SLOTS / 32;
-pub const L1_WORDS: usize = L1_MASK_WORDS + L1_MASK_WORDS / 2 + 1;
 pub const L2_WORDS: usize = L2_MASK_WORDS + L2_MASK_WORDS / 2 + 1;
+
+/// Mask words of an L1 node of 2^`log2` slots per axis.
+pub fn l1_mask_words(log2: u32) -> usize {
+    (1usize << (3 * log2)) / 32
+}
+
+/// Words of an L1 node of 2^`log2` slots per axis: L, mask, prefix counts, first entry.
+pub fn l1_node_len(log2: u32) -> usize {
+    let m = l1_mask_words(log2);
+    1 + m + m / 2 + 1
+}
+
+/// The smallest L1 node's log2 whose slots reach slot coordinate `max` on every axis.
+pub fn l1_log2_for(max: u32) -> u32 {
+    (u32::BITS - max.leading_zeros()).clamp(L1_MIN_LOG2, L1_LOG2)
+}
+
+/// An L1 node of 2^`log2` slots per axis whose `occupied` slots (numbered in
+/// that node: `(x << 2·log2) | (y << log2) | z`) have entries from `first`.
+pub fn l1_node_words(log2: u32, occupied: &[usize], first: u32) -> Vec<u32> {
+    let mut w = Vec::with_capacity(l1_node_len(log2));
+    w.push(log2);
+    w.extend(node_words(occupied, 1 << (3 * log2), first));
+    w
+}
+
+/// The word each L1 node of an L1 array starts at, in order; `None` when
+/// the array is not a sequence of whole nodes with L from 2 to 5.
+pub fn l1_records(words: &[u32]) -> Option<Vec<u32>> {
+    let mut starts = Vec::new();
+    let mut at = 0usize;
+    while at < words.len() {
+        let log2 = words[at];
+        if !(L1_MIN_LOG2..=L1_LOG2).contains(&log2) {
+            return None;
+        }
+        starts.push(u32::try_from(at).ok()?);
+        at += l1_node_len(log2);
+    }
+    (at == words.len()).then_some(starts)
+}
 /// Words of one L3 node record (brick, sub-block states, first sub-mask).
 pub const L3_WORDS: usize = 3;
 /// Sub-block state: no voxel active.
@@ -174,7 +219,7 @@ pub struct Nodes {
     pub offset: [i32; 3],
     /// Values per tile (the asset's channel count).
     pub channels: usize,
-    /// L1 node of each frame.
+    /// L1 node of each tree (frame and level): the word of `l1` it starts at.
     pub frames: Vec<u32>,
     pub l1: Vec<u32>,
     pub l1_entries: Vec<u32>,
@@ -190,6 +235,8 @@ pub struct Nodes {
 pub struct Usage {
     pub trees: usize,
     pub l1: usize,
+    /// Words of those L1 nodes (they differ in size).
+    pub l1_words: usize,
     pub l1_entries: usize,
     pub l2: usize,
     pub l2_entries: usize,
@@ -205,7 +252,7 @@ impl Usage {
     /// Bytes of the node arrays these trees need on their own (frame entries,
     /// L1, L2 and L3 nodes with their entries and sub-masks, tiles of `channels` floats).
     pub fn tree_bytes(&self, channels: usize) -> u64 {
-        let words = self.trees + self.l1 * L1_WORDS + self.l1_entries + self.l2 * L2_WORDS + self.l2_entries + 1 + self.l3 * L3_WORDS + 2 * self.l3_sub_masks + self.tiles * channels;
+        let words = self.trees + self.l1_words + self.l1_entries + self.l2 * L2_WORDS + self.l2_entries + 1 + self.l3 * L3_WORDS + 2 * self.l3_sub_masks + self.tiles * channels;
         4 * words as u64
     }
 }
@@ -232,10 +279,26 @@ fn lookup(node: &[u32], entries: &[u32], mask_words: usize, s: usize) -> Slot {
 }
 
 impl Nodes {
-    /// Slot `s` of L1 node `id`.
-    pub fn l1_slot(&self, id: u32, s: usize) -> Slot {
-        let node = self.l1.get(id as usize * L1_WORDS..(id as usize + 1) * L1_WORDS).unwrap_or(&[]);
-        lookup(node, &self.l1_entries, L1_MASK_WORDS, s)
+    /// The L1 node starting at word `at`: its log2 and its words after L
+    /// (`None` when L is out of range or the node is not whole).
+    pub fn l1_node(&self, at: u32) -> Option<(u32, &[u32])> {
+        let at = at as usize;
+        let log2 = *self.l1.get(at)?;
+        if !(L1_MIN_LOG2..=L1_LOG2).contains(&log2) {
+            return None;
+        }
+        Some((log2, self.l1.get(at + 1..at + l1_node_len(log2))?))
+    }
+
+    /// What the L1 node starting at word `at` holds for the 128³ region at
+    /// slot coordinates `c` (asset index >> 7): empty past the node's slots.
+    pub fn l1_slot(&self, at: u32, c: [u32; 3]) -> Slot {
+        let Some((log2, node)) = self.l1_node(at) else { return Slot::Empty };
+        if c.iter().any(|&v| v >> log2 != 0) {
+            return Slot::Empty;
+        }
+        let s = ((c[0] << (2 * log2)) | (c[1] << log2) | c[2]) as usize;
+        lookup(node, &self.l1_entries, l1_mask_words(log2), s)
     }
 
     /// Slot `s` of L2 node `id`.
@@ -277,16 +340,18 @@ impl Nodes {
         let mut leaves = Vec::new();
         let mut tiles = Vec::new();
         let Some(&l1) = self.frames.get(tree) else { return Some((leaves, tiles)) };
-        let node = self.l1.get(l1 as usize * L1_WORDS..(l1 as usize + 1) * L1_WORDS).unwrap_or(&[]);
+        let Some((log2, node)) = self.l1_node(l1) else { return Some((leaves, tiles)) };
+        let (mask_words, axis) = (l1_mask_words(log2), (1usize << log2) - 1);
         let o = offset;
         let at = |base: [i32; 3], d: [i32; 3]| [base[0].wrapping_add(d[0]), base[1].wrapping_add(d[1]), base[2].wrapping_add(d[2])];
-        for w in 0..L1_MASK_WORDS {
+        for w in 0..mask_words {
             let mut bits = node.get(w).copied().unwrap_or(0);
             while bits != 0 {
                 let s1 = w * 32 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let c1 = at(o, [((s1 >> 10) & 31) as i32 * 128, ((s1 >> 5) & 31) as i32 * 128, (s1 & 31) as i32 * 128]);
-                match self.l1_slot(l1, s1) {
+                let xyz = [s1 >> (2 * log2), (s1 >> log2) & axis, s1 & axis];
+                let c1 = at(o, xyz.map(|v| v as i32 * 128));
+                match lookup(node, &self.l1_entries, mask_words, s1) {
                     Slot::Tile(t) => tiles.push((c1, 128, t)),
                     Slot::Child(l2) => {
                         for s2 in 0..L2_SLOTS {
@@ -319,8 +384,7 @@ impl Nodes {
         let (mut l1s, mut l2s, mut l3s, mut tiles) = (BTreeSet::new(), BTreeSet::new(), BTreeSet::new(), BTreeSet::new());
         let mut u = Usage { trees: roots.len(), ..Usage::default() };
         // A node's occupied slots: children and tiles collected, the count returned.
-        fn slots(id: u32, words: &[u32], mask_words: usize, lookup_slot: &dyn Fn(u32, usize) -> Slot, children: &mut BTreeSet<u32>, tiles: &mut BTreeSet<u32>) -> usize {
-            let node = words.get(id as usize * (mask_words + mask_words / 2 + 1)..).unwrap_or(&[]);
+        fn slots(node: &[u32], entries: &[u32], mask_words: usize, children: &mut BTreeSet<u32>, tiles: &mut BTreeSet<u32>) -> usize {
             let mut n = 0;
             for w in 0..mask_words {
                 let mut bits = node.get(w).copied().unwrap_or(0);
@@ -328,7 +392,7 @@ impl Nodes {
                     let s = w * 32 + bits.trailing_zeros() as usize;
                     bits &= bits - 1;
                     n += 1;
-                    match lookup_slot(id, s) {
+                    match lookup(node, entries, mask_words, s) {
                         Slot::Child(c) => {
                             children.insert(c);
                         }
@@ -342,12 +406,14 @@ impl Nodes {
             n
         }
         for &r in roots {
-            if l1s.insert(r) {
-                u.l1_entries += slots(r, &self.l1, L1_MASK_WORDS, &|id, s| self.l1_slot(id, s), &mut l2s, &mut tiles);
+            if let Some((log2, node)) = self.l1_node(r).filter(|_| l1s.insert(r)) {
+                u.l1_words += l1_node_len(log2);
+                u.l1_entries += slots(node, &self.l1_entries, l1_mask_words(log2), &mut l2s, &mut tiles);
             }
         }
         for &c in &l2s {
-            u.l2_entries += slots(c, &self.l2, L2_MASK_WORDS, &|id, s| self.l2_slot(id, s), &mut l3s, &mut tiles);
+            let node = self.l2.get(c as usize * L2_WORDS..).unwrap_or(&[]);
+            u.l2_entries += slots(node, &self.l2_entries, L2_MASK_WORDS, &mut l3s, &mut tiles);
         }
         let mut bricks = BTreeSet::new();
         for &c in &l3s {
@@ -375,7 +441,7 @@ impl Nodes {
     }
 
     pub fn l1_count(&self) -> usize {
-        self.l1.len() / L1_WORDS
+        l1_records(&self.l1).map_or(0, |r| r.len())
     }
     pub fn l2_count(&self) -> usize {
         self.l2.len() / L2_WORDS
@@ -394,6 +460,35 @@ impl Nodes {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// L1 nodes of every size: a slot inside reads its entry, one past the
+    /// node's slots is empty, and an array of them walks back to its starts.
+    #[test]
+    fn l1_nodes_are_as_large_as_what_they_hold() {
+        assert_eq!([0, 3, 4, 7, 8, 15, 16, 31].map(l1_log2_for), [2, 2, 3, 3, 4, 4, 5, 5]);
+        assert_eq!([2, 3, 4, 5].map(l1_node_len), [5, 26, 194, 1538]);
+        let mut n = Nodes { channels: 1, ..Nodes::default() };
+        for log2 in [5, 2, 3] {
+            let far = (1u32 << log2) - 1;
+            let slot = |c: [u32; 3]| ((c[0] << (2 * log2)) | (c[1] << log2) | c[2]) as usize;
+            let at = n.l1.len() as u32;
+            n.l1.extend(l1_node_words(log2, &[slot([0, 0, 1]), slot([far, 1, far])], n.l1_entries.len() as u32));
+            n.l1_entries.extend([10 + log2, TILE_FLAG | log2]);
+            n.frames.push(at);
+            assert_eq!(n.l1_slot(at, [0, 0, 1]), Slot::Child(10 + log2));
+            assert_eq!(n.l1_slot(at, [far, 1, far]), Slot::Tile(log2));
+            assert_eq!(n.l1_slot(at, [0, 0, 0]), Slot::Empty);
+            assert_eq!(n.l1_slot(at, [far + 1, 0, 1]), Slot::Empty, "past the node's slots");
+            let tiles = n.tree_contents(n.frames.len() - 1, [0; 3], 0, 10).unwrap().1;
+            assert_eq!(tiles, vec![([far as i32 * 128, 128, far as i32 * 128], 128, log2)]);
+        }
+        assert_eq!(l1_records(&n.l1), Some(n.frames.clone()));
+        assert_eq!(n.l1_count(), 3);
+        assert_eq!(l1_records(&n.l1[..n.l1.len() - 1]), None, "a node cut short");
+        let mut bad = n.l1.clone();
+        bad[0] = 6;
+        assert_eq!(l1_records(&bad), None, "L past 5");
+    }
 
     #[test]
     fn prefix_counts_make_lookup_match_a_scan() {
