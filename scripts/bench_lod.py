@@ -8,8 +8,8 @@ values differ from OpenVDB's `vdb_lod`, all measured in one run.
    256^3 fog, scripts/make_bench_volume.py --size 256) and format (f16, bc7):
    `cook --lods 4` against `cook --lods 1` in the same format; the ratio is
    (bytes with levels 1-3 - bytes without) / bytes without, the target <= 0.2; 'L1 part':
-   how much of that fraction is L1 nodes (6148 bytes each, one per frame and level at
-   least, whatever the level holds). Also the bytes each level needs on its own
+   how much of that fraction is L1 nodes (each of 4^3 to 32^3 slots, as many as its tree
+   needs: 20 bytes to 6152 bytes, one per frame and level). Also the bytes each level needs on its own
    (`inspect --json`, levels[k].bytes) over level 0's.
 2. Time, on the 256^3 fog, best of 3, interleaved: `vdb_lod in.vdb out.vdb -range 1-3`
    (wall: read, filter, write) against vdbcook's `levels` stage (filtering levels 1-3
@@ -26,6 +26,9 @@ values differ from OpenVDB's `vdb_lod`, all measured in one run.
    vdb_lod (the filter explains the difference when this is ~0); (c) ours against the
    numpy box mean (0: ours is the box mean); (d) the integral (sum x 8^k) of the source,
    ours and vdb_lod's.
+4. A byte budget (`cook --lods 4 --max-bytes B`), f16, B = half the full asset's bytes:
+   the levels kept, the asset's bytes, and the wall time against the same cook without
+   a budget (each try cooks the asset again without one more of the finest levels).
 --quick: fewer inputs, one timing round.
 """
 
@@ -88,14 +91,31 @@ def sizes(quick):
             a, b = os.path.join(OUT, "s1.vpak"), os.path.join(OUT, "s4.vpak")
             b1, r1, _ = cook(inputs, flags, fmt, 1, a)
             b4, r4, _ = cook(inputs, flags, fmt, 4, b)
-            # The part of the added bytes that is L1 nodes (1537 words each, one per frame and level at least).
-            l1_part = (r4["l1_nodes"] - r1["l1_nodes"]) * 1537 * 4 / b1
+            # The part of the added bytes that is L1 nodes (their section's growth).
+            l1_bytes = lambda r: sum(x["bytes"] for x in r["sections"] if x["name"] == "l1 nodes")
+            l1_part = (l1_bytes(r4) - l1_bytes(r1)) / b1
             lv = json.loads(run([EXE, "inspect", "--json", b]))["files"][0]["levels"]
             alone = " ".join("L%d %.3f" % (x["level"], x["bytes"] / lv[0]["bytes"]) for x in lv[1:])
             added = (b4 - b1) / b1
             worst = max(worst, added)
             print("  %-32s %-5s %12d %12d %8.3f %8.3f   %s" % (label, fmt, b1, b4, added, l1_part, alone))
     print("  largest added fraction: %.3f (target 0.200)" % worst)
+
+
+def budget(quick):
+    print("\n== 4. A byte budget: cook --lods 4 --max-bytes B, f16, B = half the full asset")
+    print("  %-32s %12s %12s %12s %6s %9s %9s %6s" % ("input", "full B", "budget B", "asset B", "kept", "full s", "budget s", "ratio"))
+    for label, inputs, flags in INPUTS[: 4 if quick else None]:
+        if not all(os.path.exists(p) for p in inputs):
+            continue
+        out = os.path.join(OUT, "b.vpak")
+        full, _, w_full = cook(inputs, flags, "f16", 4, out)
+        cap = full // 2
+        t0 = time.perf_counter()
+        rep = json.loads(run([EXE, "cook", "--json", "--force", "-o", out, "--format", "f16", "--lods", "4", "--max-bytes", str(cap), *flags, *inputs]))
+        w_cap = time.perf_counter() - t0
+        kept = "%d-3" % rep["first_level"]
+        print("  %-32s %12d %12d %12d %6s %9.3f %9.3f %6.2f" % (label, full, cap, rep["file_bytes"], kept, w_full, w_cap, w_cap / w_full))
 
 
 def timing(quick):
@@ -199,6 +219,7 @@ def main():
     print("vdbcook levels of detail; %s" % run([EXE, "--version"]).strip())
     print("fog_256: %s" % run(["vdb_print", FOG]).strip().splitlines()[-1])
     sizes(quick)
+    budget(quick)
     timing(quick)
     print("\n== 3. Values against vdb_lod (relative RMS where either is non-zero; 'same idx': ours and vdb_lod's")
     print("   voxel i compared directly; 'resampled': ours trilinearly at vdb_lod's centres; 'FW port': max |numpy full")

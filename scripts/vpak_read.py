@@ -113,6 +113,12 @@ def read_header(buf):
         if (kind, index) in sections:
             raise VpakError(f"section kind {kind} index {index} appears twice")
         sections[(kind, index)] = (offset, size, checksum)
+    # Every byte after the table that no section holds is zero padding.
+    at = table_end
+    for offset, size, _ in sorted(sections.values()) + [(len(buf), 0, 0)]:
+        if any(bytes(buf[at:max(at, offset)])):
+            raise VpakError(f"non-zero padding between sections (after byte {at})")
+        at = max(at, offset + size)
     return sections
 
 

@@ -773,7 +773,7 @@ impl Cooker {
         // encoded on their own).
         let t0 = Instant::now();
         let decode_stored = |b: u32| remap.get(b as usize).and_then(|&i| keep.get(i as usize)).and_then(|&k| encoded.decode(k));
-        // Per tree (frames and levels, in push order); the frame figures are level 0's.
+        // Per tree (frames and levels, in push order); the frame figures are the first stored level's.
         let tree_err = voxel_errors(built, &decode_stored);
         let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
         let frame_err: Vec<&Vec<ErrorStats>> = tree_err.iter().zip(&tree_level).filter(|(_, &l)| l == first).map(|(e, _)| e).collect();

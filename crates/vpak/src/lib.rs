@@ -126,6 +126,8 @@ pub enum Error {
     SectionBounds { kind: u32, index: u32, offset: u64, size: u64 },
     #[error("section {name} #{index} checksum mismatch (stored {stored:#018x}, computed {computed:#018x})", name = kind::name(*kind))]
     SectionChecksum { kind: u32, index: u32, stored: u64, computed: u64 },
+    #[error("byte {0} lies between sections and is not zero (the file is damaged)")]
+    Padding(u64),
     #[error("section {name} #{index} is listed twice", name = kind::name(*kind))]
     DuplicateSection { kind: u32, index: u32 },
     #[error("missing section {name} #{index}", name = kind::name(*kind))]
@@ -611,13 +613,25 @@ impl Asset {
         Ok(a)
     }
 
-    /// Checks every section's checksum; the first mismatch is the error.
+    /// Checks every section's checksum and that the padding between sections
+    /// is zero (so every byte of a verified file is the one written: a cache
+    /// of assets may trust it); the first failure is the error.
     pub fn verify(&self) -> Result<(), Error> {
         for s in &self.sections {
             let computed = checksum(self.raw(s));
             if computed != s.checksum {
                 return Err(Error::SectionChecksum { kind: s.kind, index: s.index, stored: s.checksum, computed });
             }
+        }
+        let b = self.bytes();
+        let mut spans: Vec<(u64, u64)> = self.sections.iter().map(|s| (s.offset, s.offset + s.size)).collect();
+        spans.sort_unstable();
+        let mut at = (HEADER_LEN + ENTRY_LEN * self.sections.len()) as u64;
+        for (start, end) in spans.into_iter().chain([(b.len() as u64, b.len() as u64)]) {
+            if let Some(k) = b.get(at as usize..start.max(at) as usize).and_then(|gap| gap.iter().position(|&x| x != 0)) {
+                return Err(Error::Padding(at + k as u64));
+            }
+            at = at.max(end);
         }
         Ok(())
     }
@@ -704,11 +718,9 @@ mod tests {
             let mut c = b.clone();
             c[i] ^= 0x10;
             let r = Asset::from_bytes(&c).and_then(|a| a.verify().map(|_| a));
-            // Padding bytes are not covered by any checksum; everything else is.
-            let covered = i < 40 || (HEADER_LEN..HEADER_LEN + 2 * ENTRY_LEN).contains(&i) || {
-                let a = Asset::from_bytes(&b).unwrap();
-                a.sections.iter().any(|s| (s.offset as usize..(s.offset + s.size) as usize).contains(&i))
-            };
+            // Checksums cover the header, the table and the sections, and the
+            // padding between sections must be zero: only the reserved bytes 40 to 63 are free.
+            let covered = !(40..HEADER_LEN).contains(&i);
             assert_eq!(r.is_err(), covered, "byte {i}");
         }
     }
