@@ -9,7 +9,9 @@ values differ from OpenVDB's `vdb_lod`, all measured in one run.
    `cook --lods 4` against `cook --lods 1` in the same format; the ratio is
    (bytes with levels 1-3 - bytes without) / bytes without, the target <= 0.2; 'L1 part':
    how much of that fraction is L1 nodes (each of 4^3 to 32^3 slots, as many as its tree
-   needs: 20 bytes to 6152 bytes, one per frame and level). Also the bytes each level needs on its own
+   needs: 20 bytes to 6152 bytes, one per frame and level); 'bricks': the distinct bricks
+   levels 1-3 add over level 0's (after deduplication), a floor for any layout that stores
+   one 8^3 brick per leaf. Also the bytes each level needs on its own
    (`inspect --json`, levels[k].bytes) over level 0's.
 2. Time, on the 256^3 fog, best of 3, interleaved: `vdb_lod in.vdb out.vdb -range 1-3`
    (wall: read, filter, write) against vdbcook's `levels` stage (filtering levels 1-3
@@ -81,7 +83,7 @@ def cook(inputs, flags, fmt, lods, out):
 
 def sizes(quick):
     print("\n== 1. Bytes: levels 1-3 against level 0 alone, in the same format (target <= 0.200)")
-    print("  %-32s %-5s %12s %12s %8s %8s   %s" % ("input", "fmt", "lods 1 B", "lods 4 B", "added", "L1 part", "each level alone / level 0 alone (inspect)"))
+    print("  %-32s %-5s %12s %12s %8s %8s %8s   %s" % ("input", "fmt", "lods 1 B", "lods 4 B", "added", "L1 part", "bricks", "each level alone / level 0 alone (inspect)"))
     worst = 0.0
     for label, inputs, flags in INPUTS[: 4 if quick else None]:
         if not all(os.path.exists(p) for p in inputs):
@@ -98,7 +100,10 @@ def sizes(quick):
             alone = " ".join("L%d %.3f" % (x["level"], x["bytes"] / lv[0]["bytes"]) for x in lv[1:])
             added = (b4 - b1) / b1
             worst = max(worst, added)
-            print("  %-32s %-5s %12d %12d %8.3f %8.3f   %s" % (label, fmt, b1, b4, added, l1_part, alone))
+            # Distinct bricks levels 1-3 add over level 0's (after deduplication): what any
+            # format of one 8^3 brick per leaf pays at least, whatever its nodes cost.
+            bricks = (r4["stored_bricks"] - r1["stored_bricks"]) / max(1, r1["stored_bricks"])
+            print("  %-32s %-5s %12d %12d %8.3f %8.3f %8.3f   %s" % (label, fmt, b1, b4, added, l1_part, bricks, alone))
     print("  largest added fraction: %.3f (target 0.200)" % worst)
 
 
