@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (version 5).
+"""Independent reader for vdbcook's `.vpak` volume asset format (version 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -9,7 +9,8 @@ that the document is a complete specification: it decodes every channel of a fra
 For every channel C (named as in the metadata) OUT.npz holds `C.ijk` (n x 3 int32,
 source index space = asset index + index_offset) and `C.values` (n float32) over the
 frame's active voxels (every active voxel of every L3 node and every voxel of every
-tile), sorted by i, then j, then k. With `--lod K`, the frame's level K instead, in
+tile), sorted by i, then j, then k, at the asset's first stored level (0, the frame
+itself, unless the cook left finer levels out). With `--lod K`, the frame's level K, in
 that level's index space (level index = level asset index + index_offset >> K). `--json` prints a summary of the metadata.
 
 Dependencies (Debian): python3-numpy, python3-pil (BC7 blocks), python3-xxhash.
@@ -445,13 +446,17 @@ def l3_active(l3, node_index):
     return active
 
 
-def walk_frame(m, secs, frame, lod=0):
+def walk_frame(m, secs, frame, lod=None):
     """Walk a frame's L1 node and its L2 children.
 
     Returns tile_parts [(asset-space origin, edge 128 or 8, tile index)] and leaf_parts
     [(asset-space origin, L3 node index)]. The frame's L1 node covers asset space
-    [0, 128 * 2^L)^3; an empty frame is simply an L1 node with no slot set.
+    [0, 128 * 2^L)^3; an empty frame is simply an L1 node with no slot set. `lod`:
+    a stored level (default: the first, `first_level`).
     """
+    lod = m["first_level"] if lod is None else lod
+    if not m["first_level"] <= lod < m["levels"]:
+        raise VpakError(f"level {lod} is not stored (asset has levels {m['first_level']} to {m['levels'] - 1})")
     frames = secs.u32(K_FRAMES)
     l1 = secs.u32(K_L1)
     l1e = secs.u32(K_L1_ENTRIES)
@@ -643,8 +648,9 @@ def brick_values(m, secs, bricks):
 # Frame decoding
 # ---------------------------------------------------------------------------
 
-def read_frame(m, secs, frame, lod=0):
+def read_frame(m, secs, frame, lod=None):
     """Per-channel (ijk int32 n x 3, values float32 n), sorted by i, j, k (source space of the level)."""
+    lod = m["first_level"] if lod is None else lod
     C = len(m["channels"])
     tile_parts, leaf_parts = walk_frame(m, secs, frame, lod)
     ijk_parts, val_parts = [], []
@@ -733,10 +739,7 @@ def main(argv=None):
             frame = 0 if args.frame is None else args.frame
             if not 0 <= frame < m["frame_count"]:
                 raise VpakError(f"frame {frame} out of range (asset has {m['frame_count']})")
-            lod = m["first_level"] if args.lod is None else args.lod
-            if not m["first_level"] <= lod < m["levels"]:
-                raise VpakError(f"level {lod} is not stored (asset has levels {m['first_level']} to {m['levels'] - 1})")
-            chans = read_frame(m, secs, frame, lod)
+            chans = read_frame(m, secs, frame, args.lod)
             if args.out:
                 arrays = {}
                 for name, (ijk, vals) in chans.items():

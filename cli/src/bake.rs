@@ -360,9 +360,10 @@ impl Ctx {
 
 /// The record and size of a valid asset at `path` that carries `key`.
 fn cached(path: &Path, key: &str) -> Option<(Record, u64)> {
-    // Opening checks every checksum: a corrupted asset is not a hit.
+    // Opening checks every checksum and the padding, the validator the rest
+    // every reader relies on: a corrupted or inconsistent asset is not a hit.
     let asset = Asset::open(path).ok()?;
-    let meta = asset.metadata().ok()?;
+    let meta = vdbcook_vpak::Checked::new(&asset).ok()?.meta;
     let get = |k: &str| meta.settings.iter().find(|(n, _)| n == k).map(|(_, v)| v.as_str());
     if get("cache_key")? != key {
         return None;

@@ -34,7 +34,7 @@ report.html.
 filtered losslessly to it; --every-lod checks every level so, the gate holding at each
 (a failure names the level), with a table of the levels' worst image and voxel figures.
 With --report, report.html gains a summary row per level (voxel size, figures, pass or
-fail) and a section with level 0's worst view rendered at every level, side by side:
+fail) and a section with the first stored level's worst view rendered at every level:
 a column per level (its PNGs level{K}_frame{F}_view{V}_{reference,asset,error,flip}.png;
 the difference maps on one scale). cook --lods N --validate (N > 1) checks every level
 too.

@@ -36,6 +36,26 @@ fn the_spec_only_reader_decodes_what_unpack_writes() {
     let e: Vec<String> = (0..4).map(|k| samples.join(format!("vfx-toolkit-embergen/embergen_fire_a_{k}.vdb")).to_string_lossy().into_owned()).collect();
     let smoke = "fixtures/smoke_seq".to_string();
     let tiles = "fixtures/tiles.vdb".to_string();
+    // Frames whose trees need L1 nodes of 8³, 16³ and 32³ slots (content out to x = 700, 1600 and 4000).
+    let wide_dir = scratch().join("wide");
+    std::fs::create_dir_all(&wide_dir).unwrap();
+    let make = "import pyopenvdb as vdb, sys\n\
+for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):\n\
+    g = vdb.FloatGrid(); g.name = 'density'; a = g.getAccessor()\n\
+    for i, (x, y, z) in enumerate([(k, k, k), far, (900, 900, 900)]):\n\
+        for d in range(27): a.setValueOn((x + d % 3, y + d // 3 % 3, z + d // 9), 0.1 * (i + 1) + 0.01 * d)\n\
+    vdb.write('%s/wide_%04d.vdb' % (sys.argv[1], k + 1), grids=[g])\n";
+    let out = python(&["-c", make, s(&wide_dir)]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let wide = wide_dir.display().to_string();
+    let probe = wide_dir.join("probe.vpak");
+    assert!(vdbcook(&["cook", "-q", "--force", "-o", s(&probe), &wide]).status.success());
+    let sizes = python(&[
+        "-c",
+        "import sys; sys.path.insert(0, 'scripts'); import vpak_read as v; m, s = v.open_asset(sys.argv[1]); f = s.u32(v.K_FRAMES); l1 = s.u32(v.K_L1); print(sorted(int(l1[int(x)]) for x in f))",
+        s(&probe),
+    ]);
+    assert_eq!(String::from_utf8_lossy(&sizes.stdout).trim(), "[3, 4, 5]", "the wide frames' L1 nodes: {}", String::from_utf8_lossy(&sizes.stderr));
     // (inputs, cook flags): every format, every packing (R/RG/RGBA, BC4 per
     // channel, BC7 with 4, 2 and 1 z-slices per texel), vec3, mixed groups,
     // split atlases, tiles and an empty frame; per-brick formats (constant,
@@ -57,6 +77,8 @@ fn the_spec_only_reader_decodes_what_unpack_writes() {
         (e, vec!["--grids", "all", "--max-error", "0.02"]),
         (vec![tiles.clone()], vec!["--format", "f16"]),
         (vec![tiles], vec!["--max-error", "0.002"]),
+        (vec![wide.clone()], vec!["--format", "f16"]),
+        (vec![wide], vec!["--format", "bc4", "--lods", "3"]),
     ];
     let dir = scratch();
     let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |(k, (inputs, flags))| -> Result<usize, String> {

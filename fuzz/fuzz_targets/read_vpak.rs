@@ -1,6 +1,6 @@
 //! Any byte string as a .vpak asset, checksums not verified (so every byte is
 //! reachable): the section table, the metadata, the validator, and unpacking
-//! the first frames of every channel. A second
+//! the first frames of every channel at every stored level. A second
 //! mode takes the bytes as the metadata of a small, valid three-channel asset
 //! (resealed), so absurd channels, planes, atlases and frames meet real
 //! sections: they must be refused, never a panic.
@@ -12,9 +12,11 @@ fn exercise(asset: &vdbcook_vpak::Asset) {
     let Ok(meta) = asset.metadata() else { return };
     let _ = vdbcook_vpak::Checked::new(asset);
     for frame in 0..(meta.frame_count as usize).min(3) {
-        if let Ok(grids) = vdbcook_cook::unpack_frame(asset, frame) {
-            for g in grids {
-                let _ = g.stats();
+        for level in meta.stored_levels().take(vdbcook_vpak::MAX_LEVELS as usize) {
+            if let Ok(grids) = vdbcook_cook::unpack_level(asset, frame, level) {
+                for g in grids {
+                    let _ = g.stats();
+                }
             }
         }
     }

@@ -99,22 +99,33 @@ impl FromStr for ByteBudget {
         let t = s.trim();
         let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
         let (number, unit) = (t[..split].trim(), t[split..].trim());
-        let scale: f64 = match unit {
-            "" | "B" | "b" => 1.0,
-            "k" | "K" | "kB" | "KB" => 1e3,
-            "M" | "MB" => 1e6,
-            "G" | "GB" => 1e9,
-            "KiB" => 1024.0,
-            "MiB" => 1024.0 * 1024.0,
-            "GiB" => 1024.0 * 1024.0 * 1024.0,
+        let scale: u128 = match unit {
+            "" | "B" | "b" => 1,
+            "k" | "K" | "kB" | "KB" => 1_000,
+            "M" | "MB" => 1_000_000,
+            "G" | "GB" => 1_000_000_000,
+            "KiB" => 1 << 10,
+            "MiB" => 1 << 20,
+            "GiB" => 1 << 30,
             _ => return Err(bad()),
         };
-        let n: f64 = number.parse().map_err(|_| bad())?;
-        let bytes = (n * scale).floor();
-        if !(bytes >= 1.0 && bytes < 2f64.powi(63)) {
-            return Err(format!("byte budget \"{s}\" must be at least 1 byte"));
+        // Decimal digits exactly (1.001kB is 1001 bytes, not a float's 1000.99…).
+        let (whole, frac) = number.split_once('.').unwrap_or((number, ""));
+        let digits = |d: &str| d.len() <= 18 && d.bytes().all(|b| b.is_ascii_digit());
+        if whole.is_empty() && frac.is_empty() || !digits(whole) || !digits(frac) {
+            return Err(bad());
         }
-        Ok(ByteBudget(bytes as u64))
+        let value = |d: &str| d.parse::<u128>().unwrap_or(0);
+        let den = 10u128.pow(frac.len() as u32);
+        let num = value(whole) * den + value(frac);
+        if !(num * scale).is_multiple_of(den) {
+            return Err(format!("byte budget \"{s}\" is not a whole number of bytes"));
+        }
+        match u64::try_from(num * scale / den) {
+            Ok(0) => Err(format!("byte budget \"{s}\" must be at least 1 byte")),
+            Ok(b) => Ok(ByteBudget(b)),
+            Err(_) => Err(format!("byte budget \"{s}\" is too large")),
+        }
     }
 }
 
@@ -567,10 +578,27 @@ mod tests {
 
     #[test]
     fn byte_budgets_read_units() {
-        for (text, bytes) in [("1000", 1000), ("500kB", 500_000), ("1.5M", 1_500_000), ("1.5 MB", 1_500_000), ("2MiB", 2 << 20), ("1GiB", 1 << 30), ("7 B", 7), ("2.5", 2)] {
+        for (text, bytes) in [
+            ("1000", 1000),
+            ("500kB", 500_000),
+            ("1.5M", 1_500_000),
+            ("1.5 MB", 1_500_000),
+            ("2MiB", 2 << 20),
+            ("1GiB", 1 << 30),
+            ("7 B", 7),
+            ("1.001kB", 1001),
+            ("128.003kB", 128_003),
+            ("1.001MB", 1_001_000),
+            ("0.5KiB", 512),
+            (".5k", 500),
+        ] {
             assert_eq!(text.parse::<ByteBudget>(), Ok(ByteBudget(bytes)), "{text}");
         }
-        for text in ["0", "-5", "0.5", "1.5XB", "MB", "", "nan", "inf"] {
+        // Every whole number of kB with three decimals is exact.
+        for n in (1u64..200_000).step_by(7) {
+            assert_eq!(format!("{}.{:03}kB", n / 1000, n % 1000).parse::<ByteBudget>(), Ok(ByteBudget(n)), "{n}");
+        }
+        for text in ["0", "-5", "0.5", "2.5", "1.0001kB", "1.5XB", "MB", "", ".", "1.2.3", "nan", "inf", "1e6", "99999999999999999GB"] {
             assert!(text.parse::<ByteBudget>().is_err(), "{text}");
         }
         #[derive(serde::Deserialize)]

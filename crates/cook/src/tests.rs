@@ -986,14 +986,15 @@ fn levels_are_deterministic_and_lossy_formats_report_their_error() {
 fn a_byte_budget_keeps_the_finest_levels_that_fit() {
     let frames = [frame(0), frame(1), frame(2)];
     let levels = 4;
+    // A lossy format: the report's figures are the first stored level's.
     let cook = |max_bytes: Option<u64>| {
-        let mut c = Cooker::new(CookOptions { format: Format::F32, levels, max_bytes, ..CookOptions::default() });
+        let mut c = Cooker::new(CookOptions { format: Format::Unorm8, levels, max_bytes, ..CookOptions::default() });
         for f in &frames {
             c.push(f, None).unwrap();
         }
         c.finish(&NoProgress).map(|(s, r)| (vdbcook_vpak::assemble(&s), r))
     };
-    let (full, _) = cook(None).unwrap();
+    let (full, full_report) = cook(None).unwrap();
     let full_asset = Asset::from_bytes(&full).unwrap();
     let full_checked = Checked::new(&full_asset).unwrap();
     // A budget the whole asset meets changes nothing.
@@ -1012,6 +1013,9 @@ fn a_byte_budget_keeps_the_finest_levels_that_fit() {
         assert_eq!(b.tries.last().unwrap().bytes, bytes.len() as u64);
         assert_eq!((r.first_level, r.levels.len()), (first, (levels - first - 1) as usize));
         assert!(r.levels.iter().zip(first + 1..).all(|(l, k)| l.level == k), "{:?}", r.levels);
+        let was = &full_report.levels[first as usize - 1];
+        assert!(r.frame_errors.len() == frames.len() && r.voxel_rmse == was.voxel_rmse && r.voxel_rmse > 0.0, "level {first}: {} against {was:?}", r.voxel_rmse);
+        assert!(r.levels.iter().zip(&full_report.levels[first as usize..]).all(|(a, b)| a.voxel_rmse == b.voxel_rmse && a.leaves == b.leaves), "{:?}", r.levels);
         let asset = Asset::from_bytes(&bytes).unwrap();
         let checked = Checked::new(&asset).unwrap();
         assert_eq!((checked.meta.first_level, checked.meta.levels, checked.frames.len()), (first, levels, 3 * (levels - first) as usize));

@@ -24,9 +24,10 @@ const MAX_TILES: usize = 1 << 22;
 /// Decodes frame `frame` (counted from 0) of an opened asset: one grid per
 /// channel, in the metadata's channel order, each active over the frame's
 /// active voxels (the union of the channels'), holding the channel's
-/// background where its own grid was inactive.
+/// background where its own grid was inactive. At the asset's first stored
+/// level (0 unless `cook --max-bytes` left finer levels out).
 pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Vec<Grid>, Error> {
-    unpack_level(asset, frame, 0)
+    unpack_level(asset, frame, asset.metadata()?.first_level)
 }
 
 /// [`unpack_frame`] at level of detail `level` (0: the frame itself): the
@@ -52,8 +53,9 @@ pub fn unpack_level(asset: &Asset, frame: usize, level: u32) -> Result<Vec<Grid>
     }
     let want = want as usize;
     let nodes = checked.nodes();
+    let tree = meta.tree_index(frame, level).ok_or_else(|| Error::Corrupt(format!("frame {frame} has no tree at level {level}")))?;
     let (leaves, tiles) = nodes
-        .tree_contents(meta.tree_index(frame, level), meta.level_offset(level), want, MAX_TILES)
+        .tree_contents(tree, meta.level_offset(level), want, MAX_TILES)
         .ok_or_else(|| Error::Corrupt(format!("frame {frame} holds more than the {want} leaves or {MAX_TILES} tiles its metadata allows")))?;
     if leaves.len() != want {
         return Err(Error::Corrupt(format!("frame {frame} holds {} leaves, its metadata says {want}", leaves.len())));

@@ -430,7 +430,7 @@ impl Renderer {
     /// Renders frame `frame` of `asset` from every view: the shadow grid is
     /// computed once, then one dispatch per view, all in one submission.
     pub fn render_views(&self, asset: &GpuAsset, scene: &Scene, frame: usize, views: &[View], width: u32, height: u32) -> Result<Vec<Image>, Error> {
-        self.render_views_level(asset, scene, frame, 0, views, width, height)
+        self.render_views_level(asset, scene, frame, asset.meta.first_level, views, width, height)
     }
 
     /// [`Renderer::render_views`] of level of detail `level` of the frame: each
@@ -443,7 +443,7 @@ impl Renderer {
         if frame >= asset.frame_count {
             return Err(Error::Frame { frame, count: asset.frame_count });
         }
-        let l1 = *asset.frames.get(asset.meta.tree_index(frame, level)).ok_or(Error::Frame { frame, count: asset.frame_count })?;
+        let l1 = *asset.meta.tree_index(frame, level).and_then(|t| asset.frames.get(t)).ok_or(Error::Frame { frame, count: asset.frame_count })?;
         if let Some(&c) = scene.channels.iter().find(|&&c| c != crate::NONE && !asset.bound.get(c as usize).copied().unwrap_or(false)) {
             return Err(Error::NotUploaded(c));
         }

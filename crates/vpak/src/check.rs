@@ -219,10 +219,7 @@ impl<'a> Checked<'a> {
 
     /// The L1 node of frame `frame` at level `level`.
     pub fn tree(&self, frame: usize, level: u32) -> Option<u32> {
-        if frame >= self.meta.frame_count as usize || !self.meta.stored_levels().contains(&level) {
-            return None;
-        }
-        self.frames.get(self.meta.tree_index(frame, level)).copied()
+        self.frames.get(self.meta.tree_index(frame, level)?).copied()
     }
 
     /// Bytes level `level` needs on its own: the node arrays of its trees

@@ -356,9 +356,11 @@ impl Metadata {
     }
 
     /// The L1 node of frame `frame` at stored level `level` is entry
-    /// `(level − first_level) · frame_count + frame` of the frames section.
-    pub fn tree_index(&self, frame: usize, level: u32) -> usize {
-        level.saturating_sub(self.first_level) as usize * self.frame_count as usize + frame
+    /// `(level − first_level) · frame_count + frame` of the frames section;
+    /// `None` for a frame or a level the asset does not store.
+    pub fn tree_index(&self, frame: usize, level: u32) -> Option<usize> {
+        let stored = self.stored_levels().contains(&level) && frame < self.frame_count as usize;
+        stored.then(|| (level - self.first_level) as usize * self.frame_count as usize + frame)
     }
 
     /// Leaves of frame `frame` at level `level` (0 past the end).
