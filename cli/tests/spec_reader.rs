@@ -39,12 +39,14 @@ fn the_spec_only_reader_decodes_what_unpack_writes() {
     // Frames whose trees need L1 nodes of 8³, 16³ and 32³ slots (content out to x = 700, 1600 and 4000).
     let wide_dir = scratch().join("wide");
     std::fs::create_dir_all(&wide_dir).unwrap();
-    let make = "import pyopenvdb as vdb, sys\n\
-for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):\n\
-    g = vdb.FloatGrid(); g.name = 'density'; a = g.getAccessor()\n\
-    for i, (x, y, z) in enumerate([(k, k, k), far, (900, 900, 900)]):\n\
-        for d in range(27): a.setValueOn((x + d % 3, y + d // 3 % 3, z + d // 9), 0.1 * (i + 1) + 0.01 * d)\n\
-    vdb.write('%s/wide_%04d.vdb' % (sys.argv[1], k + 1), grids=[g])\n";
+    let make = r#"
+import pyopenvdb as vdb, sys
+for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
+    g = vdb.FloatGrid(); g.name = 'density'; a = g.getAccessor()
+    for i, (x, y, z) in enumerate([(k, k, k), far, (900, 900, 900)]):
+        for d in range(27): a.setValueOn((x + d % 3, y + d // 3 % 3, z + d // 9), 0.1 * (i + 1) + 0.01 * d)
+    vdb.write('%s/wide_%04d.vdb' % (sys.argv[1], k + 1), grids=[g])
+"#;
     let out = python(&["-c", make, s(&wide_dir)]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let wide = wide_dir.display().to_string();
