@@ -326,7 +326,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     }
     let mut out = combine(&runs, args)?;
     if let Some(dir) = &args.report {
-        write_report(dir, &out.doc, &runs).with_context(|| dir.display().to_string())?;
+        write_report(dir, &out.doc, &runs, gated(args)).with_context(|| dir.display().to_string())?;
         out.text += &format!("  report   {}\n", dir.join("report.html").display());
     }
     Ok(out)
@@ -520,7 +520,7 @@ fn view_figures(write: &dyn Fn(&str, &[u8]) -> Result<()>, stem: &str, k: &Kept,
 /// report.json, the PNGs and report.html: the summary (a row per level), the
 /// first level's per-frame plot and worst views, and with several levels the
 /// first level's worst view at every level, side by side.
-fn write_report(dir: &Path, doc: &serde_json::Value, runs: &[LevelRun]) -> Result<()> {
+fn write_report(dir: &Path, doc: &serde_json::Value, runs: &[LevelRun], gated: bool) -> Result<()> {
     let first = runs.first().ok_or_else(|| anyhow!("no level to report"))?;
     let (format, name) = (doc["format"].as_str().unwrap_or(""), doc["asset"].as_str().unwrap_or(""));
     std::fs::create_dir_all(dir)?;
@@ -560,7 +560,6 @@ fn write_report(dir: &Path, doc: &serde_json::Value, runs: &[LevelRun]) -> Resul
         serde_json::Value::String(s) => s.clone(),
         _ => "–".into(),
     };
-    let gated = ["max_rmse", "min_psnr", "max_flip"].iter().any(|k| !doc["gate"][k].is_null());
     let levels = doc["levels"].as_array().map_or(&[][..], |v| &v[..]);
     let summary: String = runs
         .iter()

@@ -608,18 +608,18 @@ impl Built {
     /// the index space, bounding box and backgrounds are the frames' own.
     pub fn from_level(&self, first: u32) -> Result<Built, Error> {
         let frames: Vec<FrameLeaves> = self.frames.iter().filter(|f| f.level >= first).cloned().collect();
-        let mut l3_new = vec![u32::MAX; self.l3.len()];
-        for f in &frames {
-            for &(_, id) in &f.leaves {
-                if let Some(slot) = l3_new.get_mut(id as usize) {
-                    *slot = 0;
-                }
+        let mut used = vec![false; self.l3.len()];
+        for &(_, id) in frames.iter().flat_map(|f| &f.leaves) {
+            if let Some(u) = used.get_mut(id as usize) {
+                *u = true;
             }
         }
+        // Old id -> new id of the L3 nodes and bricks kept, in their order.
+        let mut l3_new = vec![u32::MAX; self.l3.len()];
         let mut brick_new = vec![u32::MAX; self.pool.len()];
         let mut pool = BrickPool::new(self.channels);
         let mut l3 = Vec::new();
-        for (old, new) in l3_new.iter_mut().enumerate().filter(|(_, n)| **n != u32::MAX) {
+        for (old, new) in l3_new.iter_mut().enumerate().filter(|&(old, _)| used[old]) {
             let node = self.l3[old];
             let b = node.brick as usize;
             if brick_new[b] == u32::MAX {
@@ -696,7 +696,7 @@ impl Built {
                         // A root tile: every 128³ slot of the L1 region inside it.
                         let span = i64::from(*dim);
                         for s in 0..L1_SLOTS {
-                            let (x, y, z) = ((s >> 10) as i64 * 128, ((s >> 5) & 31) as i64 * 128, (s & 31) as i64 * 128);
+                            let [x, y, z] = nodes::slot_coords(s, L1_LOG2).map(|v| v as i64 * 128);
                             let w = [i64::from(lo.x) + x, i64::from(lo.y) + y, i64::from(lo.z) + z];
                             let o = [i64::from(o.x), i64::from(o.y), i64::from(o.z)];
                             if (0..3).all(|a| w[a] >= o[a] && w[a] < o[a] + span) {
@@ -729,9 +729,8 @@ impl Built {
             l1_occ.sort_unstable_by_key(|e| e.0);
             // The smallest node that holds every occupied slot; renumbering
             // the slots for it keeps their order.
-            let coords = |s: usize| [s >> (2 * L1_LOG2), (s >> L1_LOG2) & 31, s & 31];
-            let log2 = nodes::l1_log2_for(l1_occ.iter().flat_map(|e| coords(e.0)).max().unwrap_or(0) as u32);
-            let occ: Vec<(usize, u32)> = l1_occ.iter().map(|&(s, e)| (coords(s).iter().fold(0, |acc, &c| (acc << log2) | c), e)).collect();
+            let log2 = nodes::l1_log2_for(l1_occ.iter().flat_map(|e| nodes::slot_coords(e.0, L1_LOG2)).max().unwrap_or(0) as u32);
+            let occ: Vec<(usize, u32)> = l1_occ.iter().map(|&(s, e)| (nodes::slot_at(nodes::slot_coords(s, L1_LOG2), log2), e)).collect();
             let start = n.l1.len() as u32;
             let (id, new) = intern_node(&mut l1_table, &mut n.l1, &mut n.l1_entries, log2, &occ, |slots, first| nodes::l1_node_words(log2, slots, first))?;
             if new {

@@ -148,7 +148,6 @@ pub struct GpuAsset {
     atlases: Vec<Atlas>,
     /// Every tree, as the frames section lists them (`Metadata::tree_index`).
     frames: Vec<u32>,
-    frame_count: usize,
     /// The frames' and levels' layout (`Metadata::tree_index`, `missing_level`).
     meta: vdbcook_vpak::Metadata,
     /// Texture slots in use (the atlases of the planes bound).
@@ -387,7 +386,6 @@ impl Renderer {
             buffers,
             atlases,
             frames: c.frames.to_vec(),
-            frame_count: c.meta.frame_count as usize,
             meta: c.meta.clone(),
             slots: slots.len(),
             bound,
@@ -440,10 +438,7 @@ impl Renderer {
         if let Some(why) = asset.meta.missing_level(level) {
             return Err(Error::Level(why));
         }
-        if frame >= asset.frame_count {
-            return Err(Error::Frame { frame, count: asset.frame_count });
-        }
-        let l1 = *asset.meta.tree_index(frame, level).and_then(|t| asset.frames.get(t)).ok_or(Error::Frame { frame, count: asset.frame_count })?;
+        let l1 = *asset.meta.tree_index(frame, level).and_then(|t| asset.frames.get(t)).ok_or(Error::Frame { frame, count: asset.meta.frame_count as usize })?;
         if let Some(&c) = scene.channels.iter().find(|&&c| c != crate::NONE && !asset.bound.get(c as usize).copied().unwrap_or(false)) {
             return Err(Error::NotUploaded(c));
         }

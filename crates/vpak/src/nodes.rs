@@ -59,20 +59,27 @@ pub fn l1_node_words(log2: u32, occupied: &[usize], first: u32) -> Vec<u32> {
     w
 }
 
+/// The L1 node of an L1 array that starts at word `at`: its L and its words
+/// after L (`None` when L is out of range or the node is not whole).
+fn l1_node_at(words: &[u32], at: usize) -> Option<(u32, &[u32])> {
+    let log2 = *words.get(at)?;
+    if !(L1_MIN_LOG2..=L1_LOG2).contains(&log2) {
+        return None;
+    }
+    Some((log2, words.get(at + 1..at + l1_node_len(log2))?))
+}
+
 /// The word each L1 node of an L1 array starts at, in order; `None` when
 /// the array is not a sequence of whole nodes with L from 2 to 5.
 pub fn l1_records(words: &[u32]) -> Option<Vec<u32>> {
     let mut starts = Vec::new();
     let mut at = 0usize;
     while at < words.len() {
-        let log2 = words[at];
-        if !(L1_MIN_LOG2..=L1_LOG2).contains(&log2) {
-            return None;
-        }
+        let (log2, _) = l1_node_at(words, at)?;
         starts.push(u32::try_from(at).ok()?);
         at += l1_node_len(log2);
     }
-    (at == words.len()).then_some(starts)
+    Some(starts)
 }
 /// Words of one L3 node record (brick, sub-block states, first sub-mask).
 pub const L3_WORDS: usize = 3;
@@ -91,8 +98,18 @@ pub const L1_CHILD_DIM: i32 = 128;
 /// Slot of the asset-space coordinate `p` in a node of `2^log2` slots per axis of `2^child_log2` voxels.
 pub fn slot(p: [i32; 3], log2: u32, child_log2: u32) -> usize {
     let m = (1i32 << log2) - 1;
-    let [x, y, z] = p.map(|c| ((c >> child_log2) & m) as usize);
+    slot_at(p.map(|c| ((c >> child_log2) & m) as usize), log2)
+}
+
+/// Slot `(x << 2·log2) | (y << log2) | z` of slot coordinates (each below 2^`log2`).
+pub fn slot_at([x, y, z]: [usize; 3], log2: u32) -> usize {
     (x << (2 * log2)) | (y << log2) | z
+}
+
+/// The slot coordinates of slot `s` of a node of 2^`log2` slots per axis ([`slot_at`]'s inverse).
+pub fn slot_coords(s: usize, log2: u32) -> [usize; 3] {
+    let m = (1 << log2) - 1;
+    [(s >> (2 * log2)) & m, (s >> log2) & m, s & m]
 }
 
 /// Occupancy mask, prefix counts and first entry of a node with `slots` slots.
@@ -282,12 +299,7 @@ impl Nodes {
     /// The L1 node starting at word `at`: its log2 and its words after L
     /// (`None` when L is out of range or the node is not whole).
     pub fn l1_node(&self, at: u32) -> Option<(u32, &[u32])> {
-        let at = at as usize;
-        let log2 = *self.l1.get(at)?;
-        if !(L1_MIN_LOG2..=L1_LOG2).contains(&log2) {
-            return None;
-        }
-        Some((log2, self.l1.get(at + 1..at + l1_node_len(log2))?))
+        l1_node_at(&self.l1, at as usize)
     }
 
     /// What the L1 node starting at word `at` holds for the 128³ region at
@@ -297,8 +309,7 @@ impl Nodes {
         if c.iter().any(|&v| v >> log2 != 0) {
             return Slot::Empty;
         }
-        let s = ((c[0] << (2 * log2)) | (c[1] << log2) | c[2]) as usize;
-        lookup(node, &self.l1_entries, l1_mask_words(log2), s)
+        lookup(node, &self.l1_entries, l1_mask_words(log2), slot_at(c.map(|v| v as usize), log2))
     }
 
     /// Slot `s` of L2 node `id`.
@@ -341,7 +352,7 @@ impl Nodes {
         let mut tiles = Vec::new();
         let Some(&l1) = self.frames.get(tree) else { return Some((leaves, tiles)) };
         let Some((log2, node)) = self.l1_node(l1) else { return Some((leaves, tiles)) };
-        let (mask_words, axis) = (l1_mask_words(log2), (1usize << log2) - 1);
+        let mask_words = l1_mask_words(log2);
         let o = offset;
         let at = |base: [i32; 3], d: [i32; 3]| [base[0].wrapping_add(d[0]), base[1].wrapping_add(d[1]), base[2].wrapping_add(d[2])];
         for w in 0..mask_words {
@@ -349,13 +360,12 @@ impl Nodes {
             while bits != 0 {
                 let s1 = w * 32 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let xyz = [s1 >> (2 * log2), (s1 >> log2) & axis, s1 & axis];
-                let c1 = at(o, xyz.map(|v| v as i32 * 128));
+                let c1 = at(o, slot_coords(s1, log2).map(|v| v as i32 * 128));
                 match lookup(node, &self.l1_entries, mask_words, s1) {
                     Slot::Tile(t) => tiles.push((c1, 128, t)),
                     Slot::Child(l2) => {
                         for s2 in 0..L2_SLOTS {
-                            let c2 = at(c1, [((s2 >> 8) & 15) as i32 * 8, ((s2 >> 4) & 15) as i32 * 8, (s2 & 15) as i32 * 8]);
+                            let c2 = at(c1, slot_coords(s2, L2_LOG2).map(|v| v as i32 * 8));
                             match self.l2_slot(l2, s2) {
                                 Slot::Tile(t) => tiles.push((c2, 8, t)),
                                 Slot::Child(l3) => {
@@ -406,7 +416,10 @@ impl Nodes {
             n
         }
         for &r in roots {
-            if let Some((log2, node)) = self.l1_node(r).filter(|_| l1s.insert(r)) {
+            if !l1s.insert(r) {
+                continue;
+            }
+            if let Some((log2, node)) = self.l1_node(r) {
                 u.l1_words += l1_node_len(log2);
                 u.l1_entries += slots(node, &self.l1_entries, l1_mask_words(log2), &mut l2s, &mut tiles);
             }
