@@ -9,6 +9,7 @@ mod inputs;
 mod inspect;
 mod inspect_vpak;
 mod progress;
+mod recorded;
 mod unpack;
 mod validate;
 

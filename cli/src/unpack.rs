@@ -10,9 +10,10 @@ pub struct UnpackArgs {
     /// The asset.
     #[arg(value_name = "ASSET.vpak")]
     pub asset: PathBuf,
-    /// Frame to decode, counted from 0 in the asset's frame order.
+    /// Frame to decode, counted from 0 in the asset's frame order (may be left out when the
+    /// asset has one frame).
     #[arg(long, value_name = "N")]
-    pub frame: usize,
+    pub frame: Option<usize>,
     /// Level of detail to decode (0: the frame itself; k: voxels 2^k times as large, in the
     /// level's index space, with a transform to match). Default: the asset's finest level (0
     /// unless `cook --max-bytes` left finer ones out).
@@ -36,7 +37,12 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
     let asset = vdbcook_vpak::Asset::open(&args.asset).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
     let lod = args.lod.unwrap_or(meta.first_level);
-    let grids = vdbcook_cook::unpack_level(&asset, args.frame, lod).with_context(|| name.clone())?;
+    let frame = match (args.frame, meta.frame_count) {
+        (Some(f), _) => f,
+        (None, 1) => 0,
+        (None, n) => return Err(crate::Usage(format!("{name} has {n} frames: say which with --frame N (0 to {})", n.saturating_sub(1))).into()),
+    };
+    let grids = vdbcook_cook::unpack_level(&asset, frame, lod).with_context(|| name.clone())?;
     // Scalar channels become float grids; the x, y, z channels of a vec3 grid one vec3s grid again.
     let mut out: Vec<WriteGrid> = Vec::new();
     let mut done = vec![false; grids.len()];
@@ -70,7 +76,7 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
         });
         let what = if out.len() == 1 { "1 grid".to_string() } else { format!("{} grids", out.len()) };
         let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
-        crate::emit_final(&format!("wrote frame {}{level} of {} to {} ({what}, {voxels} active voxels, {leaves} leaves)\n", args.frame, name, args.output.display()))?;
+        crate::emit_final(&format!("wrote frame {}{level} of {} to {} ({what}, {voxels} active voxels, {leaves} leaves)\n", frame, name, args.output.display()))?;
     }
     Ok(exit::SUCCESS)
 }

@@ -15,6 +15,14 @@ use vdbcook_validate::{compare, flip, report, BcDecode, FlipMap, GpuAsset, Image
 use vdbcook_vpak::Asset;
 
 pub const AFTER_HELP: &str = "\
+Without --source, the source files the asset records are used (and the report says
+so): cook records each frame's file as it was named on its command line (a relative
+path is relative to the directory cook ran in), bake relative to the manifest's
+directory; a relative path is looked up in the current directory, then in the asset's.
+A recorded file that is missing here, or whose size or bytes differ from those
+recorded, is an error naming it: give the sources with --source. The asset may also
+come last: validate --source SRC... ASSET.vpak.
+
 The source frames are cooked again in memory, losslessly (f32, no clustering), and
 both assets are rendered by the same deterministic wgpu ray-marcher (emission and
 absorption, one directional light with shadow rays, hierarchical empty-space skipping;
@@ -43,15 +51,20 @@ A GPU is not required: Mesa's CPU Vulkan driver (Debian: mesa-vulkan-drivers) wo
 
 #[derive(clap::Args, Clone)]
 pub struct ValidateArgs {
-    /// The cooked asset.
+    /// The cooked asset (it may also come last, after --source's inputs).
     #[arg(value_name = "ASSET.vpak")]
-    pub asset: PathBuf,
+    pub asset: Option<PathBuf>,
     /// The source frames the asset was cooked from (files, directories, globs or patterns).
-    #[arg(long, required = true, num_args = 1.., value_name = "INPUT")]
+    /// Default: the source files the asset records (see below).
+    #[arg(long, num_args = 1.., value_name = "INPUT")]
     pub source: Vec<String>,
     /// Frames of a source frame pattern: A-B or A-B:STEP.
-    #[arg(long, value_name = "RANGE")]
+    #[arg(long, value_name = "RANGE", requires = "source")]
     pub source_frames: Option<FrameRange>,
+    /// The channel that gives extinction in the validation scene (default: `density`, else
+    /// the first scalar fog channel that is not a glow channel; see below).
+    #[arg(long, value_name = "NAME")]
+    pub extinction: Option<String>,
     /// Asset frames to render, counted from 0: A-B or A-B:STEP (default: all).
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<FrameRange>,
@@ -97,8 +110,9 @@ impl ValidateArgs {
     /// size): every level of an asset with levels of detail, the gate holding at each.
     pub fn of_cook(s: &vdbcook_bake::CookSettings, asset: PathBuf, source: Vec<String>, report: Option<PathBuf>, gpu: GpuArgs, json: bool) -> ValidateArgs {
         ValidateArgs {
-            asset,
+            asset: Some(asset),
             source,
+            extinction: None,
             source_frames: s.frames,
             frames: None,
             views: s.views,
@@ -157,10 +171,9 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
-/// Cooks the source frames losslessly in memory: the reference asset.
-fn reference(meta: &vdbcook_vpak::Metadata, source: &[String], frames: Option<FrameRange>, lod: u32, bars: &Bars) -> Result<Asset> {
-    let files = inputs::expand(source, frames)?;
-    let allow_missing = meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
+/// Cooks `files` losslessly in memory: the reference asset.
+fn reference(meta: &vdbcook_vpak::Metadata, files: Vec<PathBuf>, allow_missing: bool, lod: u32, bars: &Bars) -> Result<Asset> {
+    let allow_missing = allow_missing || meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
     crate::cook::cook_lossless_levels(files, crate::cook::selection_of(meta), allow_missing, lod + 1, bars).context("cooking the reference")
 }
 
@@ -242,9 +255,10 @@ pub fn gate(failure: &Option<String>) -> u8 {
 }
 
 /// Renders and compares; `quiet` hides progress bars.
-pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
-    let name = args.asset.display().to_string();
-    let asset = Asset::open(&args.asset).with_context(|| name.clone())?;
+pub fn evaluate(mut args: ValidateArgs, quiet: bool) -> Result<Outcome> {
+    let (path, source) = crate::recorded::asset_and_sources(args.asset.take(), std::mem::take(&mut args.source)).map_err(Usage)?;
+    let name = path.display().to_string();
+    let asset = Asset::open(&path).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
     let bars = Bars::new(quiet || args.json);
     let lod = args.lod.unwrap_or(meta.first_level);
@@ -253,8 +267,16 @@ pub fn evaluate(args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     }
     // One reference, filtered down to the coarsest level checked, serves every level.
     let coarsest = if args.every_lod { meta.stored_levels().end.saturating_sub(1) } else { lod };
-    let reference = reference(&meta, &args.source, args.source_frames, coarsest, &bars)?;
-    compare_assets(&asset, &name, &reference, &args, || args.gpu.renderer().map(Box::new), &bars)
+    let recorded = source.is_empty();
+    let files = if recorded { crate::recorded::frame_files(&meta, &path)? } else { inputs::expand(&source, args.source_frames)? };
+    let reference = reference(&meta, files.clone(), recorded, coarsest, &bars)?;
+    let mut o = compare_assets(&asset, &name, &reference, &args, || args.gpu.renderer().map(Box::new), &bars)?;
+    if recorded {
+        let read = files.iter().filter(|f| f.exists()).count();
+        o.text += &format!("  sources  the {read} file(s) the asset records (no --source given)\n");
+        o.doc["sources"] = json!({"recorded": true, "files": read});
+    }
+    Ok(o)
 }
 
 /// The two assets of a comparison, on the host and on the GPU.
@@ -679,6 +701,9 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     crate::refuse_existing(&args.output, args.force)?;
     if args.view >= args.views {
         return Err(Usage(format!("--view {} is out of range (0 to {})", args.view, args.views - 1)).into());
+    }
+    if !args.input.exists() {
+        return Err(anyhow!("{name}: no such file"));
     }
     let asset = if crate::inspect::is_vpak(&args.input) {
         Asset::open(&args.input).with_context(|| name.clone())?

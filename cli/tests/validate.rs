@@ -433,3 +433,80 @@ fn cook_validate_with_levels_gates_every_level() {
     assert!(text.contains("levels") && text.lines().filter(|l| l.trim_end().ends_with("FAIL")).count() == failing.len(), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn validate_without_source_uses_the_recorded_files() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = scratch("recorded");
+    let src = dir.join("src");
+    std::fs::create_dir_all(&src).unwrap();
+    for f in vdb_files(&root().join("fixtures/smoke_seq")) {
+        std::fs::copy(&f, src.join(f.file_name().unwrap())).unwrap();
+    }
+    let asset = dir.join("a.vpak");
+    ok(vdbcook(&["cook", "-q", "--format", "bc7", "-o", s(&asset), s(&src)]));
+    let small = ["--views", "1", "--size", "32x32", "--json"];
+    let run = |args: &[&str]| {
+        let r = vdbcook(&[&["validate"], args, &small[..]].concat());
+        (r.status.code(), serde_json::from_slice::<serde_json::Value>(&r.stdout).unwrap_or_default(), String::from_utf8_lossy(&r.stderr).into_owned())
+    };
+    // The recorded sources give the same figures as the sources named.
+    let (code, recorded, err) = run(&[s(&asset)]);
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(recorded["sources"]["recorded"], true, "{recorded}");
+    assert_eq!(recorded["sources"]["files"], 4);
+    // The order a user types: --source SRC ASSET.
+    let (code, named, err) = run(&["--source", s(&src), s(&asset)]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(named.get("sources").is_none());
+    assert_eq!(recorded["worst"], named["worst"]);
+    assert_eq!(recorded["voxel"], named["voxel"]);
+    // A source changed since the cook (same size, other bytes; then another size): named, exit 1.
+    let first = vdb_files(&src)[0].clone();
+    let bytes = std::fs::read(&first).unwrap();
+    let mut flipped = bytes.clone();
+    *flipped.last_mut().unwrap() ^= 1;
+    for changed in [flipped, [&bytes[..], b"x"].concat()] {
+        std::fs::write(&first, &changed).unwrap();
+        let (code, _, err) = run(&[s(&asset)]);
+        assert_eq!(code, Some(1), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(err.contains(s(&first)) && err.contains("changed since the cook") && err.contains("--source"), "{err}");
+    }
+    std::fs::write(&first, &bytes).unwrap();
+    // A recorded file that does not exist here (an asset cooked on another machine).
+    let moved = dir.join("moved");
+    std::fs::rename(&src, &moved).unwrap();
+    let (code, _, err) = run(&[s(&asset)]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains(s(&first)) && err.contains("does not exist here") && err.contains("--source"), "{err}");
+    let (code, _, err) = run(&["--source", s(&moved), s(&asset)]);
+    assert_eq!(code, Some(0), "{err}");
+    // No asset at all: a usage error.
+    let (code, _, err) = run(&["--source", s(&moved)]);
+    assert_eq!(code, Some(2), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn render_of_a_missing_asset_and_unpack_of_one_frame() {
+    let dir = scratch("missing");
+    let r = vdbcook(&["render", s(&dir.join("nothere.vpak")), "-o", s(&dir.join("x.png"))]);
+    assert_eq!(r.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("nothere.vpak: no such file") && !err.contains("allow-missing"), "{err}");
+    // One frame: no --frame needed; several: a usage error that says how many.
+    let one = dir.join("one.vpak");
+    ok(vdbcook(&["cook", "-q", "--format", "f16", "-o", s(&one), "fixtures/smoke_seq/smoke_0001.vdb"]));
+    ok(vdbcook(&["unpack", s(&one), "-o", s(&dir.join("one.vdb"))]));
+    assert!(dir.join("one.vdb").is_file());
+    let four = dir.join("four.vpak");
+    ok(vdbcook(&["cook", "-q", "--format", "f16", "-o", s(&four), "fixtures/smoke_seq"]));
+    let r = vdbcook(&["unpack", s(&four), "-o", s(&dir.join("four.vdb"))]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("4 frames"));
+    assert!(!dir.join("four.vdb").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

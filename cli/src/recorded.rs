@@ -1,0 +1,92 @@
+//! The source files an asset records: where `validate ASSET` finds them when
+//! no `--source` is given, and whether they still are what was cooked.
+//!
+//! `cook` records each frame's file as it was named (relative paths: to the
+//! directory cook ran in); `bake` records them relative to the manifest's
+//! directory when they are below it. A relative path is looked up in the
+//! current directory, then in the asset's directory.
+
+use anyhow::{anyhow, Result};
+use std::path::{Path, PathBuf};
+use vdbcook_vpak::Metadata;
+
+/// One path per frame of `meta`, in frame order. A frame cooked empty (a
+/// missing file with `--allow-missing`) gets a path that cannot exist, so the
+/// reference cook reads it as empty too (it is cooked with missing files allowed).
+pub fn frame_files(meta: &Metadata, asset: &Path) -> Result<Vec<PathBuf>> {
+    let name = asset.display();
+    let asset_dir = asset.parent().unwrap_or(Path::new(""));
+    let mut files = Vec::with_capacity(meta.frames.len());
+    for (f, frame) in meta.frames.iter().enumerate() {
+        let Some(i) = frame.source else {
+            // A NUL byte is in no file name: `exists()` is false on every system.
+            files.push(PathBuf::from(format!("\0empty frame {f}")));
+            continue;
+        };
+        let src = meta.sources.get(i as usize).ok_or_else(|| anyhow!("{name}: frame {f} names source {i}, but the asset records {}", meta.sources.len()))?;
+        let recorded = Path::new(&src.path);
+        let found = if recorded.is_absolute() { vec![recorded.to_path_buf()] } else { vec![recorded.to_path_buf(), asset_dir.join(recorded)] }.into_iter().find(|p| p.is_file());
+        let Some(path) = found else {
+            return Err(anyhow!(
+                "{name}: the recorded source of frame {f}, {}, does not exist here (relative paths are looked up in the current directory and the asset's); give the sources with --source",
+                src.path
+            ));
+        };
+        // The size first (free), then the bytes: a changed file is named before it is parsed.
+        let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+        if bytes != src.bytes || file_hash(&path).map_err(|e| anyhow!("{}: {e}", path.display()))? != src.xxh3_128 {
+            return Err(changed(&name.to_string(), &path));
+        }
+        files.push(path);
+    }
+    Ok(files)
+}
+
+/// XXH3-128 of a file's bytes, hex (as recorded), read in chunks.
+fn file_hash(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    let mut hasher = xxhash_rust::xxh3::Xxh3::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = file.read(&mut buf)?;
+        if n == 0 {
+            return Ok(format!("{:032x}", hasher.digest128()));
+        }
+        hasher.update(&buf[..n]);
+    }
+}
+
+fn changed(asset: &str, path: &Path) -> anyhow::Error {
+    anyhow!("{asset}: the recorded source {} changed since the cook (its bytes differ from those the asset records); cook again, or give the sources with --source", path.display())
+}
+
+/// The asset of `validate`: the positional one, or, as a user may type
+/// `validate --source SRC... ASSET`, the last of --source's values when it is an asset.
+pub fn asset_and_sources(asset: Option<PathBuf>, mut source: Vec<String>) -> Result<(PathBuf, Vec<String>), String> {
+    if let Some(a) = asset {
+        return Ok((a, source));
+    }
+    match source.last() {
+        Some(last) if last.ends_with(".vpak") || crate::inspect::is_vpak(Path::new(last)) => {
+            let a = source.pop().map(PathBuf::from).unwrap_or_default();
+            Ok((a, source))
+        }
+        _ => Err("the asset to validate is missing (usage: vdbcook validate ASSET.vpak [--source INPUT...])".into()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::asset_and_sources;
+    use std::path::PathBuf;
+
+    #[test]
+    fn the_asset_may_come_after_the_sources() {
+        let v = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(asset_and_sources(None, v(&["a.vdb", "x.vpak"])).unwrap(), (PathBuf::from("x.vpak"), v(&["a.vdb"])));
+        assert_eq!(asset_and_sources(Some("y.vpak".into()), v(&["a.vdb"])).unwrap(), (PathBuf::from("y.vpak"), v(&["a.vdb"])));
+        assert!(asset_and_sources(None, v(&["a.vdb"])).is_err());
+        assert!(asset_and_sources(None, vec![]).is_err());
+    }
+}
