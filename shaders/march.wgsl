@@ -13,9 +13,19 @@
 // the asset has them) add emission along the ray, temperature through a
 // blackbody-like ramp (black, red, orange, yellow, white as it rises) and
 // flames in a fixed orange, each normalised by its channel's largest value
-// (temperature weighted by its square, so only hot gas glows brightly). Smoke
-// (a density channel) scatters light; without one, flames or temperature give
-// extinction but do not scatter: fire absorbs and glows.
+// (temperature weighted by its square, so only hot gas glows brightly).
+// What the channel params.channels.x holds decides the model
+// (params.channels.w; the Rust side chooses it, see `Scene::model`):
+// - scatter (0): a fog, whatever its name, absorbs and scatters (albedo 1)
+//   against black;
+// - glow (1): no fog, so flames or temperature give extinction but do not
+//   scatter (fire absorbs and glows), in front of a neutral backdrop
+//   (`backdrop`, a function of the ray direction) that the absorption darkens;
+// - surface (2): a level set, drawn as an opaque lit surface at its first
+//   zero crossing along the ray (`surface`) against black.
+// Non-finite voxels (NaN, ±inf) count as empty: no extinction, no emission,
+// no surface. The override constants SURFACE and BACKDROP fold the other
+// models away, so a plain fog's march is what it was before they existed.
 // The image is RGB. No randomness: the image depends only on the data, so
 // two assets can be compared exactly.
 
@@ -30,7 +40,7 @@ struct Params {
     light: vec4<f32>,       // xyz: direction towards the light, w: density scale
     size: vec4<u32>,        // width, height, max steps, skip empty space (0/1)
     shadow: vec4<f32>,      // shadow grid cells along x, y, z (as floats), cell edge in voxels
-    channels: vec4<u32>,    // x: the channel that gives extinction; y, z: temperature, flames (or VPAK_NONE)
+    channels: vec4<u32>,    // x: the channel that gives extinction (the level set of a surface); y, z: temperature, flames (or VPAK_NONE); w: model
     emission: vec4<f32>,    // x, y: 1 / largest temperature, flames; z: emission per voxel at full scale; w: albedo
 }
 
@@ -45,6 +55,10 @@ override GLOWS: bool = true;
 override SLOT_X: u32 = 0xffffffffu;
 override SLOT_Y: u32 = 0xffffffffu;
 override SLOT_Z: u32 = 0xffffffffu;
+// The surface model: params.channels.x is a level set (see `surface`).
+override SURFACE: bool = false;
+// The glow model's backdrop behind the volume.
+override BACKDROP: bool = false;
 // RGB per pixel, row-major from the top.
 @group(0) @binding(9) var<storage, read_write> image: array<f32>;
 // Optical depth towards the light at each shadow cell centre, x fastest.
@@ -116,11 +130,22 @@ fn shadow_depth(o: vec3<f32>) -> f32 {
             t += cell_exit(p, d, f32(q.empty_dim)) + 0.5 * step;
             continue;
         }
-        depth += max(q.value, 0.0) * params.light.w * step;
+        depth += finite_positive(q.value) * params.light.w * step;
         t += step;
         step *= 1.25;
     }
     return depth;
+}
+
+// Whether `v` is finite (by its exponent bits: compilers may assume that
+// floating-point comparisons never see NaN or infinity).
+fn is_finite(v: f32) -> bool {
+    return (bitcast<u32>(v) & 0x7f800000u) != 0x7f800000u;
+}
+
+// `v` when it is positive and finite, else 0.
+fn finite_positive(v: f32) -> f32 {
+    return select(0.0, v, v > 0.0 && is_finite(v));
 }
 
 // Blackbody-like colour of a normalised temperature t in [0, 1]: red first,
@@ -155,14 +180,149 @@ fn cell_value(leaf: VpakLeaf, bc: VpakBrickChannel, on: bool, ip: vec3<i32>, c: 
 fn emission(t_raw: f32, f_raw: f32) -> vec3<f32> {
     var e = vec3<f32>(0.0);
     if (params.channels.y != VPAK_NONE) {
-        let t = clamp(t_raw * params.emission.x, 0.0, 1.0);
+        let t = clamp(finite_positive(t_raw) * params.emission.x, 0.0, 1.0);
         e += fire_ramp(t) * t * t;
     }
     if (params.channels.z != VPAK_NONE) {
-        let f = clamp(f_raw * params.emission.y, 0.0, 1.0);
+        let f = clamp(finite_positive(f_raw) * params.emission.y, 0.0, 1.0);
         e += vec3<f32>(1.0, 0.55, 0.15) * f;
     }
     return e * params.emission.z;
+}
+
+// The backdrop of the glow model along the ray direction `d`: a neutral
+// grey, lighter upwards, with a soft checker (smooth, so rounding never
+// flips a cell between the GPU and the CPU twin).
+fn backdrop(d: vec3<f32>) -> vec3<f32> {
+    let base = 0.2 + 0.1 * d.y;
+    let checker = sin(10.0 * d.x) * sin(10.0 * d.y) * sin(10.0 * d.z);
+    return vec3<f32>(base * (1.0 + 0.5 * checker));
+}
+
+// `v` when it is finite, else `bg`.
+fn finite_or(v: f32, bg: f32) -> f32 {
+    return select(bg, v, is_finite(v));
+}
+
+// The level set (params.channels.x) at `p` (level-0 asset coordinates):
+// trilinear between the centres of the drawn level's voxels, inactive and
+// non-finite voxels reading the background (positive: outside).
+fn ls_field(p: vec3<f32>) -> f32 {
+    let c = params.channels.x;
+    let bg = vpak_background(c);
+    let q = p / f32(1u << params.info.level) - vec3<f32>(0.5);
+    let i0 = vec3<i32>(floor(q));
+    let w = q - floor(q);
+    var acc = 0.0;
+    for (var k = 0; k < 8; k += 1) {
+        let sel = vec3<bool>((k & 1) != 0, (k & 2) != 0, (k & 4) != 0);
+        let ip = select(i0, i0 + vec3<i32>(1), sel);
+        let leaf = vpak_leaf(params.info, ip);
+        var v = bg;
+        if (vpak_leaf_active(leaf, ip)) {
+            v = finite_or(vpak_active_value(params.info, leaf, ip, c), bg);
+        }
+        let wk = select(vec3<f32>(1.0) - w, w, sel);
+        acc += v * wk.x * wk.y * wk.z;
+    }
+    return acc;
+}
+
+// How far along `d` the point `p` stays inside the cube of edge `dim` that
+// contains it, shrunk by `m` on every side; 0 when `p` is not inside that.
+fn inset_exit(p: vec3<f32>, d: vec3<f32>, dim: f32, m: f32) -> f32 {
+    let lo = floor(p / dim) * dim + vec3<f32>(m);
+    let hi = lo + vec3<f32>(dim - 2.0 * m);
+    if (any(p < lo) || any(p > hi)) {
+        return 0.0;
+    }
+    let inv = 1.0 / d;
+    let t = max((lo - p) * inv, (hi - p) * inv);
+    return min(min(t.x, t.y), t.z);
+}
+
+// The surface model: the first place along the ray where the level set goes
+// from positive to not positive (marched on the same lattice as the fog,
+// the crossing bracketed between two samples and refined by four bisection
+// steps and a final linear interpolation), shaded with the normal of the
+// field's central-difference gradient, the scene's light and ambient light,
+// at a fixed albedo. Empty regions (the background, positive when size.w is
+// 1) are skipped where the trilinear field cannot leave the background: more
+// than one of the level's voxels inside them.
+fn surface(o: vec3<f32>, d: vec3<f32>, hit: vec2<f32>) -> vec3<f32> {
+    if (hit.x >= hit.y) {
+        return vec3<f32>(0.0);
+    }
+    let step = params.box_min.w;
+    let voxel = f32(1u << params.info.level);
+    let bg = vpak_background(params.channels.x);
+    var t_prev = hit.x;
+    var v_prev = ls_field(o + d * hit.x);
+    var t_hit = -1.0;
+    if (v_prev <= 0.0) {
+        t_hit = hit.x;
+    }
+    var k = 0.5;
+    var n = 0u;
+    loop {
+        let t = hit.x + k * step;
+        if (t_hit >= 0.0 || t >= hit.y || n >= params.size.z) { break; }
+        n += 1u;
+        let p = o + d * t;
+        if (params.size.w == 1u) {
+            let leaf = vpak_leaf(params.info, vpak_level_point(params.info, vec3<i32>(floor(p))));
+            if (leaf.empty_dim > 0u) {
+                let deep = inset_exit(p, d, f32(leaf.empty_dim << params.info.level), voxel);
+                if (deep > 0.0) {
+                    // Every lattice point before t + deep reads the background.
+                    let next = max(k + 1.0, ceil((t + deep - hit.x) / step - 0.5) + 0.5);
+                    t_prev = hit.x + (next - 1.0) * step;
+                    v_prev = bg;
+                    k = next;
+                    continue;
+                }
+            }
+        }
+        let v = ls_field(p);
+        if (v_prev > 0.0 && v <= 0.0) {
+            var a = t_prev;
+            var va = v_prev;
+            var b = t;
+            var vb = v;
+            for (var i = 0; i < 4; i += 1) {
+                let m = 0.5 * (a + b);
+                let vm = ls_field(o + d * m);
+                if (vm > 0.0) {
+                    a = m;
+                    va = vm;
+                } else {
+                    b = m;
+                    vb = vm;
+                }
+            }
+            t_hit = a + (b - a) * (va / (va - vb));
+        }
+        t_prev = t;
+        v_prev = v;
+        k += 1.0;
+    }
+    if (t_hit < 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let p = o + d * t_hit;
+    let h = voxel;
+    let g = vec3<f32>(
+        ls_field(p + vec3<f32>(h, 0.0, 0.0)) - ls_field(p - vec3<f32>(h, 0.0, 0.0)),
+        ls_field(p + vec3<f32>(0.0, h, 0.0)) - ls_field(p - vec3<f32>(0.0, h, 0.0)),
+        ls_field(p + vec3<f32>(0.0, 0.0, h)) - ls_field(p - vec3<f32>(0.0, 0.0, h)),
+    );
+    let len = length(g);
+    var normal = -d;
+    if (len > 0.0) {
+        normal = g / len;
+    }
+    let lit = max(dot(normal, params.light.xyz), 0.0);
+    return vec3<f32>(0.8 * (0.25 + 0.75 * lit));
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -178,9 +338,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let o = params.eye.xyz;
     let hit = box_hit(o, d, params.box_min.xyz, params.box_max.xyz);
     var radiance = vec3<f32>(0.0);
-    if (hit.x < hit.y) {
+    var trans = 1.0;
+    if (SURFACE) {
+        radiance = surface(o, d, hit);
+    } else if (hit.x < hit.y) {
         let step = params.box_min.w;
-        var trans = 1.0;
         var k = 0.5;
         var n = 0u;
         var cell = vec3<i32>(-1 << 30);
@@ -230,7 +392,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 radiance += trans * emission(t, f) * step;
             }
             let e = cell_value(leaf, in_slot(ext, SLOT_X), on, ip, params.channels.x, bg.x);
-            let sigma = max(e, 0.0) * params.light.w;
+            let sigma = finite_positive(e) * params.light.w;
             if (sigma > 0.0) {
                 let a = 1.0 - exp(-sigma * step);
                 let lit = 0.25 + 0.75 * exp(-shadow_at(p));
@@ -239,6 +401,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             k += 1.0;
         }
+    }
+    if (BACKDROP) {
+        radiance += trans * backdrop(d);
     }
     let pixel = 3u * (gid.y * w + gid.x);
     image[pixel] = radiance.x;

@@ -2,7 +2,8 @@
 //! `shaders/vpak.wgsl` and `shaders/march.wgsl`; BC4/BC7 blocks are decoded by
 //! bcdec_rs (BC4 in float, as `shaders/bcdec.wgsl`).
 
-use crate::{AssetData, Error, Image, Scene, View};
+use crate::scene::{backdrop, ray_dir};
+use crate::{AssetData, Error, Image, Model, Scene, View};
 use vdbcook_vpak::{Asset, GpuChannel};
 
 struct Sampler<'a> {
@@ -206,6 +207,117 @@ fn at(o: [f32; 3], d: [f32; 3], t: f32) -> [f32; 3] {
     [o[0] + d[0] * t, o[1] + d[1] * t, o[2] + d[2] * t]
 }
 
+/// `v` when it is positive and finite, else 0 (`finite_positive`).
+fn finite_positive(v: f32) -> f32 {
+    if v > 0.0 && v.is_finite() {
+        v
+    } else {
+        0.0
+    }
+}
+
+/// As `inset_exit` in march.wgsl.
+fn inset_exit(p: [f32; 3], d: [f32; 3], dim: f32, m: f32) -> f32 {
+    let lo = p.map(|c| (c / dim).floor() * dim + m);
+    let hi = lo.map(|l| l + (dim - 2.0 * m));
+    if (0..3).any(|a| p[a] < lo[a] || p[a] > hi[a]) {
+        return 0.0;
+    }
+    let mut t = f32::INFINITY;
+    for a in 0..3 {
+        let inv = 1.0 / d[a];
+        t = t.min(((lo[a] - p[a]) * inv).max((hi[a] - p[a]) * inv));
+    }
+    t
+}
+
+/// The level set `c` at `p` (level-0 coordinates), as `ls_field`.
+fn ls_field(s: &Sampler, c: usize, bg: f32, p: [f32; 3]) -> f32 {
+    let scale = (1u32 << s.level) as f32;
+    let q = p.map(|v| v / scale - 0.5);
+    let i0 = q.map(|v| v.floor() as i32);
+    let w = [0, 1, 2].map(|a| q[a] - q[a].floor());
+    let mut acc = 0.0f32;
+    for k in 0..8 {
+        let sel = [k & 1 != 0, k & 2 != 0, k & 4 != 0];
+        let ip = [0, 1, 2].map(|a| i0[a] + i32::from(sel[a]));
+        let v = s.query_level(ip, c).0;
+        let v = if v.is_finite() { v } else { bg };
+        let wk = [0, 1, 2].map(|a| if sel[a] { w[a] } else { 1.0 - w[a] });
+        acc += v * wk[0] * wk[1] * wk[2];
+    }
+    acc
+}
+
+/// The surface model's colour along the ray `o` + t `d` through the box
+/// from `t0` to `t1`, as `surface` in march.wgsl.
+fn surface(s: &Sampler, scene: &Scene, skip: bool, o: [f32; 3], d: [f32; 3], (t0, t1): (f32, f32)) -> f32 {
+    if t0 >= t1 {
+        return 0.0;
+    }
+    let c = scene.channels[0] as usize;
+    let bg = s.table.get(c).map_or(0.0, |ch| f32::from_bits(ch.background));
+    let field = |p: [f32; 3]| ls_field(s, c, bg, p);
+    let step = scene.step;
+    let voxel = (1u32 << s.level) as f32;
+    let (mut t_prev, mut v_prev) = (t0, field(at(o, d, t0)));
+    let mut t_hit = if v_prev <= 0.0 { t0 } else { -1.0 };
+    let (mut k, mut n) = (0.5f32, 0u32);
+    loop {
+        let t = t0 + k * step;
+        if t_hit >= 0.0 || t >= t1 || n >= scene.max_steps {
+            break;
+        }
+        n += 1;
+        let p = at(o, d, t);
+        if skip {
+            let (_, empty) = s.query(p.map(|v| v.floor() as i32), c);
+            if empty > 0 {
+                let deep = inset_exit(p, d, empty as f32, voxel);
+                if deep > 0.0 {
+                    let next = (k + 1.0).max(((t + deep - t0) / step - 0.5).ceil() + 0.5);
+                    t_prev = t0 + (next - 1.0) * step;
+                    v_prev = bg;
+                    k = next;
+                    continue;
+                }
+            }
+        }
+        let v = field(p);
+        if v_prev > 0.0 && v <= 0.0 {
+            let (mut a, mut va, mut b, mut vb) = (t_prev, v_prev, t, v);
+            for _ in 0..4 {
+                let m = 0.5 * (a + b);
+                let vm = field(at(o, d, m));
+                if vm > 0.0 {
+                    (a, va) = (m, vm);
+                } else {
+                    (b, vb) = (m, vm);
+                }
+            }
+            t_hit = a + (b - a) * (va / (va - vb));
+        }
+        (t_prev, v_prev) = (t, v);
+        k += 1.0;
+    }
+    if t_hit < 0.0 {
+        return 0.0;
+    }
+    let p = at(o, d, t_hit);
+    let h = voxel;
+    let diff = |a: usize| {
+        let (mut hi, mut lo) = (p, p);
+        hi[a] += h;
+        lo[a] -= h;
+        field(hi) - field(lo)
+    };
+    let g = [diff(0), diff(1), diff(2)];
+    let len = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+    let normal = if len > 0.0 { g.map(|v| v / len) } else { d.map(|v| -v) };
+    let lit = (normal[0] * scene.light[0] + normal[1] * scene.light[1] + normal[2] * scene.light[2]).max(0.0);
+    0.8 * (0.25 + 0.75 * lit)
+}
+
 /// Renders like the GPU path (the asset's first stored level).
 pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width: u32, height: u32) -> Result<Image, Error> {
     render_cpu_level(asset, scene, frame, asset.metadata()?.first_level, view, width, height)
@@ -216,11 +328,11 @@ pub fn render_cpu_level(asset: &Asset, scene: &Scene, frame: usize, level: u32, 
     let d = AssetData::new(asset)?;
     let l1 = d.tree_l1(frame, level)?;
     let ext = scene.channels[0] as usize;
-    let skip = d.meta().channels.get(ext).is_some_and(|c| c.background == 0.0);
+    let model = scene.model();
+    let skip = d.meta().channels.get(ext).is_some_and(|c| if model == Model::Surface { c.background > 0.0 } else { c.background == 0.0 });
     let s = Sampler::new(d, l1, level);
-    let (r, u, f) = view.basis();
+    let basis = view.basis();
     let tf = (view.fov_deg.to_radians() * 0.5).tan();
-    let aspect = width as f32 / height as f32;
     let shadow = |o: [f32; 3]| -> f32 {
         let dl = scene.light;
         let (_, t1) = box_hit(o, dl, scene.box_min, scene.box_max);
@@ -237,17 +349,17 @@ pub fn render_cpu_level(asset: &Asset, scene: &Scene, frame: usize, level: u32, 
                 t += cell_exit(p, dl, empty as f32) + 0.5 * step;
                 continue;
             }
-            depth += v.max(0.0) * scene.density_scale * step;
+            depth += finite_positive(v) * scene.density_scale * step;
             t += step;
             step *= 1.25;
         }
         depth
     };
-    // The shadow grid, as `shadow_main`.
+    // The shadow grid, as `shadow_main` (only scattered light reads it).
     let g = scene.shadow_grid();
     let cell = scene.shadow_cell;
-    let mut grid = vec![0.0f32; (g[0] * g[1] * g[2]) as usize];
-    for (i, v) in grid.iter_mut().enumerate() {
+    let mut grid = vec![0.0f32; if model == Model::Scatter { (g[0] * g[1] * g[2]) as usize } else { 1 }];
+    for (i, v) in grid.iter_mut().enumerate().filter(|_| model == Model::Scatter) {
         let i = i as u32;
         let c = [i % g[0], (i / g[0]) % g[1], i / (g[0] * g[1])];
         *v = shadow([0, 1, 2].map(|a| scene.box_min[a] + (c[a] as f32 + 0.5) * cell));
@@ -262,7 +374,7 @@ pub fn render_cpu_level(asset: &Asset, scene: &Scene, frame: usize, level: u32, 
             let sel = [k & 1 != 0, k & 2 != 0, k & 4 != 0];
             let c = [0, 1, 2].map(|a| if sel[a] { i1[a] } else { i0[a] });
             let wk = [0, 1, 2].map(|a| if sel[a] { w[a] } else { 1.0 - w[a] });
-            acc += grid[((c[2] * g[1] + c[1]) * g[0] + c[0]) as usize] * wk[0] * wk[1] * wk[2];
+            acc += grid.get(((c[2] * g[1] + c[1]) * g[0] + c[0]) as usize).copied().unwrap_or(0.0) * wk[0] * wk[1] * wk[2];
         }
         acc
     };
@@ -271,14 +383,14 @@ pub fn render_cpu_level(asset: &Asset, scene: &Scene, frame: usize, level: u32, 
     let emission = |p: [i32; 3]| -> [f32; 3] {
         let mut e = [0.0f32; 3];
         if temperature != crate::NONE {
-            let t = (s.query(p, temperature as usize).0 * scene.emission[0]).clamp(0.0, 1.0);
+            let t = (finite_positive(s.query(p, temperature as usize).0) * scene.emission[0]).clamp(0.0, 1.0);
             let ramp = [3.0 * t, 3.0 * t - 1.0, 3.0 * t - 2.0].map(|c| c.clamp(0.0, 1.0));
             for (e, r) in e.iter_mut().zip(ramp) {
                 *e += r * t * t;
             }
         }
         if flames != crate::NONE {
-            let f = (s.query(p, flames as usize).0 * scene.emission[1]).clamp(0.0, 1.0);
+            let f = (finite_positive(s.query(p, flames as usize).0) * scene.emission[1]).clamp(0.0, 1.0);
             for (e, c) in e.iter_mut().zip([1.0, 0.55, 0.15]) {
                 *e += c * f;
             }
@@ -288,15 +400,14 @@ pub fn render_cpu_level(asset: &Asset, scene: &Scene, frame: usize, level: u32, 
     let mut pixels = vec![0.0f32; (width * height * 3) as usize];
     for y in 0..height {
         for x in 0..width {
-            let px = (x as f32 + 0.5) / width as f32 * 2.0 - 1.0;
-            let py = 1.0 - (y as f32 + 0.5) / height as f32 * 2.0;
-            let dir = [0, 1, 2].map(|a| f[a] + r[a] * (px * tf * aspect) + u[a] * (py * tf));
-            let l = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
-            let dir = dir.map(|c| c / l);
+            let dir = ray_dir(basis, tf, x, y, width, height);
             let (t0, t1) = box_hit(view.eye, dir, scene.box_min, scene.box_max);
             let mut radiance = [0.0f32; 3];
-            if t0 < t1 {
-                let (mut trans, mut k, mut n) = (1.0f32, 0.5f32, 0u32);
+            let mut trans = 1.0f32;
+            if model == Model::Surface {
+                radiance = [surface(&s, scene, skip, view.eye, dir, (t0, t1)); 3];
+            } else if t0 < t1 {
+                let (mut k, mut n) = (0.5f32, 0u32);
                 loop {
                     let t = t0 + k * scene.step;
                     if t >= t1 || n >= scene.max_steps || trans < 1e-3 {
@@ -314,7 +425,7 @@ pub fn render_cpu_level(asset: &Asset, scene: &Scene, frame: usize, level: u32, 
                     for (r, e) in radiance.iter_mut().zip(emission(ip)) {
                         *r += trans * e * scene.step;
                     }
-                    let sigma = v.max(0.0) * scene.density_scale;
+                    let sigma = finite_positive(v) * scene.density_scale;
                     if sigma > 0.0 {
                         let a = 1.0 - (-sigma * scene.step).exp();
                         let lit = 0.25 + 0.75 * (-shadow_at(p)).exp();
@@ -324,6 +435,12 @@ pub fn render_cpu_level(asset: &Asset, scene: &Scene, frame: usize, level: u32, 
                         trans *= 1.0 - a;
                     }
                     k += 1.0;
+                }
+            }
+            if scene.has_backdrop() {
+                let b = backdrop(dir);
+                for r in radiance.iter_mut() {
+                    *r += trans * b;
                 }
             }
             pixels[(3 * (y * width + x)) as usize..][..3].copy_from_slice(&radiance);

@@ -1,6 +1,6 @@
 //! The wgpu side: device, pipeline, asset upload, one dispatch per image.
 
-use crate::{AssetData, Error, Image, Scene, View};
+use crate::{AssetData, Error, Image, Model, Scene, View};
 use vdbcook_vpak::{Asset, GpuChannel};
 use wgpu::util::DeviceExt;
 
@@ -67,8 +67,9 @@ const TABLE_BINDING: u32 = 19;
 /// Storage buffers of the asset, in the order `GpuAsset::buffers` holds them.
 const BUFFER_BINDINGS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, CHANNEL_BINDING, TABLE_BINDING];
 
-/// A pipeline's entry point and override constants: several textures, emission, the shown channels' known slots.
-type PipelineKey = (&'static str, bool, bool, [u32; 3]);
+/// A pipeline's entry point and override constants: several textures,
+/// emission, the shown channels' known slots, the surface model, the backdrop.
+type PipelineKey = (&'static str, bool, bool, [u32; 3], bool, bool);
 
 /// The bind group layout and the pipelines of one shader, each made on first
 /// use for its entry point and the override constants that fold branches
@@ -93,12 +94,14 @@ impl Pipelines {
         Pipelines { layout, module, pipeline_layout, made: Default::default() }
     }
 
-    /// The pipeline of `entry` for several textures (`multi`) or one, with
-    /// emission (`glows`) or without, with the shown channels' texture slots
-    /// where known (`slots`, `NONE` where not).
-    fn get(&self, device: &wgpu::Device, entry: &'static str, multi: bool, glows: bool, slots: [u32; 3]) -> wgpu::ComputePipeline {
+    /// The pipeline of `key`: `entry` for several textures (`multi`) or one,
+    /// with emission (`glows`) or without, with the shown channels' texture
+    /// slots where known (`slots`, `NONE` where not), for the surface model
+    /// or not, with the backdrop or not.
+    fn get(&self, device: &wgpu::Device, key: PipelineKey) -> wgpu::ComputePipeline {
+        let (entry, multi, glows, slots, surface, backdrop) = key;
         let mut made = self.made.lock().unwrap_or_else(|e| e.into_inner());
-        made.entry((entry, multi, glows, slots))
+        made.entry(key)
             .or_insert_with(|| {
                 let flag = |b: bool| if b { 1.0 } else { 0.0 };
                 let [x, y, z] = slots.map(f64::from);
@@ -108,7 +111,7 @@ impl Pipelines {
                     module: &self.module,
                     entry_point: Some(entry),
                     compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &[("VPAK_MULTI_ATLAS", flag(multi)), ("GLOWS", flag(glows)), ("SLOT_X", x), ("SLOT_Y", y), ("SLOT_Z", z)],
+                        constants: &[("VPAK_MULTI_ATLAS", flag(multi)), ("GLOWS", flag(glows)), ("SLOT_X", x), ("SLOT_Y", y), ("SLOT_Z", z), ("SURFACE", flag(surface)), ("BACKDROP", flag(backdrop))],
                         ..Default::default()
                     },
                     cache: None,
@@ -256,16 +259,28 @@ impl Renderer {
         self.bc.textures
     }
 
-    /// Uploads an asset's node arrays, brick ranges and atlases.
+    /// Uploads an asset's node arrays, brick ranges and atlases, binding the
+    /// planes of the channels its own scene ([`Scene::for_asset`]) shows.
     pub fn upload(&self, asset: &Asset) -> Result<GpuAsset, Error> {
+        self.upload_scene(asset, None)
+    }
+
+    /// [`Renderer::upload`], binding the planes of the channels `scene` shows
+    /// (a scene of this asset, or of one with the same channels).
+    pub fn upload_for(&self, asset: &Asset, scene: &Scene) -> Result<GpuAsset, Error> {
+        self.upload_scene(asset, Some(scene))
+    }
+
+    fn upload_scene(&self, asset: &Asset, scene: Option<&Scene>) -> Result<GpuAsset, Error> {
         let d = AssetData::new(asset)?;
+        let scene = scene.copied().unwrap_or_else(|| Scene::for_asset(d.meta()));
         let limits = self.device.limits();
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         // Out-of-memory and validation errors of the uploads come back here
         // instead of reaching wgpu's default handler (which panics).
         let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let uploaded = self.upload_in_scope(&d, limit);
+        let uploaded = self.upload_in_scope(&d, &scene, limit);
         let errors = [pollster::block_on(scope.pop()), pollster::block_on(oom.pop())];
         if let Some(e) = errors.into_iter().flatten().next() {
             return Err(Error::Gpu(e.to_string()));
@@ -273,7 +288,7 @@ impl Renderer {
         uploaded
     }
 
-    fn upload_in_scope(&self, d: &AssetData, limit: u64) -> Result<GpuAsset, Error> {
+    fn upload_in_scope(&self, d: &AssetData, scene: &Scene, limit: u64) -> Result<GpuAsset, Error> {
         let buffer = |what: &'static str, data: &[u8]| -> Result<wgpu::Buffer, Error> {
             if data.len() as u64 > limit {
                 return Err(Error::TooLarge { what, bytes: data.len() as u64, limit });
@@ -290,10 +305,10 @@ impl Renderer {
         };
         let c = &d.c;
         let meta = &c.meta;
-        // Bind the atlases of the planes holding the channels the asset's
-        // scene shows (an asset may have more planes than a shader can bind),
-        // and point those channels at their slots.
-        let mut planes: Vec<usize> = Scene::for_asset(meta).channels.iter().filter(|&&ch| ch != crate::NONE).flat_map(|&ch| meta.channel_planes(ch as usize)).map(|p| p as usize).collect();
+        // Bind the atlases of the planes holding the channels the scene shows
+        // (an asset may have more planes than a shader can bind), and point
+        // those channels at their slots.
+        let mut planes: Vec<usize> = scene.channels.iter().filter(|&&ch| ch != crate::NONE).flat_map(|&ch| meta.channel_planes(ch as usize)).map(|p| p as usize).collect();
         planes.sort_unstable();
         planes.dedup();
         let mut slot_of_plane = vec![u32::MAX; meta.planes.len()];
@@ -414,12 +429,14 @@ impl Renderer {
         v4(&mut p, scene.box_min, scene.step);
         v4(&mut p, scene.box_max, scene.shadow_step);
         v4(&mut p, scene.light, scene.density_scale);
-        // Skipping empty space is exact only when empty space is zero.
-        let skip = asset.backgrounds.get(scene.channels[0] as usize).is_some_and(|&b| b == 0.0);
+        // Skipping empty space is exact only when empty space is zero (a
+        // fog) or positive (outside a level set's surface).
+        let bg = asset.backgrounds.get(scene.channels[0] as usize).copied();
+        let skip = bg.is_some_and(|b| if scene.model() == Model::Surface { b > 0.0 } else { b == 0.0 });
         p.extend([width, height, scene.max_steps, u32::from(skip)]);
         v4(&mut p, scene.shadow_grid().map(|g| g as f32), scene.shadow_cell);
         p.extend(scene.channels);
-        p.push(0);
+        p.push(scene.model().code());
         let [t, f, e, albedo] = scene.emission;
         v4(&mut p, [t, f, e], albedo);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("params"), contents: bytemuck::cast_slice(&p), usage: wgpu::BufferUsages::UNIFORM })
@@ -480,8 +497,11 @@ impl Renderer {
                 let multi = asset.slots > 1;
                 let glows = scene.channels[1] != crate::NONE || scene.channels[2] != crate::NONE;
                 let known = scene.channels.map(|c| asset.single_slot.get(c as usize).copied().unwrap_or(crate::NONE));
-                let (march, shadow_pipeline) = (pipelines.get(&self.device, "main", multi, glows, known), pipelines.get(&self.device, "shadow_main", multi, false, [crate::NONE; 3]));
-                if i == 0 {
+                let (surface, backdrop) = (scene.model() == Model::Surface, scene.has_backdrop());
+                let march = pipelines.get(&self.device, ("main", multi, glows, known, surface, backdrop));
+                // Only scattered light reads the shadow grid.
+                if i == 0 && scene.model() == Model::Scatter {
+                    let shadow_pipeline = pipelines.get(&self.device, ("shadow_main", multi, false, [crate::NONE; 3], false, false));
                     pass.set_pipeline(&shadow_pipeline);
                     pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);
                 }

@@ -11,10 +11,12 @@ mod cpu;
 pub mod flip;
 mod gpu;
 pub mod report;
+mod scene;
 
 pub use cpu::{render_cpu, render_cpu_level};
 pub use flip::{flip, FlipMap};
 pub use gpu::{shader_sources, BcDecode, GpuAsset, Renderer};
+pub use scene::{coverage, Model};
 
 use vdbcook_vpak::{Asset, Checked, Metadata};
 
@@ -47,6 +49,9 @@ pub enum Error {
     Asset(#[from] vdbcook_vpak::Error),
     #[error("{0}")]
     Flip(String),
+    /// `--extinction` (manifest key `extinction`) names a channel the asset lacks.
+    #[error("the asset has no channel \"{name}\" to give extinction (its channels: {channels})")]
+    Extinction { name: String, channels: String },
 }
 
 /// Atlas textures the renderer binds (those of the planes holding the channels a render shows).
@@ -54,18 +59,15 @@ pub const MAX_TEXTURES: usize = 8;
 
 /// No channel (`VPAK_NONE` in the shaders).
 pub const NONE: u32 = u32::MAX;
-const TEMPERATURE: [&str; 2] = ["temperature", "heat"];
-const FLAMES: [&str; 2] = ["flames", "flame"];
+use scene::{find, FLAMES, TEMPERATURE};
 
-fn find(meta: &Metadata, names: &[&str]) -> Option<usize> {
-    meta.channels.iter().position(|c| names.contains(&c.name.as_str()))
-}
-
-/// The channel that gives extinction in the validation render: `density`;
-/// without one, `flames` (or `flame`), else `temperature` (or `heat`), else
-/// the first channel.
+/// The channel the validation render shows ([`Scene::shown`] of
+/// [`Scene::for_asset`]): `density`; else the first scalar fog volume (or
+/// unknown-class) channel that does not glow; else the first scalar level
+/// set; else `flames` (or `flame`), else `temperature` (or `heat`); else the
+/// first channel.
 pub fn extinction_channel(meta: &Metadata) -> usize {
-    find(meta, &["density"]).or_else(|| find(meta, &FLAMES)).or_else(|| find(meta, &TEMPERATURE)).unwrap_or(0)
+    scene::choose_default(meta).0
 }
 
 /// The channels that glow in the validation render: (temperature, flames).
@@ -97,13 +99,16 @@ pub struct Scene {
     pub max_steps: u32,
     /// Edge of a shadow-grid cell in voxels.
     pub shadow_cell: f32,
-    /// Channels: extinction, temperature, flames ([`NONE`] when absent).
+    /// Channels: extinction (or the level set of the surface model),
+    /// temperature, flames ([`NONE`] when absent or not drawn).
     pub channels: [u32; 3],
     /// 1 / the largest temperature and flames value, the light emitted per
     /// voxel of path at full scale, and the albedo of the extinguishing
-    /// medium (1 for smoke; 0 when flames or temperature stand in for a
-    /// missing density: fire absorbs and glows, it does not scatter).
+    /// medium (1 when it scatters; 0 in the glow model, where flames or
+    /// temperature stand in for a missing fog: fire absorbs and glows).
     pub emission: [f32; 4],
+    /// How `channels[0]` is drawn.
+    model: Model,
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -129,10 +134,22 @@ impl View {
 }
 
 impl Scene {
+    /// The scene for an asset, its medium chosen by the rule of
+    /// [`extinction_channel`]: see [`Scene::for_asset_with`].
+    pub fn for_asset(meta: &Metadata) -> Scene {
+        Self::with_medium(meta, scene::choose_default(meta))
+    }
+
     /// The scene for an asset: its union bbox (from the metadata), a density
     /// scale giving an optical depth of 4 across the box at the largest value,
-    /// and a fixed light.
-    pub fn for_asset(meta: &Metadata) -> Scene {
+    /// and a fixed light. The channel `extinction` names (an error when the
+    /// asset lacks it), else the channel [`extinction_channel`] picks, is the
+    /// medium, drawn as [`Scene::model`] says.
+    pub fn for_asset_with(meta: &Metadata, extinction: Option<&str>) -> Result<Scene, Error> {
+        Ok(Self::with_medium(meta, scene::choose(meta, extinction)?))
+    }
+
+    fn with_medium(meta: &Metadata, (extinction, model): (usize, Model)) -> Scene {
         let o = meta.index_offset.map(i64::from);
         let (lo, hi) = match meta.index_bbox {
             Some((a, b)) => ([0, 1, 2].map(|i| i64::from(a[i]) - o[i]), [0, 1, 2].map(|i| i64::from(b[i]) - o[i] + 1)),
@@ -143,10 +160,18 @@ impl Scene {
         let box_max = hi.map(|v| v.clamp(0, 4096) as f32);
         let ext = sub(box_max, box_min);
         let diag = (ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]).sqrt().max(1.0);
-        let peak_of = |c: usize| meta.channels.get(c).map_or(1.0, |c| c.value_range[1].abs().max(c.value_range[0].abs()).max(1e-6));
-        let extinction = extinction_channel(meta);
+        // The largest magnitude of a channel's values. The recorded range
+        // takes in non-finite voxels (which the march ignores): past an
+        // infinite end, the other end if it is not zero, else 1.
+        let peak_of = |c: usize| {
+            meta.channels.get(c).map_or(1.0, |c| match c.value_range.map(f32::abs) {
+                [lo, hi] if lo.is_finite() && hi.is_finite() => hi.max(lo).max(1e-6),
+                [lo, hi] => [lo, hi].into_iter().find(|v| v.is_finite() && *v > 0.0).unwrap_or(1.0),
+            })
+        };
         let peak = peak_of(extinction);
-        let (temperature, flames) = emission_channels(meta);
+        // A surface neither glows nor scatters.
+        let (temperature, flames) = if model == Model::Surface { (None, None) } else { emission_channels(meta) };
         Scene {
             box_min,
             box_max,
@@ -159,7 +184,8 @@ impl Scene {
             shadow_cell: (ext[0].max(ext[1]).max(ext[2]) / 128.0).ceil().max(4.0),
             channels: [extinction as u32, temperature.map_or(NONE, |c| c as u32), flames.map_or(NONE, |c| c as u32)],
             // A ray across the box through full-scale fire gathers about 6.
-            emission: [1.0 / temperature.map_or(1.0, peak_of), 1.0 / flames.map_or(1.0, peak_of), 6.0 / diag, if find(meta, &["density"]).is_some() { 1.0 } else { 0.0 }],
+            emission: [1.0 / temperature.map_or(1.0, peak_of), 1.0 / flames.map_or(1.0, peak_of), 6.0 / diag, if model == Model::Scatter { 1.0 } else { 0.0 }],
+            model,
         }
     }
 
