@@ -178,11 +178,14 @@ fn reference(meta: &vdbcook_vpak::Metadata, files: Vec<PathBuf>, allow_missing: 
 }
 
 /// Voxel-domain error of each channel of the asset's frame against the
-/// reference's, over the reference's active voxels.
-fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize, lod: u32) -> Result<Vec<ErrorStats>> {
+/// reference's, over the reference's active voxels; and channel `shown`'s
+/// active voxels in the reference whose values are finite and not zero (what
+/// its images must show something of).
+fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize, lod: u32, shown: usize) -> Result<(Vec<ErrorStats>, u64)> {
     let a = vdbcook_cook::unpack_level(asset, frame, lod).map_err(|e| anyhow!(e))?;
     let r = vdbcook_cook::unpack_level(reference, frame, lod).map_err(|e| anyhow!(e))?;
-    Ok(r.iter()
+    let errors = r
+        .iter()
         .zip(&a)
         .map(|(r, a)| {
             let mut e = ErrorStats::default();
@@ -194,7 +197,14 @@ fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize, lod: u32) -> Res
             }
             e
         })
-        .collect())
+        .collect();
+    let visible = |v: f32| v.is_finite() && v != 0.0;
+    let nonzero = r.get(shown).map_or(0, |g| {
+        let leaves: u64 = g.leaves.iter().map(|l| l.mask.iter_on().filter(|&i| visible(l.values[i])).count() as u64).sum();
+        let tiles: u64 = g.tiles.iter().filter(|t| t.active && visible(t.value)).map(|t| t.voxel_count()).sum();
+        leaves + tiles
+    });
+    Ok((errors, nonzero))
 }
 
 #[derive(Clone, Copy)]
@@ -204,6 +214,8 @@ struct Shot {
     metrics: ImageMetrics,
     /// Mean FLIP error of the image.
     flip: f64,
+    /// Share of the reference image's pixels that differ from the empty scene.
+    coverage: f64,
 }
 
 /// A view kept for the report: its figures, both images and the FLIP map.
@@ -289,6 +301,7 @@ struct Pair<'a> {
     gpu_asset: &'a GpuAsset,
     gpu_ref: &'a GpuAsset,
     renderer: &'a Renderer,
+    scene: &'a Scene,
 }
 
 /// One level's comparison: its outcome (a document with one `levels` row)
@@ -336,10 +349,12 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>>(
     if levels.end > ref_meta.levels.min(meta.levels) {
         return Err(anyhow!("{name}: level {} is out of range (the asset has {} levels of detail, the reference {})", levels.end - 1, meta.levels, ref_meta.levels));
     }
+    // The scene is the reference's: what the source is decides what is drawn.
+    let scene = Scene::for_asset_with(&ref_meta, args.extinction.as_deref()).map_err(|e| Usage(format!("--extinction: {e}")))?;
     let renderer = renderer()?;
-    let gpu_asset = renderer.upload(asset).with_context(|| name.to_string())?;
-    let gpu_ref = renderer.upload(reference).context("reference")?;
-    let pair = Pair { name, asset, reference, meta: &meta, ref_meta: &ref_meta, gpu_asset: &gpu_asset, gpu_ref: &gpu_ref, renderer: &renderer };
+    let gpu_asset = renderer.upload_for(asset, &scene).with_context(|| name.to_string())?;
+    let gpu_ref = renderer.upload_for(reference, &scene).context("reference")?;
+    let pair = Pair { name, asset, reference, meta: &meta, ref_meta: &ref_meta, gpu_asset: &gpu_asset, gpu_ref: &gpu_ref, renderer: &renderer, scene: &scene };
     let mut runs: Vec<LevelRun> = Vec::new();
     for lod in levels {
         // Coarser levels keep the finest level's worst view: the report shows it at every level.
@@ -412,11 +427,14 @@ fn combine(runs: &[LevelRun], args: &ValidateArgs) -> Result<Outcome> {
 /// Compares level `lod` of the pair over `frames`; with a report, keeps the
 /// three worst views, or only the `focus` view (frame, view) when one is given.
 fn compare_level(p: &Pair, args: &ValidateArgs, lod: u32, frames: &[usize], focus: Option<(usize, usize)>, bars: &dyn Progress) -> Result<LevelRun> {
-    let (name, meta, ref_meta, renderer) = (p.name, p.meta, p.ref_meta, p.renderer);
+    let (name, meta, ref_meta, renderer, scene) = (p.name, p.meta, p.ref_meta, p.renderer, p.scene);
     let started = Instant::now();
-    let scene = Scene::for_asset(ref_meta);
     let views = scene.orbit(args.views as usize);
     let (w, h) = args.size;
+    // What each view shows with no volume: coverage is measured against it.
+    let empty: Vec<Image> = views.iter().map(|v| scene.empty_image(v, w, h)).collect();
+    let shown = scene.shown();
+    let shown_name = ref_meta.channels.get(shown).map_or(String::new(), |c| c.name.clone());
 
     let mut shots = Vec::new();
     let mut voxel = Vec::new();
@@ -424,15 +442,26 @@ fn compare_level(p: &Pair, args: &ValidateArgs, lod: u32, frames: &[usize], focu
     let mut flip_secs = 0.0;
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in frames {
-        voxel.push((f, voxel_errors(p.asset, p.reference, f, lod)?));
-        let refs = renderer.render_views_level(p.gpu_ref, &scene, f, lod, &views, w, h)?;
-        let imgs = renderer.render_views_level(p.gpu_asset, &scene, f, lod, &views, w, h)?;
+        let (errors, nonzero) = voxel_errors(p.asset, p.reference, f, lod, shown)?;
+        voxel.push((f, errors));
+        let refs = renderer.render_views_level(p.gpu_ref, scene, f, lod, &views, w, h)?;
+        let imgs = renderer.render_views_level(p.gpu_asset, scene, f, lod, &views, w, h)?;
+        let coverage: Vec<f64> = refs.iter().zip(&empty).map(|(r, e)| vdbcook_validate::coverage(r, e)).collect();
+        // Two blank pictures are equal: a frame with something to show must show it somewhere.
+        if nonzero > 0 && coverage.iter().all(|&c| c == 0.0) {
+            return Err(anyhow!(
+                "{name}: frame {f}{at}: the reference is blank in all {n} view(s), though channel \"{shown_name}\" ({model}) has {nonzero} active voxel(s) with non-zero values; name the channel that gives extinction with --extinction NAME, or try other --views",
+                at = if lod > 0 { format!(" at level {lod}") } else { String::new() },
+                n = views.len(),
+                model = scene.model().name(),
+            ));
+        }
         // FLIP runs on the CPU, one image per thread: the views of a frame in parallel.
         let t = Instant::now();
         let maps: Vec<FlipMap> = refs.par_iter().zip(&imgs).map(|(r, a)| flip(r, a, DEFAULT_PPD)).collect::<Result<_, _>>()?;
         flip_secs += t.elapsed().as_secs_f64();
         for (vi, ((r, a), map)) in refs.into_iter().zip(imgs).zip(maps).enumerate() {
-            let shot = Shot { frame: f, view: vi, metrics: compare(&r, &a), flip: map.mean() };
+            let shot = Shot { frame: f, view: vi, metrics: compare(&r, &a), flip: map.mean(), coverage: coverage[vi] };
             if args.report.is_some() {
                 let k = Kept { shot, reference: r, asset: a, flip: map };
                 match focus {
@@ -463,7 +492,6 @@ fn compare_level(p: &Pair, args: &ValidateArgs, lod: u32, frames: &[usize], focu
         })
         .collect();
     // The voxel figures of the channel the images show.
-    let shown = vdbcook_validate::extinction_channel(ref_meta);
     let vox_total = channel_totals.get(shown).copied().unwrap_or_default();
     let format = meta.format_names();
     let num = |v: f64| if v.is_finite() { json!(v) } else { serde_json::Value::Null };
@@ -474,12 +502,14 @@ fn compare_level(p: &Pair, args: &ValidateArgs, lod: u32, frames: &[usize], focu
         "format": format,
         "channels": meta.channels.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
         "shown": meta.channels.get(shown).map(|c| c.name.clone()),
+        "model": scene.model().name(),
         "frames": meta.frame_count,
         "level": lod,
         "views": args.views,
         "size": [w, h],
         "flip_ppd": DEFAULT_PPD,
-        "images": shots.iter().map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "max_error": s.metrics.max_error, "flip": s.flip})).collect::<Vec<_>>(),
+        "images": shots.iter().map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "max_error": s.metrics.max_error, "flip": s.flip, "coverage": s.coverage})).collect::<Vec<_>>(),
+        "coverage": coverage_figures(&shots).map(|(min, mean)| json!({"min": min, "mean": mean})),
         "worst": worst.map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "flip": s.flip})),
         "worst_flip": worst_flip.map(|s| json!({"frame": s.frame, "view": s.view, "flip": s.flip})),
         "voxel": {
@@ -500,6 +530,11 @@ fn compare_level(p: &Pair, args: &ValidateArgs, lod: u32, frames: &[usize], focu
     let decoder = if p.gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
     let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
     let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), args.views, renderer.adapter);
+    text += &format!("  scene    channel \"{shown_name}\" drawn as {}", scene_words(scene.model()));
+    if let Some((min, mean)) = coverage_figures(&shots) {
+        text += &format!("; coverage {:.1} % of the pixels on average, {:.1} % in the emptiest view", 100.0 * mean, 100.0 * min);
+    }
+    text += "\n";
     if let Some(s) = worst {
         text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, flip {:.4}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error, s.flip);
         let mean = |f: fn(&Shot) -> f64| shots.iter().map(f).sum::<f64>() / shots.len() as f64;
@@ -518,6 +553,21 @@ fn compare_level(p: &Pair, args: &ValidateArgs, lod: u32, frames: &[usize], focu
         .map(|s| format!("{} image(s) over budget, first frame {} view {} (rmse {:.3e}, psnr {:.1} dB, flip {:.4})", failed.len(), s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.flip));
     let worst = worst.zip(worst_flip).map(|(w, f)| Worst { rmse: w.metrics.rmse, psnr: w.metrics.psnr, flip: f.flip });
     Ok(LevelRun { lod, outcome: Outcome { doc, text, gate_failure, worst }, shots, kept })
+}
+
+/// The smallest and the mean coverage of the images, if any.
+fn coverage_figures(shots: &[Shot]) -> Option<(f64, f64)> {
+    let min = shots.iter().map(|s| s.coverage).reduce(f64::min)?;
+    Some((min, shots.iter().map(|s| s.coverage).sum::<f64>() / shots.len() as f64))
+}
+
+/// How a model draws its channel, in the report's words.
+fn scene_words(model: vdbcook_validate::Model) -> &'static str {
+    match model {
+        vdbcook_validate::Model::Scatter => "a scattering fog (scatter)",
+        vdbcook_validate::Model::Glow => "an absorbing, glowing medium before a backdrop (glow)",
+        vdbcook_validate::Model::Surface => "a lit surface at its zero crossing (surface)",
+    }
 }
 
 /// Writes a view's four images into the report directory as
@@ -555,26 +605,27 @@ fn write_report(dir: &Path, doc: &serde_json::Value, runs: &[LevelRun], gated: b
         let s = &k.shot;
         let figs = view_figures(&write, &format!("frame{}_view{}", s.frame, s.view), k, format, (s.metrics.max_error as f32).max(1e-6))?;
         figures += &format!(
-            "<h3>frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, FLIP {:.4}</h3><div class='row'>{}</div>",
+            "<h3>frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, FLIP {:.4}, coverage {:.1} %</h3><div class='row'>{}</div>",
             s.frame,
             s.view,
             s.metrics.rmse,
             s.metrics.psnr,
             s.metrics.max_error,
             s.flip,
+            100.0 * s.coverage,
             figs.concat()
         );
     }
     let side = if runs.len() > 1 { levels_side_by_side(&write, runs, format)? } else { String::new() };
-    // Worst view per frame: RMSE and FLIP.
-    let mut per_frame: Vec<(usize, f64, f64)> = Vec::new();
+    // Worst view per frame: RMSE and FLIP; and the emptiest view's coverage.
+    let mut per_frame: Vec<(usize, f64, f64, f64)> = Vec::new();
     for s in &first.shots {
-        match per_frame.iter_mut().find(|(f, _, _)| *f == s.frame) {
-            Some(e) => (e.1, e.2) = (e.1.max(s.metrics.rmse), e.2.max(s.flip)),
-            None => per_frame.push((s.frame, s.metrics.rmse, s.flip)),
+        match per_frame.iter_mut().find(|e| e.0 == s.frame) {
+            Some(e) => (e.1, e.2, e.3) = (e.1.max(s.metrics.rmse), e.2.max(s.flip), e.3.min(s.coverage)),
+            None => per_frame.push((s.frame, s.metrics.rmse, s.flip, s.coverage)),
         }
     }
-    let rows: String = per_frame.iter().map(|(f, r, fl)| format!("<tr><td>{f}</td><td>{r:.4e}</td><td>{fl:.4}</td></tr>")).collect();
+    let rows: String = per_frame.iter().map(|(f, r, fl, c)| format!("<tr><td>{f}</td><td>{r:.4e}</td><td>{fl:.4}</td><td>{:.1} %</td></tr>", 100.0 * c)).collect();
     // A figure of the JSON as people read it: 4 significant digits (RMSE) or 2 decimals (dB).
     let show = |x: &serde_json::Value, sci: bool| match x {
         serde_json::Value::Number(n) => n.as_f64().map(|x| if sci { format!("{x:.4e}") } else { format!("{x:.2}") }).unwrap_or_default(),
@@ -601,7 +652,7 @@ fn write_report(dir: &Path, doc: &serde_json::Value, runs: &[LevelRun], gated: b
                 l["worst_flip"]["flip"].as_f64().map(|x| format!("{x:.4}")).unwrap_or_default(),
                 show(&l["voxel"]["rmse"], true),
                 show(&l["voxel"]["psnr"], false),
-                g = report::esc(doc["shown"].as_str().unwrap_or("")),
+                g = report::esc(&format!("{} ({})", doc["shown"].as_str().unwrap_or(""), doc["model"].as_str().unwrap_or(""))),
                 f = report::esc(format),
             )
         })
@@ -614,7 +665,7 @@ td.pass{{color:#060}}td.fail{{color:#b00;font-weight:bold}}table.levels td,table
 <h1>vdbcook validation</h1><p>{n}, adapter {ad}</p>\
 <table><tr><th>level</th><th>voxel size (source voxels)</th><th>model</th><th>format</th><th>worst image RMSE</th><th>worst PSNR (dB)</th><th>worst FLIP</th><th>voxel RMSE</th><th>voxel PSNR (dB)</th>{gh}</tr>{summary}</table>\
 <p>FLIP: NVIDIA's perceptual error (LDR-FLIP, mean over the image, 0 to 1) at {ppd} pixels per degree, on the 8-bit sRGB images shown here.{lv}</p>\
-<h2>Per-frame error (worst view{l0})</h2>{plot}<table><tr><th>frame</th><th>RMSE</th><th>FLIP</th></tr>{rows}</table>{side}<h2>Worst views{l0}</h2>{figures}</body></html>",
+<h2>Per-frame error (worst view{l0})</h2>{plot}<table><tr><th>frame</th><th>RMSE</th><th>FLIP</th><th>coverage (emptiest view)</th></tr>{rows}</table>{side}<h2>Worst views{l0}</h2>{figures}</body></html>",
         n = report::esc(name),
         ad = report::esc(doc["adapter"].as_str().unwrap_or("")),
         gh = if gated { "<th>gate</th>" } else { "" },
@@ -689,6 +740,10 @@ pub struct RenderArgs {
     /// level as `cook --lods` does.
     #[arg(long, value_name = "K", value_parser = vdbcook_bake::options::parse_lod)]
     pub lod: Option<u32>,
+    /// The channel that gives extinction (default: `density`, else the first scalar fog
+    /// channel that is not a glow channel; see `vdbcook validate --help`).
+    #[arg(long, value_name = "NAME")]
+    pub extinction: Option<String>,
     #[command(flatten)]
     pub gpu: GpuArgs,
     /// Replace OUT if it exists.
@@ -719,9 +774,9 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
         let hint = if lod >= meta.levels { format!("; cook it with --lods {}", lod + 1) } else { String::new() };
         return Err(anyhow!("{name}: {why}{hint}"));
     }
+    let scene = Scene::for_asset_with(&meta, args.extinction.as_deref()).map_err(|e| Usage(format!("--extinction: {e}")))?;
     let renderer = args.gpu.renderer()?;
-    let gpu = renderer.upload(&asset).with_context(|| name.clone())?;
-    let scene = Scene::for_asset(&meta);
+    let gpu = renderer.upload_for(&asset, &scene).with_context(|| name.clone())?;
     let view = scene.orbit(args.views as usize)[args.view as usize];
     let img = renderer.render_views_level(&gpu, &scene, args.frame, lod, std::slice::from_ref(&view), args.size.0, args.size.1)?.pop().ok_or_else(|| anyhow!("no image"))?;
     vdbcook_vpak::write_atomic(&args.output, &report::png_rgb(&img), args.force).with_context(|| args.output.display().to_string())?;
