@@ -293,7 +293,7 @@ mod tests {
 
     /// One-channel bricks of levels as BC7 texels (four z-slices in RGBA).
     fn encode_bc7_levels(q: Quality, levels: &[[u8; BRICK_VOXELS]], out: &mut [u8]) {
-        let texels = crate::bc7_texels(&levels.iter().map(|l| vec![*l]).collect::<Vec<_>>(), 4);
+        let texels = crate::texels::bc7_texels(&levels.iter().map(|l| vec![*l]).collect::<Vec<_>>(), 4);
         encode_bc7(q, 2, &texels, out);
     }
 

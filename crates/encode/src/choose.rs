@@ -3,7 +3,8 @@
 //! exactly as a reader decodes it, within E of the source.  NaN and ±∞
 //! voxels must decode to themselves (only `f16` and `f32` keep them).
 
-use super::{bc, bc7_texels, encode_texels, group_planes, levels, quantise, range_of, Brick, Format, Plane, Quality};
+use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of};
+use crate::{bc, group_planes, Brick, Format, Plane, Quality};
 use rayon::prelude::*;
 
 /// One brick channel's chosen encoding.

@@ -1,0 +1,145 @@
+//! [`Cooker::finish`]: the trees the cooker built, to an asset.  `assemble`
+//! reads as its list of steps, each in a module of its own (NanoVDB's
+//! `IndexGridBuilder::getHandle` → `processLeafs/Lower/Upper/Root/Grid` is
+//! the model): format choice (`choose`), clustering (`cluster`), encoding
+//! (`encode`), deduplication and remapping (`dedup`), node arrays (the
+//! flip-book), error figures (`errors`), atlases and tables (`layout`),
+//! metadata (`metadata`) and the report (`report`).
+
+use crate::layout::Laid;
+use crate::metadata::Placement;
+use crate::report::Parts;
+use crate::{choose, cluster, dedup, encode, errors, layout};
+use crate::{BudgetReport, BudgetTry, CookReport, Cooker, Error, Progress, MAX_CLUSTER_CHANNELS};
+use std::time::Instant;
+use vdbcook_flipbook::Built;
+use vdbcook_vpak::{kind, Section};
+
+/// Records how long stage `stage` took, since `t0`.
+fn lap(timings: &mut Vec<(String, f64)>, stage: &str, t0: Instant) {
+    timings.push((stage.into(), t0.elapsed().as_secs_f64()));
+}
+
+impl Cooker {
+    /// Encodes, lays out and serialises the asset.
+    /// Returns the asset's sections (write them with `vdbcook_vpak::write_file`) and the report.
+    /// With `max_bytes`, the finest levels that fit are kept (see [`CookReport::budget`]).
+    pub fn finish(mut self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
+        let levels = self.opts.levels;
+        if levels == 0 || levels > vdbcook_vpak::MAX_LEVELS {
+            return Err(Error::Levels(levels));
+        }
+        let timings = vec![("build".to_string(), self.build_secs - self.level_secs), ("levels".to_string(), self.level_secs)];
+        let built = std::mem::take(&mut self.builder).finish()?;
+        let Some(budget) = self.opts.max_bytes else { return self.assemble(&built, 0, timings, progress) };
+        // Each try leaves out one more of the finest levels (and the bricks
+        // only they used); the coarsest level always stays.
+        let started = Instant::now();
+        let mut tries = Vec::new();
+        let mut candidate = built;
+        for first in 0..levels {
+            if first > 0 {
+                candidate = candidate.from_level(first)?;
+            }
+            let t0 = Instant::now();
+            let (sections, mut report) = self.assemble(&candidate, first, timings.clone(), progress)?;
+            tries.push(BudgetTry { first_level: first, bytes: report.file_bytes });
+            if report.file_bytes <= budget {
+                report.timings.push(("earlier tries".into(), (t0 - started).as_secs_f64()));
+                report.budget = Some(BudgetReport { max_bytes: budget, dropped: (0..first).collect(), tries });
+                return Ok((sections, report));
+            }
+        }
+        Err(Error::OverBudget { budget, smallest: tries.last().map_or(0, |t| t.bytes), level: levels - 1 })
+    }
+
+    /// Encodes, lays out and serialises the trees of `built`, whose finest level is `first`.
+    fn assemble(&self, built: &Built, first: u32, mut timings: Vec<(String, f64)>, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
+        let opts = &self.opts;
+        let channels = self.channels.len().max(1);
+        let pool = built.pool.bricks();
+
+        // Format choice: the planes of the channel groups' formats.
+        let (specs, group_of) = choose::plan_planes(opts, &self.channels)?;
+        if opts.clustering.is_some() && channels > MAX_CLUSTER_CHANNELS {
+            return Err(Error::MultiChannelClustering(channels));
+        }
+
+        // Clustering: similar bricks merged into work bricks.
+        let mut clustered = opts.clustering.as_ref().map(|co| {
+            let t0 = Instant::now();
+            let c = cluster::cluster(pool, &self.ranges, co, progress);
+            lap(&mut timings, "cluster", t0);
+            c
+        });
+
+        // Encoding: the work bricks in their planes' formats, or each brick
+        // channel in the cheapest format within the maximum error (strays
+        // split off their clusters); then deduplication and remapping.
+        let masks = encode::shown_masks(built, &specs, opts.max_error);
+        let t0 = Instant::now();
+        let encoded = match opts.max_error {
+            None => encode::in_planes(pool, channels, specs, opts.quality, masks.as_deref(), clustered.as_ref(), progress),
+            Some(bound) => {
+                let choices = choose::per_brick(pool, channels, masks.as_deref().unwrap_or(&[]), bound, opts.quality, clustered.as_mut(), progress);
+                encode::as_chosen(pool, channels, choices, clustered.as_ref())
+            }
+        };
+        encode::check_planes(&encoded)?;
+        let stored = dedup::store(&encoded, clustered.as_ref());
+        lap(&mut timings, "encode", t0);
+
+        // Node arrays over the stored bricks.
+        let t0 = Instant::now();
+        progress.start("building nodes", built.frames.len() as u64);
+        let nodes = built.nodes(|b| stored.remap.get(b as usize).copied().unwrap_or(0))?;
+        progress.finish();
+        lap(&mut timings, "nodes", t0);
+
+        // Error figures of what is stored, per tree and channel (and, with
+        // clustering, what they would have been without).
+        let t0 = Instant::now();
+        let decode_stored = |b: u32| stored.decode(&encoded, b);
+        let measured = errors::measure(built, first, opts.levels, channels, &decode_stored);
+        let cluster_report = clustered.as_ref().zip(opts.clustering.as_ref()).map(|(c, co)| {
+            let without = cluster::Unclustered { built, first, channels, specs: &encoded.specs, quality: opts.quality, max_error: opts.max_error, masks: masks.as_deref() };
+            cluster::report(c, co, &without, &decode_stored, measured.totals[0].rmse())
+        });
+        lap(&mut timings, "error", t0);
+
+        // Layout: node arrays, brick ranges and tables, channel tables, atlases.
+        let t0 = Instant::now();
+        let planes_of = layout::planes_of(&encoded.specs, channels);
+        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(&nodes, &encoded, &stored, &planes_of, opts.max_texture_dim)?;
+        let value_ranges = self.value_ranges(built, channels);
+        let peaks = errors::peaks(built, &value_ranges);
+        let specs = encoded.specs.clone();
+        // The source-precision bricks are not needed any more.
+        drop(encoded);
+        drop(clustered);
+
+        // Metadata, the first section.
+        let placement = Placement { specs: &specs, group_of: &group_of, planes_of: &planes_of, planes, bricks: stored.keep.len() };
+        let meta = self.metadata(built, first, &nodes, &value_ranges, placement);
+        sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()? });
+        lap(&mut timings, "layout", t0);
+
+        // The report.
+        let parts = Parts {
+            built,
+            first,
+            nodes: &nodes,
+            meta: &meta,
+            sections: &sections,
+            stored_bricks: stored.keep.len(),
+            specs: &specs,
+            planes_of: &planes_of,
+            plane_bytes: &plane_bytes,
+            channel_table_bytes: &channel_table_bytes,
+            measured: &measured,
+            peaks: &peaks,
+        };
+        let report = self.report(parts, cluster_report, timings);
+        Ok((sections, report))
+    }
+}

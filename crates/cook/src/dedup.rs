@@ -1,0 +1,114 @@
+//! Deduplication of the encoded bricks, and the remapping of pool bricks to
+//! the bricks stored.
+
+use crate::cluster::{used_work, Clustered};
+use rayon::prelude::*;
+use vdbcook_encode::{Brick, Encoded};
+use vdbcook_flipbook::HashIndex;
+
+/// The bricks an asset stores.
+pub(crate) struct Stored {
+    /// Per stored brick, the encoded brick it is.
+    pub(crate) keep: Vec<usize>,
+    /// Per plane: its distinct encoded bricks, and per stored brick its
+    /// plane brick (`u32::MAX`: none, with per-brick formats).
+    pub(crate) planes: Vec<(Vec<usize>, Vec<u32>)>,
+    /// Pool brick -> stored brick.
+    pub(crate) remap: Vec<u32>,
+}
+
+impl Stored {
+    /// Pool brick `b` as stored, decoded (one [`Brick`] per channel).
+    pub(crate) fn decode(&self, encoded: &Encoded, b: u32) -> Option<Vec<Brick>> {
+        self.remap.get(b as usize).and_then(|&i| self.keep.get(i as usize)).and_then(|&k| encoded.decode(k))
+    }
+}
+
+/// Each plane stores its own distinct bricks (a table maps bricks to them),
+/// so a channel that repeats where others change (a constant flame, a static
+/// shadow) is stored once, as in an asset of its own.  With per-brick
+/// formats a plane holds only the bricks that chose it (the others map to
+/// `u32::MAX`).  A brick is its plane bricks: the distinct bricks are the
+/// distinct combinations.
+pub(crate) fn store(encoded: &Encoded, clustered: Option<&Clustered>) -> Stored {
+    let used = used_work(clustered, encoded.len());
+    let plane_ids: Vec<(Vec<usize>, Vec<u32>)> = (0..encoded.specs.len())
+        .map(|p| {
+            let members: Vec<usize> = (0..encoded.len()).filter(|&i| used[i] && encoded.holds(p, i)).collect();
+            let (keep, ids) = distinct(members.len(), &|j, buf| plane_brick_bytes(encoded, p, members[j], buf));
+            let mut all = vec![u32::MAX; encoded.len()];
+            for (&i, id) in members.iter().zip(ids) {
+                all[i] = id;
+            }
+            (keep.into_iter().map(|j| members[j]).collect(), all)
+        })
+        .collect();
+    // Plane bricks, numbered by first use, are then numbered by first use
+    // among the distinct bricks too (a plane without repeats maps brick b to
+    // plane brick b).
+    let used_bricks: Vec<usize> = (0..encoded.len()).filter(|&i| used[i]).collect();
+    let (keep, used_remap) = distinct(used_bricks.len(), &|j, buf| {
+        buf.clear();
+        buf.extend(plane_ids.iter().flat_map(|(_, ids)| ids[used_bricks[j]].to_le_bytes()));
+    });
+    let keep: Vec<usize> = keep.into_iter().map(|j| used_bricks[j]).collect();
+    let mut enc_remap = vec![u32::MAX; encoded.len()];
+    for (&i, id) in used_bricks.iter().zip(used_remap) {
+        enc_remap[i] = id;
+    }
+    let planes = plane_ids.into_iter().map(|(k, ids)| (k, keep.iter().map(|&i| ids[i]).collect())).collect();
+    let remap = match clustered {
+        Some(c) => c.remap.iter().map(|&w| enc_remap[w as usize]).collect(),
+        None => enc_remap,
+    };
+    Stored { keep, planes, remap }
+}
+
+/// Brick `i`'s bytes in plane `p`: its encoding, then the range of each of the plane's channels.
+fn plane_brick_bytes(encoded: &Encoded, p: usize, i: usize, buf: &mut Vec<u8>) {
+    let spec = &encoded.specs[p];
+    buf.clear();
+    buf.resize(spec.plane.brick_bytes(), 0);
+    encoded.write(p, i, buf);
+    for &c in &spec.channels {
+        for v in encoded.range(i, c) {
+            buf.extend_from_slice(&v.to_bits().to_le_bytes());
+        }
+    }
+}
+
+/// Finds the distinct items `0..n` by their bytes (`bytes_of`; the first of
+/// equal ones, in order): returns their indices and, per item, its distinct index.
+fn distinct(n: usize, bytes_of: &(dyn Fn(usize, &mut Vec<u8>) + Sync)) -> (Vec<usize>, Vec<u32>) {
+    let hashes: Vec<u64> = (0..n)
+        .into_par_iter()
+        .map_init(Vec::new, |buf, i| {
+            bytes_of(i, buf);
+            xxhash_rust::xxh3::xxh3_64(buf)
+        })
+        .collect();
+    let mut index = HashIndex::default();
+    index.reserve(n);
+    let mut keep: Vec<usize> = Vec::new();
+    let mut remap = Vec::with_capacity(n);
+    for (i, &h) in hashes.iter().enumerate() {
+        let same = |k: u32| {
+            // Equal hashes are rare: make both again to compare.
+            let (mut x, mut y) = (Vec::new(), Vec::new());
+            bytes_of(keep[k as usize], &mut x);
+            bytes_of(i, &mut y);
+            x == y
+        };
+        let id = match index.find(h, same) {
+            Some(k) => k,
+            None => {
+                let k = keep.len() as u32;
+                index.add(h, k);
+                keep.push(i);
+                k
+            }
+        };
+        remap.push(id);
+    }
+    (keep, remap)
+}

@@ -1,0 +1,64 @@
+//! Encoding: the work bricks (the pool, or the clustered pool) in their
+//! planes' formats, or in the formats chosen per brick.
+
+use crate::cluster::{used_work, Clustered};
+use crate::{Error, Progress};
+use vdbcook_encode::{Brick, Choice, Encoded, PlaneSpec, Quality};
+use vdbcook_flipbook::Built;
+
+/// Which voxels of each pool brick some L3 node shows: block encoders may
+/// spend nothing on the others, and per-brick formats bound only these.
+/// `None` when neither is at work.
+pub(crate) fn shown_masks(built: &Built, specs: &[PlaneSpec], max_error: Option<f32>) -> Option<Vec<[u64; 8]>> {
+    let any_block = specs.iter().any(|s| s.plane.format.is_block());
+    (any_block || max_error.is_some()).then(|| union_masks(built.pool.len(), built.l3.iter().map(|l| (l.brick as usize, l.mask))))
+}
+
+/// Per item `0..n`, the union of the masks given for it.
+pub(crate) fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8])>) -> Vec<[u64; 8]> {
+    let mut out = vec![[0u64; 8]; n];
+    for (i, m) in masks {
+        if let Some(o) = out.get_mut(i) {
+            for (o, m) in o.iter_mut().zip(m) {
+                *o |= m;
+            }
+        }
+    }
+    out
+}
+
+/// The work bricks in the planes `specs` (`masks`: the pool's shown voxels).
+pub(crate) fn in_planes<'a>(
+    pool: &'a [Brick],
+    channels: usize,
+    specs: Vec<PlaneSpec>,
+    quality: Quality,
+    masks: Option<&[[u64; 8]]>,
+    clustered: Option<&'a Clustered>,
+    progress: &dyn Progress,
+) -> Encoded<'a> {
+    let work: &[Brick] = clustered.map_or(pool, |c| &c.bricks[..]);
+    let work_masks = masks.map(|m| match clustered {
+        Some(c) => c.work_masks(m, channels),
+        None => m.to_vec(),
+    });
+    progress.start("encoding", (work.len() / channels * specs.len()) as u64);
+    let encoded = Encoded::new(specs, quality, work, channels, work_masks.as_deref(), &|n| progress.advance(n as u64));
+    progress.finish();
+    encoded
+}
+
+/// The work bricks in the formats chosen for them (`choices`, per work brick
+/// and channel); centroids no pool brick uses any more are in no plane.
+pub(crate) fn as_chosen<'a>(pool: &'a [Brick], channels: usize, choices: Vec<Choice>, clustered: Option<&'a Clustered>) -> Encoded<'a> {
+    let work: &[Brick] = clustered.map_or(pool, |c| &c.bricks[..]);
+    Encoded::from_choices(work, channels, choices, &used_work(clustered, work.len() / channels))
+}
+
+/// An asset holds at most `vdbcook_vpak::MAX_CHANNELS` planes.
+pub(crate) fn check_planes(encoded: &Encoded) -> Result<(), Error> {
+    match encoded.specs.len() {
+        n if n > vdbcook_vpak::MAX_CHANNELS => Err(Error::TooManyPlanes(n)),
+        _ => Ok(()),
+    }
+}

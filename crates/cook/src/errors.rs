@@ -1,0 +1,149 @@
+//! Error figures: what is stored, decoded as readers decode it, against the
+//! source (each coarser level against the level filtered from the source).
+
+use rayon::prelude::*;
+use vdbcook_encode::{Brick, ErrorStats};
+use vdbcook_flipbook::Built;
+
+/// A stored brick decoder: pool brick -> one [`Brick`] per channel.
+pub(crate) type Decode<'a> = dyn Fn(u32) -> Option<Vec<Brick>> + Sync + 'a;
+
+/// The error of an asset's stored levels, per channel.
+pub(crate) struct Measured {
+    /// Per frame of the first stored level.
+    pub(crate) frames: Vec<Vec<ErrorStats>>,
+    /// Per coarser stored level, finest first, over every frame.
+    pub(crate) levels: Vec<Vec<ErrorStats>>,
+    /// The first stored level over every frame.
+    pub(crate) totals: Vec<ErrorStats>,
+}
+
+/// Measures every tree of `built` (levels `first` … `levels` − 1).
+pub(crate) fn measure(built: &Built, first: u32, levels: u32, channels: usize, decoded: &Decode) -> Measured {
+    let tree_err = voxel_errors(built, decoded);
+    let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
+    let level_err: Vec<Vec<ErrorStats>> = (first + 1..levels)
+        .map(|k| {
+            let mut t = vec![ErrorStats::default(); channels];
+            for (e, _) in tree_err.iter().zip(&tree_level).filter(|(_, &l)| l == k) {
+                t.iter_mut().zip(e).for_each(|(t, e)| t.merge(e));
+            }
+            t
+        })
+        .collect();
+    let frames: Vec<Vec<ErrorStats>> = tree_err.into_iter().zip(&tree_level).filter(|(_, &l)| l == first).map(|(e, _)| e).collect();
+    let totals = (0..channels)
+        .map(|c| {
+            let mut t = ErrorStats::default();
+            for f in &frames {
+                t.merge(&f[c]);
+            }
+            t
+        })
+        .collect();
+    Measured { frames, levels: level_err, totals }
+}
+
+/// Per frame of level `first` (the first stored), its error per channel.
+pub(crate) fn frame_errors(built: &Built, first: u32, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
+    voxel_errors(built, decoded).into_iter().zip(&built.frames).filter(|(_, f)| f.level == first).map(|(e, _)| e).collect()
+}
+
+/// Error of decoded bricks (`decoded(pool brick)`, one [`Brick`] per
+/// channel) against the source, per tree (frames and levels, in push order)
+/// and channel, over each channel's own active voxels.
+fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
+    let channels = built.channels;
+    let source = |b: u32| built.pool.brick(b as usize);
+    if channels == 1 {
+        // Per L3 node: its error over its own active voxels (the channel's mask).
+        let per_l3: Vec<ErrorStats> = built
+            .l3
+            .par_iter()
+            .map(|l| {
+                let mut e = ErrorStats::default();
+                if let (Some(src), Some(dec)) = (source(l.brick), decoded(l.brick)) {
+                    e.add_masked(&src[0], &dec[0], &l.mask);
+                }
+                e
+            })
+            .collect();
+        return built
+            .frames
+            .iter()
+            .map(|f| {
+                let mut e = ErrorStats::default();
+                for &(_, id) in &f.leaves {
+                    e.merge(&per_l3[id as usize]);
+                }
+                vec![e]
+            })
+            .collect();
+    }
+    // Several channels: each leaf over each channel's own mask.
+    built
+        .frames
+        .iter()
+        .map(|f| {
+            let per_leaf: Vec<Vec<ErrorStats>> = f
+                .leaves
+                .par_iter()
+                .enumerate()
+                .map(|(k, &(_, id))| {
+                    let mut e = vec![ErrorStats::default(); channels];
+                    let brick = built.l3[id as usize].brick;
+                    if let (Some(src), Some(dec)) = (source(brick), decoded(brick)) {
+                        for (c, e) in e.iter_mut().enumerate() {
+                            if let Some(mask) = f.channel_masks.get(k * channels + c) {
+                                e.add_masked(&src[c], &dec[c], mask);
+                            }
+                        }
+                    }
+                    e
+                })
+                .collect();
+            let mut total = vec![ErrorStats::default(); channels];
+            for leaf in &per_leaf {
+                for (t, e) in total.iter_mut().zip(leaf) {
+                    t.merge(e);
+                }
+            }
+            total
+        })
+        .collect()
+}
+
+/// Each channel's PSNR peak: its value range (`ranges`) over its finite
+/// values (an infinite range would make every PSNR infinite); 1 for none.
+pub(crate) fn peaks(built: &Built, ranges: &[[f32; 2]]) -> Vec<f64> {
+    ranges
+        .iter()
+        .enumerate()
+        .map(|(c, &range)| {
+            let [lo, hi] = match range {
+                r if r.iter().all(|v| v.is_finite()) => r,
+                _ => finite_range(built, c),
+            };
+            let peak = f64::from(hi - lo);
+            if peak > 0.0 && peak.is_finite() {
+                peak
+            } else {
+                1.0
+            }
+        })
+        .collect()
+}
+
+/// Channel `c`'s range over the finite values of the pool's bricks (their
+/// inactive voxels are filled from the active ones, within their range) and
+/// of the frames' tiles; `[0, 0]` when it has none.
+fn finite_range(built: &Built, c: usize) -> [f32; 2] {
+    let bricks = (0..built.pool.len()).filter_map(|b| built.pool.brick(b)).filter_map(|b| b.get(c)).flat_map(|b| b.iter().copied());
+    let tiles = built.frames.iter().flat_map(|f| f.tiles.iter().filter_map(|t| t.2.get(c).copied()));
+    let [lo, hi] = bricks.chain(tiles).filter(|v| v.is_finite()).fold([f32::INFINITY, f32::NEG_INFINITY], |[lo, hi], v| [lo.min(v), hi.max(v)]);
+    if lo <= hi {
+        [lo, hi]
+    } else {
+        [0.0, 0.0]
+    }
+}

@@ -1,0 +1,109 @@
+//! Layout: the node arrays, and per plane its brick ranges, brick table and
+//! atlases (`vdbcook_vpak::layout`), and the channel tables of channels
+//! stored in several planes, as sections.
+
+use crate::dedup::Stored;
+use crate::{Error, Format};
+use vdbcook_encode::{Encoded, PlaneSpec};
+use vdbcook_vpak::layout::{pack_atlas, plan_atlases, AtlasLayout};
+use vdbcook_vpak::nodes::Nodes;
+use vdbcook_vpak::{kind, PlaneInfo, Section};
+
+/// The sections of an asset but its metadata, and what they cost.
+pub(crate) struct Laid {
+    /// Node arrays, then per plane its ranges and table, then the channel
+    /// tables, then every atlas.
+    pub(crate) sections: Vec<Section>,
+    pub(crate) planes: Vec<PlaneInfo>,
+    /// Per plane: bytes of its atlases, ranges and brick table.
+    pub(crate) plane_bytes: Vec<u64>,
+    /// Per channel: bytes of its channel table (0 for none).
+    pub(crate) channel_table_bytes: Vec<u64>,
+}
+
+/// Each channel's planes, in spec order: the first is its `plane`, the
+/// others (per-brick formats) its alternates, reached through its channel table.
+pub(crate) fn planes_of(specs: &[PlaneSpec], channels: usize) -> Vec<Vec<usize>> {
+    let mut planes_of: Vec<Vec<usize>> = vec![Vec::new(); channels];
+    for (p, spec) in specs.iter().enumerate() {
+        for &c in &spec.channels {
+            planes_of[c].push(p);
+        }
+    }
+    planes_of
+}
+
+/// Lays out the stored bricks of every plane of `encoded` in atlases of at
+/// most `max_texture_dim` texels a side.
+pub(crate) fn lay_out(nodes: &Nodes, encoded: &Encoded, stored: &Stored, planes_of: &[Vec<usize>], max_texture_dim: u32) -> Result<Laid, Error> {
+    let specs = &encoded.specs;
+    let mut sections = node_sections(nodes);
+    let mut plane_infos = Vec::with_capacity(specs.len());
+    let mut plane_bytes = vec![0u64; specs.len()];
+    let mut atlas_sections = Vec::new();
+    let mixed_plane = |p: usize| specs[p].channels.first().is_some_and(|&c| planes_of[c].len() > 1);
+    for (p, (spec, (pkeep, table))) in specs.iter().zip(&stored.planes).enumerate() {
+        let atlases = match spec.plane.format {
+            Format::Constant => Vec::new(),
+            _ => plan_atlases(spec.plane.slices_per_brick(), pkeep.len() as u32, max_texture_dim),
+        };
+        let info = PlaneInfo { plane: spec.plane, bricks: pkeep.len() as u32, atlases };
+        let slots = info.range_slots() as usize;
+        let ranges: Vec<u32> = pkeep.iter().flat_map(|&k| (0..slots).flat_map(move |s| spec.channels.get(s).map_or([0.0; 2], |&c| encoded.range(k, c)))).map(f32::to_bits).collect();
+        plane_bytes[p] += 4 * ranges.len() as u64;
+        sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: words(&ranges) });
+        if info.bricks as usize != stored.keep.len() && !mixed_plane(p) {
+            plane_bytes[p] += 4 * table.len() as u64;
+            sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: words(table) });
+        }
+        let bricks = encoded.plane(p, pkeep);
+        for atlas in &info.atlases {
+            let data = pack_atlas(&AtlasLayout { plane: spec.plane, atlas: *atlas }, &bricks);
+            plane_bytes[p] += data.len() as u64;
+            atlas_sections.push(Section { kind: kind::ATLAS, index: atlas_sections.len() as u32, data });
+        }
+        plane_infos.push(info);
+    }
+    let mut channel_table_bytes = vec![0u64; planes_of.len()];
+    for (c, planes) in planes_of.iter().enumerate().filter(|(_, planes)| planes.len() > 1) {
+        let mut table = vec![0u32; stored.keep.len()];
+        for (j, &p) in planes.iter().enumerate() {
+            if plane_infos[p].bricks > vdbcook_vpak::PLANE_BRICK_MASK {
+                return Err(Error::TooManyPlaneBricks(plane_infos[p].bricks));
+            }
+            for (entry, &pb) in table.iter_mut().zip(&stored.planes[p].1) {
+                if pb != u32::MAX {
+                    *entry = (j as u32) << vdbcook_vpak::CHOICE_SHIFT | pb;
+                }
+            }
+        }
+        channel_table_bytes[c] = 4 * table.len() as u64;
+        sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: words(&table) });
+    }
+    sections.extend(atlas_sections);
+    Ok(Laid { sections, planes: plane_infos, plane_bytes, channel_table_bytes })
+}
+
+/// Little-endian bytes of `u32`s (a plain copy on little-endian machines).
+fn words(v: &[u32]) -> Vec<u8> {
+    if cfg!(target_endian = "little") {
+        bytemuck::cast_slice(v).to_vec()
+    } else {
+        v.iter().flat_map(|w| w.to_le_bytes()).collect()
+    }
+}
+
+fn node_sections(n: &Nodes) -> Vec<Section> {
+    [
+        (kind::FRAMES, &n.frames),
+        (kind::L1_NODES, &n.l1),
+        (kind::L1_ENTRIES, &n.l1_entries),
+        (kind::L2_NODES, &n.l2),
+        (kind::L2_ENTRIES, &n.l2_entries),
+        (kind::L3_NODES, &n.l3),
+        (kind::TILES, &n.tiles),
+    ]
+    .into_iter()
+    .map(|(k, v)| Section { kind: k, index: 0, data: words(v) })
+    .collect()
+}

@@ -1,0 +1,195 @@
+//! The planes of a brick pool, encoded: block formats at once and in
+//! parallel, uncompressed ones when asked for, per-brick formats from their
+//! choices.
+
+use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of};
+use crate::{bc, single_plane, Brick, BrickSource, Choice, Format, PlaneSpec, Quality, BRICK_VOXELS, MAX_BRICK_BYTES};
+use rayon::prelude::*;
+
+/// The encoded bricks of one plane: kept (block formats, whose encoders are
+/// slow), made from the pool whenever asked for (uncompressed formats, so
+/// no copy of the pool is kept), or, with per-brick formats, kept for the
+/// bricks that chose the plane's format (`at[i]`: brick i's place among
+/// them, or `u32::MAX`).
+enum PlaneData {
+    Kept(Vec<u8>),
+    OnDemand,
+    Chosen { bytes: Vec<u8>, at: Vec<u32> },
+}
+
+/// Every plane of every brick of a pool (`channels` [`Brick`]s per brick),
+/// with each brick's channel ranges.
+pub struct Encoded<'a> {
+    pub specs: Vec<PlaneSpec>,
+    bricks: &'a [Brick],
+    channels: usize,
+    /// (min, max) per brick per channel.
+    ranges: Vec<[f32; 2]>,
+    planes: Vec<PlaneData>,
+}
+
+/// Bricks per parallel work item of the block encoders.
+const CHUNK: usize = 256;
+
+impl<'a> Encoded<'a> {
+    /// Encodes the block planes now, in parallel (`progress(n)` after each
+    /// chunk of `n` bricks of a plane); uncompressed planes are made when
+    /// asked for.  `masks` (512 bits per brick) says which voxels count for
+    /// the encoders that can use it (BC4): readers take the others from the
+    /// background.
+    pub fn new(specs: Vec<PlaneSpec>, quality: Quality, bricks: &'a [Brick], channels: usize, masks: Option<&[[u64; 8]]>, progress: &(dyn Fn(usize) + Sync)) -> Encoded<'a> {
+        let channels = channels.max(1);
+        let ranges: Vec<[f32; 2]> = bricks.par_iter().map(range_of).collect();
+        let n = bricks.len() / channels;
+        let mut planes = Vec::with_capacity(specs.len());
+        for spec in &specs {
+            if !spec.plane.format.is_block() {
+                progress(n);
+                planes.push(PlaneData::OnDemand);
+                continue;
+            }
+            let bb = spec.plane.brick_bytes();
+            let mut data = vec![0u8; n * bb];
+            vdbcook_grid::mem::advise_huge_pages(&data);
+            data.par_chunks_mut(CHUNK * bb).enumerate().for_each(|(k, out)| {
+                let first = k * CHUNK;
+                let count = out.len() / bb;
+                let slot = |b: usize, c: usize| (&bricks[b * channels + c], ranges[b * channels + c]);
+                match spec.plane.format {
+                    Format::Bc4 => {
+                        let c = spec.channels[0];
+                        let lv: Vec<Brick> = (first..first + count).map(|b| levels(slot(b, c).0, slot(b, c).1, 255.0)).collect();
+                        bc::encode_bc4(quality, &lv, masks.and_then(|m| m.get(first..first + count)), out);
+                    }
+                    _ => {
+                        let lv: Vec<Vec<[u8; BRICK_VOXELS]>> = (first..first + count).map(|b| spec.channels.iter().map(|&c| quantise(slot(b, c).0, slot(b, c).1)).collect()).collect();
+                        let zpt = spec.plane.z_per_texel as usize;
+                        bc::encode_bc7(quality, 8 / zpt, &bc7_texels(&lv, zpt), out);
+                    }
+                }
+                progress(count);
+            });
+            planes.push(PlaneData::Kept(data));
+        }
+        Encoded { specs, bricks, channels, ranges, planes }
+    }
+
+    /// Bricks.
+    pub fn len(&self) -> usize {
+        self.bricks.len() / self.channels
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.bricks.is_empty()
+    }
+
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// Brick `i`'s range in channel `c`.
+    pub fn range(&self, i: usize, c: usize) -> [f32; 2] {
+        self.ranges.get(i * self.channels + c).copied().unwrap_or_default()
+    }
+
+    /// Writes brick `i`'s encoding in plane `p` (`brick_bytes` bytes, in the
+    /// order `vdbcook_vpak::layout::brick_runs` describes) to `out`; false
+    /// past the end.
+    pub fn write(&self, p: usize, i: usize, out: &mut [u8]) -> bool {
+        let (Some(spec), Some(data)) = (self.specs.get(p), self.planes.get(p)) else { return false };
+        let bb = spec.plane.brick_bytes();
+        if i >= self.len() || out.len() != bb {
+            return false;
+        }
+        match data {
+            PlaneData::Kept(d) => out.copy_from_slice(&d[i * bb..(i + 1) * bb]),
+            PlaneData::Chosen { bytes, at } => match at[i] {
+                u32::MAX => return false,
+                k => out.copy_from_slice(&bytes[k as usize * bb..(k as usize + 1) * bb]),
+            },
+            PlaneData::OnDemand => {
+                let slots: Vec<(&Brick, [f32; 2])> = spec.channels.iter().map(|&c| (&self.bricks[i * self.channels + c], self.range(i, c))).collect();
+                encode_texels(&spec.plane, &slots, out);
+            }
+        }
+        true
+    }
+
+    /// True when plane `p` stores brick `i` (with per-brick formats, the
+    /// planes of the formats it did not choose do not).
+    pub fn holds(&self, p: usize, i: usize) -> bool {
+        match self.planes.get(p) {
+            Some(PlaneData::Chosen { at, .. }) => at.get(i).is_some_and(|&k| k != u32::MAX),
+            Some(_) => i < self.len(),
+            None => false,
+        }
+    }
+
+    /// Brick `i` decoded back to values, one [`Brick`] per channel.
+    pub fn decode(&self, i: usize) -> Option<Vec<Brick>> {
+        let mut out = vec![[0.0f32; BRICK_VOXELS]; self.channels];
+        let mut buf = vec![0u8; MAX_BRICK_BYTES];
+        for (p, spec) in self.specs.iter().enumerate() {
+            if !self.holds(p, i) {
+                continue;
+            }
+            let data = &mut buf[..spec.plane.brick_bytes()];
+            if !self.write(p, i, data) {
+                return None;
+            }
+            let texels = spec.plane.decode_brick(data);
+            for (slot, &c) in spec.channels.iter().enumerate() {
+                out[c] = spec.plane.channel_values(&texels, slot as u32 * spec.plane.z_per_texel, self.range(i, c));
+            }
+        }
+        Some(out)
+    }
+
+    /// Plane `p` of the bricks `keep[0]`, `keep[1]`, …, renumbered from 0, for `vdbcook_vpak::layout::pack_atlas`.
+    pub fn plane<'s>(&'s self, p: usize, keep: &'s [usize]) -> PlaneBricks<'s> {
+        PlaneBricks { encoded: self, plane: p, keep }
+    }
+}
+
+impl<'a> Encoded<'a> {
+    /// Per-brick formats: `choices[i · channels + c]` is channel c of brick
+    /// i ([`cheapest`]); each channel is stored in one plane of its own per
+    /// format its bricks chose, in [`Format::BY_COST`] order.  Bricks not
+    /// `used` are in no plane.
+    pub fn from_choices(bricks: &'a [Brick], channels: usize, mut choices: Vec<Choice>, used: &[bool]) -> Encoded<'a> {
+        let channels = channels.max(1);
+        let n = bricks.len() / channels;
+        let ranges = choices.iter().map(|ch| ch.range).collect();
+        let (mut specs, mut planes) = (Vec::new(), Vec::new());
+        for c in 0..channels {
+            for format in Format::BY_COST {
+                let members: Vec<usize> = (0..n).filter(|&i| used.get(i).copied().unwrap_or(true) && choices[i * channels + c].format == format).collect();
+                if members.is_empty() {
+                    continue;
+                }
+                let mut at = vec![u32::MAX; n];
+                let mut bytes = Vec::with_capacity(members.len() * single_plane(format).brick_bytes());
+                for (k, &i) in members.iter().enumerate() {
+                    at[i] = k as u32;
+                    bytes.extend_from_slice(&std::mem::take(&mut choices[i * channels + c].bytes));
+                }
+                specs.push(PlaneSpec { plane: single_plane(format), channels: vec![c] });
+                planes.push(PlaneData::Chosen { bytes, at });
+            }
+        }
+        Encoded { specs, bricks, channels, ranges, planes }
+    }
+}
+
+/// One plane of a subset of an [`Encoded`] pool.
+pub struct PlaneBricks<'s> {
+    encoded: &'s Encoded<'s>,
+    plane: usize,
+    keep: &'s [usize],
+}
+
+impl BrickSource for PlaneBricks<'_> {
+    fn write_brick(&self, i: usize, out: &mut [u8]) -> bool {
+        self.keep.get(i).is_some_and(|&k| self.encoded.write(self.plane, k, out))
+    }
+}

@@ -1,0 +1,352 @@
+use super::*;
+use vdbcook_vpak::layout::{pack_atlas, plan_atlases, unpack_brick, AtlasLayout};
+
+fn smoke(seed: f32) -> Brick {
+    std::array::from_fn(|i| ((i as f32 * 0.37 + seed).sin() * 0.5 + 0.5) * 0.3)
+}
+
+#[test]
+fn f32_is_exact_and_f16_within_half_precision() {
+    let b = smoke(1.0);
+    assert_eq!(round_trip(Format::F32, Quality::Fast, &b), b);
+    let d = round_trip(Format::F16, Quality::Fast, &b);
+    for (x, y) in b.iter().zip(d.iter()) {
+        assert!((x - y).abs() <= x.abs() * 2f32.powi(-11) + 1e-7, "{x} {y}");
+    }
+}
+
+#[test]
+fn unorm8_within_half_a_step_of_the_brick_range() {
+    let mut b = smoke(2.0);
+    b[0] = 1e-4; // thin smoke must keep its own range
+    let [lo, hi] = range_of(&b);
+    let d = round_trip(Format::Unorm8, Quality::Fast, &b);
+    let step = (hi - lo) / 255.0;
+    for (x, y) in b.iter().zip(d.iter()) {
+        assert!((x - y).abs() <= step * 0.5 + 1e-6, "{x} {y} step {step}");
+    }
+    let flat = [0.25f32; BRICK_VOXELS];
+    assert_eq!(round_trip(Format::Unorm8, Quality::Fast, &flat), flat);
+}
+
+#[test]
+fn unorm16_within_half_a_step_of_the_brick_range() {
+    // NanoVDB's Fp16 bound, range / 131070, where f16's error grows with the value.
+    let b: Brick = std::array::from_fn(|i| 1000.0 + (i as f32 * 0.37).sin() * 3.0);
+    let [lo, hi] = range_of(&b);
+    let step = (hi - lo) / 65535.0;
+    let d = round_trip(Format::Unorm16, Quality::Fast, &b);
+    let f16 = round_trip(Format::F16, Quality::Fast, &b);
+    let worst = |d: &Brick| b.iter().zip(d).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    // Half a step, and the f32 rounding of min + t·(max − min) near 1000.
+    assert!(worst(&d) <= step * 0.5 + 1000.0 * f32::EPSILON, "{} step {step}", worst(&d));
+    assert!(worst(&f16) > 50.0 * worst(&d), "f16 {} unorm16 {}", worst(&f16), worst(&d));
+}
+
+#[test]
+fn every_format_keeps_voxel_order() {
+    // A brick whose voxels differ along each axis by different steps
+    // decodes with each voxel in its place, in every format.
+    let ramp: Brick = std::array::from_fn(|i| (((i / 64) * 24 + ((i / 8) % 8) * 6 + i % 8 * 2) as f32) / 255.0);
+    for format in Format::ALL {
+        let d = round_trip(format, Quality::Fast, &ramp);
+        let worst = ramp.iter().zip(d.iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        assert!(worst <= 12.0 / 255.0, "{format:?}: worst error {worst}");
+    }
+}
+
+/// Channel c of brick k: one affine ramp on the channel's own scale and
+/// offset, so every BC7 block's lanes lie on a line (any lane or slice
+/// mix-up shows as a large error, block compression does not).
+fn channel_brick(k: usize, c: usize) -> Brick {
+    std::array::from_fn(|i| {
+        let (x, y, z) = ((i / 64) as f32, ((i / 8) % 8) as f32, (i % 8) as f32);
+        (x * 9.0 + y * 5.0 + z * 20.0 + (k * 7) as f32) * (1.0 + c as f32) + 100.0 * c as f32
+    })
+}
+
+#[test]
+fn every_channel_of_every_packing_decodes_in_its_place() {
+    // 1 to 5 channels in every format: each channel decodes to its own
+    // values (within the format's precision over its own range), so no
+    // lane or z-slice is swapped between channels.
+    for channels in 1..=5usize {
+        let bricks: Vec<Brick> = (0..6).flat_map(|k| (0..channels).map(move |c| channel_brick(k, c))).collect();
+        for format in Format::ALL {
+            let specs = group_planes(format, &(0..channels).collect::<Vec<_>>());
+            assert!(specs.iter().all(|s| s.plane.is_valid() && s.channels.len() as u32 <= s.plane.channel_slots()));
+            assert_eq!(specs.iter().map(|s| s.channels.len()).sum::<usize>(), channels);
+            let e = Encoded::new(specs, Quality::Fast, &bricks, channels, None, &|_| {});
+            for k in 0..6 {
+                let d = e.decode(k).unwrap();
+                for (c, dc) in d.iter().enumerate() {
+                    let src = channel_brick(k, c);
+                    let [lo, hi] = range_of(&src);
+                    let tol = match format {
+                        Format::F32 => 0.0,
+                        Format::F16 => hi.abs() * 2f32.powi(-10),
+                        Format::Unorm8 => (hi - lo) / 255.0 * 0.5 + 1e-4,
+                        _ => (hi - lo) / 255.0 * 12.0,
+                    };
+                    let worst = src.iter().zip(dc.iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+                    assert!(worst <= tol, "{format:?}, {channels} channels, brick {k} channel {c}: {worst} > {tol}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn made_on_demand_planes_land_in_their_atlas() {
+    // Voxel (x, y, z) of channel c is texel (8·px + x, 8·py + y, 8·pz + z)
+    // of its plane, in lane `c`, for many brick counts and limits.
+    let channels = 4;
+    for (count, max_dim) in [(1usize, 2048u32), (7, 16), (37, 32)] {
+        let bricks: Vec<Brick> = (0..count * channels).map(|k| std::array::from_fn(|v| (k * 1000 + v) as f32)).collect();
+        let e = Encoded::new(group_planes(Format::F32, &[0, 1, 2, 3]), Quality::Fast, &bricks, channels, None, &|_| {});
+        let keep: Vec<usize> = (0..count).collect();
+        let plane = e.specs[0].plane;
+        for atlas in plan_atlases(8, count as u32, max_dim) {
+            let layout = AtlasLayout { plane, atlas };
+            let bytes = pack_atlas(&layout, &e.plane(0, &keep));
+            for i in 0..atlas.count {
+                let g = (atlas.first_brick + i) as usize;
+                let [px, py, pz] = atlas.position(i);
+                for v in (0..BRICK_VOXELS as u32).step_by(7) {
+                    let (x, y, z) = (v / 64, (v / 8) % 8, v % 8);
+                    for c in 0..channels {
+                        let o = layout.texel_offset(px * 8 + x, py * 8 + y, pz * 8 + z) + 4 * c;
+                        assert_eq!(f32::from_le_bytes(bytes[o..o + 4].try_into().unwrap()), ((g * channels + c) * 1000 + v as usize) as f32);
+                    }
+                }
+                let mut want = vec![0u8; plane.brick_bytes()];
+                assert!(e.write(0, g, &mut want));
+                assert_eq!(unpack_brick(&layout, &bytes, i).unwrap(), want);
+            }
+        }
+    }
+}
+
+#[test]
+fn bc7_lanes_hold_channels_by_z_slices() {
+    // Two channels, constant per z-slice: lane l of texel slice t holds
+    // channel l / 2 at z = 2t + l % 2.
+    let bricks: Vec<Brick> = (0..2).map(|c| std::array::from_fn(|i| ((i % 8) * 30 + c * 5) as f32)).collect();
+    let e = Encoded::new(group_planes(Format::Bc7, &[0, 1]), Quality::Slow, &bricks, 2, None, &|_| {});
+    let plane = e.specs[0].plane;
+    assert_eq!((plane.z_per_texel, plane.slices_per_brick()), (2, 4));
+    let mut data = vec![0u8; plane.brick_bytes()];
+    assert!(e.write(0, 0, &mut data));
+    let texels = plane.decode_brick(&data);
+    for t in 0..4 {
+        for (l, &got) in texels[t * 64].iter().enumerate() {
+            let (c, z) = (l / 2, 2 * t + l % 2);
+            let [lo, hi] = range_of(&bricks[c]);
+            let want = ((z * 30 + c * 5) as f32 - lo) / (hi - lo);
+            assert!((got - want).abs() < 3.0 / 255.0, "slice {t} lane {l}: {got} vs {want}");
+        }
+    }
+}
+
+/// A random smooth brick (a tilted ramp plus a wave, on a random scale
+/// and offset), with `noise` levels of its range of noise on top.
+fn random_brick(rng: &mut vdbcook_testkit::Rng, noise: f32) -> Brick {
+    let (scale, offset) = (0.01 + rng.unit() * 100.0, rng.unit() * 50.0 - 25.0);
+    let (gx, gy, gz, f, p) = (rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() * 0.8, rng.unit() * 6.0);
+    std::array::from_fn(|i| {
+        let (x, y, z) = ((i / 64) as f32, ((i / 8) % 8) as f32, (i % 8) as f32);
+        let v = gx * x + gy * y + gz * z + (f * (x + 2.0 * y - z) + p).sin() + noise / 255.0 * 8.0 * (rng.unit() - 0.5);
+        offset + scale * v
+    })
+}
+
+/// The largest error of `decoded` against `source` over the voxels
+/// where `pick` holds; infinite if one of them decodes to NaN or ±∞.
+fn worst(source: &Brick, decoded: &Brick, pick: impl Fn(usize) -> bool) -> f32 {
+    (0..BRICK_VOXELS).filter(|&i| pick(i)).map(|i| if decoded[i].is_finite() { (decoded[i] - source[i]).abs() } else { f32::INFINITY }).fold(0.0, f32::max)
+}
+
+#[test]
+fn non_finite_voxels_cost_their_neighbours_nothing_in_any_format() {
+    // Random bricks, each with 1 to 6 voxels set to NaN, +∞ or −∞: in
+    // every format and quality, the finite voxels decode within the
+    // format's bound over the brick's finite range, and about as well as
+    // the same brick without the non-finite voxels; the non-finite ones
+    // decode as documented (kept by f32 and f16, the fill of their finite
+    // neighbours by the ranged formats).
+    let mut rng = vdbcook_testkit::Rng::new(0x4e4e);
+    let specials = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+    for trial in 0..24 {
+        let clean = random_brick(&mut rng, if trial % 3 == 0 { 6.0 } else { 0.0 });
+        let mut dirty = clean;
+        let mut odd = [false; BRICK_VOXELS];
+        for k in 0..1 + rng.below(6) as usize {
+            let i = rng.below(BRICK_VOXELS as u64) as usize;
+            dirty[i] = specials[(trial + k) % 3];
+            odd[i] = true;
+        }
+        let [lo, hi] = range_of(&dirty);
+        assert!(lo.is_finite() && hi.is_finite() && lo <= hi, "{lo} {hi}");
+        let fill = fill_non_finite(&dirty).unwrap();
+        let step = (hi - lo) / 255.0;
+        for format in Format::ALL {
+            for quality in [Quality::UltraFast, Quality::VeryFast, Quality::Slow] {
+                let d = round_trip(format, quality, &dirty);
+                let c = round_trip(format, quality, &clean);
+                let what = format!("brick {trial}, {format:?} {quality:?}");
+                let finite = |i: usize| !odd[i];
+                let (got, clean_worst) = (worst(&clean, &d, finite), worst(&clean, &c, finite));
+                let bound = match format {
+                    Format::F32 => 0.0,
+                    Format::F16 => hi.abs().max(lo.abs()) * 2f32.powi(-11),
+                    Format::Unorm8 => step * 0.501,
+                    // Block formats: their usual error (these smooth bricks
+                    // stay within a few levels), a little either way.
+                    _ => (clean_worst * 1.25).max(clean_worst + 2.0 * step),
+                };
+                assert!(got <= bound, "{what}: finite voxels off by {got} (levels: {}), the clean brick's by {clean_worst}", got / step);
+                for i in (0..BRICK_VOXELS).filter(|&i| odd[i]) {
+                    match format {
+                        Format::F32 => assert_eq!(d[i].to_bits(), dirty[i].to_bits(), "{what}: voxel {i}"),
+                        Format::F16 => assert!(d[i] == dirty[i] || d[i].is_nan() && dirty[i].is_nan(), "{what}: voxel {i}: {} became {}", dirty[i], d[i]),
+                        _ => {
+                            assert!(d[i] >= lo && d[i] <= hi, "{what}: voxel {i}: {} became {}, outside [{lo}, {hi}]", dirty[i], d[i]);
+                            let tol = if format == Format::Unorm8 { step * 0.501 } else { bound };
+                            assert!((d[i] - fill[i]).abs() <= tol, "{what}: voxel {i}: decodes to {}, its fill is {}", d[i], fill[i]);
+                        }
+                    }
+                }
+                if !format.is_block() {
+                    break;
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn bricks_without_finite_values() {
+    // Decoded by every ranged format as the range's one finite value.
+    for (v, m) in [(f32::INFINITY, f32::MAX), (f32::NEG_INFINITY, -f32::MAX), (f32::NAN, 0.0)] {
+        let b = [v; BRICK_VOXELS];
+        assert_eq!(range_of(&b), [m, m]);
+        assert!(fill_non_finite(&b).is_none());
+        for format in [Format::Unorm8, Format::Bc4, Format::Bc7] {
+            assert!(round_trip(format, Quality::Fast, &b).iter().all(|&d| d == m), "{format:?} {v}");
+        }
+    }
+    let mut mixed = [f32::NAN; BRICK_VOXELS];
+    mixed[7] = f32::NEG_INFINITY;
+    mixed[9] = f32::INFINITY;
+    assert_eq!(range_of(&mixed), [f32::MAX, f32::MAX]);
+    // One finite voxel fills the brick.
+    mixed[100] = 0.5;
+    assert_eq!(range_of(&mixed), [0.5, 0.5]);
+    assert_eq!(fill_non_finite(&mixed), Some([0.5; BRICK_VOXELS]));
+}
+
+#[test]
+fn error_figures_leave_non_finite_references_out() {
+    let mut reference = smoke(3.0);
+    let decoded = reference.map(|v| v + 0.25);
+    reference[3] = f32::NAN;
+    reference[200] = f32::INFINITY;
+    reference[511] = f32::NEG_INFINITY;
+    let mut all = ErrorStats::default();
+    all.add_masked(&reference, &decoded, &[u64::MAX; 8]);
+    // The voxel-by-voxel path (a mask with a voxel missing) agrees.
+    let mut part = ErrorStats::default();
+    let mut mask = [u64::MAX; 8];
+    mask[1] &= !1;
+    part.add_masked(&reference, &decoded, &mask);
+    for (e, n) in [(all, 509), (part, 508)] {
+        assert_eq!(e.count, n);
+        assert_eq!(e.non_finite, NonFinite { nan: 1, pos_inf: 1, neg_inf: 1 });
+        assert!((e.rmse() - 0.25).abs() < 1e-6 && (e.max_abs - 0.25).abs() < 1e-6, "{e:?}");
+    }
+    all.merge(&part);
+    assert_eq!(all.non_finite.total(), 6);
+}
+
+/// A random brick of one of the kinds `--max-error` meets: smooth,
+/// noisy, constant, with extreme values, with non-finite voxels.
+fn kind_of_brick(rng: &mut vdbcook_testkit::Rng, kind: u64) -> Brick {
+    match kind {
+        0 => random_brick(rng, 0.0),
+        1 => random_brick(rng, 40.0),
+        2 => [rng.unit() * 10.0 - 5.0; BRICK_VOXELS],
+        3 => {
+            let mut b = random_brick(rng, 2.0);
+            let big = [f32::MAX, -f32::MAX, 3e38, 1e-30];
+            for _ in 0..1 + rng.below(4) {
+                b[rng.below(BRICK_VOXELS as u64) as usize] = big[rng.below(4) as usize];
+            }
+            b
+        }
+        _ => {
+            let mut b = random_brick(rng, 1.0);
+            let odd = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+            for _ in 0..1 + rng.below(3) {
+                b[rng.below(BRICK_VOXELS as u64) as usize] = odd[rng.below(3) as usize];
+            }
+            b
+        }
+    }
+}
+
+#[test]
+fn per_brick_formats_meet_the_bound_with_the_cheapest_format() {
+    // For random bricks (five kinds, fully or partly shown) and random
+    // bounds E: every shown voxel, decoded through the plane the choice
+    // lands in, is within E (NaN and ±∞ decode to themselves); and every
+    // cheaper format, encoded and decoded on its own, breaks E somewhere.
+    let mut rng = vdbcook_testkit::Rng::new(0xe4405);
+    let mut seen = std::collections::BTreeSet::new();
+    for trial in 0..120u64 {
+        let brick = kind_of_brick(&mut rng, trial % 5);
+        let mask: [u64; 8] = if trial % 3 == 0 { std::array::from_fn(|_| rng.next_u64() & rng.next_u64()) } else { [u64::MAX; 8] };
+        let e = 10f32.powf(-6.0 + 6.0 * rng.unit());
+        let choice = cheapest(&brick, &mask, e, Quality::VeryFast);
+        seen.insert(choice.format);
+        let encoded = Encoded::from_choices(std::slice::from_ref(&brick), 1, vec![choice.clone()], &[true]);
+        assert_eq!(encoded.specs.len(), 1);
+        assert_eq!(encoded.specs[0].plane, single_plane(choice.format));
+        let decoded = encoded.decode(0).unwrap()[0];
+        for i in (0..BRICK_VOXELS).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 1) {
+            let (v, d) = (brick[i], decoded[i]);
+            let ok = if v.is_nan() {
+                d.is_nan()
+            } else if v.is_infinite() {
+                d == v
+            } else {
+                (f64::from(d) - f64::from(v)).abs() <= f64::from(e)
+            };
+            assert!(ok, "trial {trial}: {} voxel {i}: {v} decodes to {d}, bound {e}", choice.format.name());
+        }
+        let cost = |f: Format| Format::BY_COST.iter().position(|&g| g == f).unwrap();
+        for cheaper in Format::BY_COST.into_iter().take(cost(choice.format)) {
+            let meets = match cheaper {
+                // A constant within E exists exactly when the shown voxels are finite and span at most 2E.
+                Format::Constant => {
+                    let shown: Vec<f32> = (0..BRICK_VOXELS).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 1).map(|i| brick[i]).collect();
+                    let (lo, hi) = shown.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+                    shown.iter().all(|v| v.is_finite()) && f64::from(hi) - f64::from(lo) <= 2.0 * f64::from(e) * 0.999
+                }
+                f => within(&brick, &round_trip(f, Quality::VeryFast, &brick), &mask, e),
+            };
+            assert!(!meets, "trial {trial}: chose {} but {} meets {e}", choice.format.name(), cheaper.name());
+        }
+    }
+    // The trials reach most of the ladder.
+    assert!(seen.len() >= 5, "{seen:?}");
+}
+
+#[test]
+fn error_stats() {
+    let mut e = ErrorStats::default();
+    e.add(1.0, 1.5);
+    e.add(0.0, 0.0);
+    assert!((e.rmse() - (0.125f64).sqrt()).abs() < 1e-12);
+    assert_eq!(e.max_abs, 0.5);
+    assert!(ErrorStats::default().psnr(1.0).is_infinite());
+}

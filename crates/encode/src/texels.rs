@@ -1,0 +1,152 @@
+//! A brick's values as texels: the brick range, the levels of the ranged
+//! formats, and the texel order of the uncompressed ones (which lane and
+//! byte is which is `vdbcook_vpak::layout`'s to say).
+
+use crate::{Brick, Format, Plane, BRICK_VOXELS};
+use half::slice::HalfFloatSliceExt;
+
+/// The smallest and largest of a brick's finite values (NaN and ±∞ left
+/// out, so that the ranged formats keep their precision and decode to finite
+/// values); for a brick without any finite value, `[m, m]` with m = `f32::MAX`
+/// if it holds +∞, else `-f32::MAX` if it holds −∞, else 0 (all NaN).
+pub fn range_of(values: &Brick) -> [f32; 2] {
+    // Eight independent lanes, so the compiler can vectorise.
+    let mut lo = [f32::INFINITY; 8];
+    let mut hi = [f32::NEG_INFINITY; 8];
+    for c in values.chunks_exact(8) {
+        for k in 0..8 {
+            let finite = c[k].is_finite();
+            lo[k] = lo[k].min(if finite { c[k] } else { f32::INFINITY });
+            hi[k] = hi[k].max(if finite { c[k] } else { f32::NEG_INFINITY });
+        }
+    }
+    let (lo, hi) = (lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max));
+    if lo <= hi {
+        return [lo, hi];
+    }
+    let m = if values.contains(&f32::INFINITY) {
+        f32::MAX
+    } else if values.contains(&f32::NEG_INFINITY) {
+        -f32::MAX
+    } else {
+        0.0
+    };
+    [m, m]
+}
+
+/// A brick whose NaN and ±∞ voxels are replaced as the ranged formats store
+/// them: like inactive voxels, each takes the mean of its finite 6-neighbours
+/// (in the order −x, +x, −y, +y, −z, +z), front by front outwards from the
+/// finite voxels, so it lies within their range and a block encoder fits
+/// nothing through it.  `None` when every voxel is finite (the common case)
+/// or none is.
+pub fn fill_non_finite(values: &Brick) -> Option<Brick> {
+    if values.iter().fold(true, |all, v| all & v.is_finite()) {
+        return None;
+    }
+    let mut known = [0u64; 8];
+    for (i, v) in values.iter().enumerate() {
+        known[i >> 6] |= u64::from(v.is_finite()) << (i & 63);
+    }
+    if known == [0; 8] {
+        return None;
+    }
+    let mut out = *values;
+    // Fronts reach every voxel of a brick (at most 21 steps apart).
+    vdbcook_grid::fill_from_neighbours(&mut out, known, BRICK_VOXELS);
+    Some(out)
+}
+
+/// A brick's values as levels in [0, top] over its own range (not rounded);
+/// non-finite voxels as [`fill_non_finite`] replaces them.
+pub(crate) fn levels(values: &Brick, [lo, hi]: [f32; 2], top: f32) -> Brick {
+    let filled = fill_non_finite(values);
+    let values = filled.as_ref().unwrap_or(values);
+    let span = hi - lo;
+    let mut out = [0.0f32; BRICK_VOXELS];
+    if span > 0.0 && span.is_finite() {
+        let scale = top / span;
+        for (o, &v) in out.iter_mut().zip(values) {
+            *o = ((v - lo) * scale).clamp(0.0, top);
+        }
+    }
+    out
+}
+
+/// 8-bit levels of a brick over its own range.
+pub(crate) fn quantise(values: &Brick, range: [f32; 2]) -> [u8; BRICK_VOXELS] {
+    levels(values, range, 255.0).map(|l| l.round() as u8)
+}
+
+/// 16-bit levels of a brick over its own range.
+pub(crate) fn quantise16(values: &Brick, range: [f32; 2]) -> [u16; BRICK_VOXELS] {
+    levels(values, range, 65535.0).map(|l| l.round() as u16)
+}
+
+/// BC7 texels of bricks (per brick, its channels' 8-bit levels in slot
+/// order): lane `l` of texel (x, y, t) holds slot `l / zpt` at
+/// z = `t · zpt + l % zpt` (`vdbcook_vpak::Plane::locate`); empty slots are 0.
+pub(crate) fn bc7_texels(bricks: &[Vec<[u8; BRICK_VOXELS]>], zpt: usize) -> Vec<[u8; 4]> {
+    let slices = 8 / zpt;
+    let mut out = vec![[0u8; 4]; bricks.len() * slices * 64];
+    for (k, slots) in bricks.iter().enumerate() {
+        for t in 0..slices {
+            for y in 0..8 {
+                for x in 0..8 {
+                    let px = &mut out[(k * slices + t) * 64 + y * 8 + x];
+                    for (l, v) in px.iter_mut().enumerate() {
+                        if let Some(lv) = slots.get(l / zpt) {
+                            *v = lv[x * 64 + y * 8 + t * zpt + l % zpt];
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Swaps the x and z axes of a brick: leaf order (`x·64 + y·8 + z`) to texel
+/// order (`z·64 + y·8 + x`) and back.
+pub(crate) fn swap_xz<T: Copy>(a: &[T; BRICK_VOXELS]) -> [T; BRICK_VOXELS] {
+    std::array::from_fn(|i| a[(i & 7) << 6 | (i & 0o70) | i >> 6])
+}
+
+/// One uncompressed brick of a plane: its channels' values lane by lane, in
+/// texel order, little-endian.
+pub(crate) fn encode_texels(plane: &Plane, slots: &[(&Brick, [f32; 2])], out: &mut [u8]) {
+    let lanes = plane.lanes as usize;
+    let lb = plane.format.lane_bytes();
+    for (l, (values, range)) in slots.iter().enumerate().take(lanes) {
+        let put = |out: &mut [u8], t: usize, b: &[u8]| {
+            let at = (t * lanes + l) * lb;
+            out[at..at + lb].copy_from_slice(b);
+        };
+        match plane.format {
+            Format::F32 => {
+                for (t, v) in swap_xz(values).iter().enumerate() {
+                    put(out, t, &v.to_le_bytes());
+                }
+            }
+            Format::F16 => {
+                let mut h = [half::f16::ZERO; BRICK_VOXELS];
+                h.convert_from_f32_slice(&swap_xz(values));
+                for (t, v) in h.iter().enumerate() {
+                    put(out, t, &v.to_le_bytes());
+                }
+            }
+            Format::Unorm16 => {
+                for (t, q) in swap_xz(&quantise16(values, *range)).iter().enumerate() {
+                    put(out, t, &q.to_le_bytes());
+                }
+            }
+            Format::Unorm8 => {
+                for (t, q) in swap_xz(&quantise(values, *range)).iter().enumerate() {
+                    put(out, t, &[*q]);
+                }
+            }
+            // No texels; block formats are encoded elsewhere.
+            Format::Constant | Format::Bc4 | Format::Bc7 => {}
+        }
+    }
+}
