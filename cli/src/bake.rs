@@ -175,7 +175,8 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
         return dry_run(&args, &out_dir, &selected, quiet);
     }
 
-    let ctx = Ctx { out_dir, report_dir: report_dir.clone(), cache: args.cache.clone(), base, force: args.force, gpu: args.gpu.clone(), first_error: OnceLock::new(), renderers: Mutex::new(Vec::new()) };
+    let ctx =
+        Ctx { out_dir, report_dir: report_dir.clone(), cache: args.cache.clone(), base, force: args.force, gpu: args.gpu.clone(), first_error: OnceLock::new(), renderers: Mutex::new(Vec::new()) };
     let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize).clamp(1, selected.len().max(1));
     let show = Shown::new(quiet || args.json, selected.len());
     let next = AtomicUsize::new(0);

@@ -151,7 +151,13 @@ mod tests {
             assert_eq!(outside(&out, ok), None, "{ok}");
         }
         let abs = d.join("elsewhere/victim.txt");
-        for (bad, says) in [(abs.to_str().unwrap(), "absolute"), ("../escape.vpak", "through '..'"), ("sub/../../escape.vpak", "through '..'"), ("new/../../escape.vpak", "through '..'"), (".", "the directory itself")] {
+        for (bad, says) in [
+            (abs.to_str().unwrap(), "absolute"),
+            ("../escape.vpak", "through '..'"),
+            ("sub/../../escape.vpak", "through '..'"),
+            ("new/../../escape.vpak", "through '..'"),
+            (".", "the directory itself"),
+        ] {
             let e = outside(&out, bad).unwrap_or_else(|| panic!("{bad} is outside"));
             assert!(e.contains(says) && e.contains("--allow-outside") && !e.contains('\n'), "{bad}: {e}");
         }

@@ -110,6 +110,11 @@ impl ChannelFormats {
         };
         self.formats.iter().map(|f| format!("{} {}", f.format, pct(f.bricks))).collect::<Vec<_>>().join(", ")
     }
+
+    /// [`ChannelFormats::shares`] with each "format N %" unbreakable, for HTML.
+    fn shares_html(&self) -> String {
+        esc(&self.shares()).split(", ").map(|x| x.replace(' ', "&nbsp;")).collect::<Vec<_>>().join(", ")
+    }
 }
 
 impl Record {
@@ -326,12 +331,12 @@ impl Report {
             "<!doctype html>\n<html lang='en'><head><meta charset='utf-8'><title>vdbcook bake: {m}</title>\n<meta name='viewport' content='width=device-width'>\n<style>\
 body{{font-family:sans-serif;margin:1em;color:#222;font-size:14px}}h1{{font-size:150%;margin:0 0 .3em}}p{{max-width:60em;overflow-wrap:anywhere}}\
 table{{border-collapse:collapse;max-width:100%}}th,td{{border:1px solid #ccc;padding:3px 6px;text-align:right;vertical-align:top}}td{{white-space:nowrap}}\
-th{{background:#f3f3f3;cursor:pointer;user-select:none;font-weight:600;vertical-align:bottom}}th.asc::after{{content:' \\25b2'}}th.desc::after{{content:' \\25bc'}}\
+th{{background:#f3f3f3;cursor:pointer;user-select:none;font-weight:600;vertical-align:bottom}}th:nth-child(-n+3),th:nth-child(5){{text-align:left}}th.asc::after{{content:' \\25b2'}}th.desc::after{{content:' \\25bc'}}\
 td.t{{text-align:left;white-space:normal;overflow-wrap:anywhere;min-width:6em;max-width:14em}}td.pic{{padding:2px}}\
 img{{width:256px;height:256px;background:#000;display:block}}.sub{{color:#777;font-size:85%}}.none{{color:#999}}\
 .ch{{margin-bottom:2px}}.ch b{{font-weight:600}}details summary{{cursor:pointer}}td.fmt{{min-width:9em;max-width:15em}}\
 tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}tr td .msg{{font-weight:normal}}</style></head><body>\n\
-<h1>vdbcook bake</h1>\n<p>{m}{scope}: {n} assets, {b} baked, {c} cached, {f} failed, {g} failed a quality gate, {k} skipped; {t:.1} s; {tool}.</p>\n\
+<h1>vdbcook bake</h1>\n<p>{m}{scope}: {n} assets, {b} baked, {c} cached, {f} failed, {g} failed a quality gate, {k} skipped; {t:.1}&nbsp;s; {tool}.</p>\n\
 <p class='sub'>Click a column heading to sort. Formats: each channel's formats and their share of its bricks. Image RMSE / PSNR / FLIP: the worst of every frame and view against a lossless reference render (FLIP: NVIDIA's perceptual error, 0 to 1, at 67 pixels per degree); voxel RMSE / PSNR over every active voxel. Previews are exposed to their volume's brightness; the validation pages use the fixed scene.</p>\n\
 <table id='assets'><thead><tr><th>preview</th><th>asset</th><th>status</th><th>frames</th><th>format</th><th>bytes</th><th>bits per active voxel</th>\
 <th>voxel RMSE</th><th>voxel PSNR (dB)</th><th>image RMSE</th><th>image PSNR (dB)</th><th>image FLIP</th><th>time</th></tr></thead>\n<tbody>\n{rows}</tbody></table>\n\
@@ -359,7 +364,7 @@ fn format_cell(r: &Record) -> String {
     let all = esc(r.format.as_deref().unwrap_or(""));
     let body = match r.channels.as_deref() {
         Some(chs) if !chs.is_empty() => {
-            let lines: String = chs.iter().map(|c| format!("<div class='ch'><b>{}</b> {}</div>", esc(&c.name), esc(&c.shares()))).collect();
+            let lines: String = chs.iter().map(|c| format!("<div class='ch'><b>{}</b> {}</div>", esc(&c.name), c.shares_html())).collect();
             if chs.len() > 3 {
                 format!("<details><summary>{} channels</summary>{lines}</details>", chs.len())
             } else {
@@ -464,6 +469,26 @@ mod tests {
         assert_eq!(back, merged);
         let twice = vec![parts[0].clone(), parts[0].clone()];
         assert!(Report::merge(twice).is_err());
+    }
+
+    #[test]
+    fn formats_are_shown_per_channel() {
+        let ch = |name: &str, f: &[(&str, u32)]| ChannelFormats { name: name.into(), formats: f.iter().map(|(f, b)| FormatBricks { format: (*f).into(), bricks: *b }).collect() };
+        let density = ch("density", &[("constant", 1), ("bc7", 61), ("bc4", 30), ("unorm8", 8), ("f16", 0)]);
+        assert_eq!(density.shares(), "constant 1 %, bc7 61 %, bc4 30 %, unorm8 8 %, f16 0 %");
+        assert_eq!(ch("t", &[("bc7", 1), ("unorm8", 999)]).shares(), "bc7 <1 %, unorm8 100 %");
+        assert_eq!(ch("t", &[("bc4", 7)]).shares(), "bc4");
+        let mut r = Record { format: Some("constant+bc7+bc4+unorm8+f16".into()), channels: Some(vec![density.clone()]), ..Record::default() };
+        let cell = format_cell(&r);
+        assert!(cell.contains("<b>density</b> constant&nbsp;1&nbsp;%, bc7&nbsp;61&nbsp;%,") && !cell.contains("<details>"), "{cell}");
+        r.channels = Some((0..4).map(|k| ch(&format!("c{k}"), &[("bc7", 1)])).collect());
+        assert!(format_cell(&r).contains("<details><summary>4 channels</summary>"));
+        // A record written before channels were recorded reads back, and shows the joined formats.
+        let mut old: serde_json::Value = serde_json::from_str(&r.to_setting()).unwrap();
+        old.as_object_mut().unwrap().remove("channels");
+        let back = Record::from_setting(&old.to_string()).unwrap();
+        assert_eq!(back.channels, None);
+        assert!(format_cell(&back).contains("constant+<wbr>bc7+<wbr>bc4"));
     }
 
     #[test]
