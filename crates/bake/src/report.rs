@@ -332,10 +332,10 @@ impl Report {
 body{{font-family:sans-serif;margin:1em;color:#222;font-size:14px}}h1{{font-size:150%;margin:0 0 .3em}}p{{max-width:60em;overflow-wrap:anywhere}}\
 table{{border-collapse:collapse;max-width:100%}}th,td{{border:1px solid #ccc;padding:3px 6px;text-align:right;vertical-align:top}}td{{white-space:nowrap}}\
 th{{background:#f3f3f3;cursor:pointer;user-select:none;font-weight:600;vertical-align:bottom}}th:nth-child(-n+3),th:nth-child(5){{text-align:left}}th.asc::after{{content:' \\25b2'}}th.desc::after{{content:' \\25bc'}}\
-td.t{{text-align:left;white-space:normal;overflow-wrap:anywhere;min-width:6em;max-width:14em}}td.pic{{padding:2px}}\
+td.t{{text-align:left;white-space:normal;overflow-wrap:anywhere;min-width:6em;max-width:14em}}td.pic{{padding:2px;text-align:center}}\
 img{{width:256px;height:256px;background:#000;display:block}}.sub{{color:#777;font-size:85%}}.none{{color:#999}}\
 .ch{{margin-bottom:2px}}.ch b{{font-weight:600}}details summary{{cursor:pointer}}td.fmt{{min-width:9em;max-width:15em}}\
-tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}tr td .msg{{font-weight:normal}}</style></head><body>\n\
+tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}td .sub{{font-weight:normal}}</style></head><body>\n\
 <h1>vdbcook bake</h1>\n<p>{m}{scope}: {n} assets, {b} baked, {c} cached, {f} failed, {g} failed a quality gate, {k} skipped; {t:.1}&nbsp;s; {tool}.</p>\n\
 <p class='sub'>Click a column heading to sort. Formats: each channel's formats and their share of its bricks. Image RMSE / PSNR / FLIP: the worst of every frame and view against a lossless reference render (FLIP: NVIDIA's perceptual error, 0 to 1, at 67 pixels per degree); voxel RMSE / PSNR over every active voxel. Previews are exposed to their volume's brightness; the validation pages use the fixed scene.</p>\n\
 <table id='assets'><thead><tr><th>preview</th><th>asset</th><th>status</th><th>frames</th><th>format</th><th>bytes</th><th>bits per active voxel</th>\
