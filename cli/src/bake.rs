@@ -57,7 +57,9 @@ not exist yet); report.json, report.xml and report.html replace only earlier bak
 reports (unless --force), checked before anything is baked.
 
 Reports: report.json (docs/bake-json.md; --json prints the same), report.xml (JUnit)
-and report.html (sortable, self-contained) in --report-dir, default --out-dir; each
+and report.html (sortable, self-contained, 1280 px wide: each channel's formats with
+their share of its bricks, 256-pixel previews exposed from each volume) in
+--report-dir, default --out-dir; each
 validated asset's own page in validation/NAME/ there.
 
 Scale-out: --shard I/N takes every N-th asset (round robin in manifest order), so N
