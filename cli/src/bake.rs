@@ -4,7 +4,7 @@
 //! reports come from `vdbcook_bake`; this file does the I/O.
 
 use crate::cook::{cook_asset, CookJob};
-use crate::validate::{compare_assets, thumbnail, GpuArgs, ValidateArgs};
+use crate::validate::{compare_assets, GpuArgs, ValidateArgs};
 use crate::{exit, one_line, Usage};
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -15,8 +15,10 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 use vdbcook_bake::manifest::resolve;
-use vdbcook_bake::{AssetReport, Gate, KeyContext, Manifest, PlannedAsset, Record, Report, Shard, Sources, Status, Validation};
-use vdbcook_validate::{report::base64, Renderer};
+use vdbcook_bake::place;
+use vdbcook_bake::{AssetReport, ChannelFormats, Gate, KeyContext, Manifest, PlannedAsset, Record, Report, Shard, Sources, Status, Validation};
+use vdbcook_validate::report::{base64, thumbnail};
+use vdbcook_validate::Renderer;
 use vdbcook_vpak::{kind, Asset, Metadata};
 
 pub const AFTER_HELP: &str = "\
@@ -43,10 +45,21 @@ Cache: an asset's key is an XXH3-128 hash of its input files' bytes, every setti
 vdbcook's version and the .vpak format version, and is recorded in the asset. An asset
 whose output already carries its key (and whose checksums hold) is left in place; with
 --cache DIR, one found there is copied; otherwise it is cooked, and stored in DIR.
-Outputs are written atomically and belong to the bake: a stale one is replaced.
+
+Where a bake writes: every output stays inside --out-dir. An output that is absolute,
+or that leaves --out-dir through '..' or a symbolic link (the longest existing part of
+the path is resolved, the rest read as written), is a manifest error (exit 2, nothing
+baked) unless --allow-outside is given. Outputs are written atomically; a file already
+at an output path is replaced only when it is a .vpak (its header says so), else that
+asset fails and the file is left as it is, unless --force. The same holds for cache
+entries (DIR/KEY.vpak). --out-dir, --report-dir and --cache must be directories (or
+not exist yet); report.json, report.xml and report.html replace only earlier bake
+reports (unless --force), checked before anything is baked.
 
 Reports: report.json (docs/bake-json.md; --json prints the same), report.xml (JUnit)
-and report.html (sortable, self-contained) in --report-dir, default --out-dir; each
+and report.html (sortable, self-contained, 1280 px wide: each channel's formats with
+their share of its bricks, 256-pixel previews exposed from each volume) in
+--report-dir, default --out-dir; each
 validated asset's own page in validation/NAME/ there.
 
 Scale-out: --shard I/N takes every N-th asset (round robin in manifest order), so N
@@ -81,6 +94,12 @@ pub struct BakeArgs {
     /// Bake only these assets (repeat the flag or separate names with commas).
     #[arg(long, value_name = "NAME", value_delimiter = ',')]
     pub only: Vec<String>,
+    /// Let outputs be absolute or leave --out-dir (through '..' or symbolic links).
+    #[arg(long)]
+    pub allow_outside: bool,
+    /// Replace whatever is at an output path (or a report or cache file), not only a .vpak (or a report).
+    #[arg(long)]
+    pub force: bool,
     /// Check the manifest and the cache and say what would be baked; write nothing.
     #[arg(long)]
     pub dry_run: bool,
@@ -147,14 +166,19 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
     let selected: Vec<PlannedAsset> = planned.into_iter().filter(|a| args.only.is_empty() || args.only.contains(&a.name)).filter(|a| args.shard.is_none_or(|s| s.takes(a.index))).collect();
     let out_dir = args.out_dir.clone().unwrap_or_else(|| base.clone());
     let report_dir = args.report_dir.clone().unwrap_or_else(|| out_dir.clone());
+    if !args.allow_outside {
+        place::check_outputs(&m, &selected, &out_dir).map_err(|e| Usage(format!("{mname}:{}", e.located(&text))))?;
+    }
     if args.plan {
         return print_plan(&args, &mname, &out_dir, &selected, quiet);
     }
+    preflight(&args, &out_dir, &report_dir)?;
     if args.dry_run {
         return dry_run(&args, &out_dir, &selected, quiet);
     }
 
-    let ctx = Ctx { out_dir, report_dir: report_dir.clone(), cache: args.cache.clone(), base, gpu: args.gpu.clone(), first_error: OnceLock::new(), renderers: Mutex::new(Vec::new()) };
+    let ctx =
+        Ctx { out_dir, report_dir: report_dir.clone(), cache: args.cache.clone(), base, force: args.force, gpu: args.gpu.clone(), first_error: OnceLock::new(), renderers: Mutex::new(Vec::new()) };
     let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize).clamp(1, selected.len().max(1));
     let show = Shown::new(quiet || args.json, selected.len());
     let next = AtomicUsize::new(0);
@@ -181,6 +205,27 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
     let report = Report::new(tool_version(), mname, args.shard, assets, started.elapsed().as_secs_f64());
     write_reports(&report_dir, &report)?;
     finish(&report, &report_dir, args.json, quiet)
+}
+
+const REPORT_FILES: [&str; 3] = ["report.json", "report.xml", "report.html"];
+
+/// Before anything is baked: the directories the bake writes into are
+/// directories (or do not exist yet), and the report files there are earlier
+/// bake reports (or absent, or --force): a usage error otherwise.
+fn preflight(args: &BakeArgs, out_dir: &Path, report_dir: &Path) -> Result<()> {
+    place::check_dir(out_dir, "--out-dir").map_err(Usage)?;
+    place::check_dir(report_dir, "--report-dir").map_err(Usage)?;
+    if let Some(c) = &args.cache {
+        place::check_dir(c, "--cache").map_err(Usage)?;
+    }
+    check_reports(report_dir, args.force)
+}
+
+fn check_reports(dir: &Path, force: bool) -> Result<()> {
+    for f in REPORT_FILES {
+        place::may_replace_report(&dir.join(f), force).map_err(Usage)?;
+    }
+    Ok(())
 }
 
 /// Writes report.json, report.xml and report.html into `dir`, each atomically.
@@ -243,6 +288,8 @@ fn merge(args: &BakeArgs, quiet: bool) -> Result<u8> {
     }
     let report = Report::merge(parts).map_err(|e| Usage(e.to_string()))?;
     let dir = args.report_dir.clone().or_else(|| args.out_dir.clone()).unwrap_or_else(|| PathBuf::from("."));
+    place::check_dir(&dir, "--report-dir").map_err(Usage)?;
+    check_reports(&dir, args.force)?;
     write_reports(&dir, &report)?;
     finish(&report, &dir, args.json, quiet)
 }
@@ -286,6 +333,8 @@ fn dry_run(args: &BakeArgs, out_dir: &Path, assets: &[PlannedAsset], quiet: bool
         let out = resolve(out_dir, &a.output);
         let action = if cached(&out, &a.key).is_some() {
             "cached"
+        } else if place::may_replace(&out, args.force).is_err() {
+            "refused"
         } else if args.cache.as_ref().is_some_and(|c| cached(&c.join(format!("{}.vpak", a.key)), &a.key).is_some()) {
             "from-cache"
         } else {
@@ -312,6 +361,8 @@ struct Ctx {
     report_dir: PathBuf,
     cache: Option<PathBuf>,
     base: PathBuf,
+    /// Replace anything at an output or cache path (`--force`).
+    force: bool,
     gpu: GpuArgs,
     /// Why no GPU device could be opened, once that happened.
     first_error: OnceLock<String>,
@@ -425,6 +476,10 @@ fn obtain(a: &PlannedAsset, ctx: &Ctx, out: &Path) -> Result<(Status, Record, u6
         return Ok((Status::Cached, record, bytes));
     }
     let name = out.display().to_string();
+    // Checked before the cook (so a refusal costs nothing) and again before
+    // each write (the file may have appeared meanwhile).
+    let may_write = |p: &Path| place::may_replace(p, ctx.force).map_err(|e| anyhow!(e));
+    may_write(out)?;
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| parent.display().to_string())?;
     }
@@ -432,18 +487,25 @@ fn obtain(a: &PlannedAsset, ctx: &Ctx, out: &Path) -> Result<(Status, Record, u6
     if let Some(cf) = &cache_file {
         if let Some((record, bytes)) = cached(cf, &a.key) {
             let data = std::fs::read(cf).with_context(|| cf.display().to_string())?;
+            may_write(out)?;
             vdbcook_vpak::write_atomic(out, &data, true).with_context(|| name.clone())?;
             return Ok((Status::Cached, record, bytes));
         }
+        may_write(cf)?;
     }
     let (bytes, record) = cook_fresh(a, ctx, &name)?;
+    may_write(out)?;
     vdbcook_vpak::write_atomic(out, &bytes, true).with_context(|| name.clone())?;
     if let (Some(cf), Some(dir)) = (&cache_file, &ctx.cache) {
         std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+        may_write(cf)?;
         vdbcook_vpak::write_atomic(cf, &bytes, true).with_context(|| cf.display().to_string())?;
     }
     Ok((Status::Baked, record, bytes.len() as u64))
 }
+
+/// Pixels on a side of a report preview (shown at that size in report.html).
+const THUMBNAIL_SIZE: u32 = 256;
 
 fn finite(x: f64) -> Option<f64> {
     x.is_finite().then_some(x)
@@ -463,6 +525,7 @@ fn cook_fresh(a: &PlannedAsset, ctx: &Ctx, name: &str) -> Result<(Vec<u8>, Recor
         bits_per_active_voxel: Some(r.bits_per_active_voxel),
         voxel_rmse: Some(r.voxel_rmse),
         voxel_psnr: finite(r.voxel_psnr),
+        channels: Some(r.channels.iter().map(ChannelFormats::from).collect()),
         ..Record::default()
     };
     let mut sections = cooked.sections;
@@ -475,7 +538,7 @@ fn cook_fresh(a: &PlannedAsset, ctx: &Ctx, name: &str) -> Result<(Vec<u8>, Recor
     }
     // A preview for the report; without a GPU (and no validation asked for) there is none.
     if let Ok(renderer) = ctx.renderer() {
-        record.thumbnail = thumbnail(&renderer, &asset, 96).ok().map(|png| base64(&png));
+        record.thumbnail = thumbnail(&renderer, &asset, THUMBNAIL_SIZE).ok().map(|png| base64(&png));
     }
     drop(asset);
     let meta_section = sections.iter_mut().find(|x| x.kind == kind::METADATA).ok_or_else(|| anyhow!("the cooked asset has no metadata"))?;

@@ -702,16 +702,6 @@ the |difference| maps share one scale (full scale {scale:.2e}).</p><table class=
     ))
 }
 
-/// A small PNG of the middle frame of `asset`, seen by the first of eight orbiting cameras.
-pub fn thumbnail(renderer: &Renderer, asset: &Asset, size: u32) -> Result<Vec<u8>> {
-    let meta = asset.metadata()?;
-    let gpu = renderer.upload(asset)?;
-    let scene = Scene::for_asset(&meta);
-    let view = scene.orbit(8)[0];
-    let img = renderer.render(&gpu, &scene, meta.frame_count as usize / 2, &view, size, size)?;
-    Ok(report::png_rgb(&img))
-}
-
 #[derive(clap::Args)]
 pub struct RenderArgs {
     /// A .vpak asset or a .vdb file.

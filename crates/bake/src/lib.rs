@@ -13,12 +13,13 @@
 pub mod key;
 pub mod manifest;
 pub mod options;
+pub mod place;
 pub mod report;
 
 pub use key::{cache_key, KeyContext};
 pub use manifest::{line_column, plan, Manifest, ManifestError, PlannedAsset, Sources};
 pub use options::{CookSettings, FrameRange, SettingText, Size};
-pub use report::{AssetReport, Gate, Record, Report, Status, Summary, Validation};
+pub use report::{AssetReport, ChannelFormats, FormatBricks, Gate, Record, Report, Status, Summary, Validation};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {

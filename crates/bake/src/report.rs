@@ -68,8 +68,53 @@ pub struct Record {
     pub validation: Option<Validation>,
     /// The gate's verdict when it failed.
     pub gate_failure: Option<String>,
-    /// A small grey PNG of the asset's first frame, base64.
+    /// A 256×256 PNG of the asset's middle frame, exposed from the volume, base64.
     pub thumbnail: Option<String>,
+    /// Per channel, its formats and their bricks (`None` in records written before them).
+    #[serde(default)]
+    pub channels: Option<Vec<ChannelFormats>>,
+}
+
+/// One channel's formats: the cook report's `formats`, in its order (cheapest first).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ChannelFormats {
+    pub name: String,
+    pub formats: Vec<FormatBricks>,
+}
+
+/// A format of a channel and the distinct bricks stored in it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FormatBricks {
+    pub format: String,
+    pub bricks: u32,
+}
+
+impl From<&vdbcook_cook::ChannelReport> for ChannelFormats {
+    fn from(c: &vdbcook_cook::ChannelReport) -> ChannelFormats {
+        ChannelFormats { name: c.name.clone(), formats: c.formats.iter().map(|f| FormatBricks { format: f.format.name().to_string(), bricks: f.bricks }).collect() }
+    }
+}
+
+impl ChannelFormats {
+    /// "bc7 61 %, bc4 30 %, unorm8 9 %": each format's share of the channel's
+    /// bricks (one format alone: just its name).
+    pub fn shares(&self) -> String {
+        if let [one] = &self.formats[..] {
+            return one.format.clone();
+        }
+        let total: u64 = self.formats.iter().map(|f| u64::from(f.bricks)).sum();
+        let pct = |b: u32| match (u64::from(b) * 100).checked_div(total) {
+            _ if b == 0 => "0 %".to_string(),
+            Some(0) | None => "<1 %".to_string(),
+            Some(_) => format!("{:.0} %", f64::from(b) * 100.0 / total as f64),
+        };
+        self.formats.iter().map(|f| format!("{} {}", f.format, pct(f.bricks))).collect::<Vec<_>>().join(", ")
+    }
+
+    /// [`ChannelFormats::shares`] with each "format N %" unbreakable, for HTML.
+    fn shares_html(&self) -> String {
+        esc(&self.shares()).split(", ").map(|x| x.replace(' ', "&nbsp;")).collect::<Vec<_>>().join(", ")
+    }
 }
 
 impl Record {
@@ -233,7 +278,9 @@ impl Report {
         s
     }
 
-    /// A self-contained HTML page: one sortable table row per asset, with its thumbnail.
+    /// A self-contained HTML page: one sortable table row per asset, with its
+    /// thumbnail; it fits a 1280 px wide window (long text wraps, the formats
+    /// are listed per channel).
     pub fn to_html(&self) -> String {
         let mut rows = String::new();
         for a in &self.assets {
@@ -244,22 +291,26 @@ impl Report {
                 None => "<span class='none'>no preview</span>".into(),
             };
             let link = match &a.validation_report {
-                Some(p) => format!("<a href='{}'>validation</a>", esc(p)),
+                Some(p) => format!("<div class='sub'><a href='{}'>validation report</a></div>", esc(p)),
                 None => String::new(),
             };
             let cell = |sort: Option<f64>, text: String| match sort {
                 Some(x) if x.is_finite() => format!("<td data-v='{x}'>{text}</td>"),
                 _ => format!("<td data-v=''>{text}</td>"),
             };
-            let fmt = format!("<td data-v='{0}'>{0}</td>", esc(r.format.as_deref().unwrap_or("")));
+            let gate = match gate_text(a) {
+                "" => String::new(),
+                g => format!("<div class='sub'>gate {g}</div>"),
+            };
             let _ = writeln!(
                 rows,
-                "<tr class='{st}'><td>{thumb}</td><td data-v='{n}'>{n}<div class='sub'>{out}</div></td><td data-v='{st}'>{st}{msg}</td>{frames}{fmt}{bytes}{bpv}{vr}{vp}{ir}{ip}{fl}<td data-v='{gate}'>{gate}</td><td data-v='{hit}'>{hit}</td>{secs}<td>{link}</td></tr>",
+                "<tr class='{st}'><td class='pic'>{thumb}</td><td class='t' data-v='{n}'>{n}<div class='sub'>{out}</div>{link}</td><td class='t' data-v='{st}'>{st}{gate}{msg}</td>{frames}{fmt}{bytes}{bpv}{vr}{vp}{ir}{ip}{fl}{secs}</tr>",
                 st = a.status.name(),
                 n = esc(&a.name),
                 out = esc(&a.output),
                 msg = a.message.as_ref().map(|m| format!("<div class='sub msg'>{}</div>", esc(m))).unwrap_or_default(),
                 frames = cell(r.frames.map(f64::from), r.frames.map(|f| f.to_string()).unwrap_or_default()),
+                fmt = format_cell(r),
                 bytes = cell(a.bytes.map(|b| b as f64), a.bytes.map(human_bytes).unwrap_or_default()),
                 bpv = cell(r.bits_per_active_voxel, r.bits_per_active_voxel.map(|b| format!("{b:.3}")).unwrap_or_default()),
                 vr = cell(r.voxel_rmse, r.voxel_rmse.map(sci).unwrap_or_default()),
@@ -267,8 +318,6 @@ impl Report {
                 ir = cell(v.map(|v| v.image_rmse), v.map(|v| sci(v.image_rmse)).unwrap_or_default()),
                 ip = cell(v.and_then(|v| v.image_psnr), v.map(|v| psnr_text(Some(v.image_rmse), v.image_psnr)).unwrap_or_default()),
                 fl = cell(v.and_then(|v| v.image_flip), v.and_then(|v| v.image_flip).map(|f| format!("{f:.4}")).unwrap_or_default()),
-                gate = gate_text(a),
-                hit = if a.status == Status::Cached { "hit" } else { "" },
                 secs = cell(Some(a.seconds), format!("{:.2} s", a.seconds)),
             );
         }
@@ -279,15 +328,18 @@ impl Report {
             _ => String::new(),
         };
         format!(
-            "<!doctype html>\n<html lang='en'><head><meta charset='utf-8'><title>vdbcook bake: {m}</title>\n<style>\
-body{{font-family:sans-serif;margin:2em;color:#222}}table{{border-collapse:collapse}}th,td{{border:1px solid #ccc;padding:4px 8px;text-align:right;vertical-align:middle}}td{{white-space:nowrap}}\
-th{{background:#f3f3f3;cursor:pointer;user-select:none}}th.asc::after{{content:' \\25b2'}}th.desc::after{{content:' \\25bc'}}td:nth-child(2),td:nth-child(3){{text-align:left}}\
-img{{width:96px;height:96px;image-rendering:pixelated;background:#000;display:block}}.sub{{color:#777;font-size:85%}}.msg{{white-space:normal;min-width:16em;max-width:28em;text-align:left}}.none{{color:#999}}\
-tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}</style></head><body>\n\
-<h1>vdbcook bake</h1>\n<p>{m}{scope}: {n} assets, {b} baked, {c} cached, {f} failed, {g} failed a quality gate, {k} skipped; {t:.1} s; {tool}.</p>\n\
-<p class='sub'>Click a column heading to sort. Image RMSE / PSNR / FLIP: the worst of every frame and view against a lossless reference render (FLIP: NVIDIA's perceptual error, 0 to 1, at 67 pixels per degree); voxel RMSE / PSNR over every active voxel.</p>\n\
+            "<!doctype html>\n<html lang='en'><head><meta charset='utf-8'><title>vdbcook bake: {m}</title>\n<meta name='viewport' content='width=device-width'>\n<style>\
+body{{font-family:sans-serif;margin:1em;color:#222;font-size:14px}}h1{{font-size:150%;margin:0 0 .3em}}p{{max-width:60em;overflow-wrap:anywhere}}\
+table{{border-collapse:collapse;max-width:100%}}th,td{{border:1px solid #ccc;padding:3px 6px;text-align:right;vertical-align:top}}td{{white-space:nowrap}}\
+th{{background:#f3f3f3;cursor:pointer;user-select:none;font-weight:600;vertical-align:bottom}}th:nth-child(-n+3),th:nth-child(5){{text-align:left}}th.asc::after{{content:' \\25b2'}}th.desc::after{{content:' \\25bc'}}\
+td.t{{text-align:left;white-space:normal;overflow-wrap:anywhere;min-width:6em;max-width:14em}}td.pic{{padding:2px;text-align:center}}\
+img{{width:256px;height:256px;background:#000;display:block}}.sub{{color:#777;font-size:85%}}.none{{color:#999}}\
+.ch{{margin-bottom:2px}}.ch b{{font-weight:600}}details summary{{cursor:pointer}}td.fmt{{min-width:9em;max-width:15em}}\
+tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child(3){{color:#b00;font-weight:bold}}td .sub{{font-weight:normal}}</style></head><body>\n\
+<h1>vdbcook bake</h1>\n<p>{m}{scope}: {n} assets, {b} baked, {c} cached, {f} failed, {g} failed a quality gate, {k} skipped; {t:.1}&nbsp;s; {tool}.</p>\n\
+<p class='sub'>Click a column heading to sort. Formats: each channel's formats and their share of its bricks. Image RMSE / PSNR / FLIP: the worst of every frame and view against a lossless reference render (FLIP: NVIDIA's perceptual error, 0 to 1, at 67 pixels per degree); voxel RMSE / PSNR over every active voxel. Previews are exposed to their volume's brightness; the validation pages use the fixed scene.</p>\n\
 <table id='assets'><thead><tr><th>preview</th><th>asset</th><th>status</th><th>frames</th><th>format</th><th>bytes</th><th>bits per active voxel</th>\
-<th>voxel RMSE</th><th>voxel PSNR (dB)</th><th>image RMSE</th><th>image PSNR (dB)</th><th>image FLIP</th><th>gate</th><th>cache</th><th>time</th><th>details</th></tr></thead>\n<tbody>\n{rows}</tbody></table>\n\
+<th>voxel RMSE</th><th>voxel PSNR (dB)</th><th>image RMSE</th><th>image PSNR (dB)</th><th>image FLIP</th><th>time</th></tr></thead>\n<tbody>\n{rows}</tbody></table>\n\
 <script>\n(function () {{\n  var table = document.getElementById('assets');\n  var heads = table.tHead.rows[0].cells;\n  for (var i = 0; i < heads.length; i++) {{\n    heads[i].addEventListener('click', sorter(i));\n  }}\n\
   function sorter(col) {{\n    return function () {{\n      var th = heads[col], asc = !th.classList.contains('asc');\n      for (var k = 0; k < heads.length; k++) {{ heads[k].classList.remove('asc', 'desc'); }}\n      th.classList.add(asc ? 'asc' : 'desc');\n\
       var body = table.tBodies[0], rows = Array.prototype.slice.call(body.rows);\n      rows.sort(function (a, b) {{\n        var x = key(a, col), y = key(b, col);\n        if (x.n !== y.n) {{ return x.n ? -1 : 1; }}\n        var c = x.n ? x.v - y.v : String(x.v).localeCompare(String(y.v));\n        return asc ? c : -c;\n      }});\n\
@@ -303,6 +355,25 @@ tr.failed td:nth-child(3),tr.skipped td:nth-child(3),tr.gate-failed td:nth-child
             tool = esc(&self.tool),
         )
     }
+}
+
+/// The format cell: a line per channel ("density bc7 61 %, bc4 30 %"), behind
+/// a toggle past three channels; records without channels show the joined
+/// formats, breakable at each '+'.
+fn format_cell(r: &Record) -> String {
+    let all = esc(r.format.as_deref().unwrap_or(""));
+    let body = match r.channels.as_deref() {
+        Some(chs) if !chs.is_empty() => {
+            let lines: String = chs.iter().map(|c| format!("<div class='ch'><b>{}</b> {}</div>", esc(&c.name), c.shares_html())).collect();
+            if chs.len() > 3 {
+                format!("<details><summary>{} channels</summary>{lines}</details>", chs.len())
+            } else {
+                lines
+            }
+        }
+        _ => all.replace('+', "+<wbr>"),
+    };
+    format!("<td class='t fmt' data-v='{all}'>{body}</td>")
 }
 
 fn gate_text(a: &AssetReport) -> &'static str {
@@ -398,6 +469,26 @@ mod tests {
         assert_eq!(back, merged);
         let twice = vec![parts[0].clone(), parts[0].clone()];
         assert!(Report::merge(twice).is_err());
+    }
+
+    #[test]
+    fn formats_are_shown_per_channel() {
+        let ch = |name: &str, f: &[(&str, u32)]| ChannelFormats { name: name.into(), formats: f.iter().map(|(f, b)| FormatBricks { format: (*f).into(), bricks: *b }).collect() };
+        let density = ch("density", &[("constant", 1), ("bc7", 61), ("bc4", 30), ("unorm8", 8), ("f16", 0)]);
+        assert_eq!(density.shares(), "constant 1 %, bc7 61 %, bc4 30 %, unorm8 8 %, f16 0 %");
+        assert_eq!(ch("t", &[("bc7", 1), ("unorm8", 999)]).shares(), "bc7 <1 %, unorm8 100 %");
+        assert_eq!(ch("t", &[("bc4", 7)]).shares(), "bc4");
+        let mut r = Record { format: Some("constant+bc7+bc4+unorm8+f16".into()), channels: Some(vec![density.clone()]), ..Record::default() };
+        let cell = format_cell(&r);
+        assert!(cell.contains("<b>density</b> constant&nbsp;1&nbsp;%, bc7&nbsp;61&nbsp;%,") && !cell.contains("<details>"), "{cell}");
+        r.channels = Some((0..4).map(|k| ch(&format!("c{k}"), &[("bc7", 1)])).collect());
+        assert!(format_cell(&r).contains("<details><summary>4 channels</summary>"));
+        // A record written before channels were recorded reads back, and shows the joined formats.
+        let mut old: serde_json::Value = serde_json::from_str(&r.to_setting()).unwrap();
+        old.as_object_mut().unwrap().remove("channels");
+        let back = Record::from_setting(&old.to_string()).unwrap();
+        assert_eq!(back.channels, None);
+        assert!(format_cell(&back).contains("constant+<wbr>bc7+<wbr>bc4"));
     }
 
     #[test]

@@ -1,6 +1,42 @@
-//! Images as PNG, error heat-maps, and the self-contained HTML report.
+//! Images as PNG, error heat-maps, report previews, and the self-contained HTML report.
 
-use crate::{FlipMap, Image};
+use crate::{Error, FlipMap, Image, Renderer, Scene};
+use vdbcook_vpak::Asset;
+
+/// Where a preview puts the bright end of its volume (linear, before sRGB).
+pub const PREVIEW_WHITE: f32 = 0.8;
+
+/// A `size`×`size` PNG preview of `asset` for reports: its middle frame from
+/// the first of 8 orbiting views, through [`expose`]. Validation images keep
+/// the fixed scene; only previews are exposed.
+pub fn thumbnail(renderer: &Renderer, asset: &Asset, size: u32) -> Result<Vec<u8>, Error> {
+    let meta = asset.metadata()?;
+    let gpu = renderer.upload(asset)?;
+    let scene = Scene::for_asset(&meta);
+    let view = scene.orbit(8)[0];
+    let mut img = renderer.render(&gpu, &scene, meta.frame_count as usize / 2, &view, size, size)?;
+    expose(&mut img);
+    Ok(png_rgb(&img))
+}
+
+/// Scales a linear image so that the 98th percentile of the luminance of the
+/// pixels the volume covers (luminance above 1e-3: the scene's background is
+/// black) lands at [`PREVIEW_WHITE`]: a dim smoke or a small fire fills the
+/// preview's range, a bright cloud is toned down. The gain stays within
+/// 1/8 to 64; an image with nothing in it is left as it is. Returns the gain.
+pub fn expose(img: &mut Image) -> f32 {
+    let mut lum: Vec<f32> = img.pixels.chunks_exact(3).map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]).filter(|l| l.is_finite() && *l > 1e-3).collect();
+    if lum.is_empty() {
+        return 1.0;
+    }
+    let k = ((lum.len() - 1) as f64 * 0.98).round() as usize;
+    let (_, high, _) = lum.select_nth_unstable_by(k, f32::total_cmp);
+    let gain = (PREVIEW_WHITE / *high).clamp(0.125, 64.0);
+    for v in &mut img.pixels {
+        *v *= gain;
+    }
+    gain
+}
 
 /// 8-bit RGB PNG of an image (values clamped to [0, 1], sRGB-encoded: the pixels FLIP compares).
 pub fn png_rgb(img: &Image) -> Vec<u8> {
@@ -95,6 +131,27 @@ pub fn svg_plot(values: &[f64], frames: &[usize], label: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn previews_are_exposed_from_the_volume() {
+        // A dim volume on black: its bright end goes to PREVIEW_WHITE, the background stays black.
+        let mut pixels = vec![0.0f32; 3 * 100];
+        for (i, p) in pixels.chunks_exact_mut(3).enumerate().take(50) {
+            p.fill(0.01 + 0.04 * i as f32 / 49.0);
+        }
+        let mut img = Image { width: 10, height: 10, pixels };
+        let gain = expose(&mut img);
+        let top = img.pixels.iter().copied().fold(0.0f32, f32::max);
+        assert!((gain - PREVIEW_WHITE / 0.0492).abs() / gain < 0.02, "{gain}");
+        assert!(top > PREVIEW_WHITE && top < 0.85, "{top}");
+        assert!(img.pixels[150..].iter().all(|&v| v == 0.0));
+        // A bright one is toned down; an empty one is left alone.
+        let mut bright = Image { width: 1, height: 2, pixels: vec![3.0; 6] };
+        assert_eq!(expose(&mut bright), PREVIEW_WHITE / 3.0);
+        let mut empty = Image { width: 2, height: 1, pixels: vec![0.0; 6] };
+        assert_eq!(expose(&mut empty), 1.0);
+        assert_eq!(empty.pixels, vec![0.0; 6]);
+    }
 
     #[test]
     fn base64_matches_the_standard() {
