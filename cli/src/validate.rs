@@ -112,7 +112,7 @@ impl ValidateArgs {
         ValidateArgs {
             asset: Some(asset),
             source,
-            extinction: None,
+            extinction: s.extinction.clone(),
             source_frames: s.frames,
             frames: None,
             views: s.views,

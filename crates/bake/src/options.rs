@@ -439,6 +439,10 @@ settings! {
     /// With --validate (or cook --auto): image size.
     #[cfg_attr(feature = "clap", arg(long, value_name = "WxH", default_value_t = CookSettings::default().size, requires = "checks"))]
     size: Size = Size { width: 512, height: 512 };
+    /// With --validate (or cook --auto): the channel that gives extinction in the validation
+    /// scene (default: "density", else the first scalar fog channel that does not glow).
+    #[cfg_attr(feature = "clap", arg(long, value_name = "NAME", requires = "checks"))]
+    extinction: Option<String> = None;
 }
 
 impl CookSettings {
