@@ -204,12 +204,28 @@ fn finite_or(v: f32, bg: f32) -> f32 {
     return select(bg, v, is_finite(v));
 }
 
+// The surface model's last 8³ cell of the drawn level: the tree walk and
+// the level set's brick channel are done once per cell, not per voxel read.
+var<private> ls_cell: vec3<i32> = vec3<i32>(-1 << 30);
+var<private> ls_leaf: VpakLeaf;
+var<private> ls_bc: VpakBrickChannel;
+
+// Makes `ls_leaf` the cell of voxel `ip` of the drawn level.
+fn ls_enter(ip: vec3<i32>) {
+    let cell = ip >> vec3<u32>(3u);
+    if (any(cell != ls_cell)) {
+        ls_cell = cell;
+        ls_leaf = vpak_leaf(params.info, ip);
+        if (ls_leaf.l3 != VPAK_NONE) {
+            ls_bc = in_slot(vpak_brick_channel(params.info, ls_leaf.brick, params.channels.x), SLOT_X);
+        }
+    }
+}
+
 // The level set (params.channels.x) at `p` (level-0 asset coordinates):
 // trilinear between the centres of the drawn level's voxels, inactive and
-// non-finite voxels reading the background (positive: outside).
-fn ls_field(p: vec3<f32>) -> f32 {
-    let c = params.channels.x;
-    let bg = vpak_background(c);
+// non-finite voxels reading the background `bg` (positive: outside).
+fn ls_field(p: vec3<f32>, bg: f32) -> f32 {
     let q = p / f32(1u << params.info.level) - vec3<f32>(0.5);
     let i0 = vec3<i32>(floor(q));
     let w = q - floor(q);
@@ -217,11 +233,8 @@ fn ls_field(p: vec3<f32>) -> f32 {
     for (var k = 0; k < 8; k += 1) {
         let sel = vec3<bool>((k & 1) != 0, (k & 2) != 0, (k & 4) != 0);
         let ip = select(i0, i0 + vec3<i32>(1), sel);
-        let leaf = vpak_leaf(params.info, ip);
-        var v = bg;
-        if (vpak_leaf_active(leaf, ip)) {
-            v = finite_or(vpak_active_value(params.info, leaf, ip, c), bg);
-        }
+        ls_enter(ip);
+        let v = finite_or(cell_value(ls_leaf, ls_bc, vpak_leaf_active(ls_leaf, ip), ip, params.channels.x, bg), bg);
         let wk = select(vec3<f32>(1.0) - w, w, sel);
         acc += v * wk.x * wk.y * wk.z;
     }
@@ -257,7 +270,7 @@ fn surface(o: vec3<f32>, d: vec3<f32>, hit: vec2<f32>) -> vec3<f32> {
     let voxel = f32(1u << params.info.level);
     let bg = vpak_background(params.channels.x);
     var t_prev = hit.x;
-    var v_prev = ls_field(o + d * hit.x);
+    var v_prev = ls_field(o + d * hit.x, bg);
     var t_hit = -1.0;
     if (v_prev <= 0.0) {
         t_hit = hit.x;
@@ -270,9 +283,9 @@ fn surface(o: vec3<f32>, d: vec3<f32>, hit: vec2<f32>) -> vec3<f32> {
         n += 1u;
         let p = o + d * t;
         if (params.size.w == 1u) {
-            let leaf = vpak_leaf(params.info, vpak_level_point(params.info, vec3<i32>(floor(p))));
-            if (leaf.empty_dim > 0u) {
-                let deep = inset_exit(p, d, f32(leaf.empty_dim << params.info.level), voxel);
+            ls_enter(vpak_level_point(params.info, vec3<i32>(floor(p))));
+            if (ls_leaf.empty_dim > 0u) {
+                let deep = inset_exit(p, d, f32(ls_leaf.empty_dim << params.info.level), voxel);
                 if (deep > 0.0) {
                     // Every lattice point before t + deep reads the background.
                     let next = max(k + 1.0, ceil((t + deep - hit.x) / step - 0.5) + 0.5);
@@ -283,7 +296,7 @@ fn surface(o: vec3<f32>, d: vec3<f32>, hit: vec2<f32>) -> vec3<f32> {
                 }
             }
         }
-        let v = ls_field(p);
+        let v = ls_field(p, bg);
         if (v_prev > 0.0 && v <= 0.0) {
             var a = t_prev;
             var va = v_prev;
@@ -291,7 +304,7 @@ fn surface(o: vec3<f32>, d: vec3<f32>, hit: vec2<f32>) -> vec3<f32> {
             var vb = v;
             for (var i = 0; i < 4; i += 1) {
                 let m = 0.5 * (a + b);
-                let vm = ls_field(o + d * m);
+                let vm = ls_field(o + d * m, bg);
                 if (vm > 0.0) {
                     a = m;
                     va = vm;
@@ -312,9 +325,9 @@ fn surface(o: vec3<f32>, d: vec3<f32>, hit: vec2<f32>) -> vec3<f32> {
     let p = o + d * t_hit;
     let h = voxel;
     let g = vec3<f32>(
-        ls_field(p + vec3<f32>(h, 0.0, 0.0)) - ls_field(p - vec3<f32>(h, 0.0, 0.0)),
-        ls_field(p + vec3<f32>(0.0, h, 0.0)) - ls_field(p - vec3<f32>(0.0, h, 0.0)),
-        ls_field(p + vec3<f32>(0.0, 0.0, h)) - ls_field(p - vec3<f32>(0.0, 0.0, h)),
+        ls_field(p + vec3<f32>(h, 0.0, 0.0), bg) - ls_field(p - vec3<f32>(h, 0.0, 0.0), bg),
+        ls_field(p + vec3<f32>(0.0, h, 0.0), bg) - ls_field(p - vec3<f32>(0.0, h, 0.0), bg),
+        ls_field(p + vec3<f32>(0.0, 0.0, h), bg) - ls_field(p - vec3<f32>(0.0, 0.0, h), bg),
     );
     let len = length(g);
     var normal = -d;

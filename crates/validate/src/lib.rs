@@ -30,7 +30,7 @@ pub enum Error {
     Unsupported { adapter: String, format: String, feature: &'static str },
     #[error("the channels the render shows are in {planes} planes of {textures} atlas textures; the renderer binds at most {MAX_TEXTURES} (a larger --max-texture-dim puts a plane in fewer atlases; cook --max-error gives a channel a texture per format its bricks chose, so several shown channels cooked with it may need more)")]
     Textures { planes: usize, textures: usize },
-    #[error("channel {0} is not on the GPU (the asset was uploaded for the channels its own scene shows)")]
+    #[error("channel {0} is not on the GPU (the asset was uploaded for the channels another scene shows: upload it for this one)")]
     NotUploaded(u32),
     #[error("a brick atlas of {size:?} texels exceeds the adapter's 3D texture limit of {limit} (cook with a smaller --max-texture-dim)")]
     Texture { size: [u32; 3], limit: u32 },

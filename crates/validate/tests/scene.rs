@@ -141,6 +141,13 @@ fn a_level_set_renders_as_a_surface_on_the_gpu_like_its_cpu_twin() {
         eprintln!("view {i}: silhouette radius {measured} px, expected {expected} px, coverage {c}");
         assert!(c > 0.05, "view {i}: coverage {c}");
     }
+    // A coarser level draws the level's own voxels, as the twin does.
+    let levels = cook(&[sphere(10.0)], CookOptions { format: Format::F32, levels: 2, ..CookOptions::default() });
+    let gpu = r.upload_for(&levels, &scene).unwrap();
+    let coarse = r.render_views_level(&gpu, &scene, 0, 1, &views[..1], size, size).unwrap();
+    let cpu = vdbcook_validate::render_cpu_level(&levels, &scene, 0, 1, &views[0], size, size).unwrap();
+    assert!(compare(&cpu, &coarse[0]).max_error < 2e-3, "level 1: {:?}", compare(&cpu, &coarse[0]));
+    assert!(compare(&imgs[0], &coarse[0]).rmse > 0.0 && coverage(&coarse[0], &scene.empty_image(&views[0], size, size)) > 0.05);
     // The same surface a voxel further out: another image.
     let moved = f32_cook(&[sphere(11.0)]);
     let moved_imgs = render(&r, &moved, &scene, &views, size);
