@@ -283,11 +283,11 @@ pub fn evaluate(mut args: ValidateArgs, quiet: bool) -> Result<Outcome> {
     let files = if recorded { crate::recorded::frame_files(&meta, &path)? } else { inputs::expand(&source, args.source_frames)? };
     let reference = reference(&meta, files.clone(), recorded, coarsest, &bars)?;
     let mut o = compare_assets(&asset, &name, &reference, &args, || args.gpu.renderer().map(Box::new), &bars)?;
+    let read = files.iter().filter(|f| f.exists()).count();
     if recorded {
-        let read = files.iter().filter(|f| f.exists()).count();
         o.text += &format!("  sources  the {read} file(s) the asset records (no --source given)\n");
-        o.doc["sources"] = json!({"recorded": true, "files": read});
     }
+    o.doc["sources"] = json!({"recorded": recorded, "files": read});
     Ok(o)
 }
 
