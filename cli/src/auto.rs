@@ -4,7 +4,7 @@
 
 use crate::cook::{cook_formats, json_text, summary_json, summary_text, CookArgs, CookJob, Cooked};
 use crate::progress::Bars;
-use crate::validate::{compare_assets, GpuArgs, Outcome, ValidateArgs, Worst};
+use crate::validate::{GpuArgs, ValidateArgs};
 use crate::{exit, Usage};
 use anyhow::{anyhow, Context, Result};
 use serde_json::json;
@@ -12,6 +12,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 use vdbcook_bake::CookSettings;
 use vdbcook_cook::{Figure, Format};
+use vdbcook_validate::{compare_assets, Comparison, Worst};
 use vdbcook_vpak::Asset;
 
 /// The formats tried, smallest per voxel first (the search sorts by file bytes).
@@ -22,7 +23,7 @@ struct Candidate {
     bytes: u64,
     cooked: Cooked,
     /// The validation, once tried.
-    outcome: Option<Outcome>,
+    outcome: Option<Comparison>,
 }
 
 impl Candidate {
@@ -43,6 +44,7 @@ pub fn run(args: &CookArgs, files: Vec<PathBuf>, started: Instant, bars: &Bars, 
     // The GPU first: without one, no cooking time is spent for nothing.
     let v = ValidateArgs::of_cook(s, args.output.clone(), args.inputs.clone(), None, GpuArgs::default(), args.json);
     let renderer = v.gpu.renderer()?;
+    let opts = v.compare_options();
     let cooked = cook_formats(CookJob { settings: s, files, inputs: &args.inputs, base: None, reference: true }, &CANDIDATES, bars)?;
     let mut cands: Vec<Candidate> = cooked.into_iter().zip(CANDIDATES).map(|(cooked, format)| Candidate { format, bytes: vdbcook_vpak::file_len(&cooked.sections), cooked, outcome: None }).collect();
     let reference = cands.first_mut().and_then(|c| c.cooked.reference.take()).ok_or_else(|| anyhow!("no reference"))?;
@@ -53,7 +55,7 @@ pub fn run(args: &CookArgs, files: Vec<PathBuf>, started: Instant, bars: &Bars, 
     let mut chosen = None;
     for (i, c) in cands.iter_mut().enumerate() {
         let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&c.cooked.sections)).with_context(|| format!("the {} candidate", c.format.name()))?;
-        let o = compare_assets(&asset, &name, &reference, &v, || Ok(&renderer), bars)?;
+        let o = compare_assets(&asset, &name, &reference, &opts, || Ok::<_, std::convert::Infallible>(&renderer), bars)?;
         let pass = o.gate_failure.is_none();
         c.outcome = Some(o);
         if pass {
@@ -64,7 +66,7 @@ pub fn run(args: &CookArgs, files: Vec<PathBuf>, started: Instant, bars: &Bars, 
     let best = chosen.or_else(|| best_reached(&cands, s));
     let table = table(&cands, s);
     let doc = json!({
-        "gate": {"max_rmse": s.max_rmse, "min_psnr": s.min_psnr, "max_flip": s.max_flip},
+        "gate": s.gate(),
         "candidates": cands.iter().map(|c| {
             let w = c.worst();
             json!({"format": c.format.name(), "bytes": c.bytes, "result": c.result(), "rmse": w.map(|w| Figure(w.rmse)), "psnr": w.map(|w| Figure(w.psnr)), "flip": w.map(|w| w.flip)})
@@ -83,7 +85,7 @@ pub fn run(args: &CookArgs, files: Vec<PathBuf>, started: Instant, bars: &Bars, 
             let w = c.worst().map_or_else(String::new, |w| format!(": worst image psnr {:.1} dB, rmse {:.3e}, flip {:.4}", w.psnr, w.rmse, w.flip));
             format!("; the best reached: {} ({} bytes){w}", c.format.name(), c.bytes)
         });
-        return Ok(crate::validate::gate(&Some(format!("--auto: no format meets the gate ({}){reached}; nothing written", gate_text(s)))));
+        return Ok(crate::validate::gate(&Some(format!("--auto: no format meets the gate ({}){reached}; nothing written", s.gate().text()))));
     };
     let c = &mut cands[i];
     let t0 = Instant::now();
@@ -113,28 +115,15 @@ pub fn run(args: &CookArgs, files: Vec<PathBuf>, started: Instant, bars: &Bars, 
 /// the highest PSNR), or the lowest worst FLIP when --max-flip is the only
 /// gate; the smaller file on a tie.
 fn best_reached(cands: &[Candidate], s: &CookSettings) -> Option<usize> {
-    let by_flip = s.max_rmse.is_none() && s.min_psnr.is_none();
+    let by_flip = s.gate().flip_only();
     let key = |w: Worst| if by_flip { w.flip } else { w.rmse };
     cands.iter().enumerate().filter_map(|(i, c)| c.worst().map(|w| (i, key(w)))).min_by(|a, b| a.1.total_cmp(&b.1)).map(|(i, _)| i)
 }
 
-fn gate_text(s: &CookSettings) -> String {
-    let mut g = Vec::new();
-    if let Some(y) = s.min_psnr {
-        g.push(format!("psnr >= {y} dB"));
-    }
-    if let Some(x) = s.max_rmse {
-        g.push(format!("rmse <= {x}"));
-    }
-    if let Some(f) = s.max_flip {
-        g.push(format!("flip <= {f}"));
-    }
-    g.join(", ")
-}
 
 fn table(cands: &[Candidate], s: &CookSettings) -> String {
     let tried = cands.iter().filter(|c| c.outcome.is_some()).count();
-    let mut t = format!("auto: gate {}; tried {tried} of {} formats, smallest file first (worst image of each)\n", gate_text(s), cands.len());
+    let mut t = format!("auto: gate {}; tried {tried} of {} formats, smallest file first (worst image of each)\n", s.gate().text(), cands.len());
     t += &format!("  {:<8}{:>12}{:>12}{:>12}{:>9}  result\n", "format", "bytes", "psnr (dB)", "rmse", "flip");
     for c in cands {
         let (p, r, f) = c.worst().map_or_else(|| ("-".into(), "-".into(), "-".into()), |w| (format!("{:.2}", w.psnr), format!("{:.3e}", w.rmse), format!("{:.4}", w.flip)));
@@ -146,7 +135,7 @@ fn table(cands: &[Candidate], s: &CookSettings) -> String {
 /// `--auto`'s own checks of the command line.
 pub fn check(args: &CookArgs) -> Result<()> {
     let s = &args.settings;
-    if s.max_rmse.is_none() && s.min_psnr.is_none() && s.max_flip.is_none() {
+    if !s.gate().is_set() {
         return Err(Usage("--auto needs a quality gate: --min-psnr, --max-rmse or --max-flip".into()).into());
     }
     Ok(())

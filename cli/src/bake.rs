@@ -4,7 +4,7 @@
 //! reports come from `vdbcook_bake`; this file does the I/O.
 
 use crate::cook::{cook_asset, CookJob};
-use crate::validate::{compare_assets, GpuArgs, ValidateArgs};
+use crate::validate::{GpuArgs, ValidateArgs};
 use crate::{exit, one_line, Usage};
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -16,9 +16,9 @@ use std::sync::{Mutex, OnceLock};
 use std::time::Instant;
 use vdbcook_bake::manifest::resolve;
 use vdbcook_bake::place;
-use vdbcook_bake::{AssetReport, ChannelFormats, Gate, KeyContext, Manifest, PlannedAsset, Record, Report, Shard, Sources, Status, Validation};
+use vdbcook_bake::{AssetReport, ChannelFormats, KeyContext, Manifest, PlannedAsset, Record, Report, Shard, Sources, Status, Validation};
 use vdbcook_validate::report::{base64, thumbnail};
-use vdbcook_validate::Renderer;
+use vdbcook_validate::{compare_assets, Comparison, Renderer};
 use vdbcook_vpak::{kind, Asset, Metadata};
 
 pub const AFTER_HELP: &str = "\
@@ -441,7 +441,7 @@ fn blank(a: &PlannedAsset) -> AssetReport {
         files: a.files.len(),
         record: Record::default(),
         validate: a.settings.validate,
-        gate: Gate { max_rmse: a.settings.max_rmse, min_psnr: a.settings.min_psnr, max_flip: a.settings.max_flip },
+        gate: a.settings.gate(),
         message: None,
         validation_report: None,
         seconds: 0.0,
@@ -532,8 +532,8 @@ fn cook_fresh(a: &PlannedAsset, ctx: &Ctx, name: &str) -> Result<(Vec<u8>, Recor
     let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?;
     if let Some(reference) = &cooked.reference {
         let v = ValidateArgs::of_cook(s, PathBuf::from(name), a.input_paths.clone(), Some(ctx.report_dir.join("validation").join(&a.name)), ctx.gpu.clone(), true);
-        let o = compare_assets(&asset, &a.output, reference, &v, || ctx.renderer(), &vdbcook_cook::NoProgress).context("validating")?;
-        record.validation = Some(validation_figures(&o.doc));
+        let o = compare_assets(&asset, &a.output, reference, &v.compare_options(), || ctx.renderer(), &vdbcook_cook::NoProgress).context("validating")?;
+        record.validation = validation_figures(&o);
         record.gate_failure = o.gate_failure;
     }
     // A preview for the report; without a GPU (and no validation asked for) there is none.
@@ -549,23 +549,24 @@ fn cook_fresh(a: &PlannedAsset, ctx: &Ctx, name: &str) -> Result<(Vec<u8>, Recor
     Ok((vdbcook_vpak::assemble(&sections), record))
 }
 
-/// The image figures of a validation document (docs/validate-json.md).
-fn validation_figures(doc: &serde_json::Value) -> Validation {
-    let images = doc["images"].as_array().map_or(&[][..], |v| &v[..]);
-    let mean = if images.is_empty() { 0.0 } else { images.iter().filter_map(|i| i["rmse"].as_f64()).sum::<f64>() / images.len() as f64 };
-    let size = |k: usize| doc["size"][k].as_u64().unwrap_or(0) as u32;
-    Validation {
-        adapter: doc["adapter"].as_str().unwrap_or("").to_string(),
-        views: doc["views"].as_u64().unwrap_or(0) as u32,
-        size: [size(0), size(1)],
+/// The image figures of a validation: its first level's (the level its document reports).
+fn validation_figures(o: &Comparison) -> Option<Validation> {
+    let level = o.levels.first()?;
+    let images = &level.shots;
+    let mean = if images.is_empty() { 0.0 } else { images.iter().map(|i| i.metrics.rmse).sum::<f64>() / images.len() as f64 };
+    let worst = level.worst_shot;
+    Some(Validation {
+        adapter: o.adapter.clone(),
+        views: o.views,
+        size: [o.size.width, o.size.height],
         images: images.len(),
-        worst_frame: doc["worst"]["frame"].as_u64().unwrap_or(0) as usize,
-        worst_view: doc["worst"]["view"].as_u64().unwrap_or(0) as usize,
-        image_rmse: doc["worst"]["rmse"].as_f64().unwrap_or(0.0),
-        image_psnr: doc["worst"]["psnr"].as_f64(),
+        worst_frame: worst.map_or(0, |s| s.frame),
+        worst_view: worst.map_or(0, |s| s.view),
+        image_rmse: worst.map_or(0.0, |s| s.metrics.rmse),
+        image_psnr: worst.and_then(|s| finite(s.metrics.psnr)),
         mean_image_rmse: mean,
-        image_flip: doc["worst_flip"]["flip"].as_f64(),
-    }
+        image_flip: level.shots.iter().map(|s| s.flip).reduce(f64::max),
+    })
 }
 
 /// Progress on a terminal: one overall bar and a line per finished asset.

@@ -460,7 +460,7 @@ pub fn fail(e: &anyhow::Error) -> u8 {
         return exit::SUCCESS;
     }
     report_error(e);
-    if e.downcast_ref::<Usage>().is_some() {
+    if e.downcast_ref::<Usage>().is_some() || e.downcast_ref::<vdbcook_validate::CompareError>().is_some_and(vdbcook_validate::CompareError::is_usage) {
         exit::USAGE
     } else {
         exit::FAILURE

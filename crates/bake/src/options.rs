@@ -14,6 +14,9 @@ use std::str::FromStr;
 use toml::Spanned;
 pub use vdbcook_cook::ChannelGroup;
 pub use vdbcook_encode::{Format, Quality};
+// The gate's budgets and the image size are the comparison's (vdbcook-validate owns them).
+pub use vdbcook_validate::options::{flip_budget, parse_flip_budget, parse_psnr_floor, parse_rmse_budget, psnr_floor, rmse_budget};
+pub use vdbcook_validate::{Gate, Size};
 
 /// An inclusive frame range with a step (`A-B` or `A-B:STEP`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -57,32 +60,6 @@ impl fmt::Display for FrameRange {
 impl FrameRange {
     pub fn frames(&self) -> impl Iterator<Item = i64> + '_ {
         (self.first..=self.last).step_by(self.step as usize)
-    }
-}
-
-/// An image size, `WxH`, each 8 to 8192.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Size {
-    pub width: u32,
-    pub height: u32,
-}
-
-impl FromStr for Size {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || format!("invalid size \"{s}\" (expected WxH, e.g. 512x512, each 8 to 8192)");
-        let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-        let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
-        if !(8..=8192).contains(&w) || !(8..=8192).contains(&h) {
-            return Err(bad());
-        }
-        Ok(Size { width: w, height: h })
-    }
-}
-
-impl fmt::Display for Size {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}x{}", self.width, self.height)
     }
 }
 
@@ -163,7 +140,7 @@ macro_rules! deserialize_from_str {
         }
     )*};
 }
-deserialize_from_str!(FrameRange, Size);
+deserialize_from_str!(FrameRange);
 
 /// A setting's value as canonical text (for cache keys and metadata).
 pub trait SettingText {
@@ -231,45 +208,8 @@ pub fn parse_lods(s: &str) -> Result<u32, String> {
     lods(s.trim().parse::<u32>().map_err(|_| format!("invalid level count \"{s}\" (expected a whole number, 1 to {})", vdbcook_vpak::MAX_LEVELS))?)
 }
 
-/// A FLIP budget (`--max-flip`, `max_flip`): a finite number >= 0 (FLIP errors lie in [0, 1]).
-pub fn flip_budget(x: f64) -> Result<f64, String> {
-    if x.is_finite() && x >= 0.0 {
-        Ok(x)
-    } else {
-        Err(format!("must be a finite number >= 0, not {x}"))
-    }
-}
-
-/// An RMSE budget (`--max-rmse`, `max_rmse`): a number >= 0.
-pub fn rmse_budget(x: f64) -> Result<f64, String> {
-    if x >= 0.0 {
-        Ok(x)
-    } else {
-        Err(format!("must be a number >= 0, not {x}"))
-    }
-}
-
-/// A PSNR floor (`--min-psnr`, `min_psnr`), in dB: any number but NaN.
-pub fn psnr_floor(y: f64) -> Result<f64, String> {
-    if y.is_nan() {
-        Err(format!("must be a number, not {y}"))
-    } else {
-        Ok(y)
-    }
-}
-
 fn parse_number(s: &str) -> Result<f64, String> {
-    s.trim().parse::<f64>().map_err(|_| format!("invalid number \"{s}\""))
-}
-
-/// Parses a FLIP budget flag.
-pub fn parse_flip_budget(s: &str) -> Result<f64, String> {
-    flip_budget(parse_number(s)?)
-}
-
-/// Parses an RMSE budget flag.
-pub fn parse_rmse_budget(s: &str) -> Result<f64, String> {
-    rmse_budget(parse_number(s)?)
+    vdbcook_validate::options::parse_number(s)
 }
 
 /// A per-voxel error bound (`--max-error`, `max_error`): a finite number >= 0.
@@ -284,11 +224,6 @@ pub fn max_error_bound(e: f32) -> Result<f32, String> {
 /// Parses a per-voxel error bound flag.
 pub fn parse_max_error(s: &str) -> Result<f32, String> {
     max_error_bound(parse_number(s)? as f32)
-}
-
-/// Parses a PSNR floor flag.
-pub fn parse_psnr_floor(s: &str) -> Result<f64, String> {
-    psnr_floor(parse_number(s)?)
 }
 
 macro_rules! settings {
@@ -477,16 +412,15 @@ impl CookSettings {
         if self.max_error.is_some() && !self.group.is_empty() {
             return bad("max_error", "chooses every brick's format: it takes no channel groups".into());
         }
-        if let Some(Err(message)) = self.max_rmse.map(rmse_budget) {
-            return bad("max_rmse", message);
-        }
-        if let Some(Err(message)) = self.min_psnr.map(psnr_floor) {
-            return bad("min_psnr", message);
-        }
-        if let Some(Err(message)) = self.max_flip.map(flip_budget) {
-            return bad("max_flip", message);
+        if let Err((name, message)) = Gate::new(self.max_rmse, self.min_psnr, self.max_flip) {
+            return bad(name, message);
         }
         Ok(())
+    }
+
+    /// The quality gate of `validate`, checked by [`CookSettings::check`].
+    pub fn gate(&self) -> Gate {
+        Gate { max_rmse: self.max_rmse, min_psnr: self.min_psnr, max_flip: self.max_flip }
     }
 
     /// The clustering options, when `clusters` is set.
