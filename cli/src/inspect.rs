@@ -19,12 +19,6 @@ types (vec3s, int32, points, ...) are listed with the reason they are skipped.
 A file that cannot be read prints one error line and makes the exit code 1;
 the other files are still described.";
 
-/// True when the file starts with the .vpak magic.
-pub fn is_vpak(path: &Path) -> bool {
-    use std::io::Read;
-    let mut magic = [0u8; 8];
-    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && magic == vdbcook_vpak::MAGIC
-}
 
 /// One grid's figures, or why it was skipped.
 struct GridReport<'a> {
@@ -60,7 +54,7 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
     let mut code = exit::SUCCESS;
     let mut docs = Vec::new();
     for path in files {
-        if is_vpak(path) {
+        if vdbcook_pipeline::is_vpak(path) {
             match crate::inspect_vpak::describe(path, as_json) {
                 Ok(crate::inspect_vpak::Described::Text(t)) => {
                     if !quiet {

@@ -1,12 +1,13 @@
 //! `vdbcook validate` and `vdbcook render`: the GPU check of what a cook cost.
 
-use crate::inputs::{self, FrameRange};
+use crate::gpu::GpuArgs;
 use crate::progress::Bars;
 use crate::{exit, Usage};
 use anyhow::{anyhow, Context, Result};
-use serde_json::json;
 use std::path::PathBuf;
-use vdbcook_validate::{compare_assets, report, BcDecode, CompareOptions, Comparison, Gate, Levels, Renderer, Scene, Size};
+use vdbcook_validate::{report, CompareOptions, Comparison, Gate, Levels, Scene, Size};
+use vdbcook_pipeline::options::FrameRange;
+use vdbcook_pipeline::{recorded, GridSelection, Sources};
 use vdbcook_vpak::Asset;
 
 pub const AFTER_HELP: &str = "\
@@ -85,7 +86,7 @@ pub struct ValidateArgs {
     /// Level of detail to check (0: the frames themselves; k: the asset's level k against the
     /// source filtered losslessly to level k, as `cook --lods` does). Default: the asset's
     /// finest level (0 unless `cook --max-bytes` left finer ones out).
-    #[arg(long, value_name = "K", value_parser = vdbcook_bake::options::parse_lod)]
+    #[arg(long, value_name = "K", value_parser = vdbcook_pipeline::options::parse_lod)]
     pub lod: Option<u32>,
     /// Check every level of detail of the asset, each against the source filtered to it
     /// (the gate holds at every level), and show the levels side by side: a table in the
@@ -98,30 +99,6 @@ pub struct ValidateArgs {
     /// Print the report as JSON on stdout.
     #[arg(long)]
     pub json: bool,
-}
-
-impl ValidateArgs {
-    /// The validation a cook's settings ask for (`--validate` and its gate, views and
-    /// size): every level of an asset with levels of detail, the gate holding at each.
-    pub fn of_cook(s: &vdbcook_bake::CookSettings, asset: PathBuf, source: Vec<String>, report: Option<PathBuf>, gpu: GpuArgs, json: bool) -> ValidateArgs {
-        ValidateArgs {
-            asset: Some(asset),
-            source,
-            extinction: s.extinction.clone(),
-            source_frames: s.frames,
-            frames: None,
-            views: s.views,
-            size: s.size,
-            max_rmse: s.max_rmse,
-            min_psnr: s.min_psnr,
-            max_flip: s.max_flip,
-            report,
-            lod: None,
-            every_lod: s.lods > 1,
-            gpu,
-            json,
-        }
-    }
 }
 
 impl ValidateArgs {
@@ -143,44 +120,6 @@ impl ValidateArgs {
     }
 }
 
-/// The GPU options of `validate` and `render`.
-#[derive(clap::Args, Clone, Default)]
-pub struct GpuArgs {
-    /// Use the first GPU adapter whose name contains NAME (e.g. "llvmpipe").
-    #[arg(long, value_name = "NAME")]
-    pub adapter: Option<String>,
-    /// Where BC4/BC7 bricks are decoded: the GPU's texture unit, the shader (raw blocks
-    /// decoded in WGSL), or auto: the texture unit of a GPU with BC 3D textures, the
-    /// shader on other adapters and on CPU drivers (faster there).
-    #[arg(long, value_name = "WHERE", value_enum, default_value_t = BcDecodeArg::Auto)]
-    pub bc_decode: BcDecodeArg,
-}
-
-#[derive(clap::ValueEnum, Clone, Copy, Default)]
-pub enum BcDecodeArg {
-    #[default]
-    Auto,
-    Texture,
-    Shader,
-}
-
-impl GpuArgs {
-    pub fn renderer(&self) -> Result<Renderer> {
-        let decode = match self.bc_decode {
-            BcDecodeArg::Auto => BcDecode::Auto,
-            BcDecodeArg::Texture => BcDecode::Texture,
-            BcDecodeArg::Shader => BcDecode::Shader,
-        };
-        Ok(Renderer::new(self.adapter.as_deref())?.with_bc_decode(decode))
-    }
-}
-
-/// Cooks `files` losslessly in memory: the reference asset.
-fn reference(meta: &vdbcook_vpak::Metadata, files: Vec<PathBuf>, allow_missing: bool, lod: u32, bars: &Bars) -> Result<Asset> {
-    let allow_missing = allow_missing || meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
-    crate::cook::cook_lossless_levels(files, crate::cook::selection_of(meta), allow_missing, lod + 1, bars).context("cooking the reference")
-}
-
 pub fn run(args: ValidateArgs, quiet: bool) -> Result<u8> {
     let json_out = args.json;
     let o = evaluate(args, quiet)?;
@@ -188,43 +127,15 @@ pub fn run(args: ValidateArgs, quiet: bool) -> Result<u8> {
         let text = if json_out { format!("{}\n", serde_json::to_string_pretty(&o.doc).unwrap_or_default()) } else { o.text };
         crate::emit_final(&text)?;
     }
-    Ok(gate(&o.gate_failure))
-}
-
-/// Prints a gate failure; the exit code.
-pub fn gate(failure: &Option<String>) -> u8 {
-    match failure {
-        Some(msg) => {
-            eprintln!("vdbcook: quality gate failed: {msg}");
-            exit::QUALITY_GATE
-        }
-        None => exit::SUCCESS,
-    }
+    Ok(crate::gate_exit(&o.gate_failure))
 }
 
 /// Renders and compares; `quiet` hides progress bars.
 pub fn evaluate(mut args: ValidateArgs, quiet: bool) -> Result<Comparison> {
-    let (path, source) = crate::recorded::asset_and_sources(args.asset.take(), std::mem::take(&mut args.source)).map_err(Usage)?;
-    let name = path.display().to_string();
-    let asset = Asset::open(&path).with_context(|| name.clone())?;
-    let meta = asset.metadata().with_context(|| name.clone())?;
+    let (path, source) = recorded::asset_and_sources(args.asset.take(), std::mem::take(&mut args.source)).map_err(Usage)?;
     let bars = Bars::new(quiet || args.json);
-    let lod = args.lod.unwrap_or(meta.first_level);
-    if let Some(why) = meta.missing_level(lod) {
-        return Err(anyhow!("{name}: {why}"));
-    }
-    // One reference, filtered down to the coarsest level checked, serves every level.
-    let coarsest = if args.every_lod { meta.stored_levels().end.saturating_sub(1) } else { lod };
-    let recorded = source.is_empty();
-    let files = if recorded { crate::recorded::frame_files(&meta, &path)? } else { inputs::expand(&source, args.source_frames)? };
-    let reference = reference(&meta, files.clone(), recorded, coarsest, &bars)?;
-    let mut o = compare_assets(&asset, &name, &reference, &args.compare_options(), || args.gpu.renderer().map(Box::new), &bars)?;
-    if recorded {
-        let read = files.iter().filter(|f| f.exists()).count();
-        o.text += &format!("  sources  the {read} file(s) the asset records (no --source given)\n");
-        o.doc["sources"] = json!({"recorded": true, "files": read});
-    }
-    Ok(o)
+    let sources = if source.is_empty() { Sources::Recorded } else { Sources::Inputs(source, args.source_frames) };
+    Ok(vdbcook_pipeline::validate_file(&path, sources, &args.compare_options(), || args.gpu.renderer().map(Box::new), &bars)?)
 }
 
 #[derive(clap::Args)]
@@ -253,7 +164,7 @@ pub struct RenderArgs {
     /// sample reading the level's voxel that covers it). Default: the asset's finest level
     /// (0 unless `cook --max-bytes` left finer ones out). A .vdb input is filtered to that
     /// level as `cook --lods` does.
-    #[arg(long, value_name = "K", value_parser = vdbcook_bake::options::parse_lod)]
+    #[arg(long, value_name = "K", value_parser = vdbcook_pipeline::options::parse_lod)]
     pub lod: Option<u32>,
     /// The channel that gives extinction (default: `density`, else the first scalar fog
     /// channel that is not a glow channel; see `vdbcook validate --help`).
@@ -275,10 +186,10 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     if !args.input.exists() {
         return Err(anyhow!("{name}: no such file"));
     }
-    let asset = if crate::inspect::is_vpak(&args.input) {
+    let asset = if vdbcook_pipeline::is_vpak(&args.input) {
         Asset::open(&args.input).with_context(|| name.clone())?
     } else {
-        crate::cook::cook_lossless_levels(vec![args.input.clone()], crate::grids::GridSelection::from_flags(args.grid.as_deref(), None), false, args.lod.unwrap_or(0) + 1, &Bars::new(true))?
+        vdbcook_pipeline::cook_lossless_levels(vec![args.input.clone()], GridSelection::from_flags(args.grid.as_deref(), None), false, args.lod.unwrap_or(0) + 1, &Bars::new(true))?
     };
     let meta = asset.metadata().with_context(|| name.clone())?;
     let lod = args.lod.unwrap_or(meta.first_level);

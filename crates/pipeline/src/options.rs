@@ -7,7 +7,6 @@
 //! its position in the file) and the canonical `(name, value)` list that cache
 //! keys hash. Adding a setting is one entry there.
 
-use crate::Error;
 use std::fmt;
 use std::ops::RangeInclusive;
 use std::str::FromStr;
@@ -17,6 +16,14 @@ pub use vdbcook_encode::{Format, Quality};
 // The gate's budgets and the image size are the comparison's (vdbcook-validate owns them).
 pub use vdbcook_validate::options::{flip_budget, parse_flip_budget, parse_psnr_floor, parse_rmse_budget, psnr_floor, rmse_budget};
 pub use vdbcook_validate::{Gate, Size};
+
+/// A setting out of its range or at odds with another; `name` is the setting's.
+#[derive(Debug, thiserror::Error)]
+#[error("{name}: {message}")]
+pub struct SettingError {
+    pub name: &'static str,
+    pub message: String,
+}
 
 /// An inclusive frame range with a step (`A-B` or `A-B:STEP`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -382,8 +389,8 @@ settings! {
 
 impl CookSettings {
     /// Checks what the types do not: ranges and numbers. The error names the setting.
-    pub fn check(&self) -> Result<(), Error> {
-        let bad = |name: &'static str, message: String| Err(Error::Setting { name, message });
+    pub fn check(&self) -> Result<(), SettingError> {
+        let bad = |name: &'static str, message: String| Err(SettingError { name, message });
         let within = |v: u32, r: &RangeInclusive<i64>| r.contains(&i64::from(v));
         if let Some(k) = self.clusters.filter(|&k| !within(k, &CLUSTERS)) {
             return bad("clusters", format!("{k} is not in {}..={}", CLUSTERS.start(), CLUSTERS.end()));
@@ -421,6 +428,21 @@ impl CookSettings {
     /// The quality gate of `validate`, checked by [`CookSettings::check`].
     pub fn gate(&self) -> Gate {
         Gate { max_rmse: self.max_rmse, min_psnr: self.min_psnr, max_flip: self.max_flip }
+    }
+
+    /// The comparison `cook --validate`, `cook --auto` and `bake` make: every
+    /// frame, and every level of an asset with levels of detail (the gate
+    /// holding at each); a report in `report` when given.
+    pub fn compare_options(&self, report: Option<std::path::PathBuf>) -> vdbcook_validate::CompareOptions {
+        vdbcook_validate::CompareOptions {
+            frames: None,
+            views: self.views,
+            size: self.size,
+            gate: self.gate(),
+            levels: if self.lods > 1 { vdbcook_validate::Levels::Every } else { vdbcook_validate::Levels::First },
+            report,
+            extinction: self.extinction.clone(),
+        }
     }
 
     /// The clustering options, when `clusters` is set.
@@ -502,11 +524,11 @@ mod tests {
         assert_eq!(d.pairs().len(), CookSettings::NAMES.len());
         assert!(d.check().is_ok());
         let bad = CookSettings { variance_threshold: -1.0, ..d.clone() };
-        assert!(matches!(bad.check(), Err(Error::Setting { name: "variance_threshold", .. })));
+        assert!(matches!(bad.check(), Err(SettingError { name: "variance_threshold", .. })));
         assert_eq!(d.max_flip, None);
         for x in [-0.1, f64::NAN, f64::INFINITY] {
             let bad = CookSettings { max_flip: Some(x), ..d.clone() };
-            assert!(matches!(bad.check(), Err(Error::Setting { name: "max_flip", .. })), "{x}");
+            assert!(matches!(bad.check(), Err(SettingError { name: "max_flip", .. })), "{x}");
             assert!(parse_flip_budget(&x.to_string()).is_err(), "{x}");
         }
         assert!(CookSettings { max_flip: Some(0.0), ..d.clone() }.check().is_ok());
