@@ -1,7 +1,7 @@
 //! `vdbcook cook`: a VDB sequence into one .vpak asset.
 
-use crate::progress::Bars;
 use crate::gpu::GpuArgs;
+use crate::progress::Bars;
 use crate::{exit, Usage};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
@@ -143,8 +143,11 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
         None
     };
     if !quiet {
-        let mut text =
-            if args.json { json_text(&summary_json(&args.output, cooked.grid.as_deref(), report, validation.as_ref().map(|o| &o.doc))) } else { summary_text(&args.output, cooked.grid.as_deref(), report) };
+        let mut text = if args.json {
+            json_text(&summary_json(&args.output, cooked.grid.as_deref(), report, validation.as_ref().map(|o| &o.doc)))
+        } else {
+            summary_text(&args.output, cooked.grid.as_deref(), report)
+        };
         if let (Some(o), false) = (&validation, args.json) {
             text += &o.text;
         }

@@ -1,5 +1,9 @@
 //! `vdbcook inspect`: what a .vdb file holds, as text or JSON.
 
+/// The .vpak half of `inspect`.
+#[path = "inspect_vpak.rs"]
+mod inspect_vpak;
+
 use crate::{emit, exit, report_error};
 use anyhow::Context;
 use serde_json::{json, Map, Value};
@@ -18,7 +22,6 @@ active tile count, and min / max / sum of the active values. Grids of other
 types (vec3s, int32, points, ...) are listed with the reason they are skipped.
 A file that cannot be read prints one error line and makes the exit code 1;
 the other files are still described.";
-
 
 /// One grid's figures, or why it was skipped.
 struct GridReport<'a> {
@@ -55,15 +58,15 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
     let mut docs = Vec::new();
     for path in files {
         if vdbcook_pipeline::is_vpak(path) {
-            match crate::inspect_vpak::describe(path, as_json) {
-                Ok(crate::inspect_vpak::Described::Text(t)) => {
+            match inspect_vpak::describe(path, as_json) {
+                Ok(inspect_vpak::Described::Text(t)) => {
                     if !quiet {
                         if let Err(e) = emit(&t) {
                             return stdout_failed(&e, code);
                         }
                     }
                 }
-                Ok(crate::inspect_vpak::Described::Json(v)) => docs.push(v),
+                Ok(inspect_vpak::Described::Json(v)) => docs.push(v),
                 Err(e) => {
                     report_error(&e);
                     code = exit::FAILURE;

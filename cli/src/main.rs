@@ -5,7 +5,6 @@ mod cook;
 mod diff;
 mod gpu;
 mod inspect;
-mod inspect_vpak;
 mod progress;
 mod unpack;
 mod validate;
@@ -220,8 +219,10 @@ pub fn fail(e: &anyhow::Error) -> u8 {
         return exit::SUCCESS;
     }
     report_error(e);
-    if e.downcast_ref::<Usage>().is_some() || e.downcast_ref::<vdbcook_validate::CompareError>().is_some_and(vdbcook_validate::CompareError::is_usage)
-        || e.downcast_ref::<vdbcook_pipeline::Error>().is_some_and(vdbcook_pipeline::Error::is_usage) {
+    if e.downcast_ref::<Usage>().is_some()
+        || e.downcast_ref::<vdbcook_validate::CompareError>().is_some_and(vdbcook_validate::CompareError::is_usage)
+        || e.downcast_ref::<vdbcook_pipeline::Error>().is_some_and(vdbcook_pipeline::Error::is_usage)
+    {
         exit::USAGE
     } else {
         exit::FAILURE

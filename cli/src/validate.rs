@@ -5,9 +5,9 @@ use crate::progress::Bars;
 use crate::{exit, Usage};
 use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
-use vdbcook_validate::{report, CompareOptions, Comparison, Gate, Levels, Scene, Size};
 use vdbcook_pipeline::options::FrameRange;
 use vdbcook_pipeline::{recorded, GridSelection, Sources};
+use vdbcook_validate::{report, CompareOptions, Comparison, Gate, Levels, Scene, Size};
 use vdbcook_vpak::Asset;
 
 pub const AFTER_HELP: &str = "\
@@ -65,7 +65,7 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<FrameRange>,
     /// Cameras orbiting the volume.
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=360))]
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(vdbcook_pipeline::options::VIEWS))]
     pub views: u32,
     /// Image size.
     #[arg(long, default_value = "512x512", value_name = "WxH")]
@@ -155,7 +155,7 @@ pub struct RenderArgs {
     /// Which of --views orbiting cameras to use (from 0).
     #[arg(long, default_value_t = 0)]
     pub view: u32,
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=360))]
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(vdbcook_pipeline::options::VIEWS))]
     pub views: u32,
     /// Grid of a .vdb input (default: "density", else the first float grid).
     #[arg(long, value_name = "NAME")]

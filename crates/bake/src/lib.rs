@@ -21,8 +21,8 @@ pub mod step;
 pub use key::{cache_key, KeyContext};
 pub use manifest::{line_column, plan, Manifest, ManifestError, PlannedAsset, Sources};
 pub use options::{CookSettings, FrameRange, SettingText, Size};
-pub use step::{bake_one, cached, skipped, Baker};
 pub use report::{AssetReport, ChannelFormats, FormatBricks, Gate, Record, Report, Status, Summary, Validation};
+pub use step::{bake_one, cached, skipped, Baker};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {

@@ -201,7 +201,8 @@ fn cook_fresh(a: &PlannedAsset, ctx: &Baker) -> Result<(Vec<u8>, Record)> {
     let mut sections = cooked.sections;
     let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?;
     if let Some(reference) = &cooked.reference {
-                let o = compare_assets(&asset, &a.output, reference, &s.compare_options(Some(ctx.report_dir.join("validation").join(&a.name))), || ctx.renderer(), &vdbcook_cook::NoProgress).context("validating")?;
+        let o = compare_assets(&asset, &a.output, reference, &s.compare_options(Some(ctx.report_dir.join("validation").join(&a.name))), || ctx.renderer(), &vdbcook_cook::NoProgress)
+            .context("validating")?;
         record.validation = validation_figures(&o);
         record.gate_failure = o.gate_failure;
     }

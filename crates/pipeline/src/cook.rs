@@ -201,4 +201,3 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
     }
     Ok(out)
 }
-

@@ -66,7 +66,7 @@ pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channel
     let find = |name: &str| -> Result<&GridInfo> {
         let g = vdb.grids.iter().find(|g| g.name == name).ok_or_else(|| Error::Usage(format!("{path}: no grid named \"{name}\" (the file has: {})", describe_grids(vdb))))?;
         match &g.unsupported {
-            Some(u) if !g.is_readable() => Err(Error::Usage(format!("{path}: grid \"{name}\" cannot be cooked: {u}")).into()),
+            Some(u) if !g.is_readable() => Err(Error::Usage(format!("{path}: grid \"{name}\" cannot be cooked: {u}"))),
             _ => Ok(g),
         }
     };
@@ -81,7 +81,7 @@ pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channel
         GridSelection::Many(names) => {
             let mut seen = std::collections::HashSet::new();
             if let Some(dup) = names.iter().find(|n| !seen.insert(n.as_str())) {
-                return Err(Error::Usage(format!("--grids names \"{dup}\" twice")).into());
+                return Err(Error::Usage(format!("--grids names \"{dup}\" twice")));
             }
             names.iter().map(|n| find(n).map(specs_of)).collect::<Result<Vec<_>>>()?.concat()
         }
@@ -89,7 +89,7 @@ pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channel
             let mut seen = std::collections::HashSet::new();
             let all: Vec<ChannelSpec> = vdb.grids.iter().filter(|g| g.is_readable() && seen.insert(g.name.clone())).flat_map(specs_of).collect();
             if all.is_empty() {
-                return Err(Error::Usage(format!("{path}: --grids all found no float, double, half or vec3 grid (the file has: {})", describe_grids(vdb))).into());
+                return Err(Error::Usage(format!("{path}: --grids all found no float, double, half or vec3 grid (the file has: {})", describe_grids(vdb))));
             }
             all
         }

@@ -119,10 +119,10 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<PathB
             plain.push(path.to_path_buf());
         } else if let Some((pre, width, post)) = parse_pattern(input) {
             if width > MAX_PAD {
-                return Err(Error::Usage(format!("{input}: a frame pattern pads to at most {MAX_PAD} digits")).into());
+                return Err(Error::Usage(format!("{input}: a frame pattern pads to at most {MAX_PAD} digits")));
             }
             let Some(range) = frames else {
-                return Err(Error::Usage(format!("{input}: a frame pattern needs --frames A-B[:STEP]")).into());
+                return Err(Error::Usage(format!("{input}: a frame pattern needs --frames A-B[:STEP]")));
             };
             used_range = true;
             flush(&mut plain, &mut out);
@@ -141,7 +141,7 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<PathB
         }
     }
     if frames.is_some() && !used_range {
-        return Err(Error::Usage("--frames applies to frame patterns (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb), and no INPUT is one".into()).into());
+        return Err(Error::Usage("--frames applies to frame patterns (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb), and no INPUT is one".into()));
     }
     flush(&mut plain, &mut out);
     Ok(out)

@@ -202,7 +202,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>, E: Into<BoxError>>(
     }
     let mut out = combine(&runs, opts, &renderer.adapter)?;
     if let Some(dir) = &opts.report {
-        crate::html::write_report(dir, &out.doc, &runs, opts.gate.is_set()).map_err(|e| CompareError::In(dir.display().to_string(), e.into()))?;
+        crate::html::write_report(dir, &out.doc, &runs, opts.gate.is_set()).map_err(|e| CompareError::In(dir.display().to_string(), e))?;
         out.text += &format!("  report   {}\n", dir.join("report.html").display());
     }
     out.levels = runs.into_iter().map(|r| r.figures).collect();
@@ -298,7 +298,6 @@ fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize, lod: u32, shown:
     });
     Ok((errors, nonzero))
 }
-
 
 /// Compares level `lod` of the pair over `frames`; with a report, keeps the
 /// three worst views, or only the `focus` view (frame, view) when one is given.
@@ -401,8 +400,7 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
             "voxel": {"rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak(shown))), "max_error": vox_total.max_abs},
         }],
     });
-    let failed: Vec<&Shot> =
-        shots.iter().filter(|s| opts.gate.fails(s.metrics.rmse, s.metrics.psnr, s.flip)).collect();
+    let failed: Vec<&Shot> = shots.iter().filter(|s| opts.gate.fails(s.metrics.rmse, s.metrics.psnr, s.flip)).collect();
     let decoder = if p.gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
     let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
     let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), opts.views, renderer.adapter);
@@ -446,4 +444,3 @@ fn scene_words(model: Model) -> &'static str {
         Model::Surface => "a lit surface at its zero crossing (surface)",
     }
 }
-

@@ -18,9 +18,9 @@ mod scene;
 
 pub use compare::{compare_assets, CompareError, CompareOptions, Comparison, LevelFigures, Levels, Shot, Worst};
 pub use cpu::{render_cpu, render_cpu_level};
-pub use options::{Gate, Size};
 pub use flip::{flip, FlipMap};
 pub use gpu::{shader_sources, BcDecode, GpuAsset, Renderer};
+pub use options::{Gate, Size};
 pub use scene::{coverage, Model};
 
 use vdbcook_vpak::{Asset, Checked, Metadata};
