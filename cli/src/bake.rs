@@ -3,8 +3,7 @@
 //! content-addressed cache, shards, and one report. The plan, the keys and the
 //! reports come from `vdbcook_bake`; this file does the I/O.
 
-use crate::cook::{cook_asset, CookJob};
-use crate::validate::{compare_assets, GpuArgs, ValidateArgs};
+use crate::gpu::GpuArgs;
 use crate::{exit, one_line, Usage};
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -12,14 +11,12 @@ use serde_json::json;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Mutex, OnceLock};
+use std::sync::Mutex;
 use std::time::Instant;
 use vdbcook_bake::manifest::resolve;
 use vdbcook_bake::place;
-use vdbcook_bake::{AssetReport, ChannelFormats, Gate, KeyContext, Manifest, PlannedAsset, Record, Report, Shard, Sources, Status, Validation};
-use vdbcook_validate::report::{base64, thumbnail};
-use vdbcook_validate::Renderer;
-use vdbcook_vpak::{kind, Asset, Metadata};
+use vdbcook_bake::{bake_one, cached, skipped, AssetReport, Baker, KeyContext, Manifest, PlannedAsset, Report, Shard, Sources, Status};
+use vdbcook_pipeline::inputs;
 
 pub const AFTER_HELP: &str = "\
 The manifest (TOML) has a [defaults] table and [[asset]] entries. Each entry has a
@@ -134,10 +131,10 @@ struct FsSources;
 
 impl Sources for FsSources {
     fn expand(&self, inputs: &[String], frames: Option<vdbcook_bake::FrameRange>) -> Result<Vec<PathBuf>, String> {
-        crate::inputs::expand(inputs, frames).map_err(|e| one_line(&e))
+        inputs::expand(inputs, frames).map_err(|e| one_line(&e.into()))
     }
     fn is_pattern(&self, input: &str) -> bool {
-        crate::inputs::is_pattern(input)
+        inputs::is_pattern(input)
     }
     fn read(&self, path: &Path) -> std::io::Result<Option<Vec<u8>>> {
         match std::fs::read(path) {
@@ -177,8 +174,8 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
         return dry_run(&args, &out_dir, &selected, quiet);
     }
 
-    let ctx =
-        Ctx { out_dir, report_dir: report_dir.clone(), cache: args.cache.clone(), base, force: args.force, gpu: args.gpu.clone(), first_error: OnceLock::new(), renderers: Mutex::new(Vec::new()) };
+    let gpu = args.gpu.clone();
+    let ctx = Baker::new(out_dir, report_dir.clone(), args.cache.clone(), base, args.force, move || gpu.renderer().map_err(Into::into));
     let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize).clamp(1, selected.len().max(1));
     let show = Shown::new(quiet || args.json, selected.len());
     let next = AtomicUsize::new(0);
@@ -353,219 +350,6 @@ fn dry_run(args: &BakeArgs, out_dir: &Path, assets: &[PlannedAsset], quiet: bool
     };
     crate::emit_final(&text)?;
     Ok(exit::SUCCESS)
-}
-
-/// What every worker shares.
-struct Ctx {
-    out_dir: PathBuf,
-    report_dir: PathBuf,
-    cache: Option<PathBuf>,
-    base: PathBuf,
-    /// Replace anything at an output or cache path (`--force`).
-    force: bool,
-    gpu: GpuArgs,
-    /// Why no GPU device could be opened, once that happened.
-    first_error: OnceLock<String>,
-    /// Idle GPU devices: each worker borrows its own (on Mesa's CPU driver, one
-    /// device per worker renders in parallel where a shared queue would not).
-    renderers: Mutex<Vec<Renderer>>,
-}
-
-/// A GPU device borrowed from [`Ctx`]; it goes back when dropped.
-struct Lease<'a> {
-    ctx: &'a Ctx,
-    renderer: Option<Renderer>,
-}
-
-impl std::ops::Deref for Lease<'_> {
-    type Target = Renderer;
-    fn deref(&self) -> &Renderer {
-        // Some until drop.
-        self.renderer.as_ref().unwrap_or_else(|| unreachable!("a lease holds its renderer until dropped"))
-    }
-}
-
-impl Drop for Lease<'_> {
-    fn drop(&mut self) {
-        if let (Some(r), Ok(mut pool)) = (self.renderer.take(), self.ctx.renderers.lock()) {
-            pool.push(r);
-        }
-    }
-}
-
-impl Ctx {
-    fn renderer(&self) -> Result<Lease<'_>> {
-        if let Some(e) = self.first_error.get() {
-            return Err(anyhow!(e.clone()));
-        }
-        let idle = self.renderers.lock().ok().and_then(|mut pool| pool.pop());
-        let renderer = match idle {
-            Some(r) => r,
-            None => self.gpu.renderer().inspect_err(|e| {
-                let _ = self.first_error.set(one_line(e));
-            })?,
-        };
-        Ok(Lease { ctx: self, renderer: Some(renderer) })
-    }
-}
-
-/// The record and size of a valid asset at `path` that carries `key`.
-fn cached(path: &Path, key: &str) -> Option<(Record, u64)> {
-    // Opening checks every checksum and the padding, the validator the rest
-    // every reader relies on: a corrupted or inconsistent asset is not a hit.
-    let asset = Asset::open(path).ok()?;
-    let meta = vdbcook_vpak::Checked::new(&asset).ok()?.meta;
-    let get = |k: &str| meta.settings.iter().find(|(n, _)| n == k).map(|(_, v)| v.as_str());
-    if get("cache_key")? != key {
-        return None;
-    }
-    Some((Record::from_setting(get("bake_record")?)?, asset.bytes().len() as u64))
-}
-
-fn skipped(a: &PlannedAsset) -> AssetReport {
-    let mut r = blank(a);
-    r.status = Status::Skipped;
-    r.message = Some("not baked: an earlier asset failed (--fail-fast)".into());
-    r
-}
-
-fn blank(a: &PlannedAsset) -> AssetReport {
-    AssetReport {
-        index: a.index,
-        name: a.name.clone(),
-        status: Status::Failed,
-        output: a.output.clone(),
-        bytes: None,
-        cache_key: a.key.clone(),
-        inputs: a.inputs.clone(),
-        files: a.files.len(),
-        record: Record::default(),
-        validate: a.settings.validate,
-        gate: Gate { max_rmse: a.settings.max_rmse, min_psnr: a.settings.min_psnr, max_flip: a.settings.max_flip },
-        message: None,
-        validation_report: None,
-        seconds: 0.0,
-    }
-}
-
-/// Bakes one asset (or finds it cached); never fails: a failure is its status.
-fn bake_one(a: &PlannedAsset, ctx: &Ctx) -> AssetReport {
-    let t0 = Instant::now();
-    let mut r = blank(a);
-    let out = resolve(&ctx.out_dir, &a.output);
-    match obtain(a, ctx, &out) {
-        Ok((status, record, bytes)) => {
-            r.status = if record.gate_failure.is_some() { Status::GateFailed } else { status };
-            r.message = record.gate_failure.clone();
-            r.record = record;
-            r.bytes = Some(bytes);
-        }
-        Err(e) => r.message = Some(one_line(&e)),
-    }
-    let page = Path::new("validation").join(&a.name).join("report.html");
-    if a.settings.validate && ctx.report_dir.join(&page).is_file() {
-        r.validation_report = Some(page.to_string_lossy().replace('\\', "/"));
-    }
-    r.seconds = t0.elapsed().as_secs_f64();
-    r
-}
-
-/// The asset at `out`: left in place, copied from the cache, or cooked.
-fn obtain(a: &PlannedAsset, ctx: &Ctx, out: &Path) -> Result<(Status, Record, u64)> {
-    if let Some((record, bytes)) = cached(out, &a.key) {
-        return Ok((Status::Cached, record, bytes));
-    }
-    let name = out.display().to_string();
-    // Checked before the cook (so a refusal costs nothing) and again before
-    // each write (the file may have appeared meanwhile).
-    let may_write = |p: &Path| place::may_replace(p, ctx.force).map_err(|e| anyhow!(e));
-    may_write(out)?;
-    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).with_context(|| parent.display().to_string())?;
-    }
-    let cache_file = ctx.cache.as_ref().map(|c| c.join(format!("{}.vpak", a.key)));
-    if let Some(cf) = &cache_file {
-        if let Some((record, bytes)) = cached(cf, &a.key) {
-            let data = std::fs::read(cf).with_context(|| cf.display().to_string())?;
-            may_write(out)?;
-            vdbcook_vpak::write_atomic(out, &data, true).with_context(|| name.clone())?;
-            return Ok((Status::Cached, record, bytes));
-        }
-        may_write(cf)?;
-    }
-    let (bytes, record) = cook_fresh(a, ctx, &name)?;
-    may_write(out)?;
-    vdbcook_vpak::write_atomic(out, &bytes, true).with_context(|| name.clone())?;
-    if let (Some(cf), Some(dir)) = (&cache_file, &ctx.cache) {
-        std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
-        may_write(cf)?;
-        vdbcook_vpak::write_atomic(cf, &bytes, true).with_context(|| cf.display().to_string())?;
-    }
-    Ok((Status::Baked, record, bytes.len() as u64))
-}
-
-/// Pixels on a side of a report preview (shown at that size in report.html).
-const THUMBNAIL_SIZE: u32 = 256;
-
-fn finite(x: f64) -> Option<f64> {
-    x.is_finite().then_some(x)
-}
-
-/// Cooks, validates and renders a thumbnail; returns the asset's bytes, with
-/// the key and the record in its metadata.
-fn cook_fresh(a: &PlannedAsset, ctx: &Ctx, name: &str) -> Result<(Vec<u8>, Record)> {
-    let s = &a.settings;
-    let cooked = cook_asset(CookJob { settings: s, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: s.validate }, &vdbcook_cook::NoProgress)?;
-    let r = &cooked.report;
-    let mut record = Record {
-        frames: Some(r.frames as u32),
-        format: Some(r.format.clone()),
-        grid: cooked.grid.clone(),
-        active_voxels: Some(r.active_voxels),
-        bits_per_active_voxel: Some(r.bits_per_active_voxel),
-        voxel_rmse: Some(r.voxel_rmse),
-        voxel_psnr: finite(r.voxel_psnr),
-        channels: Some(r.channels.iter().map(ChannelFormats::from).collect()),
-        ..Record::default()
-    };
-    let mut sections = cooked.sections;
-    let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?;
-    if let Some(reference) = &cooked.reference {
-        let v = ValidateArgs::of_cook(s, PathBuf::from(name), a.input_paths.clone(), Some(ctx.report_dir.join("validation").join(&a.name)), ctx.gpu.clone(), true);
-        let o = compare_assets(&asset, &a.output, reference, &v, || ctx.renderer(), &vdbcook_cook::NoProgress).context("validating")?;
-        record.validation = Some(validation_figures(&o.doc));
-        record.gate_failure = o.gate_failure;
-    }
-    // A preview for the report; without a GPU (and no validation asked for) there is none.
-    if let Ok(renderer) = ctx.renderer() {
-        record.thumbnail = thumbnail(&renderer, &asset, THUMBNAIL_SIZE).ok().map(|png| base64(&png));
-    }
-    drop(asset);
-    let meta_section = sections.iter_mut().find(|x| x.kind == kind::METADATA).ok_or_else(|| anyhow!("the cooked asset has no metadata"))?;
-    let mut meta = Metadata::from_bytes(&meta_section.data)?;
-    meta.settings.push(("cache_key".into(), a.key.clone()));
-    meta.settings.push(("bake_record".into(), record.to_setting()));
-    meta_section.data = meta.to_bytes()?;
-    Ok((vdbcook_vpak::assemble(&sections), record))
-}
-
-/// The image figures of a validation document (docs/validate-json.md).
-fn validation_figures(doc: &serde_json::Value) -> Validation {
-    let images = doc["images"].as_array().map_or(&[][..], |v| &v[..]);
-    let mean = if images.is_empty() { 0.0 } else { images.iter().filter_map(|i| i["rmse"].as_f64()).sum::<f64>() / images.len() as f64 };
-    let size = |k: usize| doc["size"][k].as_u64().unwrap_or(0) as u32;
-    Validation {
-        adapter: doc["adapter"].as_str().unwrap_or("").to_string(),
-        views: doc["views"].as_u64().unwrap_or(0) as u32,
-        size: [size(0), size(1)],
-        images: images.len(),
-        worst_frame: doc["worst"]["frame"].as_u64().unwrap_or(0) as usize,
-        worst_view: doc["worst"]["view"].as_u64().unwrap_or(0) as usize,
-        image_rmse: doc["worst"]["rmse"].as_f64().unwrap_or(0.0),
-        image_psnr: doc["worst"]["psnr"].as_f64(),
-        mean_image_rmse: mean,
-        image_flip: doc["worst_flip"]["flip"].as_f64(),
-    }
 }
 
 /// Progress on a terminal: one overall bar and a line per finished asset.

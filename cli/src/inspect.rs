@@ -1,5 +1,9 @@
 //! `vdbcook inspect`: what a .vdb file holds, as text or JSON.
 
+/// The .vpak half of `inspect`.
+#[path = "inspect_vpak.rs"]
+mod inspect_vpak;
+
 use crate::{emit, exit, report_error};
 use anyhow::Context;
 use serde_json::{json, Map, Value};
@@ -18,13 +22,6 @@ active tile count, and min / max / sum of the active values. Grids of other
 types (vec3s, int32, points, ...) are listed with the reason they are skipped.
 A file that cannot be read prints one error line and makes the exit code 1;
 the other files are still described.";
-
-/// True when the file starts with the .vpak magic.
-pub fn is_vpak(path: &Path) -> bool {
-    use std::io::Read;
-    let mut magic = [0u8; 8];
-    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && magic == vdbcook_vpak::MAGIC
-}
 
 /// One grid's figures, or why it was skipped.
 struct GridReport<'a> {
@@ -60,16 +57,16 @@ pub fn run(files: &[std::path::PathBuf], as_json: bool, quiet: bool) -> u8 {
     let mut code = exit::SUCCESS;
     let mut docs = Vec::new();
     for path in files {
-        if is_vpak(path) {
-            match crate::inspect_vpak::describe(path, as_json) {
-                Ok(crate::inspect_vpak::Described::Text(t)) => {
+        if vdbcook_pipeline::is_vpak(path) {
+            match inspect_vpak::describe(path, as_json) {
+                Ok(inspect_vpak::Described::Text(t)) => {
                     if !quiet {
                         if let Err(e) = emit(&t) {
                             return stdout_failed(&e, code);
                         }
                     }
                 }
-                Ok(crate::inspect_vpak::Described::Json(v)) => docs.push(v),
+                Ok(inspect_vpak::Described::Json(v)) => docs.push(v),
                 Err(e) => {
                     report_error(&e);
                     code = exit::FAILURE;

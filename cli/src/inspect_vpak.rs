@@ -66,7 +66,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "frames": meta.frame_count,
             "channels": meta.channels.iter().enumerate().map(|(i, c)| json!({
                 "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
-                "background": crate::inspect::num32(c.background), "value_range": c.value_range.map(crate::inspect::num32), "group": c.group, "plane": c.plane, "lane": c.lane,
+                "background": super::num32(c.background), "value_range": c.value_range.map(super::num32), "group": c.group, "plane": c.plane, "lane": c.lane,
                 "alternates": c.alternates, "format": meta.channel_format_names(i), "bytes": channel_bytes(i),
             })).collect::<Vec<_>>(),
             "bricks": meta.brick_count,

@@ -1,15 +1,11 @@
 //! The `vdbcook` binary: flags in, library calls, human or JSON text out.
 
-mod auto;
 mod bake;
 mod cook;
 mod diff;
-mod grids;
-mod inputs;
+mod gpu;
 mod inspect;
-mod inspect_vpak;
 mod progress;
-mod recorded;
 mod unpack;
 mod validate;
 
@@ -178,12 +174,12 @@ fn main() -> ExitCode {
     }
     let code = match cli.command {
         Command::Inspect { files, json } => inspect::run(&files, json, cli.quiet),
-        Command::Cook(args) => cook::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
-        Command::Unpack(args) => unpack::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
-        Command::Diff(args) => diff::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
-        Command::Validate(args) => validate::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
-        Command::Render(args) => validate::render(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
-        Command::Bake(args) => bake::run(args, cli.quiet).unwrap_or_else(|e| cook::fail(&e)),
+        Command::Cook(args) => cook::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::Unpack(args) => unpack::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::Diff(args) => diff::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::Validate(args) => validate::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::Render(args) => validate::render(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::Bake(args) => bake::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
     };
     ExitCode::from(code)
 }
@@ -202,7 +198,34 @@ fn clap_exit(e: &clap::Error) -> u8 {
     }
     match emit(&e.render().to_string()) {
         Ok(()) => exit::SUCCESS,
-        Err(err) => cook::fail(&err),
+        Err(err) => fail(&err),
+    }
+}
+
+/// Prints a gate failure; the exit code.
+pub fn gate_exit(failure: &Option<String>) -> u8 {
+    match failure {
+        Some(msg) => {
+            eprintln!("vdbcook: quality gate failed: {msg}");
+            exit::QUALITY_GATE
+        }
+        None => exit::SUCCESS,
+    }
+}
+
+/// Reports a failure; the exit code. A closed stdout is not one.
+pub fn fail(e: &anyhow::Error) -> u8 {
+    if e.is::<PipeClosed>() {
+        return exit::SUCCESS;
+    }
+    report_error(e);
+    if e.downcast_ref::<Usage>().is_some()
+        || e.downcast_ref::<vdbcook_validate::CompareError>().is_some_and(vdbcook_validate::CompareError::is_usage)
+        || e.downcast_ref::<vdbcook_pipeline::Error>().is_some_and(vdbcook_pipeline::Error::is_usage)
+    {
+        exit::USAGE
+    } else {
+        exit::FAILURE
     }
 }
 
@@ -211,23 +234,9 @@ pub fn report_error(err: &anyhow::Error) {
     eprintln!("vdbcook: error: {}", one_line(err));
 }
 
-/// The error and its causes joined by ": ", each fact once: a context that the
-/// next cause repeats at its start (a path, "/out/a.vpak" before "/out/a.vpak
-/// already exists") and a cause that the message before it already ends with
-/// (an error whose text includes its source's) are left out.
+/// The error and its causes on one line (see [`vdbcook_pipeline::one_line`]).
 pub fn one_line(err: &anyhow::Error) -> String {
-    let parts: Vec<String> = err.chain().map(|e| e.to_string().replace('\n', " ")).collect();
-    let mut kept: Vec<&str> = Vec::new();
-    for (i, p) in parts.iter().enumerate() {
-        if p.is_empty() || kept.last().is_some_and(|k| k.ends_with(p.as_str())) {
-            continue;
-        }
-        if parts.get(i + 1).is_some_and(|n| n == p || n.starts_with(&format!("{p} "))) {
-            continue;
-        }
-        kept.push(p);
-    }
-    kept.join(": ")
+    vdbcook_pipeline::one_line(err.as_ref())
 }
 
 #[cfg(test)]

@@ -17,7 +17,7 @@ pub struct UnpackArgs {
     /// Level of detail to decode (0: the frame itself; k: voxels 2^k times as large, in the
     /// level's index space, with a transform to match). Default: the asset's finest level (0
     /// unless `cook --max-bytes` left finer ones out).
-    #[arg(long, value_name = "K", value_parser = vdbcook_bake::options::parse_lod)]
+    #[arg(long, value_name = "K", value_parser = vdbcook_pipeline::options::parse_lod)]
     pub lod: Option<u32>,
     /// The .vdb file to write: one float grid per scalar channel and one vec3s grid per
     /// vec3 grid, zip-compressed, each with its name, class, background and transform.

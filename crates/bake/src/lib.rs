@@ -12,19 +12,20 @@
 
 pub mod key;
 pub mod manifest;
-pub mod options;
+/// The typed cook settings (vdbcook-pipeline owns them; manifests are built from them).
+pub use vdbcook_pipeline::options;
 pub mod place;
 pub mod report;
+pub mod step;
 
 pub use key::{cache_key, KeyContext};
 pub use manifest::{line_column, plan, Manifest, ManifestError, PlannedAsset, Sources};
 pub use options::{CookSettings, FrameRange, SettingText, Size};
 pub use report::{AssetReport, ChannelFormats, FormatBricks, Gate, Record, Report, Status, Summary, Validation};
+pub use step::{bake_one, cached, skipped, Baker};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{name}: {message}")]
-    Setting { name: &'static str, message: String },
     #[error("invalid shard \"{0}\" (expected I/N with 1 <= I <= N, e.g. 2/3)")]
     Shard(String),
     #[error("report {0}: {1}")]

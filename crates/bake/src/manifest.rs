@@ -155,7 +155,7 @@ pub fn plan(m: &Manifest, base: &Path, sources: &dyn Sources, ctx: &KeyContext) 
         let mut settings = CookSettings::default();
         m.defaults.apply(&mut settings);
         a.apply(&mut settings);
-        if let Err(crate::Error::Setting { name: key, message }) = settings.check() {
+        if let Err(crate::options::SettingError { name: key, message }) = settings.check() {
             let span = a.span(key).or_else(|| m.defaults.span(key)).unwrap_or(table_span.clone());
             return Err(ManifestError::at(span, format!("{key}: {message}")));
         }

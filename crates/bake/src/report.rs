@@ -127,13 +127,7 @@ impl Record {
 }
 
 /// The budgets an asset was held to.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Gate {
-    pub max_rmse: Option<f64>,
-    pub min_psnr: Option<f64>,
-    #[serde(default)]
-    pub max_flip: Option<f64>,
-}
+pub use vdbcook_validate::Gate;
 
 /// One asset of the report.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

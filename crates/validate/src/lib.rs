@@ -7,15 +7,20 @@
 //! or with `vpak_atlas_buffer.wgsl` and `bcdec.wgsl` where BC bricks are
 //! decoded in the shader; `march.wgsl` is the marcher.
 
+pub mod compare;
 mod cpu;
 pub mod flip;
 mod gpu;
+mod html;
+pub mod options;
 pub mod report;
 mod scene;
 
+pub use compare::{compare_assets, CompareError, CompareOptions, Comparison, LevelFigures, Levels, Shot, Worst};
 pub use cpu::{render_cpu, render_cpu_level};
 pub use flip::{flip, FlipMap};
 pub use gpu::{shader_sources, BcDecode, GpuAsset, Renderer};
+pub use options::{Gate, Size};
 pub use scene::{coverage, Model};
 
 use vdbcook_vpak::{Asset, Checked, Metadata};

@@ -1,8 +1,7 @@
 //! Which grids of the input files become channels (`--grid`, `--grids`), and
 //! reading them frame by frame.
 
-use crate::Usage;
-use anyhow::{anyhow, Context, Result};
+use crate::{Context, Error, Result};
 use std::path::PathBuf;
 use vdbcook_cook::ChannelSpec;
 use vdbcook_grid::Grid;
@@ -65,9 +64,9 @@ fn specs_of(g: &GridInfo) -> Vec<ChannelSpec> {
 /// Resolves the selection against the first frame's file.
 pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channels> {
     let find = |name: &str| -> Result<&GridInfo> {
-        let g = vdb.grids.iter().find(|g| g.name == name).ok_or_else(|| Usage(format!("{path}: no grid named \"{name}\" (the file has: {})", describe_grids(vdb))))?;
+        let g = vdb.grids.iter().find(|g| g.name == name).ok_or_else(|| Error::Usage(format!("{path}: no grid named \"{name}\" (the file has: {})", describe_grids(vdb))))?;
         match &g.unsupported {
-            Some(u) if !g.is_readable() => Err(Usage(format!("{path}: grid \"{name}\" cannot be cooked: {u}")).into()),
+            Some(u) if !g.is_readable() => Err(Error::Usage(format!("{path}: grid \"{name}\" cannot be cooked: {u}"))),
             _ => Ok(g),
         }
     };
@@ -76,13 +75,13 @@ pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channel
         // One grid missing from a file is that frame's problem (exit 1, or an
         // empty frame with --allow-missing), as it is in any later frame.
         GridSelection::One(name) if !vdb.grids.iter().any(|g| &g.name == name) => {
-            return Err(anyhow!("{path}: no grid named \"{name}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", describe_grids(vdb)));
+            return Err(Error::Failed(format!("{path}: no grid named \"{name}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", describe_grids(vdb))));
         }
         GridSelection::One(name) => specs_of(find(name)?),
         GridSelection::Many(names) => {
             let mut seen = std::collections::HashSet::new();
             if let Some(dup) = names.iter().find(|n| !seen.insert(n.as_str())) {
-                return Err(Usage(format!("--grids names \"{dup}\" twice")).into());
+                return Err(Error::Usage(format!("--grids names \"{dup}\" twice")));
             }
             names.iter().map(|n| find(n).map(specs_of)).collect::<Result<Vec<_>>>()?.concat()
         }
@@ -90,7 +89,7 @@ pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channel
             let mut seen = std::collections::HashSet::new();
             let all: Vec<ChannelSpec> = vdb.grids.iter().filter(|g| g.is_readable() && seen.insert(g.name.clone())).flat_map(specs_of).collect();
             if all.is_empty() {
-                return Err(Usage(format!("{path}: --grids all found no float, double, half or vec3 grid (the file has: {})", describe_grids(vdb))).into());
+                return Err(Error::Usage(format!("{path}: --grids all found no float, double, half or vec3 grid (the file has: {})", describe_grids(vdb))));
             }
             all
         }
@@ -117,7 +116,7 @@ pub fn read_frame(path: PathBuf, sel: &GridSelection, channels: &mut Option<Chan
         if allow_missing {
             return Ok(Frame { path, grids: None, source: None });
         }
-        return Err(anyhow!("{p}: no such file (use --allow-missing to cook it as an empty frame)"));
+        return Err(Error::Failed(format!("{p}: no such file (use --allow-missing to cook it as an empty frame)")));
     }
     let vdb = vdbcook_vdb::open(&path).with_context(|| p.clone())?;
     let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(vdb.bytes()) };
@@ -141,7 +140,7 @@ pub fn read_frame(path: PathBuf, sel: &GridSelection, channels: &mut Option<Chan
             if allow_missing {
                 return Ok(Frame { path, grids: None, source: Some(source) });
             }
-            return Err(anyhow!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(&vdb)));
+            return Err(Error::Failed(format!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(&vdb))));
         };
         if read.as_ref().is_none_or(|(name, _)| name != &spec.grid) {
             read = Some((spec.grid.clone(), vdb.read_channels(i).with_context(|| p.clone())?));

@@ -6,12 +6,11 @@
 //! and globs are put in natural order (`frame_2` before `frame_10`); pattern
 //! frames keep the order of `--frames`.
 
-use crate::Usage;
-use anyhow::{bail, Context, Result};
+use crate::{Context, Error, Result};
 use std::cmp::Ordering;
 use std::path::{Path, PathBuf};
 
-pub use vdbcook_bake::FrameRange;
+pub use crate::options::FrameRange;
 
 /// True when `input` is a frame pattern (and not an existing file or directory).
 pub fn is_pattern(input: &str) -> bool {
@@ -112,7 +111,7 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<PathB
                 .filter(|p| p.is_file() && p.extension().is_some_and(|x| x.eq_ignore_ascii_case("vdb")))
                 .collect();
             if found.is_empty() {
-                bail!("{input}: the directory holds no .vdb files");
+                return Err(Error::Failed(format!("{input}: the directory holds no .vdb files")));
             }
             natural_sort(&mut found);
             plain.extend(found);
@@ -120,10 +119,10 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<PathB
             plain.push(path.to_path_buf());
         } else if let Some((pre, width, post)) = parse_pattern(input) {
             if width > MAX_PAD {
-                return Err(Usage(format!("{input}: a frame pattern pads to at most {MAX_PAD} digits")).into());
+                return Err(Error::Usage(format!("{input}: a frame pattern pads to at most {MAX_PAD} digits")));
             }
             let Some(range) = frames else {
-                return Err(Usage(format!("{input}: a frame pattern needs --frames A-B[:STEP]")).into());
+                return Err(Error::Usage(format!("{input}: a frame pattern needs --frames A-B[:STEP]")));
             };
             used_range = true;
             flush(&mut plain, &mut out);
@@ -133,16 +132,16 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<PathB
         } else if is_glob(input) {
             let mut found: Vec<PathBuf> = glob::glob(input).with_context(|| format!("{input}: invalid glob"))?.flatten().filter(|p| p.is_file()).collect();
             if found.is_empty() {
-                bail!("{input}: no file matches");
+                return Err(Error::Failed(format!("{input}: no file matches")));
             }
             natural_sort(&mut found);
             plain.extend(found);
         } else {
-            bail!("{input}: no such file or directory");
+            return Err(Error::Failed(format!("{input}: no such file or directory")));
         }
     }
     if frames.is_some() && !used_range {
-        return Err(Usage("--frames applies to frame patterns (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb), and no INPUT is one".into()).into());
+        return Err(Error::Usage("--frames applies to frame patterns (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb), and no INPUT is one".into()));
     }
     flush(&mut plain, &mut out);
     Ok(out)

@@ -7,13 +7,23 @@
 //! its position in the file) and the canonical `(name, value)` list that cache
 //! keys hash. Adding a setting is one entry there.
 
-use crate::Error;
 use std::fmt;
 use std::ops::RangeInclusive;
 use std::str::FromStr;
 use toml::Spanned;
 pub use vdbcook_cook::ChannelGroup;
 pub use vdbcook_encode::{Format, Quality};
+// The gate's budgets and the image size are the comparison's (vdbcook-validate owns them).
+pub use vdbcook_validate::options::{flip_budget, parse_flip_budget, parse_psnr_floor, parse_rmse_budget, psnr_floor, rmse_budget};
+pub use vdbcook_validate::{Gate, Size};
+
+/// A setting out of its range or at odds with another; `name` is the setting's.
+#[derive(Debug, thiserror::Error)]
+#[error("{name}: {message}")]
+pub struct SettingError {
+    pub name: &'static str,
+    pub message: String,
+}
 
 /// An inclusive frame range with a step (`A-B` or `A-B:STEP`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -57,32 +67,6 @@ impl fmt::Display for FrameRange {
 impl FrameRange {
     pub fn frames(&self) -> impl Iterator<Item = i64> + '_ {
         (self.first..=self.last).step_by(self.step as usize)
-    }
-}
-
-/// An image size, `WxH`, each 8 to 8192.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Size {
-    pub width: u32,
-    pub height: u32,
-}
-
-impl FromStr for Size {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || format!("invalid size \"{s}\" (expected WxH, e.g. 512x512, each 8 to 8192)");
-        let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-        let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
-        if !(8..=8192).contains(&w) || !(8..=8192).contains(&h) {
-            return Err(bad());
-        }
-        Ok(Size { width: w, height: h })
-    }
-}
-
-impl fmt::Display for Size {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}x{}", self.width, self.height)
     }
 }
 
@@ -163,7 +147,7 @@ macro_rules! deserialize_from_str {
         }
     )*};
 }
-deserialize_from_str!(FrameRange, Size);
+deserialize_from_str!(FrameRange);
 
 /// A setting's value as canonical text (for cache keys and metadata).
 pub trait SettingText {
@@ -231,45 +215,8 @@ pub fn parse_lods(s: &str) -> Result<u32, String> {
     lods(s.trim().parse::<u32>().map_err(|_| format!("invalid level count \"{s}\" (expected a whole number, 1 to {})", vdbcook_vpak::MAX_LEVELS))?)
 }
 
-/// A FLIP budget (`--max-flip`, `max_flip`): a finite number >= 0 (FLIP errors lie in [0, 1]).
-pub fn flip_budget(x: f64) -> Result<f64, String> {
-    if x.is_finite() && x >= 0.0 {
-        Ok(x)
-    } else {
-        Err(format!("must be a finite number >= 0, not {x}"))
-    }
-}
-
-/// An RMSE budget (`--max-rmse`, `max_rmse`): a number >= 0.
-pub fn rmse_budget(x: f64) -> Result<f64, String> {
-    if x >= 0.0 {
-        Ok(x)
-    } else {
-        Err(format!("must be a number >= 0, not {x}"))
-    }
-}
-
-/// A PSNR floor (`--min-psnr`, `min_psnr`), in dB: any number but NaN.
-pub fn psnr_floor(y: f64) -> Result<f64, String> {
-    if y.is_nan() {
-        Err(format!("must be a number, not {y}"))
-    } else {
-        Ok(y)
-    }
-}
-
 fn parse_number(s: &str) -> Result<f64, String> {
-    s.trim().parse::<f64>().map_err(|_| format!("invalid number \"{s}\""))
-}
-
-/// Parses a FLIP budget flag.
-pub fn parse_flip_budget(s: &str) -> Result<f64, String> {
-    flip_budget(parse_number(s)?)
-}
-
-/// Parses an RMSE budget flag.
-pub fn parse_rmse_budget(s: &str) -> Result<f64, String> {
-    rmse_budget(parse_number(s)?)
+    vdbcook_validate::options::parse_number(s)
 }
 
 /// A per-voxel error bound (`--max-error`, `max_error`): a finite number >= 0.
@@ -284,11 +231,6 @@ pub fn max_error_bound(e: f32) -> Result<f32, String> {
 /// Parses a per-voxel error bound flag.
 pub fn parse_max_error(s: &str) -> Result<f32, String> {
     max_error_bound(parse_number(s)? as f32)
-}
-
-/// Parses a PSNR floor flag.
-pub fn parse_psnr_floor(s: &str) -> Result<f64, String> {
-    psnr_floor(parse_number(s)?)
 }
 
 macro_rules! settings {
@@ -447,8 +389,8 @@ settings! {
 
 impl CookSettings {
     /// Checks what the types do not: ranges and numbers. The error names the setting.
-    pub fn check(&self) -> Result<(), Error> {
-        let bad = |name: &'static str, message: String| Err(Error::Setting { name, message });
+    pub fn check(&self) -> Result<(), SettingError> {
+        let bad = |name: &'static str, message: String| Err(SettingError { name, message });
         let within = |v: u32, r: &RangeInclusive<i64>| r.contains(&i64::from(v));
         if let Some(k) = self.clusters.filter(|&k| !within(k, &CLUSTERS)) {
             return bad("clusters", format!("{k} is not in {}..={}", CLUSTERS.start(), CLUSTERS.end()));
@@ -477,16 +419,30 @@ impl CookSettings {
         if self.max_error.is_some() && !self.group.is_empty() {
             return bad("max_error", "chooses every brick's format: it takes no channel groups".into());
         }
-        if let Some(Err(message)) = self.max_rmse.map(rmse_budget) {
-            return bad("max_rmse", message);
-        }
-        if let Some(Err(message)) = self.min_psnr.map(psnr_floor) {
-            return bad("min_psnr", message);
-        }
-        if let Some(Err(message)) = self.max_flip.map(flip_budget) {
-            return bad("max_flip", message);
+        if let Err((name, message)) = Gate::new(self.max_rmse, self.min_psnr, self.max_flip) {
+            return bad(name, message);
         }
         Ok(())
+    }
+
+    /// The quality gate of `validate`, checked by [`CookSettings::check`].
+    pub fn gate(&self) -> Gate {
+        Gate { max_rmse: self.max_rmse, min_psnr: self.min_psnr, max_flip: self.max_flip }
+    }
+
+    /// The comparison `cook --validate`, `cook --auto` and `bake` make: every
+    /// frame, and every level of an asset with levels of detail (the gate
+    /// holding at each); a report in `report` when given.
+    pub fn compare_options(&self, report: Option<std::path::PathBuf>) -> vdbcook_validate::CompareOptions {
+        vdbcook_validate::CompareOptions {
+            frames: None,
+            views: self.views,
+            size: self.size,
+            gate: self.gate(),
+            levels: if self.lods > 1 { vdbcook_validate::Levels::Every } else { vdbcook_validate::Levels::First },
+            report,
+            extinction: self.extinction.clone(),
+        }
     }
 
     /// The clustering options, when `clusters` is set.
@@ -568,11 +524,11 @@ mod tests {
         assert_eq!(d.pairs().len(), CookSettings::NAMES.len());
         assert!(d.check().is_ok());
         let bad = CookSettings { variance_threshold: -1.0, ..d.clone() };
-        assert!(matches!(bad.check(), Err(Error::Setting { name: "variance_threshold", .. })));
+        assert!(matches!(bad.check(), Err(SettingError { name: "variance_threshold", .. })));
         assert_eq!(d.max_flip, None);
         for x in [-0.1, f64::NAN, f64::INFINITY] {
             let bad = CookSettings { max_flip: Some(x), ..d.clone() };
-            assert!(matches!(bad.check(), Err(Error::Setting { name: "max_flip", .. })), "{x}");
+            assert!(matches!(bad.check(), Err(SettingError { name: "max_flip", .. })), "{x}");
             assert!(parse_flip_budget(&x.to_string()).is_err(), "{x}");
         }
         assert!(CookSettings { max_flip: Some(0.0), ..d.clone() }.check().is_ok());

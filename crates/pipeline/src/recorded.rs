@@ -6,7 +6,7 @@
 //! directory when they are below it. A relative path is looked up in the
 //! current directory, then in the asset's directory.
 
-use anyhow::{anyhow, Result};
+use crate::{Error, Result};
 use std::path::{Path, PathBuf};
 use vdbcook_vpak::Metadata;
 
@@ -23,18 +23,18 @@ pub fn frame_files(meta: &Metadata, asset: &Path) -> Result<Vec<PathBuf>> {
             files.push(PathBuf::from(format!("\0empty frame {f}")));
             continue;
         };
-        let src = meta.sources.get(i as usize).ok_or_else(|| anyhow!("{name}: frame {f} names source {i}, but the asset records {}", meta.sources.len()))?;
+        let src = meta.sources.get(i as usize).ok_or_else(|| Error::Failed(format!("{name}: frame {f} names source {i}, but the asset records {}", meta.sources.len())))?;
         let recorded = Path::new(&src.path);
         let found = if recorded.is_absolute() { vec![recorded.to_path_buf()] } else { vec![recorded.to_path_buf(), asset_dir.join(recorded)] }.into_iter().find(|p| p.is_file());
         let Some(path) = found else {
-            return Err(anyhow!(
+            return Err(Error::Failed(format!(
                 "{name}: the recorded source of frame {f}, {}, does not exist here (relative paths are looked up in the current directory and the asset's); give the sources with --source",
                 src.path
-            ));
+            )));
         };
         // The size first (free), then the bytes: a changed file is named before it is parsed.
         let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
-        if bytes != src.bytes || file_hash(&path).map_err(|e| anyhow!("{}: {e}", path.display()))? != src.xxh3_128 {
+        if bytes != src.bytes || file_hash(&path).map_err(|e| Error::Failed(format!("{}: {e}", path.display())))? != src.xxh3_128 {
             return Err(changed(&name.to_string(), &path));
         }
         files.push(path);
@@ -57,8 +57,8 @@ fn file_hash(path: &Path) -> std::io::Result<String> {
     }
 }
 
-fn changed(asset: &str, path: &Path) -> anyhow::Error {
-    anyhow!("{asset}: the recorded source {} changed since the cook (its bytes differ from those the asset records); cook again, or give the sources with --source", path.display())
+fn changed(asset: &str, path: &Path) -> Error {
+    Error::Failed(format!("{asset}: the recorded source {} changed since the cook (its bytes differ from those the asset records); cook again, or give the sources with --source", path.display()))
 }
 
 /// The asset of `validate`: the positional one, or, as a user may type
@@ -68,7 +68,7 @@ pub fn asset_and_sources(asset: Option<PathBuf>, mut source: Vec<String>) -> Res
         return Ok((a, source));
     }
     match source.last() {
-        Some(last) if last.ends_with(".vpak") || crate::inspect::is_vpak(Path::new(last)) => {
+        Some(last) if last.ends_with(".vpak") || crate::is_vpak(Path::new(last)) => {
             let a = source.pop().map(PathBuf::from).unwrap_or_default();
             Ok((a, source))
         }

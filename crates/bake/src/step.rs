@@ -1,0 +1,240 @@
+//! One bake asset's step: left in place when its output carries its key,
+//! copied from the cache, or cooked (through vdbcook-pipeline), validated
+//! (through vdbcook-validate), given a preview and its record, written, and
+//! stored in the cache. Workers share one [`Baker`].
+
+use crate::manifest::resolve;
+use crate::{place, AssetReport, ChannelFormats, PlannedAsset, Record, Status, Validation};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, OnceLock};
+use std::time::Instant;
+use vdbcook_pipeline::{cook_asset, one_line, Context, CookJob, Error, Result};
+use vdbcook_validate::report::{base64, thumbnail};
+use vdbcook_validate::{compare_assets, Comparison, Renderer};
+use vdbcook_vpak::{kind, Asset, Metadata};
+
+type BoxError = Box<dyn std::error::Error + Send + Sync>;
+
+/// What every worker shares.
+pub struct Baker<'g> {
+    out_dir: PathBuf,
+    report_dir: PathBuf,
+    cache: Option<PathBuf>,
+    base: PathBuf,
+    /// Replace anything at an output or cache path (`--force`).
+    force: bool,
+    /// Opens a GPU device (the caller's choice of adapter).
+    open: Box<dyn Fn() -> Result<Renderer, BoxError> + Send + Sync + 'g>,
+    /// Why no GPU device could be opened, once that happened.
+    first_error: OnceLock<String>,
+    /// Idle GPU devices: each worker borrows its own (on Mesa's CPU driver, one
+    /// device per worker renders in parallel where a shared queue would not).
+    renderers: Mutex<Vec<Renderer>>,
+}
+
+impl<'g> Baker<'g> {
+    /// Outputs go below `out_dir`, validation pages below `report_dir`; `base`
+    /// is the manifest's directory (sources are recorded relative to it);
+    /// `open` opens a GPU device when one is first needed.
+    pub fn new(out_dir: PathBuf, report_dir: PathBuf, cache: Option<PathBuf>, base: PathBuf, force: bool, open: impl Fn() -> Result<Renderer, BoxError> + Send + Sync + 'g) -> Baker<'g> {
+        Baker { out_dir, report_dir, cache, base, force, open: Box::new(open), first_error: OnceLock::new(), renderers: Mutex::new(Vec::new()) }
+    }
+}
+
+/// A GPU device borrowed from a [`Baker`]; it goes back when dropped.
+struct Lease<'a, 'g> {
+    ctx: &'a Baker<'g>,
+    renderer: Option<Renderer>,
+}
+
+impl std::ops::Deref for Lease<'_, '_> {
+    type Target = Renderer;
+    fn deref(&self) -> &Renderer {
+        // Some until drop.
+        self.renderer.as_ref().unwrap_or_else(|| unreachable!("a lease holds its renderer until dropped"))
+    }
+}
+
+impl Drop for Lease<'_, '_> {
+    fn drop(&mut self) {
+        if let (Some(r), Ok(mut pool)) = (self.renderer.take(), self.ctx.renderers.lock()) {
+            pool.push(r);
+        }
+    }
+}
+
+impl<'g> Baker<'g> {
+    fn renderer(&self) -> Result<Lease<'_, 'g>> {
+        if let Some(e) = self.first_error.get() {
+            return Err(Error::Failed(e.clone()));
+        }
+        let idle = self.renderers.lock().ok().and_then(|mut pool| pool.pop());
+        let renderer = match idle {
+            Some(r) => r,
+            None => (self.open)().map_err(Error::Other).inspect_err(|e| {
+                let _ = self.first_error.set(one_line(e));
+            })?,
+        };
+        Ok(Lease { ctx: self, renderer: Some(renderer) })
+    }
+}
+
+/// The record and size of a valid asset at `path` that carries `key`.
+pub fn cached(path: &Path, key: &str) -> Option<(Record, u64)> {
+    // Opening checks every checksum and the padding, the validator the rest
+    // every reader relies on: a corrupted or inconsistent asset is not a hit.
+    let asset = Asset::open(path).ok()?;
+    let meta = vdbcook_vpak::Checked::new(&asset).ok()?.meta;
+    let get = |k: &str| meta.settings.iter().find(|(n, _)| n == k).map(|(_, v)| v.as_str());
+    if get("cache_key")? != key {
+        return None;
+    }
+    Some((Record::from_setting(get("bake_record")?)?, asset.bytes().len() as u64))
+}
+
+pub fn skipped(a: &PlannedAsset) -> AssetReport {
+    let mut r = blank(a);
+    r.status = Status::Skipped;
+    r.message = Some("not baked: an earlier asset failed (--fail-fast)".into());
+    r
+}
+
+fn blank(a: &PlannedAsset) -> AssetReport {
+    AssetReport {
+        index: a.index,
+        name: a.name.clone(),
+        status: Status::Failed,
+        output: a.output.clone(),
+        bytes: None,
+        cache_key: a.key.clone(),
+        inputs: a.inputs.clone(),
+        files: a.files.len(),
+        record: Record::default(),
+        validate: a.settings.validate,
+        gate: a.settings.gate(),
+        message: None,
+        validation_report: None,
+        seconds: 0.0,
+    }
+}
+
+/// Bakes one asset (or finds it cached); never fails: a failure is its status.
+pub fn bake_one(a: &PlannedAsset, ctx: &Baker) -> AssetReport {
+    let t0 = Instant::now();
+    let mut r = blank(a);
+    let out = resolve(&ctx.out_dir, &a.output);
+    match obtain(a, ctx, &out) {
+        Ok((status, record, bytes)) => {
+            r.status = if record.gate_failure.is_some() { Status::GateFailed } else { status };
+            r.message = record.gate_failure.clone();
+            r.record = record;
+            r.bytes = Some(bytes);
+        }
+        Err(e) => r.message = Some(one_line(&e)),
+    }
+    let page = Path::new("validation").join(&a.name).join("report.html");
+    if a.settings.validate && ctx.report_dir.join(&page).is_file() {
+        r.validation_report = Some(page.to_string_lossy().replace('\\', "/"));
+    }
+    r.seconds = t0.elapsed().as_secs_f64();
+    r
+}
+
+/// The asset at `out`: left in place, copied from the cache, or cooked.
+fn obtain(a: &PlannedAsset, ctx: &Baker, out: &Path) -> Result<(Status, Record, u64)> {
+    if let Some((record, bytes)) = cached(out, &a.key) {
+        return Ok((Status::Cached, record, bytes));
+    }
+    let name = out.display().to_string();
+    // Checked before the cook (so a refusal costs nothing) and again before
+    // each write (the file may have appeared meanwhile).
+    let may_write = |p: &Path| place::may_replace(p, ctx.force).map_err(Error::Failed);
+    may_write(out)?;
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| parent.display().to_string())?;
+    }
+    let cache_file = ctx.cache.as_ref().map(|c| c.join(format!("{}.vpak", a.key)));
+    if let Some(cf) = &cache_file {
+        if let Some((record, bytes)) = cached(cf, &a.key) {
+            let data = std::fs::read(cf).with_context(|| cf.display().to_string())?;
+            may_write(out)?;
+            vdbcook_vpak::write_atomic(out, &data, true).with_context(|| name.clone())?;
+            return Ok((Status::Cached, record, bytes));
+        }
+        may_write(cf)?;
+    }
+    let (bytes, record) = cook_fresh(a, ctx)?;
+    may_write(out)?;
+    vdbcook_vpak::write_atomic(out, &bytes, true).with_context(|| name.clone())?;
+    if let (Some(cf), Some(dir)) = (&cache_file, &ctx.cache) {
+        std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+        may_write(cf)?;
+        vdbcook_vpak::write_atomic(cf, &bytes, true).with_context(|| cf.display().to_string())?;
+    }
+    Ok((Status::Baked, record, bytes.len() as u64))
+}
+
+/// Pixels on a side of a report preview (shown at that size in report.html).
+const THUMBNAIL_SIZE: u32 = 256;
+
+fn finite(x: f64) -> Option<f64> {
+    x.is_finite().then_some(x)
+}
+
+/// Cooks, validates and renders a thumbnail; returns the asset's bytes, with
+/// the key and the record in its metadata.
+fn cook_fresh(a: &PlannedAsset, ctx: &Baker) -> Result<(Vec<u8>, Record)> {
+    let s = &a.settings;
+    let cooked = cook_asset(CookJob { settings: s, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: s.validate }, &vdbcook_cook::NoProgress)?;
+    let r = &cooked.report;
+    let mut record = Record {
+        frames: Some(r.frames as u32),
+        format: Some(r.format.clone()),
+        grid: cooked.grid.clone(),
+        active_voxels: Some(r.active_voxels),
+        bits_per_active_voxel: Some(r.bits_per_active_voxel),
+        voxel_rmse: Some(r.voxel_rmse),
+        voxel_psnr: finite(r.voxel_psnr),
+        channels: Some(r.channels.iter().map(ChannelFormats::from).collect()),
+        ..Record::default()
+    };
+    let mut sections = cooked.sections;
+    let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?;
+    if let Some(reference) = &cooked.reference {
+        let o = compare_assets(&asset, &a.output, reference, &s.compare_options(Some(ctx.report_dir.join("validation").join(&a.name))), || ctx.renderer(), &vdbcook_cook::NoProgress)
+            .context("validating")?;
+        record.validation = validation_figures(&o);
+        record.gate_failure = o.gate_failure;
+    }
+    // A preview for the report; without a GPU (and no validation asked for) there is none.
+    if let Ok(renderer) = ctx.renderer() {
+        record.thumbnail = thumbnail(&renderer, &asset, THUMBNAIL_SIZE).ok().map(|png| base64(&png));
+    }
+    drop(asset);
+    let meta_section = sections.iter_mut().find(|x| x.kind == kind::METADATA).ok_or_else(|| Error::Failed("the cooked asset has no metadata".into()))?;
+    let mut meta = Metadata::from_bytes(&meta_section.data)?;
+    meta.settings.push(("cache_key".into(), a.key.clone()));
+    meta.settings.push(("bake_record".into(), record.to_setting()));
+    meta_section.data = meta.to_bytes()?;
+    Ok((vdbcook_vpak::assemble(&sections), record))
+}
+
+/// The image figures of a validation: its first level's (the level its document reports).
+fn validation_figures(o: &Comparison) -> Option<Validation> {
+    let level = o.levels.first()?;
+    let images = &level.shots;
+    let mean = if images.is_empty() { 0.0 } else { images.iter().map(|i| i.metrics.rmse).sum::<f64>() / images.len() as f64 };
+    let worst = level.worst_shot;
+    Some(Validation {
+        adapter: o.adapter.clone(),
+        views: o.views,
+        size: [o.size.width, o.size.height],
+        images: images.len(),
+        worst_frame: worst.map_or(0, |s| s.frame),
+        worst_view: worst.map_or(0, |s| s.view),
+        image_rmse: worst.map_or(0.0, |s| s.metrics.rmse),
+        image_psnr: worst.and_then(|s| finite(s.metrics.psnr)),
+        mean_image_rmse: mean,
+        image_flip: level.shots.iter().map(|s| s.flip).reduce(f64::max),
+    })
+}

@@ -1,0 +1,61 @@
+//! Validating an asset file against its sources: the sources cooked
+//! losslessly in memory (the reference), then the comparison.
+
+use crate::inputs::{self, FrameRange};
+use crate::{recorded, Context, Error, Result};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use vdbcook_cook::Progress;
+use vdbcook_validate::{compare_assets, CompareOptions, Comparison, Levels, Renderer};
+use vdbcook_vpak::{Asset, Metadata};
+
+/// Where the source frames of a validation come from.
+pub enum Sources {
+    /// INPUT arguments (files, directories, globs, patterns) and the frames of a pattern.
+    Inputs(Vec<String>, Option<FrameRange>),
+    /// The files the asset records (checked against their recorded size and hash).
+    Recorded,
+}
+
+/// Compares the asset at `path` with its source frames cooked losslessly,
+/// at the levels `opts` asks for. `renderer` is asked for once the frames are
+/// known to be in range.
+pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std::error::Error + Send + Sync>>>(
+    path: &Path,
+    sources: Sources,
+    opts: &CompareOptions,
+    renderer: impl FnOnce() -> std::result::Result<R, E>,
+    bars: &dyn Progress,
+) -> Result<Comparison> {
+    let name = path.display().to_string();
+    let asset = Asset::open(path).with_context(|| name.clone())?;
+    let meta = asset.metadata().with_context(|| name.clone())?;
+    let lod = match opts.levels {
+        Levels::At(k) => k,
+        _ => meta.first_level,
+    };
+    if let Some(why) = meta.missing_level(lod) {
+        return Err(Error::Failed(format!("{name}: {why}")));
+    }
+    // One reference, filtered down to the coarsest level checked, serves every level.
+    let coarsest = if opts.levels == Levels::Every { meta.stored_levels().end.saturating_sub(1) } else { lod };
+    let recorded = matches!(sources, Sources::Recorded);
+    let files = match sources {
+        Sources::Recorded => recorded::frame_files(&meta, path)?,
+        Sources::Inputs(inputs, frames) => inputs::expand(&inputs, frames)?,
+    };
+    let reference = reference(&meta, files.clone(), recorded, coarsest, bars)?;
+    let mut o = compare_assets(&asset, &name, &reference, opts, renderer, bars)?;
+    if recorded {
+        let read = files.iter().filter(|f| f.exists()).count();
+        o.text += &format!("  sources  the {read} file(s) the asset records (no --source given)\n");
+        o.doc["sources"] = json!({"recorded": true, "files": read});
+    }
+    Ok(o)
+}
+
+/// Cooks `files` losslessly in memory, down to level `lod`: the reference asset.
+fn reference(meta: &Metadata, files: Vec<PathBuf>, allow_missing: bool, lod: u32, bars: &dyn Progress) -> Result<Asset> {
+    let allow_missing = allow_missing || meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
+    crate::cook_lossless_levels(files, crate::selection_of(meta), allow_missing, lod + 1, bars).context("cooking the reference")
+}
