@@ -29,6 +29,9 @@ const VPAK_L3_WORDS: u32 = 3u;      // brick, sub-block states, first sub-mask (
 // No brick table: brick b is plane brick b.
 const VPAK_TILE: u32 = 0x80000000u;
 const VPAK_NONE: u32 = 0xffffffffu;
+// Records of the channel table: a record per channel and per alternate
+// plane (at most 256 channels and 256 planes).
+const VPAK_CHANNEL_RECORDS: u32 = 512u;
 
 // Plane formats (Format codes).
 const VPAK_F32: u32 = 0u;
@@ -99,12 +102,35 @@ struct VpakChannel {
 @group(0) @binding(5) var<storage, read> vpak_l3: array<u32>;
 @group(0) @binding(6) var<storage, read> vpak_tiles: array<u32>;
 @group(0) @binding(7) var<storage, read> vpak_ranges: array<vec2<f32>>;
-@group(0) @binding(14) var<storage, read> vpak_channels: array<VpakChannel>;
+// A uniform buffer (of VPAK_CHANNEL_RECORDS records, unused ones zero): a
+// channel's record is read at every sample, and a uniform read is a single
+// load where the channel is the same for every invocation.
+@group(0) @binding(14) var<uniform> vpak_channels: array<VpakChannel, VPAK_CHANNEL_RECORDS>;
 @group(0) @binding(19) var<storage, read> vpak_tables: array<u32>;
 // False when the asset has a single texture (one plane, one atlas): the
 // texture selection then folds away at pipeline creation (it costs 2-3x on
 // a CPU driver otherwise).
 override VPAK_MULTI_ATLAS: bool = true;
+// The format code of every plane sampled, when the channels a pipeline
+// samples are each in one plane (no per-brick formats) of that one format;
+// else VPAK_NONE. A known format folds the other formats' decoding, the
+// per-brick plane choice and the range test away at pipeline creation: a
+// CPU driver runs every branch of a shader, taken or not.
+override VPAK_FORMAT: u32 = 0xffffffffu;
+
+// The format of the brick channel whose record says `format`.
+fn vpak_format(format: u32) -> u32 {
+    if (VPAK_FORMAT != VPAK_NONE) {
+        return VPAK_FORMAT;
+    }
+    return format;
+}
+
+// Whether texels of `format` are levels over the brick's range (every
+// format but f32 and f16).
+fn vpak_ranged(format: u32) -> bool {
+    return format != VPAK_F32 && format != VPAK_F16;
+}
 
 // Entry of slot `s` in the node at `base` with `mask_words` mask words,
 // or VPAK_NONE when the slot is empty: the mask bit, then the rank of the
@@ -152,7 +178,7 @@ struct VpakBrickChannel {
 fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
     var ch = vpak_channels[c];
     var pb = b;
-    if (ch.alternates != VPAK_NONE) {
+    if (VPAK_FORMAT == VPAK_NONE && ch.alternates != VPAK_NONE) {
         // Per-brick formats: the channel table picks the plane and its brick.
         let e = vpak_tables[ch.table + b];
         pb = e & VPAK_PLANE_BRICK;
@@ -180,10 +206,10 @@ fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
     }
     bc.lane = ch.lane;
     bc.z_shift = ch.z_shift;
-    bc.format = ch.format;
+    bc.format = vpak_format(ch.format);
     bc.lanes = ch.lanes;
     bc.ranged = ch.ranged;
-    if (ch.ranged != 0u) {
+    if (vpak_ranged(bc.format)) {
         let r = vpak_ranges[ch.range_base + pb * ch.range_slots + (ch.lane >> ch.z_shift)];
         bc.range = vec2<f32>(r.x, r.y - r.x);
     }
@@ -192,12 +218,13 @@ fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
 
 // Voxel `v` (0..8 on each axis) of the brick channel `bc`.
 fn vpak_brick_channel_value(bc: VpakBrickChannel, v: vec3<u32>) -> f32 {
-    if (bc.format == VPAK_CONSTANT) {
+    let format = vpak_format(bc.format);
+    if (format == VPAK_CONSTANT) {
         return bc.range.x;
     }
     let t = bc.origin + vec3<u32>(v.x, v.y, v.z >> bc.z_shift);
     let level = vpak_texel(bc, vec3<i32>(t))[bc.lane + (v.z & ((1u << bc.z_shift) - 1u))];
-    if (bc.ranged == 0u) {
+    if (!vpak_ranged(format)) {
         return level;
     }
     return bc.range.x + level * bc.range.y;

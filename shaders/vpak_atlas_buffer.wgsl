@@ -43,7 +43,7 @@ fn vpak_byte(slot: u32, b: u32) -> u32 {
 fn vpak_texel(bc: VpakBrickChannel, t: vec3<i32>) -> vec4<f32> {
     let u = vec3<u32>(t);
     let slot = bc.slot;
-    let format = bc.format;
+    let format = vpak_format(bc.format);
     let lanes = bc.lanes;
     // The atlas's size in texels along x and y (8 a brick).
     let size = bc.size * 8u;

@@ -1,7 +1,7 @@
 //! The wgpu side: device, pipeline, asset upload, one dispatch per image.
 
 use crate::{AssetData, Error, Image, Scene, View};
-use vdbcook_vpak::{Asset, GpuChannel};
+use vdbcook_vpak::{Asset, GpuChannel, GPU_CHANNEL_WORDS};
 use wgpu::util::DeviceExt;
 
 macro_rules! shader {
@@ -63,12 +63,15 @@ impl BcDecode {
 const SLOT_BINDINGS: [u32; crate::MAX_TEXTURES] = [8, 11, 12, 13, 15, 16, 17, 18];
 /// Bindings of the channel table and the brick tables (`vpak.wgsl`).
 const CHANNEL_BINDING: u32 = 14;
+/// Records of the channel table's uniform array (`VPAK_CHANNEL_RECORDS`): one per channel and per alternate plane.
+const CHANNEL_RECORDS: usize = 2 * vdbcook_vpak::MAX_CHANNELS;
 const TABLE_BINDING: u32 = 19;
 /// Storage buffers of the asset, in the order `GpuAsset::buffers` holds them.
 const BUFFER_BINDINGS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, CHANNEL_BINDING, TABLE_BINDING];
 
-/// A pipeline's entry point and override constants: several textures, emission, the shown channels' known slots.
-type PipelineKey = (&'static str, bool, bool, [u32; 3]);
+/// A pipeline's entry point and override constants: several textures, emission, the shown channels' known slots,
+/// the format every plane sampled has (`NONE` when they differ).
+type PipelineKey = (&'static str, bool, bool, [u32; 3], u32);
 
 /// The bind group layout and the pipelines of one shader, each made on first
 /// use for its entry point and the override constants that fold branches
@@ -85,7 +88,7 @@ impl Pipelines {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("march"), source: wgpu::ShaderSource::Wgsl(source.into()) });
         let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry { binding, visibility: wgpu::ShaderStages::COMPUTE, ty, count: None };
         let mut entries = vec![entry(0, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None })];
-        entries.extend(BUFFER_BINDINGS.map(|b| entry(b, storage(true))));
+        entries.extend(BUFFER_BINDINGS.map(|b| entry(b, if b == CHANNEL_BINDING { uniform() } else { storage(true) })));
         entries.extend(SLOT_BINDINGS.map(|b| entry(b, atlas)));
         entries.extend([9, 10].map(|b| entry(b, storage(false))));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
@@ -95,10 +98,11 @@ impl Pipelines {
 
     /// The pipeline of `entry` for several textures (`multi`) or one, with
     /// emission (`glows`) or without, with the shown channels' texture slots
-    /// where known (`slots`, `NONE` where not).
-    fn get(&self, device: &wgpu::Device, entry: &'static str, multi: bool, glows: bool, slots: [u32; 3]) -> wgpu::ComputePipeline {
+    /// where known (`slots`, `NONE` where not), and the format of every plane
+    /// sampled when they share one (`format`, else `NONE`).
+    fn get(&self, device: &wgpu::Device, entry: &'static str, multi: bool, glows: bool, slots: [u32; 3], format: u32) -> wgpu::ComputePipeline {
         let mut made = self.made.lock().unwrap_or_else(|e| e.into_inner());
-        made.entry((entry, multi, glows, slots))
+        made.entry((entry, multi, glows, slots, format))
             .or_insert_with(|| {
                 let flag = |b: bool| if b { 1.0 } else { 0.0 };
                 let [x, y, z] = slots.map(f64::from);
@@ -108,7 +112,7 @@ impl Pipelines {
                     module: &self.module,
                     entry_point: Some(entry),
                     compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &[("VPAK_MULTI_ATLAS", flag(multi)), ("GLOWS", flag(glows)), ("SLOT_X", x), ("SLOT_Y", y), ("SLOT_Z", z)],
+                        constants: &[("VPAK_MULTI_ATLAS", flag(multi)), ("GLOWS", flag(glows)), ("SLOT_X", x), ("SLOT_Y", y), ("SLOT_Z", z), ("VPAK_FORMAT", f64::from(format))],
                         ..Default::default()
                     },
                     cache: None,
@@ -156,6 +160,8 @@ pub struct GpuAsset {
     bound: Vec<bool>,
     /// Per channel, its texture slot when its plane is bound and has a single atlas, else `NONE`.
     single_slot: Vec<u32>,
+    /// Per channel, its plane's format code when it has one plane (no per-brick formats), else `NONE`.
+    single_format: Vec<u32>,
     channels: u32,
     /// Each channel's background.
     backgrounds: Vec<f32>,
@@ -165,6 +171,18 @@ impl GpuAsset {
     /// True when BC bricks are decoded by the shader rather than the texture unit.
     pub fn decodes_in_shader(&self) -> bool {
         matches!(self.atlases.first(), Some(Atlas::Buffer(_)))
+    }
+
+    /// The format code every one of `channels` (`NONE` ones aside) has in its
+    /// single plane, or `NONE` when they differ or one has per-brick formats.
+    fn common_format(&self, channels: &[u32]) -> u32 {
+        let mut formats = channels.iter().filter(|&&c| c != crate::NONE).map(|&c| self.single_format.get(c as usize).copied().unwrap_or(crate::NONE));
+        let first = formats.next().unwrap_or(crate::NONE);
+        if formats.all(|f| f == first) {
+            first
+        } else {
+            crate::NONE
+        }
     }
 }
 
@@ -190,6 +208,10 @@ fn texture_format(p: &vdbcook_vpak::Plane) -> wgpu::TextureFormat {
         // Constant planes have no atlases.
         (Format::Constant, _) => T::R8Unorm,
     }
+}
+
+fn uniform() -> wgpu::BindingType {
+    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
 }
 
 fn storage(kind: bool) -> wgpu::BindingType {
@@ -310,7 +332,13 @@ impl Renderer {
         // A channel in several planes (per-brick formats) changes slots from brick to brick.
         let single_slot: Vec<u32> =
             channels.iter().map(|g| if meta.planes[g.plane as usize].atlases.len() == 1 && g.alternates == u32::MAX { slot_of_plane[g.plane as usize] } else { crate::NONE }).collect();
-        let channel_words: Vec<u32> = channels.iter().flat_map(|g| GpuChannel { slot: slot_of_plane[g.plane as usize], ..*g }.words()).collect();
+        let single_format: Vec<u32> = channels.iter().map(|g| if g.alternates == u32::MAX { g.format } else { crate::NONE }).collect();
+        let mut channel_words: Vec<u32> = channels.iter().flat_map(|g| GpuChannel { slot: slot_of_plane[g.plane as usize], ..*g }.words()).collect();
+        // The channel table is a uniform array of CHANNEL_RECORDS records (`vpak.wgsl`).
+        if channel_words.len() > CHANNEL_RECORDS * GPU_CHANNEL_WORDS {
+            return Err(Error::Corrupt(format!("{} channel records (at most {CHANNEL_RECORDS})", channels.len())));
+        }
+        channel_words.resize(CHANNEL_RECORDS * GPU_CHANNEL_WORDS, 0);
         let (ranges, tables) = (c.gpu_ranges(), c.gpu_tables());
         let mut buffers = Vec::new();
         for (what, data) in [
@@ -324,7 +352,10 @@ impl Renderer {
             ("channel table", bytemuck::cast_slice(&channel_words)),
             ("brick tables", bytemuck::cast_slice(&tables)),
         ] {
-            buffers.push(buffer(what, data)?);
+            buffers.push(match what {
+                "channel table" => self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: data, usage: wgpu::BufferUsages::UNIFORM }),
+                _ => buffer(what, data)?,
+            });
         }
         let slots: Vec<(vdbcook_vpak::AtlasLayout, &[u8])> = sections.iter().filter_map(|&(p, a)| c.atlas(p, a)).collect();
         let block = slots.iter().any(|(l, _)| l.plane.format.is_block());
@@ -390,6 +421,7 @@ impl Renderer {
             slots: slots.len(),
             bound,
             single_slot,
+            single_format,
             channels: meta.channels.len() as u32,
             backgrounds: meta.channels.iter().map(|ch| ch.background).collect(),
         })
@@ -480,7 +512,8 @@ impl Renderer {
                 let multi = asset.slots > 1;
                 let glows = scene.channels[1] != crate::NONE || scene.channels[2] != crate::NONE;
                 let known = scene.channels.map(|c| asset.single_slot.get(c as usize).copied().unwrap_or(crate::NONE));
-                let (march, shadow_pipeline) = (pipelines.get(&self.device, "main", multi, glows, known), pipelines.get(&self.device, "shadow_main", multi, false, [crate::NONE; 3]));
+                let format = asset.common_format(&scene.channels);
+                let (march, shadow_pipeline) = (pipelines.get(&self.device, "main", multi, glows, known, format), pipelines.get(&self.device, "shadow_main", multi, false, [crate::NONE; 3], format));
                 if i == 0 {
                     pass.set_pipeline(&shadow_pipeline);
                     pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);
