@@ -117,6 +117,9 @@ override VPAK_MULTI_ATLAS: bool = true;
 // per-brick plane choice and the range test away at pipeline creation: a
 // CPU driver runs every branch of a shader, taken or not.
 override VPAK_FORMAT: u32 = 0xffffffffu;
+// False when no plane has a brick table (vpak_tables is empty): the table
+// reads fold away.
+override VPAK_TABLES: bool = true;
 
 // The format of the brick channel whose record says `format`.
 fn vpak_format(format: u32) -> u32 {
@@ -178,7 +181,7 @@ struct VpakBrickChannel {
 fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
     var ch = vpak_channels[c];
     var pb = b;
-    if (VPAK_FORMAT == VPAK_NONE && ch.alternates != VPAK_NONE) {
+    if (VPAK_TABLES && VPAK_FORMAT == VPAK_NONE && ch.alternates != VPAK_NONE) {
         // Per-brick formats: the channel table picks the plane and its brick.
         let e = vpak_tables[ch.table + b];
         pb = e & VPAK_PLANE_BRICK;
@@ -186,7 +189,7 @@ fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
         if (choice != 0u) {
             ch = vpak_channels[ch.alternates + choice - 1u];
         }
-    } else if (ch.table != VPAK_NONE) {
+    } else if (VPAK_TABLES && ch.table != VPAK_NONE) {
         pb = vpak_tables[ch.table + b];
     }
     var atlas = 0u;

@@ -71,7 +71,7 @@ const BUFFER_BINDINGS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, CHANNEL_BINDING, TABLE_B
 
 /// A pipeline's entry point and override constants: several textures, emission, the shown channels' known slots,
 /// the format every plane sampled has (`NONE` when they differ).
-type PipelineKey = (&'static str, bool, bool, [u32; 3], u32);
+type PipelineKey = (&'static str, bool, bool, [u32; 3], u32, bool);
 
 /// The bind group layout and the pipelines of one shader, each made on first
 /// use for its entry point and the override constants that fold branches
@@ -98,11 +98,12 @@ impl Pipelines {
 
     /// The pipeline of `entry` for several textures (`multi`) or one, with
     /// emission (`glows`) or without, with the shown channels' texture slots
-    /// where known (`slots`, `NONE` where not), and the format of every plane
-    /// sampled when they share one (`format`, else `NONE`).
-    fn get(&self, device: &wgpu::Device, entry: &'static str, multi: bool, glows: bool, slots: [u32; 3], format: u32) -> wgpu::ComputePipeline {
+    /// where known (`slots`, `NONE` where not), the format of every plane
+    /// sampled when they share one (`format`, else `NONE`), and whether any
+    /// plane has a brick table (`tables`).
+    fn get(&self, device: &wgpu::Device, (entry, multi, glows, slots, format, tables): PipelineKey) -> wgpu::ComputePipeline {
         let mut made = self.made.lock().unwrap_or_else(|e| e.into_inner());
-        made.entry((entry, multi, glows, slots, format))
+        made.entry((entry, multi, glows, slots, format, tables))
             .or_insert_with(|| {
                 let flag = |b: bool| if b { 1.0 } else { 0.0 };
                 let [x, y, z] = slots.map(f64::from);
@@ -112,7 +113,15 @@ impl Pipelines {
                     module: &self.module,
                     entry_point: Some(entry),
                     compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &[("VPAK_MULTI_ATLAS", flag(multi)), ("GLOWS", flag(glows)), ("SLOT_X", x), ("SLOT_Y", y), ("SLOT_Z", z), ("VPAK_FORMAT", f64::from(format))],
+                        constants: &[
+                            ("VPAK_MULTI_ATLAS", flag(multi)),
+                            ("GLOWS", flag(glows)),
+                            ("SLOT_X", x),
+                            ("SLOT_Y", y),
+                            ("SLOT_Z", z),
+                            ("VPAK_FORMAT", f64::from(format)),
+                            ("VPAK_TABLES", flag(tables)),
+                        ],
                         ..Default::default()
                     },
                     cache: None,
@@ -162,6 +171,8 @@ pub struct GpuAsset {
     single_slot: Vec<u32>,
     /// Per channel, its plane's format code when it has one plane (no per-brick formats), else `NONE`.
     single_format: Vec<u32>,
+    /// Whether any plane has a brick table.
+    tables: bool,
     channels: u32,
     /// Each channel's background.
     backgrounds: Vec<f32>,
@@ -300,12 +311,13 @@ impl Renderer {
             if data.len() as u64 > limit {
                 return Err(Error::TooLarge { what, bytes: data.len() as u64, limit });
             }
-            // Bindings may not be empty and are whole words: pad when needed.
-            let contents: std::borrow::Cow<[u8]> = if data.len() >= 16 && data.len().is_multiple_of(4) {
+            // Bindings may not be empty and are whole 16-byte units (atlases decoded in
+            // the shader are read as vec4<u32>): pad when needed.
+            let contents: std::borrow::Cow<[u8]> = if data.len() >= 16 && data.len().is_multiple_of(16) {
                 data.into()
             } else {
                 let mut v = data.to_vec();
-                v.resize(v.len().max(16).next_multiple_of(4), 0);
+                v.resize(v.len().max(16).next_multiple_of(16), 0);
                 v.into()
             };
             Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: &contents, usage: wgpu::BufferUsages::STORAGE }))
@@ -422,6 +434,7 @@ impl Renderer {
             bound,
             single_slot,
             single_format,
+            tables: !tables.is_empty(),
             channels: meta.channels.len() as u32,
             backgrounds: meta.channels.iter().map(|ch| ch.background).collect(),
         })
@@ -513,7 +526,10 @@ impl Renderer {
                 let glows = scene.channels[1] != crate::NONE || scene.channels[2] != crate::NONE;
                 let known = scene.channels.map(|c| asset.single_slot.get(c as usize).copied().unwrap_or(crate::NONE));
                 let format = asset.common_format(&scene.channels);
-                let (march, shadow_pipeline) = (pipelines.get(&self.device, "main", multi, glows, known, format), pipelines.get(&self.device, "shadow_main", multi, false, [crate::NONE; 3], format));
+                let (march, shadow_pipeline) = (
+                    pipelines.get(&self.device, ("main", multi, glows, known, format, asset.tables)),
+                    pipelines.get(&self.device, ("shadow_main", multi, false, [crate::NONE; 3], format, asset.tables)),
+                );
                 if i == 0 {
                     pass.set_pipeline(&shadow_pipeline);
                     pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);
