@@ -161,27 +161,25 @@ fn vpak_entry_index(nodes_is_l1: bool, base: u32, mask_words: u32, s: u32) -> u3
     return first + prefix + below;
 }
 
-// (n / d, n % d) for n below 2^24 and d > 0, through a float division and
-// corrections: a CPU driver has no vector integer division and divides lane
-// by lane. Within WGSL's 2.5 ULP the float quotient is within 3 of n / d
-// (exact IEEE division: within 1).
+// (n / d, n % d) for n below 2^28 and d > 0, through float divisions: a CPU
+// driver has no vector integer division and divides lane by lane. The first
+// quotient is within 100 of n / d (within WGSL's 2.5 ULP), the remainder's
+// quotient within 1 of the rest, and one step corrects that.
 fn vpak_divmod(n: u32, d: u32) -> vec2<u32> {
-    var q = vec2<i32>(i32(f32(n) / f32(d)), 0);
-    q.y = i32(n) - q.x * i32(d);
-    q = vpak_divmod_fix(q, i32(d));
-    q = vpak_divmod_fix(q, i32(d));
-    return vec2<u32>(vpak_divmod_fix(q, i32(d)));
-}
-
-// One step of a quotient and remainder (q.x, q.y) towards 0 <= q.y < d.
-fn vpak_divmod_fix(q: vec2<i32>, d: i32) -> vec2<i32> {
-    if (q.y < 0) {
-        return q + vec2<i32>(-1, d);
+    let fd = f32(d);
+    var q = i32(f32(n) / fd);
+    var r = i32(n) - q * i32(d);
+    let c = i32(floor(f32(r) / fd));
+    q += c;
+    r -= c * i32(d);
+    if (r < 0) {
+        q -= 1;
+        r += i32(d);
+    } else if (r >= i32(d)) {
+        q += 1;
+        r -= i32(d);
     }
-    if (q.y >= d) {
-        return q + vec2<i32>(1, -d);
-    }
-    return q;
+    return vec2<u32>(u32(q), u32(r));
 }
 
 // Channel `c` of brick `b`, resolved once: its plane brick's texture slot,
