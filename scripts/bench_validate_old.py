@@ -16,13 +16,15 @@
   `validate ASSET --source CLOUD --views 8 --size 512x512` once untimed (Mesa keeps the
   compiled shaders in its disk cache: the timed runs do not compile), then R times
   (default 3), the two binaries alternating;
-* prints every time, the medians and their ratio new / old (the target: at most 1.05).
+* prints every time (wall clock, and CPU time of every thread: the GPU here is Mesa's
+  lavapipe, on the CPU), the medians and their ratios new / old (target: at most 1.05).
 The machine's other work disturbs single runs: compare the medians, and run again when
 the ratio looks off.
 """
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -58,10 +60,14 @@ def new_binary():
 
 
 def validate(exe, asset, cloud):
+    """Wall and CPU seconds (user + system, every thread) of one validate, and its text."""
     cmd = [exe, "validate", asset, "--source", cloud, "--views", "8", "--size", "512x512"]
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     out = run(cmd, capture_output=True, text=True).stdout
-    return time.perf_counter() - t0, out
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (wall, r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime), out
 
 
 def main():
@@ -90,12 +96,13 @@ def main():
     times = {"old": [], "new": []}
     for i in range(args.runs):
         for name in ("old", "new"):
-            t, _ = validate(exes[name], assets[name], cloud)
-            times[name].append(t)
-            print("run %d %s: %.2f s" % (i + 1, name, t), flush=True)
-    med = {k: statistics.median(v) for k, v in times.items()}
+            (wall, cpu), _ = validate(exes[name], assets[name], cloud)
+            times[name].append((wall, cpu))
+            print("run %d %s: %.2f s (CPU %.2f s)" % (i + 1, name, wall, cpu), flush=True)
     print("validate --views 8 --size 512x512 of a bc7 cook of %s (median of %d, alternating):" % (os.path.relpath(cloud, ROOT), args.runs))
-    print("  old (%s): %.2f s   new: %.2f s   ratio new/old: %.3f" % (OLD_COMMIT, med["old"], med["new"], med["new"] / med["old"]))
+    for k, what in ((0, "wall"), (1, "CPU")):
+        old_m, new_m = (statistics.median(t[k] for t in times[n]) for n in ("old", "new"))
+        print("  %-4s old (%s): %.2f s   new: %.2f s   ratio new/old: %.3f" % (what, OLD_COMMIT, old_m, new_m, new_m / old_m))
 
 
 if __name__ == "__main__":

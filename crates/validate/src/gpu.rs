@@ -75,7 +75,8 @@ type PipelineKey = (&'static str, bool, bool, [u32; 3], u32, bool);
 
 /// The bind group layout and the pipelines of one shader, each made on first
 /// use for its entry point and the override constants that fold branches
-/// away: several textures or one, emission channels or none.
+/// away: several textures or one, emission channels or none, the shown
+/// channels' slots, one format for every plane sampled, brick tables or none.
 struct Pipelines {
     layout: wgpu::BindGroupLayout,
     module: wgpu::ShaderModule,
