@@ -29,6 +29,9 @@ const VPAK_L3_WORDS: u32 = 3u;      // brick, sub-block states, first sub-mask (
 // No brick table: brick b is plane brick b.
 const VPAK_TILE: u32 = 0x80000000u;
 const VPAK_NONE: u32 = 0xffffffffu;
+// Records of the channel table: a record per channel and per alternate
+// plane (at most 256 channels and 256 planes).
+const VPAK_CHANNEL_RECORDS: u32 = 512u;
 
 // Plane formats (Format codes).
 const VPAK_F32: u32 = 0u;
@@ -99,12 +102,38 @@ struct VpakChannel {
 @group(0) @binding(5) var<storage, read> vpak_l3: array<u32>;
 @group(0) @binding(6) var<storage, read> vpak_tiles: array<u32>;
 @group(0) @binding(7) var<storage, read> vpak_ranges: array<vec2<f32>>;
-@group(0) @binding(14) var<storage, read> vpak_channels: array<VpakChannel>;
+// A uniform buffer (of VPAK_CHANNEL_RECORDS records, unused ones zero): a
+// channel's record is read at every sample, and a uniform read is a single
+// load where the channel is the same for every invocation.
+@group(0) @binding(14) var<uniform> vpak_channels: array<VpakChannel, VPAK_CHANNEL_RECORDS>;
 @group(0) @binding(19) var<storage, read> vpak_tables: array<u32>;
 // False when the asset has a single texture (one plane, one atlas): the
 // texture selection then folds away at pipeline creation (it costs 2-3x on
 // a CPU driver otherwise).
 override VPAK_MULTI_ATLAS: bool = true;
+// The format code of every plane sampled, when the channels a pipeline
+// samples are each in one plane (no per-brick formats) of that one format;
+// else VPAK_NONE. A known format folds the other formats' decoding, the
+// per-brick plane choice and the range test away at pipeline creation: a
+// CPU driver runs every branch of a shader, taken or not.
+override VPAK_FORMAT: u32 = 0xffffffffu;
+// False when no plane has a brick table (vpak_tables is empty): the table
+// reads fold away.
+override VPAK_TABLES: bool = true;
+
+// The format of the brick channel whose record says `format`.
+fn vpak_format(format: u32) -> u32 {
+    if (VPAK_FORMAT != VPAK_NONE) {
+        return VPAK_FORMAT;
+    }
+    return format;
+}
+
+// Whether texels of `format` are levels over the brick's range (every
+// format but f32 and f16).
+fn vpak_ranged(format: u32) -> bool {
+    return format != VPAK_F32 && format != VPAK_F16;
+}
 
 // Entry of slot `s` in the node at `base` with `mask_words` mask words,
 // or VPAK_NONE when the slot is empty: the mask bit, then the rank of the
@@ -132,6 +161,27 @@ fn vpak_entry_index(nodes_is_l1: bool, base: u32, mask_words: u32, s: u32) -> u3
     return first + prefix + below;
 }
 
+// (n / d, n % d) for n below 2^28 and d > 0, through float divisions: a CPU
+// driver has no vector integer division and divides lane by lane. The first
+// quotient is within 100 of n / d (within WGSL's 2.5 ULP), the remainder's
+// quotient within 1 of the rest, and one step corrects that.
+fn vpak_divmod(n: u32, d: u32) -> vec2<u32> {
+    let fd = f32(d);
+    var q = i32(f32(n) / fd);
+    var r = i32(n) - q * i32(d);
+    let c = i32(floor(f32(r) / fd));
+    q += c;
+    r -= c * i32(d);
+    if (r < 0) {
+        q -= 1;
+        r += i32(d);
+    } else if (r >= i32(d)) {
+        q += 1;
+        r -= i32(d);
+    }
+    return vec2<u32>(u32(q), u32(r));
+}
+
 // Channel `c` of brick `b`, resolved once: its plane brick's texture slot,
 // first texel there and the atlas's size, its lanes and its value range. A
 // marcher keeps it for a cell.
@@ -152,7 +202,7 @@ struct VpakBrickChannel {
 fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
     var ch = vpak_channels[c];
     var pb = b;
-    if (ch.alternates != VPAK_NONE) {
+    if (VPAK_TABLES && VPAK_FORMAT == VPAK_NONE && ch.alternates != VPAK_NONE) {
         // Per-brick formats: the channel table picks the plane and its brick.
         let e = vpak_tables[ch.table + b];
         pb = e & VPAK_PLANE_BRICK;
@@ -160,7 +210,7 @@ fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
         if (choice != 0u) {
             ch = vpak_channels[ch.alternates + choice - 1u];
         }
-    } else if (ch.table != VPAK_NONE) {
+    } else if (VPAK_TABLES && ch.table != VPAK_NONE) {
         pb = vpak_tables[ch.table + b];
     }
     var atlas = 0u;
@@ -169,21 +219,22 @@ fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
         atlas = pb / ch.atlas_bricks.w;
         i = pb % ch.atlas_bricks.w;
     }
-    let bx = ch.atlas_bricks.x;
-    let by = ch.atlas_bricks.y;
+    // i = x + bx · (y + by · z)
+    let qx = vpak_divmod(i, ch.atlas_bricks.x);
+    let qy = vpak_divmod(qx.x, ch.atlas_bricks.y);
     var bc: VpakBrickChannel;
     bc.slot = ch.slot + atlas;
-    bc.origin = vec3<u32>(i % bx, (i / bx) % by, i / (bx * by)) * vec3<u32>(8u, 8u, ch.slices);
+    bc.origin = vec3<u32>(qx.y, qy.y, qy.x) * vec3<u32>(8u, 8u, ch.slices);
     bc.size = ch.atlas_bricks.xy;
     if (atlas == ch.last_atlas.x) {
         bc.size = ch.last_atlas.yz;
     }
     bc.lane = ch.lane;
     bc.z_shift = ch.z_shift;
-    bc.format = ch.format;
+    bc.format = vpak_format(ch.format);
     bc.lanes = ch.lanes;
     bc.ranged = ch.ranged;
-    if (ch.ranged != 0u) {
+    if (vpak_ranged(bc.format)) {
         let r = vpak_ranges[ch.range_base + pb * ch.range_slots + (ch.lane >> ch.z_shift)];
         bc.range = vec2<f32>(r.x, r.y - r.x);
     }
@@ -192,12 +243,13 @@ fn vpak_brick_channel(info: VpakInfo, b: u32, c: u32) -> VpakBrickChannel {
 
 // Voxel `v` (0..8 on each axis) of the brick channel `bc`.
 fn vpak_brick_channel_value(bc: VpakBrickChannel, v: vec3<u32>) -> f32 {
-    if (bc.format == VPAK_CONSTANT) {
+    let format = vpak_format(bc.format);
+    if (format == VPAK_CONSTANT) {
         return bc.range.x;
     }
     let t = bc.origin + vec3<u32>(v.x, v.y, v.z >> bc.z_shift);
     let level = vpak_texel(bc, vec3<i32>(t))[bc.lane + (v.z & ((1u << bc.z_shift) - 1u))];
-    if (bc.ranged == 0u) {
+    if (!vpak_ranged(format)) {
         return level;
     }
     return bc.range.x + level * bc.range.y;

@@ -46,11 +46,11 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
     };
     let reference = reference(&meta, files.clone(), recorded, coarsest, bars)?;
     let mut o = compare_assets(&asset, &name, &reference, opts, renderer, bars)?;
+    let read = files.iter().filter(|f| f.exists()).count();
     if recorded {
-        let read = files.iter().filter(|f| f.exists()).count();
         o.text += &format!("  sources  the {read} file(s) the asset records (no --source given)\n");
-        o.doc["sources"] = json!({"recorded": true, "files": read});
     }
+    o.doc["sources"] = json!({"recorded": recorded, "files": read});
     Ok(o)
 }
 

@@ -325,7 +325,7 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
         // Two blank pictures are equal: a frame with something to show must show it somewhere.
         if nonzero > 0 && coverage.iter().all(|&c| c == 0.0) {
             return Err(CompareError::Failed(format!(
-                "{name}: frame {f}{at}: the reference is blank in all {n} view(s), though channel \"{shown_name}\" ({model}) has {nonzero} active voxel(s) with non-zero values; name the channel that gives extinction with --extinction NAME, or try other --views",
+                "{name}: frame {f}{at}: the reference is blank in all {n} view(s), though channel \"{shown_name}\" ({model}) has {nonzero} active voxel(s) with non-zero values; name the channel that gives extinction with --extinction NAME, or try other --views or a larger --size",
                 at = if lod > 0 { format!(" at level {lod}") } else { String::new() },
                 n = views.len(),
                 model = scene.model().name(),

@@ -1,7 +1,7 @@
 //! The wgpu side: device, pipeline, asset upload, one dispatch per image.
 
 use crate::{AssetData, Error, Image, Model, Scene, View};
-use vdbcook_vpak::{Asset, GpuChannel};
+use vdbcook_vpak::{Asset, GpuChannel, GPU_CHANNEL_WORDS};
 use wgpu::util::DeviceExt;
 
 macro_rules! shader {
@@ -63,17 +63,22 @@ impl BcDecode {
 const SLOT_BINDINGS: [u32; crate::MAX_TEXTURES] = [8, 11, 12, 13, 15, 16, 17, 18];
 /// Bindings of the channel table and the brick tables (`vpak.wgsl`).
 const CHANNEL_BINDING: u32 = 14;
+/// Records of the channel table's uniform array (`VPAK_CHANNEL_RECORDS`): one per channel and per alternate plane.
+const CHANNEL_RECORDS: usize = 2 * vdbcook_vpak::MAX_CHANNELS;
 const TABLE_BINDING: u32 = 19;
 /// Storage buffers of the asset, in the order `GpuAsset::buffers` holds them.
 const BUFFER_BINDINGS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, CHANNEL_BINDING, TABLE_BINDING];
 
 /// A pipeline's entry point and override constants: several textures,
-/// emission, the shown channels' known slots, the surface model, the backdrop.
-type PipelineKey = (&'static str, bool, bool, [u32; 3], bool, bool);
+/// emission, the shown channels' known slots, the format every plane sampled
+/// has (`NONE` when they differ), brick tables or none, the surface model,
+/// the backdrop.
+type PipelineKey = (&'static str, bool, bool, [u32; 3], u32, bool, bool, bool);
 
 /// The bind group layout and the pipelines of one shader, each made on first
 /// use for its entry point and the override constants that fold branches
-/// away: several textures or one, emission channels or none.
+/// away: several textures or one, emission channels or none, the shown
+/// channels' slots, one format for every plane sampled, brick tables or none.
 struct Pipelines {
     layout: wgpu::BindGroupLayout,
     module: wgpu::ShaderModule,
@@ -86,7 +91,7 @@ impl Pipelines {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("march"), source: wgpu::ShaderSource::Wgsl(source.into()) });
         let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry { binding, visibility: wgpu::ShaderStages::COMPUTE, ty, count: None };
         let mut entries = vec![entry(0, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None })];
-        entries.extend(BUFFER_BINDINGS.map(|b| entry(b, storage(true))));
+        entries.extend(BUFFER_BINDINGS.map(|b| entry(b, if b == CHANNEL_BINDING { uniform() } else { storage(true) })));
         entries.extend(SLOT_BINDINGS.map(|b| entry(b, atlas)));
         entries.extend([9, 10].map(|b| entry(b, storage(false))));
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("vpak"), entries: &entries });
@@ -96,10 +101,12 @@ impl Pipelines {
 
     /// The pipeline of `key`: `entry` for several textures (`multi`) or one,
     /// with emission (`glows`) or without, with the shown channels' texture
-    /// slots where known (`slots`, `NONE` where not), for the surface model
-    /// or not, with the backdrop or not.
+    /// slots where known (`slots`, `NONE` where not), the format of every
+    /// plane sampled when they share one (`format`, else `NONE`), whether any
+    /// plane has a brick table (`tables`), for the surface model or not, with
+    /// the backdrop or not.
     fn get(&self, device: &wgpu::Device, key: PipelineKey) -> wgpu::ComputePipeline {
-        let (entry, multi, glows, slots, surface, backdrop) = key;
+        let (entry, multi, glows, slots, format, tables, surface, backdrop) = key;
         let mut made = self.made.lock().unwrap_or_else(|e| e.into_inner());
         made.entry(key)
             .or_insert_with(|| {
@@ -111,7 +118,17 @@ impl Pipelines {
                     module: &self.module,
                     entry_point: Some(entry),
                     compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &[("VPAK_MULTI_ATLAS", flag(multi)), ("GLOWS", flag(glows)), ("SLOT_X", x), ("SLOT_Y", y), ("SLOT_Z", z), ("SURFACE", flag(surface)), ("BACKDROP", flag(backdrop))],
+                        constants: &[
+                            ("VPAK_MULTI_ATLAS", flag(multi)),
+                            ("GLOWS", flag(glows)),
+                            ("SLOT_X", x),
+                            ("SLOT_Y", y),
+                            ("SLOT_Z", z),
+                            ("VPAK_FORMAT", f64::from(format)),
+                            ("VPAK_TABLES", flag(tables)),
+                            ("SURFACE", flag(surface)),
+                            ("BACKDROP", flag(backdrop)),
+                        ],
                         ..Default::default()
                     },
                     cache: None,
@@ -159,6 +176,10 @@ pub struct GpuAsset {
     bound: Vec<bool>,
     /// Per channel, its texture slot when its plane is bound and has a single atlas, else `NONE`.
     single_slot: Vec<u32>,
+    /// Per channel, its plane's format code when it has one plane (no per-brick formats), else `NONE`.
+    single_format: Vec<u32>,
+    /// Whether any plane has a brick table.
+    tables: bool,
     channels: u32,
     /// Each channel's background.
     backgrounds: Vec<f32>,
@@ -168,6 +189,18 @@ impl GpuAsset {
     /// True when BC bricks are decoded by the shader rather than the texture unit.
     pub fn decodes_in_shader(&self) -> bool {
         matches!(self.atlases.first(), Some(Atlas::Buffer(_)))
+    }
+
+    /// The format code every one of `channels` (`NONE` ones aside) has in its
+    /// single plane, or `NONE` when they differ or one has per-brick formats.
+    fn common_format(&self, channels: &[u32]) -> u32 {
+        let mut formats = channels.iter().filter(|&&c| c != crate::NONE).map(|&c| self.single_format.get(c as usize).copied().unwrap_or(crate::NONE));
+        let first = formats.next().unwrap_or(crate::NONE);
+        if formats.all(|f| f == first) {
+            first
+        } else {
+            crate::NONE
+        }
     }
 }
 
@@ -193,6 +226,10 @@ fn texture_format(p: &vdbcook_vpak::Plane) -> wgpu::TextureFormat {
         // Constant planes have no atlases.
         (Format::Constant, _) => T::R8Unorm,
     }
+}
+
+fn uniform() -> wgpu::BindingType {
+    wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }
 }
 
 fn storage(kind: bool) -> wgpu::BindingType {
@@ -293,12 +330,13 @@ impl Renderer {
             if data.len() as u64 > limit {
                 return Err(Error::TooLarge { what, bytes: data.len() as u64, limit });
             }
-            // Bindings may not be empty and are whole words: pad when needed.
-            let contents: std::borrow::Cow<[u8]> = if data.len() >= 16 && data.len().is_multiple_of(4) {
+            // Bindings may not be empty and are whole 16-byte units (atlases decoded in
+            // the shader are read as vec4<u32>): pad when needed.
+            let contents: std::borrow::Cow<[u8]> = if data.len() >= 16 && data.len().is_multiple_of(16) {
                 data.into()
             } else {
                 let mut v = data.to_vec();
-                v.resize(v.len().max(16).next_multiple_of(4), 0);
+                v.resize(v.len().max(16).next_multiple_of(16), 0);
                 v.into()
             };
             Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: &contents, usage: wgpu::BufferUsages::STORAGE }))
@@ -325,7 +363,13 @@ impl Renderer {
         // A channel in several planes (per-brick formats) changes slots from brick to brick.
         let single_slot: Vec<u32> =
             channels.iter().map(|g| if meta.planes[g.plane as usize].atlases.len() == 1 && g.alternates == u32::MAX { slot_of_plane[g.plane as usize] } else { crate::NONE }).collect();
-        let channel_words: Vec<u32> = channels.iter().flat_map(|g| GpuChannel { slot: slot_of_plane[g.plane as usize], ..*g }.words()).collect();
+        let single_format: Vec<u32> = channels.iter().map(|g| if g.alternates == u32::MAX { g.format } else { crate::NONE }).collect();
+        let mut channel_words: Vec<u32> = channels.iter().flat_map(|g| GpuChannel { slot: slot_of_plane[g.plane as usize], ..*g }.words()).collect();
+        // The channel table is a uniform array of CHANNEL_RECORDS records (`vpak.wgsl`).
+        if channel_words.len() > CHANNEL_RECORDS * GPU_CHANNEL_WORDS {
+            return Err(Error::Corrupt(format!("{} channel records (at most {CHANNEL_RECORDS})", channels.len())));
+        }
+        channel_words.resize(CHANNEL_RECORDS * GPU_CHANNEL_WORDS, 0);
         let (ranges, tables) = (c.gpu_ranges(), c.gpu_tables());
         let mut buffers = Vec::new();
         for (what, data) in [
@@ -339,7 +383,10 @@ impl Renderer {
             ("channel table", bytemuck::cast_slice(&channel_words)),
             ("brick tables", bytemuck::cast_slice(&tables)),
         ] {
-            buffers.push(buffer(what, data)?);
+            buffers.push(match what {
+                "channel table" => self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(what), contents: data, usage: wgpu::BufferUsages::UNIFORM }),
+                _ => buffer(what, data)?,
+            });
         }
         let slots: Vec<(vdbcook_vpak::AtlasLayout, &[u8])> = sections.iter().filter_map(|&(p, a)| c.atlas(p, a)).collect();
         let block = slots.iter().any(|(l, _)| l.plane.format.is_block());
@@ -405,6 +452,8 @@ impl Renderer {
             slots: slots.len(),
             bound,
             single_slot,
+            single_format,
+            tables: !tables.is_empty(),
             channels: meta.channels.len() as u32,
             backgrounds: meta.channels.iter().map(|ch| ch.background).collect(),
         })
@@ -497,11 +546,12 @@ impl Renderer {
                 let multi = asset.slots > 1;
                 let glows = scene.channels[1] != crate::NONE || scene.channels[2] != crate::NONE;
                 let known = scene.channels.map(|c| asset.single_slot.get(c as usize).copied().unwrap_or(crate::NONE));
+                let format = asset.common_format(&scene.channels);
                 let (surface, backdrop) = (scene.model() == Model::Surface, scene.has_backdrop());
-                let march = pipelines.get(&self.device, ("main", multi, glows, known, surface, backdrop));
+                let march = pipelines.get(&self.device, ("main", multi, glows, known, format, asset.tables, surface, backdrop));
                 // Only scattered light reads the shadow grid.
                 if i == 0 && scene.model() == Model::Scatter {
-                    let shadow_pipeline = pipelines.get(&self.device, ("shadow_main", multi, false, [crate::NONE; 3], false, false));
+                    let shadow_pipeline = pipelines.get(&self.device, ("shadow_main", multi, false, [crate::NONE; 3], format, asset.tables, false, false));
                     pass.set_pipeline(&shadow_pipeline);
                     pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);
                 }
