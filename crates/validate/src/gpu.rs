@@ -70,7 +70,7 @@ const TABLE_BINDING: u32 = 19;
 const BUFFER_BINDINGS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, CHANNEL_BINDING, TABLE_BINDING];
 
 /// A pipeline's entry point and override constants: several textures, emission, the shown channels' known slots,
-/// the format every plane sampled has (`NONE` when they differ).
+/// the format every plane sampled has (`NONE` when they differ), brick tables or none.
 type PipelineKey = (&'static str, bool, bool, [u32; 3], u32, bool);
 
 /// The bind group layout and the pipelines of one shader, each made on first
