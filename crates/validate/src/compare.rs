@@ -4,7 +4,7 @@
 //! and voxel figures per level, frame and view, and the gate's verdict.
 
 use crate::flip::DEFAULT_PPD;
-use crate::{compare, flip, FlipMap, Gate, GpuAsset, Image, ImageMetrics, Model, Renderer, Scene, Size};
+use crate::{compare, FlipMap, Gate, GpuAsset, Image, ImageMetrics, Model, Renderer, Scene, Size};
 use rayon::prelude::*;
 use serde_json::json;
 use std::path::PathBuf;
@@ -306,8 +306,8 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
     let started = Instant::now();
     let views = scene.orbit(opts.views as usize);
     let (w, h) = (opts.size.width, opts.size.height);
-    // What each view shows with no volume: coverage is measured against it.
-    let empty: Vec<Image> = views.iter().map(|v| scene.empty_image(v, w, h)).collect();
+    // What each view shows with no volume, as 8-bit sRGB: coverage is measured against it.
+    let empty: Vec<Vec<u8>> = views.iter().map(|v| crate::flip::srgb8(&scene.empty_image(v, w, h))).collect();
     let shown = scene.shown();
     let shown_name = ref_meta.channels.get(shown).map_or(String::new(), |c| c.name.clone());
 
@@ -321,7 +321,21 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
         voxel.push((f, errors));
         let refs = renderer.render_views_level(p.gpu_ref, scene, f, lod, &views, w, h)?;
         let imgs = renderer.render_views_level(p.gpu_asset, scene, f, lod, &views, w, h)?;
-        let coverage: Vec<f64> = refs.iter().zip(&empty).map(|(r, e)| crate::coverage(r, e)).collect();
+        // FLIP and coverage run on the CPU, one view per thread, on the 8-bit
+        // sRGB images (the reference's encoded once for both).
+        let t = Instant::now();
+        let measured: Vec<(FlipMap, f64)> = refs
+            .par_iter()
+            .zip(&imgs)
+            .zip(&empty)
+            .map(|((r, a), e)| {
+                let r8 = crate::flip::srgb8(r);
+                let map = crate::flip::flip_srgb8(&r8, &crate::flip::srgb8(a), w, h, DEFAULT_PPD)?;
+                Ok((map, crate::scene::coverage_srgb8(&r8, e)))
+            })
+            .collect::<Result<_, crate::Error>>()?;
+        flip_secs += t.elapsed().as_secs_f64();
+        let coverage: Vec<f64> = measured.iter().map(|m| m.1).collect();
         // Two blank pictures are equal: a frame with something to show must show it somewhere.
         if nonzero > 0 && coverage.iter().all(|&c| c == 0.0) {
             return Err(CompareError::Failed(format!(
@@ -331,12 +345,8 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
                 model = scene.model().name(),
             )));
         }
-        // FLIP runs on the CPU, one image per thread: the views of a frame in parallel.
-        let t = Instant::now();
-        let maps: Vec<FlipMap> = refs.par_iter().zip(&imgs).map(|(r, a)| flip(r, a, DEFAULT_PPD)).collect::<Result<_, _>>()?;
-        flip_secs += t.elapsed().as_secs_f64();
-        for (vi, ((r, a), map)) in refs.into_iter().zip(imgs).zip(maps).enumerate() {
-            let shot = Shot { frame: f, view: vi, metrics: compare(&r, &a), flip: map.mean(), coverage: coverage[vi] };
+        for (vi, ((r, a), (map, coverage))) in refs.into_iter().zip(imgs).zip(measured).enumerate() {
+            let shot = Shot { frame: f, view: vi, metrics: compare(&r, &a), flip: map.mean(), coverage };
             if opts.report.is_some() {
                 let k = Kept { shot, reference: r, asset: a, flip: map };
                 match focus {

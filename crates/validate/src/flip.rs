@@ -42,9 +42,35 @@ pub fn srgb8_value(v: f32) -> u8 {
     (s * 255.0).round() as u8
 }
 
-/// The 8-bit sRGB pixels of a linear image (what the report's PNGs hold).
+/// For each code k in 1..=255, the smallest linear value that [`srgb8_value`]
+/// encodes as k or more (the curve only rises, so a value's code is the
+/// number of thresholds at or below it).
+fn srgb8_thresholds() -> &'static [f32; 255] {
+    static T: std::sync::OnceLock<[f32; 255]> = std::sync::OnceLock::new();
+    T.get_or_init(|| {
+        std::array::from_fn(|i| {
+            let k = i as u8 + 1;
+            // Bisection over the bit patterns of [0, 1] (ordered as the values are).
+            let (mut lo, mut hi) = (0u32, 1.0f32.to_bits());
+            while lo < hi {
+                let mid = lo + (hi - lo) / 2;
+                if srgb8_value(f32::from_bits(mid)) >= k {
+                    hi = mid;
+                } else {
+                    lo = mid + 1;
+                }
+            }
+            f32::from_bits(lo)
+        })
+    })
+}
+
+/// The 8-bit sRGB pixels of a linear image (what the report's PNGs hold):
+/// [`srgb8_value`] of each, found in a table of thresholds instead of a
+/// power per value (validate encodes every image two or three times).
 pub fn srgb8(img: &Image) -> Vec<u8> {
-    img.pixels.iter().map(|&v| srgb8_value(v)).collect()
+    let t = srgb8_thresholds();
+    img.pixels.iter().map(|&v| if v.is_nan() { srgb8_value(v) } else { t.partition_point(|&x| x <= v) as u8 }).collect()
 }
 
 /// FLIP of two 8-bit sRGB RGB images of `width` × `height` pixels.
@@ -75,6 +101,24 @@ pub fn flip(reference: &Image, test: &Image, ppd: f32) -> Result<FlipMap, Error>
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_threshold_table_encodes_as_the_curve_does() {
+        // Every 211th float of [0, 1], the ends, values out of range and NaN.
+        let mut values: Vec<f32> = (0..=1.0f32.to_bits()).step_by(211).map(f32::from_bits).collect();
+        values.extend([0.0, 1.0, -0.5, 2.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 0.003_130_8, 1e-30]);
+        let img = super::Image { width: values.len() as u32, height: 1, pixels: values.clone() };
+        let fast = super::srgb8(&img);
+        for (v, f) in values.iter().zip(&fast) {
+            assert_eq!(*f, super::srgb8_value(*v), "{v:e}");
+        }
+        // Every code is reached, and each threshold is where its code starts.
+        assert_eq!(fast.iter().copied().max(), Some(255));
+        for (i, &t) in super::srgb8_thresholds().iter().enumerate() {
+            assert_eq!(super::srgb8_value(t), i as u8 + 1);
+            assert_eq!(super::srgb8_value(f32::from_bits(t.to_bits() - 1)), i as u8, "{t:e}");
+        }
+    }
+
     use super::*;
 
     /// The synthetic pair of `scripts/flip_oracle.py`, built from integers so

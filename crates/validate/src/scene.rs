@@ -142,12 +142,16 @@ pub fn coverage(reference: &Image, empty: &Image) -> f64 {
     if (reference.width, reference.height) != (empty.width, empty.height) || reference.pixels.len() != empty.pixels.len() {
         return 1.0;
     }
-    let (a, b) = (crate::flip::srgb8(reference), crate::flip::srgb8(empty));
-    let pixels = a.len() / 3;
+    coverage_srgb8(&crate::flip::srgb8(reference), &crate::flip::srgb8(empty))
+}
+
+/// [`coverage`] of two images already encoded as 8-bit sRGB RGB of one size.
+pub fn coverage_srgb8(reference: &[u8], empty: &[u8]) -> f64 {
+    let pixels = reference.len().min(empty.len()) / 3;
     if pixels == 0 {
         return 0.0;
     }
-    let covered = a.chunks_exact(3).zip(b.chunks_exact(3)).filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.abs_diff(*y) > 1)).count();
+    let covered = reference.chunks_exact(3).zip(empty.chunks_exact(3)).filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.abs_diff(*y) > 1)).count();
     covered as f64 / pixels as f64
 }
 
