@@ -1,6 +1,20 @@
 //! Helpers shared by the tests of the vdbcook crates. Only ever a
 //! dev-dependency.
 
+/// The value of `made`, or `None` after a note on stderr when it failed
+/// (no GPU adapter, say): a test then skips its checks. Under `CI=true` a
+/// failure is a test failure, never a skip.
+pub fn or_skip<T, E: std::fmt::Display>(made: Result<T, E>, what: &str) -> Option<T> {
+    match made {
+        Ok(v) => Some(v),
+        Err(e) => {
+            assert!(std::env::var("CI").ok().as_deref() != Some("true"), "CI=true and no {what}: {e}");
+            eprintln!("note: skipping: no {what}: {e}");
+            None
+        }
+    }
+}
+
 /// A small deterministic generator (xorshift64*) for test inputs and
 /// corruption corpora: the same seed gives the same stream everywhere.
 #[derive(Clone, Debug)]

@@ -27,14 +27,7 @@ fn cook_with(files: &[&str], opts: CookOptions) -> Vec<u8> {
 }
 
 fn renderer() -> Option<Renderer> {
-    match Renderer::new(None) {
-        Ok(r) => Some(r),
-        Err(e) => {
-            assert!(std::env::var("CI").ok().as_deref() != Some("true"), "CI=true and no GPU adapter: {e}");
-            eprintln!("note: skipping GPU test: {e}");
-            None
-        }
-    }
+    vdbcook_testkit::or_skip(Renderer::new(None), "GPU adapter")
 }
 
 #[test]

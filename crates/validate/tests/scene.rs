@@ -10,14 +10,7 @@ use vdbcook_validate::{compare, coverage, render_cpu, Image, Model, Renderer, Sc
 use vdbcook_vpak::Asset;
 
 fn renderer() -> Option<Renderer> {
-    match Renderer::new(None) {
-        Ok(r) => Some(r),
-        Err(e) => {
-            assert!(std::env::var("CI").ok().as_deref() != Some("true"), "CI=true and no GPU adapter: {e}");
-            eprintln!("note: skipping GPU test: {e}");
-            None
-        }
-    }
+    vdbcook_testkit::or_skip(Renderer::new(None), "GPU adapter")
 }
 
 /// A grid whose voxels in [0, size)³ are active where `f` gives a value.
