@@ -105,8 +105,9 @@ pub struct Frame {
     pub source: Option<SourceFile>,
 }
 
-fn hash_hex(bytes: &[u8]) -> String {
-    format!("{:032x}", xxhash_rust::xxh3::xxh3_128(bytes))
+/// A source's recorded hash: XXH3-128 as 32 hex digits (`SourceFile::xxh3_128`).
+pub(crate) fn hash_hex(xxh3_128: u128) -> String {
+    format!("{xxh3_128:032x}")
 }
 
 /// Reads one frame; the channels are resolved by the first frame that has a file.
@@ -119,7 +120,7 @@ pub fn read_frame(path: PathBuf, sel: &GridSelection, channels: &mut Option<Chan
         return Err(Error::Failed(format!("{p}: no such file (use --allow-missing to cook it as an empty frame)")));
     }
     let vdb = vdbcook_vdb::open(&path).with_context(|| p.clone())?;
-    let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(vdb.bytes()) };
+    let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(xxhash_rust::xxh3::xxh3_128(vdb.bytes())) };
     if channels.is_none() {
         match resolve(&vdb, &p, sel) {
             Ok(c) => *channels = Some(c),

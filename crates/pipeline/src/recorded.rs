@@ -51,7 +51,7 @@ fn file_hash(path: &Path) -> std::io::Result<String> {
     loop {
         let n = file.read(&mut buf)?;
         if n == 0 {
-            return Ok(format!("{:032x}", hasher.digest128()));
+            return Ok(crate::grids::hash_hex(hasher.digest128()));
         }
         hasher.update(&buf[..n]);
     }
