@@ -91,6 +91,8 @@ when --max-flip is the only gate. f32 renders exactly unless clustered, so witho
 
 #[derive(clap::Args)]
 #[command(group(clap::ArgGroup::new("checks").args(["validate", "auto"]).multiple(true)))]
+// The comparison's flags (Viewing, Gate) mean nothing without a comparison.
+#[command(group(clap::ArgGroup::new("comparison").args(["extinction", "views", "size", "max_rmse", "min_psnr", "max_flip"]).multiple(true).requires("checks")))]
 pub struct CookArgs {
     /// Frame files, directories, globs or frame patterns.
     #[arg(required = true, value_name = "INPUT")]
@@ -105,13 +107,13 @@ pub struct CookArgs {
     /// smallest file first and write the first whose images meet the gate (--min-psnr,
     /// --max-rmse and/or --max-flip: at least one is required). Implies --validate; not with
     /// --format, --max-error or --max-bytes.
-    #[arg(long, conflicts_with_all = ["format", "max_error", "max_bytes"])]
+    #[arg(long, conflicts_with_all = ["format", "max_error", "max_bytes"], help_heading = "Options")]
     pub auto: bool,
     /// Replace OUT if it exists.
-    #[arg(long)]
+    #[arg(long, help_heading = "Options")]
     pub force: bool,
     /// Print the summary as JSON on stdout.
-    #[arg(long)]
+    #[arg(long, help_heading = "Options")]
     pub json: bool,
 }
 
@@ -121,7 +123,7 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     if let Err(SettingError { name, message }) = s.check() {
         return Err(Usage(format!("--{} {message}", name.replace('_', "-"))).into());
     }
-    if args.auto && !s.gate().is_set() {
+    if args.auto && !s.gate.is_set() {
         return Err(Usage("--auto needs a quality gate: --min-psnr, --max-rmse or --max-flip".into()).into());
     }
     let files = inputs::expand(&args.inputs, s.frames)?;

@@ -17,8 +17,8 @@ pub struct UnpackArgs {
     /// Level of detail to decode (0: the frame itself; k: voxels 2^k times as large, in the
     /// level's index space, with a transform to match). Default: the asset's finest level (0
     /// unless `cook --max-bytes` left finer ones out).
-    #[arg(long, value_name = "K", value_parser = vdbcook_pipeline::options::parse_lod)]
-    pub lod: Option<u32>,
+    #[arg(long, value_name = "K")]
+    pub lod: Option<vdbcook_vpak::Level>,
     /// The .vdb file to write: one float grid per scalar channel and one vec3s grid per
     /// vec3 grid, zip-compressed, each with its name, class, background and transform.
     #[arg(short, long, value_name = "OUT.vdb")]
@@ -36,7 +36,7 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
     crate::refuse_existing(&args.output, args.force)?;
     let asset = vdbcook_vpak::Asset::open(&args.asset).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
-    let lod = args.lod.unwrap_or(meta.first_level);
+    let lod = args.lod.map_or(meta.first_level, vdbcook_vpak::Level::get);
     let frame = match (args.frame, meta.frame_count) {
         (Some(f), _) => f,
         (None, 1) => 0,

@@ -6,9 +6,10 @@ use crate::{exit, Usage};
 use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
 use vdbcook_pipeline::options::FrameRange;
-use vdbcook_pipeline::{recorded, GridSelection, Sources};
-use vdbcook_validate::{report, CompareOptions, Comparison, Gate, Levels, Scene, Size};
+use vdbcook_pipeline::{recorded, FrameFile, GridSelection, Sources};
+use vdbcook_validate::{report, CompareOptions, Comparison, Gate, Levels, Scene, Viewing};
 use vdbcook_vpak::Asset;
+use vdbcook_vpak::{Level, LevelCount};
 
 pub const AFTER_HELP: &str = "\
 Without --source, the source files the asset records are used (and the report says
@@ -57,28 +58,13 @@ pub struct ValidateArgs {
     /// Frames of a source frame pattern: A-B or A-B:STEP.
     #[arg(long, value_name = "RANGE", requires = "source")]
     pub source_frames: Option<FrameRange>,
-    /// The channel that gives extinction in the validation scene (default: `density`, else
-    /// the first scalar fog channel that is not a glow channel; see below).
-    #[arg(long, value_name = "NAME")]
-    pub extinction: Option<String>,
     /// Asset frames to render, counted from 0: A-B or A-B:STEP (default: all).
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<FrameRange>,
-    /// Cameras orbiting the volume.
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(vdbcook_pipeline::options::VIEWS))]
-    pub views: u32,
-    /// Image size.
-    #[arg(long, default_value = "512x512", value_name = "WxH")]
-    pub size: Size,
-    /// Exit with code 3 when any image's RMSE is above X.
-    #[arg(long, value_name = "X", allow_negative_numbers = true, value_parser = vdbcook_validate::options::parse_rmse_budget)]
-    pub max_rmse: Option<f64>,
-    /// Exit with code 3 when any image's PSNR (dB) is below Y.
-    #[arg(long, value_name = "Y", allow_negative_numbers = true, value_parser = vdbcook_validate::options::parse_psnr_floor)]
-    pub min_psnr: Option<f64>,
-    /// Exit with code 3 when any image's mean FLIP error (0 to 1, at 67 pixels per degree) is above F.
-    #[arg(long, value_name = "F", allow_negative_numbers = true, value_parser = vdbcook_validate::options::parse_flip_budget)]
-    pub max_flip: Option<f64>,
+    #[command(flatten)]
+    pub viewing: Viewing,
+    #[command(flatten)]
+    pub gate: Gate,
     /// Write report.json, PNGs and report.html into DIR (with --every-lod: a row per level
     /// and the worst view at every level, side by side).
     #[arg(long, value_name = "DIR")]
@@ -86,8 +72,8 @@ pub struct ValidateArgs {
     /// Level of detail to check (0: the frames themselves; k: the asset's level k against the
     /// source filtered losslessly to level k, as `cook --lods` does). Default: the asset's
     /// finest level (0 unless `cook --max-bytes` left finer ones out).
-    #[arg(long, value_name = "K", value_parser = vdbcook_pipeline::options::parse_lod)]
-    pub lod: Option<u32>,
+    #[arg(long, value_name = "K")]
+    pub lod: Option<Level>,
     /// Check every level of detail of the asset, each against the source filtered to it
     /// (the gate holds at every level), and show the levels side by side: a table in the
     /// text, `levels` in the JSON, and with --report a row per level and the finest level's
@@ -106,16 +92,14 @@ impl ValidateArgs {
     pub fn compare_options(&self) -> CompareOptions {
         CompareOptions {
             frames: self.frames.map(|r| r.frames().map(|f| usize::try_from(f).unwrap_or(usize::MAX)).collect()),
-            views: self.views,
-            size: self.size,
-            gate: Gate { max_rmse: self.max_rmse, min_psnr: self.min_psnr, max_flip: self.max_flip },
+            viewing: self.viewing.clone(),
+            gate: self.gate,
             levels: match (self.every_lod, self.lod) {
                 (true, _) => Levels::Every,
                 (false, Some(k)) => Levels::At(k),
                 (false, None) => Levels::First,
             },
             report: self.report.clone(),
-            extinction: self.extinction.clone(),
         }
     }
 }
@@ -149,14 +133,11 @@ pub struct RenderArgs {
     /// The PNG to write.
     #[arg(short, long, value_name = "OUT.png")]
     pub output: PathBuf,
-    /// Image size.
-    #[arg(long, default_value = "512x512", value_name = "WxH")]
-    pub size: Size,
     /// Which of --views orbiting cameras to use (from 0).
     #[arg(long, default_value_t = 0)]
     pub view: u32,
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(vdbcook_pipeline::options::VIEWS))]
-    pub views: u32,
+    #[command(flatten)]
+    pub viewing: Viewing,
     /// Grid of a .vdb input (default: "density", else the first float grid).
     #[arg(long, value_name = "NAME")]
     pub grid: Option<String>,
@@ -164,12 +145,8 @@ pub struct RenderArgs {
     /// sample reading the level's voxel that covers it). Default: the asset's finest level
     /// (0 unless `cook --max-bytes` left finer ones out). A .vdb input is filtered to that
     /// level as `cook --lods` does.
-    #[arg(long, value_name = "K", value_parser = vdbcook_pipeline::options::parse_lod)]
-    pub lod: Option<u32>,
-    /// The channel that gives extinction (default: `density`, else the first scalar fog
-    /// channel that is not a glow channel; see `vdbcook validate --help`).
-    #[arg(long, value_name = "NAME")]
-    pub extinction: Option<String>,
+    #[arg(long, value_name = "K")]
+    pub lod: Option<Level>,
     #[command(flatten)]
     pub gpu: GpuArgs,
     /// Replace OUT if it exists.
@@ -180,8 +157,9 @@ pub struct RenderArgs {
 pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let name = args.input.display().to_string();
     crate::refuse_existing(&args.output, args.force)?;
-    if args.view >= args.views {
-        return Err(Usage(format!("--view {} is out of range (0 to {})", args.view, args.views - 1)).into());
+    let (views, size) = (args.viewing.views, args.viewing.size);
+    if args.view >= views.get() {
+        return Err(Usage(format!("--view {} is out of range (0 to {})", args.view, views.get() - 1)).into());
     }
     if !args.input.exists() {
         return Err(anyhow!("{name}: no such file"));
@@ -189,10 +167,15 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let asset = if vdbcook_pipeline::is_vpak(&args.input) {
         Asset::open(&args.input).with_context(|| name.clone())?
     } else {
-        vdbcook_pipeline::cook_lossless_levels(vec![args.input.clone()], GridSelection::from_flags(args.grid.as_deref(), None), false, args.lod.unwrap_or(0) + 1, &Bars::new(true))?
+        vdbcook_pipeline::cook_lossless_levels(
+            FrameFile::each(vec![args.input.clone()], false),
+            GridSelection::from_flags(args.grid.as_deref(), None),
+            args.lod.map_or(LevelCount::ONE, Level::count),
+            &Bars::new(true),
+        )?
     };
     let meta = asset.metadata().with_context(|| name.clone())?;
-    let lod = args.lod.unwrap_or(meta.first_level);
+    let lod = args.lod.map_or(meta.first_level, Level::get);
     if args.frame >= meta.frame_count as usize {
         return Err(anyhow!("{name}: frame {} is out of range (it has {} frames, numbered from 0)", args.frame, meta.frame_count));
     }
@@ -200,15 +183,15 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
         let hint = if lod >= meta.levels { format!("; cook it with --lods {}", lod + 1) } else { String::new() };
         return Err(anyhow!("{name}: {why}{hint}"));
     }
-    let scene = Scene::for_asset_with(&meta, args.extinction.as_deref()).map_err(|e| Usage(format!("--extinction: {e}")))?;
+    let scene = Scene::for_asset_with(&meta, args.viewing.extinction.as_deref()).map_err(|e| Usage(format!("--extinction: {e}")))?;
     let renderer = args.gpu.renderer()?;
     let gpu = renderer.upload_for(&asset, &scene).with_context(|| name.clone())?;
-    let view = scene.orbit(args.views as usize)[args.view as usize];
-    let img = renderer.render_views_level(&gpu, &scene, args.frame, lod, std::slice::from_ref(&view), args.size.width, args.size.height)?.pop().ok_or_else(|| anyhow!("no image"))?;
+    let view = scene.orbit(views.count())[args.view as usize];
+    let img = renderer.render_views_level(&gpu, &scene, args.frame, lod, std::slice::from_ref(&view), size.width(), size.height())?.pop().ok_or_else(|| anyhow!("no image"))?;
     vdbcook_vpak::write_atomic(&args.output, &report::png_rgb(&img), args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
         let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
-        crate::emit_final(&format!("rendered frame {}{level} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), args.size.width, args.size.height, renderer.adapter))?;
+        crate::emit_final(&format!("rendered frame {}{level} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), size.width(), size.height(), renderer.adapter))?;
     }
     Ok(exit::SUCCESS)
 }

@@ -88,7 +88,7 @@ mod tests {
         let other_ctx = KeyContext { tool: "vdbcook 0.1.1".into(), ..ctx.clone() };
         assert_ne!(k, cache_key(&other_ctx, &s, &inputs, &files));
         assert_ne!(k, cache_key(&KeyContext { format_version: 99, ..ctx.clone() }, &s, &inputs, &files));
-        assert_ne!(k, cache_key(&ctx, &CookSettings { iterations: 6, ..s.clone() }, &inputs, &files));
+        assert_ne!(k, cache_key(&ctx, &CookSettings { iterations: "6".parse().unwrap(), ..s.clone() }, &inputs, &files));
         assert_ne!(k, cache_key(&ctx, &s, &inputs, &[FileDigest::of("a.vdb".into(), Some(b"abd"))]));
         assert_ne!(k, cache_key(&ctx, &s, &inputs, &[FileDigest::of("b.vdb".into(), Some(b"abc"))]));
         assert_ne!(k, cache_key(&ctx, &s, &inputs, &[FileDigest::of("a.vdb".into(), None)]));

@@ -17,12 +17,14 @@ pub use vdbcook_pipeline::options;
 pub mod place;
 pub mod report;
 pub mod step;
+pub mod table;
 
 pub use key::{cache_key, KeyContext};
 pub use manifest::{line_column, plan, Manifest, ManifestError, PlannedAsset, Sources};
 pub use options::{CookSettings, FrameRange, SettingText, Size};
 pub use report::{AssetReport, ChannelFormats, FormatBricks, Gate, Record, Report, Status, Summary, Validation};
 pub use step::{bake_one, cached, skipped, Baker};
+pub use table::{AssetTable, SettingsTable};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {

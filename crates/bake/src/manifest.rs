@@ -3,7 +3,8 @@
 //! turns it into `FILE:LINE:COLUMN: message` with [`line_column`].
 
 use crate::key::{cache_key, FileDigest, KeyContext};
-use crate::options::{AssetTable, CookSettings, SettingsTable};
+use crate::options::CookSettings;
+use crate::table::{AssetTable, SettingsTable};
 use std::ops::Range;
 use std::path::{Component, Path, PathBuf};
 use toml::Spanned;
@@ -154,9 +155,9 @@ pub fn plan(m: &Manifest, base: &Path, sources: &dyn Sources, ctx: &KeyContext) 
 
         let mut settings = CookSettings::default();
         m.defaults.apply(&mut settings);
-        a.apply(&mut settings);
+        a.settings.apply(&mut settings);
         if let Err(crate::options::SettingError { name: key, message }) = settings.check() {
-            let span = a.span(key).or_else(|| m.defaults.span(key)).unwrap_or(table_span.clone());
+            let span = a.settings.span(key).or_else(|| m.defaults.span(key)).unwrap_or(table_span.clone());
             return Err(ManifestError::at(span, format!("{key}: {message}")));
         }
 
@@ -167,7 +168,7 @@ pub fn plan(m: &Manifest, base: &Path, sources: &dyn Sources, ctx: &KeyContext) 
         let input_paths: Vec<String> = inputs.iter().map(|i| resolve(base, i.get_ref()).to_string_lossy().into_owned()).collect();
         let frames = settings.frames;
         if frames.is_some() && !input_paths.iter().any(|i| sources.is_pattern(i)) {
-            let span = a.span("frames").or_else(|| m.defaults.span("frames")).unwrap_or(table_span.clone());
+            let span = a.settings.span("frames").or_else(|| m.defaults.span("frames")).unwrap_or(table_span.clone());
             return Err(ManifestError::at(span, "frames applies to frame patterns (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb), and no input is one"));
         }
         // Each input on its own first, so that an error points at it.
@@ -243,9 +244,13 @@ mod tests {
         assert_eq!(p[0].settings.format, crate::options::Format::Bc7);
         assert_eq!(p[0].settings.quality, crate::options::Quality::Fast);
         assert_eq!(p[1].settings.format, crate::options::Format::F16);
-        assert_eq!(p[1].settings.clusters, Some(4));
+        assert_eq!(p[1].settings.clusters.map(crate::options::Clusters::get), Some(4));
         assert_eq!(p[1].settings.iterations, CookSettings::default().iterations);
         assert_eq!(p[1].files, [PathBuf::from("p/s1.vdb"), PathBuf::from("p/s2.vdb")]);
+        // The comparison's settings are keys like any other.
+        let q = run(&GOOD.replace("clusters = 4", "views = 3\nmax_rmse = 0.5")).unwrap();
+        assert_eq!((q[1].settings.viewing.views.get(), q[1].settings.gate.max_rmse.map(|x| x.get())), (3, Some(0.5)));
+        assert_eq!(q[0].settings.viewing, crate::options::Viewing::default());
         assert_ne!(p[0].key, p[1].key);
         assert_eq!(run(GOOD).unwrap()[1].key, p[1].key);
     }
@@ -254,14 +259,17 @@ mod tests {
     fn errors_point_at_line_and_column() {
         let cases = [
             (GOOD.replace("clusters = 4", "clustres = 4"), "16:1: unknown field `clustres`"),
-            (GOOD.replace("clusters = 4", "clusters = \"4\""), "16:12: invalid type: string \"4\", expected u32"),
-            (GOOD.replace("\"bc7\"", "\"bc9\""), "2:10: unknown variant `bc9`"),
+            (GOOD.replace("clusters = 4", "clusters = \"4\""), "16:12: clusters: invalid type: string \"4\", expected u32"),
+            (GOOD.replace("\"bc7\"", "\"bc9\""), "2:10: format: unknown variant `bc9`"),
             (GOOD.replace("[\"a.vdb\"]", "[\"a.vdb\", \"nope.vdb\"]"), "8:20: input \"nope.vdb\": p/nope.vdb: no such file"),
             (GOOD.replace("out/s.vpak", "./a.vpak"), "12:10: duplicate output \"./a.vpak\""),
             (GOOD.replace("name = \"s\"", "name = \"a\""), "11:8: duplicate asset name \"a\""),
             (GOOD.replace("frames = \"1-2\"", "frames = \"1-3\""), "13:11: p/s3.vdb: no such file"),
             (GOOD.replace("clusters = 4", "variance_threshold = -1.0"), "16:22: variance_threshold: must be a number >= 0"),
-            (GOOD.replace("frames = \"1-2\"", "frames = \"2-1\""), "14:10: invalid frame range \"2-1\""),
+            (GOOD.replace("frames = \"1-2\"", "frames = \"2-1\""), "14:10: frames: invalid frame range \"2-1\""),
+            (GOOD.replace("clusters = 4", "views = 0"), "16:9: views: 0 is not a view count (expected 1 to 360)"),
+            (GOOD.replace("clusters = 4", "lods = 6"), "16:8: lods: 6 is more levels than the tree has"),
+            (GOOD.replace("quality = \"fast\"", "size = \"4x4\""), "3:8: size: invalid size \"4x4\""),
             (GOOD.replace("name = \"s\"\n", ""), "missing field `name`"),
         ];
         for (text, want) in cases {

@@ -6,7 +6,7 @@
 use crate::manifest::resolve;
 use crate::{place, AssetReport, ChannelFormats, PlannedAsset, Record, Status, Validation};
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, OnceLock};
+use std::sync::OnceLock;
 use std::time::Instant;
 use vdbcook_pipeline::{cook_asset, one_line, Context, CookJob, Error, Result};
 use vdbcook_validate::report::{base64, thumbnail};
@@ -23,59 +23,23 @@ pub struct Baker<'g> {
     base: PathBuf,
     /// Replace anything at an output or cache path (`--force`).
     force: bool,
-    /// Opens a GPU device (the caller's choice of adapter).
+    /// Opens the GPU device (the caller's choice of adapter), once, when first needed.
     open: Box<dyn Fn() -> Result<Renderer, BoxError> + Send + Sync + 'g>,
-    /// Why no GPU device could be opened, once that happened.
-    first_error: OnceLock<String>,
-    /// Idle GPU devices: each worker borrows its own (on Mesa's CPU driver, one
-    /// device per worker renders in parallel where a shared queue would not).
-    renderers: Mutex<Vec<Renderer>>,
+    /// The one renderer every worker shares (one device, its pipelines compiled
+    /// once), or why none could be opened.
+    renderer: OnceLock<std::result::Result<Renderer, String>>,
 }
 
 impl<'g> Baker<'g> {
     /// Outputs go below `out_dir`, validation pages below `report_dir`; `base`
     /// is the manifest's directory (sources are recorded relative to it);
-    /// `open` opens a GPU device when one is first needed.
+    /// `open` opens the GPU device when one is first needed.
     pub fn new(out_dir: PathBuf, report_dir: PathBuf, cache: Option<PathBuf>, base: PathBuf, force: bool, open: impl Fn() -> Result<Renderer, BoxError> + Send + Sync + 'g) -> Baker<'g> {
-        Baker { out_dir, report_dir, cache, base, force, open: Box::new(open), first_error: OnceLock::new(), renderers: Mutex::new(Vec::new()) }
+        Baker { out_dir, report_dir, cache, base, force, open: Box::new(open), renderer: OnceLock::new() }
     }
-}
 
-/// A GPU device borrowed from a [`Baker`]; it goes back when dropped.
-struct Lease<'a, 'g> {
-    ctx: &'a Baker<'g>,
-    renderer: Option<Renderer>,
-}
-
-impl std::ops::Deref for Lease<'_, '_> {
-    type Target = Renderer;
-    fn deref(&self) -> &Renderer {
-        // Some until drop.
-        self.renderer.as_ref().unwrap_or_else(|| unreachable!("a lease holds its renderer until dropped"))
-    }
-}
-
-impl Drop for Lease<'_, '_> {
-    fn drop(&mut self) {
-        if let (Some(r), Ok(mut pool)) = (self.renderer.take(), self.ctx.renderers.lock()) {
-            pool.push(r);
-        }
-    }
-}
-
-impl<'g> Baker<'g> {
-    fn renderer(&self) -> Result<Lease<'_, 'g>> {
-        if let Some(e) = self.first_error.get() {
-            return Err(Error::Failed(e.clone()));
-        }
-        let idle = self.renderers.lock().ok().and_then(|mut pool| pool.pop());
-        let renderer = match idle {
-            Some(r) => r,
-            None => (self.open)().map_err(Error::Other).inspect_err(|e| {
-                let _ = self.first_error.set(one_line(e));
-            })?,
-        };
-        Ok(Lease { ctx: self, renderer: Some(renderer) })
+    fn renderer(&self) -> Result<&Renderer> {
+        self.renderer.get_or_init(|| (self.open)().map_err(|e| one_line(&Error::Other(e)))).as_ref().map_err(|e| Error::Failed(e.clone()))
     }
 }
 
@@ -111,7 +75,7 @@ fn blank(a: &PlannedAsset) -> AssetReport {
         files: a.files.len(),
         record: Record::default(),
         validate: a.settings.validate,
-        gate: a.settings.gate(),
+        gate: a.settings.gate,
         message: None,
         validation_report: None,
         seconds: 0.0,
@@ -228,7 +192,7 @@ fn validation_figures(o: &Comparison) -> Option<Validation> {
     Some(Validation {
         adapter: o.adapter.clone(),
         views: o.views,
-        size: [o.size.width, o.size.height],
+        size: [o.size.width(), o.size.height()],
         images: images.len(),
         worst_frame: worst.map_or(0, |s| s.frame),
         worst_view: worst.map_or(0, |s| s.view),

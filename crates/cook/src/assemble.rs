@@ -25,10 +25,7 @@ impl Cooker {
     /// Returns the asset's sections (write them with `vdbcook_vpak::write_file`) and the report.
     /// With `max_bytes`, the finest levels that fit are kept (see [`CookReport::budget`]).
     pub fn finish(mut self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
-        let levels = self.opts.levels;
-        if levels == 0 || levels > vdbcook_vpak::MAX_LEVELS {
-            return Err(Error::Levels(levels));
-        }
+        let levels = self.opts.levels.get();
         let timings = vec![("build".to_string(), self.build_secs - self.level_secs), ("levels".to_string(), self.level_secs)];
         let built = std::mem::take(&mut self.builder).finish()?;
         let Some(budget) = self.opts.max_bytes else { return self.assemble(&built, 0, timings, progress) };
@@ -76,9 +73,10 @@ impl Cooker {
         // Encoding: the work bricks in their planes' formats, or each brick
         // channel in the cheapest format within the maximum error (strays
         // split off their clusters); then deduplication and remapping.
-        let masks = encode::shown_masks(built, &specs, opts.max_error);
+        let max_error = opts.max_error.map(crate::ErrorBound::get);
+        let masks = encode::shown_masks(built, &specs, max_error);
         let t0 = Instant::now();
-        let encoded = match opts.max_error {
+        let encoded = match max_error {
             None => encode::in_planes(pool, channels, specs, opts.quality, masks.as_deref(), clustered.as_ref(), progress),
             Some(bound) => {
                 let choices = choose::per_brick(pool, channels, masks.as_deref().unwrap_or(&[]), bound, opts.quality, clustered.as_mut(), progress);
@@ -100,9 +98,9 @@ impl Cooker {
         // clustering, what they would have been without).
         let t0 = Instant::now();
         let decode_stored = |b: u32| stored.decode(&encoded, b);
-        let measured = errors::measure(built, first, opts.levels, channels, &decode_stored);
+        let measured = errors::measure(built, first, opts.levels.get(), channels, &decode_stored);
         let cluster_report = clustered.as_ref().zip(opts.clustering.as_ref()).map(|(c, co)| {
-            let without = cluster::Unclustered { built, first, channels, specs: &encoded.specs, quality: opts.quality, max_error: opts.max_error, masks: masks.as_deref() };
+            let without = cluster::Unclustered { built, first, channels, specs: &encoded.specs, quality: opts.quality, max_error, masks: masks.as_deref() };
             cluster::report(c, co, &without, &decode_stored, measured.totals[0].rmse())
         });
         lap(&mut timings, "error", t0);

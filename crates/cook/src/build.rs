@@ -144,10 +144,7 @@ impl Cooker {
     /// Filters a frame's grids to levels 1 … levels − 1 (each from the one
     /// before) and pushes each level's tree.
     fn push_levels(&mut self, grids: &[Option<&Grid>]) -> Result<Vec<LevelFigures>, Error> {
-        let levels = self.opts.levels;
-        if levels == 0 || levels > vdbcook_vpak::MAX_LEVELS {
-            return Err(Error::Levels(levels));
-        }
+        let levels = self.opts.levels.get();
         let t0 = Instant::now();
         let filters = self.filters();
         let mut figures = Vec::with_capacity(levels as usize - 1);
@@ -176,7 +173,7 @@ impl Cooker {
     /// Adds an empty frame (a source without the grids, with `--allow-missing`).
     pub fn push_empty(&mut self, source: Option<SourceFile>) {
         self.builder.push_empty();
-        let levels = self.opts.levels.clamp(1, vdbcook_vpak::MAX_LEVELS);
+        let levels = self.opts.levels.get();
         for k in 1..levels {
             self.builder.push_empty_level(k);
         }

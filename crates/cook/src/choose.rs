@@ -18,13 +18,8 @@ pub(crate) fn plan_planes(opts: &CookOptions, specs: &[ChannelSpec]) -> Result<(
     if opts.format == Format::Constant || opts.groups.iter().any(|g| g.format == Format::Constant) {
         return Err(Error::ConstantFormat);
     }
-    if let Some(e) = opts.max_error {
-        if !(e >= 0.0 && e.is_finite()) {
-            return Err(Error::MaxError(e));
-        }
-        if !opts.groups.is_empty() {
-            return Err(Error::MaxErrorGroups);
-        }
+    if opts.max_error.is_some() && !opts.groups.is_empty() {
+        return Err(Error::MaxErrorGroups);
     }
     let mut group_of: Vec<Option<u32>> = vec![None; specs.len()];
     let mut groups: Vec<(Format, Vec<usize>)> = Vec::new();

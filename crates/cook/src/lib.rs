@@ -26,7 +26,8 @@ pub use build::Cooker;
 pub use report::{figure, BudgetReport, BudgetTry, ChannelReport, ClusterReport, CookReport, ErrorFigures, Figure, FormatShare, LevelReport};
 pub use unpack::{unpack_frame, unpack_level};
 pub use vdbcook_encode::NonFinite;
-pub use vdbcook_encode::{Format, Quality};
+pub use vdbcook_encode::{ErrorBound, Format, Quality};
+pub use vdbcook_vpak::LevelCount;
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -54,14 +55,10 @@ pub enum Error {
     MultiChannelClustering(usize),
     #[error("format constant is chosen per brick by a maximum error, not for a whole channel")]
     ConstantFormat,
-    #[error("a maximum error of {0} is not a bound (need a finite value of 0 or more)")]
-    MaxError(f32),
     #[error("a maximum error chooses every brick's format: it takes no channel groups")]
     MaxErrorGroups,
     #[error("a plane of {0} bricks is more than a channel table can address")]
     TooManyPlaneBricks(u32),
-    #[error("{0} levels of detail asked for: an asset has 1 (no coarser level) to {max} (level {top}'s voxels are {scale} source voxels wide and its bricks span a whole L1 slot, the coarsest the tree's 128-voxel alignment allows)", max = vdbcook_vpak::MAX_LEVELS, top = vdbcook_vpak::MAX_LEVELS - 1, scale = 1u32 << (vdbcook_vpak::MAX_LEVELS - 1))]
-    Levels(u32),
     #[error("{0}")]
     NoLevel(String),
     #[error("no asset fits in {budget} bytes: the smallest reachable, level {level} alone, is {smallest} bytes")]
@@ -74,7 +71,7 @@ impl Error {
     /// True for errors in the settings a cook was given (its channel groups,
     /// clustering of too many channels) rather than in its input.
     pub fn is_settings_error(&self) -> bool {
-        matches!(self, Error::UnknownChannel { .. } | Error::TwiceGrouped(_) | Error::MultiChannelClustering(_) | Error::ConstantFormat | Error::MaxError(_) | Error::MaxErrorGroups | Error::Levels(_))
+        matches!(self, Error::UnknownChannel { .. } | Error::TwiceGrouped(_) | Error::MultiChannelClustering(_) | Error::ConstantFormat | Error::MaxErrorGroups)
     }
 }
 
@@ -119,6 +116,12 @@ impl TryFrom<String> for ChannelGroup {
     }
 }
 
+impl vdbcook_vpak::settings::SettingText for ChannelGroup {
+    fn text(&self) -> String {
+        self.to_string()
+    }
+}
+
 impl std::fmt::Display for ChannelGroup {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}={}", self.channels.join(","), self.format.name())
@@ -140,21 +143,30 @@ pub struct CookOptions {
     /// Per-brick formats: every brick channel in the cheapest format whose
     /// shown voxels decode within this absolute error (`format` and `groups`
     /// are not used); merged bricks (`clustering`) are held to it too.
-    pub max_error: Option<f32>,
+    pub max_error: Option<ErrorBound>,
     /// Every setting, recorded verbatim in the asset's metadata.
     pub settings: Vec<(String, String)>,
     /// A byte budget for the asset: the finest levels of detail that do not
     /// fit are left out (the coarsest always stays; [`Error::OverBudget`] when it alone does not fit).
     pub max_bytes: Option<u64>,
-    /// Levels of detail (1: none; at most `vdbcook_vpak::MAX_LEVELS`): levels
-    /// 1 … levels − 1 of every frame, each filtered from the one before
-    /// (`vdbcook_grid::lod`), are trees of the asset too.
-    pub levels: u32,
+    /// Levels of detail (1: none): levels 1 … levels − 1 of every frame, each
+    /// filtered from the one before (`vdbcook_grid::lod`), are trees of the asset too.
+    pub levels: LevelCount,
 }
 
 impl Default for CookOptions {
     fn default() -> Self {
-        CookOptions { format: Format::F16, groups: Vec::new(), quality: Quality::VeryFast, max_texture_dim: 2048, clustering: None, max_error: None, settings: Vec::new(), levels: 1, max_bytes: None }
+        CookOptions {
+            format: Format::F16,
+            groups: Vec::new(),
+            quality: Quality::VeryFast,
+            max_texture_dim: 2048,
+            clustering: None,
+            max_error: None,
+            settings: Vec::new(),
+            levels: LevelCount::ONE,
+            max_bytes: None,
+        }
     }
 }
 

@@ -66,8 +66,8 @@ impl Cooker {
             settings: self.opts.settings.clone(),
             sources: self.sources.clone(),
             frames: self.frames.clone(),
-            levels: self.opts.levels,
-            level_filters: if self.opts.levels > 1 { self.filters().into_iter().map(level_filter).collect() } else { Vec::new() },
+            levels: self.opts.levels.get(),
+            level_filters: if self.opts.levels.get() > 1 { self.filters().into_iter().map(level_filter).collect() } else { Vec::new() },
             first_level: first,
         }
     }

@@ -19,6 +19,13 @@
 
 pub use vdbcook_vpak::{BrickSource, Format, Plane, BRICK_VOXELS, MAX_BRICK_BYTES};
 
+vdbcook_vpak::bounded!(
+    /// An absolute per-voxel error bound (`--max-error`, `--max-brick-error`): a finite number >= 0.
+    ErrorBound(f32),
+    "number",
+    |e| if e >= 0.0 && e.is_finite() { Ok(()) } else { Err(format!("must be a finite number >= 0, not {e}")) }
+);
+
 /// One brick of one channel (index `x·64 + y·8 + z`).
 pub type Brick = [f32; BRICK_VOXELS];
 
@@ -52,6 +59,12 @@ impl Quality {
 
     pub fn parse(s: &str) -> Option<Quality> {
         Quality::ALL.into_iter().find(|q| q.name() == s)
+    }
+}
+
+impl vdbcook_vpak::settings::SettingText for Quality {
+    fn text(&self) -> String {
+        self.name().to_string()
     }
 }
 

@@ -1,6 +1,7 @@
 //! Validating an asset file against its sources: the sources cooked
 //! losslessly in memory (the reference), then the comparison.
 
+use crate::grids::FrameFile;
 use crate::inputs::{self, FrameRange};
 use crate::{recorded, Context, Error, Result};
 use serde_json::json;
@@ -31,7 +32,7 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
     let asset = Asset::open(path).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
     let lod = match opts.levels {
-        Levels::At(k) => k,
+        Levels::At(k) => k.get(),
         _ => meta.first_level,
     };
     if let Some(why) = meta.missing_level(lod) {
@@ -42,11 +43,11 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
     let recorded = matches!(sources, Sources::Recorded);
     let files = match sources {
         Sources::Recorded => recorded::frame_files(&meta, path)?,
-        Sources::Inputs(inputs, frames) => inputs::expand(&inputs, frames)?,
+        Sources::Inputs(inputs, frames) => inputs::expand(&inputs, frames)?.into_iter().map(Some).collect(),
     };
-    let reference = reference(&meta, files.clone(), recorded, coarsest, bars)?;
+    let read = files.iter().flatten().filter(|f| f.exists()).count();
+    let reference = reference(&meta, files, coarsest, bars)?;
     let mut o = compare_assets(&asset, &name, &reference, opts, renderer, bars)?;
-    let read = files.iter().filter(|f| f.exists()).count();
     if recorded {
         o.text += &format!("  sources  the {read} file(s) the asset records (no --source given)\n");
     }
@@ -54,8 +55,11 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
     Ok(o)
 }
 
-/// Cooks `files` losslessly in memory, down to level `lod`: the reference asset.
-fn reference(meta: &Metadata, files: Vec<PathBuf>, allow_missing: bool, lod: u32, bars: &dyn Progress) -> Result<Asset> {
-    let allow_missing = allow_missing || meta.settings.iter().any(|(k, v)| k == "allow_missing" && v == "true");
-    crate::cook_lossless_levels(files, crate::selection_of(meta), allow_missing, lod + 1, bars).context("cooking the reference")
+/// Cooks `files` losslessly in memory, down to level `lod`: the reference
+/// asset. A frame the asset has empty may be missing its file or grid there
+/// too (it was cooked with `--allow-missing`); every other frame must read.
+fn reference(meta: &Metadata, files: Vec<Option<PathBuf>>, lod: u32, bars: &dyn Progress) -> Result<Asset> {
+    let frames = files.into_iter().enumerate().map(|(f, path)| FrameFile { path, allow_missing: meta.frames.get(f).is_some_and(|fr| fr.active_voxels == 0) }).collect();
+    let levels = vdbcook_vpak::LevelCount::new(lod + 1).map_err(Error::Failed)?;
+    crate::cook_lossless_levels(frames, crate::selection_of(meta), levels, bars).context("cooking the reference")
 }

@@ -2,7 +2,7 @@
 //! into one or more [`Cooker`]s (an asset and its lossless reference share
 //! one read), from typed [`CookSettings`].
 
-use crate::grids::{read_frame, Channels, Frame, GridSelection};
+use crate::grids::{read_frame, Channels, Frame, FrameFile, GridSelection};
 use crate::options::CookSettings;
 use crate::{Context, Error, Result};
 use std::path::PathBuf;
@@ -16,7 +16,7 @@ use vdbcook_vpak::SourceFile;
 /// channels the first frame with a file resolves. Source paths are recorded
 /// relative to `base` when they are below it. Returns the cookers, their
 /// channels and the seconds spent waiting for frames.
-pub fn feed(opts: Vec<CookOptions>, files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, base: Option<PathBuf>, bars: &dyn Progress) -> Result<(Vec<Cooker>, Option<Channels>, f64)> {
+pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, base: Option<PathBuf>, bars: &dyn Progress) -> Result<(Vec<Cooker>, Option<Channels>, f64)> {
     // Each frame comes with the channels when they are first resolved.
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
     let total = files.len() as u64;
@@ -24,7 +24,7 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<PathBuf>, sel: GridSelection, all
         let mut channels = None;
         let mut sent = false;
         for f in files {
-            let r = read_frame(f, &sel, &mut channels, allow_missing).map(|mut frame| {
+            let r = read_frame(f, &sel, &mut channels).map(|mut frame| {
                 if let (Some(s), Some(b)) = (frame.source.as_mut(), base.as_deref()) {
                     if let Ok(rel) = frame.path.strip_prefix(b) {
                         s.path = rel.display().to_string();
@@ -112,8 +112,8 @@ pub fn selection_of(meta: &vdbcook_vpak::Metadata) -> GridSelection {
 
 /// Cooks `files` losslessly in memory (f32, no clustering) with `levels` levels of detail: the reference
 /// asset `validate` compares with, and what `render` draws for a .vdb.
-pub fn cook_lossless_levels(files: Vec<PathBuf>, sel: GridSelection, allow_missing: bool, levels: u32, bars: &dyn Progress) -> Result<vdbcook_vpak::Asset> {
-    let (cookers, _, _) = feed(vec![CookOptions { levels, ..reference_options() }], files, sel, allow_missing, None, bars)?;
+pub fn cook_lossless_levels(files: Vec<FrameFile>, sel: GridSelection, levels: vdbcook_vpak::LevelCount, bars: &dyn Progress) -> Result<vdbcook_vpak::Asset> {
+    let (cookers, _, _) = feed(vec![CookOptions { levels, ..reference_options() }], files, sel, None, bars)?;
     let cooker = cookers.into_iter().next().ok_or_else(|| Error::Failed("no cooker".into()))?;
     finish_reference(cooker)
 }
@@ -160,29 +160,13 @@ pub fn cook_asset(job: CookJob, bars: &dyn Progress) -> Result<Cooked> {
 /// asked for, comes with the first.
 pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Result<Vec<Cooked>> {
     let s = job.settings;
-    let mut all: Vec<CookOptions> = formats
-        .iter()
-        .map(|&format| {
-            let fs = CookSettings { format, ..s.clone() };
-            CookOptions {
-                format,
-                groups: s.group.clone(),
-                quality: s.quality,
-                max_texture_dim: s.max_texture_dim,
-                clustering: s.clustering(),
-                max_error: s.max_error,
-                settings: fs.recorded(job.inputs),
-                levels: s.lods,
-                max_bytes: s.max_bytes.map(|b| b.0),
-            }
-        })
-        .collect();
+    let mut all: Vec<CookOptions> = formats.iter().map(|&format| CookSettings { format, ..s.clone() }.cook_options(job.inputs)).collect();
     if job.reference {
         // As many levels as the asset: its validation checks each.
         all.push(CookOptions { levels: s.lods, ..reference_options() });
     }
     let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
-    let (cookers, channels, read_secs) = feed(all, job.files, sel, s.allow_missing, job.base, bars)?;
+    let (cookers, channels, read_secs) = feed(all, FrameFile::each(job.files, s.allow_missing), sel, job.base, bars)?;
     let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
     let mut cookers = cookers.into_iter();
     let mut out = Vec::new();

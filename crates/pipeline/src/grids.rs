@@ -110,8 +110,27 @@ pub(crate) fn hash_hex(xxh3_128: u128) -> String {
     format!("{xxh3_128:032x}")
 }
 
+/// One frame to read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameFile {
+    /// The file; `None` for a frame that has none (a reference's copy of an
+    /// asset's frame cooked from a missing file).
+    pub path: Option<PathBuf>,
+    /// A missing file or grid makes an empty frame rather than an error.
+    pub allow_missing: bool,
+}
+
+impl FrameFile {
+    /// One frame per file, each with the same rule for what is missing.
+    pub fn each(files: Vec<PathBuf>, allow_missing: bool) -> Vec<FrameFile> {
+        files.into_iter().map(|p| FrameFile { path: Some(p), allow_missing }).collect()
+    }
+}
+
 /// Reads one frame; the channels are resolved by the first frame that has a file.
-pub fn read_frame(path: PathBuf, sel: &GridSelection, channels: &mut Option<Channels>, allow_missing: bool) -> Result<Frame> {
+pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Channels>) -> Result<Frame> {
+    let FrameFile { path, allow_missing } = file;
+    let Some(path) = path else { return Ok(Frame { path: PathBuf::new(), grids: None, source: None }) };
     let p = path.display().to_string();
     if !path.exists() {
         if allow_missing {

@@ -19,7 +19,7 @@ pub mod summary;
 
 pub use check::{validate_file, Sources};
 pub use cook::{cook_asset, cook_formats, cook_lossless_levels, feed, selection_of, CookJob, Cooked};
-pub use grids::{Channels, GridSelection};
+pub use grids::{Channels, FrameFile, GridSelection};
 pub use options::{CookSettings, FrameRange, SettingError};
 
 type BoxError = Box<dyn std::error::Error + Send + Sync>;

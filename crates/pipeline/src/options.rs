@@ -1,21 +1,21 @@
 //! The typed cook options: one struct, [`CookSettings`], built from `cook`'s
 //! flags (clap) or from a manifest entry (serde), with one default per setting.
 //!
-//! Every setting is declared once, in the `settings!` list at the bottom:
-//! its type, its default, its flag's help and value checks. The macro derives
-//! the struct, its defaults, the manifest tables (every field optional, with
-//! its position in the file) and the canonical `(name, value)` list that cache
-//! keys hash. Adding a setting is one entry there.
+//! Every setting is declared once, in the `settings_group!` below: its type,
+//! its default and its flag's help. Each value type checks its own range when
+//! it is built (`vdbcook_vpak::settings`), so the flags, the manifest and a
+//! library caller share one check. The comparison's settings ([`Viewing`],
+//! [`Gate`]) are vdbcook-validate's groups, included flat.
 
 use std::fmt;
-use std::ops::RangeInclusive;
 use std::str::FromStr;
-use toml::Spanned;
 pub use vdbcook_cook::ChannelGroup;
-pub use vdbcook_encode::{Format, Quality};
-// The gate's budgets and the image size are the comparison's (vdbcook-validate owns them).
-pub use vdbcook_validate::options::{flip_budget, parse_flip_budget, parse_psnr_floor, parse_rmse_budget, psnr_floor, rmse_budget};
+pub use vdbcook_encode::{ErrorBound, Format, Quality};
+pub use vdbcook_validate::options::{FlipBudget, PsnrFloor, RmseBudget, Viewing, Views};
 pub use vdbcook_validate::{Gate, Size};
+pub use vdbcook_vpak::settings::{SettingText, Settings};
+use vdbcook_vpak::{bounded, settings_group};
+pub use vdbcook_vpak::{Level, LevelCount};
 
 /// A setting out of its range or at odds with another; `name` is the setting's.
 #[derive(Debug, thiserror::Error)]
@@ -136,168 +136,53 @@ impl<'de> serde::Deserialize<'de> for ByteBudget {
     }
 }
 
-/// Types written as a string in a manifest and parsed like the flag.
-macro_rules! deserialize_from_str {
-    ($($t:ty),*) => {$(
-        impl<'de> serde::Deserialize<'de> for $t {
-            fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-                let s = String::deserialize(d)?;
-                s.parse().map_err(serde::de::Error::custom)
-            }
-        }
-    )*};
-}
-deserialize_from_str!(FrameRange);
-
-/// A setting's value as canonical text (for cache keys and metadata).
-pub trait SettingText {
-    fn text(&self) -> String;
+/// A manifest writes it as the flag's text.
+impl<'de> serde::Deserialize<'de> for FrameRange {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
 }
 
-macro_rules! text_by_display {
-    ($($t:ty),*) => {$( impl SettingText for $t { fn text(&self) -> String { self.to_string() } } )*};
-}
-text_by_display!(bool, u32, f32, f64, String, FrameRange, Size, ChannelGroup, ByteBudget);
-
-impl SettingText for Format {
+impl SettingText for FrameRange {
     fn text(&self) -> String {
-        self.name().to_string()
+        self.to_string()
     }
 }
 
-impl SettingText for Quality {
+impl SettingText for ByteBudget {
     fn text(&self) -> String {
-        self.name().to_string()
+        self.to_string()
     }
 }
 
-impl<T: SettingText> SettingText for Option<T> {
-    fn text(&self) -> String {
-        self.as_ref().map(SettingText::text).unwrap_or_default()
-    }
-}
+bounded!(
+    /// k-means clusters (`--clusters`, `clusters`): 1 to 1,000,000.
+    Clusters(u32),
+    "cluster count",
+    |k| if (1..=1_000_000).contains(&k) { Ok(()) } else { Err(format!("{k} is not in 1..=1000000")) }
+);
 
-impl<T: SettingText> SettingText for Vec<T> {
-    fn text(&self) -> String {
-        self.iter().map(SettingText::text).collect::<Vec<_>>().join(",")
-    }
-}
+bounded!(
+    /// k-means iterations (`--iterations`, `iterations`): 0 to 1000.
+    Iterations(u32),
+    "iteration count",
+    |n| if n <= 1000 { Ok(()) } else { Err(format!("{n} is not in 0..=1000")) }
+);
 
-/// Accepted ranges, shared by the flags' parsers and the manifest's checks.
-pub const CLUSTERS: RangeInclusive<i64> = 1..=1_000_000;
-pub const ITERATIONS: RangeInclusive<i64> = 0..=1000;
-pub const MAX_TEXTURE_DIM: RangeInclusive<i64> = 8..=16384;
-pub const VIEWS: RangeInclusive<i64> = 1..=360;
+bounded!(
+    /// A variance / mean threshold (`--variance-threshold`): a number >= 0.
+    VarianceThreshold(f64),
+    "number",
+    |t| if t >= 0.0 { Ok(()) } else { Err(format!("must be a number >= 0, not {t}")) }
+);
 
-/// A level count (`--lods`, `lods`): 1 to `vdbcook_vpak::MAX_LEVELS`.
-pub fn lods(n: u32) -> Result<u32, String> {
-    let max = vdbcook_vpak::MAX_LEVELS;
-    match n {
-        0 => Err("0 is not a level count: 1 keeps the frames alone, N adds levels 1 to N-1".into()),
-        n if n > max => {
-            Err(format!("{n} is more levels than the tree has: at most {max} (level {}'s voxels are {} source voxels wide, and its bricks span a whole L1 slot)", max - 1, 1u32 << (max - 1)))
-        }
-        n => Ok(n),
-    }
-}
-
-/// Parses a level flag (`render --lod`, `unpack --lod`): 0 to `MAX_LEVELS` − 1.
-pub fn parse_lod(s: &str) -> Result<u32, String> {
-    let max = vdbcook_vpak::MAX_LEVELS - 1;
-    match s.trim().parse::<u32>() {
-        Ok(k) if k <= max => Ok(k),
-        _ => Err(format!("invalid level \"{s}\" (expected 0 to {max}: 0 is the frame itself)")),
-    }
-}
-
-/// Parses a level count flag.
-pub fn parse_lods(s: &str) -> Result<u32, String> {
-    lods(s.trim().parse::<u32>().map_err(|_| format!("invalid level count \"{s}\" (expected a whole number, 1 to {})", vdbcook_vpak::MAX_LEVELS))?)
-}
-
-fn parse_number(s: &str) -> Result<f64, String> {
-    vdbcook_validate::options::parse_number(s)
-}
-
-/// A per-voxel error bound (`--max-error`, `max_error`): a finite number >= 0.
-pub fn max_error_bound(e: f32) -> Result<f32, String> {
-    if e >= 0.0 && e.is_finite() {
-        Ok(e)
-    } else {
-        Err(format!("must be a finite number >= 0, not {e}"))
-    }
-}
-
-/// Parses a per-voxel error bound flag.
-pub fn parse_max_error(s: &str) -> Result<f32, String> {
-    max_error_bound(parse_number(s)? as f32)
-}
-
-macro_rules! settings {
-    ($( $(#[$attr:meta])* $name:ident : $ty:ty = $default:expr ; )*) => {
-        /// Every cook setting of one asset (flags of `vdbcook cook`, keys of a bake manifest).
-        #[derive(Clone, Debug, PartialEq)]
-        #[cfg_attr(feature = "clap", derive(clap::Args))]
-        pub struct CookSettings {
-            $( $(#[$attr])* pub $name: $ty, )*
-        }
-
-        impl Default for CookSettings {
-            fn default() -> Self {
-                CookSettings { $( $name: $default, )* }
-            }
-        }
-
-        impl CookSettings {
-            /// Setting names in canonical order (the manifest's keys).
-            pub const NAMES: &'static [&'static str] = &[$( stringify!($name), )*];
-
-            /// Every setting as (name, value) text, in canonical order.
-            pub fn pairs(&self) -> Vec<(&'static str, String)> {
-                vec![$( (stringify!($name), SettingText::text(&self.$name)), )*]
-            }
-        }
-
-        /// A manifest's `[defaults]` table: any setting, each optional.
-        #[derive(Clone, Debug, Default, serde::Deserialize)]
-        #[serde(deny_unknown_fields)]
-        pub struct SettingsTable {
-            $( #[serde(default)] pub $name: Option<Spanned<$ty>>, )*
-        }
-
-        /// One `[[asset]]` entry: name, output, inputs and any setting.
-        #[derive(Clone, Debug, serde::Deserialize)]
-        #[serde(deny_unknown_fields)]
-        pub struct AssetTable {
-            pub name: Spanned<String>,
-            pub output: Spanned<String>,
-            pub inputs: Spanned<Vec<Spanned<String>>>,
-            $( #[serde(default)] pub $name: Option<Spanned<$ty>>, )*
-        }
-
-        impl SettingsTable {
-            /// Overrides `s` with the settings this table gives.
-            pub fn apply(&self, s: &mut CookSettings) {
-                $( if let Some(v) = &self.$name { s.$name = v.get_ref().clone(); } )*
-            }
-            /// Where the table gives `name`.
-            pub fn span(&self, name: &str) -> Option<std::ops::Range<usize>> {
-                $( if name == stringify!($name) { return self.$name.as_ref().map(|v| v.span()); } )*
-                None
-            }
-        }
-
-        impl AssetTable {
-            pub fn apply(&self, s: &mut CookSettings) {
-                $( if let Some(v) = &self.$name { s.$name = v.get_ref().clone(); } )*
-            }
-            pub fn span(&self, name: &str) -> Option<std::ops::Range<usize>> {
-                $( if name == stringify!($name) { return self.$name.as_ref().map(|v| v.span()); } )*
-                None
-            }
-        }
-    };
-}
+bounded!(
+    /// The largest 3D texture edge in texels (`--max-texture-dim`): 8 to 16384.
+    TextureDim(u32),
+    "texel count",
+    |n| if (8..=16384).contains(&n) { Ok(()) } else { Err(format!("{n} is not in 8..=16384")) }
+);
 
 fn cook_defaults() -> vdbcook_cook::CookOptions {
     vdbcook_cook::CookOptions::default()
@@ -307,127 +192,99 @@ fn cluster_defaults() -> vdbcook_cluster::Options {
     vdbcook_cluster::Options::default()
 }
 
-// The one list of settings. Defaults come from the libraries that use them
-// (CookOptions, cluster::Options) or are written here; the flags show them.
-// The gate flags `requires = "checks"`: cook's group of --validate and
-// --auto (a flag of cook alone: a bake does not search formats).
-settings! {
-    /// Frames of a frame pattern: A-B or A-B:STEP (e.g. 1-120:2).
-    #[cfg_attr(feature = "clap", arg(long, value_name = "RANGE"))]
-    frames: Option<FrameRange> = None;
-    /// Grid to cook (default: "density", else the first float grid; a vec3 grid gives three channels).
-    #[cfg_attr(feature = "clap", arg(long, value_name = "NAME", conflicts_with = "grids"))]
-    grid: Option<String> = None;
-    /// Grids to cook into one asset, as channels of one tree: names as in the files,
-    /// comma-separated, or "all" (every float, double, half and vec3 grid of the first frame).
-    #[cfg_attr(feature = "clap", arg(long, value_name = "A,B,...|all"))]
-    grids: Option<String> = None;
-    /// Pack these channels into shared textures in their own format (repeatable), e.g.
-    /// --group temperature,flames=bc7 --group density=bc4; other channels take --format, a texture each.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "CHANNELS=FORMAT"))]
-    group: Vec<ChannelGroup> = Vec::new();
-    /// A frame whose file or grid is missing becomes an empty frame instead of an error.
-    #[cfg_attr(feature = "clap", arg(long))]
-    allow_missing: bool = false;
-    /// Voxel format of the brick atlas.
-    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().format))]
-    format: Format = cook_defaults().format;
-    /// Store every brick in the cheapest format (constant, bc7, bc4, unorm8, unorm16, f16, f32)
-    /// whose active voxels all decode within E of the source (absolute); --format is not used.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "E", allow_negative_numbers = true, value_parser = parse_max_error, conflicts_with_all = ["format", "group"]))]
-    max_error: Option<f32> = None;
-    /// Encoder preset of bc7 and bc4 (see the notes below).
-    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().quality))]
-    quality: Quality = cook_defaults().quality;
-    /// Merge similar bricks with variance-gated k-means into K centroid bricks (off by default).
-    #[cfg_attr(feature = "clap", arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(CLUSTERS)))]
-    clusters: Option<u32> = None;
-    /// k-means iterations.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().iterations, value_parser = clap::value_parser!(u32).range(ITERATIONS)))]
-    iterations: u32 = cluster_defaults().iterations as u32;
-    /// Bricks whose variance / mean exceeds T are never clustered.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "T", default_value_t = CookSettings::default().variance_threshold))]
-    variance_threshold: f64 = cluster_defaults().variance_threshold;
-    /// A clustered brick whose largest voxel difference from its centroid exceeds E stays unique.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "E"))]
-    max_brick_error: Option<f32> = cluster_defaults().max_brick_error;
-    /// Levels of detail: N > 1 adds levels 1 to N-1 to every frame, level k with voxels 2^k
-    /// times as large (each the mean of its 2x2x2 children; level sets: of the active ones).
-    #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().lods, value_parser = parse_lods))]
-    lods: u32 = cook_defaults().levels;
-    /// Byte budget B (bytes, or e.g. 500kB, 1.5MB, 2MiB): keep the finest levels of detail
-    /// (of --lods) whose asset fits, leaving out the finer ones; the coarsest always stays, and
-    /// when even it alone is larger the cook fails (exit 1) naming the smallest size reachable.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "B"))]
-    max_bytes: Option<ByteBudget> = None;
-    /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim, value_parser = clap::value_parser!(u32).range(MAX_TEXTURE_DIM)))]
-    max_texture_dim: u32 = cook_defaults().max_texture_dim;
-    /// After cooking, render the asset against its sources on the GPU (see `vdbcook validate`).
-    #[cfg_attr(feature = "clap", arg(long))]
-    validate: bool = false;
-    /// With --validate (or cook --auto): exit with code 3 when any image's RMSE is above X.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "X", requires = "checks", allow_negative_numbers = true, value_parser = parse_rmse_budget))]
-    max_rmse: Option<f64> = None;
-    /// With --validate (or cook --auto): exit with code 3 when any image's PSNR (dB) is below Y.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "Y", requires = "checks", allow_negative_numbers = true, value_parser = parse_psnr_floor))]
-    min_psnr: Option<f64> = None;
-    /// With --validate (or cook --auto): exit with code 3 when any image's mean FLIP error (0 to 1, at 67 pixels per degree) is above F.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "F", requires = "checks", allow_negative_numbers = true, value_parser = parse_flip_budget))]
-    max_flip: Option<f64> = None;
-    /// With --validate (or cook --auto): cameras orbiting the volume.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().views, requires = "checks", value_parser = clap::value_parser!(u32).range(VIEWS)))]
-    views: u32 = 8;
-    /// With --validate (or cook --auto): image size.
-    #[cfg_attr(feature = "clap", arg(long, value_name = "WxH", default_value_t = CookSettings::default().size, requires = "checks"))]
-    size: Size = Size { width: 512, height: 512 };
-    /// With --validate (or cook --auto): the channel that gives extinction in the validation
-    /// scene (default: "density", else the first scalar fog channel that does not glow).
-    #[cfg_attr(feature = "clap", arg(long, value_name = "NAME", requires = "checks"))]
-    extinction: Option<String> = None;
+// The one list of cook settings. Defaults come from the libraries that use
+// them (CookOptions, cluster::Options) or are written here; the flags show
+// them. `cook` makes the comparison's flags (Viewing, Gate) require --validate
+// or --auto (a group of its own: a bake does not search formats).
+settings_group! {
+    /// Every cook setting of one asset (flags of `vdbcook cook`, keys of a bake manifest).
+    #[cfg_attr(feature = "clap", derive(clap::Args))]
+    pub struct CookSettings {
+        /// Frames of a frame pattern: A-B or A-B:STEP (e.g. 1-120:2).
+        #[cfg_attr(feature = "clap", arg(long, value_name = "RANGE"))]
+        pub frames: Option<FrameRange> = None;
+        /// Grid to cook (default: "density", else the first float grid; a vec3 grid gives three channels).
+        #[cfg_attr(feature = "clap", arg(long, value_name = "NAME", conflicts_with = "grids"))]
+        pub grid: Option<String> = None;
+        /// Grids to cook into one asset, as channels of one tree: names as in the files,
+        /// comma-separated, or "all" (every float, double, half and vec3 grid of the first frame).
+        #[cfg_attr(feature = "clap", arg(long, value_name = "A,B,...|all"))]
+        pub grids: Option<String> = None;
+        /// Pack these channels into shared textures in their own format (repeatable), e.g.
+        /// --group temperature,flames=bc7 --group density=bc4; other channels take --format, a texture each.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "CHANNELS=FORMAT"))]
+        pub group: Vec<ChannelGroup> = Vec::new();
+        /// A frame whose file or grid is missing becomes an empty frame instead of an error.
+        #[cfg_attr(feature = "clap", arg(long))]
+        pub allow_missing: bool = false;
+        /// Voxel format of the brick atlas.
+        #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().format))]
+        pub format: Format = cook_defaults().format;
+        /// Store every brick in the cheapest format (constant, bc7, bc4, unorm8, unorm16, f16, f32)
+        /// whose active voxels all decode within E of the source (absolute); --format is not used.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "E", allow_negative_numbers = true, conflicts_with_all = ["format", "group"]))]
+        pub max_error: Option<ErrorBound> = None;
+        /// Encoder preset of bc7 and bc4 (see the notes below).
+        #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().quality))]
+        pub quality: Quality = cook_defaults().quality;
+        /// Merge similar bricks with variance-gated k-means into K centroid bricks (off by default).
+        #[cfg_attr(feature = "clap", arg(long, value_name = "K"))]
+        pub clusters: Option<Clusters> = None;
+        /// k-means iterations.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().iterations))]
+        pub iterations: Iterations = Iterations(cluster_defaults().iterations as u32);
+        /// Bricks whose variance / mean exceeds T are never clustered.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "T", allow_negative_numbers = true, default_value_t = CookSettings::default().variance_threshold))]
+        pub variance_threshold: VarianceThreshold = VarianceThreshold(cluster_defaults().variance_threshold);
+        /// A clustered brick whose largest voxel difference from its centroid exceeds E stays unique.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "E", allow_negative_numbers = true))]
+        pub max_brick_error: Option<ErrorBound> = cluster_defaults().max_brick_error.and_then(|e| ErrorBound::new(e).ok());
+        /// Levels of detail: N > 1 adds levels 1 to N-1 to every frame, level k with voxels 2^k
+        /// times as large (each the mean of its 2x2x2 children; level sets: of the active ones).
+        #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().lods))]
+        pub lods: LevelCount = cook_defaults().levels;
+        /// Byte budget B (bytes, or e.g. 500kB, 1.5MB, 2MiB): keep the finest levels of detail
+        /// (of --lods) whose asset fits, leaving out the finer ones; the coarsest always stays, and
+        /// when even it alone is larger the cook fails (exit 1) naming the smallest size reachable.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "B"))]
+        pub max_bytes: Option<ByteBudget> = None;
+        /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim))]
+        pub max_texture_dim: TextureDim = TextureDim(cook_defaults().max_texture_dim);
+        /// After cooking, render the asset against its sources on the GPU (see `vdbcook validate`).
+        #[cfg_attr(feature = "clap", arg(long))]
+        pub validate: bool = false;
+    }
+    flatten {
+        #[cfg_attr(feature = "clap", command(flatten, next_help_heading = "With --validate or --auto"))]
+        pub viewing: Viewing;
+        #[cfg_attr(feature = "clap", command(flatten, next_help_heading = "With --validate or --auto"))]
+        pub gate: Gate;
+    }
 }
 
 impl CookSettings {
-    /// Checks what the types do not: ranges and numbers. The error names the setting.
+    /// Checks what one value's type cannot: settings at odds with each other.
+    /// The error names the setting.
     pub fn check(&self) -> Result<(), SettingError> {
-        let bad = |name: &'static str, message: String| Err(SettingError { name, message });
-        let within = |v: u32, r: &RangeInclusive<i64>| r.contains(&i64::from(v));
-        if let Some(k) = self.clusters.filter(|&k| !within(k, &CLUSTERS)) {
-            return bad("clusters", format!("{k} is not in {}..={}", CLUSTERS.start(), CLUSTERS.end()));
-        }
-        if !within(self.iterations, &ITERATIONS) {
-            return bad("iterations", format!("{} is not in {}..={}", self.iterations, ITERATIONS.start(), ITERATIONS.end()));
-        }
-        if !within(self.max_texture_dim, &MAX_TEXTURE_DIM) {
-            return bad("max_texture_dim", format!("{} is not in {}..={}", self.max_texture_dim, MAX_TEXTURE_DIM.start(), MAX_TEXTURE_DIM.end()));
-        }
-        if let Err(message) = lods(self.lods) {
-            return bad("lods", message);
-        }
-        if !within(self.views, &VIEWS) {
-            return bad("views", format!("{} is not in {}..={}", self.views, VIEWS.start(), VIEWS.end()));
-        }
-        if self.variance_threshold.is_nan() || self.variance_threshold < 0.0 {
-            return bad("variance_threshold", format!("must be a number >= 0, not {}", self.variance_threshold));
-        }
-        if let Some(e) = self.max_brick_error.filter(|e| e.is_nan() || *e < 0.0) {
-            return bad("max_brick_error", format!("must be a number >= 0, not {e}"));
-        }
-        if let Some(Err(message)) = self.max_error.map(max_error_bound) {
-            return bad("max_error", message);
-        }
         if self.max_error.is_some() && !self.group.is_empty() {
-            return bad("max_error", "chooses every brick's format: it takes no channel groups".into());
-        }
-        if let Err((name, message)) = Gate::new(self.max_rmse, self.min_psnr, self.max_flip) {
-            return bad(name, message);
+            return Err(SettingError { name: "max_error", message: vdbcook_cook::Error::MaxErrorGroups.to_string() });
         }
         Ok(())
     }
 
-    /// The quality gate of `validate`, checked by [`CookSettings::check`].
-    pub fn gate(&self) -> Gate {
-        Gate { max_rmse: self.max_rmse, min_psnr: self.min_psnr, max_flip: self.max_flip }
+    /// Setting names in canonical order (the manifest's keys).
+    pub fn names() -> Vec<&'static str> {
+        let mut k = Vec::new();
+        Self::keys(&mut k);
+        k
+    }
+
+    /// Every setting as (name, value) text, in canonical order.
+    pub fn pairs(&self) -> Vec<(&'static str, String)> {
+        let mut out = Vec::new();
+        Settings::pairs(self, &mut out);
+        out
     }
 
     /// The comparison `cook --validate`, `cook --auto` and `bake` make: every
@@ -436,24 +293,37 @@ impl CookSettings {
     pub fn compare_options(&self, report: Option<std::path::PathBuf>) -> vdbcook_validate::CompareOptions {
         vdbcook_validate::CompareOptions {
             frames: None,
-            views: self.views,
-            size: self.size,
-            gate: self.gate(),
-            levels: if self.lods > 1 { vdbcook_validate::Levels::Every } else { vdbcook_validate::Levels::First },
+            viewing: self.viewing.clone(),
+            gate: self.gate,
+            levels: if self.lods.get() > 1 { vdbcook_validate::Levels::Every } else { vdbcook_validate::Levels::First },
             report,
-            extinction: self.extinction.clone(),
         }
     }
 
     /// The clustering options, when `clusters` is set.
     pub fn clustering(&self) -> Option<vdbcook_cluster::Options> {
         self.clusters.map(|k| vdbcook_cluster::Options {
-            clusters: k as usize,
-            iterations: self.iterations as usize,
-            variance_threshold: self.variance_threshold,
-            max_brick_error: self.max_brick_error,
+            clusters: k.get() as usize,
+            iterations: self.iterations.get() as usize,
+            variance_threshold: self.variance_threshold.get(),
+            max_brick_error: self.max_brick_error.map(ErrorBound::get),
             ..vdbcook_cluster::Options::default()
         })
+    }
+
+    /// The cooker's options (the settings recorded in the asset with `inputs`).
+    pub fn cook_options(&self, inputs: &[String]) -> vdbcook_cook::CookOptions {
+        vdbcook_cook::CookOptions {
+            format: self.format,
+            groups: self.group.clone(),
+            quality: self.quality,
+            max_texture_dim: self.max_texture_dim.get(),
+            clustering: self.clustering(),
+            max_error: self.max_error,
+            settings: self.recorded(inputs),
+            levels: self.lods,
+            max_bytes: self.max_bytes.map(|b| b.0),
+        }
     }
 
     /// The settings a cook records in the asset's metadata (what `cook` has
@@ -490,7 +360,7 @@ mod tests {
             assert_eq!(s.parse::<FrameRange>().unwrap().to_string(), s);
         }
         assert!("9-1".parse::<FrameRange>().is_err());
-        assert_eq!("64x48".parse::<Size>().unwrap(), Size { width: 64, height: 48 });
+        assert_eq!("64x48".parse::<Size>().unwrap(), Size::new(64, 48).unwrap());
         assert!("4x4".parse::<Size>().is_err());
     }
 
@@ -517,23 +387,48 @@ mod tests {
     #[test]
     fn one_default_per_setting() {
         let d = CookSettings::default();
-        assert_eq!(d.variance_threshold, vdbcook_cluster::Options::default().variance_threshold);
-        assert_eq!(d.variance_threshold, 0.01);
+        assert_eq!(d.variance_threshold.get(), vdbcook_cluster::Options::default().variance_threshold);
+        assert_eq!(d.variance_threshold.get(), 0.01);
         assert_eq!(d.format, Format::F16);
         assert_eq!(d.quality, Quality::VeryFast);
-        assert_eq!(d.pairs().len(), CookSettings::NAMES.len());
+        assert_eq!(d.pairs().len(), CookSettings::names().len());
         assert!(d.check().is_ok());
-        let bad = CookSettings { variance_threshold: -1.0, ..d.clone() };
-        assert!(matches!(bad.check(), Err(SettingError { name: "variance_threshold", .. })));
-        assert_eq!(d.max_flip, None);
-        for x in [-0.1, f64::NAN, f64::INFINITY] {
-            let bad = CookSettings { max_flip: Some(x), ..d.clone() };
-            assert!(matches!(bad.check(), Err(SettingError { name: "max_flip", .. })), "{x}");
-            assert!(parse_flip_budget(&x.to_string()).is_err(), "{x}");
+        assert_eq!(d.gate.max_flip, None);
+        assert_eq!(d.viewing.views.get(), 8);
+        // The comparison's settings are keys of their own, flat, after cook's.
+        let names = CookSettings::names();
+        assert!(names.ends_with(&["extinction", "views", "size", "max_rmse", "min_psnr", "max_flip"]), "{names:?}");
+        for x in ["-0.1", "NaN", "inf", "x"] {
+            assert!(x.parse::<FlipBudget>().is_err(), "{x}");
         }
-        assert!(CookSettings { max_flip: Some(0.0), ..d.clone() }.check().is_ok());
-        assert_eq!(parse_flip_budget("0.05"), Ok(0.05));
-        assert!(parse_flip_budget("x").is_err());
+        assert_eq!("0.05".parse::<FlipBudget>().map(FlipBudget::get), Ok(0.05));
+        let groups = CookSettings { max_error: Some(ErrorBound::new(0.1).unwrap()), group: vec!["density=bc4".parse().unwrap()], ..d.clone() };
+        assert!(matches!(groups.check(), Err(SettingError { name: "max_error", .. })));
+    }
+
+    /// A manifest key and a flag reach the same slot, checked by the same type.
+    #[test]
+    fn keys_reach_their_slots() {
+        struct Json(serde_json::Value);
+        impl vdbcook_vpak::settings::SettingVisitor for Json {
+            type Out = Result<(), String>;
+            fn visit<T: serde::de::DeserializeOwned>(self, slot: &mut T) -> Self::Out {
+                *slot = serde_json::from_value(self.0).map_err(|e| e.to_string())?;
+                Ok(())
+            }
+        }
+        let mut s = CookSettings::default();
+        assert_eq!(s.visit_key("views", Json(serde_json::json!(3))), Some(Ok(())));
+        assert_eq!(s.viewing.views.get(), 3);
+        assert_eq!(s.visit_key("max_rmse", Json(serde_json::json!(0.5))), Some(Ok(())));
+        assert_eq!(s.gate.max_rmse.map(RmseBudget::get), Some(0.5));
+        assert!(s.visit_key("clusters", Json(serde_json::json!(0))).unwrap().unwrap_err().contains("0 is not in 1..=1000000"));
+        assert!(s.visit_key("lods", Json(serde_json::json!(9))).unwrap().is_err());
+        assert!(s.visit_key("nope", Json(serde_json::json!(1))).is_none());
+        let mut t = CookSettings::default();
+        t.copy_key(&s, "views");
+        assert_eq!(t.viewing.views.get(), 3);
+        assert_eq!(t.gate.max_rmse, None);
     }
 
     #[test]

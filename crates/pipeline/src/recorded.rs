@@ -10,17 +10,15 @@ use crate::{Error, Result};
 use std::path::{Path, PathBuf};
 use vdbcook_vpak::Metadata;
 
-/// One path per frame of `meta`, in frame order. A frame cooked empty (a
-/// missing file with `--allow-missing`) gets a path that cannot exist, so the
-/// reference cook reads it as empty too (it is cooked with missing files allowed).
-pub fn frame_files(meta: &Metadata, asset: &Path) -> Result<Vec<PathBuf>> {
+/// One path per frame of `meta`, in frame order; `None` for a frame cooked
+/// from a missing file (`--allow-missing`), which records none.
+pub fn frame_files(meta: &Metadata, asset: &Path) -> Result<Vec<Option<PathBuf>>> {
     let name = asset.display();
     let asset_dir = asset.parent().unwrap_or(Path::new(""));
     let mut files = Vec::with_capacity(meta.frames.len());
     for (f, frame) in meta.frames.iter().enumerate() {
         let Some(i) = frame.source else {
-            // A NUL byte is in no file name: `exists()` is false on every system.
-            files.push(PathBuf::from(format!("\0empty frame {f}")));
+            files.push(None);
             continue;
         };
         let src = meta.sources.get(i as usize).ok_or_else(|| Error::Failed(format!("{name}: frame {f} names source {i}, but the asset records {}", meta.sources.len())))?;
@@ -37,7 +35,7 @@ pub fn frame_files(meta: &Metadata, asset: &Path) -> Result<Vec<PathBuf>> {
         if bytes != src.bytes || file_hash(&path).map_err(|e| Error::Failed(format!("{}: {e}", path.display())))? != src.xxh3_128 {
             return Err(changed(&name.to_string(), &path));
         }
-        files.push(path);
+        files.push(Some(path));
     }
     Ok(files)
 }

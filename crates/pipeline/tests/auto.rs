@@ -7,7 +7,13 @@ use vdbcook_cook::NoProgress;
 use vdbcook_pipeline::auto::search;
 use vdbcook_pipeline::options::CookSettings;
 use vdbcook_pipeline::{cook_asset, inputs, validate_file, CookJob, Sources};
-use vdbcook_validate::{Gate, Renderer, Size};
+use vdbcook_validate::options::RmseBudget;
+use vdbcook_validate::{Gate, Renderer, Size, Viewing, Views};
+
+/// An image RMSE of 0: only an exact asset passes.
+fn lossless_gate() -> Gate {
+    Gate { max_rmse: Some(RmseBudget::new(0.0).unwrap()), ..Gate::default() }
+}
 
 fn renderer() -> Option<Renderer> {
     vdbcook_testkit::or_skip(Renderer::new(None), "GPU adapter")
@@ -18,7 +24,7 @@ fn smoke() -> String {
 }
 
 fn settings(gate: Gate) -> CookSettings {
-    CookSettings { views: 2, size: Size { width: 32, height: 24 }, max_rmse: gate.max_rmse, min_psnr: gate.min_psnr, max_flip: gate.max_flip, ..CookSettings::default() }
+    CookSettings { viewing: Viewing { views: Views::new(2).unwrap(), size: Size::new(32, 24).unwrap(), ..Viewing::default() }, gate, ..CookSettings::default() }
 }
 
 #[test]
@@ -26,7 +32,7 @@ fn the_search_picks_the_smallest_format_that_meets_the_gate() {
     let Some(r) = renderer() else { return };
     let files = inputs::expand(&[smoke()], None).unwrap();
     // An exact gate: f32 renders exactly (no clustering), so the search ends by f32 at the latest.
-    let s = settings(Gate::new(Some(0.0), None, None).unwrap());
+    let s = settings(lossless_gate());
     let found = search(CookJob { settings: &s, files: files.clone(), inputs: &[], base: None, reference: false }, &s.compare_options(None), "smoke", &r, &NoProgress).unwrap();
     let chosen = found.chosen.expect("f32 meets an exact gate");
     assert_eq!(found.candidates[chosen].worst().unwrap().rmse, 0.0);
@@ -47,7 +53,7 @@ fn a_gate_nothing_meets_names_the_best_reached() {
     let Some(r) = renderer() else { return };
     let files = inputs::expand(&[smoke()], None).unwrap();
     // With clustering into one brick, even f32 is lossy.
-    let s = CookSettings { clusters: Some(1), ..settings(Gate::new(Some(0.0), None, None).unwrap()) };
+    let s = CookSettings { clusters: Some("1".parse().unwrap()), ..settings(lossless_gate()) };
     let found = search(CookJob { settings: &s, files, inputs: &[], base: None, reference: false }, &s.compare_options(None), "smoke", &r, &NoProgress).unwrap();
     assert!(found.chosen.is_none());
     assert!(found.best.is_some());

@@ -4,6 +4,7 @@
 //! and voxel figures per level, frame and view, and the gate's verdict.
 
 use crate::flip::DEFAULT_PPD;
+use crate::options::Viewing;
 use crate::{compare, FlipMap, Gate, GpuAsset, Image, ImageMetrics, Model, Renderer, Scene, Size};
 use rayon::prelude::*;
 use serde_json::json;
@@ -41,12 +42,12 @@ impl CompareError {
 }
 
 /// Which levels of detail to compare.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub enum Levels {
     /// One level (default: the asset's first stored level).
     #[default]
     First,
-    At(u32),
+    At(vdbcook_vpak::Level),
     /// Every stored level, the gate holding at each.
     Every,
 }
@@ -56,15 +57,12 @@ pub enum Levels {
 pub struct CompareOptions {
     /// Asset frames to render, counted from 0 (default: all).
     pub frames: Option<Vec<usize>>,
-    /// Cameras orbiting the volume (1 to 360).
-    pub views: u32,
-    pub size: Size,
+    /// The medium, the cameras and the image size.
+    pub viewing: Viewing,
     pub gate: Gate,
     pub levels: Levels,
     /// Write report.json, PNGs and report.html here.
     pub report: Option<PathBuf>,
-    /// The channel that gives extinction (default: the scene's choice).
-    pub extinction: Option<String>,
 }
 
 /// One image's figures.
@@ -171,7 +169,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>, E: Into<BoxError>>(
     let meta = asset.metadata().map_err(|e| CompareError::In(name.to_string(), e.into()))?;
     let ref_meta = reference.metadata().map_err(crate::Error::from)?;
     let lod = match opts.levels {
-        Levels::At(k) => k,
+        Levels::At(k) => k.get(),
         _ => meta.first_level,
     };
     if ref_meta.frame_count != meta.frame_count {
@@ -189,7 +187,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>, E: Into<BoxError>>(
         return Err(CompareError::Failed(format!("{name}: level {} is out of range (the asset has {} levels of detail, the reference {})", levels.end - 1, meta.levels, ref_meta.levels)));
     }
     // The scene is the reference's: what the source is decides what is drawn.
-    let scene = Scene::for_asset_with(&ref_meta, opts.extinction.as_deref()).map_err(|e| CompareError::Usage(format!("--extinction: {e}")))?;
+    let scene = Scene::for_asset_with(&ref_meta, opts.viewing.extinction.as_deref()).map_err(|e| CompareError::Usage(format!("--extinction: {e}")))?;
     let renderer = renderer().map_err(|e| CompareError::Other(e.into()))?;
     let gpu_asset = renderer.upload_for(asset, &scene).map_err(|e| CompareError::In(name.to_string(), e.into()))?;
     let gpu_ref = renderer.upload_for(reference, &scene).map_err(|e| CompareError::In("reference".into(), e.into()))?;
@@ -217,8 +215,8 @@ fn combine(runs: &[LevelRun], opts: &CompareOptions, adapter: &str) -> Result<Co
     let first = runs.first().ok_or_else(|| CompareError::Failed("no level to compare".into()))?;
     let base = Comparison {
         adapter: adapter.to_string(),
-        views: opts.views,
-        size: opts.size,
+        views: opts.viewing.views.get(),
+        size: opts.viewing.size,
         levels: Vec::new(),
         gate_failure: first.figures.gate_failure.clone(),
         worst: first.figures.worst,
@@ -266,7 +264,7 @@ fn combine(runs: &[LevelRun], opts: &CompareOptions, adapter: &str) -> Result<Co
         .map(|r| r.figures.worst)
         .collect::<Option<Vec<Worst>>>()
         .and_then(|w| w.into_iter().reduce(|a, b| Worst { rmse: a.rmse.max(b.rmse), psnr: a.psnr.min(b.psnr), flip: a.flip.max(b.flip) }));
-    Ok(Comparison { adapter: adapter.to_string(), views: opts.views, size: opts.size, levels: Vec::new(), gate_failure, worst, doc, text })
+    Ok(Comparison { adapter: adapter.to_string(), views: opts.viewing.views.get(), size: opts.viewing.size, levels: Vec::new(), gate_failure, worst, doc, text })
 }
 
 /// Voxel-domain error of each channel of the asset's frame against the
@@ -304,8 +302,8 @@ fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize, lod: u32, shown:
 fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], focus: Option<(usize, usize)>, bars: &dyn Progress) -> Result<LevelRun, CompareError> {
     let (name, meta, ref_meta, renderer, scene) = (p.name, p.meta, p.ref_meta, p.renderer, p.scene);
     let started = Instant::now();
-    let views = scene.orbit(opts.views as usize);
-    let (w, h) = (opts.size.width, opts.size.height);
+    let views = scene.orbit(opts.viewing.views.count());
+    let (w, h) = (opts.viewing.size.width(), opts.viewing.size.height());
     // What each view shows with no volume, as 8-bit sRGB: coverage is measured against it.
     let empty: Vec<Vec<u8>> = views.iter().map(|v| crate::flip::srgb8(&scene.empty_image(v, w, h))).collect();
     let shown = scene.shown();
@@ -390,7 +388,7 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
         "model": scene.model().name(),
         "frames": meta.frame_count,
         "level": lod,
-        "views": opts.views,
+        "views": opts.viewing.views,
         "size": [w, h],
         "flip_ppd": DEFAULT_PPD,
         "images": shots.iter().map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "max_error": s.metrics.max_error, "flip": s.flip, "coverage": s.coverage})).collect::<Vec<_>>(),
@@ -413,7 +411,7 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
     let failed: Vec<&Shot> = shots.iter().filter(|s| opts.gate.fails(s.metrics.rmse, s.metrics.psnr, s.flip)).collect();
     let decoder = if p.gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
     let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
-    let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), opts.views, renderer.adapter);
+    let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), opts.viewing.views, renderer.adapter);
     text += &format!("  scene    channel \"{shown_name}\" drawn as {}", scene_words(scene.model()));
     if let Some((min, mean)) = coverage_figures(&shots) {
         text += &format!("; coverage {:.1} % of the pixels on average, {:.1} % in the emptiest view", 100.0 * mean, 100.0 * min);

@@ -488,7 +488,7 @@ mod tests {
                 }
             }
             // Every level of detail, as `unpack_level` gives it (the twin takes level-0 coordinates).
-            let mut c = Cooker::new(CookOptions { format: Format::F32, levels: 4, ..CookOptions::default() });
+            let mut c = Cooker::new(CookOptions { format: Format::F32, levels: vdbcook_vpak::LevelCount::new(4).unwrap(), ..CookOptions::default() });
             c.push(&grid, None).unwrap();
             let levels = Asset::from_bytes(&vdbcook_vpak::assemble(&c.finish(&NoProgress).unwrap().0)).unwrap();
             for level in 1..4u32 {

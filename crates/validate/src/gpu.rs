@@ -236,49 +236,82 @@ fn storage(kind: bool) -> wgpu::BindingType {
     wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { read_only: kind }, has_dynamic_offset: false, min_binding_size: None }
 }
 
-impl Renderer {
-    /// Opens an adapter: the first whose name contains `filter` (case-insensitive), else the default one.
-    pub fn new(filter: Option<&str>) -> Result<Renderer, Error> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
-        let adapter = match filter {
-            Some(f) => {
-                let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
-                let f_low = f.to_lowercase();
-                adapters
-                    .into_iter()
-                    .find(|a| a.get_info().name.to_lowercase().contains(&f_low))
-                    .ok_or_else(|| Error::NoAdapter(format!(" matching \"{f}\" (adapters: {})", if names.is_empty() { "none".to_string() } else { names.join(", ") })))?
-            }
-            None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter: false,
-                compatible_surface: None,
-                ..Default::default()
-            }))
-            .map_err(|e| Error::NoAdapter(format!(" ({e})")))?,
-        };
-        let info = adapter.get_info();
-        let adapter_name = format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
-        let want = wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D;
-        let bc = BcSupport { textures: adapter.features().contains(want), cpu: info.device_type == wgpu::DeviceType::Cpu };
-        let norm16 = adapter.features().contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM);
-        let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("vdbcook"),
-            required_features: if bc.textures { want } else { wgpu::Features::empty() } | if norm16 { wgpu::Features::TEXTURE_FORMAT_16BIT_NORM } else { wgpu::Features::empty() },
-            required_limits: limits,
-            experimental_features: wgpu::ExperimentalFeatures::disabled(),
-            memory_hints: wgpu::MemoryHints::Performance,
-            trace: wgpu::Trace::Off,
+/// An adapter's device and queue, opened with the features and limits the
+/// renderer uses where the adapter has them ([`open_gpu`]).
+pub struct Gpu {
+    pub adapter: wgpu::AdapterInfo,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+}
+
+/// The features the renderer uses when a device has them: BC 3D textures and 16-bit norm textures.
+pub fn wanted_features() -> wgpu::Features {
+    wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D | wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
+}
+
+/// Opens an adapter, the first whose name contains `filter` (case-insensitive)
+/// or else the default one, and a device on it with the adapter's limits and
+/// whichever of [`wanted_features`] it has.
+pub fn open_gpu(filter: Option<&str>) -> Result<Gpu, Error> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = match filter {
+        Some(f) => {
+            let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+            let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+            let f_low = f.to_lowercase();
+            adapters
+                .into_iter()
+                .find(|a| a.get_info().name.to_lowercase().contains(&f_low))
+                .ok_or_else(|| Error::NoAdapter(format!(" matching \"{f}\" (adapters: {})", if names.is_empty() { "none".to_string() } else { names.join(", ") })))?
+        }
+        None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            ..Default::default()
         }))
-        .map_err(|e| Error::Device(e.to_string()))?;
+        .map_err(|e| Error::NoAdapter(format!(" ({e})")))?,
+    };
+    // Sliced 3D BC textures are of no use without BC textures.
+    let bc = wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D;
+    let mut features = adapter.features() & wanted_features();
+    if !features.contains(bc) {
+        features.remove(bc);
+    }
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("vdbcook"),
+        required_features: features,
+        required_limits: adapter.limits(),
+        experimental_features: wgpu::ExperimentalFeatures::disabled(),
+        memory_hints: wgpu::MemoryHints::Performance,
+        trace: wgpu::Trace::Off,
+    }))
+    .map_err(|e| Error::Device(e.to_string()))?;
+    Ok(Gpu { adapter: adapter.get_info(), device, queue })
+}
+
+impl Renderer {
+    /// Opens a device with [`open_gpu`] and renders on it.
+    pub fn new(filter: Option<&str>) -> Result<Renderer, Error> {
+        Ok(Renderer::from_device(open_gpu(filter)?))
+    }
+
+    /// Renders on the caller's device and queue (each a handle: clones share
+    /// them). BC atlases are sampled as textures when the device has BC 3D
+    /// textures enabled, unorm16 atlases when it has 16-bit norm textures.
+    pub fn from_device(gpu: Gpu) -> Renderer {
+        let Gpu { adapter: info, device, queue } = gpu;
+        let adapter_name = format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
+        let features = device.features();
+        let bc_features = wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D;
+        let bc = BcSupport { textures: features.contains(bc_features), cpu: info.device_type == wgpu::DeviceType::Cpu };
+        let norm16 = features.contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM);
         let textures = Pipelines::new(
             &device,
             TEXTURE_SHADER,
             wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D3, multisampled: false },
         );
-        Ok(Renderer { device, queue, textures, buffers: std::sync::OnceLock::new(), bc, decode: BcDecode::Auto, norm16, adapter: adapter_name })
+        Renderer { device, queue, textures, buffers: std::sync::OnceLock::new(), bc, decode: BcDecode::Auto, norm16, adapter: adapter_name }
     }
 
     /// Chooses where BC4/BC7 bricks of assets uploaded from now on are decoded.

@@ -19,8 +19,8 @@ mod scene;
 pub use compare::{compare_assets, CompareError, CompareOptions, Comparison, LevelFigures, Levels, Shot, Worst};
 pub use cpu::{render_cpu, render_cpu_level};
 pub use flip::{flip, FlipMap};
-pub use gpu::{shader_sources, BcDecode, GpuAsset, Renderer};
-pub use options::{Gate, Size};
+pub use gpu::{open_gpu, shader_sources, wanted_features, BcDecode, Gpu, GpuAsset, Renderer};
+pub use options::{Gate, Size, Viewing, Views};
 pub use scene::{coverage, Model};
 
 use vdbcook_vpak::{Asset, Checked, Metadata};

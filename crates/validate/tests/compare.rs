@@ -5,14 +5,15 @@
 
 use std::path::Path;
 use vdbcook_cook::{CookOptions, Cooker, Format, NoProgress};
-use vdbcook_validate::{compare_assets, CompareError, CompareOptions, Gate, Levels, Renderer, Size};
+use vdbcook_validate::options::RmseBudget;
+use vdbcook_validate::{compare_assets, CompareError, CompareOptions, Gate, Levels, Renderer, Size, Viewing, Views};
 use vdbcook_vpak::Asset;
 
 fn cook(format: Format, levels: u32) -> Asset {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/smoke_seq");
     let mut files: Vec<_> = std::fs::read_dir(&root).unwrap().map(|e| e.unwrap().path()).collect();
     files.sort();
-    let mut c = Cooker::new(CookOptions { format, levels, clustering: None, ..CookOptions::default() });
+    let mut c = Cooker::new(CookOptions { format, levels: vdbcook_vpak::LevelCount::new(levels).unwrap(), clustering: None, ..CookOptions::default() });
     for f in files.iter().take(2) {
         let v = vdbcook_vdb::open(f).unwrap();
         c.push(&v.read_grid(v.select(None).unwrap()).unwrap(), None).unwrap();
@@ -25,14 +26,14 @@ fn renderer() -> Option<Renderer> {
 }
 
 fn options() -> CompareOptions {
-    CompareOptions { views: 2, size: Size { width: 32, height: 24 }, ..CompareOptions::default() }
+    CompareOptions { viewing: Viewing { views: Views::new(2).unwrap(), size: Size::new(32, 24).unwrap(), ..Viewing::default() }, ..CompareOptions::default() }
 }
 
 #[test]
 fn an_exact_asset_passes_any_gate_and_a_lossy_one_fails_a_strict_one() {
     let Some(r) = renderer() else { return };
     let reference = cook(Format::F32, 1);
-    let strict = CompareOptions { gate: Gate::new(Some(0.0), None, None).unwrap(), ..options() };
+    let strict = CompareOptions { gate: Gate { max_rmse: Some(RmseBudget::new(0.0).unwrap()), ..Gate::default() }, ..options() };
     let same = compare_assets(&reference, "f32", &reference, &strict, || Ok::<_, CompareError>(&r), &NoProgress).unwrap();
     assert!(same.passed(), "{:?}", same.gate_failure);
     assert_eq!(same.levels.len(), 1);
@@ -62,11 +63,12 @@ fn every_level_is_compared_and_bad_options_are_usage_errors() {
     let frames = CompareOptions { frames: Some(vec![5]), ..options() };
     let e = compare_assets(&asset, "unorm8", &reference, &frames, || Ok::<_, CompareError>(&r), &NoProgress).unwrap_err();
     assert!(e.is_usage() && e.to_string().starts_with("--frames: frame 5 is out of range"), "{e}");
-    let ext = CompareOptions { extinction: Some("nothing".into()), ..options() };
+    let mut ext = options();
+    ext.viewing.extinction = Some("nothing".into());
     let e = compare_assets(&asset, "unorm8", &reference, &ext, || Ok::<_, CompareError>(&r), &NoProgress).unwrap_err();
     assert!(e.is_usage() && e.to_string().starts_with("--extinction:"), "{e}");
     // A level neither asset stores is not the options' fault.
-    let one = CompareOptions { levels: Levels::At(3), ..options() };
+    let one = CompareOptions { levels: Levels::At(vdbcook_vpak::Level::new(3).unwrap()), ..options() };
     let e = compare_assets(&asset, "unorm8", &reference, &one, || Ok::<_, CompareError>(&r), &NoProgress).unwrap_err();
     assert!(!e.is_usage() && e.to_string().contains("level 3 is out of range"), "{e}");
 }

@@ -46,7 +46,7 @@ fn every_level_renders_on_the_gpu_like_its_cpu_twin() {
     let Some(r) = renderer() else { return };
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     for format in [Format::F32, Format::Bc7] {
-        let mut c = Cooker::new(CookOptions { format, levels: 4, ..CookOptions::default() });
+        let mut c = Cooker::new(CookOptions { format, levels: vdbcook_vpak::LevelCount::new(4).unwrap(), ..CookOptions::default() });
         for f in SEQ {
             let v = vdbcook_vdb::open(&root.join(f)).unwrap();
             c.push(&v.read_grid(v.select(None).unwrap()).unwrap(), None).unwrap();
@@ -231,7 +231,7 @@ fn per_brick_formats_render_like_the_cpu_twin_on_both_paths() {
     let Some(r) = renderer() else { return };
     let soft = Renderer::new(None).unwrap().with_bc_decode(BcDecode::Shader);
     for (files, e, dim) in [(&SEQ[..], 0.01, 2048), (&SEQ, 0.001, 2048), (&SEQ, 0.001, 24), (&["fixtures/tiles.vdb"][..], 0.002, 2048)] {
-        let asset = Asset::from_bytes(&cook_with(files, CookOptions { max_error: Some(e), max_texture_dim: dim, ..CookOptions::default() })).unwrap();
+        let asset = Asset::from_bytes(&cook_with(files, CookOptions { max_error: Some(vdbcook_cook::ErrorBound::new(e).unwrap()), max_texture_dim: dim, ..CookOptions::default() })).unwrap();
         let meta = asset.metadata().unwrap();
         if files.len() == 2 {
             assert!(meta.planes.len() >= 4 && !meta.channels[0].alternates.is_empty(), "E = {e}: {:?}", meta.planes.iter().map(|p| p.plane.format).collect::<Vec<_>>());

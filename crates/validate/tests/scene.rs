@@ -135,7 +135,7 @@ fn a_level_set_renders_as_a_surface_on_the_gpu_like_its_cpu_twin() {
         assert!(c > 0.05, "view {i}: coverage {c}");
     }
     // A coarser level draws the level's own voxels, as the twin does.
-    let levels = cook(&[sphere(10.0)], CookOptions { format: Format::F32, levels: 2, ..CookOptions::default() });
+    let levels = cook(&[sphere(10.0)], CookOptions { format: Format::F32, levels: vdbcook_vpak::LevelCount::new(2).unwrap(), ..CookOptions::default() });
     let gpu = r.upload_for(&levels, &scene).unwrap();
     let coarse = r.render_views_level(&gpu, &scene, 0, 1, &views[..1], size, size).unwrap();
     let cpu = vdbcook_validate::render_cpu_level(&levels, &scene, 0, 1, &views[0], size, size).unwrap();
@@ -163,7 +163,7 @@ fn a_lossy_level_set_moves_the_surface_more_as_the_error_bound_grows() {
         let e = rmse(&cook(&frames, CookOptions { format, ..CookOptions::default() }));
         assert!(e > 0.0, "{format:?}: the image error of a lossy level set is 0");
     }
-    let series: Vec<f64> = [0.003f32, 0.03, 0.3].iter().map(|&e| rmse(&cook(&frames, CookOptions { max_error: Some(e), ..CookOptions::default() }))).collect();
+    let series: Vec<f64> = [0.003f32, 0.03, 0.3].iter().map(|&e| rmse(&cook(&frames, CookOptions { max_error: Some(vdbcook_cook::ErrorBound::new(e).unwrap()), ..CookOptions::default() }))).collect();
     eprintln!("level set, image RMSE at --max-error 0.003, 0.03, 0.3: {series:?}");
     assert!(series[0] > 0.0 && series.windows(2).all(|w| w[0] <= w[1]) && series[2] > series[0], "{series:?}");
 }

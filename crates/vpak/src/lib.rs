@@ -24,10 +24,14 @@
 mod check;
 pub mod layout;
 pub mod nodes;
+pub mod settings;
 
 pub use check::{Checked, GpuChannel, GPU_CHANNEL_WORDS, MAX_CHANNELS};
 pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, PlaneInfo, BRICK_VOXELS, MAX_BRICK_BYTES};
+pub use settings::{Level, LevelCount};
 
+#[doc(hidden)]
+pub use serde; // for the settings macros
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
