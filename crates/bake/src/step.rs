@@ -11,7 +11,7 @@ use std::time::Instant;
 use vdbcook_pipeline::{cook_asset, one_line, Context, CookJob, Error, Result};
 use vdbcook_validate::report::{base64, thumbnail};
 use vdbcook_validate::{compare_assets, Comparison, Renderer};
-use vdbcook_vpak::{kind, Asset, Metadata};
+use vdbcook_vpak::{kind, Asset};
 
 type BoxError = Box<dyn std::error::Error + Send + Sync>;
 
@@ -176,7 +176,7 @@ fn cook_fresh(a: &PlannedAsset, ctx: &Baker) -> Result<(Vec<u8>, Record)> {
     }
     drop(asset);
     let meta_section = sections.iter_mut().find(|x| x.kind == kind::METADATA).ok_or_else(|| Error::Failed("the cooked asset has no metadata".into()))?;
-    let mut meta = Metadata::from_bytes(&meta_section.data)?;
+    let mut meta = cooked.report.metadata;
     meta.settings.push(("cache_key".into(), a.key.clone()));
     meta.settings.push(("bake_record".into(), record.to_setting()));
     meta_section.data = meta.to_bytes()?;

@@ -164,6 +164,10 @@ pub struct CookReport {
     pub clustering: Option<ClusterReport>,
     /// (stage, seconds).
     pub timings: Vec<(String, f64)>,
+    /// The asset's metadata as written in its first section (typed, so that a
+    /// caller adding settings, as bake does, need not read the bytes back).
+    #[serde(skip)]
+    pub metadata: vdbcook_vpak::Metadata,
 }
 
 /// How `CookOptions::max_bytes` was met.
@@ -277,6 +281,7 @@ impl Cooker {
             .collect();
         let worst = (0..channels).min_by(|&a, &b| psnr(a).total_cmp(&psnr(b))).unwrap_or(0);
         CookReport {
+            metadata: meta.clone(),
             format: meta.format_names(),
             frames: self.frames.len(),
             empty_frames: self.frames.iter().filter(|f| f.leaves == 0 && f.tiles == 0).count(),

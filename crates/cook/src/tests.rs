@@ -905,3 +905,17 @@ fn a_zero_bound_is_exact_even_with_several_channels_clustered() {
     }
     assert!(report.channels.iter().all(|c| c.voxel_max_error == 0.0));
 }
+
+/// The report's typed metadata is the metadata section, byte for byte, with or without a byte budget.
+#[test]
+fn the_report_carries_the_metadata_it_wrote() {
+    for max_bytes in [None, Some(1 << 40)] {
+        let mut c = Cooker::new(CookOptions { levels: LevelCount::new(2).unwrap(), max_bytes, ..CookOptions::default() });
+        c.push(&frame(0), None).unwrap();
+        c.push_empty(None);
+        let (sections, report) = c.finish(&NoProgress).unwrap();
+        let written = sections.iter().find(|s| s.kind == kind::METADATA).unwrap();
+        assert_eq!(written.data, report.metadata.to_bytes().unwrap());
+        assert_eq!(report.metadata.frame_count, 2);
+    }
+}
