@@ -13,6 +13,10 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+/// Running out of memory is one line and exit code 1, not an abort.
+#[global_allocator]
+static ALLOCATOR: vdbcook_grid::mem::ReportingAllocator = vdbcook_grid::mem::ReportingAllocator { program: "vdbcook" };
+
 /// Exit codes (documented in the README and in --help).
 pub mod exit {
     pub const SUCCESS: u8 = 0;

@@ -102,3 +102,73 @@ fn output_does_not_depend_on_thread_count() {
     assert!(one.status.success());
     assert_eq!(one.stdout, two.stdout);
 }
+
+/// The smallest address-space limit (KiB, `ulimit -v`) under which the
+/// binary starts at all, found by bisection: the floor the test builds on.
+fn start_limit_kib() -> u64 {
+    let starts =
+        |kib: u64| std::process::Command::new("sh").args(["-c", &format!("ulimit -v {kib} && exec \"$0\" --version"), env!("CARGO_BIN_EXE_vdbcook")]).output().is_ok_and(|o| o.status.success());
+    let (mut lo, mut hi) = (1u64 << 10, 1u64 << 22);
+    assert!(starts(hi), "vdbcook does not start under a 4 GiB limit");
+    while hi - lo > 512 {
+        let mid = (lo + hi) / 2;
+        if starts(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    hi
+}
+
+/// Eight frames of a dense 96³ fog whose bricks all differ (a 28 MB brick pool).
+fn dense_frames(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    use vdbcook_grid::{Coord, Grid, GridClass, Leaf, LeafMask, Transform};
+    (0..8)
+        .map(|f| {
+            let mut leaves = Vec::new();
+            for (x, y, z) in (0..12).flat_map(|x| (0..12).flat_map(move |y| (0..12).map(move |z| (x, y, z)))) {
+                let mut values = [0f32; 512];
+                for (i, v) in values.iter_mut().enumerate() {
+                    *v = ((i as u32).wrapping_mul(2_654_435_761).wrapping_add(((x * 144 + y * 12 + z + 1728 * f) as u32).wrapping_mul(40_503)) >> 8) as f32 / (1u32 << 24) as f32;
+                }
+                leaves.push(Leaf { origin: Coord::new(x * 8, y * 8, z * 8), mask: LeafMask([u64::MAX; 8]), values });
+            }
+            let g = Grid { name: "density".into(), class: GridClass::FogVolume, background: 0.0, transform: Transform::identity(), leaves, tiles: Vec::new() };
+            let bytes = vdbcook_vdb::write_vdb_grids(&[vdbcook_vdb::WriteGrid::Float(&g)], vdbcook_vdb::WriteOptions { version: 224, zip: false }).unwrap();
+            let p = dir.join(format!("dense_{f}.vdb"));
+            std::fs::write(&p, bytes).unwrap();
+            p
+        })
+        .collect()
+}
+
+/// Out of memory is a failure like any other: one line, exit 1, nothing written.
+#[test]
+fn running_out_of_memory_is_one_line_and_leaves_nothing() {
+    if !cfg!(target_os = "linux") {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("vdbcook-oom-{}", std::process::id()));
+    let out_dir = dir.join("out");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let frames = dense_frames(&dir);
+    let out = out_dir.join("dense.vpak");
+    let cook = |kib: u64| {
+        let mut args = vec![format!("ulimit -v {kib} && exec \"$0\" cook \"$@\""), env!("CARGO_BIN_EXE_vdbcook").to_string()];
+        args.extend(frames.iter().map(|p| p.display().to_string()));
+        args.extend(["-o".into(), out.display().to_string(), "-q".into(), "-j".into(), "1".into()]);
+        std::process::Command::new("sh").arg("-c").args(&args).output().unwrap()
+    };
+    // Below its need: 16 MB above what starting takes (threads' stacks included), where
+    // the brick pool alone is 28 MB.
+    let o = cook(start_limit_kib() + (16 << 10));
+    assert_one_line_error(&o, &["memory"]);
+    let left: Vec<_> = std::fs::read_dir(&out_dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+    // With room, the same cook succeeds: the failure was the memory.
+    let o = cook(4 << 20);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr_of(&o));
+    assert!(out.is_file());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

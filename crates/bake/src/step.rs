@@ -172,7 +172,7 @@ fn cook_fresh(a: &PlannedAsset, ctx: &Baker) -> Result<(Vec<u8>, Record)> {
     }
     // A preview for the report; without a GPU (and no validation asked for) there is none.
     if let Ok(renderer) = ctx.renderer() {
-        record.thumbnail = thumbnail(&renderer, &asset, THUMBNAIL_SIZE).ok().map(|png| base64(&png));
+        record.thumbnail = thumbnail(renderer, &asset, THUMBNAIL_SIZE).ok().map(|png| base64(&png));
     }
     drop(asset);
     let meta_section = sections.iter_mut().find(|x| x.kind == kind::METADATA).ok_or_else(|| Error::Failed("the cooked asset has no metadata".into()))?;

@@ -62,6 +62,8 @@ pub enum Error {
     Overflow { what: &'static str },
     #[error("a frame gave {found} channels, the builder was made for {expected}")]
     Channels { found: usize, expected: usize },
+    #[error(transparent)]
+    OutOfMemory(#[from] vdbcook_grid::mem::OutOfMemory),
 }
 
 /// Content hash of a brick's channels: the exact bits of every value (so
@@ -342,7 +344,7 @@ impl Builder {
         let mut fl = FrameLeaves { channel_masks, level: self.level, ..FrameLeaves::default() };
         // Room for every leaf being new, so the pool never moves while it grows
         // (untouched capacity costs no memory).
-        self.pool.bricks.reserve(n * c);
+        vdbcook_grid::mem::try_reserve(&mut self.pool.bricks, n * c, "the brick pool")?;
         self.pool.index.reserve(n);
         vdbcook_grid::mem::advise_huge_pages(&self.pool.bricks);
         self.l3.reserve(n);

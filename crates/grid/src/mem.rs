@@ -1,4 +1,111 @@
-//! Large buffers.
+//! Large buffers, and running out of memory as an error rather than an abort.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+thread_local! {
+    /// Whether this thread's failed allocations go back to the code that asked.
+    static FALLIBLE: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Runs `f` with this thread's failed allocations returned to the code that
+/// asked for them (`Vec::try_reserve` sees the error) instead of ending the
+/// process under [`ReportingAllocator`]. Without that allocator (library
+/// tests, other programs) it only runs `f`.
+pub fn fallible<R>(f: impl FnOnce() -> R) -> R {
+    struct Restore(bool);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let _ = FALLIBLE.try_with(|c| c.set(self.0));
+        }
+    }
+    let _restore = Restore(FALLIBLE.with(|c| c.replace(true)));
+    f()
+}
+
+/// `Vec::try_reserve` under [`fallible`]; the error says how many bytes `what` needed.
+pub fn try_reserve<T>(v: &mut Vec<T>, additional: usize, what: &'static str) -> Result<(), OutOfMemory> {
+    fallible(|| v.try_reserve(additional)).map_err(|_| OutOfMemory { what, bytes: additional.saturating_add(v.len()).saturating_mul(std::mem::size_of::<T>()) as u64 })
+}
+
+/// A buffer that could not be allocated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("out of memory: {what} needed {} (cook fewer frames or grids at once, or give the cook more memory)", mib(*bytes))]
+pub struct OutOfMemory {
+    pub what: &'static str,
+    pub bytes: u64,
+}
+
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
+}
+
+/// The system allocator, except that an allocation that fails outside
+/// [`fallible`] ends the process with one line on stderr (`PROGRAM: error:
+/// out of memory: ...`) and exit code 1, where Rust would print a backtrace
+/// and abort. Installed by the `vdbcook` binary as its global allocator.
+pub struct ReportingAllocator {
+    pub program: &'static str,
+}
+
+// SAFETY: every call is forwarded to the system allocator unchanged; a null
+// result is either returned (inside `fallible`) or ends the process.
+unsafe impl GlobalAlloc for ReportingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        self.checked(System.alloc(layout), layout.size())
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        self.checked(System.alloc_zeroed(layout), layout.size())
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        System.dealloc(ptr, layout)
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        self.checked(System.realloc(ptr, layout, new_size), new_size)
+    }
+}
+
+impl ReportingAllocator {
+    fn checked(&self, ptr: *mut u8, size: usize) -> *mut u8 {
+        if ptr.is_null() && !FALLIBLE.try_with(Cell::get).unwrap_or(false) {
+            self.out_of_memory(size);
+        }
+        ptr
+    }
+
+    /// Writes the line without allocating, then exits at once: no destructor
+    /// runs (they might allocate), and no output file exists yet, since every
+    /// output is written whole at the end, through an unnamed temporary file
+    /// where the system has them.
+    fn out_of_memory(&self, size: usize) -> ! {
+        use std::io::Write;
+        use std::sync::atomic::{AtomicBool, Ordering};
+        // One line, from the first thread that fails; the others wait for the exit.
+        static REPORTED: AtomicBool = AtomicBool::new(false);
+        if REPORTED.swap(true, Ordering::SeqCst) {
+            loop {
+                std::thread::sleep(std::time::Duration::from_secs(1));
+            }
+        }
+        let mut buf = [0u8; 256];
+        let mut w = &mut buf[..];
+        let what = if size >= 1 << 20 { format_args!("{:.1} MiB", size as f64 / (1u64 << 20) as f64) } else { format_args!("{size} bytes") };
+        let _ = writeln!(w, "{}: error: out of memory: an allocation of {what} failed (cook fewer frames or grids at once, or give it more memory)", self.program);
+        let left = w.len();
+        let n = buf.len() - left;
+        #[cfg(unix)]
+        // SAFETY: write(2) and _exit(2) on a stack buffer; both are async-signal-safe and allocate nothing.
+        unsafe {
+            libc::write(2, buf.as_ptr().cast(), n);
+            libc::_exit(1);
+        }
+        #[cfg(not(unix))]
+        {
+            let _ = std::io::stderr().write_all(&buf[..n]);
+            std::process::exit(1);
+        }
+    }
+}
 
 /// Buffers smaller than this are left alone.
 const MIN_BYTES: usize = 8 << 20;

@@ -20,26 +20,30 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
     // Each frame comes with the channels when they are first resolved.
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
     let total = files.len() as u64;
-    let reader = std::thread::spawn(move || {
-        let mut channels = None;
-        let mut sent = false;
-        for f in files {
-            let r = read_frame(f, &sel, &mut channels).map(|mut frame| {
-                if let (Some(s), Some(b)) = (frame.source.as_mut(), base.as_deref()) {
-                    if let Ok(rel) = frame.path.strip_prefix(b) {
-                        s.path = rel.display().to_string();
+    // A thread that cannot start (no memory for its stack) is an error, not a panic.
+    let reader = std::thread::Builder::new()
+        .name("frame reader".into())
+        .spawn(move || {
+            let mut channels = None;
+            let mut sent = false;
+            for f in files {
+                let r = read_frame(f, &sel, &mut channels).map(|mut frame| {
+                    if let (Some(s), Some(b)) = (frame.source.as_mut(), base.as_deref()) {
+                        if let Ok(rel) = frame.path.strip_prefix(b) {
+                            s.path = rel.display().to_string();
+                        }
                     }
+                    frame
+                });
+                let stop = r.is_err();
+                let first = if sent { None } else { channels.clone() };
+                sent |= first.is_some();
+                if tx.send((r, first)).is_err() || stop {
+                    break;
                 }
-                frame
-            });
-            let stop = r.is_err();
-            let first = if sent { None } else { channels.clone() };
-            sent |= first.is_some();
-            if tx.send((r, first)).is_err() || stop {
-                break;
             }
-        }
-    });
+        })
+        .map_err(|e| Error::Failed(format!("cannot start the frame reader thread: {e}")))?;
     bars.start("reading frames", total);
     let mut read_secs = 0.0;
     let mut wait = Instant::now();

@@ -21,11 +21,13 @@
 //! ([`nodes`]), the voxel formats, planes, atlas shapes and texel packing
 //! ([`layout`]), and the one validator every reader calls ([`Checked`]).
 
+mod atomic;
 mod check;
 pub mod layout;
 pub mod nodes;
 pub mod settings;
 
+pub use atomic::{write_atomic, write_atomic_with, write_file};
 pub use check::{Checked, GpuChannel, GPU_CHANNEL_WORDS, MAX_CHANNELS};
 pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, PlaneInfo, BRICK_VOXELS, MAX_BRICK_BYTES};
 pub use settings::{Level, LevelCount};
@@ -467,59 +469,6 @@ fn header_checksum(head: &[u8], table: &[u8]) -> u64 {
     h.digest()
 }
 
-/// Writes `bytes` to `path` atomically (see [`write_atomic_with`]).
-pub fn write_atomic(path: &Path, bytes: &[u8], overwrite: bool) -> Result<(), Error> {
-    write_atomic_with(path, overwrite, |w| w.write_all(bytes))
-}
-
-/// Writes `sections` as a .vpak file at `path` atomically.
-pub fn write_file(path: &Path, sections: &[Section], overwrite: bool) -> Result<(), Error> {
-    write_atomic_with(path, overwrite, |w| write_to(w, sections))
-}
-
-/// Writes to a temporary file beside `path`, then renames it into place.
-/// Without `overwrite`, an existing `path` is never replaced; on any failure
-/// the temporary file is removed and `path` is untouched.
-pub fn write_atomic_with(path: &Path, overwrite: bool, fill: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>) -> Result<(), Error> {
-    use std::io::Write;
-    if !overwrite && path.exists() {
-        return Err(Error::Exists(path.display().to_string()));
-    }
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-    // A fresh name (never an existing file or symlink): pid, time and a counter.
-    static SERIAL: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
-    let serial = SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = dir.join(format!(".{name}.{}-{nanos}-{serial}.tmp", std::process::id()));
-    let result = (|| -> Result<(), Error> {
-        let file = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
-        let mut f = std::io::BufWriter::with_capacity(1 << 20, file);
-        fill(&mut f)?;
-        f.flush()?;
-        let f = f.into_inner().map_err(|e| Error::Io(e.into_error()))?;
-        f.sync_all()?;
-        drop(f);
-        if overwrite {
-            std::fs::rename(&tmp, path)?;
-        } else {
-            // A hard link fails if `path` appeared meanwhile: no clobbering, even racing.
-            match std::fs::hard_link(&tmp, path) {
-                Ok(()) => std::fs::remove_file(&tmp)?,
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => return Err(Error::Exists(path.display().to_string())),
-                // File systems without hard links: check, then rename.
-                Err(_) if !path.exists() => std::fs::rename(&tmp, path)?,
-                Err(_) => return Err(Error::Exists(path.display().to_string())),
-            }
-        }
-        Ok(())
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
 /// One entry of the section table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SectionEntry {
@@ -751,6 +700,21 @@ mod tests {
         assert_eq!(std::fs::read(&p).unwrap(), b"three");
         let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).collect();
         assert!(leftovers.is_empty());
+        // While the data is written it has no name (Linux), and a failed write leaves the old file.
+        let names = || std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.file_name()).collect::<Vec<_>>();
+        let before = names();
+        let failed = write_atomic_with(&p, true, |w| {
+            w.write_all(b"four")?;
+            if cfg!(target_os = "linux") {
+                assert_eq!(names(), before, "a named temporary file exists during the write");
+            }
+            Err(std::io::Error::other("the writer failed"))
+        });
+        assert!(failed.is_err());
+        assert_eq!((names(), std::fs::read(&p).unwrap()), (before.clone(), b"three".to_vec()));
+        let q = dir.join("b.vpak");
+        write_atomic_with(&q, false, |w| w.write_all(b"five")).unwrap();
+        assert_eq!(std::fs::read(&q).unwrap(), b"five");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
