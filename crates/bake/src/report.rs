@@ -371,7 +371,7 @@ fn format_cell(r: &Record) -> String {
 }
 
 fn gate_text(a: &AssetReport) -> &'static str {
-    match (a.status, a.gate.max_rmse.is_some() || a.gate.min_psnr.is_some() || a.gate.max_flip.is_some()) {
+    match (a.status, a.gate.is_set()) {
         (Status::GateFailed, _) => "failed",
         (Status::Failed | Status::Skipped, _) => "",
         (_, true) => "held",
