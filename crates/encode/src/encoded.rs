@@ -2,7 +2,7 @@
 //! parallel, uncompressed ones when asked for, per-brick formats from their
 //! choices.
 
-use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of};
+use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of, round_trip};
 use crate::{bc, single_plane, Brick, BrickSource, Choice, Format, PlaneSpec, Quality, BRICK_VOXELS, MAX_BRICK_BYTES};
 use rayon::prelude::*;
 
@@ -128,11 +128,22 @@ impl<'a> Encoded<'a> {
     /// Brick `i` decoded back to values, one [`Brick`] per channel.
     pub fn decode(&self, i: usize) -> Option<Vec<Brick>> {
         let mut out = vec![[0.0f32; BRICK_VOXELS]; self.channels];
-        let mut buf = vec![0u8; MAX_BRICK_BYTES];
+        let mut buf = Vec::new();
         for (p, spec) in self.specs.iter().enumerate() {
             if !self.holds(p, i) {
                 continue;
             }
+            // Encoded on demand: decoded value by value, without the texels.
+            if matches!(self.planes.get(p), Some(PlaneData::OnDemand)) && i < self.len() {
+                let trips: Option<Vec<Brick>> = spec.channels.iter().map(|&c| round_trip(spec.plane.format, &self.bricks[i * self.channels + c], self.range(i, c))).collect();
+                if let Some(trips) = trips {
+                    for (&c, values) in spec.channels.iter().zip(trips) {
+                        out[c] = values;
+                    }
+                    continue;
+                }
+            }
+            buf.resize(MAX_BRICK_BYTES, 0);
             let data = &mut buf[..spec.plane.brick_bytes()];
             if !self.write(p, i, data) {
                 return None;

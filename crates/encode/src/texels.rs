@@ -116,37 +116,51 @@ pub(crate) fn swap_xz<T: Copy>(a: &[T; BRICK_VOXELS]) -> [T; BRICK_VOXELS] {
 /// texel order, little-endian.
 pub(crate) fn encode_texels(plane: &Plane, slots: &[(&Brick, [f32; 2])], out: &mut [u8]) {
     let lanes = plane.lanes as usize;
-    let lb = plane.format.lane_bytes();
     for (l, (values, range)) in slots.iter().enumerate().take(lanes) {
-        let put = |out: &mut [u8], t: usize, b: &[u8]| {
-            let at = (t * lanes + l) * lb;
-            out[at..at + lb].copy_from_slice(b);
-        };
         match plane.format {
-            Format::F32 => {
-                for (t, v) in swap_xz(values).iter().enumerate() {
-                    put(out, t, &v.to_le_bytes());
-                }
-            }
+            Format::F32 => put_lane(out, lanes, l, swap_xz(values).iter().map(|v| v.to_le_bytes())),
             Format::F16 => {
                 let mut h = [half::f16::ZERO; BRICK_VOXELS];
                 h.convert_from_f32_slice(&swap_xz(values));
-                for (t, v) in h.iter().enumerate() {
-                    put(out, t, &v.to_le_bytes());
-                }
+                put_lane(out, lanes, l, h.iter().map(|v| v.to_le_bytes()));
             }
-            Format::Unorm16 => {
-                for (t, q) in swap_xz(&quantise16(values, *range)).iter().enumerate() {
-                    put(out, t, &q.to_le_bytes());
-                }
-            }
-            Format::Unorm8 => {
-                for (t, q) in swap_xz(&quantise(values, *range)).iter().enumerate() {
-                    put(out, t, &[*q]);
-                }
-            }
+            Format::Unorm16 => put_lane(out, lanes, l, swap_xz(&quantise16(values, *range)).iter().map(|q| q.to_le_bytes())),
+            Format::Unorm8 => put_lane(out, lanes, l, swap_xz(&quantise(values, *range)).iter().map(|&q| [q])),
             // No texels; block formats are encoded elsewhere.
             Format::Constant | Format::Bc4 | Format::Bc7 => {}
+        }
+    }
+}
+
+/// What a reader decodes of `values` stored in the uncompressed `format`
+/// over `range` ([`encode_texels`], then `Plane::decode_brick` and
+/// `Plane::channel_values`), value by value without the bytes; `None` for
+/// the block formats and constant.
+pub(crate) fn round_trip(format: Format, values: &Brick, [lo, hi]: [f32; 2]) -> Option<Brick> {
+    let ranged = |t: f32| if hi > lo { lo + t * (hi - lo) } else { lo };
+    Some(match format {
+        Format::F32 => *values,
+        Format::F16 => {
+            let mut h = [half::f16::ZERO; BRICK_VOXELS];
+            h.convert_from_f32_slice(values);
+            h.map(half::f16::to_f32)
+        }
+        Format::Unorm16 => quantise16(values, [lo, hi]).map(|q| ranged(f32::from(q) / 65535.0)),
+        Format::Unorm8 => quantise(values, [lo, hi]).map(|q| ranged(f32::from(q) / 255.0)),
+        Format::Constant | Format::Bc4 | Format::Bc7 => return None,
+    })
+}
+
+/// Writes lane `lane` of every texel (`lanes` lanes of `N` bytes each). The
+/// lane size is a constant, so each write is a store, not a call to memcpy.
+fn put_lane<const N: usize>(out: &mut [u8], lanes: usize, lane: usize, texels: impl Iterator<Item = [u8; N]>) {
+    if lanes == 1 {
+        for (dst, b) in out.chunks_exact_mut(N).zip(texels) {
+            dst.copy_from_slice(&b);
+        }
+    } else {
+        for (dst, b) in out.chunks_exact_mut(N * lanes).zip(texels) {
+            dst[lane * N..lane * N + N].copy_from_slice(&b);
         }
     }
 }
