@@ -172,3 +172,20 @@ fn running_out_of_memory_is_one_line_and_leaves_nothing() {
     assert!(out.is_file());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A file-size limit (a full disk as a test can make one) is a one-line error
+/// naming the output, exit 1, and nothing left in the output's directory.
+#[test]
+fn a_write_past_the_file_size_limit_is_one_line_and_leaves_nothing() {
+    if !cfg!(unix) {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("vdbcook-fsize-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("fog.vpak");
+    let input = root().join("fixtures").join("fog_none.vdb");
+    let o = std::process::Command::new("sh").args(["-c", "ulimit -f 8 && exec \"$0\" cook \"$1\" --format f32 -o \"$2\" -q", env!("CARGO_BIN_EXE_vdbcook"), s(&input), s(&out)]).output().unwrap();
+    assert_one_line_error(&o, &["fog.vpak", "too large"]);
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "nothing is left behind");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
