@@ -159,14 +159,15 @@ fn differing_box(reference: &[u8], test: &[u8], width: usize) -> Option<[usize; 
 }
 
 /// How far (in pixels, either axis) FLIP's filters reach from a pixel at
-/// `ppd` pixels per degree, with a pixel to spare: the spatial filter's
-/// radius (FLIP's `calculateSpatialFilterRadius`: three deviations of its
-/// widest Gaussian, scale 0.04) plus the feature filter's (three deviations
-/// of 0.5 · 0.082 · ppd), where FLIP's own reach is the larger of the two.
+/// `ppd` pixels per degree, with a pixel to spare: the larger radius of its
+/// two, computed as its C++ does (`calculateSpatialFilterRadius`: three
+/// deviations of the widest Gaussian, scale 0.04; the feature filter: three
+/// deviations of 0.5 · 0.082 · ppd).
 fn filter_reach(ppd: f32) -> usize {
-    let spatial = 3.0 * (0.04f64 / (2.0 * std::f64::consts::PI * std::f64::consts::PI)).sqrt() * f64::from(ppd);
-    let feature = 3.0 * 0.5 * 0.082 * f64::from(ppd);
-    (spatial.ceil() + feature.ceil()) as usize + 1
+    let pi = 3.141_592_7_f32;
+    let spatial = (3.0 * (0.04 / (2.0 * (pi * pi))).sqrt() * ppd).ceil();
+    let feature = (3.0 * (0.5 * 0.082 * ppd)).ceil();
+    spatial.max(feature) as usize + 1
 }
 
 /// FLIP of two linear images of the same size, compared as 8-bit sRGB (see the module notes).
@@ -324,12 +325,15 @@ mod tests {
 
     #[test]
     fn the_reach_covers_flips_filters() {
-        // FLIP's radii (sharedflip.h, image.h) in f32, as its C++ computes them.
+        // At FLIP's default distance its filters reach 10 pixels (spatial)
+        // and 9 (features), by its own formulas worked in f64.
         for ppd in [1.0f32, 10.0, DEFAULT_PPD, 120.0, 1000.0] {
-            let spatial = (3.0f32 * (0.04f32 / (2.0 * (std::f32::consts::PI * std::f32::consts::PI))).sqrt() * ppd).ceil() as usize;
-            let feature = (3.0f32 * (0.5 * 0.082 * ppd)).ceil() as usize;
+            let p = f64::from(ppd);
+            let spatial = (3.0 * (0.04 / (2.0 * std::f64::consts::PI * std::f64::consts::PI)).sqrt() * p).ceil() as usize;
+            let feature = (1.5 * 0.082 * p).ceil() as usize;
             assert!(filter_reach(ppd) > spatial.max(feature), "{ppd}");
         }
+        assert_eq!(filter_reach(DEFAULT_PPD), 11);
     }
 
     #[test]
