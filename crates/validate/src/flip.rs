@@ -164,7 +164,7 @@ fn differing_box(reference: &[u8], test: &[u8], width: usize) -> Option<[usize; 
 /// deviations of the widest Gaussian, scale 0.04; the feature filter: three
 /// deviations of 0.5 · 0.082 · ppd).
 fn filter_reach(ppd: f32) -> usize {
-    let pi = 3.141_592_7_f32;
+    let pi = std::f32::consts::PI; // FLIP's 3.14159265358979f is the same float
     let spatial = (3.0 * (0.04 / (2.0 * (pi * pi))).sqrt() * ppd).ceil();
     let feature = (3.0 * (0.5 * 0.082 * ppd)).ceil();
     spatial.max(feature) as usize + 1

@@ -478,8 +478,18 @@ impl Renderer {
     pub fn prepare(&self, asset: &GpuAsset, scene: &Scene) {
         let pipelines = if asset.decodes_in_shader() { self.buffer_pipelines() } else { &self.textures };
         let (march, shadow) = pipeline_keys(asset, scene);
-        for key in std::iter::once(march).chain(shadow) {
+        let keys: Vec<PipelineKey> = std::iter::once(march).chain(shadow).collect();
+        // Error scopes are the thread's own: a pipeline that fails here is
+        // forgotten, so the render makes it again and reports why.
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        for &key in &keys {
             pipelines.get(&self.device, key);
+        }
+        if pollster::block_on(scope.pop()).is_some() {
+            let mut made = pipelines.made.lock().unwrap_or_else(|e| e.into_inner());
+            for key in &keys {
+                made.remove(key);
+            }
         }
     }
 
