@@ -116,33 +116,33 @@ pub(crate) fn swap_xz<T: Copy>(a: &[T; BRICK_VOXELS]) -> [T; BRICK_VOXELS] {
 /// texel order, little-endian.
 pub(crate) fn encode_texels(plane: &Plane, slots: &[(&Brick, [f32; 2])], out: &mut [u8]) {
     let lanes = plane.lanes as usize;
+    let lb = plane.format.lane_bytes();
     for (l, (values, range)) in slots.iter().enumerate().take(lanes) {
-        // Texel t's lane l; N (the lane's bytes) known here, so no call to memcpy per value.
-        fn put<const N: usize>(out: &mut [u8], lanes: usize, l: usize, t: usize, b: [u8; N]) {
-            let at = (t * lanes + l) * N;
-            out[at..at + N].copy_from_slice(&b);
-        }
+        let put = |out: &mut [u8], t: usize, b: &[u8]| {
+            let at = (t * lanes + l) * lb;
+            out[at..at + lb].copy_from_slice(b);
+        };
         match plane.format {
             Format::F32 => {
                 for (t, v) in swap_xz(values).iter().enumerate() {
-                    put(out, lanes, l, t, v.to_le_bytes());
+                    put(out, t, &v.to_le_bytes());
                 }
             }
             Format::F16 => {
                 let mut h = [half::f16::ZERO; BRICK_VOXELS];
                 h.convert_from_f32_slice(&swap_xz(values));
                 for (t, v) in h.iter().enumerate() {
-                    put(out, lanes, l, t, v.to_le_bytes());
+                    put(out, t, &v.to_le_bytes());
                 }
             }
             Format::Unorm16 => {
                 for (t, q) in swap_xz(&quantise16(values, *range)).iter().enumerate() {
-                    put(out, lanes, l, t, q.to_le_bytes());
+                    put(out, t, &q.to_le_bytes());
                 }
             }
             Format::Unorm8 => {
                 for (t, q) in swap_xz(&quantise(values, *range)).iter().enumerate() {
-                    put(out, lanes, l, t, [*q]);
+                    put(out, t, &[*q]);
                 }
             }
             // No texels; block formats are encoded elsewhere.
