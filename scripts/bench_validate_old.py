@@ -2,7 +2,7 @@
 """validate's speed against the last binary before format v3 (issue 21), in one run.
 
     /usr/bin/python3 scripts/bench_validate_old.py [--runs R] [--size N]
-        [--old-worktree DIR] [--old-target DIR] [--new-exe PATH]
+        [--old-worktree DIR] [--old-target DIR] [--new-exe PATH] [--also NAME=EXE ...]
 
 * old: commit 0ebd86e (the last before multi-channel assets), checked out in a git
   worktree (default bench-out/old-0ebd86e) and built with `cargo build --release` into
@@ -16,8 +16,12 @@
   `validate ASSET --source CLOUD --views 8 --size 512x512` once untimed (Mesa keeps the
   compiled shaders in its disk cache: the timed runs do not compile), then R times
   (default 3), the two binaries alternating;
+* --also NAME=EXE (repeatable): another binary of this tree's format (e.g. an earlier
+  build of main), timed in the same alternation on the new binary's asset, so a change
+  and its base are measured against 0ebd86e in one run;
 * prints every time (wall clock, and CPU time of every thread: the GPU here is Mesa's
-  lavapipe, on the CPU), the medians and their ratios new / old (target: at most 1.05).
+  lavapipe, on the CPU) with the machine's load average after it, the medians and their ratios to old (target for new: at most
+  1.05).
 The machine's other work disturbs single runs: compare the medians, and run again when
 the ratio looks off.
 """
@@ -77,6 +81,7 @@ def main():
     ap.add_argument("--old-worktree", default=os.path.join(OUT, "old-" + OLD_COMMIT))
     ap.add_argument("--old-target", default=os.path.join(OUT, "target-" + OLD_COMMIT))
     ap.add_argument("--new-exe", help="the new vdbcook binary (default: build this tree)")
+    ap.add_argument("--also", action="append", default=[], metavar="NAME=EXE", help="another binary of this tree's format, timed in the same alternation")
     args = ap.parse_args()
     os.makedirs(OUT, exist_ok=True)
     old = old_binary(os.path.abspath(args.old_worktree), os.path.abspath(args.old_target))
@@ -89,20 +94,29 @@ def main():
         assets[name] = os.path.join(OUT, "cloud_%d_%s_bc7.vpak" % (args.size, name))
         run([exe, "cook", "-q", "--force", "--format", "bc7", "-o", assets[name], cloud])
     exes = {"old": old, "new": new}
+    for spec in args.also:
+        name, sep, exe = spec.partition("=")
+        if not sep or not name or name in exes:
+            sys.exit("--also %s: expected NAME=EXE with a NAME other than old, new and the others" % spec)
+        exes[name] = os.path.abspath(exe)
+        assets[name] = assets["new"]
+    names = list(exes)
     # Untimed: fills Mesa's shader cache, so no timed run compiles shaders.
-    for name in ("old", "new"):
+    for name in names:
         _, out = validate(exes[name], assets[name], cloud)
         print("%s (%s):\n%s" % (name, exes[name], out.rstrip()))
-    times = {"old": [], "new": []}
+    times = {n: [] for n in names}
     for i in range(args.runs):
-        for name in ("old", "new"):
+        for name in names:
             (wall, cpu), _ = validate(exes[name], assets[name], cloud)
             times[name].append((wall, cpu))
-            print("run %d %s: %.2f s (CPU %.2f s)" % (i + 1, name, wall, cpu), flush=True)
+            print("run %d %s: %.2f s (CPU %.2f s) load %.2f" % (i + 1, name, wall, cpu, os.getloadavg()[0]), flush=True)
     print("validate --views 8 --size 512x512 of a bc7 cook of %s (median of %d, alternating):" % (os.path.relpath(cloud, ROOT), args.runs))
     for k, what in ((0, "wall"), (1, "CPU")):
-        old_m, new_m = (statistics.median(t[k] for t in times[n]) for n in ("old", "new"))
-        print("  %-4s old (%s): %.2f s   new: %.2f s   ratio new/old: %.3f" % (what, OLD_COMMIT, old_m, new_m, new_m / old_m))
+        med = {n: statistics.median(t[k] for t in times[n]) for n in names}
+        print("  %-4s old (%s): %.2f s   new: %.2f s   ratio new/old: %.3f" % (what, OLD_COMMIT, med["old"], med["new"], med["new"] / med["old"]))
+        for n in names[2:]:
+            print("  %-4s %s: %.2f s   ratio %s/old: %.3f" % (what, n, med[n], n, med[n] / med["old"]))
 
 
 if __name__ == "__main__":

@@ -24,8 +24,11 @@
 // - surface (2): a level set, drawn as an opaque lit surface at its first
 //   zero crossing along the ray (`surface`) against black.
 // Non-finite voxels (NaN, ±inf) count as empty: no extinction, no emission,
-// no surface. The override constants SURFACE and BACKDROP fold the other
-// models away, so a plain fog's march is what it was before they existed.
+// no surface. The surface model has its own entry point (`surface_main`;
+// one entry point, with every function inlined into it, would make the
+// driver compile the surface code for every fog, only to remove it), and
+// the override constant BACKDROP folds the backdrop away, so a plain fog's
+// march is what it was before they existed.
 // The image is RGB. No randomness: the image depends only on the data, so
 // two assets can be compared exactly.
 
@@ -55,8 +58,6 @@ override GLOWS: bool = true;
 override SLOT_X: u32 = 0xffffffffu;
 override SLOT_Y: u32 = 0xffffffffu;
 override SLOT_Z: u32 = 0xffffffffu;
-// The surface model: params.channels.x is a level set (see `surface`).
-override SURFACE: bool = false;
 // The glow model's backdrop behind the volume.
 override BACKDROP: bool = false;
 // RGB per pixel, row-major from the top.
@@ -338,23 +339,48 @@ fn surface(o: vec3<f32>, d: vec3<f32>, hit: vec2<f32>) -> vec3<f32> {
     return vec3<f32>(0.8 * (0.25 + 0.75 * lit));
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+// The direction of the camera ray through pixel `gid` of the image.
+fn pixel_ray(gid: vec3<u32>) -> vec3<f32> {
     let w = params.size.x;
     let h = params.size.y;
-    if (gid.x >= w || gid.y >= h) { return; }
     let px = (f32(gid.x) + 0.5) / f32(w) * 2.0 - 1.0;
     let py = 1.0 - (f32(gid.y) + 0.5) / f32(h) * 2.0;
     let aspect = f32(w) / f32(h);
     let tf = params.forward.w;
-    let d = normalize(params.forward.xyz + params.right.xyz * (px * tf * aspect) + params.up.xyz * (py * tf));
+    return normalize(params.forward.xyz + params.right.xyz * (px * tf * aspect) + params.up.xyz * (py * tf));
+}
+
+fn write_pixel(gid: vec3<u32>, radiance: vec3<f32>) {
+    let pixel = 3u * (gid.y * params.size.x + gid.x);
+    image[pixel] = radiance.x;
+    image[pixel + 1u] = radiance.y;
+    image[pixel + 2u] = radiance.z;
+}
+
+// The surface model (params.channels.x is a level set, see `surface`).
+@compute @workgroup_size(8, 8, 1)
+fn surface_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= params.size.x || gid.y >= params.size.y) { return; }
+    let d = pixel_ray(gid);
+    let o = params.eye.xyz;
+    let hit = box_hit(o, d, params.box_min.xyz, params.box_max.xyz);
+    var radiance = surface(o, d, hit);
+    if (BACKDROP) {
+        radiance += backdrop(d);
+    }
+    write_pixel(gid, radiance);
+}
+
+// The scatter and glow models.
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if (gid.x >= params.size.x || gid.y >= params.size.y) { return; }
+    let d = pixel_ray(gid);
     let o = params.eye.xyz;
     let hit = box_hit(o, d, params.box_min.xyz, params.box_max.xyz);
     var radiance = vec3<f32>(0.0);
     var trans = 1.0;
-    if (SURFACE) {
-        radiance = surface(o, d, hit);
-    } else if (hit.x < hit.y) {
+    if (hit.x < hit.y) {
         let step = params.box_min.w;
         var k = 0.5;
         var n = 0u;
@@ -418,8 +444,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (BACKDROP) {
         radiance += trans * backdrop(d);
     }
-    let pixel = 3u * (gid.y * w + gid.x);
-    image[pixel] = radiance.x;
-    image[pixel + 1u] = radiance.y;
-    image[pixel + 2u] = radiance.z;
+    write_pixel(gid, radiance);
 }

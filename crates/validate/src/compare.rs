@@ -192,12 +192,19 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>, E: Into<BoxError>>(
     let gpu_asset = renderer.upload_for(asset, &scene).map_err(|e| CompareError::In(name.to_string(), e.into()))?;
     let gpu_ref = renderer.upload_for(reference, &scene).map_err(|e| CompareError::In("reference".into(), e.into()))?;
     let pair = Pair { name, asset, reference, meta: &meta, ref_meta: &ref_meta, gpu_asset: &gpu_asset, gpu_ref: &gpu_ref, renderer: &renderer, scene: &scene };
-    let mut runs: Vec<LevelRun> = Vec::new();
-    for lod in levels {
-        // Coarser levels keep the finest level's worst view: the report shows it at every level.
-        let focus = runs.first().and_then(|r| r.kept.first()).map(|k| (k.shot.frame, k.shot.view));
-        runs.push(compare_level(&pair, opts, lod, &frames, focus, bars)?);
-    }
+    let runs = std::thread::scope(|s| {
+        // The driver compiles the asset's pipelines (on the CPU, mostly on one
+        // core) while the reference renders, not between the two renders.
+        let r: &Renderer = &renderer;
+        s.spawn(|| r.prepare(&gpu_asset, &scene));
+        let mut runs: Vec<LevelRun> = Vec::new();
+        for lod in levels {
+            // Coarser levels keep the finest level's worst view: the report shows it at every level.
+            let focus = runs.first().and_then(|r| r.kept.first()).map(|k| (k.shot.frame, k.shot.view));
+            runs.push(compare_level(&pair, opts, lod, &frames, focus, bars)?);
+        }
+        Ok::<_, CompareError>(runs)
+    })?;
     let mut out = combine(&runs, opts, &renderer.adapter)?;
     if let Some(dir) = &opts.report {
         crate::html::write_report(dir, &out.doc, &runs, opts.gate.is_set()).map_err(|e| CompareError::In(dir.display().to_string(), e))?;
@@ -305,7 +312,11 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
     let views = scene.orbit(opts.viewing.views.count());
     let (w, h) = (opts.viewing.size.width(), opts.viewing.size.height());
     // What each view shows with no volume, as 8-bit sRGB: coverage is measured against it.
-    let empty: Vec<Vec<u8>> = views.iter().map(|v| crate::flip::srgb8(&scene.empty_image(v, w, h))).collect();
+    // Without the backdrop the empty scene is black: zeros, not computed.
+    let empty: Vec<Vec<u8>> = match scene.has_backdrop() {
+        true => views.iter().map(|v| crate::flip::srgb8(&scene.empty_image(v, w, h))).collect(),
+        false => vec![vec![0; w as usize * h as usize * 3]; views.len()],
+    };
     let shown = scene.shown();
     let shown_name = ref_meta.channels.get(shown).map_or(String::new(), |c| c.name.clone());
 
@@ -315,10 +326,16 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
     let mut flip_secs = 0.0;
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in frames {
-        let (errors, nonzero) = voxel_errors(p.asset, p.reference, f, lod, shown)?;
+        // The voxel errors (one core) are found while the GPU renders (on a
+        // CPU driver, the rendering leaves that core some time).
+        let (vox, rendered) = std::thread::scope(|s| {
+            let vox = s.spawn(|| voxel_errors(p.asset, p.reference, f, lod, shown));
+            let rendered = renderer.render_views_level(p.gpu_ref, scene, f, lod, &views, w, h).and_then(|refs| Ok((refs, renderer.render_views_level(p.gpu_asset, scene, f, lod, &views, w, h)?)));
+            (vox.join().unwrap_or_else(|e| std::panic::resume_unwind(e)), rendered)
+        });
+        let (errors, nonzero) = vox?;
         voxel.push((f, errors));
-        let refs = renderer.render_views_level(p.gpu_ref, scene, f, lod, &views, w, h)?;
-        let imgs = renderer.render_views_level(p.gpu_asset, scene, f, lod, &views, w, h)?;
+        let (refs, imgs) = rendered?;
         // FLIP and coverage run on the CPU, one view per thread, on the 8-bit
         // sRGB images (the reference's encoded once for both).
         let t = Instant::now();

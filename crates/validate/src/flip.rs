@@ -65,12 +65,38 @@ fn srgb8_thresholds() -> &'static [f32; 255] {
     })
 }
 
+/// For each value of the top 16 bits of a float in [0, 1], the code of the
+/// smallest float with those bits: where the search for a code in (0, 1) starts.
+fn srgb8_starts() -> &'static [u8] {
+    static S: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    S.get_or_init(|| {
+        let t = srgb8_thresholds();
+        (0..=1.0f32.to_bits() >> 16).map(|hi| t.partition_point(|&x| x <= f32::from_bits(hi << 16)) as u8).collect()
+    })
+}
+
 /// The 8-bit sRGB pixels of a linear image (what the report's PNGs hold):
 /// [`srgb8_value`] of each, found in a table of thresholds instead of a
-/// power per value (validate encodes every image two or three times).
+/// power per value (validate encodes every image two or three times): the
+/// number of thresholds at or below the value, counted on from the code of
+/// the smallest float that shares its top 16 bits (a step or two at most).
 pub fn srgb8(img: &Image) -> Vec<u8> {
-    let t = srgb8_thresholds();
-    img.pixels.iter().map(|&v| if v.is_nan() { srgb8_value(v) } else { t.partition_point(|&x| x <= v) as u8 }).collect()
+    let (t, starts) = (srgb8_thresholds(), srgb8_starts());
+    img.pixels
+        .iter()
+        .map(|&v| {
+            if v > 0.0 && v < 1.0 {
+                let mut code = starts.get((v.to_bits() >> 16) as usize).map_or(0, |&c| usize::from(c));
+                while t.get(code).is_some_and(|&x| x <= v) {
+                    code += 1;
+                }
+                code as u8
+            } else {
+                // Zero, negative, one and over, infinite, NaN.
+                srgb8_value(v)
+            }
+        })
+        .collect()
 }
 
 /// FLIP of two 8-bit sRGB RGB images of `width` × `height` pixels.
@@ -82,13 +108,66 @@ pub fn flip_srgb8(reference: &[u8], test: &[u8], width: u32, height: u32, ppd: f
     if !(ppd.is_finite() && ppd > 0.0) {
         return Err(Error::Flip(format!("FLIP needs a positive number of pixels per degree, not {ppd}")));
     }
-    if n == 0 {
-        return Ok(FlipMap { width, height, errors: Vec::new() });
+    let mut errors = vec![0.0f32; n / 3];
+    // FLIP's error at a pixel depends only on the pixels within its filters'
+    // reach, and is exactly 0 where both images agree over all of them. So
+    // only the box around the pixels that differ, widened by twice that reach
+    // (then every pixel whose window the box cuts sees equal images in either
+    // computation), is computed: the same map, bit for bit, for less work.
+    let Some([x0, y0, x1, y1]) = differing_box(reference, test, width as usize) else {
+        return Ok(FlipMap { width, height, errors });
+    };
+    let margin = 2 * filter_reach(ppd) + 1;
+    let (x0, y0) = (x0.saturating_sub(margin), y0.saturating_sub(margin));
+    let (x1, y1) = ((x1 + margin).min(width as usize), (y1 + margin).min(height as usize));
+    let crop = |img: &[u8]| -> Vec<u8> { (y0..y1).flat_map(|y| &img[(y * width as usize + x0) * 3..(y * width as usize + x1) * 3]).copied().collect() };
+    let cw = x1 - x0;
+    let map = flip_whole(&crop(reference), &crop(test), cw as u32, (y1 - y0) as u32, ppd);
+    for (y, row) in (y0..y1).zip(map.chunks_exact(cw)) {
+        errors[y * width as usize + x0..y * width as usize + x1].copy_from_slice(row);
+    }
+    Ok(FlipMap { width, height, errors })
+}
+
+/// FLIP's map of two whole RGB images (no cropping): nv-flip's C++ code.
+fn flip_whole(reference: &[u8], test: &[u8], width: u32, height: u32, ppd: f32) -> Vec<f32> {
+    if reference.is_empty() {
+        return Vec::new();
     }
     let r = nv_flip::FlipImageRgb8::with_data(width, height, reference);
     let t = nv_flip::FlipImageRgb8::with_data(width, height, test);
-    let map = nv_flip::flip(r, t, ppd);
-    Ok(FlipMap { width, height, errors: map.to_vec() })
+    nv_flip::flip(r, t, ppd).to_vec()
+}
+
+/// `[x0, y0, x1, y1)`: the smallest box holding every pixel where two RGB
+/// images of rows `width` pixels long differ; `None` when they are equal.
+fn differing_box(reference: &[u8], test: &[u8], width: usize) -> Option<[usize; 4]> {
+    let mut b: Option<[usize; 4]> = None;
+    for (y, (r, t)) in reference.chunks_exact(width * 3).zip(test.chunks_exact(width * 3)).enumerate() {
+        if r == t {
+            continue;
+        }
+        let differs = |x: &usize| r[x * 3..x * 3 + 3] != t[x * 3..x * 3 + 3];
+        let first = (0..width).find(differs).unwrap_or(0);
+        let last = (0..width).rev().find(differs).unwrap_or(width - 1);
+        b = Some(match b {
+            None => [first, y, last + 1, y + 1],
+            Some([x0, y0, x1, _]) => [x0.min(first), y0, x1.max(last + 1), y + 1],
+        });
+    }
+    b
+}
+
+/// How far (in pixels, either axis) FLIP's filters reach from a pixel at
+/// `ppd` pixels per degree, with a pixel to spare: the larger radius of its
+/// two, computed as its C++ does (`calculateSpatialFilterRadius`: three
+/// deviations of the widest Gaussian, scale 0.04; the feature filter: three
+/// deviations of 0.5 · 0.082 · ppd).
+fn filter_reach(ppd: f32) -> usize {
+    let pi = std::f32::consts::PI; // FLIP's 3.14159265358979f is the same float
+    let spatial = (3.0 * (0.04 / (2.0 * (pi * pi))).sqrt() * ppd).ceil();
+    let feature = (3.0 * (0.5 * 0.082 * ppd)).ceil();
+    spatial.max(feature) as usize + 1
 }
 
 /// FLIP of two linear images of the same size, compared as 8-bit sRGB (see the module notes).
@@ -105,7 +184,9 @@ mod tests {
     fn the_threshold_table_encodes_as_the_curve_does() {
         // Every 211th float of [0, 1], the ends, values out of range and NaN.
         let mut values: Vec<f32> = (0..=1.0f32.to_bits()).step_by(211).map(f32::from_bits).collect();
-        values.extend([0.0, 1.0, -0.5, 2.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 0.003_130_8, 1e-30]);
+        values.extend([0.0, -0.0, 1.0, -0.5, 2.0, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 0.003_130_8, 1e-30, f32::MIN_POSITIVE, 1e-45]);
+        // Each threshold and the floats either side of it.
+        values.extend(super::srgb8_thresholds().iter().flat_map(|t| [t.to_bits() - 1, t.to_bits(), t.to_bits() + 1]).map(f32::from_bits));
         let img = super::Image { width: values.len() as u32, height: 1, pixels: values.clone() };
         let fast = super::srgb8(&img);
         for (v, f) in values.iter().zip(&fast) {
@@ -208,6 +289,51 @@ mod tests {
         let mut dark = img.clone();
         dark.pixels.iter_mut().for_each(|v| *v *= 0.5);
         assert!(flip(&img, &dark, DEFAULT_PPD).unwrap().mean() > 0.01);
+    }
+
+    #[test]
+    fn the_cropped_map_is_the_whole_map() {
+        // Blobs of change at the corners, edges and middle of a textured
+        // image, alone and together, at several viewing distances: the map
+        // computed over the box around the change is FLIP's map of the whole
+        // images, bit for bit (so is every figure made from it).
+        let (w, h) = (160usize, 112usize);
+        let base: Vec<u8> = (0..w * h * 3).map(|i| ((i * 7919 + (i / (w * 3)) * 31) % 251) as u8 / 2 + 40).collect();
+        let spots: [&[(usize, usize)]; 6] = [&[(0, 0)], &[(w - 1, h - 1)], &[(80, 0)], &[(80, 56)], &[(30, 90), (130, 20)], &[(3, 60), (150, 60)]];
+        for ppd in [10.0, DEFAULT_PPD, 120.0] {
+            for spot in spots {
+                let mut test = base.clone();
+                for &(cx, cy) in spot {
+                    for y in cy.saturating_sub(2)..(cy + 3).min(h) {
+                        for x in cx.saturating_sub(3)..(cx + 2).min(w) {
+                            test[(y * w + x) * 3 + (x + y) % 3] ^= 0x55;
+                        }
+                    }
+                }
+                let whole = flip_whole(&base, &test, w as u32, h as u32, ppd);
+                let cropped = flip_srgb8(&base, &test, w as u32, h as u32, ppd).unwrap();
+                assert_eq!(cropped.errors.len(), whole.len());
+                let same = cropped.errors.iter().zip(&whole).all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(same, "ppd {ppd}, spots {spot:?}");
+                assert!(cropped.mean() > 0.0);
+            }
+        }
+        // Equal images: an all-zero map, as FLIP gives.
+        let same = flip_srgb8(&base, &base, w as u32, h as u32, DEFAULT_PPD).unwrap();
+        assert!(same.errors.iter().zip(flip_whole(&base, &base, w as u32, h as u32, DEFAULT_PPD)).all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+
+    #[test]
+    fn the_reach_covers_flips_filters() {
+        // At FLIP's default distance its filters reach 10 pixels (spatial)
+        // and 9 (features), by its own formulas worked in f64.
+        for ppd in [1.0f32, 10.0, DEFAULT_PPD, 120.0, 1000.0] {
+            let p = f64::from(ppd);
+            let spatial = (3.0 * (0.04 / (2.0 * std::f64::consts::PI * std::f64::consts::PI)).sqrt() * p).ceil() as usize;
+            let feature = (1.5 * 0.082 * p).ceil() as usize;
+            assert!(filter_reach(ppd) > spatial.max(feature), "{ppd}");
+        }
+        assert_eq!(filter_reach(DEFAULT_PPD), 11);
     }
 
     #[test]

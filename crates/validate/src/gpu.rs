@@ -71,9 +71,9 @@ const BUFFER_BINDINGS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, CHANNEL_BINDING, TABLE_B
 
 /// A pipeline's entry point and override constants: several textures,
 /// emission, the shown channels' known slots, the format every plane sampled
-/// has (`NONE` when they differ), brick tables or none, the surface model,
-/// the backdrop.
-type PipelineKey = (&'static str, bool, bool, [u32; 3], u32, bool, bool, bool);
+/// has (`NONE` when they differ), brick tables or none, the backdrop. The
+/// surface model has an entry point of its own.
+type PipelineKey = (&'static str, bool, bool, [u32; 3], u32, bool, bool);
 
 /// The bind group layout and the pipelines of one shader, each made on first
 /// use for its entry point and the override constants that fold branches
@@ -83,7 +83,10 @@ struct Pipelines {
     layout: wgpu::BindGroupLayout,
     module: wgpu::ShaderModule,
     pipeline_layout: wgpu::PipelineLayout,
-    made: std::sync::Mutex<std::collections::HashMap<PipelineKey, wgpu::ComputePipeline>>,
+    /// Each key's pipeline, made once: the map is locked only to find a key's
+    /// cell, so one thread can make a pipeline while another renders with a
+    /// pipeline made before (see [`Renderer::prepare`]).
+    made: std::sync::Mutex<std::collections::HashMap<PipelineKey, std::sync::Arc<std::sync::OnceLock<wgpu::ComputePipeline>>>>,
 }
 
 impl Pipelines {
@@ -103,38 +106,35 @@ impl Pipelines {
     /// with emission (`glows`) or without, with the shown channels' texture
     /// slots where known (`slots`, `NONE` where not), the format of every
     /// plane sampled when they share one (`format`, else `NONE`), whether any
-    /// plane has a brick table (`tables`), for the surface model or not, with
-    /// the backdrop or not.
+    /// plane has a brick table (`tables`), with the backdrop or not.
     fn get(&self, device: &wgpu::Device, key: PipelineKey) -> wgpu::ComputePipeline {
-        let (entry, multi, glows, slots, format, tables, surface, backdrop) = key;
-        let mut made = self.made.lock().unwrap_or_else(|e| e.into_inner());
-        made.entry(key)
-            .or_insert_with(|| {
-                let flag = |b: bool| if b { 1.0 } else { 0.0 };
-                let [x, y, z] = slots.map(f64::from);
-                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(entry),
-                    layout: Some(&self.pipeline_layout),
-                    module: &self.module,
-                    entry_point: Some(entry),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &[
-                            ("VPAK_MULTI_ATLAS", flag(multi)),
-                            ("GLOWS", flag(glows)),
-                            ("SLOT_X", x),
-                            ("SLOT_Y", y),
-                            ("SLOT_Z", z),
-                            ("VPAK_FORMAT", f64::from(format)),
-                            ("VPAK_TABLES", flag(tables)),
-                            ("SURFACE", flag(surface)),
-                            ("BACKDROP", flag(backdrop)),
-                        ],
-                        ..Default::default()
-                    },
-                    cache: None,
-                })
+        let (entry, multi, glows, slots, format, tables, backdrop) = key;
+        let cell = self.made.lock().unwrap_or_else(|e| e.into_inner()).entry(key).or_default().clone();
+        cell.get_or_init(|| {
+            let flag = |b: bool| if b { 1.0 } else { 0.0 };
+            let [x, y, z] = slots.map(f64::from);
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&self.pipeline_layout),
+                module: &self.module,
+                entry_point: Some(entry),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[
+                        ("VPAK_MULTI_ATLAS", flag(multi)),
+                        ("GLOWS", flag(glows)),
+                        ("SLOT_X", x),
+                        ("SLOT_Y", y),
+                        ("SLOT_Z", z),
+                        ("VPAK_FORMAT", f64::from(format)),
+                        ("VPAK_TABLES", flag(tables)),
+                        ("BACKDROP", flag(backdrop)),
+                    ],
+                    ..Default::default()
+                },
+                cache: None,
             })
-            .clone()
+        })
+        .clone()
     }
 }
 
@@ -226,6 +226,19 @@ fn texture_format(p: &vdbcook_vpak::Plane) -> wgpu::TextureFormat {
         // Constant planes have no atlases.
         (Format::Constant, _) => T::R8Unorm,
     }
+}
+
+/// The keys of the march's pipeline for `asset` in `scene`, and of the shadow
+/// grid's (only scattered light reads it).
+fn pipeline_keys(asset: &GpuAsset, scene: &Scene) -> (PipelineKey, Option<PipelineKey>) {
+    let multi = asset.slots > 1;
+    let glows = scene.channels[1] != crate::NONE || scene.channels[2] != crate::NONE;
+    let known = scene.channels.map(|c| asset.single_slot.get(c as usize).copied().unwrap_or(crate::NONE));
+    let format = asset.common_format(&scene.channels);
+    let backdrop = scene.has_backdrop();
+    let shadow = (scene.model() == Model::Scatter).then_some(("shadow_main", multi, false, [crate::NONE; 3], format, asset.tables, false));
+    let entry = if scene.model() == Model::Surface { "surface_main" } else { "main" };
+    ((entry, multi, glows, known, format, asset.tables, backdrop), shadow)
 }
 
 fn uniform() -> wgpu::BindingType {
@@ -492,6 +505,27 @@ impl Renderer {
         })
     }
 
+    /// Makes the pipelines that rendering `asset` in `scene` needs (what the
+    /// first render would otherwise make): called on another thread while
+    /// this one renders, the driver's shader compilation overlaps the render.
+    pub fn prepare(&self, asset: &GpuAsset, scene: &Scene) {
+        let pipelines = if asset.decodes_in_shader() { self.buffer_pipelines() } else { &self.textures };
+        let (march, shadow) = pipeline_keys(asset, scene);
+        let keys: Vec<PipelineKey> = std::iter::once(march).chain(shadow).collect();
+        // Error scopes are the thread's own: a pipeline that fails here is
+        // forgotten, so the render makes it again and reports why.
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        for &key in &keys {
+            pipelines.get(&self.device, key);
+        }
+        if pollster::block_on(scope.pop()).is_some() {
+            let mut made = pipelines.made.lock().unwrap_or_else(|e| e.into_inner());
+            for key in &keys {
+                made.remove(key);
+            }
+        }
+    }
+
     /// Renders frame `frame` of `asset` from `view`.
     pub fn render(&self, asset: &GpuAsset, scene: &Scene, frame: usize, view: &View, width: u32, height: u32) -> Result<Image, Error> {
         let mut v = self.render_views(asset, scene, frame, std::slice::from_ref(view), width, height)?;
@@ -576,15 +610,10 @@ impl Renderer {
             {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("march"), timestamp_writes: None });
                 pass.set_bind_group(0, &group, &[]);
-                let multi = asset.slots > 1;
-                let glows = scene.channels[1] != crate::NONE || scene.channels[2] != crate::NONE;
-                let known = scene.channels.map(|c| asset.single_slot.get(c as usize).copied().unwrap_or(crate::NONE));
-                let format = asset.common_format(&scene.channels);
-                let (surface, backdrop) = (scene.model() == Model::Surface, scene.has_backdrop());
-                let march = pipelines.get(&self.device, ("main", multi, glows, known, format, asset.tables, surface, backdrop));
-                // Only scattered light reads the shadow grid.
-                if i == 0 && scene.model() == Model::Scatter {
-                    let shadow_pipeline = pipelines.get(&self.device, ("shadow_main", multi, false, [crate::NONE; 3], format, asset.tables, false, false));
+                let (march_key, shadow_key) = pipeline_keys(asset, scene);
+                let march = pipelines.get(&self.device, march_key);
+                if let (0, Some(key)) = (i, shadow_key) {
+                    let shadow_pipeline = pipelines.get(&self.device, key);
                     pass.set_pipeline(&shadow_pipeline);
                     pass.dispatch_workgroups(u32::try_from(cells.div_ceil(64)).map_err(|_| Error::Gpu("shadow grid too large".into()))?, 1, 1);
                 }
