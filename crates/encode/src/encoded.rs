@@ -134,14 +134,11 @@ impl<'a> Encoded<'a> {
                 continue;
             }
             // Encoded on demand: decoded value by value, without the texels.
-            if matches!(self.planes.get(p), Some(PlaneData::OnDemand)) && i < self.len() {
-                let trips: Option<Vec<Brick>> = spec.channels.iter().map(|&c| round_trip(spec.plane.format, &self.bricks[i * self.channels + c], self.range(i, c))).collect();
-                if let Some(trips) = trips {
-                    for (&c, values) in spec.channels.iter().zip(trips) {
-                        out[c] = values;
-                    }
-                    continue;
-                }
+            if matches!(self.planes.get(p), Some(PlaneData::OnDemand))
+                && i < self.len()
+                && spec.channels.iter().all(|&c| round_trip(spec.plane.format, &self.bricks[i * self.channels + c], self.range(i, c), &mut out[c]))
+            {
+                continue;
             }
             buf.resize(MAX_BRICK_BYTES, 0);
             let data = &mut buf[..spec.plane.brick_bytes()];

@@ -134,21 +134,22 @@ pub(crate) fn encode_texels(plane: &Plane, slots: &[(&Brick, [f32; 2])], out: &m
 
 /// What a reader decodes of `values` stored in the uncompressed `format`
 /// over `range` ([`encode_texels`], then `Plane::decode_brick` and
-/// `Plane::channel_values`), value by value without the bytes; `None` for
-/// the block formats and constant.
-pub(crate) fn round_trip(format: Format, values: &Brick, [lo, hi]: [f32; 2]) -> Option<Brick> {
+/// `Plane::channel_values`), value by value without the bytes, into `out`;
+/// false (and `out` untouched) for the block formats and constant.
+pub(crate) fn round_trip(format: Format, values: &Brick, [lo, hi]: [f32; 2], out: &mut Brick) -> bool {
     let ranged = |t: f32| if hi > lo { lo + t * (hi - lo) } else { lo };
-    Some(match format {
-        Format::F32 => *values,
+    match format {
+        Format::F32 => *out = *values,
         Format::F16 => {
             let mut h = [half::f16::ZERO; BRICK_VOXELS];
             h.convert_from_f32_slice(values);
-            h.map(half::f16::to_f32)
+            out.iter_mut().zip(h).for_each(|(o, x)| *o = x.to_f32());
         }
-        Format::Unorm16 => quantise16(values, [lo, hi]).map(|q| ranged(f32::from(q) / 65535.0)),
-        Format::Unorm8 => quantise(values, [lo, hi]).map(|q| ranged(f32::from(q) / 255.0)),
-        Format::Constant | Format::Bc4 | Format::Bc7 => return None,
-    })
+        Format::Unorm16 => out.iter_mut().zip(quantise16(values, [lo, hi])).for_each(|(o, q)| *o = ranged(f32::from(q) / 65535.0)),
+        Format::Unorm8 => out.iter_mut().zip(quantise(values, [lo, hi])).for_each(|(o, q)| *o = ranged(f32::from(q) / 255.0)),
+        Format::Constant | Format::Bc4 | Format::Bc7 => return false,
+    }
+    true
 }
 
 /// Writes lane `lane` of every texel (`lanes` lanes of `N` bytes each). The
