@@ -11,7 +11,8 @@ thread_local! {
 /// Runs `f` with this thread's failed allocations returned to the code that
 /// asked for them (`Vec::try_reserve` sees the error) instead of ending the
 /// process under [`ReportingAllocator`]. Without that allocator (library
-/// tests, other programs) it only runs `f`.
+/// tests, other programs) it only runs `f`. Keep `f` to the fallible call
+/// itself: any other allocation that fails inside it aborts, as Rust's do.
 pub fn fallible<R>(f: impl FnOnce() -> R) -> R {
     struct Restore(bool);
     impl Drop for Restore {
