@@ -257,9 +257,12 @@ pub struct Gpu {
     pub queue: wgpu::Queue,
 }
 
+/// BC textures and their 3D (sliced) use: only both together let BC atlases be textures.
+const BC_3D: wgpu::Features = wgpu::Features::TEXTURE_COMPRESSION_BC.union(wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D);
+
 /// The features the renderer uses when a device has them: BC 3D textures and 16-bit norm textures.
 pub fn wanted_features() -> wgpu::Features {
-    wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D | wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
+    BC_3D | wgpu::Features::TEXTURE_FORMAT_16BIT_NORM
 }
 
 /// Opens an adapter, the first whose name contains `filter` (case-insensitive)
@@ -285,11 +288,9 @@ pub fn open_gpu(filter: Option<&str>) -> Result<Gpu, Error> {
         }))
         .map_err(|e| Error::NoAdapter(format!(" ({e})")))?,
     };
-    // Sliced 3D BC textures are of no use without BC textures.
-    let bc = wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D;
     let mut features = adapter.features() & wanted_features();
-    if !features.contains(bc) {
-        features.remove(bc);
+    if !features.contains(BC_3D) {
+        features.remove(BC_3D);
     }
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some("vdbcook"),
@@ -316,8 +317,7 @@ impl Renderer {
         let Gpu { adapter: info, device, queue } = gpu;
         let adapter_name = format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
         let features = device.features();
-        let bc_features = wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_BC_SLICED_3D;
-        let bc = BcSupport { textures: features.contains(bc_features), cpu: info.device_type == wgpu::DeviceType::Cpu };
+        let bc = BcSupport { textures: features.contains(BC_3D), cpu: info.device_type == wgpu::DeviceType::Cpu };
         let norm16 = features.contains(wgpu::Features::TEXTURE_FORMAT_16BIT_NORM);
         let textures = Pipelines::new(
             &device,
