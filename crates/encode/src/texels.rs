@@ -136,8 +136,8 @@ pub(crate) fn encode_texels(plane: &Plane, slots: &[(&Brick, [f32; 2])], out: &m
 /// over `range` ([`encode_texels`], then `Plane::decode_brick` and
 /// `Plane::channel_values`), value by value without the bytes, into `out`;
 /// false (and `out` untouched) for the block formats and constant.
-pub(crate) fn round_trip(format: Format, values: &Brick, [lo, hi]: [f32; 2], out: &mut Brick) -> bool {
-    let ranged = |t: f32| if hi > lo { lo + t * (hi - lo) } else { lo };
+pub(crate) fn round_trip(format: Format, values: &Brick, range: [f32; 2], out: &mut Brick) -> bool {
+    let ranged = |t: f32| vdbcook_vpak::layout::from_unit(t, range);
     match format {
         Format::F32 => *out = *values,
         Format::F16 => {
@@ -145,8 +145,8 @@ pub(crate) fn round_trip(format: Format, values: &Brick, [lo, hi]: [f32; 2], out
             h.convert_from_f32_slice(values);
             out.iter_mut().zip(h).for_each(|(o, x)| *o = x.to_f32());
         }
-        Format::Unorm16 => out.iter_mut().zip(quantise16(values, [lo, hi])).for_each(|(o, q)| *o = ranged(f32::from(q) / 65535.0)),
-        Format::Unorm8 => out.iter_mut().zip(quantise(values, [lo, hi])).for_each(|(o, q)| *o = ranged(f32::from(q) / 255.0)),
+        Format::Unorm16 => out.iter_mut().zip(quantise16(values, range)).for_each(|(o, q)| *o = ranged(f32::from(q) / 65535.0)),
+        Format::Unorm8 => out.iter_mut().zip(quantise(values, range)).for_each(|(o, q)| *o = ranged(f32::from(q) / 255.0)),
         Format::Constant | Format::Bc4 | Format::Bc7 => return false,
     }
     true

@@ -240,14 +240,22 @@ impl Plane {
             let v = [(i / 64) as u32, ((i / 8) % 8) as u32, (i % 8) as u32];
             let ([x, y, s], lane) = self.locate(v, first_lane);
             let t = texels.get(((s * 8 + y) * 8 + x) as usize).map_or(0.0, |px| px[(lane & 3) as usize]);
-            if !ranged {
-                t
-            } else if hi > lo {
-                lo + t * (hi - lo)
+            if ranged {
+                from_unit(t, [lo, hi])
             } else {
-                lo
+                t
             }
         })
+    }
+}
+
+/// A ranged format's stored level `t` (0 to 1) as a value of the brick's
+/// range `[lo, hi]` (a range without width: `lo`).
+pub fn from_unit(t: f32, [lo, hi]: [f32; 2]) -> f32 {
+    if hi > lo {
+        lo + t * (hi - lo)
+    } else {
+        lo
     }
 }
 
