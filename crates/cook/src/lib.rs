@@ -116,11 +116,7 @@ impl TryFrom<String> for ChannelGroup {
     }
 }
 
-impl vdbcook_vpak::settings::SettingText for ChannelGroup {
-    fn text(&self) -> String {
-        self.to_string()
-    }
-}
+vdbcook_vpak::setting_text_by_display!(ChannelGroup);
 
 impl std::fmt::Display for ChannelGroup {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

@@ -144,17 +144,7 @@ impl<'de> serde::Deserialize<'de> for FrameRange {
     }
 }
 
-impl SettingText for FrameRange {
-    fn text(&self) -> String {
-        self.to_string()
-    }
-}
-
-impl SettingText for ByteBudget {
-    fn text(&self) -> String {
-        self.to_string()
-    }
-}
+vdbcook_vpak::setting_text_by_display!(FrameRange, ByteBudget);
 
 bounded!(
     /// k-means clusters (`--clusters`, `clusters`): 1 to 1,000,000.

@@ -58,11 +58,7 @@ impl Default for Size {
     }
 }
 
-impl vdbcook_vpak::settings::SettingText for Size {
-    fn text(&self) -> String {
-        self.to_string()
-    }
-}
+vdbcook_vpak::setting_text_by_display!(Size);
 
 /// A manifest writes it as the flag's text.
 impl<'de> serde::Deserialize<'de> for Size {

@@ -12,10 +12,12 @@ pub trait SettingText {
     fn text(&self) -> String;
 }
 
-macro_rules! text_by_display {
-    ($($t:ty),*) => {$( impl SettingText for $t { fn text(&self) -> String { self.to_string() } } )*};
+/// [`SettingText`] for types whose `Display` is the canonical text.
+#[macro_export]
+macro_rules! setting_text_by_display {
+    ($($t:ty),*) => {$( impl $crate::settings::SettingText for $t { fn text(&self) -> String { self.to_string() } } )*};
 }
-text_by_display!(bool, u32, u64, f32, f64, String);
+setting_text_by_display!(bool, u32, u64, f32, f64, String);
 
 impl SettingText for crate::Format {
     fn text(&self) -> String {
@@ -155,11 +157,7 @@ macro_rules! bounded {
             }
         }
 
-        impl $crate::settings::SettingText for $name {
-            fn text(&self) -> String {
-                self.0.to_string()
-            }
-        }
+        $crate::setting_text_by_display!($name);
 
         impl $crate::serde::Serialize for $name {
             fn serialize<S: $crate::serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
