@@ -29,9 +29,12 @@ pub fn try_reserve<T>(v: &mut Vec<T>, additional: usize, what: &'static str) -> 
     fallible(|| v.try_reserve(additional)).map_err(|_| OutOfMemory { what, bytes: additional.saturating_add(v.len()).saturating_mul(std::mem::size_of::<T>()) as u64 })
 }
 
+/// What to do when memory runs out, in both messages.
+const ADVICE: &str = "cook fewer frames or grids at once, or give it more memory";
+
 /// A buffer that could not be allocated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("out of memory: {what} needed {} (cook fewer frames or grids at once, or give the cook more memory)", mib(*bytes))]
+#[error("out of memory: {what} needed {} ({ADVICE})", mib(*bytes))]
 pub struct OutOfMemory {
     pub what: &'static str,
     pub bytes: u64,
@@ -91,7 +94,7 @@ impl ReportingAllocator {
         let mut buf = [0u8; 256];
         let mut w = &mut buf[..];
         let what = if size >= 1 << 20 { format_args!("{:.1} MiB", size as f64 / (1u64 << 20) as f64) } else { format_args!("{size} bytes") };
-        let _ = writeln!(w, "{}: error: out of memory: an allocation of {what} failed (cook fewer frames or grids at once, or give it more memory)", self.program);
+        let _ = writeln!(w, "{}: error: out of memory: an allocation of {what} failed ({ADVICE})", self.program);
         let left = w.len();
         let n = buf.len() - left;
         #[cfg(unix)]
