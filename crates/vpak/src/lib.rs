@@ -5,7 +5,8 @@
 //! ```text
 //! offset  size   field
 //! 0       8      magic "VPAK\r\n\x1a\n"
-//! 8       4      format version (6)
+//! 8       4      format version (6: one body, as below; 7: a segment table
+//!                  of version-6 bodies, see [`segments`])
 //! 12      4      flags (0; reserved)
 //! 16      4      section count n
 //! 20      4      reserved (0)
@@ -25,9 +26,11 @@ mod atomic;
 mod check;
 pub mod layout;
 pub mod nodes;
+pub mod segments;
 pub mod settings;
 
-pub use atomic::{write_atomic, write_atomic_with, write_file};
+pub use atomic::{write_atomic, write_atomic_with, write_file, AtomicFile};
+pub use segments::{assemble_segments, SegmentEntry, Writer};
 pub use check::{Checked, GpuChannel, GPU_CHANNEL_WORDS, MAX_CHANNELS};
 pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, PlaneInfo, BRICK_VOXELS, MAX_BRICK_BYTES};
 pub use settings::{Level, LevelCount};
@@ -46,7 +49,8 @@ pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
 ///    and level; `Metadata::levels`, `FrameInfo::coarse`).
 /// 6: `Metadata::first_level`: an asset may leave out its finest levels (`cook --max-bytes`);
 ///    L1 nodes of 4³ to 32³ slots, as many as the tree needs (frame entries are word offsets).
-pub const VERSION: u32 = 6;
+/// 7: segments: a table of version-6 bodies, each a run of frames ([`segments`]).
+pub const VERSION: u32 = segments::VERSION;
 /// Levels an asset may have: level 4's bricks span 128³ source voxels, one
 /// L1 slot, and the asset's index offset (a multiple of 128) keeps every
 /// level's leaves on its L3 grid only up to there.
@@ -120,7 +124,7 @@ pub enum Error {
     Io(#[from] std::io::Error),
     #[error("not a .vpak file (bad magic)")]
     Magic,
-    #[error("unsupported .vpak version {0} (this build reads version {VERSION}: cook the asset again)")]
+    #[error("unsupported .vpak version {0} (this build reads versions 6 and {VERSION}: cook the asset again)")]
     Version(u32),
     #[error("truncated: the header says {expected} bytes, the file has {actual}")]
     Size { expected: u64, actual: u64 },
@@ -146,6 +150,16 @@ pub enum Error {
     Exists(String),
     #[error("the asset is inconsistent: {0}")]
     Invalid(String),
+    #[error("implausible segment count {0}")]
+    SegmentCount(u32),
+    #[error("segment {segment} at {offset}+{size} is outside the file, misaligned or overlaps the one before")]
+    SegmentBounds { segment: usize, offset: u64, size: u64 },
+    #[error("segment {segment} is out of range (the asset has {count})")]
+    NoSegment { segment: usize, count: usize },
+    #[error("segment {0}: {1}")]
+    InSegment(usize, Box<Error>),
+    #[error("the asset has {0} segments: read its sections segment by segment")]
+    Segmented(usize),
 }
 
 /// A source file and its content hash.
@@ -398,7 +412,7 @@ pub struct Section {
     pub data: Vec<u8>,
 }
 
-fn checksum(b: &[u8]) -> u64 {
+pub(crate) fn checksum(b: &[u8]) -> u64 {
     xxhash_rust::xxh3::xxh3_64(b)
 }
 
@@ -425,12 +439,18 @@ pub fn file_len(sections: &[Section]) -> u64 {
     plan(sections).2 as u64
 }
 
-/// Writes a complete file to `w`, section by section (no copy of the whole file).
+/// Writes a complete one-body file (the version-6 layout) to `w`, section
+/// by section (no copy of the whole file).
 pub fn write_to<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section]) -> std::io::Result<()> {
+    write_body(w, sections, false)
+}
+
+/// Writes a body: its header and section table, then (unless `head_only`) its sections.
+pub(crate) fn write_body<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section], head_only: bool) -> std::io::Result<()> {
     let (offsets, table_end, total) = plan(sections);
     let mut head = vec![0u8; table_end];
     head[..8].copy_from_slice(&MAGIC);
-    head[8..12].copy_from_slice(&VERSION.to_le_bytes());
+    head[8..12].copy_from_slice(&segments::BODY_VERSION.to_le_bytes());
     head[16..20].copy_from_slice(&(sections.len() as u32).to_le_bytes());
     head[24..32].copy_from_slice(&(total as u64).to_le_bytes());
     for (i, (s, &off)) in sections.iter().zip(&offsets).enumerate() {
@@ -444,6 +464,9 @@ pub fn write_to<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section]) -> 
     let h = header_checksum(&head[..32], &head[HEADER_LEN..table_end]);
     head[32..40].copy_from_slice(&h.to_le_bytes());
     w.write_all(&head)?;
+    if head_only {
+        return Ok(());
+    }
     let mut pos = table_end;
     let zeros = [0u8; ALIGN];
     for (s, &off) in sections.iter().zip(&offsets) {
@@ -462,7 +485,7 @@ pub fn assemble(sections: &[Section]) -> Vec<u8> {
     out
 }
 
-fn header_checksum(head: &[u8], table: &[u8]) -> u64 {
+pub(crate) fn header_checksum(head: &[u8], table: &[u8]) -> u64 {
     let mut h = xxhash_rust::xxh3::Xxh3::new();
     h.update(head);
     h.update(table);
@@ -485,22 +508,41 @@ enum Bytes {
     Owned(Vec<u64>, usize),
 }
 
-/// An opened asset: header checked, sections located (and, with
-/// [`Asset::verify`], checksummed).  Slices point into the file's mapping.
+impl Bytes {
+    fn all(&self) -> &[u8] {
+        match self {
+            Bytes::Mapped(m) => m,
+            Bytes::Owned(w, len) => &bytemuck::cast_slice(w)[..*len],
+        }
+    }
+}
+
+/// An opened asset: header checked, sections (or segments) located (and,
+/// with [`Asset::verify`], checksummed).  Slices point into the file's
+/// mapping. A version-6 file is one body of sections; a version-7 file is a
+/// table of segments, each a body read through [`Asset::segment`] (an
+/// `Asset` over the same mapping).
+#[derive(Clone)]
 pub struct Asset {
-    bytes: Bytes,
+    bytes: std::sync::Arc<Bytes>,
+    /// The window of `bytes` this asset is: the whole file, or one segment's body.
+    start: usize,
+    len: usize,
+    /// A body's sections (none in a file with a segment table).
     pub sections: Vec<SectionEntry>,
+    /// A version-7 file's segment table (empty for a body).
+    table: Vec<SegmentEntry>,
 }
 
 impl Asset {
-    /// Maps a file and checks its header, section table and every section checksum.
+    /// Maps a file and checks its header, section (or segment) table and every checksum.
     pub fn open(path: &Path) -> Result<Asset, Error> {
         let a = Asset::open_unverified(path)?;
         a.verify()?;
         Ok(a)
     }
 
-    /// Maps a file and checks its header and section table only.
+    /// Maps a file and checks its header and section (or segment) table only.
     pub fn open_unverified(path: &Path) -> Result<Asset, Error> {
         let f = std::fs::File::open(path)?;
         if f.metadata()?.len() < HEADER_LEN as u64 {
@@ -518,42 +560,61 @@ impl Asset {
         Asset::parse(Bytes::Owned(words, b.len()))
     }
 
+    /// This asset's bytes: the whole file, or a segment's body.
     pub fn bytes(&self) -> &[u8] {
-        match &self.bytes {
-            Bytes::Mapped(m) => m,
-            Bytes::Owned(w, len) => &bytemuck::cast_slice(w)[..*len],
-        }
+        &self.bytes.all()[self.start..self.start + self.len]
     }
 
     fn parse(bytes: Bytes) -> Result<Asset, Error> {
-        let mut a = Asset { bytes, sections: Vec::new() };
-        let b = a.bytes();
+        let len = bytes.all().len();
+        let whole = Asset { bytes: std::sync::Arc::new(bytes), start: 0, len, sections: Vec::new(), table: Vec::new() };
+        let version = whole.version()?;
+        match version {
+            segments::BODY_VERSION => whole.body(),
+            segments::VERSION => whole.container(),
+            v => Err(Error::Version(v)),
+        }
+    }
+
+    /// The version field, after the magic and the file size are checked.
+    fn version(&self) -> Result<u32, Error> {
+        let b = self.bytes();
         if b.len() < HEADER_LEN || b[..8] != MAGIC {
             return Err(Error::Magic);
         }
-        let u32_at = |o: usize| u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
-        let u64_at = |o: usize| u64::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3], b[o + 4], b[o + 5], b[o + 6], b[o + 7]]);
-        let version = u32_at(8);
-        if version != VERSION {
-            return Err(Error::Version(version));
-        }
-        let size = u64_at(24);
+        let size = u64::from_le_bytes(b[24..32].try_into().unwrap_or([0; 8]));
         if size != b.len() as u64 {
             return Err(Error::Size { expected: size, actual: b.len() as u64 });
         }
-        let n = u32_at(16);
-        let table_end = (n as usize).checked_mul(ENTRY_LEN).and_then(|t| t.checked_add(HEADER_LEN)).filter(|&e| n <= MAX_SECTIONS && e <= b.len()).ok_or(Error::SectionCount(n))?;
+        Ok(u32::from_le_bytes(b[8..12].try_into().unwrap_or([0; 4])))
+    }
+
+    /// Checks a table of `n` entries of `entry_len` bytes after the header
+    /// against the header checksum; returns the table's bytes.
+    fn table_bytes(&self, entry_len: usize, max: u32, count_error: fn(u32) -> Error) -> Result<&[u8], Error> {
+        let b = self.bytes();
+        let n = u32::from_le_bytes(b[16..20].try_into().unwrap_or([0; 4]));
+        let table_end = (n as usize).checked_mul(entry_len).and_then(|t| t.checked_add(HEADER_LEN)).filter(|&e| n <= max && e <= b.len()).ok_or(count_error(n))?;
         let computed = header_checksum(&b[..32], &b[HEADER_LEN..table_end]);
-        let stored = u64_at(32);
+        let stored = u64::from_le_bytes(b[32..40].try_into().unwrap_or([0; 8]));
         if stored != computed {
             return Err(Error::HeaderChecksum { stored, computed });
         }
-        let mut sections = Vec::with_capacity(n as usize);
-        for i in 0..n as usize {
-            let e = HEADER_LEN + i * ENTRY_LEN;
-            let s = SectionEntry { kind: u32_at(e), index: u32_at(e + 4), offset: u64_at(e + 8), size: u64_at(e + 16), checksum: u64_at(e + 24) };
+        Ok(&b[HEADER_LEN..table_end])
+    }
+
+    /// A body (version 6): its section table.
+    fn body(mut self) -> Result<Asset, Error> {
+        let table = self.table_bytes(ENTRY_LEN, MAX_SECTIONS, Error::SectionCount)?;
+        let table_end = (HEADER_LEN + table.len()) as u64;
+        let len = self.len as u64;
+        let mut sections = Vec::with_capacity(table.len() / ENTRY_LEN);
+        for e in table.chunks_exact(ENTRY_LEN) {
+            let u32_at = |o: usize| u32::from_le_bytes(e[o..o + 4].try_into().unwrap_or([0; 4]));
+            let u64_at = |o: usize| u64::from_le_bytes(e[o..o + 8].try_into().unwrap_or([0; 8]));
+            let s = SectionEntry { kind: u32_at(0), index: u32_at(4), offset: u64_at(8), size: u64_at(16), checksum: u64_at(24) };
             let end = s.offset.checked_add(s.size);
-            if !s.offset.is_multiple_of(ALIGN as u64) || s.offset < table_end as u64 || end.is_none_or(|e| e > b.len() as u64) {
+            if !s.offset.is_multiple_of(ALIGN as u64) || s.offset < table_end || end.is_none_or(|e| e > len) {
                 return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
             }
             sections.push(s);
@@ -564,24 +625,121 @@ impl Asset {
         if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
             return Err(Error::DuplicateSection { kind: w[0].0, index: w[0].1 });
         }
-        a.sections = sections;
-        Ok(a)
+        self.sections = sections;
+        Ok(self)
+    }
+
+    /// A file of segments (version 7): its segment table, each body in
+    /// order, inside the file, frames counted on from 0 without a gap.
+    fn container(mut self) -> Result<Asset, Error> {
+        let table = self.table_bytes(segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount)?;
+        if table.is_empty() {
+            return Err(Error::SegmentCount(0));
+        }
+        let mut entries: Vec<SegmentEntry> = table.chunks_exact(segments::SEGMENT_ENTRY_LEN).map(SegmentEntry::parse).collect();
+        let mut at = segments::first_offset(entries.len() as u32);
+        let mut frame = 0u64;
+        for (s, e) in entries.iter().enumerate() {
+            let end = e.offset.checked_add(e.size);
+            if !e.offset.is_multiple_of(ALIGN as u64) || e.offset < at || end.is_none_or(|end| end > self.len as u64) || e.size < HEADER_LEN as u64 {
+                return Err(Error::SegmentBounds { segment: s, offset: e.offset, size: e.size });
+            }
+            if u64::from(e.first_frame) != frame {
+                return Err(Error::Invalid(format!("segment {s} starts at frame {}, the segments before it end at frame {frame}", e.first_frame)));
+            }
+            frame += u64::from(e.frame_count);
+            at = e.offset + e.size;
+        }
+        if frame > u64::from(u32::MAX) {
+            return Err(Error::Invalid("more than 2^32 frames".into()));
+        }
+        self.table = std::mem::take(&mut entries);
+        Ok(self)
+    }
+
+    /// Whether this is a file with a segment table (version 7).
+    pub fn is_segmented(&self) -> bool {
+        !self.table.is_empty()
+    }
+
+    /// Segments: a version-7 file's table, or one segment for a body.
+    pub fn segment_count(&self) -> usize {
+        self.table.len().max(1)
+    }
+
+    /// The segment table (for a body: one segment of all its frames, from its metadata).
+    pub fn segments(&self) -> Result<Vec<SegmentEntry>, Error> {
+        if self.is_segmented() {
+            return Ok(self.table.clone());
+        }
+        let frames = self.metadata()?.frame_count;
+        let head = self.bytes().get(..segments::head_len(self.sections.len())).unwrap_or_default();
+        Ok(vec![SegmentEntry { first_frame: 0, frame_count: frames, offset: 0, size: self.len as u64, head_checksum: checksum(head) }])
+    }
+
+    /// Segment `s`'s body, as an asset of its own (its frames counted from 0);
+    /// for a body, segment 0 is the asset itself. Checks the body's header and
+    /// section table, and that they are the ones the segment table names.
+    pub fn segment(&self, s: usize) -> Result<Asset, Error> {
+        if !self.is_segmented() {
+            return match s {
+                0 => Ok(self.clone()),
+                _ => Err(Error::NoSegment { segment: s, count: 1 }),
+            };
+        }
+        let e = self.table.get(s).ok_or(Error::NoSegment { segment: s, count: self.table.len() })?;
+        let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new() };
+        let body = match seg.version() {
+            Ok(segments::BODY_VERSION) => seg.body(),
+            Ok(v) => Err(Error::Invalid(format!("a body of version {v} (segments are version {})", segments::BODY_VERSION))),
+            Err(e) => Err(e),
+        }
+        .map_err(|err| Error::InSegment(s, Box::new(err)))?;
+        let head = &body.bytes()[..segments::head_len(body.sections.len())];
+        let computed = checksum(head);
+        if computed != e.head_checksum {
+            return Err(Error::InSegment(s, Box::new(Error::HeaderChecksum { stored: e.head_checksum, computed })));
+        }
+        Ok(body)
+    }
+
+    /// The segment holding frame `frame` of the whole asset, and the frame's index within it.
+    pub fn locate(&self, frame: usize) -> Option<(usize, usize)> {
+        if !self.is_segmented() {
+            return Some((0, frame));
+        }
+        let s = self.table.partition_point(|e| e.first_frame as usize + e.frame_count as usize <= frame);
+        let e = self.table.get(s)?;
+        (frame >= e.first_frame as usize).then(|| (s, frame - e.first_frame as usize))
     }
 
     /// Checks every section's checksum and that the padding between sections
-    /// is zero (so every byte of a verified file is the one written: a cache
-    /// of assets may trust it); the first failure is the error.
+    /// (and between segments) is zero, so every byte of a verified file is
+    /// the one written (a cache of assets may trust it); the first failure is the error.
     pub fn verify(&self) -> Result<(), Error> {
+        if self.is_segmented() {
+            let mut spans = Vec::with_capacity(self.table.len());
+            for s in 0..self.table.len() {
+                self.segment(s)?.verify().map_err(|e| Error::InSegment(s, Box::new(e)))?;
+                spans.push((self.table[s].offset, self.table[s].offset + self.table[s].size));
+            }
+            return self.zero_between(HEADER_LEN + segments::SEGMENT_ENTRY_LEN * self.table.len(), spans);
+        }
         for s in &self.sections {
             let computed = checksum(self.raw(s));
             if computed != s.checksum {
                 return Err(Error::SectionChecksum { kind: s.kind, index: s.index, stored: s.checksum, computed });
             }
         }
+        let spans = self.sections.iter().map(|s| (s.offset, s.offset + s.size)).collect();
+        self.zero_between(HEADER_LEN + ENTRY_LEN * self.sections.len(), spans)
+    }
+
+    /// Every byte from `from` on outside `spans` is zero.
+    fn zero_between(&self, from: usize, mut spans: Vec<(u64, u64)>) -> Result<(), Error> {
         let b = self.bytes();
-        let mut spans: Vec<(u64, u64)> = self.sections.iter().map(|s| (s.offset, s.offset + s.size)).collect();
         spans.sort_unstable();
-        let mut at = (HEADER_LEN + ENTRY_LEN * self.sections.len()) as u64;
+        let mut at = from as u64;
         for (start, end) in spans.into_iter().chain([(b.len() as u64, b.len() as u64)]) {
             if let Some(k) = b.get(at as usize..start.max(at) as usize).and_then(|gap| gap.iter().position(|&x| x != 0)) {
                 return Err(Error::Padding(at + k as u64));
@@ -597,6 +755,9 @@ impl Asset {
 
     /// Bytes of section (`kind`, `index`).
     pub fn section(&self, kind: u32, index: u32) -> Result<&[u8], Error> {
+        if self.is_segmented() {
+            return Err(Error::Segmented(self.table.len()));
+        }
         self.sections.iter().find(|s| s.kind == kind && s.index == index).map(|s| self.raw(s)).ok_or(Error::Missing { kind, index })
     }
 
@@ -616,12 +777,31 @@ impl Asset {
         bytemuck::try_cast_slice(b).map_err(|_| Error::Shape { kind, size: b.len(), unit: std::mem::size_of::<T>() })
     }
 
+    /// The metadata: a body's own, or the whole sequence's merged from every
+    /// segment's ([`segments::merged`]: frames, sources and value ranges of
+    /// all; planes and placement of the first segment).
     pub fn metadata(&self) -> Result<Metadata, Error> {
+        if self.is_segmented() {
+            let metas = (0..self.table.len()).map(|s| self.segment(s)?.metadata().map_err(|e| Error::InSegment(s, Box::new(e)))).collect::<Result<Vec<_>, _>>()?;
+            if let Some((s, m)) = metas.iter().enumerate().find(|(s, m)| m.frame_count != self.table[*s].frame_count) {
+                return Err(Error::InSegment(s, Box::new(Error::Invalid(format!("its metadata has {} frames, the segment table {}", m.frame_count, self.table[s].frame_count)))));
+            }
+            return segments::merged(&metas);
+        }
         Metadata::from_bytes(self.section(kind::METADATA, 0)?)
     }
 
-    /// Every section, copied: edit them and `assemble` a new asset (its
-    /// checksums are computed afresh).
+    /// Validates every segment ([`Checked`]) and returns the whole sequence's metadata.
+    pub fn check(&self) -> Result<Metadata, Error> {
+        for s in 0..self.segment_count() {
+            let seg = self.segment(s)?;
+            Checked::new(&seg).map_err(|e| if self.is_segmented() { Error::InSegment(s, Box::new(e)) } else { e })?;
+        }
+        self.metadata()
+    }
+
+    /// Every section of a body, copied: edit them and `assemble` a new asset
+    /// (its checksums are computed afresh).
     pub fn to_sections(&self) -> Vec<Section> {
         self.sections.iter().map(|s| Section { kind: s.kind, index: s.index, data: self.raw(s).to_vec() }).collect()
     }

@@ -1,0 +1,368 @@
+//! Version 7: an asset cut into segments, runs of consecutive frames each
+//! stored as a complete version-6 body (its own metadata, nodes, brick pool,
+//! ranges, tables and atlases, contiguous in the file), behind a segment
+//! table. A reader draws any frame of a segment from that segment's bytes
+//! alone. [`Writer`] writes segments one after the other as a cook finishes
+//! them (or copies them from part files, [`Writer::copy`]); [`merged`] is the
+//! whole sequence's metadata.
+
+use crate::{checksum, file_len, header_checksum, write_body, Error, Metadata, Section, ALIGN, HEADER_LEN, MAGIC};
+use std::io::{Seek, SeekFrom, Write};
+
+/// Version of a file with a segment table.
+pub const VERSION: u32 = 7;
+/// Version of a segment's body (and of a file that is one body, as version 6 files are).
+pub const BODY_VERSION: u32 = 6;
+pub const SEGMENT_ENTRY_LEN: usize = 32;
+/// Refuse segment tables larger than this (a sanity bound, not a format limit).
+pub const MAX_SEGMENTS: u32 = 1 << 20;
+
+/// One entry of the segment table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SegmentEntry {
+    /// The segment's first frame, counted over the whole asset.
+    pub first_frame: u32,
+    pub frame_count: u32,
+    /// Where the body lies in the file.
+    pub offset: u64,
+    pub size: u64,
+    /// XXH3-64 of the body's header and section table (which hold every section's checksum).
+    pub head_checksum: u64,
+}
+
+impl SegmentEntry {
+    pub fn frames(&self) -> std::ops::Range<usize> {
+        self.first_frame as usize..self.first_frame as usize + self.frame_count as usize
+    }
+
+    pub(crate) fn parse(b: &[u8]) -> SegmentEntry {
+        let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap_or([0; 4]));
+        let u64_at = |o: usize| u64::from_le_bytes(b[o..o + 8].try_into().unwrap_or([0; 8]));
+        SegmentEntry { first_frame: u32_at(0), frame_count: u32_at(4), offset: u64_at(8), size: u64_at(16), head_checksum: u64_at(24) }
+    }
+
+    fn bytes(&self) -> [u8; SEGMENT_ENTRY_LEN] {
+        let mut e = [0u8; SEGMENT_ENTRY_LEN];
+        e[0..4].copy_from_slice(&self.first_frame.to_le_bytes());
+        e[4..8].copy_from_slice(&self.frame_count.to_le_bytes());
+        e[8..16].copy_from_slice(&self.offset.to_le_bytes());
+        e[16..24].copy_from_slice(&self.size.to_le_bytes());
+        e[24..32].copy_from_slice(&self.head_checksum.to_le_bytes());
+        e
+    }
+}
+
+/// Length of a body's header and section table.
+pub(crate) fn head_len(sections: usize) -> usize {
+    HEADER_LEN + crate::ENTRY_LEN * sections
+}
+
+fn align(n: u64) -> u64 {
+    n.div_ceil(ALIGN as u64) * ALIGN as u64
+}
+
+/// Where the first segment of a file of `count` segments starts.
+pub fn first_offset(count: u32) -> u64 {
+    align((HEADER_LEN + SEGMENT_ENTRY_LEN * count as usize) as u64)
+}
+
+/// Writes a version-7 file of a known number of segments to `out`, segment
+/// after segment, then its header and table ([`Writer::finish`]). Nothing
+/// but the segment being written is held in memory.
+pub struct Writer<W: Write + Seek> {
+    out: W,
+    count: u32,
+    entries: Vec<SegmentEntry>,
+    /// Where the next segment starts (unpadded end of the last one).
+    end: u64,
+}
+
+impl<W: Write + Seek> Writer<W> {
+    /// Starts a file of `count` segments at the start of `out`.
+    pub fn new(mut out: W, count: u32) -> Result<Writer<W>, Error> {
+        if count == 0 || count > MAX_SEGMENTS {
+            return Err(Error::Invalid(format!("{count} segments (need 1 to {MAX_SEGMENTS})")));
+        }
+        let start = first_offset(count);
+        out.seek(SeekFrom::Start(0))?;
+        write_zeros(&mut out, start)?;
+        Ok(Writer { out, count, entries: Vec::new(), end: start })
+    }
+
+    fn place(&mut self, frame_count: u32, size: u64, head_checksum: u64) -> Result<SegmentEntry, Error> {
+        if self.entries.len() as u32 >= self.count {
+            return Err(Error::Invalid(format!("more than the {} segments announced", self.count)));
+        }
+        let first_frame = self.entries.last().map_or(0, |e| e.first_frame + e.frame_count);
+        let offset = align(self.end);
+        write_zeros(&mut self.out, offset - self.end)?;
+        let e = SegmentEntry { first_frame, frame_count, offset, size, head_checksum };
+        self.entries.push(e);
+        self.end = offset + size;
+        Ok(e)
+    }
+
+    /// Writes the next segment, of `frame_count` frames, from its sections (as a version-6 body).
+    pub fn add(&mut self, frame_count: u32, sections: &[Section]) -> Result<SegmentEntry, Error> {
+        let size = file_len(sections);
+        let mut head = Vec::new();
+        write_body(&mut head, sections, true)?;
+        let e = self.place(frame_count, size, checksum(&head))?;
+        write_body(&mut self.out, sections, false)?;
+        Ok(e)
+    }
+
+    /// Copies the next segment's body as it is (from a part file).
+    pub fn copy(&mut self, entry: &SegmentEntry, body: &[u8]) -> Result<SegmentEntry, Error> {
+        let e = self.place(entry.frame_count, body.len() as u64, entry.head_checksum)?;
+        self.out.write_all(body)?;
+        Ok(e)
+    }
+
+    /// The segments written so far.
+    pub fn entries(&self) -> &[SegmentEntry] {
+        &self.entries
+    }
+
+    /// Writes the header and the segment table; returns the output.
+    pub fn finish(mut self) -> Result<W, Error> {
+        if self.entries.len() as u32 != self.count {
+            return Err(Error::Invalid(format!("{} segments written of the {} announced", self.entries.len(), self.count)));
+        }
+        let head = container_head(&self.entries, self.end);
+        self.out.seek(SeekFrom::Start(0))?;
+        self.out.write_all(&head)?;
+        self.out.seek(SeekFrom::Start(self.end))?;
+        self.out.flush()?;
+        Ok(self.out)
+    }
+}
+
+/// The header and segment table of a version-7 file.
+fn container_head(entries: &[SegmentEntry], file_size: u64) -> Vec<u8> {
+    let mut head = vec![0u8; HEADER_LEN];
+    head[..8].copy_from_slice(&MAGIC);
+    head[8..12].copy_from_slice(&VERSION.to_le_bytes());
+    head[16..20].copy_from_slice(&(entries.len() as u32).to_le_bytes());
+    head[24..32].copy_from_slice(&file_size.to_le_bytes());
+    for e in entries {
+        head.extend_from_slice(&e.bytes());
+    }
+    let h = header_checksum(&head[..32], &head[HEADER_LEN..]);
+    head[32..40].copy_from_slice(&h.to_le_bytes());
+    head
+}
+
+fn write_zeros<W: Write>(w: &mut W, mut n: u64) -> std::io::Result<()> {
+    let zeros = [0u8; 4096];
+    while n > 0 {
+        let k = n.min(zeros.len() as u64) as usize;
+        w.write_all(&zeros[..k])?;
+        n -= k as u64;
+    }
+    Ok(())
+}
+
+/// Assembles a version-7 file in memory from segments of (frame count, sections).
+pub fn assemble_segments(segments: &[(u32, Vec<Section>)]) -> Result<Vec<u8>, Error> {
+    let mut w = Writer::new(std::io::Cursor::new(Vec::new()), segments.len() as u32)?;
+    for (frames, sections) in segments {
+        w.add(*frames, sections)?;
+    }
+    Ok(w.finish()?.into_inner())
+}
+
+/// The whole sequence's metadata from its segments' (in order): the frames,
+/// their figures and sources one after the other, each channel's value range
+/// over every segment, the union bounding box and the smallest index offset;
+/// every setting shared by all segments is checked to be the same.
+/// Planes and channel placement are per segment: the merged record keeps
+/// the first segment's, with the brick counts of every segment added up.
+pub fn merged(metas: &[Metadata]) -> Result<Metadata, Error> {
+    let Some(first) = metas.first() else { return Err(Error::Invalid("no segments".into())) };
+    let mut m = first.clone();
+    // The smallest offset of the segments that have active voxels (a segment without any has none that means anything).
+    let placed = metas.iter().filter(|s| s.index_bbox.is_some()).map(|s| s.index_offset);
+    m.index_offset = placed.reduce(|a, b| std::array::from_fn(|i| a[i].min(b[i]))).unwrap_or(first.index_offset);
+    m.frames.clear();
+    m.sources.clear();
+    m.frame_count = 0;
+    for (s, seg) in metas.iter().enumerate() {
+        let differs = |what: &str| Err(Error::Invalid(format!("segment {s}'s {what} differs from segment 0's")));
+        if seg.tool != first.tool || seg.settings != first.settings {
+            return differs("tool or settings");
+        }
+        if seg.map_type != first.map_type || seg.transform != first.transform {
+            return differs("transform");
+        }
+        if (seg.levels, seg.first_level, &seg.level_filters) != (first.levels, first.first_level, &first.level_filters) {
+            return differs("levels of detail");
+        }
+        let same_channel = |a: &crate::Channel, b: &crate::Channel| (&a.name, &a.grid, a.component, &a.value_type, &a.class, a.background.to_bits(), a.group) == (&b.name, &b.grid, b.component, &b.value_type, &b.class, b.background.to_bits(), b.group);
+        if seg.channels.len() != first.channels.len() || !seg.channels.iter().zip(&first.channels).all(|(a, b)| same_channel(a, b)) {
+            return differs("channels");
+        }
+        if s > 0 {
+            for (acc, c) in m.channels.iter_mut().zip(&seg.channels) {
+                acc.value_range = [acc.value_range[0].min(c.value_range[0]), acc.value_range[1].max(c.value_range[1])];
+            }
+            for (acc, p) in m.planes.iter_mut().zip(&seg.planes) {
+                if acc.plane == p.plane {
+                    acc.bricks = acc.bricks.saturating_add(p.bricks);
+                }
+            }
+            m.brick_count = m.brick_count.saturating_add(seg.brick_count);
+            m.index_bbox = match (m.index_bbox, seg.index_bbox) {
+                (Some((a0, a1)), Some((b0, b1))) => Some((std::array::from_fn(|i| a0[i].min(b0[i])), std::array::from_fn(|i| a1[i].max(b1[i])))),
+                (a, b) => a.or(b),
+            };
+        }
+        for f in &seg.frames {
+            let mut f = f.clone();
+            f.source = match f.source.and_then(|i| seg.sources.get(i as usize)) {
+                Some(src) => Some(match m.sources.iter().position(|o| o == src) {
+                    Some(i) => i as u32,
+                    None => {
+                        m.sources.push(src.clone());
+                        (m.sources.len() - 1) as u32
+                    }
+                }),
+                None => None,
+            };
+            m.frames.push(f);
+        }
+        m.frame_count = m.frame_count.checked_add(seg.frame_count).ok_or_else(|| Error::Invalid("more than 2^32 frames".into()))?;
+    }
+    Ok(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{kind, Asset, FrameInfo, SourceFile};
+
+    fn meta(frames: u32, sources: &[&str], range: [f32; 2], offset: i32) -> Metadata {
+        let channel = crate::Channel {
+            name: "density".into(),
+            grid: "density".into(),
+            component: None,
+            value_type: "float".into(),
+            class: "fog volume".into(),
+            background: 0.0,
+            value_range: range,
+            group: 0,
+            plane: 0,
+            lane: 0,
+            alternates: vec![],
+        };
+        Metadata {
+            tool: "t".into(),
+            frame_count: frames,
+            map_type: "UniformScaleMap".into(),
+            transform: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+            index_offset: [offset, 0, 0],
+            index_bbox: Some(([offset + 3, 0, 0], [offset + 9, 5, 5])),
+            channels: vec![channel],
+            planes: vec![],
+            brick_count: 2,
+            settings: vec![("format".into(), "f32".into())],
+            sources: sources.iter().map(|p| SourceFile { path: p.to_string(), bytes: 1, xxh3_128: "0".into() }).collect(),
+            frames: (0..frames).map(|f| FrameInfo { source: Some(f.min(sources.len() as u32 - 1)), active_voxels: 10 + u64::from(f), leaves: 1, tiles: 0, coarse: vec![] }).collect(),
+            levels: 1,
+            level_filters: vec![],
+            first_level: 0,
+        }
+    }
+
+    fn body(m: &Metadata, marker: u32) -> Vec<Section> {
+        vec![
+            Section { kind: kind::METADATA, index: 0, data: m.to_bytes().unwrap() },
+            Section { kind: kind::FRAMES, index: 0, data: (0..m.frame_count).flat_map(|f| (f + marker).to_le_bytes()).collect() },
+        ]
+    }
+
+    fn sample() -> Vec<u8> {
+        let a = meta(2, &["a.vdb", "b.vdb"], [0.0, 1.0], 0);
+        let b = meta(3, &["b.vdb", "c.vdb", "d.vdb"], [-1.0, 0.5], -128);
+        assemble_segments(&[(2, body(&a, 100)), (3, body(&b, 200))]).unwrap()
+    }
+
+    #[test]
+    fn segments_read_back_as_bodies_and_frames_are_located() {
+        let bytes = sample();
+        let a = Asset::from_bytes(&bytes).unwrap();
+        a.verify().unwrap();
+        assert_eq!(a.segment_count(), 2);
+        let table = a.segments().unwrap();
+        assert_eq!((table[0].frames(), table[1].frames()), (0..2, 2..5));
+        assert!(table.iter().all(|e| e.offset % ALIGN as u64 == 0));
+        assert_eq!(a.segment(1).unwrap().u32s(kind::FRAMES).unwrap(), &[200, 201, 202]);
+        assert_eq!([0, 1, 2, 4].map(|f| a.locate(f)), [Some((0, 0)), Some((0, 1)), Some((1, 0)), Some((1, 2))]);
+        assert_eq!(a.locate(5), None);
+        assert!(matches!(a.section(kind::FRAMES, 0), Err(Error::Segmented(2))));
+        assert!(matches!(a.segment(2), Err(Error::NoSegment { .. })));
+        let m = a.metadata().unwrap();
+        assert_eq!(m.frame_count, 5);
+        assert_eq!(m.channels[0].value_range, [-1.0, 1.0]);
+        assert_eq!(m.index_offset, [-128, 0, 0]);
+        assert_eq!(m.index_bbox, Some(([-125, 0, 0], [9, 5, 5])));
+        // Sources once each, frames pointing at the right ones.
+        let names: Vec<&str> = m.frames.iter().map(|f| m.sources[f.source.unwrap() as usize].path.as_str()).collect();
+        assert_eq!(names, ["a.vdb", "b.vdb", "b.vdb", "c.vdb", "d.vdb"]);
+        assert_eq!(m.sources.len(), 4);
+    }
+
+    #[test]
+    fn a_body_is_one_segment() {
+        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        let a = Asset::from_bytes(&crate::assemble(&body(&m, 7))).unwrap();
+        assert_eq!((a.segment_count(), a.is_segmented()), (1, false));
+        assert_eq!(a.segments().unwrap()[0].frames(), 0..2);
+        assert_eq!(a.segment(0).unwrap().u32s(kind::FRAMES).unwrap(), &[7, 8]);
+        assert_eq!(a.locate(1), Some((0, 1)));
+    }
+
+    #[test]
+    fn every_flipped_byte_of_a_segmented_file_is_caught() {
+        let b = sample();
+        for i in 0..b.len() {
+            let mut c = b.clone();
+            c[i] ^= 0x10;
+            let r = Asset::from_bytes(&c).and_then(|a| a.verify().map(|_| a));
+            // Only the file header's reserved bytes 40 to 63 are free (the
+            // table holds a checksum of each body's whole header).
+            assert_eq!(r.is_err(), !(40..HEADER_LEN).contains(&i), "byte {i}");
+        }
+    }
+
+    #[test]
+    fn truncation_is_an_error() {
+        let b = sample();
+        for n in (0..b.len()).step_by(7) {
+            assert!(Asset::from_bytes(&b[..n]).is_err(), "{n} bytes");
+        }
+    }
+
+    #[test]
+    fn segments_that_disagree_are_refused() {
+        let a = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        let mut b = meta(1, &["b.vdb"], [0.0, 1.0], 0);
+        b.channels[0].background = 1.0;
+        let bytes = assemble_segments(&[(2, body(&a, 0)), (1, body(&b, 0))]).unwrap();
+        let err = Asset::from_bytes(&bytes).unwrap().metadata().unwrap_err().to_string();
+        assert!(err.contains("segment 1's channels differ"), "{err}");
+        // The table's frame counts must be the bodies'.
+        let bytes = assemble_segments(&[(3, body(&a, 0))]).unwrap();
+        let err = Asset::from_bytes(&bytes).unwrap().metadata().unwrap_err().to_string();
+        assert!(err.contains("segment 0: the asset is inconsistent: its metadata has 2 frames, the segment table 3"), "{err}");
+    }
+
+    #[test]
+    fn a_writer_needs_every_segment_it_announced() {
+        let m = meta(1, &["a.vdb"], [0.0, 1.0], 0);
+        let mut w = Writer::new(std::io::Cursor::new(Vec::new()), 2).unwrap();
+        w.add(1, &body(&m, 0)).unwrap();
+        assert!(w.finish().is_err());
+        assert!(Writer::new(std::io::Cursor::new(Vec::new()), 0).is_err());
+    }
+}
