@@ -24,6 +24,8 @@ pub struct Cooker {
     pub(crate) build_secs: f64,
     /// Time spent filtering and pushing the coarser levels.
     pub(crate) level_secs: f64,
+    /// The number of this cooker's first frame in the whole sequence (0 but for later segments).
+    pub(crate) first_frame: usize,
 }
 
 /// The asset's transform and the grid that set it.
@@ -32,6 +34,8 @@ pub(crate) struct FirstTransform {
     frame: usize,
     grid: String,
     pub(crate) transform: Transform,
+    /// How errors name the frame that set it, when it was in an earlier segment.
+    earlier: Option<String>,
 }
 
 fn transform_text(t: &Transform) -> String {
@@ -60,6 +64,33 @@ impl Cooker {
             ranges: vec![[f32::INFINITY, f32::NEG_INFINITY]; n],
             build_secs: 0.0,
             level_secs: 0.0,
+            first_frame: 0,
+        }
+    }
+
+    /// A cooker for the frames after this one's, the next segment of the
+    /// sequence: the same options and channels, held to the transform and the
+    /// backgrounds of the frames before; `first_frame` is its first frame's
+    /// number in the whole sequence (what errors call it).
+    pub fn next_segment(&self, first_frame: usize) -> Cooker {
+        let transform = self.transform.as_ref().map(|t| {
+            let file = self.frames.get(t.frame).and_then(|f| f.source).and_then(|s| self.sources.get(s as usize));
+            let frame = self.first_frame + t.frame;
+            let earlier = t.earlier.clone().unwrap_or_else(|| file.map_or_else(|| format!("frame {frame}"), |s| format!("frame {frame} ({})", s.path)));
+            FirstTransform { earlier: Some(earlier), ..t.clone() }
+        });
+        Cooker {
+            opts: self.opts.clone(),
+            channels: self.channels.clone(),
+            infer: self.infer,
+            builder: self.builder.successor(),
+            transform,
+            frames: Vec::new(),
+            sources: Vec::new(),
+            ranges: vec![[f32::INFINITY, f32::NEG_INFINITY]; self.ranges.len()],
+            build_secs: 0.0,
+            level_secs: 0.0,
+            first_frame,
         }
     }
 
@@ -86,12 +117,13 @@ impl Cooker {
         for (c, g) in grids.iter().enumerate() {
             let Some(g) = g else { continue };
             match &self.transform {
-                None => self.transform = Some(FirstTransform { frame, grid: g.name.clone(), transform: g.transform }),
+                None => self.transform = Some(FirstTransform { frame, grid: g.name.clone(), transform: g.transform, earlier: None }),
                 Some(first) if first.transform != g.transform => {
                     // Name the other frame by its file too: inputs are put in
                     // natural order, so it need not be the first one given.
                     let file = self.frames.get(first.frame).and_then(|f| f.source).and_then(|s| self.sources.get(s as usize));
                     let first_name = match file {
+                        _ if first.earlier.is_some() => first.earlier.clone().unwrap_or_default(),
                         _ if first.frame == frame => "this frame".to_string(),
                         Some(s) => format!("frame {} ({})", first.frame, s.path),
                         None => format!("frame {}", first.frame),

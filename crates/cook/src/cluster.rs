@@ -166,5 +166,6 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
         ratio: c.stats.bricks_in as f64 / c.stats.bricks_out.max(1) as f64,
         rmse_without: without.rmse(),
         rmse_with,
+        without,
     }
 }

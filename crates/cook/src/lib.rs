@@ -18,12 +18,13 @@ mod dedup;
 mod encode;
 mod errors;
 mod layout;
+mod merge;
 mod metadata;
 mod report;
 mod unpack;
 
 pub use build::Cooker;
-pub use report::{figure, BudgetReport, BudgetTry, ChannelReport, ClusterReport, CookReport, ErrorFigures, Figure, FormatShare, LevelReport};
+pub use report::{figure, BudgetReport, BudgetTry, ChannelReport, ClusterReport, CookReport, ErrorFigures, Figure, FormatShare, LevelReport, SegmentReport};
 pub use unpack::{unpack_frame, unpack_level};
 pub use vdbcook_encode::NonFinite;
 pub use vdbcook_encode::{ErrorBound, Format, Quality};

@@ -164,10 +164,38 @@ pub struct CookReport {
     pub clustering: Option<ClusterReport>,
     /// (stage, seconds).
     pub timings: Vec<(String, f64)>,
+    /// Per segment (one for an asset cut into none): its frames, bricks and bytes.
+    pub segments: Vec<SegmentReport>,
     /// The asset's metadata as written in its first section (typed, so that a
-    /// caller adding settings, as bake does, need not read the bytes back).
+    /// caller adding settings, as bake does, need not read the bytes back);
+    /// for an asset of several segments, the whole sequence's (`vdbcook_vpak::segments::merged`).
     #[serde(skip)]
     pub metadata: vdbcook_vpak::Metadata,
+    /// What the figures were computed from, to add up segments' reports exactly.
+    #[serde(skip)]
+    pub(crate) sums: Sums,
+}
+
+/// One segment of an asset: its frames, distinct and stored bricks, and bytes.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SegmentReport {
+    pub first_frame: usize,
+    pub frames: usize,
+    pub unique_bricks: usize,
+    pub stored_bricks: usize,
+    /// The segment's body in the file.
+    pub bytes: u64,
+}
+
+/// Error sums behind a report's figures.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Sums {
+    /// Per channel, the first stored level over every frame.
+    pub(crate) totals: Vec<ErrorStats>,
+    /// Per coarser stored level, per channel.
+    pub(crate) levels: Vec<Vec<ErrorStats>>,
+    /// Per channel, the peak its PSNR is taken against.
+    pub(crate) peaks: Vec<f64>,
 }
 
 /// How `CookOptions::max_bytes` was met.
@@ -218,6 +246,9 @@ pub struct ClusterReport {
     pub rmse_without: f64,
     #[serde(serialize_with = "figure::f64")]
     pub rmse_with: f64,
+    /// The error sums behind `rmse_without`.
+    #[serde(skip)]
+    pub(crate) without: ErrorStats,
 }
 
 // The reports read as before (`report.voxel_rmse`): their figures are flattened into them, in JSON too.
@@ -326,6 +357,8 @@ impl Cooker {
             channels: channel_reports,
             clustering,
             timings,
+            segments: vec![SegmentReport { first_frame: self.first_frame, frames: self.frames.len(), unique_bricks: built.pool.len(), stored_bricks, bytes: file_bytes }],
+            sums: Sums { totals: totals.clone(), levels: measured.levels.clone(), peaks: peaks.to_vec() },
         }
     }
 }

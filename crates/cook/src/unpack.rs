@@ -34,6 +34,15 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Vec<Grid>, Error> {
 /// grids are in the level's index space, with the level's transform (voxels
 /// 2^level times as large, a voxel's centre at its children's centre).
 pub fn unpack_level(asset: &Asset, frame: usize, level: u32) -> Result<Vec<Grid>, Error> {
+    if asset.is_segmented() {
+        // The frame's segment alone, and the frame within it.
+        let count = asset.segments()?.last().map_or(0, |e| e.frames().end);
+        let (s, local) = asset.locate(frame).ok_or(Error::NoFrame { frame, count })?;
+        return unpack_level(&asset.segment(s)?, local, level).map_err(|e| match e {
+            Error::TooBig { leaves, bytes, budget, .. } => Error::TooBig { frame, leaves, bytes, budget },
+            e => e,
+        });
+    }
     let checked = Checked::new(asset)?;
     let meta = &checked.meta;
     if frame >= meta.frame_count as usize {

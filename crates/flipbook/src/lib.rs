@@ -296,6 +296,12 @@ impl Builder {
         self.channels
     }
 
+    /// A builder for the frames after this one's (the next segment of a
+    /// sequence): as many channels, held to the backgrounds seen so far.
+    pub fn successor(&self) -> Builder {
+        Builder { backgrounds: self.backgrounds.clone(), ..Builder::new(self.channels) }
+    }
+
     /// Adds one frame: one grid per channel (`None`: the channel is empty in
     /// this frame).  Only active values are kept: inactive voxels take the
     /// background, inactive tiles are dropped, leaves with no active voxel vanish.

@@ -2,11 +2,10 @@
 //! compared smallest file first; the first whose images meet the gate wins.
 
 use crate::cook::{cook_formats, CookJob, Cooked};
-use crate::{Context, Error, Result};
+use crate::{Error, Result};
 use serde_json::json;
 use vdbcook_cook::{Figure, Format, Progress};
 use vdbcook_validate::{compare_assets, CompareOptions, Comparison, Gate, Renderer, Worst};
-use vdbcook_vpak::Asset;
 
 /// The formats tried, smallest per voxel first (the search sorts by file bytes).
 pub const CANDIDATES: [Format; 5] = [Format::Bc7, Format::Bc4, Format::Unorm8, Format::F16, Format::F32];
@@ -51,14 +50,13 @@ pub struct Search {
 /// the comparison.
 pub fn search(job: CookJob, opts: &CompareOptions, name: &str, renderer: &Renderer, bars: &dyn Progress) -> Result<Search> {
     let cooked = cook_formats(CookJob { reference: true, ..job }, &CANDIDATES, bars)?;
-    let mut cands: Vec<Candidate> = cooked.into_iter().zip(CANDIDATES).map(|(cooked, format)| Candidate { format, bytes: vdbcook_vpak::file_len(&cooked.sections), cooked, outcome: None }).collect();
+    let mut cands: Vec<Candidate> = cooked.into_iter().zip(CANDIDATES).map(|(cooked, format)| Candidate { format, bytes: cooked.asset.bytes().len() as u64, cooked, outcome: None }).collect();
     let reference = cands.first_mut().and_then(|c| c.cooked.reference.take()).ok_or_else(|| Error::Failed("no reference".into()))?;
     // Stable: equal sizes keep the order of CANDIDATES.
     cands.sort_by_key(|c| c.bytes);
     let mut chosen = None;
     for (i, c) in cands.iter_mut().enumerate() {
-        let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&c.cooked.sections)).with_context(|| format!("the {} candidate", c.format.name()))?;
-        let o = compare_assets(&asset, name, &reference, opts, || Ok::<_, std::convert::Infallible>(renderer), bars)?;
+        let o = compare_assets(&c.cooked.asset, name, &reference, opts, || Ok::<_, std::convert::Infallible>(renderer), bars)?;
         let pass = o.passed();
         c.outcome = Some(o);
         if pass {

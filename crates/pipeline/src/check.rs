@@ -46,7 +46,9 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
         Sources::Inputs(inputs, frames) => inputs::expand(&inputs, frames)?.into_iter().map(Some).collect(),
     };
     let read = files.iter().flatten().filter(|f| f.exists()).count();
-    let reference = reference(&meta, files, coarsest, bars)?;
+    // The reference cut as the asset is, so it holds one segment's bricks at a time too.
+    let segment = asset.segments().with_context(|| name.clone())?.first().filter(|_| asset.segment_count() > 1).map(|e| e.frame_count as usize);
+    let reference = reference(&meta, files, coarsest, segment, bars)?;
     let mut o = compare_assets(&asset, &name, &reference, opts, renderer, bars)?;
     if recorded {
         o.text += &format!("  sources  the {read} file(s) the asset records (no --source given)\n");
@@ -58,8 +60,8 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
 /// Cooks `files` losslessly in memory, down to level `lod`: the reference
 /// asset. A frame the asset has empty may be missing its file or grid there
 /// too (it was cooked with `--allow-missing`); every other frame must read.
-fn reference(meta: &Metadata, files: Vec<Option<PathBuf>>, lod: u32, bars: &dyn Progress) -> Result<Asset> {
+fn reference(meta: &Metadata, files: Vec<Option<PathBuf>>, lod: u32, segment: Option<usize>, bars: &dyn Progress) -> Result<Asset> {
     let frames = files.into_iter().enumerate().map(|(f, path)| FrameFile { path, allow_missing: meta.frames.get(f).is_some_and(|fr| fr.active_voxels == 0) }).collect();
     let levels = vdbcook_vpak::LevelCount::new(lod + 1).map_err(Error::Failed)?;
-    crate::cook_lossless_levels(frames, crate::selection_of(meta), levels, bars).context("cooking the reference")
+    crate::cook_lossless_levels(frames, crate::selection_of(meta), levels, segment, bars).context("cooking the reference")
 }

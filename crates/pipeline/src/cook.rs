@@ -1,22 +1,25 @@
 //! Cooking from files: frames read on a thread one frame ahead and pushed
 //! into one or more [`Cooker`]s (an asset and its lossless reference share
-//! one read), from typed [`CookSettings`].
+//! one read), from typed [`CookSettings`]; each segment finished and written
+//! as soon as its last frame is in.
 
 use crate::grids::{read_frame, Channels, Frame, FrameFile, GridSelection};
 use crate::options::CookSettings;
 use crate::{Context, Error, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress};
-use vdbcook_vpak::SourceFile;
+use vdbcook_vpak::{Asset, AtomicFile, SourceFile, Writer};
 
 /// Reads `files` on a thread that stays one frame ahead (at most two source
 /// frames live at once) and pushes each frame into one cooker per entry of
 /// `opts` (an asset and its lossless reference share one read), made for the
-/// channels the first frame with a file resolves. Source paths are recorded
-/// relative to `base` when they are below it. Returns the cookers, their
-/// channels and the seconds spent waiting for frames.
-pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, base: Option<PathBuf>, bars: &dyn Progress) -> Result<(Vec<Cooker>, Option<Channels>, f64)> {
+/// channels the first frame with a file resolves. Every `segment` frames
+/// (and after the last frame) the cookers go to `on_segment`, and cookers
+/// for the next segment take their place, so only one segment's bricks are
+/// held at a time. Source paths are recorded relative to `base` when they
+/// are below it. Returns the channels and the seconds spent waiting for frames.
+pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, base: Option<PathBuf>, segment: Option<usize>, on_segment: &mut dyn FnMut(Vec<Cooker>) -> Result<()>, bars: &dyn Progress) -> Result<(Option<Channels>, f64)> {
     // Each frame comes with the channels when they are first resolved.
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
     let total = files.len() as u64;
@@ -48,38 +51,41 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
     let mut read_secs = 0.0;
     let mut wait = Instant::now();
     let mut failure = None;
-    let mut cookers: Vec<Cooker> = Vec::new();
+    let mut segments = Segments { cookers: Vec::new(), pushed: 0, emitted: 0, segment: segment.unwrap_or(usize::MAX).max(1), on_segment };
     let mut channels: Option<Channels> = None;
     // Frames before the first one whose file resolves the channels: empty.
     let mut leading: Vec<Option<SourceFile>> = Vec::new();
     // The cookers, for the channels (or, when no frame resolved any, one
     // channel named by nothing), with the leading empty frames.
-    let start = |specs: Option<&Channels>, leading: &mut Vec<Option<SourceFile>>| -> Vec<Cooker> {
-        let mut made: Vec<Cooker> = opts.iter().map(|o| specs.map_or_else(|| Cooker::new(o.clone()), |ch| Cooker::with_channels(o.clone(), ch.specs.clone()))).collect();
+    let start = |specs: Option<&Channels>, leading: &mut Vec<Option<SourceFile>>, segments: &mut Segments| -> Result<()> {
+        segments.cookers = opts.iter().map(|o| specs.map_or_else(|| Cooker::new(o.clone()), |ch| Cooker::with_channels(o.clone(), ch.specs.clone()))).collect();
         for s in leading.drain(..) {
-            made.iter_mut().for_each(|c| c.push_empty(s.clone()));
+            segments.push(|c| {
+                c.push_empty(s.clone());
+                Ok(())
+            })?;
         }
-        made
+        Ok(())
     };
     for (r, ch) in rx {
         read_secs += wait.elapsed().as_secs_f64();
         let pushed = r.and_then(|frame| {
             if let Some(ch) = ch {
-                cookers = start(Some(&ch), &mut leading);
+                start(Some(&ch), &mut leading, &mut segments)?;
                 channels = Some(ch);
             }
-            if cookers.is_empty() {
+            if segments.cookers.is_empty() {
                 leading.push(frame.source);
                 return Ok(());
             }
-            for c in cookers.iter_mut() {
-                let n = c.frame_count();
-                match &frame.grids {
-                    Some(g) => c.push_channels(&g.iter().map(Option::as_ref).collect::<Vec<_>>(), frame.source.clone()).with_context(|| format!("{}: frame {n}", frame.path.display()))?,
-                    None => c.push_empty(frame.source.clone()),
+            let n = segments.pushed;
+            segments.push(|c| match &frame.grids {
+                Some(g) => c.push_channels(&g.iter().map(Option::as_ref).collect::<Vec<_>>(), frame.source.clone()).with_context(|| format!("{}: frame {n}", frame.path.display())),
+                None => {
+                    c.push_empty(frame.source.clone());
+                    Ok(())
                 }
-            }
-            Ok(())
+            })
         });
         if let Err(e) = pushed {
             failure = Some(e);
@@ -93,10 +99,47 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
     if let Some(e) = failure {
         return Err(e);
     }
-    if cookers.is_empty() {
-        cookers = start(None, &mut leading);
+    if segments.cookers.is_empty() {
+        start(None, &mut leading, &mut segments)?;
     }
-    Ok((cookers, channels, read_secs))
+    segments.flush()?;
+    Ok((channels, read_secs))
+}
+
+/// The cookers of the segment being fed, and where finished segments go.
+struct Segments<'a> {
+    cookers: Vec<Cooker>,
+    /// Frames pushed over every segment.
+    pushed: usize,
+    /// Segments handed on.
+    emitted: usize,
+    segment: usize,
+    on_segment: &'a mut dyn FnMut(Vec<Cooker>) -> Result<()>,
+}
+
+impl Segments<'_> {
+    /// Pushes the next frame into every cooker, handing the full segment on first.
+    fn push(&mut self, mut push: impl FnMut(&mut Cooker) -> Result<()>) -> Result<()> {
+        if self.cookers.first().is_some_and(|c| c.frame_count() >= self.segment) {
+            let next = self.cookers.iter().map(|c| c.next_segment(self.pushed)).collect();
+            let full = std::mem::replace(&mut self.cookers, next);
+            self.emitted += 1;
+            (self.on_segment)(full)?;
+        }
+        for c in self.cookers.iter_mut() {
+            push(c)?;
+        }
+        self.pushed += 1;
+        Ok(())
+    }
+
+    /// Hands on the last segment (also when it is the only one and has no frames).
+    fn flush(&mut self) -> Result<()> {
+        if self.emitted == 0 || self.cookers.first().is_some_and(|c| c.frame_count() > 0) {
+            (self.on_segment)(std::mem::take(&mut self.cookers))?;
+        }
+        Ok(())
+    }
 }
 
 /// The selection that reads back every channel of an asset's metadata.
@@ -114,21 +157,92 @@ pub fn selection_of(meta: &vdbcook_vpak::Metadata) -> GridSelection {
     }
 }
 
-/// Cooks `files` losslessly in memory (f32, no clustering) with `levels` levels of detail: the reference
-/// asset `validate` compares with, and what `render` draws for a .vdb.
-pub fn cook_lossless_levels(files: Vec<FrameFile>, sel: GridSelection, levels: vdbcook_vpak::LevelCount, bars: &dyn Progress) -> Result<vdbcook_vpak::Asset> {
-    let (cookers, _, _) = feed(vec![CookOptions { levels, ..reference_options() }], files, sel, None, bars)?;
-    let cooker = cookers.into_iter().next().ok_or_else(|| Error::Failed("no cooker".into()))?;
-    finish_reference(cooker)
+/// Cooks `files` losslessly in memory (f32, no clustering) with `levels` levels of detail, cut
+/// into segments of `segment` frames when given: the reference asset `validate` compares with,
+/// and what `render` draws for a .vdb.
+pub fn cook_lossless_levels(files: Vec<FrameFile>, sel: GridSelection, levels: vdbcook_vpak::LevelCount, segment: Option<usize>, bars: &dyn Progress) -> Result<Asset> {
+    let count = segment_count(files.len(), segment);
+    let mut out = Output::memory(count)?;
+    let mut write = |cookers: Vec<Cooker>| -> Result<()> {
+        for c in cookers {
+            out.add(c, &vdbcook_cook::NoProgress)?;
+        }
+        Ok(())
+    };
+    feed(vec![CookOptions { levels, ..reference_options() }], files, sel, None, segment, &mut write, bars)?;
+    Ok(out.finish()?.0)
 }
 
 fn reference_options() -> CookOptions {
     CookOptions { format: Format::F32, clustering: None, ..CookOptions::default() }
 }
 
-fn finish_reference(cooker: Cooker) -> Result<vdbcook_vpak::Asset> {
-    let (sections, _) = cooker.finish(&vdbcook_cook::NoProgress)?;
-    Ok(vdbcook_vpak::Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?)
+/// Segments of `frames` frames cut every `segment`: at least one.
+pub fn segment_count(frames: usize, segment: Option<usize>) -> u32 {
+    segment.map_or(1, |n| frames.div_ceil(n.max(1)).max(1)) as u32
+}
+
+/// One asset being written, segment after segment: in memory, or into a
+/// file that gets its name only when [`Cooked::commit`] is called.
+struct Output {
+    sink: Sink,
+    reports: Vec<CookReport>,
+}
+
+enum Sink {
+    Memory(Writer<std::io::Cursor<Vec<u8>>>),
+    File(Writer<std::io::BufWriter<std::fs::File>>, AtomicFile),
+}
+
+impl Output {
+    fn memory(count: u32) -> Result<Output> {
+        Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new() })
+    }
+
+    fn file(path: &Path, overwrite: bool, count: u32) -> Result<Output> {
+        let ctx = || path.display().to_string();
+        let mut file = AtomicFile::create(path, overwrite).with_context(ctx)?;
+        let handle = file.file().try_clone().with_context(ctx)?;
+        let writer = Writer::new(std::io::BufWriter::with_capacity(1 << 20, handle), count).with_context(ctx)?;
+        Ok(Output { sink: Sink::File(writer, file), reports: Vec::new() })
+    }
+
+    /// Finishes a segment's cooker and writes the segment.
+    fn add(&mut self, cooker: Cooker, bars: &dyn Progress) -> Result<()> {
+        let frames = cooker.frame_count() as u32;
+        // A group naming no channel, or too many channels to cluster, is the settings' fault.
+        let (sections, mut report) = cooker.finish(bars).map_err(|e| if e.is_settings_error() { Error::Usage(e.to_string()) } else { Error::from(e) })?;
+        let t0 = Instant::now();
+        let entry = match &mut self.sink {
+            Sink::Memory(w) => w.add(frames, &sections)?,
+            Sink::File(w, _) => w.add(frames, &sections)?,
+        };
+        report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
+        if let Some(seg) = report.segments.first_mut() {
+            seg.bytes = entry.size;
+        }
+        self.reports.push(report);
+        Ok(())
+    }
+
+    /// The asset written, its file (to commit) and its report.
+    fn finish(self) -> Result<(Asset, Option<AtomicFile>, Option<CookReport>)> {
+        let (asset, file) = match self.sink {
+            Sink::Memory(w) => (Asset::from_bytes(&w.finish()?.into_inner())?, None),
+            Sink::File(w, file) => {
+                let f = w.finish()?.into_inner().map_err(|e| Error::from(e.into_error()))?;
+                (Asset::from_file(&f)?, Some(file))
+            }
+        };
+        let report = match self.reports.len() {
+            1 => self.reports.into_iter().next().map(|mut r| {
+                r.file_bytes = asset.bytes().len() as u64;
+                r
+            }),
+            _ => CookReport::merged(self.reports, asset.metadata()?, asset.bytes().len() as u64),
+        };
+        Ok((asset, file, report))
+    }
 }
 
 /// One asset to cook: typed settings, its frame files and what to record.
@@ -142,15 +256,30 @@ pub struct CookJob<'a> {
     pub base: Option<PathBuf>,
     /// Also cook the lossless reference (f32, no clustering) from the same reads.
     pub reference: bool,
+    /// Write the asset into an unnamed file for this path (put in place by
+    /// [`Cooked::commit`]; replacing an existing file when `.1`), not into memory.
+    pub output: Option<(&'a Path, bool)>,
 }
 
-/// What [`cook_asset`] made: the sections to write, the report, the channels
-/// cooked (names joined by ", ") and, when asked, the reference asset.
+/// What [`cook_asset`] made: the asset (in memory, or in a file to commit),
+/// the report, the channels cooked (names joined by ", ") and, when asked,
+/// the reference asset.
 pub struct Cooked {
-    pub sections: Vec<vdbcook_vpak::Section>,
+    pub asset: Asset,
+    pub file: Option<AtomicFile>,
     pub report: CookReport,
     pub grid: Option<String>,
-    pub reference: Option<vdbcook_vpak::Asset>,
+    pub reference: Option<Asset>,
+}
+
+impl Cooked {
+    /// Puts the asset's file in place (see [`CookJob::output`]).
+    pub fn commit(&mut self) -> Result<()> {
+        match self.file.take() {
+            Some(f) => Ok(f.commit()?),
+            None => Err(Error::Failed("the asset was cooked in memory, not into a file".into())),
+        }
+    }
 }
 
 /// Cooks one asset from typed settings: the one cook path of `cook` and `bake`.
@@ -160,8 +289,8 @@ pub fn cook_asset(job: CookJob, bars: &dyn Progress) -> Result<Cooked> {
 }
 
 /// Cooks the asset once per format of `formats` (every other setting as
-/// given) from one read of the frames, in the order given; the reference, when
-/// asked for, comes with the first.
+/// given) from one read of the frames, in the order given, segment after
+/// segment; the reference, when asked for, comes with the first.
 pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Result<Vec<Cooked>> {
     let s = job.settings;
     let mut all: Vec<CookOptions> = formats.iter().map(|&format| CookSettings { format, ..s.clone() }.cook_options(job.inputs)).collect();
@@ -170,22 +299,38 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         all.push(CookOptions { levels: s.lods, ..reference_options() });
     }
     let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
-    let (cookers, channels, read_secs) = feed(all, FrameFile::each(job.files, s.allow_missing), sel, job.base, bars)?;
-    let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
-    let mut cookers = cookers.into_iter();
-    let mut out = Vec::new();
-    for cooker in cookers.by_ref().take(formats.len()) {
-        if cooker.frame_count() == 0 {
-            return Err(Error::Failed("no frames to cook".into()));
-        }
-        // A group naming no channel, or too many channels to cluster, is the settings' fault.
-        let (sections, mut report) = cooker.finish(bars).map_err(|e| if e.is_settings_error() { Error::Usage(e.to_string()) } else { Error::from(e) })?;
-        report.timings.insert(0, ("read".into(), read_secs));
-        out.push(Cooked { sections, report, grid: grid_name.clone(), reference: None });
+    let segment = s.segment_frames.map(|n| n.get() as usize);
+    let count = segment_count(job.files.len(), segment);
+    let mut outs = formats.iter().map(|_| match job.output {
+        Some((path, overwrite)) => Output::file(path, overwrite, count),
+        None => Output::memory(count),
+    }).collect::<Result<Vec<_>>>()?;
+    if job.reference {
+        outs.push(Output::memory(count)?);
     }
-    let reference = cookers.next().map(finish_reference).transpose().context("cooking the reference")?;
-    if let Some(first) = out.first_mut() {
+    let mut write = |cookers: Vec<Cooker>| -> Result<()> {
+        for (i, (c, out)) in cookers.into_iter().zip(outs.iter_mut()).enumerate() {
+            if c.frame_count() == 0 {
+                return Err(Error::Failed("no frames to cook".into()));
+            }
+            let is_reference = job.reference && i == formats.len();
+            out.add(c, bars).map_err(|e| if is_reference { Error::In("cooking the reference".into(), Box::new(e)) } else { e })?;
+        }
+        Ok(())
+    };
+    let (channels, read_secs) = feed(all, FrameFile::each(job.files, s.allow_missing), sel, job.base, segment, &mut write, bars)?;
+    let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
+    let mut outs = outs.into_iter();
+    let mut cooked = Vec::new();
+    for out in outs.by_ref().take(formats.len()) {
+        let (asset, file, report) = out.finish()?;
+        let mut report = report.ok_or_else(|| Error::Failed("no frames to cook".into()))?;
+        report.timings.insert(0, ("read".into(), read_secs));
+        cooked.push(Cooked { asset, file, report, grid: grid_name.clone(), reference: None });
+    }
+    let reference = outs.next().map(|o| o.finish().map(|(a, _, _)| a)).transpose().context("cooking the reference")?;
+    if let Some(first) = cooked.first_mut() {
         first.reference = reference;
     }
-    Ok(out)
+    Ok(cooked)
 }

@@ -174,6 +174,13 @@ bounded!(
     |n| if (8..=16384).contains(&n) { Ok(()) } else { Err(format!("{n} is not in 8..=16384")) }
 );
 
+bounded!(
+    /// Frames per segment (`--segment-frames`, `segment_frames`): 1 to 1,000,000.
+    SegmentFrames(u32),
+    "frame count",
+    |n| if (1..=1_000_000).contains(&n) { Ok(()) } else { Err(format!("{n} is not in 1..=1000000")) }
+);
+
 fn cook_defaults() -> vdbcook_cook::CookOptions {
     vdbcook_cook::CookOptions::default()
 }
@@ -238,6 +245,12 @@ settings_group! {
         /// when even it alone is larger the cook fails (exit 1) naming the smallest size reachable.
         #[cfg_attr(feature = "clap", arg(long, value_name = "B"))]
         pub max_bytes: Option<ByteBudget> = None;
+        /// Cut the flip-book into segments of N frames, each with its own bricks, atlases and
+        /// tables, contiguous in the file: a player holds one segment at a time, and the cook
+        /// holds one segment's bricks at a time. Deduplication and --clusters (K per segment)
+        /// work within a segment. Default: one segment of every frame.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "N"))]
+        pub segment_frames: Option<SegmentFrames> = None;
         /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
         #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim))]
         pub max_texture_dim: TextureDim = TextureDim(cook_defaults().max_texture_dim);
@@ -259,6 +272,9 @@ impl CookSettings {
     pub fn check(&self) -> Result<(), SettingError> {
         if self.max_error.is_some() && !self.group.is_empty() {
             return Err(SettingError { name: "max_error", message: vdbcook_cook::Error::MaxErrorGroups.to_string() });
+        }
+        if self.max_bytes.is_some() && self.segment_frames.is_some() {
+            return Err(SettingError { name: "max_bytes", message: "decides which levels of detail the whole asset keeps: it takes no segment_frames (cook one segment)".into() });
         }
         Ok(())
     }
@@ -331,6 +347,7 @@ impl CookSettings {
             ("max_texture_dim".into(), self.max_texture_dim.text()),
             ("lods".into(), self.lods.text()),
             ("max_bytes".into(), self.max_bytes.text()),
+            ("segment_frames".into(), self.segment_frames.text()),
             ("clusters".into(), self.clusters.text()),
             ("iterations".into(), if clustered { self.iterations.text() } else { String::new() }),
             ("variance_threshold".into(), if clustered { self.variance_threshold.text() } else { String::new() }),

@@ -148,10 +148,44 @@ struct Pair<'a> {
     reference: &'a Asset,
     meta: &'a Metadata,
     ref_meta: &'a Metadata,
-    gpu_asset: &'a GpuAsset,
-    gpu_ref: &'a GpuAsset,
+    gpu_asset: std::cell::RefCell<Resident<'a>>,
+    gpu_ref: std::cell::RefCell<Resident<'a>>,
     renderer: &'a Renderer,
     scene: &'a Scene,
+}
+
+/// The segment of an asset on the GPU: the one holding the frame drawn last
+/// (an asset of several segments is uploaded a segment at a time).
+struct Resident<'a> {
+    asset: &'a Asset,
+    name: String,
+    /// The scene's index offset: segments are drawn with the scene shifted to theirs.
+    origin: [i32; 3],
+    now: Option<(usize, std::sync::Arc<GpuAsset>, [i32; 3])>,
+}
+
+impl<'a> Resident<'a> {
+    fn new(asset: &'a Asset, name: &str, origin: [i32; 3]) -> Resident<'a> {
+        Resident { asset, name: name.to_string(), origin, now: None }
+    }
+
+    /// The GPU copy of frame `frame`'s segment, the frame's index there and
+    /// the shift of the segment's index space from the scene's.
+    fn at(&mut self, renderer: &Renderer, scene: &Scene, frame: usize) -> Result<(std::sync::Arc<GpuAsset>, usize, [i32; 3]), CompareError> {
+        let fail = |e: crate::Error| CompareError::In(self.name.clone(), e.into());
+        let (s, local) = self.asset.locate(frame).ok_or_else(|| CompareError::Failed(format!("{}: frame {frame} is in no segment", self.name)))?;
+        if self.now.as_ref().is_none_or(|n| n.0 != s) {
+            // The old segment goes before the new one comes.
+            self.now = None;
+            let seg = self.asset.segment(s).map_err(|e| fail(e.into()))?;
+            let offset = seg.metadata().map_err(|e| fail(e.into()))?.index_offset;
+            let d = std::array::from_fn(|i| offset[i] - self.origin[i]);
+            let gpu = renderer.upload_for(&seg, &scene.shifted(d)).map_err(fail)?;
+            self.now = Some((s, std::sync::Arc::new(gpu), d));
+        }
+        let (_, gpu, d) = self.now.as_ref().ok_or_else(|| CompareError::Failed("no segment uploaded".into()))?;
+        Ok((gpu.clone(), local, *d))
+    }
 }
 
 /// Renders `asset` (called `name`) and its lossless `reference` with the same
@@ -189,14 +223,15 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>, E: Into<BoxError>>(
     // The scene is the reference's: what the source is decides what is drawn.
     let scene = Scene::for_asset_with(&ref_meta, opts.viewing.extinction.as_deref()).map_err(|e| CompareError::Usage(format!("--extinction: {e}")))?;
     let renderer = renderer().map_err(|e| CompareError::Other(e.into()))?;
-    let gpu_asset = renderer.upload_for(asset, &scene).map_err(|e| CompareError::In(name.to_string(), e.into()))?;
-    let gpu_ref = renderer.upload_for(reference, &scene).map_err(|e| CompareError::In("reference".into(), e.into()))?;
-    let pair = Pair { name, asset, reference, meta: &meta, ref_meta: &ref_meta, gpu_asset: &gpu_asset, gpu_ref: &gpu_ref, renderer: &renderer, scene: &scene };
+    let mut gpu_asset = Resident::new(asset, name, ref_meta.index_offset);
+    let first = gpu_asset.at(&renderer, &scene, frames.first().copied().unwrap_or(0))?.0;
+    let gpu_ref = Resident::new(reference, "reference", ref_meta.index_offset);
+    let pair = Pair { name, asset, reference, meta: &meta, ref_meta: &ref_meta, gpu_asset: gpu_asset.into(), gpu_ref: gpu_ref.into(), renderer: &renderer, scene: &scene };
     let runs = std::thread::scope(|s| {
         // The driver compiles the asset's pipelines (on the CPU, mostly on one
         // core) while the reference renders, not between the two renders.
         let r: &Renderer = &renderer;
-        s.spawn(|| r.prepare(&gpu_asset, &scene));
+        s.spawn(|| r.prepare(&first, &scene));
         let mut runs: Vec<LevelRun> = Vec::new();
         for lod in levels {
             // Coarser levels keep the finest level's worst view: the report shows it at every level.
@@ -324,13 +359,18 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
     let mut voxel = Vec::new();
     let mut kept: Vec<Kept> = Vec::new();
     let mut flip_secs = 0.0;
+    let mut in_shader = false;
     bars.start("rendering", (frames.len() * views.len()) as u64);
     for &f in frames {
         // The voxel errors (one core) are found while the GPU renders (on a
         // CPU driver, the rendering leaves that core some time).
+        let (gpu_ref, ref_frame, ref_shift) = p.gpu_ref.borrow_mut().at(renderer, scene, f)?;
+        let (gpu_asset, asset_frame, asset_shift) = p.gpu_asset.borrow_mut().at(renderer, scene, f)?;
+        in_shader |= gpu_asset.decodes_in_shader();
+        let draw = |gpu: &GpuAsset, frame: usize, d: [i32; 3]| renderer.render_views_level(gpu, &scene.shifted(d), frame, lod, &views.iter().map(|v| v.shifted(d)).collect::<Vec<_>>(), w, h);
         let (vox, rendered) = std::thread::scope(|s| {
             let vox = s.spawn(|| voxel_errors(p.asset, p.reference, f, lod, shown));
-            let rendered = renderer.render_views_level(p.gpu_ref, scene, f, lod, &views, w, h).and_then(|refs| Ok((refs, renderer.render_views_level(p.gpu_asset, scene, f, lod, &views, w, h)?)));
+            let rendered = draw(&gpu_ref, ref_frame, ref_shift).and_then(|refs| Ok((refs, draw(&gpu_asset, asset_frame, asset_shift)?)));
             (vox.join().unwrap_or_else(|e| std::panic::resume_unwind(e)), rendered)
         });
         let (errors, nonzero) = vox?;
@@ -398,7 +438,7 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
     let doc = json!({
         "asset": name,
         "adapter": renderer.adapter,
-        "bc_decode": if p.gpu_asset.decodes_in_shader() { "shader" } else { "texture" },
+        "bc_decode": if in_shader { "shader" } else { "texture" },
         "format": format,
         "channels": meta.channels.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
         "shown": meta.channels.get(shown).map(|c| c.name.clone()),
@@ -426,7 +466,7 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
         }],
     });
     let failed: Vec<&Shot> = shots.iter().filter(|s| opts.gate.fails(s.metrics.rmse, s.metrics.psnr, s.flip)).collect();
-    let decoder = if p.gpu_asset.decodes_in_shader() { ", BC decoded in the shader" } else { "" };
+    let decoder = if in_shader { ", BC decoded in the shader" } else { "" };
     let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
     let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), opts.viewing.views, renderer.adapter);
     text += &format!("  scene    channel \"{shown_name}\" drawn as {}", scene_words(scene.model()));

@@ -128,6 +128,13 @@ fn normalize(a: [f32; 3]) -> [f32; 3] {
 }
 
 impl View {
+    /// The view in an index space whose origin is `d` voxels from this one's
+    /// (a segment's, `d` = its index offset − the scene's).
+    pub fn shifted(&self, d: [i32; 3]) -> View {
+        let m = |p: [f32; 3]| std::array::from_fn(|i| p[i] - d[i] as f32);
+        View { eye: m(self.eye), target: m(self.target), fov_deg: self.fov_deg }
+    }
+
     /// Camera basis: right, up, forward.
     pub fn basis(&self) -> ([f32; 3], [f32; 3], [f32; 3]) {
         let f = normalize(sub(self.target, self.eye));
@@ -139,6 +146,13 @@ impl View {
 }
 
 impl Scene {
+    /// The scene in an index space whose origin is `d` voxels from this one's
+    /// (see [`View::shifted`]): the same box in the world.
+    pub fn shifted(&self, d: [i32; 3]) -> Scene {
+        let m = |p: [f32; 3]| std::array::from_fn(|i| p[i] - d[i] as f32);
+        Scene { box_min: m(self.box_min), box_max: m(self.box_max), ..*self }
+    }
+
     /// The scene for an asset, its medium chosen by the rule of
     /// [`extinction_channel`]: see [`Scene::for_asset_with`].
     pub fn for_asset(meta: &Metadata) -> Scene {

@@ -553,6 +553,17 @@ impl Asset {
         Asset::parse(Bytes::Mapped(map))
     }
 
+    /// Maps an open file (an unnamed temporary one, say) and checks its header
+    /// and section (or segment) table only.
+    pub fn from_file(f: &std::fs::File) -> Result<Asset, Error> {
+        if f.metadata()?.len() < HEADER_LEN as u64 {
+            return Err(Error::Magic);
+        }
+        // SAFETY: read-only mapping of a file this process wrote and no longer changes.
+        let map = unsafe { memmap2::Mmap::map(f)? };
+        Asset::parse(Bytes::Mapped(map))
+    }
+
     /// Parses owned bytes (checks the header; call [`Asset::verify`] for checksums).
     pub fn from_bytes(b: &[u8]) -> Result<Asset, Error> {
         let mut words = vec![0u64; b.len().div_ceil(8)];

@@ -172,6 +172,22 @@ pub fn assemble_segments(segments: &[(u32, Vec<Section>)]) -> Result<Vec<u8>, Er
     Ok(w.finish()?.into_inner())
 }
 
+/// Writes `asset` again with every segment's metadata changed by `edit`
+/// (its other sections as they are): a version-7 file in memory.
+pub fn rewrite_metadata(asset: &crate::Asset, mut edit: impl FnMut(&mut Metadata)) -> Result<Vec<u8>, Error> {
+    let table = asset.segments()?;
+    let mut w = Writer::new(std::io::Cursor::new(Vec::new()), table.len() as u32)?;
+    for (s, e) in table.iter().enumerate() {
+        let mut sections = asset.segment(s)?.to_sections();
+        let meta = sections.iter_mut().find(|x| x.kind == crate::kind::METADATA).ok_or(Error::Missing { kind: crate::kind::METADATA, index: 0 })?;
+        let mut m = Metadata::from_bytes(&meta.data)?;
+        edit(&mut m);
+        meta.data = m.to_bytes()?;
+        w.add(e.frame_count, &sections)?;
+    }
+    Ok(w.finish()?.into_inner())
+}
+
 /// The whole sequence's metadata from its segments' (in order): the frames,
 /// their figures and sources one after the other, each channel's value range
 /// over every segment, the union bounding box and the smallest index offset;
