@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (version 6).
+"""Independent reader for vdbcook's `.vpak` volume asset format (versions 7 and 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -12,12 +12,18 @@ frame's active voxels (every active voxel of every L3 node and every voxel of ev
 tile), sorted by i, then j, then k, at the asset's first stored level (0, the frame
 itself, unless the cook left finer levels out). With `--lod K`, the frame's level K, in
 that level's index space (level index = level asset index + index_offset >> K). `--json` prints a summary of the metadata.
+Frame N of a version-7 file is read from its segment's body alone.
+
+As a module: `open_segments(path)` opens a version-6 or 7 file (every body validated,
+every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
+`open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
 Dependencies (Debian): python3-numpy, python3-pil (BC7 blocks), python3-xxhash.
 Bad input exits with status 1 and one line `vpak_read.py: FILE: problem` on stderr.
 """
 
 import argparse
+import bisect
 import json
 import struct
 import sys
@@ -25,7 +31,7 @@ import sys
 import numpy as np
 
 MAGIC = b"VPAK\r\n\x1a\n"
-VERSION = 6
+BODY_VERSION, SEGMENTED_VERSION = 6, 7
 MAX_LEVELS = 5
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
@@ -89,37 +95,49 @@ def xxh3_64(data):
     return xxhash.xxh3_64_intdigest(bytes(data))
 
 
-def read_header(buf):
-    """Check magic, version, file size and header checksum; return the section table."""
+def read_table(buf, versions, what):
+    """Check magic, version, size and header checksum; return (version, table entries).
+
+    A file and a body have one header; their tables (sections or segments) both have
+    32-byte entries of u32, u32, u64, u64, u64.
+    """
     if len(buf) < HEADER_SIZE:
-        raise VpakError("file too short for a header")
+        raise VpakError(f"{what} too short for a header")
     if buf[0:8] != MAGIC:
         raise VpakError("bad magic")
     version, _flags, n, _reserved, file_size, header_sum = struct.unpack_from("<IIIIQQ", buf, 8)
-    if version != VERSION:
-        raise VpakError(f"unsupported format version {version} (this reader reads {VERSION})")
+    if version not in versions:
+        raise VpakError(f"unsupported format version {version} (a {what} here is version {' or '.join(map(str, versions))})")
     if file_size != len(buf):
-        raise VpakError(f"file size {len(buf)} differs from header's {file_size}")
+        raise VpakError(f"{what} size {len(buf)} differs from header's {file_size}")
     table_end = HEADER_SIZE + 32 * n
     if table_end > len(buf):
-        raise VpakError("section table runs past the end of the file")
-    # Header checksum covers bytes [0, 32) then the section table (not bytes [32, 64)).
+        raise VpakError(f"table runs past the end of the {what}")
+    # Header checksum covers bytes [0, 32) then the table (not bytes [32, 64)).
     if xxh3_64(bytes(buf[0:32]) + bytes(buf[HEADER_SIZE:table_end])) != header_sum:
         raise VpakError("header checksum mismatch")
+    return version, [struct.unpack_from("<IIQQQ", buf, HEADER_SIZE + 32 * i) for i in range(n)]
+
+
+def zero_outside(buf, at, spans, what):
+    """Every byte from `at` on that no (offset, size) span holds is zero padding."""
+    for offset, size in sorted(spans) + [(len(buf), 0)]:
+        if any(bytes(buf[at:max(at, offset)])):
+            raise VpakError(f"non-zero padding between {what} (after byte {at})")
+        at = max(at, offset + size)
+
+
+def read_header(buf):
+    """A body (a version-6 file): its section table {(kind, index): (offset, size, checksum)}."""
+    _, table = read_table(buf, (BODY_VERSION,), "body")
     sections = {}
-    for s in range(n):
-        kind, index, offset, size, checksum = struct.unpack_from("<IIQQQ", buf, HEADER_SIZE + 32 * s)
+    for s, (kind, index, offset, size, checksum) in enumerate(table):
         if offset % SECTION_ALIGN or offset + size > len(buf):
-            raise VpakError(f"section {s} (kind {kind}) not inside the file at a 256-byte boundary")
+            raise VpakError(f"section {s} (kind {kind}) not inside the body at a 256-byte boundary")
         if (kind, index) in sections:
             raise VpakError(f"section kind {kind} index {index} appears twice")
         sections[(kind, index)] = (offset, size, checksum)
-    # Every byte after the table that no section holds is zero padding.
-    at = table_end
-    for offset, size, _ in sorted(sections.values()) + [(len(buf), 0, 0)]:
-        if any(bytes(buf[at:max(at, offset)])):
-            raise VpakError(f"non-zero padding between sections (after byte {at})")
-        at = max(at, offset + size)
+    zero_outside(buf, HEADER_SIZE + 32 * len(table), [(o, n) for o, n, _ in sections.values()], "sections")
     return sections
 
 
@@ -707,13 +725,21 @@ def summary(m):
     return s
 
 
-def open_asset(path):
-    try:
-        with open(path, "rb") as f:
-            buf = memoryview(f.read())
-    except OSError as e:
-        raise VpakError(e.strerror or str(e)) from None
+# ---------------------------------------------------------------------------
+# Segments (version 7): a table of version-6 bodies, each a run of frames
+# ---------------------------------------------------------------------------
+
+# Equal in every segment (format.md, "Segments"; `background` bit for bit); the rest is per segment.
+SHARED = ("tool", "settings", "map_type", "transform", "levels", "first_level", "level_filters")
+SHARED_CHANNEL = ("name", "grid", "component", "value_type", "class", "group")
+
+
+def open_body(buf, head_sum=None):
+    """(metadata, sections) of a body validated as a version-6 file, every checksum verified;
+    `head_sum`: the segment table's checksum of its header and section table."""
     secs = Sections(buf, read_header(buf))
+    if head_sum is not None and xxh3_64(buf[:HEADER_SIZE + 32 * len(secs.table)]) != head_sum:
+        raise VpakError("its header and section table are not the ones the segment table names")
     # Verify every section up front (in table order) so that a corrupt asset is refused
     # whichever frame is asked for, not only when the damaged bytes are used.
     for kind, index in secs.table:
@@ -721,6 +747,123 @@ def open_asset(path):
     m = decode_metadata(secs.get(K_METADATA))
     validate(m, secs)
     return m, secs
+
+
+def check_segment_table(buf, table):
+    """Bodies inside the file at 256-byte boundaries, in order, frames counted on without a gap."""
+    if not table:
+        raise VpakError("a version-7 file of 0 segments")
+    at, frame = HEADER_SIZE + 32 * len(table), 0
+    for s, (first, count, offset, size, _) in enumerate(table):
+        if offset % SECTION_ALIGN or offset < at or offset + size > len(buf):
+            raise VpakError(f"segment {s} at {offset}+{size} is outside the file, misaligned or overlaps the one before")
+        if first != frame:
+            raise VpakError(f"segment {s} starts at frame {first}, the segments before it end at frame {frame}")
+        at, frame = offset + size, frame + count
+    if frame > 0xFFFFFFFF:
+        raise VpakError("more than 2^32 - 1 frames")
+    zero_outside(buf, HEADER_SIZE + 32 * len(table), [(e[2], e[3]) for e in table], "segments")
+
+
+def check_shared(a, b, s):
+    """Segment s's metadata `b` agrees with segment 0's (`a`) on every shared field."""
+    for key in SHARED:
+        if a[key] != b[key]:
+            raise VpakError(f"segment {s} and segment 0 differ in {key}")
+    bits = lambda c: struct.pack("<d", c["background"])  # exact for a decoded f32
+    same = lambda x, y: all(x[k] == y[k] for k in SHARED_CHANNEL) and bits(x) == bits(y)
+    if len(a["channels"]) != len(b["channels"]) or not all(map(same, a["channels"], b["channels"])):
+        raise VpakError(f"segment {s}'s channels differ from segment 0's")
+
+
+def merged(metas):
+    """The whole sequence's metadata: segment 0's shared fields; frames (each source listed
+    once) of all; value ranges and bounding boxes united; vdbcook's whole index offset."""
+    m = {k: metas[0][k] for k in SHARED}
+    m["frame_count"] = sum(x["frame_count"] for x in metas)
+    m["channels"] = [{k: ch[k] for k in SHARED_CHANNEL + ("background",)} for ch in metas[0]["channels"]]
+    for c, ch in enumerate(m["channels"]):
+        ranges = [x["channels"][c]["value_range"] for x in metas]
+        ch["value_range"] = [min(r[0] for r in ranges), max(r[1] for r in ranges)]
+    placed = [x for x in metas if x["index_bbox"] is not None]
+    m["index_offset"] = [min(x["index_offset"][i] for x in placed) for i in range(3)] if placed else metas[0]["index_offset"]
+    m["index_bbox"] = ([min(x["index_bbox"][0][i] for x in placed) for i in range(3)],
+                       [max(x["index_bbox"][1][i] for x in placed) for i in range(3)]) if placed else None
+    m["sources"], m["frames"], seen = [], [], {}
+    for x in metas:
+        for f in x["frames"]:
+            f, i = dict(f), f["source"]
+            if i is not None and i < len(x["sources"]):
+                src = x["sources"][i]
+                f["source"] = seen.setdefault(tuple(src.values()), len(seen))
+                if f["source"] == len(m["sources"]):
+                    m["sources"].append(src)
+            else:
+                f["source"] = None
+            m["frames"].append(f)
+    return m
+
+
+class Asset:
+    """A version-6 or 7 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
+    and `bodies` [(metadata, sections)] per segment (frames numbered from 0 in each), `meta`
+    the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
+
+    def __init__(self, buf):
+        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION), "file")
+        if self.version == BODY_VERSION:
+            self.bodies = [open_body(buf)]
+            self.meta = self.bodies[0][0]
+            self.table = [(0, self.meta["frame_count"], 0, len(buf), xxh3_64(buf[:HEADER_SIZE + 32 * len(table)]))]
+            return
+        check_segment_table(buf, table)
+        self.table, self.bodies = table, []
+        for s, (_, count, offset, size, head_sum) in enumerate(table):
+            try:
+                m, secs = open_body(buf[offset:offset + size], head_sum)
+                if m["frame_count"] != count:
+                    raise VpakError(f"its metadata has {m['frame_count']} frames, the segment table {count}")
+            except VpakError as e:
+                raise VpakError(f"segment {s}: {e}") from None
+            check_shared(self.bodies[0][0] if s else m, m, s)
+            self.bodies.append((m, secs))
+        self.meta = merged([m for m, _ in self.bodies])
+
+    def locate(self, frame):
+        """(segment, frame within it) of frame `frame` of the whole sequence."""
+        s = bisect.bisect_right([first + count for first, count, *_ in self.table], frame)
+        if frame < 0 or s == len(self.table):
+            raise VpakError(f"frame {frame} out of range (asset has {self.meta['frame_count']})")
+        return s, frame - self.table[s][0]
+
+    def read_frame(self, frame, lod=None):
+        """Frame `frame` of the whole sequence, decoded from its segment's body alone."""
+        s, f = self.locate(frame)
+        return read_frame(*self.bodies[s], f, lod)
+
+    def summary(self):
+        if self.version == BODY_VERSION:
+            return summary(self.meta)
+        keys = ("first_frame", "frame_count", "offset", "size")
+        return dict(self.meta, segments=[dict(zip(keys, e), **summary(m)) for e, (m, _) in zip(self.table, self.bodies)])
+
+
+def open_segments(path):
+    """A version-6 or 7 file as an `Asset`, every body validated."""
+    try:
+        with open(path, "rb") as f:
+            buf = memoryview(f.read())
+    except OSError as e:
+        raise VpakError(e.strerror or str(e)) from None
+    return Asset(buf)
+
+
+def open_asset(path):
+    """(metadata, sections) of a file of one body: version 6, or version 7 of one segment."""
+    a = open_segments(path)
+    if len(a.bodies) != 1:
+        raise VpakError(f"the asset has {len(a.bodies)} segments: read it with open_segments")
+    return a.bodies[0]
 
 
 def main(argv=None):
@@ -732,14 +875,11 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true", help="print a metadata summary")
     args = ap.parse_args(argv)
     try:
-        m, secs = open_asset(args.asset)
+        asset = open_segments(args.asset)
         if args.json:
-            print(json.dumps(summary(m), indent=2))
+            print(json.dumps(asset.summary(), indent=2))
         if args.frame is not None or args.out:
-            frame = 0 if args.frame is None else args.frame
-            if not 0 <= frame < m["frame_count"]:
-                raise VpakError(f"frame {frame} out of range (asset has {m['frame_count']})")
-            chans = read_frame(m, secs, frame, args.lod)
+            chans = asset.read_frame(0 if args.frame is None else args.frame, args.lod)
             if args.out:
                 arrays = {}
                 for name, (ijk, vals) in chans.items():
