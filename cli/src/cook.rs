@@ -109,6 +109,12 @@ pub struct CookArgs {
     /// --format, --max-error or --max-bytes.
     #[arg(long, conflicts_with_all = ["format", "max_error", "max_bytes"], help_heading = "Options")]
     pub auto: bool,
+    /// Cook only the I-th of N contiguous groups of segments (of --segment-frames) into a
+    /// part file OUT, e.g. --part 2/4 on the second of four machines; `vdbcook join` joins
+    /// the parts into the asset, byte for byte what one cook writes. Not with --validate,
+    /// --auto or --max-bytes (they decide over the whole asset: validate the joined one).
+    #[arg(long, value_name = "I/N", requires = "segment_frames", conflicts_with_all = ["validate", "auto", "max_bytes"], help_heading = "Options")]
+    pub part: Option<vdbcook_pipeline::cook::Part>,
     /// Replace OUT if it exists.
     #[arg(long, help_heading = "Options")]
     pub force: bool,
@@ -132,11 +138,9 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     if args.auto {
         return auto(&args, files, started, &bars, quiet);
     }
-    let mut cooked = cook_asset(CookJob { settings: s, files, inputs: &args.inputs, base: None, reference: false }, &bars)?;
+    let mut cooked = cook_asset(CookJob { settings: s, files, inputs: &args.inputs, base: None, reference: false, output: Some((&args.output, args.force)), part: args.part }, &bars)?;
+    cooked.commit().with_context(|| args.output.display().to_string())?;
     let report = &mut cooked.report;
-    let t0 = Instant::now();
-    vdbcook_vpak::write_file(&args.output, &cooked.sections, args.force).with_context(|| args.output.display().to_string())?;
-    report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
     report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
     let validation = if s.validate {
         let sources = Sources::Inputs(args.inputs.clone(), s.frames);
@@ -164,7 +168,7 @@ fn auto(args: &CookArgs, files: Vec<PathBuf>, started: Instant, bars: &Bars, qui
     // The GPU first: without one, no cooking time is spent for nothing.
     let renderer = GpuArgs::default().renderer()?;
     let name = args.output.display().to_string();
-    let job = CookJob { settings: s, files, inputs: &args.inputs, base: None, reference: true };
+    let job = CookJob { settings: s, files, inputs: &args.inputs, base: None, reference: true, output: Some((&args.output, args.force)), part: None };
     let mut found = search(job, &s.compare_options(None), &name, &renderer, bars)?;
     let (doc, table) = (found.doc(), found.table());
     let Some(i) = found.chosen else {
@@ -175,10 +179,8 @@ fn auto(args: &CookArgs, files: Vec<PathBuf>, started: Instant, bars: &Bars, qui
         return Ok(crate::gate_exit(&found.failure()));
     };
     let c = &mut found.candidates[i];
-    let t0 = Instant::now();
-    vdbcook_vpak::write_file(&args.output, &c.cooked.sections, args.force).with_context(|| name.clone())?;
+    c.cooked.commit().with_context(|| name.clone())?;
     let report = &mut c.cooked.report;
-    report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
     report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
     let o = c.outcome.as_ref().ok_or_else(|| anyhow::anyhow!("no validation"))?;
     if !quiet {

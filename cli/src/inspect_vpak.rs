@@ -11,19 +11,31 @@ pub enum Described {
     Json(Value),
 }
 
-pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
-    let name = path.display().to_string();
-    let asset = Asset::open(path).with_context(|| name.clone())?;
-    let checked = Checked::new(&asset).with_context(|| name.clone())?;
-    let meta = &checked.meta;
+/// What one body (a segment, or a whole version-6 file) holds, in bytes and counts.
+struct Body {
+    meta: vdbcook_vpak::Metadata,
+    /// (name, count, bytes) of the node levels and the bricks.
+    nodes: [(&'static str, u64, u64); 4],
+    /// Per plane, its atlases, ranges and brick table.
+    plane_bytes: Vec<u64>,
+    /// Per channel, its share of its planes and its channel table.
+    channel_bytes: Vec<u64>,
+    /// Per stored level, the bytes it needs on its own.
+    level_bytes: Vec<u64>,
+    sections: Vec<vdbcook_vpak::SectionEntry>,
+    /// Where the body lies in the file.
+    offset: u64,
+}
+
+fn body(asset: &Asset, offset: u64) -> Result<Body, vdbcook_vpak::Error> {
+    let checked = Checked::new(asset)?;
+    let meta = checked.meta.clone();
     let size = |k: u32| asset.sections.iter().filter(|s| s.kind == k).map(|s| s.size).sum::<u64>();
     let l1 = l1_records(checked.l1).map_or(0, |r| r.len() as u64);
     let l2 = size(kind::L2_NODES) / (L2_WORDS as u64 * 4);
     // The L3 section counts its nodes in its first word (records follow, then sub-masks).
     let l3 = l3_node_count(checked.l3).map_or(0, |n| n as u64);
     let brick_bytes = size(kind::ATLAS) + size(kind::BRICK_RANGES) + size(kind::BRICK_TABLE) + size(kind::CHANNEL_TABLE);
-    let file_bytes = asset.bytes().len() as u64;
-    let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));
     let nodes = [
         ("l1", l1, size(kind::L1_NODES) + size(kind::L1_ENTRIES)),
         ("l2", l2, size(kind::L2_NODES) + size(kind::L2_ENTRIES)),
@@ -41,26 +53,59 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         .collect();
     let sharing = |p: usize| meta.channels.iter().filter(|c| c.plane as usize == p).count().max(1) as u64;
     // A channel's share of each of its planes, and its channel table (per-brick formats).
-    let channel_bytes = |c: usize| meta.channel_planes(c).iter().map(|&p| plane_bytes[p as usize] / sharing(p as usize)).sum::<u64>() + section_bytes(kind::CHANNEL_TABLE, c as u32);
-    let formats = meta.format_names();
+    let channel_bytes = (0..meta.channels.len()).map(|c| meta.channel_planes(c).iter().map(|&p| plane_bytes[p as usize] / sharing(p as usize)).sum::<u64>() + section_bytes(kind::CHANNEL_TABLE, c as u32)).collect();
+    let level_bytes = meta.stored_levels().map(|k| checked.level_bytes(k)).collect();
+    Ok(Body { meta, nodes, plane_bytes, channel_bytes, level_bytes, sections: asset.sections.clone(), offset })
+}
+
+pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
+    let name = path.display().to_string();
+    let asset = Asset::open(path).with_context(|| name.clone())?;
+    let table = asset.segments().with_context(|| name.clone())?;
+    let bodies = (0..asset.segment_count())
+        .map(|s| asset.segment(s).and_then(|seg| body(&seg, table[s].offset)).map_err(|e| if asset.is_segmented() { vdbcook_vpak::Error::InSegment(s, Box::new(e)) } else { e }))
+        .collect::<Result<Vec<Body>, _>>()
+        .with_context(|| name.clone())?;
+    let merged = asset.metadata().with_context(|| name.clone())?;
+    let meta = &merged;
+    let version = if asset.is_segmented() { vdbcook_vpak::VERSION } else { vdbcook_vpak::segments::BODY_VERSION };
+    let file_bytes = asset.bytes().len() as u64;
+    let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));
+    // Figures of the whole asset: each body's added up (planes and channels by position, as the merged metadata lists them).
+    let sum_at = |f: fn(&Body) -> &Vec<u64>, i: usize| bodies.iter().filter_map(|b| f(b).get(i)).sum::<u64>();
+    let nodes: Vec<(&str, u64, u64)> = (0..4).map(|i| (bodies[0].nodes[i].0, bodies.iter().map(|b| b.nodes[i].1).sum(), bodies.iter().map(|b| b.nodes[i].2).sum())).collect();
+    let plane_bytes: Vec<u64> = (0..meta.planes.len()).map(|p| sum_at(|b| &b.plane_bytes, p)).collect();
+    let channel_bytes = |c: usize| sum_at(|b| &b.channel_bytes, c);
+    let formats = bodies.iter().map(|b| b.meta.format_names()).reduce(|a, b| {
+        let mut names: Vec<String> = a.split('+').map(String::from).collect();
+        names.extend(b.split('+').map(String::from).filter(|n| !a.split('+').any(|m| m == n)));
+        names.join("+")
+    }).unwrap_or_default();
     // Levels of detail: figures over every frame, and the bytes each level needs on its own.
     let levels: Vec<(u32, u64, u64, u64, u64)> = meta
         .stored_levels()
-        .map(|k| {
+        .enumerate()
+        .map(|(i, k)| {
             let fig = |f: &vdbcook_vpak::FrameInfo| match k {
                 0 => (u64::from(f.leaves), u64::from(f.tiles), f.active_voxels),
                 _ => f.coarse.get(k as usize - 1).map_or((0, 0, 0), |c| (u64::from(c.leaves), u64::from(c.tiles), c.active_voxels)),
             };
             let (l, t, a) = meta.frames.iter().map(fig).fold((0u64, 0u64, 0u64), |acc, x| (acc.0 + x.0, acc.1 + x.1, acc.2.saturating_add(x.2)));
-            (k, l, t, a, checked.level_bytes(k))
+            (k, l, t, a, sum_at(|b| &b.level_bytes, i))
         })
         .collect();
+    let segments: Vec<Value> = bodies
+        .iter()
+        .zip(&table)
+        .map(|(b, e)| json!({"first_frame": e.first_frame, "frames": e.frame_count, "offset": e.offset, "bytes": e.size, "bricks": b.meta.brick_count, "format": b.meta.format_names(), "index_offset": b.meta.index_offset}))
+        .collect();
+    let section_json = |b: &Body| b.sections.iter().map(|s| json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": b.offset + s.offset, "bytes": s.size, "checksum": format!("{:016x}", s.checksum)})).collect::<Vec<_>>();
     if as_json {
         return Ok(Described::Json(json!({
             "path": name,
             "kind": "vpak",
             "checksums_ok": true,
-            "version": vdbcook_vpak::VERSION,
+            "version": version,
             "tool": meta.tool,
             "format": formats,
             "frames": meta.frame_count,
@@ -83,7 +128,8 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "file_bytes": file_bytes,
             "bits_per_active_voxel": if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 },
             "nodes": nodes.iter().map(|(n, c, b)| (n.to_string(), json!({"count": c, "bytes": b}))).collect::<serde_json::Map<_, _>>(),
-            "sections": asset.sections.iter().map(|s| json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": s.offset, "bytes": s.size, "checksum": format!("{:016x}", s.checksum)})).collect::<Vec<_>>(),
+            "segments": segments,
+            "sections": bodies.iter().flat_map(section_json).collect::<Vec<_>>(),
             "settings": meta.settings.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
             "sources": meta.sources.iter().map(|s| json!({"path": s.path, "bytes": s.bytes, "xxh3_128": s.xxh3_128})).collect::<Vec<_>>(),
             "frame_info": meta.frames.iter().map(|f| json!({"source": f.source, "active_voxels": f.active_voxels, "leaves": f.leaves, "tiles": f.tiles,
@@ -98,11 +144,14 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let n = meta.channels.len();
     let _ = writeln!(
         s,
-        "{name}: vpak v{}, {formats}, {} frame{}, {n} channel{}, checksums ok",
-        vdbcook_vpak::VERSION,
+        "{name}: vpak v{version}, {formats}, {} frame{}, {n} channel{}{}, checksums ok",
         meta.frame_count,
         if meta.frame_count == 1 { "" } else { "s" },
         if n == 1 { "" } else { "s" },
+        match table.len() {
+            1 => String::new(),
+            k => format!(", {k} segments"),
+        },
     );
     let _ = writeln!(s, "  written by     {}", meta.tool);
     let _ = writeln!(s, "  transform      {}, index offset {:?}", meta.map_type, meta.index_offset);
@@ -139,10 +188,18 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             let _ = writeln!(s, "  {k:<5} {:>6} {l:>10} {t:>8} {a:>14} {b:>14} {:>8.1}%", format!("{}x", 1u64 << k), b as f64 * 100.0 / base as f64);
         }
     }
-    let _ = writeln!(s, "  sections:");
-    for e in &asset.sections {
-        let label = kind::label(e.kind, e.index);
-        let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}", e.size, e.offset, e.checksum);
+    if table.len() > 1 {
+        let _ = writeln!(s, "  {:<8} {:>7} {:>7} {:>10} {:>14}  format", "segment", "frames", "from", "bricks", "bytes");
+        for (k, (b, e)) in bodies.iter().zip(&table).enumerate() {
+            let _ = writeln!(s, "  {k:<8} {:>7} {:>7} {:>10} {:>14}  {}", e.frame_count, e.first_frame, b.meta.brick_count, e.size, b.meta.format_names());
+        }
+    }
+    for (k, b) in bodies.iter().enumerate() {
+        let _ = writeln!(s, "  sections{}:", if table.len() > 1 { format!(" of segment {k}") } else { String::new() });
+        for e in &b.sections {
+            let label = kind::label(e.kind, e.index);
+            let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}", e.size, b.offset + e.offset, e.checksum);
+        }
     }
     for (p, info) in meta.planes.iter().enumerate() {
         let plane = info.plane;

@@ -5,6 +5,7 @@ mod cook;
 mod diff;
 mod gpu;
 mod inspect;
+mod join;
 mod progress;
 mod unpack;
 mod validate;
@@ -75,6 +76,8 @@ enum Command {
     Validate(validate::ValidateArgs),
     /// Render one frame of a .vpak (or a .vdb) to a PNG preview.
     Render(validate::RenderArgs),
+    /// Join the part files of `cook --part I/N` into one asset, copying their segments.
+    Join(join::JoinArgs),
     /// Cook (and validate) every asset of a bake.toml manifest, with a cache, shards and one report.
     #[command(after_help = bake::AFTER_HELP)]
     Bake(bake::BakeArgs),
@@ -198,6 +201,7 @@ fn main() -> ExitCode {
         Command::Validate(args) => validate::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Render(args) => validate::render(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Bake(args) => bake::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::Join(args) => join::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
     };
     ExitCode::from(code)
 }

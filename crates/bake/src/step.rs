@@ -11,7 +11,7 @@ use std::time::Instant;
 use vdbcook_pipeline::{cook_asset, one_line, Context, CookJob, Error, Result};
 use vdbcook_validate::report::{base64, thumbnail};
 use vdbcook_validate::{compare_assets, Comparison, Renderer};
-use vdbcook_vpak::{kind, Asset};
+use vdbcook_vpak::Asset;
 
 type BoxError = Box<dyn std::error::Error + Send + Sync>;
 
@@ -48,7 +48,7 @@ pub fn cached(path: &Path, key: &str) -> Option<(Record, u64)> {
     // Opening checks every checksum and the padding, the validator the rest
     // every reader relies on: a corrupted or inconsistent asset is not a hit.
     let asset = Asset::open(path).ok()?;
-    let meta = vdbcook_vpak::Checked::new(&asset).ok()?.meta;
+    let meta = asset.check().ok()?;
     let get = |k: &str| meta.settings.iter().find(|(n, _)| n == k).map(|(_, v)| v.as_str());
     if get("cache_key")? != key {
         return None;
@@ -149,7 +149,7 @@ fn finite(x: f64) -> Option<f64> {
 /// the key and the record in its metadata.
 fn cook_fresh(a: &PlannedAsset, ctx: &Baker) -> Result<(Vec<u8>, Record)> {
     let s = &a.settings;
-    let cooked = cook_asset(CookJob { settings: s, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: s.validate }, &vdbcook_cook::NoProgress)?;
+    let cooked = cook_asset(CookJob { settings: s, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: s.validate, output: None, part: None }, &vdbcook_cook::NoProgress)?;
     let r = &cooked.report;
     let mut record = Record {
         frames: Some(r.frames as u32),
@@ -162,25 +162,21 @@ fn cook_fresh(a: &PlannedAsset, ctx: &Baker) -> Result<(Vec<u8>, Record)> {
         channels: Some(r.channels.iter().map(ChannelFormats::from).collect()),
         ..Record::default()
     };
-    let mut sections = cooked.sections;
-    let asset = Asset::from_bytes(&vdbcook_vpak::assemble(&sections))?;
+    let asset = &cooked.asset;
     if let Some(reference) = &cooked.reference {
-        let o = compare_assets(&asset, &a.output, reference, &s.compare_options(Some(ctx.report_dir.join("validation").join(&a.name))), || ctx.renderer(), &vdbcook_cook::NoProgress)
+        let o = compare_assets(asset, &a.output, reference, &s.compare_options(Some(ctx.report_dir.join("validation").join(&a.name))), || ctx.renderer(), &vdbcook_cook::NoProgress)
             .context("validating")?;
         record.validation = validation_figures(&o);
         record.gate_failure = o.gate_failure;
     }
     // A preview for the report; without a GPU (and no validation asked for) there is none.
     if let Ok(renderer) = ctx.renderer() {
-        record.thumbnail = thumbnail(renderer, &asset, THUMBNAIL_SIZE).ok().map(|png| base64(&png));
+        record.thumbnail = thumbnail(renderer, asset, THUMBNAIL_SIZE).ok().map(|png| base64(&png));
     }
-    drop(asset);
-    let meta_section = sections.iter_mut().find(|x| x.kind == kind::METADATA).ok_or_else(|| Error::Failed("the cooked asset has no metadata".into()))?;
-    let mut meta = cooked.report.metadata;
-    meta.settings.push(("cache_key".into(), a.key.clone()));
-    meta.settings.push(("bake_record".into(), record.to_setting()));
-    meta_section.data = meta.to_bytes()?;
-    Ok((vdbcook_vpak::assemble(&sections), record))
+    // Every segment records the key and the record (segments share their settings).
+    let extra = [("cache_key".to_string(), a.key.clone()), ("bake_record".to_string(), record.to_setting())];
+    let bytes = vdbcook_vpak::segments::rewrite_metadata(asset, |m| m.settings.extend(extra.iter().cloned()))?;
+    Ok((bytes, record))
 }
 
 /// The image figures of a validation: its first level's (the level its document reports).

@@ -9,6 +9,7 @@ use crate::{Context, Error, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress};
+use vdbcook_vpak::segments::PartInfo;
 use vdbcook_vpak::{Asset, AtomicFile, SourceFile, Writer};
 
 /// Reads `files` on a thread that stays one frame ahead (at most two source
@@ -199,11 +200,16 @@ impl Output {
         Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new() })
     }
 
-    fn file(path: &Path, overwrite: bool, count: u32) -> Result<Output> {
+    /// An asset (or, with `part`, a part file) of `count` segments written into an unnamed file for `path`.
+    fn file(path: &Path, overwrite: bool, count: u32, part: Option<&PartInfo>) -> Result<Output> {
         let ctx = || path.display().to_string();
         let mut file = AtomicFile::create(path, overwrite).with_context(ctx)?;
-        let handle = file.file().try_clone().with_context(ctx)?;
-        let writer = Writer::new(std::io::BufWriter::with_capacity(1 << 20, handle), count).with_context(ctx)?;
+        let handle = std::io::BufWriter::with_capacity(1 << 20, file.file().try_clone().with_context(ctx)?);
+        let writer = match part {
+            Some(info) => vdbcook_vpak::segments::part_writer(handle, info, count),
+            None => Writer::new(handle, count),
+        }
+        .with_context(ctx)?;
         Ok(Output { sink: Sink::File(writer, file), reports: Vec::new() })
     }
 
@@ -230,8 +236,10 @@ impl Output {
         let (asset, file) = match self.sink {
             Sink::Memory(w) => (Asset::from_bytes(&w.finish()?.into_inner())?, None),
             Sink::File(w, file) => {
+                let part = w.base() > 0;
                 let f = w.finish()?.into_inner().map_err(|e| Error::from(e.into_error()))?;
-                (Asset::from_file(&f)?, Some(file))
+                let asset = if part { Asset::from_part_file(&f)?.1 } else { Asset::from_file(&f)? };
+                (asset, Some(file))
             }
         };
         let report = match self.reports.len() {
@@ -259,6 +267,55 @@ pub struct CookJob<'a> {
     /// Write the asset into an unnamed file for this path (put in place by
     /// [`Cooked::commit`]; replacing an existing file when `.1`), not into memory.
     pub output: Option<(&'a Path, bool)>,
+    /// Cook only this part of the segments, into a part file (`output` must be given).
+    pub part: Option<Part>,
+}
+
+/// Part `index` (from 0) of `count`: one of `count` contiguous groups of an asset's segments.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Part {
+    pub index: u32,
+    pub count: u32,
+}
+
+impl std::str::FromStr for Part {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Part, String> {
+        let bad = || format!("invalid part \"{s}\" (expected I/N with 1 <= I <= N, e.g. 2/4)");
+        let (i, n) = s.split_once('/').ok_or_else(bad)?;
+        let (i, n) = (i.trim().parse::<u32>().map_err(|_| bad())?, n.trim().parse::<u32>().map_err(|_| bad())?);
+        if i == 0 || i > n {
+            return Err(bad());
+        }
+        Ok(Part { index: i - 1, count: n })
+    }
+}
+
+impl Part {
+    /// The segments `[first, end)` of `segments` that this part cooks.
+    pub fn segments(&self, segments: u32) -> std::ops::Range<u32> {
+        let at = |i: u32| (u64::from(i) * u64::from(segments) / u64::from(self.count)) as u32;
+        at(self.index)..at(self.index + 1)
+    }
+}
+
+/// What parts of one cook share and parts of others do not: the tool, every
+/// setting recorded, the segment length and each input file's path and size.
+fn fingerprint(opts: &CookOptions, segment: Option<usize>, files: &[PathBuf]) -> u64 {
+    let mut h = xxhash_rust::xxh3::Xxh3::new();
+    h.update(env!("CARGO_PKG_VERSION").as_bytes());
+    for (k, v) in &opts.settings {
+        h.update(&[0]);
+        h.update(k.as_bytes());
+        h.update(&[1]);
+        h.update(v.as_bytes());
+    }
+    h.update(&(segment.unwrap_or(0) as u64).to_le_bytes());
+    for f in files {
+        h.update(f.to_string_lossy().as_bytes());
+        h.update(&std::fs::metadata(f).map_or(u64::MAX, |m| m.len()).to_le_bytes());
+    }
+    h.digest()
 }
 
 /// What [`cook_asset`] made: the asset (in memory, or in a file to commit),
@@ -300,11 +357,33 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
     }
     let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
     let segment = s.segment_frames.map(|n| n.get() as usize);
-    let count = segment_count(job.files.len(), segment);
-    let mut outs = formats.iter().map(|_| match job.output {
-        Some((path, overwrite)) => Output::file(path, overwrite, count),
-        None => Output::memory(count),
-    }).collect::<Result<Vec<_>>>()?;
+    let mut files = job.files;
+    let mut count = segment_count(files.len(), segment);
+    // A part: its segments' frames alone, into a part file.
+    let part = match job.part {
+        Some(p) => {
+            let total = count;
+            if p.count > total {
+                return Err(Error::Usage(format!("--part {}/{}: the asset has {total} segment(s) to share among {} parts (a smaller --segment-frames makes more)", p.index + 1, p.count, p.count)));
+            }
+            let fp = fingerprint(&all[0], segment, &files);
+            let range = p.segments(total);
+            let n = segment.unwrap_or(files.len());
+            let frames = (range.start as usize * n).min(files.len())..(range.end as usize * n).min(files.len());
+            files = files.drain(frames.clone()).collect();
+            count = range.len() as u32;
+            Some(PartInfo { index: p.index, count: p.count, segments: total, first_segment: range.start, first_frame: frames.start as u32, fingerprint: fp })
+        }
+        None => None,
+    };
+    let mut outs = formats
+        .iter()
+        .map(|_| match job.output {
+            Some((path, overwrite)) => Output::file(path, overwrite, count, part.as_ref()),
+            None if part.is_some() => Err(Error::Failed("a part is cooked into a file".into())),
+            None => Output::memory(count),
+        })
+        .collect::<Result<Vec<_>>>()?;
     if job.reference {
         outs.push(Output::memory(count)?);
     }
@@ -318,7 +397,7 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         }
         Ok(())
     };
-    let (channels, read_secs) = feed(all, FrameFile::each(job.files, s.allow_missing), sel, job.base, segment, &mut write, bars)?;
+    let (channels, read_secs) = feed(all, FrameFile::each(files, s.allow_missing), sel, job.base, segment, &mut write, bars)?;
     let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
     let mut outs = outs.into_iter();
     let mut cooked = Vec::new();

@@ -76,11 +76,11 @@ impl<T, E: Into<Error>> Context<T> for std::result::Result<T, E> {
     }
 }
 
-/// Whether `path` is a .vpak asset (its header says so), whatever its name.
+/// Whether `path` is a .vpak asset or a part of one (its header says so), whatever its name.
 pub fn is_vpak(path: &std::path::Path) -> bool {
     use std::io::Read;
     let mut magic = [0u8; 8];
-    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && magic == vdbcook_vpak::MAGIC
+    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && (magic == vdbcook_vpak::MAGIC || magic == vdbcook_vpak::segments::PART_MAGIC)
 }
 
 /// The error and its causes joined by ": ", each fact once: a context that the

@@ -3,6 +3,7 @@
 //! caller from the source) rendered by the same ray-marcher, with image, FLIP
 //! and voxel figures per level, frame and view, and the gate's verdict.
 
+use crate::resident::Resident;
 use crate::flip::DEFAULT_PPD;
 use crate::options::Viewing;
 use crate::{compare, FlipMap, Gate, GpuAsset, Image, ImageMetrics, Model, Renderer, Scene, Size};
@@ -154,40 +155,6 @@ struct Pair<'a> {
     scene: &'a Scene,
 }
 
-/// The segment of an asset on the GPU: the one holding the frame drawn last
-/// (an asset of several segments is uploaded a segment at a time).
-struct Resident<'a> {
-    asset: &'a Asset,
-    name: String,
-    /// The scene's index offset: segments are drawn with the scene shifted to theirs.
-    origin: [i32; 3],
-    now: Option<(usize, std::sync::Arc<GpuAsset>, [i32; 3])>,
-}
-
-impl<'a> Resident<'a> {
-    fn new(asset: &'a Asset, name: &str, origin: [i32; 3]) -> Resident<'a> {
-        Resident { asset, name: name.to_string(), origin, now: None }
-    }
-
-    /// The GPU copy of frame `frame`'s segment, the frame's index there and
-    /// the shift of the segment's index space from the scene's.
-    fn at(&mut self, renderer: &Renderer, scene: &Scene, frame: usize) -> Result<(std::sync::Arc<GpuAsset>, usize, [i32; 3]), CompareError> {
-        let fail = |e: crate::Error| CompareError::In(self.name.clone(), e.into());
-        let (s, local) = self.asset.locate(frame).ok_or_else(|| CompareError::Failed(format!("{}: frame {frame} is in no segment", self.name)))?;
-        if self.now.as_ref().is_none_or(|n| n.0 != s) {
-            // The old segment goes before the new one comes.
-            self.now = None;
-            let seg = self.asset.segment(s).map_err(|e| fail(e.into()))?;
-            let offset = seg.metadata().map_err(|e| fail(e.into()))?.index_offset;
-            let d = std::array::from_fn(|i| offset[i] - self.origin[i]);
-            let gpu = renderer.upload_for(&seg, &scene.shifted(d)).map_err(fail)?;
-            self.now = Some((s, std::sync::Arc::new(gpu), d));
-        }
-        let (_, gpu, d) = self.now.as_ref().ok_or_else(|| CompareError::Failed("no segment uploaded".into()))?;
-        Ok((gpu.clone(), local, *d))
-    }
-}
-
 /// Renders `asset` (called `name`) and its lossless `reference` with the same
 /// ray-marcher and compares them at the levels `opts` asks for, each against
 /// the reference filtered to it (the reference must hold them). `renderer` is
@@ -223,9 +190,9 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>, E: Into<BoxError>>(
     // The scene is the reference's: what the source is decides what is drawn.
     let scene = Scene::for_asset_with(&ref_meta, opts.viewing.extinction.as_deref()).map_err(|e| CompareError::Usage(format!("--extinction: {e}")))?;
     let renderer = renderer().map_err(|e| CompareError::Other(e.into()))?;
-    let mut gpu_asset = Resident::new(asset, name, ref_meta.index_offset);
-    let first = gpu_asset.at(&renderer, &scene, frames.first().copied().unwrap_or(0))?.0;
-    let gpu_ref = Resident::new(reference, "reference", ref_meta.index_offset);
+    let mut gpu_asset = Resident::new(asset, ref_meta.index_offset);
+    let first = gpu_asset.at(&renderer, &scene, frames.first().copied().unwrap_or(0)).map_err(|e| CompareError::In(name.to_string(), e.into()))?.0;
+    let gpu_ref = Resident::new(reference, ref_meta.index_offset);
     let pair = Pair { name, asset, reference, meta: &meta, ref_meta: &ref_meta, gpu_asset: gpu_asset.into(), gpu_ref: gpu_ref.into(), renderer: &renderer, scene: &scene };
     let runs = std::thread::scope(|s| {
         // The driver compiles the asset's pipelines (on the CPU, mostly on one
@@ -364,8 +331,8 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
     for &f in frames {
         // The voxel errors (one core) are found while the GPU renders (on a
         // CPU driver, the rendering leaves that core some time).
-        let (gpu_ref, ref_frame, ref_shift) = p.gpu_ref.borrow_mut().at(renderer, scene, f)?;
-        let (gpu_asset, asset_frame, asset_shift) = p.gpu_asset.borrow_mut().at(renderer, scene, f)?;
+        let (gpu_ref, ref_frame, ref_shift) = p.gpu_ref.borrow_mut().at(renderer, scene, f).map_err(|e| CompareError::In("reference".into(), e.into()))?;
+        let (gpu_asset, asset_frame, asset_shift) = p.gpu_asset.borrow_mut().at(renderer, scene, f).map_err(|e| CompareError::In(name.to_string(), e.into()))?;
         in_shader |= gpu_asset.decodes_in_shader();
         let draw = |gpu: &GpuAsset, frame: usize, d: [i32; 3]| renderer.render_views_level(gpu, &scene.shifted(d), frame, lod, &views.iter().map(|v| v.shifted(d)).collect::<Vec<_>>(), w, h);
         let (vox, rendered) = std::thread::scope(|s| {

@@ -14,6 +14,7 @@ mod gpu;
 mod html;
 pub mod options;
 pub mod report;
+mod resident;
 mod scene;
 
 pub use compare::{compare_assets, CompareError, CompareOptions, Comparison, LevelFigures, Levels, Shot, Worst};
@@ -21,6 +22,7 @@ pub use cpu::{render_cpu, render_cpu_level};
 pub use flip::{flip, FlipMap};
 pub use gpu::{open_gpu, shader_sources, wanted_features, BcDecode, Gpu, GpuAsset, Renderer};
 pub use options::{Gate, Size, Viewing, Views};
+pub use resident::Resident;
 pub use scene::{coverage, Model};
 
 use vdbcook_vpak::{Asset, Checked, Metadata};

@@ -160,6 +160,14 @@ pub enum Error {
     InSegment(usize, Box<Error>),
     #[error("the asset has {0} segments: read its sections segment by segment")]
     Segmented(usize),
+    #[error("this is a part of an asset (cook --part), not an asset: join the parts with `vdbcook join`")]
+    Part,
+    #[error("{0}")]
+    Join(String),
+    #[error("not a part file (cook --part writes them)")]
+    NotPart,
+    #[error("part header checksum mismatch (the part file is damaged)")]
+    PartChecksum,
 }
 
 /// A source file and its content hash.
@@ -578,7 +586,15 @@ impl Asset {
 
     fn parse(bytes: Bytes) -> Result<Asset, Error> {
         let len = bytes.all().len();
-        let whole = Asset { bytes: std::sync::Arc::new(bytes), start: 0, len, sections: Vec::new(), table: Vec::new() };
+        if bytes.all().starts_with(&segments::PART_MAGIC) {
+            return Err(Error::Part);
+        }
+        Asset::parse_at(std::sync::Arc::new(bytes), 0, len)
+    }
+
+    /// Parses the asset that is bytes `[start, start + len)` of `bytes`.
+    fn parse_at(bytes: std::sync::Arc<Bytes>, start: usize, len: usize) -> Result<Asset, Error> {
+        let whole = Asset { bytes, start, len, sections: Vec::new(), table: Vec::new() };
         let version = whole.version()?;
         match version {
             segments::BODY_VERSION => whole.body(),
@@ -666,6 +682,24 @@ impl Asset {
         }
         self.table = std::mem::take(&mut entries);
         Ok(self)
+    }
+
+    /// Maps a part file (`cook --part`): its part header, and the segments it holds as an asset.
+    pub fn open_part(path: &Path) -> Result<(segments::PartInfo, Asset), Error> {
+        Asset::from_part_file(&std::fs::File::open(path)?)
+    }
+
+    /// [`Asset::open_part`] of an open file.
+    pub fn from_part_file(f: &std::fs::File) -> Result<(segments::PartInfo, Asset), Error> {
+        // SAFETY: read-only mapping; the part is assumed not to change while open.
+        let map = unsafe { memmap2::Mmap::map(f)? };
+        let info = segments::PartInfo::parse(&map)?;
+        let len = map.len() - segments::PART_HEADER_LEN;
+        let asset = Asset::parse_at(std::sync::Arc::new(Bytes::Mapped(map)), segments::PART_HEADER_LEN, len)?;
+        if !asset.is_segmented() {
+            return Err(Error::NotPart);
+        }
+        Ok((info, asset))
     }
 
     /// Whether this is a file with a segment table (version 7).

@@ -17,6 +17,101 @@ pub const SEGMENT_ENTRY_LEN: usize = 32;
 /// Refuse segment tables larger than this (a sanity bound, not a format limit).
 pub const MAX_SEGMENTS: u32 = 1 << 20;
 
+/// The first bytes of a part file (`cook --part I/N`): one of N contiguous
+/// groups of an asset's segments, cooked apart and joined by `vdbcook join`.
+pub const PART_MAGIC: [u8; 8] = *b"VPAKPART";
+/// A part file is its header, then (from here) a version-7 file of its segments.
+pub const PART_HEADER_LEN: usize = 256;
+
+/// What a part file says of itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PartInfo {
+    /// 0 for the first part.
+    pub index: u32,
+    pub count: u32,
+    /// Segments of the whole asset.
+    pub segments: u32,
+    /// This part's first segment and first frame in the whole asset.
+    pub first_segment: u32,
+    pub first_frame: u32,
+    /// Of the cook as a whole (settings, tool, inputs): parts join only when it is the same.
+    pub fingerprint: u64,
+}
+
+impl PartInfo {
+    fn bytes(&self) -> [u8; PART_HEADER_LEN] {
+        let mut h = [0u8; PART_HEADER_LEN];
+        h[..8].copy_from_slice(&PART_MAGIC);
+        h[8..12].copy_from_slice(&VERSION.to_le_bytes());
+        for (i, v) in [self.index, self.count, self.segments, self.first_segment, self.first_frame].iter().enumerate() {
+            h[12 + 4 * i..16 + 4 * i].copy_from_slice(&v.to_le_bytes());
+        }
+        h[32..40].copy_from_slice(&self.fingerprint.to_le_bytes());
+        let sum = checksum(&h[..40]);
+        h[40..48].copy_from_slice(&sum.to_le_bytes());
+        h
+    }
+
+    pub(crate) fn parse(b: &[u8]) -> Result<PartInfo, Error> {
+        if b.len() < PART_HEADER_LEN || b[..8] != PART_MAGIC {
+            return Err(Error::NotPart);
+        }
+        let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap_or([0; 4]));
+        let u64_at = |o: usize| u64::from_le_bytes(b[o..o + 8].try_into().unwrap_or([0; 8]));
+        if u64_at(40) != checksum(&b[..40]) || b[48..PART_HEADER_LEN].iter().any(|&x| x != 0) {
+            return Err(Error::PartChecksum);
+        }
+        if u32_at(8) != VERSION {
+            return Err(Error::Version(u32_at(8)));
+        }
+        Ok(PartInfo { index: u32_at(12), count: u32_at(16), segments: u32_at(20), first_segment: u32_at(24), first_frame: u32_at(28), fingerprint: u64_at(32) })
+    }
+}
+
+/// Writes the part header, then gives a writer of the part's segments (`count` of them) after it.
+pub fn part_writer<W: Write + Seek>(mut out: W, info: &PartInfo, count: u32) -> Result<Writer<W>, Error> {
+    out.seek(SeekFrom::Start(0))?;
+    out.write_all(&info.bytes())?;
+    Writer::at(out, PART_HEADER_LEN as u64, count)
+}
+
+/// Joins parts (in order, each with its asset of segments) into one asset written to `out`,
+/// copying the segments' bytes as they are. `names` name the parts in errors.
+pub fn join<W: Write + Seek>(parts: &[(PartInfo, crate::Asset)], names: &[String], out: W) -> Result<W, Error> {
+    let Some((first, _)) = parts.first() else { return Err(Error::Join("no parts to join".into())) };
+    let bad = |i: usize, why: String| Error::Join(format!("{}: {why}", names.get(i).map_or("a part", |n| n.as_str())));
+    if parts.len() as u32 != first.count {
+        let have: Vec<String> = parts.iter().map(|(p, _)| format!("{}", p.index + 1)).collect();
+        return Err(Error::Join(format!("the asset was cooked in {} parts; {} given (parts {})", first.count, parts.len(), have.join(", "))));
+    }
+    let (mut segment, mut frame) = (0u32, 0u32);
+    for (i, (p, asset)) in parts.iter().enumerate() {
+        if p.fingerprint != first.fingerprint || p.count != first.count || p.segments != first.segments {
+            return Err(bad(i, "is a part of another cook (other settings, inputs or vdbcook version) than the first part's".into()));
+        }
+        if p.index as usize != i {
+            return Err(bad(i, format!("is part {} of {}, but part {} belongs here (give the parts in order, each once)", p.index + 1, p.count, i + 1)));
+        }
+        if (p.first_segment, p.first_frame) != (segment, frame) {
+            return Err(bad(i, format!("starts at segment {} (frame {}), but the parts before end at segment {segment} (frame {frame})", p.first_segment, p.first_frame)));
+        }
+        let table = asset.segments()?;
+        segment += table.len() as u32;
+        frame += table.last().map_or(0, |e| e.first_frame + e.frame_count);
+    }
+    if segment != first.segments {
+        return Err(Error::Join(format!("the parts hold {segment} segments, the asset has {}", first.segments)));
+    }
+    let mut w = Writer::new(out, segment)?;
+    for (i, (_, asset)) in parts.iter().enumerate() {
+        asset.verify().map_err(|e| bad(i, e.to_string()))?;
+        for (s, e) in asset.segments()?.iter().enumerate() {
+            w.copy(e, asset.segment(s)?.bytes())?;
+        }
+    }
+    w.finish()
+}
+
 /// One entry of the segment table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SegmentEntry {
@@ -71,6 +166,8 @@ pub fn first_offset(count: u32) -> u64 {
 /// but the segment being written is held in memory.
 pub struct Writer<W: Write + Seek> {
     out: W,
+    /// Where the file starts in `out` (after a part header).
+    base: u64,
     count: u32,
     entries: Vec<SegmentEntry>,
     /// Where the next segment starts (unpadded end of the last one).
@@ -79,14 +176,19 @@ pub struct Writer<W: Write + Seek> {
 
 impl<W: Write + Seek> Writer<W> {
     /// Starts a file of `count` segments at the start of `out`.
-    pub fn new(mut out: W, count: u32) -> Result<Writer<W>, Error> {
+    pub fn new(out: W, count: u32) -> Result<Writer<W>, Error> {
+        Writer::at(out, 0, count)
+    }
+
+    /// Starts a file of `count` segments at byte `base` of `out`.
+    fn at(mut out: W, base: u64, count: u32) -> Result<Writer<W>, Error> {
         if count == 0 || count > MAX_SEGMENTS {
             return Err(Error::Invalid(format!("{count} segments (need 1 to {MAX_SEGMENTS})")));
         }
         let start = first_offset(count);
-        out.seek(SeekFrom::Start(0))?;
+        out.seek(SeekFrom::Start(base))?;
         write_zeros(&mut out, start)?;
-        Ok(Writer { out, count, entries: Vec::new(), end: start })
+        Ok(Writer { out, base, count, entries: Vec::new(), end: start })
     }
 
     fn place(&mut self, frame_count: u32, size: u64, head_checksum: u64) -> Result<SegmentEntry, Error> {
@@ -119,6 +221,11 @@ impl<W: Write + Seek> Writer<W> {
         Ok(e)
     }
 
+    /// Where the file starts in the output (after a part header: not 0).
+    pub fn base(&self) -> u64 {
+        self.base
+    }
+
     /// The segments written so far.
     pub fn entries(&self) -> &[SegmentEntry] {
         &self.entries
@@ -130,9 +237,9 @@ impl<W: Write + Seek> Writer<W> {
             return Err(Error::Invalid(format!("{} segments written of the {} announced", self.entries.len(), self.count)));
         }
         let head = container_head(&self.entries, self.end);
-        self.out.seek(SeekFrom::Start(0))?;
+        self.out.seek(SeekFrom::Start(self.base))?;
         self.out.write_all(&head)?;
-        self.out.seek(SeekFrom::Start(self.end))?;
+        self.out.seek(SeekFrom::Start(self.base + self.end))?;
         self.out.flush()?;
         Ok(self.out)
     }

@@ -1,0 +1,55 @@
+//! `vdbcook join`: the part files of `cook --part I/N` into one asset.
+
+use crate::exit;
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+use std::time::Instant;
+use vdbcook_vpak::{Asset, AtomicFile};
+
+#[derive(clap::Args)]
+#[command(after_help = "\
+The parts are given in order, 1/N to N/N, each once. Their segments are copied as they
+are (no re-encoding), so the asset is byte for byte what one `cook` with the same
+settings and --segment-frames writes. Parts of different cooks (other settings, inputs
+or vdbcook version), missing, repeated or out-of-order parts are refused and nothing is
+written. See docs/ci.md for a CI matrix of one job per part and one join.")]
+pub struct JoinArgs {
+    /// The part files, in order.
+    #[arg(required = true, value_name = "PART")]
+    pub parts: Vec<PathBuf>,
+    /// The asset to write.
+    #[arg(short, long, value_name = "OUT.vpak")]
+    pub output: PathBuf,
+    /// Replace OUT if it exists.
+    #[arg(long)]
+    pub force: bool,
+}
+
+pub fn run(args: JoinArgs, quiet: bool) -> Result<u8> {
+    crate::refuse_existing(&args.output, args.force)?;
+    let started = Instant::now();
+    let names: Vec<String> = args.parts.iter().map(|p| p.display().to_string()).collect();
+    let parts = args.parts.iter().zip(&names).map(|(p, n)| Asset::open_part(p).with_context(|| n.clone())).collect::<Result<Vec<_>>>()?;
+    let out = args.output.display().to_string();
+    let mut file = AtomicFile::create(&args.output, args.force).with_context(|| out.clone())?;
+    let handle = std::io::BufWriter::with_capacity(1 << 20, file.file().try_clone().with_context(|| out.clone())?);
+    let written = vdbcook_vpak::segments::join(&parts, &names, handle).with_context(|| out.clone())?;
+    let f = written.into_inner().map_err(|e| e.into_error()).with_context(|| out.clone())?;
+    // The joined asset is checked whole (every segment, and what segments must share) before it gets its name.
+    let asset = Asset::from_file(&f).with_context(|| out.clone())?;
+    let meta = asset.check().with_context(|| out.clone())?;
+    let bytes = asset.bytes().len();
+    drop(asset);
+    file.commit().with_context(|| out.clone())?;
+    if !quiet {
+        crate::emit_final(&format!(
+            "joined {} parts into {out}: {} frames in {} segments, {:.2} MB, {:.2}s\n",
+            parts.len(),
+            meta.frame_count,
+            parts.iter().map(|(_, a)| a.segment_count()).sum::<usize>(),
+            bytes as f64 / 1e6,
+            started.elapsed().as_secs_f64()
+        ))?;
+    }
+    Ok(exit::SUCCESS)
+}

@@ -1,0 +1,50 @@
+//! An asset on the GPU a segment at a time: the segment holding the frame
+//! drawn last is resident, and each segment is drawn in its own index space
+//! (the scene and views shifted from the scene's to the segment's offset).
+
+use crate::{Error, GpuAsset, Image, Renderer, Scene, View};
+use std::sync::Arc;
+use vdbcook_vpak::Asset;
+
+/// The resident segment of `asset`.
+pub struct Resident<'a> {
+    asset: &'a Asset,
+    /// The scene's index offset: segments are drawn with the scene shifted to theirs.
+    origin: [i32; 3],
+    now: Option<(usize, Arc<GpuAsset>, [i32; 3])>,
+}
+
+impl<'a> Resident<'a> {
+    /// `asset`, drawn in a scene made for index offset `origin` (the
+    /// whole asset's, from [`Asset::metadata`]).
+    pub fn new(asset: &'a Asset, origin: [i32; 3]) -> Resident<'a> {
+        Resident { asset, origin, now: None }
+    }
+
+    /// The GPU copy of frame `frame`'s segment, the frame's index there and
+    /// the shift of the segment's index space from the scene's.
+    pub fn at(&mut self, renderer: &Renderer, scene: &Scene, frame: usize) -> Result<(Arc<GpuAsset>, usize, [i32; 3]), Error> {
+        let count = self.asset.segments()?.last().map_or(0, |e| e.frames().end);
+        let (s, local) = self.asset.locate(frame).ok_or(Error::Frame { frame, count })?;
+        match &self.now {
+            Some((now, gpu, d)) if *now == s => Ok((gpu.clone(), local, *d)),
+            _ => {
+                // The old segment goes before the new one comes.
+                self.now = None;
+                let seg = self.asset.segment(s)?;
+                let offset = seg.metadata()?.index_offset;
+                let d = std::array::from_fn(|i| offset[i] - self.origin[i]);
+                let gpu = Arc::new(renderer.upload_for(&seg, &scene.shifted(d))?);
+                self.now = Some((s, gpu.clone(), d));
+                Ok((gpu, local, d))
+            }
+        }
+    }
+
+    /// Frame `frame` at level `level`, from each of `views` of `scene`.
+    pub fn draw(&mut self, renderer: &Renderer, scene: &Scene, frame: usize, level: u32, views: &[View], width: u32, height: u32) -> Result<Vec<Image>, Error> {
+        let (gpu, local, d) = self.at(renderer, scene, frame)?;
+        let views: Vec<View> = views.iter().map(|v| v.shifted(d)).collect();
+        renderer.render_views_level(&gpu, &scene.shifted(d), local, level, &views, width, height)
+    }
+}
