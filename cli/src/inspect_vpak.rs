@@ -53,7 +53,8 @@ fn body(asset: &Asset, offset: u64) -> Result<Body, vdbcook_vpak::Error> {
         .collect();
     let sharing = |p: usize| meta.channels.iter().filter(|c| c.plane as usize == p).count().max(1) as u64;
     // A channel's share of each of its planes, and its channel table (per-brick formats).
-    let channel_bytes = (0..meta.channels.len()).map(|c| meta.channel_planes(c).iter().map(|&p| plane_bytes[p as usize] / sharing(p as usize)).sum::<u64>() + section_bytes(kind::CHANNEL_TABLE, c as u32)).collect();
+    let channel_bytes =
+        (0..meta.channels.len()).map(|c| meta.channel_planes(c).iter().map(|&p| plane_bytes[p as usize] / sharing(p as usize)).sum::<u64>() + section_bytes(kind::CHANNEL_TABLE, c as u32)).collect();
     let level_bytes = meta.stored_levels().map(|k| checked.level_bytes(k)).collect();
     Ok(Body { meta, nodes, plane_bytes, channel_bytes, level_bytes, sections: asset.sections.clone(), offset })
 }
@@ -76,11 +77,15 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let nodes: Vec<(&str, u64, u64)> = (0..4).map(|i| (bodies[0].nodes[i].0, bodies.iter().map(|b| b.nodes[i].1).sum(), bodies.iter().map(|b| b.nodes[i].2).sum())).collect();
     let plane_bytes: Vec<u64> = (0..meta.planes.len()).map(|p| sum_at(|b| &b.plane_bytes, p)).collect();
     let channel_bytes = |c: usize| sum_at(|b| &b.channel_bytes, c);
-    let formats = bodies.iter().map(|b| b.meta.format_names()).reduce(|a, b| {
-        let mut names: Vec<String> = a.split('+').map(String::from).collect();
-        names.extend(b.split('+').map(String::from).filter(|n| !a.split('+').any(|m| m == n)));
-        names.join("+")
-    }).unwrap_or_default();
+    let formats = bodies
+        .iter()
+        .map(|b| b.meta.format_names())
+        .reduce(|a, b| {
+            let mut names: Vec<String> = a.split('+').map(String::from).collect();
+            names.extend(b.split('+').map(String::from).filter(|n| !a.split('+').any(|m| m == n)));
+            names.join("+")
+        })
+        .unwrap_or_default();
     // Levels of detail: figures over every frame, and the bytes each level needs on its own.
     let levels: Vec<(u32, u64, u64, u64, u64)> = meta
         .stored_levels()
@@ -99,7 +104,12 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         .zip(&table)
         .map(|(b, e)| json!({"first_frame": e.first_frame, "frames": e.frame_count, "offset": e.offset, "bytes": e.size, "bricks": b.meta.brick_count, "format": b.meta.format_names(), "index_offset": b.meta.index_offset}))
         .collect();
-    let section_json = |b: &Body| b.sections.iter().map(|s| json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": b.offset + s.offset, "bytes": s.size, "checksum": format!("{:016x}", s.checksum)})).collect::<Vec<_>>();
+    let section_json = |b: &Body| {
+        b.sections
+            .iter()
+            .map(|s| json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": b.offset + s.offset, "bytes": s.size, "checksum": format!("{:016x}", s.checksum)}))
+            .collect::<Vec<_>>()
+    };
     if as_json {
         return Ok(Described::Json(json!({
             "path": name,

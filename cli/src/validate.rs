@@ -187,7 +187,11 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let scene = Scene::for_asset_with(&meta, args.viewing.extinction.as_deref()).map_err(|e| Usage(format!("--extinction: {e}")))?;
     let renderer = args.gpu.renderer()?;
     let view = scene.orbit(views.count())[args.view as usize];
-    let img = vdbcook_validate::Resident::new(&asset, meta.index_offset).draw(&renderer, &scene, args.frame, lod, &[view], size.width(), size.height()).with_context(|| name.clone())?.pop().ok_or_else(|| anyhow!("no image"))?;
+    let img = vdbcook_validate::Resident::new(&asset, meta.index_offset)
+        .draw(&renderer, &scene, args.frame, lod, &[view], size.width(), size.height())
+        .with_context(|| name.clone())?
+        .pop()
+        .ok_or_else(|| anyhow!("no image"))?;
     vdbcook_vpak::write_atomic(&args.output, &report::png_rgb(&img), args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
         let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };

@@ -67,6 +67,8 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
         (vec![smoke.clone()], vec!["--format", "bc4", "--max-texture-dim", "24"]),
         (vec![smoke.clone()], vec!["--format", "bc7"]),
         (vec![smoke.clone()], vec!["--max-error", "0.001"]),
+        // Segments (version 7): each frame read from its own segment's body.
+        (vec![smoke.clone()], vec!["--max-error", "0.004", "--segment-frames", "3"]),
         (vec![smoke], vec!["--max-error", "0.004", "--max-texture-dim", "16"]),
         (vec![w.clone()], vec!["--grids", "density,velocity", "--format", "unorm16"]),
         (vec![w.clone()], vec!["--grids", "all", "--format", "f16"]),
@@ -76,11 +78,13 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
         (vec![w], vec!["--grids", "density,shadow,temperature,flame", "--format", "f16", "--group", "density,shadow,temperature,flame=bc7"]),
         (e.clone(), vec!["--grids", "all", "--format", "bc7"]),
         (e.clone(), vec!["--grids", "all", "--format", "unorm8", "--group", "flames=bc4"]),
+        (e.clone(), vec!["--grids", "all", "--format", "bc7", "--segment-frames", "2"]),
         (e, vec!["--grids", "all", "--max-error", "0.02"]),
         (vec![tiles.clone()], vec!["--format", "f16"]),
         (vec![tiles], vec!["--max-error", "0.002"]),
         (vec![wide.clone()], vec!["--format", "f16"]),
-        (vec![wide], vec!["--format", "bc4", "--lods", "3"]),
+        (vec![wide.clone()], vec!["--format", "bc4", "--lods", "3"]),
+        (vec![wide], vec!["--format", "f16", "--lods", "2", "--segment-frames", "1"]),
     ];
     let dir = scratch();
     let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |(k, (inputs, flags))| -> Result<usize, String> {

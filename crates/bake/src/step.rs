@@ -149,7 +149,8 @@ fn finite(x: f64) -> Option<f64> {
 /// the key and the record in its metadata.
 fn cook_fresh(a: &PlannedAsset, ctx: &Baker) -> Result<(Vec<u8>, Record)> {
     let s = &a.settings;
-    let cooked = cook_asset(CookJob { settings: s, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: s.validate, output: None, part: None }, &vdbcook_cook::NoProgress)?;
+    let cooked =
+        cook_asset(CookJob { settings: s, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: s.validate, output: None, part: None }, &vdbcook_cook::NoProgress)?;
     let r = &cooked.report;
     let mut record = Record {
         frames: Some(r.frames as u32),

@@ -145,4 +145,3 @@ fn merge_clustering(mut a: ClusterReport, b: ClusterReport) -> ClusterReport {
     a.rmse_without = a.without.rmse();
     a
 }
-

@@ -155,3 +155,15 @@ mod tests {
         super::advise_huge_pages(&Vec::<u8>::new());
     }
 }
+
+/// Gives the memory freed since the last call back to the system where the
+/// allocator keeps it (glibc's heaps): a cook that frees a segment's bricks
+/// and allocates the next segment's in pieces of other sizes would otherwise
+/// keep both high-water marks.
+pub fn release_free() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only walks the allocator's own free lists.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}

@@ -20,7 +20,15 @@ use vdbcook_vpak::{Asset, AtomicFile, SourceFile, Writer};
 /// for the next segment take their place, so only one segment's bricks are
 /// held at a time. Source paths are recorded relative to `base` when they
 /// are below it. Returns the channels and the seconds spent waiting for frames.
-pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, base: Option<PathBuf>, segment: Option<usize>, on_segment: &mut dyn FnMut(Vec<Cooker>) -> Result<()>, bars: &dyn Progress) -> Result<(Option<Channels>, f64)> {
+pub fn feed(
+    opts: Vec<CookOptions>,
+    files: Vec<FrameFile>,
+    sel: GridSelection,
+    base: Option<PathBuf>,
+    segment: Option<usize>,
+    on_segment: &mut dyn FnMut(Vec<Cooker>) -> Result<()>,
+    bars: &dyn Progress,
+) -> Result<(Option<Channels>, f64)> {
     // Each frame comes with the channels when they are first resolved.
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
     let total = files.len() as u64;
@@ -65,6 +73,7 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
                 c.push_empty(s.clone());
                 Ok(())
             })?;
+            segments.hand_on_full()?;
         }
         Ok(())
     };
@@ -88,7 +97,7 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
                 }
             })
         });
-        if let Err(e) = pushed {
+        if let Err(e) = pushed.and_then(|_| segments.hand_on_full()) {
             failure = Some(e);
             break;
         }
@@ -119,18 +128,25 @@ struct Segments<'a> {
 }
 
 impl Segments<'_> {
-    /// Pushes the next frame into every cooker, handing the full segment on first.
+    /// Pushes the next frame into every cooker.
     fn push(&mut self, mut push: impl FnMut(&mut Cooker) -> Result<()>) -> Result<()> {
+        for c in self.cookers.iter_mut() {
+            push(c)?;
+        }
+        self.pushed += 1;
+        Ok(())
+    }
+
+    /// Hands a full segment on; called once its last frame is dropped, so
+    /// that only the frame being read is held beside it.
+    fn hand_on_full(&mut self) -> Result<()> {
         if self.cookers.first().is_some_and(|c| c.frame_count() >= self.segment) {
             let next = self.cookers.iter().map(|c| c.next_segment(self.pushed)).collect();
             let full = std::mem::replace(&mut self.cookers, next);
             self.emitted += 1;
             (self.on_segment)(full)?;
+            vdbcook_grid::mem::release_free();
         }
-        for c in self.cookers.iter_mut() {
-            push(c)?;
-        }
-        self.pushed += 1;
         Ok(())
     }
 

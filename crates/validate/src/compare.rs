@@ -3,9 +3,9 @@
 //! caller from the source) rendered by the same ray-marcher, with image, FLIP
 //! and voxel figures per level, frame and view, and the gate's verdict.
 
-use crate::resident::Resident;
 use crate::flip::DEFAULT_PPD;
 use crate::options::Viewing;
+use crate::resident::Resident;
 use crate::{compare, FlipMap, Gate, GpuAsset, Image, ImageMetrics, Model, Renderer, Scene, Size};
 use rayon::prelude::*;
 use serde_json::json;

@@ -30,9 +30,9 @@ pub mod segments;
 pub mod settings;
 
 pub use atomic::{write_atomic, write_atomic_with, write_file, AtomicFile};
-pub use segments::{assemble_segments, SegmentEntry, Writer};
 pub use check::{Checked, GpuChannel, GPU_CHANNEL_WORDS, MAX_CHANNELS};
 pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, PlaneInfo, BRICK_VOXELS, MAX_BRICK_BYTES};
+pub use segments::{assemble_segments, SegmentEntry, Writer};
 pub use settings::{Level, LevelCount};
 
 #[doc(hidden)]

@@ -321,7 +321,9 @@ pub fn merged(metas: &[Metadata]) -> Result<Metadata, Error> {
         if (seg.levels, seg.first_level, &seg.level_filters) != (first.levels, first.first_level, &first.level_filters) {
             return differs("levels of detail");
         }
-        let same_channel = |a: &crate::Channel, b: &crate::Channel| (&a.name, &a.grid, a.component, &a.value_type, &a.class, a.background.to_bits(), a.group) == (&b.name, &b.grid, b.component, &b.value_type, &b.class, b.background.to_bits(), b.group);
+        let same_channel = |a: &crate::Channel, b: &crate::Channel| {
+            (&a.name, &a.grid, a.component, &a.value_type, &a.class, a.background.to_bits(), a.group) == (&b.name, &b.grid, b.component, &b.value_type, &b.class, b.background.to_bits(), b.group)
+        };
         if seg.channels.len() != first.channels.len() || !seg.channels.iter().zip(&first.channels).all(|(a, b)| same_channel(a, b)) {
             return differs("channels");
         }

@@ -1,0 +1,210 @@
+//! Segments (`cook --segment-frames N`, format version 7), parts (`cook
+//! --part I/N`) and `join`: a segmented asset decodes as the one-segment
+//! asset does, frame by frame; parts joined are the one-process asset byte
+//! for byte; bad parts are refused; and the cook's memory follows the
+//! segment, not the sequence.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// `frames` frames of a dense `size`³ block of distinct values (every brick
+/// unique) that moves `step` voxels along x per frame.
+fn moving_sequence(dir: &Path, frames: usize, size: usize, step: usize) -> String {
+    let make = r#"
+import sys, numpy as np, pyopenvdb as vdb
+d, n, size, step = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+rng = np.random.default_rng(7)
+for f in range(n):
+    a = (0.05 + rng.random((size, size, size))).astype(np.float32)
+    g = vdb.FloatGrid(); g.name = 'density'
+    g.copyFromArray(a, ijk=(f * step, 0, 0))
+    vdb.write('%s/plume_%04d.vdb' % (d, f + 1), grids=[g])
+"#;
+    let out = Command::new("/usr/bin/python3").args(["-c", make, s(dir), &frames.to_string(), &size.to_string(), &step.to_string()]).output().expect("python3");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    dir.display().to_string()
+}
+
+fn python_ok() -> bool {
+    let ok = Command::new("/usr/bin/python3").args(["-c", "import numpy, pyopenvdb"]).output().is_ok_and(|o| o.status.success());
+    assert!(ok || !in_ci(), "CI=true but /usr/bin/python3 lacks numpy or pyopenvdb");
+    ok
+}
+
+fn cook(dir: &Path, name: &str, input: &str, flags: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let mut args = vec!["cook", "-q", "--force", "-o", s(&out)];
+    args.extend(flags);
+    args.push(input);
+    ok(vdbcook(&args));
+    out
+}
+
+fn inspect(asset: &Path) -> serde_json::Value {
+    let v: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["inspect", "--json", s(asset)])).stdout).unwrap();
+    v["files"][0].clone()
+}
+
+fn unpacked(dir: &Path, asset: &Path, frame: usize, lod: Option<u32>) -> Vec<u8> {
+    let out = dir.join(format!("{}-{frame}.vdb", asset.file_stem().unwrap().to_string_lossy()));
+    let f = frame.to_string();
+    let mut args = vec!["unpack", "-q", "--force", s(asset), "--frame", &f, "-o", s(&out)];
+    let l = lod.map(|l| l.to_string());
+    if let Some(l) = &l {
+        args.extend(["--lod", l]);
+    }
+    ok(vdbcook(&args));
+    std::fs::read(&out).unwrap()
+}
+
+#[test]
+fn a_segmented_asset_decodes_as_the_whole_one_frame_by_frame() {
+    if !python_ok() {
+        return;
+    }
+    let dir = scratch_dir("segments", "decode");
+    // Content 150 voxels further each frame: the segments have index offsets of their own.
+    let seq = moving_sequence(&dir.join("src").tap_mkdir(), 5, 40, 150);
+    for flags in [vec!["--format", "f16"], vec!["--format", "bc7", "--lods", "2"], vec!["--max-error", "0.01"]] {
+        let whole = cook(&dir, "whole.vpak", &seq, &flags);
+        let seg = cook(&dir, "seg.vpak", &seq, &[flags.as_slice(), &["--segment-frames", "2"]].concat());
+        let (w, g) = (inspect(&whole), inspect(&seg));
+        assert_eq!(g["segments"].as_array().unwrap().len(), 3, "{flags:?}");
+        let offsets: Vec<i64> = g["segments"].as_array().unwrap().iter().map(|e| e["index_offset"][0].as_i64().unwrap()).collect();
+        assert!(offsets.windows(2).all(|p| p[0] < p[1]), "{flags:?}: the segments' offsets {offsets:?}");
+        for key in ["frames", "index_bbox", "frame_info", "active_voxels"] {
+            assert_eq!(w[key], g[key], "{flags:?}: {key}");
+        }
+        assert_eq!(w["channels"][0]["value_range"], g["channels"][0]["value_range"], "{flags:?}");
+        for frame in 0..5 {
+            for lod in if flags.contains(&"--lods") { vec![None, Some(1)] } else { vec![None] } {
+                assert!(unpacked(&dir, &whole, frame, lod) == unpacked(&dir, &seg, frame, lod), "{flags:?}: frame {frame} level {lod:?} unpacks differently");
+            }
+        }
+    }
+    // The same images: validation draws each segment in its own index space.
+    if gpu_available() {
+        let seg = cook(&dir, "seg32.vpak", &seq, &["--format", "f32", "--segment-frames", "2"]);
+        let out = ok(vdbcook(&["validate", "--json", "--size", "48x48", "--views", "2", "--source", &seq, s(&seg)]));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["images"].as_array().unwrap().len(), 10);
+        assert!(v["worst"]["rmse"].as_f64().unwrap() < 1e-6, "{}", v["worst"]);
+        let a = dir.join("a.png");
+        let b = dir.join("b.png");
+        let whole = cook(&dir, "whole32.vpak", &seq, &["--format", "f32"]);
+        ok(vdbcook(&["render", "--force", "-q", s(&seg), "--frame", "4", "--size", "160x160", "-o", s(&a)]));
+        ok(vdbcook(&["render", "--force", "-q", s(&whole), "--frame", "4", "--size", "160x160", "-o", s(&b)]));
+        // The segment's box sits 512 voxels further along x in its own index
+        // space: float rounding may move a pixel by a level, no more.
+        let cmp = "import sys, numpy as np; from PIL import Image; a, b = (np.asarray(Image.open(p), dtype=int) for p in sys.argv[1:]); print(int(abs(a - b).max()), int((a > 8).sum()))";
+        let out = Command::new("/usr/bin/python3").args(["-c", cmp, s(&a), s(&b)]).output().unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        let figures: Vec<u64> = text.split_whitespace().filter_map(|w| w.parse().ok()).collect();
+        assert!(
+            figures.len() == 2 && figures[0] <= 1 && figures[1] > 200,
+            "frame 4 of the segmented asset against the whole one: max difference, lit pixels: {text} {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+trait Mkdir {
+    fn tap_mkdir(self) -> PathBuf;
+}
+impl Mkdir for PathBuf {
+    fn tap_mkdir(self) -> PathBuf {
+        std::fs::create_dir_all(&self).unwrap();
+        self
+    }
+}
+
+#[test]
+fn parts_join_to_what_one_process_writes_and_bad_parts_are_refused() {
+    let dir = scratch_dir("segments", "parts");
+    let seq = "fixtures/smoke_seq";
+    let flags = ["--format", "bc7", "--segment-frames", "1", "--lods", "2"];
+    let whole = cook(&dir, "whole.vpak", seq, &flags);
+    let part = |i: &str, name: &str, extra: &[&str]| cook(&dir, name, seq, &[flags.as_slice(), extra, &["--part", i]].concat());
+    let (a, b, c) = (part("1/3", "a.part", &[]), part("2/3", "b.part", &[]), part("3/3", "c.part", &[]));
+    let joined = dir.join("joined.vpak");
+    ok(vdbcook(&["join", "-q", s(&a), s(&b), s(&c), "-o", s(&joined)]));
+    assert!(std::fs::read(&joined).unwrap() == std::fs::read(&whole).unwrap(), "the joined asset differs from one process's");
+    // Determinism at another thread count, segments and all.
+    let one_thread = dir.join("one-thread.vpak");
+    let mut args = vec!["cook", "-q", "-o", s(&one_thread)];
+    args.extend(flags);
+    args.push(seq);
+    ok(Command::new(env!("CARGO_BIN_EXE_vdbcook")).args(&args).env("RAYON_NUM_THREADS", "1").current_dir(root()).output().unwrap());
+    assert!(std::fs::read(&one_thread).unwrap() == std::fs::read(&whole).unwrap(), "one thread cooks another asset");
+
+    let other = part("3/3", "other.part", &["--quality", "slow"]);
+    let truncated = dir.join("truncated.part");
+    let bytes = std::fs::read(&c).unwrap();
+    std::fs::write(&truncated, &bytes[..bytes.len() - 100]).unwrap();
+    let out = dir.join("bad.vpak");
+    let cases: [(&[&PathBuf], &str); 5] = [
+        (&[&a, &b], "cooked in 3 parts; 2 given"),
+        (&[&a, &a, &c], "a.part: is part 1 of 3, but part 2 belongs here"),
+        (&[&b, &a, &c], "b.part: is part 2 of 3, but part 1 belongs here"),
+        (&[&a, &b, &other], "other.part: is a part of another cook"),
+        (&[&a, &b, &truncated], "truncated.part: truncated"),
+    ];
+    for (parts, want) in cases {
+        let mut args = vec!["join", "-o", s(&out)];
+        args.extend(parts.iter().map(|p| s(p)));
+        let r = vdbcook(&args);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(1), "{want}: {err}");
+        assert!(err.contains(want) && err.lines().count() == 1, "expected \"{want}\", got: {err}");
+        assert!(!out.exists(), "{want}: an output was left");
+    }
+    let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    // A part is not an asset, and parts need segments.
+    let r = vdbcook(&["inspect", s(&a)]);
+    assert!(String::from_utf8_lossy(&r.stderr).contains("join the parts"), "{}", String::from_utf8_lossy(&r.stderr));
+    let r = vdbcook(&["cook", "-o", s(&dir.join("x.part")), "--part", "1/2", seq]);
+    assert_eq!(r.status.code(), Some(2));
+    let r = vdbcook(&["cook", "-o", s(&dir.join("x.part")), "--segment-frames", "4", "--part", "1/2", seq]);
+    assert_eq!(r.status.code(), Some(2), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("1 segment(s) to share among 2 parts"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Peak resident memory (KiB) of a cook, as `/usr/bin/time -f %M` reports it.
+fn peak_kib(args: &[&str]) -> u64 {
+    let out = Command::new("/usr/bin/time").args(["-f", "%M", env!("CARGO_BIN_EXE_vdbcook")]).args(args).current_dir(root()).output().expect("/usr/bin/time (Debian package time)");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stderr).lines().last().and_then(|l| l.trim().parse().ok()).expect("a peak from /usr/bin/time")
+}
+
+#[test]
+fn memory_follows_the_segment_not_the_sequence() {
+    if !python_ok() || !Path::new("/usr/bin/time").exists() {
+        assert!(!in_ci(), "CI=true but /usr/bin/time is missing (Debian package time)");
+        return;
+    }
+    let dir = scratch_dir("segments", "memory");
+    // 32 frames of 2,744 distinct bricks each (5.6 MB of f32 values a frame).
+    let seq = moving_sequence(&dir.join("src").tap_mkdir(), 32, 112, 0);
+    let files: Vec<String> = (1..=32).map(|f| format!("{seq}/plume_{f:04}.vdb")).collect();
+    let run = |frames: usize, segment: Option<&str>| {
+        let out = dir.join("out.vpak");
+        let mut args = vec!["cook", "-q", "--force", "--format", "f16", "-o", s(&out)];
+        if let Some(n) = segment {
+            args.extend(["--segment-frames", n]);
+        }
+        args.extend(files[..frames].iter().map(String::as_str));
+        peak_kib(&args)
+    };
+    let (eight, thirty_two, whole) = (run(8, Some("8")), run(32, Some("8")), run(32, None));
+    eprintln!("peak RSS: 8 frames {eight} KiB, 32 frames in segments of 8 {thirty_two} KiB, 32 frames in one segment {whole} KiB");
+    // Flat in the sequence's length (the margin is for allocator noise)...
+    assert!(thirty_two as f64 <= 1.25 * eight as f64, "32 frames took {thirty_two} KiB, 8 frames {eight} KiB");
+    // ... where one segment grows with it (so the figure above can fail).
+    assert!(whole as f64 >= 2.0 * thirty_two as f64, "one segment of 32 frames took {whole} KiB, segments of 8 {thirty_two} KiB");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
