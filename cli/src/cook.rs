@@ -71,6 +71,15 @@ that one by default); the summary names the levels left out and each size tried.
 even the coarsest level alone is larger than B, nothing is written and the cook exits
 with 1, naming that smallest size. Without --lods, --max-bytes only checks the size.
 
+--segment-frames N cuts the flip-book into segments of N frames, each with its own
+bricks, atlases, ranges and tables, contiguous in the file (format version 7): a player
+needs one segment at a time, and the cook holds one segment's bricks at a time (its
+memory follows N, not the sequence's length). Deduplication and --clusters (K centroids
+per segment) work within a segment; the summary gives each segment's bytes and bricks.
+--part I/N then cooks only the I-th of N contiguous groups of segments into a part file,
+and `vdbcook join PART... -o OUT.vpak` joins the parts (in order) into the asset that
+one cook writes, byte for byte: one sequence on several machines (docs/ci.md).
+
 --validate renders the new asset against its sources on the GPU afterwards (see
 `vdbcook validate --help`); with --max-rmse / --min-psnr / --max-flip a failed gate
 exits with 3. With --lods N (N > 1) every level is checked against the source filtered

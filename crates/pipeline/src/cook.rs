@@ -208,7 +208,8 @@ struct Output {
 
 enum Sink {
     Memory(Writer<std::io::Cursor<Vec<u8>>>),
-    File(Writer<std::io::BufWriter<std::fs::File>>, AtomicFile),
+    /// The writer, the file it writes and the file's name (for errors).
+    File(Writer<std::io::BufWriter<std::fs::File>>, AtomicFile, String),
 }
 
 impl Output {
@@ -226,7 +227,7 @@ impl Output {
             None => Writer::new(handle, count),
         }
         .with_context(ctx)?;
-        Ok(Output { sink: Sink::File(writer, file), reports: Vec::new() })
+        Ok(Output { sink: Sink::File(writer, file, ctx()), reports: Vec::new() })
     }
 
     /// Finishes a segment's cooker and writes the segment.
@@ -237,7 +238,7 @@ impl Output {
         let t0 = Instant::now();
         let entry = match &mut self.sink {
             Sink::Memory(w) => w.add(frames, &sections)?,
-            Sink::File(w, _) => w.add(frames, &sections)?,
+            Sink::File(w, _, name) => w.add(frames, &sections).with_context(|| name.clone())?,
         };
         report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
         if let Some(seg) = report.segments.first_mut() {
@@ -251,10 +252,10 @@ impl Output {
     fn finish(self) -> Result<(Asset, Option<AtomicFile>, Option<CookReport>)> {
         let (asset, file) = match self.sink {
             Sink::Memory(w) => (Asset::from_bytes(&w.finish()?.into_inner())?, None),
-            Sink::File(w, file) => {
+            Sink::File(w, file, name) => {
                 let part = w.base() > 0;
-                let f = w.finish()?.into_inner().map_err(|e| Error::from(e.into_error()))?;
-                let asset = if part { Asset::from_part_file(&f)?.1 } else { Asset::from_file(&f)? };
+                let f = w.finish().with_context(|| name.clone())?.into_inner().map_err(|e| Error::from(e.into_error())).with_context(|| name.clone())?;
+                let asset = if part { Asset::from_part_file(&f).map(|p| p.1) } else { Asset::from_file(&f) }.with_context(|| name.clone())?;
                 (asset, Some(file))
             }
         };

@@ -17,6 +17,11 @@ pub fn summary_text(output: &Path, grid: Option<&str>, r: &CookReport) -> String
     let _ = writeln!(s, "  active voxels   {} ({:.3} bits per active voxel)", r.active_voxels, r.bits_per_active_voxel);
     let _ = writeln!(s, "  bricks          {} leaves -> {} unique -> {} stored in {} texture{}", r.bricks, r.unique_bricks, r.stored_bricks, r.textures, if r.textures == 1 { "" } else { "s" });
     let _ = writeln!(s, "  nodes           L1 {}, L2 {}, L3 {}, tiles {}; tree {} (thesis layout: {})", r.l1_nodes, r.l2_nodes, r.l3_nodes, r.tiles, mb(r.tree_bytes), mb(r.thesis_tree_bytes));
+    if r.segments.len() > 1 {
+        let sizes: Vec<String> = r.segments.iter().map(|g| format!("{} ({} bricks)", mb(g.bytes), g.stored_bricks)).collect();
+        let most = r.segments.iter().map(|g| g.frames).max().unwrap_or(0);
+        let _ = writeln!(s, "  segments        {} of up to {most} frames: {}", r.segments.len(), sizes.join(", "));
+    }
     if r.channels.len() == 1 {
         let _ = writeln!(s, "  voxel error     rmse {:.3e}, psnr {:.1} dB, max {:.3e}", r.voxel_rmse, r.voxel_psnr, r.voxel_max_error);
     } else {

@@ -33,7 +33,8 @@ fn the_search_picks_the_smallest_format_that_meets_the_gate() {
     let files = inputs::expand(&[smoke()], None).unwrap();
     // An exact gate: f32 renders exactly (no clustering), so the search ends by f32 at the latest.
     let s = settings(lossless_gate());
-    let found = search(CookJob { settings: &s, files: files.clone(), inputs: &[], base: None, reference: false }, &s.compare_options(None), "smoke", &r, &NoProgress).unwrap();
+    let found =
+        search(CookJob { settings: &s, files: files.clone(), inputs: &[], base: None, reference: false, output: None, part: None }, &s.compare_options(None), "smoke", &r, &NoProgress).unwrap();
     let chosen = found.chosen.expect("f32 meets an exact gate");
     assert_eq!(found.candidates[chosen].worst().unwrap().rmse, 0.0);
     assert!(found.failure().is_none());
@@ -44,8 +45,8 @@ fn the_search_picks_the_smallest_format_that_meets_the_gate() {
     assert_eq!(found.doc()["chosen"], format.name());
     // The chosen asset is byte for byte what a cook of that format writes.
     let f32 = CookSettings { format, ..s.clone() };
-    let alone = cook_asset(CookJob { settings: &f32, files, inputs: &[], base: None, reference: false }, &NoProgress).unwrap();
-    assert_eq!(vdbcook_vpak::assemble(&alone.sections), vdbcook_vpak::assemble(&found.candidates[chosen].cooked.sections));
+    let alone = cook_asset(CookJob { settings: &f32, files, inputs: &[], base: None, reference: false, output: None, part: None }, &NoProgress).unwrap();
+    assert_eq!(alone.asset.bytes(), found.candidates[chosen].cooked.asset.bytes());
 }
 
 #[test]
@@ -54,7 +55,7 @@ fn a_gate_nothing_meets_names_the_best_reached() {
     let files = inputs::expand(&[smoke()], None).unwrap();
     // With clustering into one brick, even f32 is lossy.
     let s = CookSettings { clusters: Some("1".parse().unwrap()), ..settings(lossless_gate()) };
-    let found = search(CookJob { settings: &s, files, inputs: &[], base: None, reference: false }, &s.compare_options(None), "smoke", &r, &NoProgress).unwrap();
+    let found = search(CookJob { settings: &s, files, inputs: &[], base: None, reference: false, output: None, part: None }, &s.compare_options(None), "smoke", &r, &NoProgress).unwrap();
     assert!(found.chosen.is_none());
     assert!(found.best.is_some());
     let why = found.failure().unwrap();
@@ -68,8 +69,9 @@ fn a_written_asset_validates_against_its_recorded_sources() {
     std::fs::create_dir_all(&dir).unwrap();
     let out: PathBuf = dir.join("smoke.vpak");
     let s = settings(Gate::default());
-    let cooked = cook_asset(CookJob { settings: &s, files: inputs::expand(&[smoke()], None).unwrap(), inputs: &[smoke()], base: None, reference: false }, &NoProgress).unwrap();
-    vdbcook_vpak::write_file(&out, &cooked.sections, true).unwrap();
+    let cooked =
+        cook_asset(CookJob { settings: &s, files: inputs::expand(&[smoke()], None).unwrap(), inputs: &[smoke()], base: None, reference: false, output: None, part: None }, &NoProgress).unwrap();
+    vdbcook_vpak::write_atomic(&out, cooked.asset.bytes(), true).unwrap();
     let c = validate_file(&out, Sources::Recorded, &s.compare_options(None), || Ok::<_, std::convert::Infallible>(&r), &NoProgress).unwrap();
     assert_eq!(c.doc["sources"]["recorded"], true);
     assert_eq!(c.levels[0].shots.len(), 4 * 2);

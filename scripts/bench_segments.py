@@ -1,0 +1,98 @@
+#!/usr/bin/python3
+"""Production sequences (issue 23): memory, time and bytes of whole-sequence cooks, one
+segment against segments, parts on two pinned cores against one, and nanovdb_convert
+--fp16 on the same files in the same run. Prints a table with the ratios.
+
+    /usr/bin/python3 scripts/make_bench_sequence.py bench-out/seq224 --frames 96 --size 224
+    /usr/bin/python3 scripts/bench_segments.py bench-out/seq224 [--segment 24] [--formats f16,bc7]
+
+Peak RSS is /usr/bin/time's %M (KiB). Every cook writes into a scratch directory that is
+removed at the end.
+"""
+
+import argparse
+import glob
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+
+
+def timed(cmd, **kw):
+    """(wall s, user+sys s, peak KiB) of one command under /usr/bin/time."""
+    out = subprocess.run(["/usr/bin/time", "-f", "%e %U %S %M"] + cmd, capture_output=True, text=True, **kw)
+    if out.returncode != 0:
+        raise SystemExit(f"failed: {' '.join(cmd)}\n{out.stderr}")
+    wall, user, sys_, peak = out.stderr.strip().splitlines()[-1].split()
+    return float(wall), float(user) + float(sys_), int(peak)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("seq")
+    ap.add_argument("--segment", type=int, default=24)
+    ap.add_argument("--formats", default="f16,bc7")
+    ap.add_argument("--exe", default="target/release/vdbcook")
+    ap.add_argument("--no-parts", action="store_true")
+    args = ap.parse_args()
+    files = sorted(glob.glob(os.path.join(args.seq, "*.vdb")))
+    n, seg = len(files), str(args.segment)
+    tmp = tempfile.mkdtemp(prefix="bench-segments-")
+    rows = []
+    try:
+        print(f"{n} frames of {args.seq}; segments of {seg}; load {os.getloadavg()[0]:.2f}", flush=True)
+        results = {}
+        for fmt in args.formats.split(","):
+            flags = ["--max-error", fmt.split(":", 1)[1]] if fmt.startswith("max-error:") else ["--format", fmt]
+            def cook(name, inputs, extra):
+                out = os.path.join(tmp, name + ".vpak")
+                r = timed([args.exe, "cook", "-q", "--force", "-o", out] + flags + extra + inputs)
+                return r + (os.path.getsize(out),)
+            first = cook(f"{fmt}-first", files[: args.segment], ["--segment-frames", seg])
+            whole = cook(f"{fmt}-one", files, [])
+            segd = cook(f"{fmt}-seg", files, ["--segment-frames", seg])
+            results[fmt] = (first, whole, segd)
+            for label, r in [(f"{fmt}: first {seg} frames", first), (f"{fmt}: {n} frames, one segment", whole), (f"{fmt}: {n} frames, segments of {seg}", segd)]:
+                rows.append((label, r))
+                print(f"  {label:<40} {r[0]:7.2f} s wall {r[1]:7.2f} s cpu {r[2] / 1024:8.1f} MB peak {r[3] / 1e6:9.2f} MB file", flush=True)
+        nano = os.path.join(tmp, "nano")
+        os.makedirs(nano)
+        one = timed(["nanovdb_convert", "--fp16", files[0], os.path.join(nano, "one.nvdb")])
+        t0 = time.time()
+        xargs = subprocess.run(f"printf '%s\\n' {' '.join(files)} | xargs -P2 -I{{}} sh -c 'nanovdb_convert -f --fp16 \"$1\" {nano}/$(basename \"$1\" .vdb).nvdb' _ {{}}", shell=True, capture_output=True, text=True)
+        xargs_wall = time.time() - t0
+        if xargs.returncode != 0:
+            raise SystemExit(f"nanovdb_convert failed: {xargs.stderr}")
+        print(f"  nanovdb_convert --fp16 one frame: {one[2] / 1024:.1f} MB peak; xargs -P2 over {n} files: {xargs_wall:.2f} s", flush=True)
+        if not args.no_parts:
+            fmt = args.formats.split(",")[0]
+            flags = ["--format", fmt, "--segment-frames", seg]
+            single = timed(["taskset", "-c", "0", args.exe, "cook", "-q", "--force", "-o", os.path.join(tmp, "single.vpak")] + flags + files)
+            procs = []
+            t0 = time.time()
+            for i in (1, 2):
+                cmd = ["/usr/bin/time", "-f", "%e %U %S %M", "taskset", "-c", str(i - 1), args.exe, "cook", "-q", "--force", "-o", os.path.join(tmp, f"p{i}.part"), "--part", f"{i}/2"] + flags + files
+                procs.append(subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True))
+            cpu = 0.0
+            for p in procs:
+                err = p.communicate()[1]
+                if p.returncode != 0:
+                    raise SystemExit(err)
+                _, u, s_, _ = err.strip().splitlines()[-1].split()
+                cpu += float(u) + float(s_)
+            parts_wall = time.time() - t0
+            join = timed([args.exe, "join", "-q", os.path.join(tmp, "p1.part"), os.path.join(tmp, "p2.part"), "-o", os.path.join(tmp, "joined.vpak")])
+            same = open(os.path.join(tmp, "joined.vpak"), "rb").read() == open(os.path.join(tmp, "single.vpak"), "rb").read()
+            print(f"  {fmt} parts: one process on one core {single[0]:.2f} s ({single[1]:.2f} s cpu); two parts on a core each {parts_wall:.2f} s wall, {cpu:.2f} s cpu; join {join[0]:.2f} s; joined == one process: {same}", flush=True)
+            print(f"    parts wall / one process {parts_wall / single[0]:.3f} (target <= 0.6); parts cpu / one process cpu {cpu / single[1]:.3f} (<= 1.1); join / one process {join[0] / single[0]:.3f} (< 0.05)")
+        print("ratios:")
+        for fmt, (first, whole, segd) in results.items():
+            print(f"  {fmt}: peak RSS {n} frames in segments / first {seg} frames {segd[2] / first[2]:.3f} (<= 1.25); one segment / first {whole[2] / first[2]:.3f}; segments / nanovdb one frame {segd[2] / one[2]:.2f} (<= 3)")
+            print(f"  {fmt}: bytes segments / one segment {segd[3] / whole[3]:.3f} (<= 1.1); wall segments / xargs -P2 nanovdb {segd[0] / xargs_wall:.3f}, one segment / xargs -P2 {whole[0] / xargs_wall:.3f} (<= 0.8)")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
