@@ -234,7 +234,17 @@ impl Output {
     fn add(&mut self, cooker: Cooker, bars: &dyn Progress) -> Result<()> {
         let frames = cooker.frame_count() as u32;
         // A group naming no channel, or too many channels to cluster, is the settings' fault.
-        let (sections, mut report) = cooker.finish(bars).map_err(|e| if e.is_settings_error() { Error::Usage(e.to_string()) } else { Error::from(e) })?;
+        let table = vdbcook_vpak::segments::first_offset(1);
+        let (sections, mut report) = cooker.finish(bars).map_err(|e| match e {
+            // A byte budget is the whole file's: the segment table included.
+            vdbcook_cook::Error::OverBudget { budget, smallest, level } => Error::from(vdbcook_cook::Error::OverBudget { budget: budget + table, smallest: smallest + table, level }),
+            e if e.is_settings_error() => Error::Usage(e.to_string()),
+            e => Error::from(e),
+        })?;
+        if let Some(b) = report.budget.as_mut() {
+            b.max_bytes += table;
+            b.tries.iter_mut().for_each(|t| t.bytes += table);
+        }
         let t0 = Instant::now();
         let entry = match &mut self.sink {
             Sink::Memory(w) => w.add(frames, &sections)?,

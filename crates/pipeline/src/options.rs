@@ -224,7 +224,8 @@ settings_group! {
         /// Encoder preset of bc7 and bc4 (see the notes below).
         #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().quality))]
         pub quality: Quality = cook_defaults().quality;
-        /// Merge similar bricks with variance-gated k-means into K centroid bricks (off by default).
+        /// Merge similar bricks with variance-gated k-means into K centroid bricks (off by default;
+        /// with --segment-frames, K per segment).
         #[cfg_attr(feature = "clap", arg(long, value_name = "K"))]
         pub clusters: Option<Clusters> = None;
         /// k-means iterations.
@@ -328,7 +329,8 @@ impl CookSettings {
             max_error: self.max_error,
             settings: self.recorded(inputs),
             levels: self.lods,
-            max_bytes: self.max_bytes.map(|b| b.0),
+            // The cooker budgets the one segment's body; the file adds the segment table.
+            max_bytes: self.max_bytes.map(|b| b.0.saturating_sub(vdbcook_vpak::segments::first_offset(1))),
         }
     }
 
