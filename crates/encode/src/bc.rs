@@ -18,7 +18,7 @@ use crate::{Quality, BRICK_VOXELS};
 
 pub const BC4_BRICK_BYTES: usize = 8 * 4 * 8;
 
-fn bc7_settings(q: Quality) -> intel_tex_2::bc7::EncodeSettings {
+pub(crate) fn bc7_settings(q: Quality) -> intel_tex_2::bc7::EncodeSettings {
     use intel_tex_2::bc7;
     match q {
         Quality::UltraFast => bc7::alpha_ultra_fast_settings(),

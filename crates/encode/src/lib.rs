@@ -127,5 +127,7 @@ pub fn round_trip(format: Format, quality: Quality, values: &Brick) -> Brick {
     e.decode(0).map_or([0.0; BRICK_VOXELS], |d| d[0])
 }
 
+#[cfg(all(test, target_arch = "x86_64"))]
+mod bc7_isa;
 #[cfg(test)]
 mod tests;
