@@ -18,6 +18,31 @@ use crate::{Quality, BRICK_VOXELS};
 
 pub const BC4_BRICK_BYTES: usize = 8 * 4 * 8;
 
+/// Which of intel_tex_2's BC7 kernels this machine runs, as a class whose
+/// members write the same blocks: its x86-64 kernels with fused multiply-add
+/// (AVX2, AVX-512) and those without (SSE2, SSE4, AVX) differ on a few blocks
+/// in ten thousand (`bc7_isa`'s test), so BC7 assets are byte-identical only
+/// between machines of one class.
+pub fn bc7_kernels() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let fma = (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")) || is_x86_feature_detected!("avx512f");
+        if fma {
+            "x86-64 fma"
+        } else {
+            "x86-64 no-fma"
+        }
+    }
+    #[cfg(target_arch = "aarch64")]
+    {
+        "aarch64 neon"
+    }
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    {
+        std::env::consts::ARCH
+    }
+}
+
 pub(crate) fn bc7_settings(q: Quality) -> intel_tex_2::bc7::EncodeSettings {
     use intel_tex_2::bc7;
     match q {

@@ -73,6 +73,7 @@ mod choose;
 mod encoded;
 mod stats;
 mod texels;
+pub use bc::bc7_kernels;
 pub use choose::{cheapest, cheapest_all, decode_one, single_plane, within, Choice};
 pub use encoded::{Encoded, PlaneBricks};
 pub use stats::{ErrorStats, NonFinite};

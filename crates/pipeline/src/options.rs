@@ -334,6 +334,11 @@ impl CookSettings {
         }
     }
 
+    /// Whether the cook may store BC7 blocks (its format, a group's, or a per-brick choice).
+    pub fn may_encode_bc7(&self) -> bool {
+        self.format == Format::Bc7 || self.max_error.is_some() || self.group.iter().any(|g| g.format == Format::Bc7)
+    }
+
     /// The settings a cook records in the asset's metadata (what `cook` has
     /// always written): settings that do not apply are empty.
     pub fn recorded(&self, inputs: &[String]) -> Vec<(String, String)> {
@@ -355,6 +360,8 @@ impl CookSettings {
             ("variance_threshold".into(), if clustered { self.variance_threshold.text() } else { String::new() }),
             ("max_brick_error".into(), self.max_brick_error.text()),
             ("inputs".into(), inputs.join(" ")),
+            // Machines of another class write other BC7 blocks: parts of one asset must agree.
+            ("bc7_kernels".into(), if self.may_encode_bc7() { vdbcook_encode::bc7_kernels().to_string() } else { String::new() }),
         ]
     }
 }

@@ -692,10 +692,20 @@ impl Asset {
     /// [`Asset::open_part`] of an open file.
     pub fn from_part_file(f: &std::fs::File) -> Result<(segments::PartInfo, Asset), Error> {
         // SAFETY: read-only mapping; the part is assumed not to change while open.
-        let map = unsafe { memmap2::Mmap::map(f)? };
-        let info = segments::PartInfo::parse(&map)?;
-        let len = map.len() - segments::PART_HEADER_LEN;
-        let asset = Asset::parse_at(std::sync::Arc::new(Bytes::Mapped(map)), segments::PART_HEADER_LEN, len)?;
+        Asset::part(Bytes::Mapped(unsafe { memmap2::Mmap::map(f)? }))
+    }
+
+    /// [`Asset::open_part`] of bytes in memory.
+    pub fn part_from_bytes(b: &[u8]) -> Result<(segments::PartInfo, Asset), Error> {
+        let mut words = vec![0u64; b.len().div_ceil(8)];
+        bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..b.len()].copy_from_slice(b);
+        Asset::part(Bytes::Owned(words, b.len()))
+    }
+
+    fn part(bytes: Bytes) -> Result<(segments::PartInfo, Asset), Error> {
+        let info = segments::PartInfo::parse(bytes.all())?;
+        let len = bytes.all().len() - segments::PART_HEADER_LEN;
+        let asset = Asset::parse_at(std::sync::Arc::new(bytes), segments::PART_HEADER_LEN, len)?;
         if !asset.is_segmented() {
             return Err(Error::NotPart);
         }

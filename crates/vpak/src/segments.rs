@@ -84,8 +84,18 @@ pub fn join<W: Write + Seek>(parts: &[(PartInfo, crate::Asset)], names: &[String
         let have: Vec<String> = parts.iter().map(|(p, _)| format!("{}", p.index + 1)).collect();
         return Err(Error::Join(format!("the asset was cooked in {} parts; {} given (parts {})", first.count, parts.len(), have.join(", "))));
     }
+    // Which BC7 kernels wrote each part (a setting every segment records).
+    let kernels = |a: &crate::Asset| -> Result<String, Error> {
+        let m = a.segment(0)?.metadata()?;
+        Ok(m.settings.iter().find(|(k, _)| k == "bc7_kernels").map_or_else(String::new, |(_, v)| v.clone()))
+    };
+    let first_kernels = kernels(&parts[0].1)?;
     let (mut segment, mut frame) = (0u32, 0u32);
     for (i, (p, asset)) in parts.iter().enumerate() {
+        let k = kernels(asset)?;
+        if k != first_kernels {
+            return Err(bad(i, format!("its BC7 blocks come from {k} kernels, the first part's from {first_kernels}, which write other blocks: cook every part on machines of one kind")));
+        }
         if p.fingerprint != first.fingerprint || p.count != first.count || p.segments != first.segments {
             return Err(bad(i, "is a part of another cook (other settings, inputs or vdbcook version) than the first part's".into()));
         }
@@ -489,5 +499,43 @@ mod tests {
         w.add(1, &body(&m, 0)).unwrap();
         assert!(w.finish().is_err());
         assert!(Writer::new(std::io::Cursor::new(Vec::new()), 0).is_err());
+    }
+
+    /// A part file in memory of the segments (frames, metadata), numbered `index` of `count`.
+    fn part(index: u32, count: u32, first_segment: u32, first_frame: u32, segments: &[(u32, Metadata)]) -> Vec<u8> {
+        let info = PartInfo { index, count, segments: 4, first_segment, first_frame, fingerprint: 9 };
+        let mut w = part_writer(std::io::Cursor::new(Vec::new()), &info, segments.len() as u32).unwrap();
+        for (frames, m) in segments {
+            w.add(*frames, &body(m, 0)).unwrap();
+        }
+        w.finish().unwrap().into_inner()
+    }
+
+    #[test]
+    fn parts_join_in_order_and_kernels_must_agree() {
+        let with = |kernels: &str| {
+            let mut m = meta(1, &["a.vdb"], [0.0, 1.0], 0);
+            m.settings.push(("bc7_kernels".into(), kernels.into()));
+            (1, m)
+        };
+        let fma = with("x86-64 fma");
+        let a = part(0, 2, 0, 0, &[fma.clone(), fma.clone()]);
+        let b = part(1, 2, 2, 2, &[fma.clone(), fma.clone()]);
+        let open = |b: &[u8]| Asset::part_from_bytes(b).unwrap();
+        let names = vec!["a".to_string(), "b".to_string()];
+        let joined = join(&[open(&a), open(&b)], &names, std::io::Cursor::new(Vec::new())).unwrap().into_inner();
+        let asset = Asset::from_bytes(&joined).unwrap();
+        asset.verify().unwrap();
+        assert_eq!((asset.segment_count(), asset.metadata().unwrap().frame_count), (4, 4));
+        // The same segments written by one writer: the same bytes.
+        let whole = assemble_segments(&(0..4).map(|_| (1, body(&fma.1, 0))).collect::<Vec<_>>()).unwrap();
+        assert!(joined == whole);
+        let other = part(1, 2, 2, 2, &[with("x86-64 no-fma"), with("x86-64 no-fma")]);
+        let err = join(&[open(&a), open(&other)], &names, std::io::Cursor::new(Vec::new())).unwrap_err().to_string();
+        assert!(err.contains("b: its BC7 blocks come from x86-64 no-fma kernels, the first part's from x86-64 fma"), "{err}");
+        let err = join(&[open(&b), open(&a)], &names, std::io::Cursor::new(Vec::new())).unwrap_err().to_string();
+        assert!(err.contains("a: is part 2 of 2, but part 1 belongs here"), "{err}");
+        // A part is not an asset.
+        assert!(matches!(Asset::from_bytes(&a), Err(Error::Part)));
     }
 }
