@@ -450,11 +450,11 @@ pub fn file_len(sections: &[Section]) -> u64 {
 /// Writes a complete one-body file (the version-6 layout) to `w`, section
 /// by section (no copy of the whole file).
 pub fn write_to<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section]) -> std::io::Result<()> {
-    write_body(w, sections, false)
+    write_body(w, sections, &body_head(sections))
 }
 
-/// Writes a body: its header and section table, then (unless `head_only`) its sections.
-pub(crate) fn write_body<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section], head_only: bool) -> std::io::Result<()> {
+/// A body's header and section table (every section's checksum computed once, here).
+pub(crate) fn body_head(sections: &[Section]) -> Vec<u8> {
     let (offsets, table_end, total) = plan(sections);
     let mut head = vec![0u8; table_end];
     head[..8].copy_from_slice(&MAGIC);
@@ -471,10 +471,13 @@ pub(crate) fn write_body<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Sect
     }
     let h = header_checksum(&head[..32], &head[HEADER_LEN..table_end]);
     head[32..40].copy_from_slice(&h.to_le_bytes());
-    w.write_all(&head)?;
-    if head_only {
-        return Ok(());
-    }
+    head
+}
+
+/// Writes a body: its `head` ([`body_head`]), then its sections.
+pub(crate) fn write_body<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section], head: &[u8]) -> std::io::Result<()> {
+    let (offsets, table_end, _) = plan(sections);
+    w.write_all(head)?;
     let mut pos = table_end;
     let zeros = [0u8; ALIGN];
     for (s, &off) in sections.iter().zip(&offsets) {

@@ -6,7 +6,7 @@
 //! them (or copies them from part files, [`Writer::copy`]); [`merged`] is the
 //! whole sequence's metadata.
 
-use crate::{checksum, file_len, header_checksum, write_body, Error, Metadata, Section, ALIGN, HEADER_LEN, MAGIC};
+use crate::{body_head, checksum, file_len, header_checksum, write_body, Error, Metadata, Section, ALIGN, HEADER_LEN, MAGIC};
 use std::io::{Seek, SeekFrom, Write};
 
 /// Version of a file with a segment table.
@@ -217,10 +217,9 @@ impl<W: Write + Seek> Writer<W> {
     /// Writes the next segment, of `frame_count` frames, from its sections (as a version-6 body).
     pub fn add(&mut self, frame_count: u32, sections: &[Section]) -> Result<SegmentEntry, Error> {
         let size = file_len(sections);
-        let mut head = Vec::new();
-        write_body(&mut head, sections, true)?;
+        let head = body_head(sections);
         let e = self.place(frame_count, size, checksum(&head))?;
-        write_body(&mut self.out, sections, false)?;
+        write_body(&mut self.out, sections, &head)?;
         Ok(e)
     }
 
