@@ -29,12 +29,12 @@ pub fn run(args: JoinArgs, quiet: bool) -> Result<u8> {
     crate::refuse_existing(&args.output, args.force)?;
     let started = Instant::now();
     let names: Vec<String> = args.parts.iter().map(|p| p.display().to_string()).collect();
-    let parts = args.parts.iter().zip(&names).map(|(p, n)| Asset::open_part(p).with_context(|| n.clone())).collect::<Result<Vec<_>>>()?;
+    let files = args.parts.iter().zip(&names).map(|(p, n)| std::fs::File::open(p).with_context(|| n.clone())).collect::<Result<Vec<_>>>()?;
+    let parts = files.iter().zip(&names).map(|(f, n)| Asset::from_part_file(f).with_context(|| n.clone())).collect::<Result<Vec<_>>>()?;
     let out = args.output.display().to_string();
     let mut file = AtomicFile::create(&args.output, args.force).with_context(|| out.clone())?;
-    let handle = std::io::BufWriter::with_capacity(1 << 20, file.file().try_clone().with_context(|| out.clone())?);
-    let written = vdbcook_vpak::segments::join(&parts, &names, handle).with_context(|| out.clone())?;
-    let f = written.into_inner().map_err(|e| e.into_error()).with_context(|| out.clone())?;
+    let handle = file.file().try_clone().with_context(|| out.clone())?;
+    let f = vdbcook_vpak::segments::join(&parts, &files, &names, handle).with_context(|| out.clone())?;
     // The joined asset is checked whole (every segment, and what segments must share) before it gets its name.
     let asset = Asset::from_file(&f).with_context(|| out.clone())?;
     let meta = asset.check().with_context(|| out.clone())?;

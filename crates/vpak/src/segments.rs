@@ -7,7 +7,7 @@
 //! whole sequence's metadata.
 
 use crate::{body_head, checksum, file_len, header_checksum, write_body, Error, Metadata, Section, ALIGN, HEADER_LEN, MAGIC};
-use std::io::{Seek, SeekFrom, Write};
+use std::io::{Read, Seek, SeekFrom, Write};
 
 /// Version of a file with a segment table.
 pub const VERSION: u32 = 7;
@@ -75,9 +75,11 @@ pub fn part_writer<W: Write + Seek>(mut out: W, info: &PartInfo, count: u32) -> 
     Writer::at(out, PART_HEADER_LEN as u64, count)
 }
 
-/// Joins parts (in order, each with its asset of segments) into one asset written to `out`,
-/// copying the segments' bytes as they are. `names` name the parts in errors.
-pub fn join<W: Write + Seek>(parts: &[(PartInfo, crate::Asset)], names: &[String], out: W) -> Result<W, Error> {
+/// Joins parts (in order: each part's header, its segments as an asset, and
+/// its file) into one asset written to `out`, copying the segments' bytes
+/// file to file (in the kernel where it can) after checking them. `names`
+/// name the parts in errors.
+pub fn join(parts: &[(PartInfo, crate::Asset)], files: &[std::fs::File], names: &[String], out: std::fs::File) -> Result<std::fs::File, Error> {
     let Some((first, _)) = parts.first() else { return Err(Error::Join("no parts to join".into())) };
     let bad = |i: usize, why: String| Error::Join(format!("{}: {why}", names.get(i).map_or("a part", |n| n.as_str())));
     if parts.len() as u32 != first.count {
@@ -112,14 +114,19 @@ pub fn join<W: Write + Seek>(parts: &[(PartInfo, crate::Asset)], names: &[String
     if segment != first.segments {
         return Err(Error::Join(format!("the parts hold {segment} segments, the asset has {}", first.segments)));
     }
-    let mut w = Writer::new(out, segment)?;
-    for (i, (_, asset)) in parts.iter().enumerate() {
-        asset.verify().map_err(|e| bad(i, e.to_string()))?;
+    let mut w = Writer::new(std::io::BufWriter::with_capacity(1 << 20, out), segment)?;
+    for (i, ((_, asset), file)) in parts.iter().zip(files).enumerate() {
+        // A segment at a time: read in, checked, copied, let go.
         for (s, e) in asset.segments()?.iter().enumerate() {
-            w.copy(e, asset.segment(s)?.bytes())?;
+            let seg = asset.segment(s).map_err(|err| bad(i, err.to_string()))?;
+            seg.populate();
+            seg.verify().map_err(|err| bad(i, Error::InSegment(s, Box::new(err)).to_string()))?;
+            seg.release();
+            w.copy_file(e, file, PART_HEADER_LEN as u64 + e.offset)?;
         }
     }
-    w.finish()
+    let out = w.finish()?;
+    out.into_inner().map_err(|e| Error::Io(e.into_error()))
 }
 
 /// One entry of the segment table.
@@ -223,12 +230,6 @@ impl<W: Write + Seek> Writer<W> {
         Ok(e)
     }
 
-    /// Copies the next segment's body as it is (from a part file).
-    pub fn copy(&mut self, entry: &SegmentEntry, body: &[u8]) -> Result<SegmentEntry, Error> {
-        let e = self.place(entry.frame_count, body.len() as u64, entry.head_checksum)?;
-        self.out.write_all(body)?;
-        Ok(e)
-    }
 
     /// Where the file starts in the output (after a part header: not 0).
     pub fn base(&self) -> u64 {
@@ -251,6 +252,23 @@ impl<W: Write + Seek> Writer<W> {
         self.out.seek(SeekFrom::Start(self.base + self.end))?;
         self.out.flush()?;
         Ok(self.out)
+    }
+}
+
+impl Writer<std::io::BufWriter<std::fs::File>> {
+    /// Copies the next segment's body, `entry.size` bytes from byte `at` of
+    /// `src` (a part file), file to file.
+    pub fn copy_file(&mut self, entry: &SegmentEntry, src: &std::fs::File, at: u64) -> Result<SegmentEntry, Error> {
+        let e = self.place(entry.frame_count, entry.size, entry.head_checksum)?;
+        self.out.flush()?;
+        let mut src = src;
+        src.seek(SeekFrom::Start(at))?;
+        // std copies a file to a file with copy_file_range where the system has it.
+        let copied = std::io::copy(&mut src.take(entry.size), self.out.get_mut())?;
+        if copied != entry.size {
+            return Err(Error::Io(std::io::ErrorKind::UnexpectedEof.into()));
+        }
+        Ok(e)
     }
 }
 
@@ -520,9 +538,19 @@ mod tests {
         let fma = with("x86-64 fma");
         let a = part(0, 2, 0, 0, &[fma.clone(), fma.clone()]);
         let b = part(1, 2, 2, 2, &[fma.clone(), fma.clone()]);
-        let open = |b: &[u8]| Asset::part_from_bytes(b).unwrap();
-        let names = vec!["a".to_string(), "b".to_string()];
-        let joined = join(&[open(&a), open(&b)], &names, std::io::Cursor::new(Vec::new())).unwrap().into_inner();
+        let dir = std::env::temp_dir().join(format!("vpak-join-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = |name: &str, b: &[u8]| {
+            let p = dir.join(name);
+            std::fs::write(&p, b).unwrap();
+            std::fs::File::open(&p).unwrap()
+        };
+        let out = || std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(true).open(dir.join("out")).unwrap();
+        let run = |x: &[u8], y: &[u8]| {
+            let parts = [Asset::part_from_bytes(x).unwrap(), Asset::part_from_bytes(y).unwrap()];
+            join(&parts, &[file("x", x), file("y", y)], &["a".to_string(), "b".to_string()], out()).map(|_| std::fs::read(dir.join("out")).unwrap())
+        };
+        let joined = run(&a, &b).unwrap();
         let asset = Asset::from_bytes(&joined).unwrap();
         asset.verify().unwrap();
         assert_eq!((asset.segment_count(), asset.metadata().unwrap().frame_count), (4, 4));
@@ -530,11 +558,12 @@ mod tests {
         let whole = assemble_segments(&(0..4).map(|_| (1, body(&fma.1, 0))).collect::<Vec<_>>()).unwrap();
         assert!(joined == whole);
         let other = part(1, 2, 2, 2, &[with("x86-64 no-fma"), with("x86-64 no-fma")]);
-        let err = join(&[open(&a), open(&other)], &names, std::io::Cursor::new(Vec::new())).unwrap_err().to_string();
+        let err = run(&a, &other).unwrap_err().to_string();
         assert!(err.contains("b: its BC7 blocks come from x86-64 no-fma kernels, the first part's from x86-64 fma"), "{err}");
-        let err = join(&[open(&b), open(&a)], &names, std::io::Cursor::new(Vec::new())).unwrap_err().to_string();
+        let err = run(&b, &a).unwrap_err().to_string();
         assert!(err.contains("a: is part 2 of 2, but part 1 belongs here"), "{err}");
         // A part is not an asset.
         assert!(matches!(Asset::from_bytes(&a), Err(Error::Part)));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
