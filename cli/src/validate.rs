@@ -188,7 +188,7 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let renderer = args.gpu.renderer()?;
     let view = scene.orbit(views.count())[args.view as usize];
     let img = vdbcook_validate::Resident::new(&asset, meta.index_offset)
-        .draw(&renderer, &scene, args.frame, lod, &[view], size.width(), size.height())
+        .draw(&renderer, &scene, (args.frame, lod), &[view], (size.width(), size.height()))
         .with_context(|| name.clone())?
         .pop()
         .ok_or_else(|| anyhow!("no image"))?;

@@ -142,6 +142,18 @@ pub fn advise_huge_pages<T>(v: &Vec<T>) {
     }
 }
 
+/// Gives the memory freed since the last call back to the system where the
+/// allocator keeps it (glibc's heaps): a cook that frees a segment's bricks
+/// and allocates the next segment's in pieces of other sizes would otherwise
+/// keep both high-water marks.
+pub fn release_free() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only walks the allocator's own free lists.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -153,17 +165,5 @@ mod tests {
         assert_eq!(v[1], 7);
         assert_eq!(v.iter().map(|&x| u64::from(x)).sum::<u64>(), 7 * (3u64 << 20) + (3u64 << 20).div_ceil(1000));
         super::advise_huge_pages(&Vec::<u8>::new());
-    }
-}
-
-/// Gives the memory freed since the last call back to the system where the
-/// allocator keeps it (glibc's heaps): a cook that frees a segment's bricks
-/// and allocates the next segment's in pieces of other sizes would otherwise
-/// keep both high-water marks.
-pub fn release_free() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: malloc_trim only walks the allocator's own free lists.
-    unsafe {
-        libc::malloc_trim(0);
     }
 }

@@ -13,7 +13,7 @@ pub fn thumbnail(renderer: &Renderer, asset: &Asset, size: u32) -> Result<Vec<u8
     let meta = asset.metadata()?;
     let scene = Scene::for_asset(&meta);
     let view = scene.orbit(8)[0];
-    let drawn = crate::Resident::new(asset, meta.index_offset).draw(renderer, &scene, meta.frame_count as usize / 2, meta.first_level, &[view], size, size)?;
+    let drawn = crate::Resident::new(asset, meta.index_offset).draw(renderer, &scene, (meta.frame_count as usize / 2, meta.first_level), &[view], (size, size))?;
     let mut img = drawn.into_iter().next().ok_or_else(|| Error::Gpu("no image".into()))?;
     expose(&mut img);
     Ok(png_rgb(&img))

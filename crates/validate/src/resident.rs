@@ -41,8 +41,8 @@ impl<'a> Resident<'a> {
         }
     }
 
-    /// Frame `frame` at level `level`, from each of `views` of `scene`.
-    pub fn draw(&mut self, renderer: &Renderer, scene: &Scene, frame: usize, level: u32, views: &[View], width: u32, height: u32) -> Result<Vec<Image>, Error> {
+    /// Frame `frame` at level `level`, from each of `views` of `scene`, as images of `(width, height)`.
+    pub fn draw(&mut self, renderer: &Renderer, scene: &Scene, (frame, level): (usize, u32), views: &[View], (width, height): (u32, u32)) -> Result<Vec<Image>, Error> {
         let (gpu, local, d) = self.at(renderer, scene, frame)?;
         let views: Vec<View> = views.iter().map(|v| v.shifted(d)).collect();
         renderer.render_views_level(&gpu, &scene.shifted(d), local, level, &views, width, height)

@@ -230,7 +230,6 @@ impl<W: Write + Seek> Writer<W> {
         Ok(e)
     }
 
-
     /// Where the file starts in the output (after a part header: not 0).
     pub fn base(&self) -> u64 {
         self.base
