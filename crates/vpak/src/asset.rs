@@ -1,0 +1,391 @@
+//! An opened asset: a file mapped (or bytes in memory), its header and
+//! section or segment table checked; a segment is an `Asset` over part of
+//! the same mapping.
+
+use crate::segments::{self, SegmentEntry};
+use crate::{checksum, header_checksum, kind, Checked, Error, Metadata, Section, SectionEntry, ALIGN, ENTRY_LEN, HEADER_LEN, MAGIC, MAX_SECTIONS};
+use std::path::Path;
+
+enum Bytes {
+    Mapped(memmap2::Mmap),
+    /// Owned bytes in 8-byte-aligned storage, `len` of them.
+    Owned(Vec<u64>, usize),
+}
+
+impl Bytes {
+    fn all(&self) -> &[u8] {
+        match self {
+            Bytes::Mapped(m) => m,
+            Bytes::Owned(w, len) => &bytemuck::cast_slice(w)[..*len],
+        }
+    }
+}
+
+/// An opened asset: header checked, sections (or segments) located (and,
+/// with [`Asset::verify`], checksummed).  Slices point into the file's
+/// mapping. A version-6 file is one body of sections; a version-7 file is a
+/// table of segments, each a body read through [`Asset::segment`] (an
+/// `Asset` over the same mapping).
+#[derive(Clone)]
+pub struct Asset {
+    bytes: std::sync::Arc<Bytes>,
+    /// The window of `bytes` this asset is: the whole file, or one segment's body.
+    start: usize,
+    len: usize,
+    /// A body's sections (none in a file with a segment table).
+    pub sections: Vec<SectionEntry>,
+    /// A version-7 file's segment table (empty for a body).
+    table: Vec<SegmentEntry>,
+}
+
+impl Asset {
+    /// Maps a file and checks its header, section (or segment) table and every checksum.
+    pub fn open(path: &Path) -> Result<Asset, Error> {
+        let a = Asset::open_unverified(path)?;
+        a.verify()?;
+        Ok(a)
+    }
+
+    /// Maps a file and checks its header and section (or segment) table only.
+    pub fn open_unverified(path: &Path) -> Result<Asset, Error> {
+        let f = std::fs::File::open(path)?;
+        if f.metadata()?.len() < HEADER_LEN as u64 {
+            return Err(Error::Magic);
+        }
+        // SAFETY: read-only mapping; the asset is assumed not to change while open.
+        let map = unsafe { memmap2::Mmap::map(&f)? };
+        Asset::parse(Bytes::Mapped(map))
+    }
+
+    /// Maps an open file (an unnamed temporary one, say) and checks its header
+    /// and section (or segment) table only.
+    pub fn from_file(f: &std::fs::File) -> Result<Asset, Error> {
+        if f.metadata()?.len() < HEADER_LEN as u64 {
+            return Err(Error::Magic);
+        }
+        // SAFETY: read-only mapping of a file this process wrote and no longer changes.
+        let map = unsafe { memmap2::Mmap::map(f)? };
+        Asset::parse(Bytes::Mapped(map))
+    }
+
+    /// Parses owned bytes (checks the header; call [`Asset::verify`] for checksums).
+    pub fn from_bytes(b: &[u8]) -> Result<Asset, Error> {
+        let mut words = vec![0u64; b.len().div_ceil(8)];
+        bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..b.len()].copy_from_slice(b);
+        Asset::parse(Bytes::Owned(words, b.len()))
+    }
+
+    /// This asset's bytes: the whole file, or a segment's body.
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes.all()[self.start..self.start + self.len]
+    }
+
+    fn parse(bytes: Bytes) -> Result<Asset, Error> {
+        let len = bytes.all().len();
+        if bytes.all().starts_with(&segments::PART_MAGIC) {
+            return Err(Error::Part);
+        }
+        Asset::parse_at(std::sync::Arc::new(bytes), 0, len)
+    }
+
+    /// Parses the asset that is bytes `[start, start + len)` of `bytes`.
+    fn parse_at(bytes: std::sync::Arc<Bytes>, start: usize, len: usize) -> Result<Asset, Error> {
+        let whole = Asset { bytes, start, len, sections: Vec::new(), table: Vec::new() };
+        let version = whole.version()?;
+        match version {
+            segments::BODY_VERSION => whole.body(),
+            segments::VERSION => whole.container(),
+            v => Err(Error::Version(v)),
+        }
+    }
+
+    /// The version field, after the magic and the file size are checked.
+    fn version(&self) -> Result<u32, Error> {
+        let b = self.bytes();
+        if b.len() < HEADER_LEN || b[..8] != MAGIC {
+            return Err(Error::Magic);
+        }
+        let size = u64::from_le_bytes(b[24..32].try_into().unwrap_or([0; 8]));
+        if size != b.len() as u64 {
+            return Err(Error::Size { expected: size, actual: b.len() as u64 });
+        }
+        Ok(u32::from_le_bytes(b[8..12].try_into().unwrap_or([0; 4])))
+    }
+
+    /// Checks a table of `n` entries of `entry_len` bytes after the header
+    /// against the header checksum; returns the table's bytes.
+    fn table_bytes(&self, entry_len: usize, max: u32, count_error: fn(u32) -> Error) -> Result<&[u8], Error> {
+        let b = self.bytes();
+        let n = u32::from_le_bytes(b[16..20].try_into().unwrap_or([0; 4]));
+        let table_end = (n as usize).checked_mul(entry_len).and_then(|t| t.checked_add(HEADER_LEN)).filter(|&e| n <= max && e <= b.len()).ok_or(count_error(n))?;
+        let computed = header_checksum(&b[..32], &b[HEADER_LEN..table_end]);
+        let stored = u64::from_le_bytes(b[32..40].try_into().unwrap_or([0; 8]));
+        if stored != computed {
+            return Err(Error::HeaderChecksum { stored, computed });
+        }
+        Ok(&b[HEADER_LEN..table_end])
+    }
+
+    /// A body (version 6): its section table.
+    fn body(mut self) -> Result<Asset, Error> {
+        let table = self.table_bytes(ENTRY_LEN, MAX_SECTIONS, Error::SectionCount)?;
+        let table_end = (HEADER_LEN + table.len()) as u64;
+        let len = self.len as u64;
+        let mut sections = Vec::with_capacity(table.len() / ENTRY_LEN);
+        for e in table.chunks_exact(ENTRY_LEN) {
+            let u32_at = |o: usize| u32::from_le_bytes(e[o..o + 4].try_into().unwrap_or([0; 4]));
+            let u64_at = |o: usize| u64::from_le_bytes(e[o..o + 8].try_into().unwrap_or([0; 8]));
+            let s = SectionEntry { kind: u32_at(0), index: u32_at(4), offset: u64_at(8), size: u64_at(16), checksum: u64_at(24) };
+            let end = s.offset.checked_add(s.size);
+            if !s.offset.is_multiple_of(ALIGN as u64) || s.offset < table_end || end.is_none_or(|e| e > len) {
+                return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
+            }
+            sections.push(s);
+        }
+        // One section per (kind, index): a reader must not have to pick.
+        let mut keys: Vec<(u32, u32)> = sections.iter().map(|s| (s.kind, s.index)).collect();
+        keys.sort_unstable();
+        if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
+            return Err(Error::DuplicateSection { kind: w[0].0, index: w[0].1 });
+        }
+        self.sections = sections;
+        Ok(self)
+    }
+
+    /// A file of segments (version 7): its segment table, each body in
+    /// order, inside the file, frames counted on from 0 without a gap.
+    fn container(mut self) -> Result<Asset, Error> {
+        let table = self.table_bytes(segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount)?;
+        if table.is_empty() {
+            return Err(Error::SegmentCount(0));
+        }
+        let mut entries: Vec<SegmentEntry> = table.chunks_exact(segments::SEGMENT_ENTRY_LEN).map(SegmentEntry::parse).collect();
+        let mut at = segments::first_offset(entries.len() as u32);
+        let mut frame = 0u64;
+        for (s, e) in entries.iter().enumerate() {
+            let end = e.offset.checked_add(e.size);
+            if !e.offset.is_multiple_of(ALIGN as u64) || e.offset < at || end.is_none_or(|end| end > self.len as u64) || e.size < HEADER_LEN as u64 {
+                return Err(Error::SegmentBounds { segment: s, offset: e.offset, size: e.size });
+            }
+            if u64::from(e.first_frame) != frame {
+                return Err(Error::Invalid(format!("segment {s} starts at frame {}, the segments before it end at frame {frame}", e.first_frame)));
+            }
+            frame += u64::from(e.frame_count);
+            at = e.offset + e.size;
+        }
+        if frame > u64::from(u32::MAX) {
+            return Err(Error::Invalid("more than 2^32 frames".into()));
+        }
+        self.table = std::mem::take(&mut entries);
+        Ok(self)
+    }
+
+    /// Maps a part file (`cook --part`): its part header, and the segments it holds as an asset.
+    pub fn open_part(path: &Path) -> Result<(segments::PartInfo, Asset), Error> {
+        Asset::from_part_file(&std::fs::File::open(path)?)
+    }
+
+    /// [`Asset::open_part`] of an open file.
+    pub fn from_part_file(f: &std::fs::File) -> Result<(segments::PartInfo, Asset), Error> {
+        // SAFETY: read-only mapping; the part is assumed not to change while open.
+        Asset::part(Bytes::Mapped(unsafe { memmap2::Mmap::map(f)? }))
+    }
+
+    /// [`Asset::open_part`] of bytes in memory.
+    pub fn part_from_bytes(b: &[u8]) -> Result<(segments::PartInfo, Asset), Error> {
+        let mut words = vec![0u64; b.len().div_ceil(8)];
+        bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..b.len()].copy_from_slice(b);
+        Asset::part(Bytes::Owned(words, b.len()))
+    }
+
+    fn part(bytes: Bytes) -> Result<(segments::PartInfo, Asset), Error> {
+        let info = segments::PartInfo::parse(bytes.all())?;
+        let len = bytes.all().len() - segments::PART_HEADER_LEN;
+        let asset = Asset::parse_at(std::sync::Arc::new(bytes), segments::PART_HEADER_LEN, len)?;
+        if !asset.is_segmented() {
+            return Err(Error::NotPart);
+        }
+        Ok((info, asset))
+    }
+
+    /// The page-aligned range of the mapping this asset's bytes lie in.
+    #[cfg(unix)]
+    fn pages(&self) -> (usize, usize) {
+        let start = self.start & !4095;
+        (start, self.start + self.len - start)
+    }
+
+    /// Reads this asset's (or segment's) pages in with one call, not a fault
+    /// per page, where the system can (Linux 5.14+): a hint for a reader
+    /// about to read every byte, as `join` is.
+    pub fn populate(&self) {
+        #[cfg(target_os = "linux")]
+        if let Bytes::Mapped(m) = &*self.bytes {
+            let (at, len) = self.pages();
+            let _ = m.advise_range(memmap2::Advice::PopulateRead, at, len);
+        }
+    }
+
+    /// Drops this asset's (or segment's) pages from the process's memory; a
+    /// later read takes them from the file again. For readers that go
+    /// through a large file a segment at a time.
+    pub fn release(&self) {
+        #[cfg(unix)]
+        if let Bytes::Mapped(m) = &*self.bytes {
+            let (at, len) = self.pages();
+            // SAFETY: a read-only mapping of a file that is not changed while
+            // open: dropped pages read back as the same bytes.
+            let _ = unsafe { m.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, at, len) };
+        }
+    }
+
+    /// Whether this is a file with a segment table (version 7).
+    pub fn is_segmented(&self) -> bool {
+        !self.table.is_empty()
+    }
+
+    /// Segments: a version-7 file's table, or one segment for a body.
+    pub fn segment_count(&self) -> usize {
+        self.table.len().max(1)
+    }
+
+    /// The segment table (for a body: one segment of all its frames, from its metadata).
+    pub fn segments(&self) -> Result<Vec<SegmentEntry>, Error> {
+        if self.is_segmented() {
+            return Ok(self.table.clone());
+        }
+        let frames = self.metadata()?.frame_count;
+        let head = self.bytes().get(..segments::head_len(self.sections.len())).unwrap_or_default();
+        Ok(vec![SegmentEntry { first_frame: 0, frame_count: frames, offset: 0, size: self.len as u64, head_checksum: checksum(head) }])
+    }
+
+    /// Segment `s`'s body, as an asset of its own (its frames counted from 0);
+    /// for a body, segment 0 is the asset itself. Checks the body's header and
+    /// section table, and that they are the ones the segment table names.
+    pub fn segment(&self, s: usize) -> Result<Asset, Error> {
+        if !self.is_segmented() {
+            return match s {
+                0 => Ok(self.clone()),
+                _ => Err(Error::NoSegment { segment: s, count: 1 }),
+            };
+        }
+        let e = self.table.get(s).ok_or(Error::NoSegment { segment: s, count: self.table.len() })?;
+        let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new() };
+        let body = match seg.version() {
+            Ok(segments::BODY_VERSION) => seg.body(),
+            Ok(v) => Err(Error::Invalid(format!("a body of version {v} (segments are version {})", segments::BODY_VERSION))),
+            Err(e) => Err(e),
+        }
+        .map_err(|err| Error::InSegment(s, Box::new(err)))?;
+        let head = &body.bytes()[..segments::head_len(body.sections.len())];
+        let computed = checksum(head);
+        if computed != e.head_checksum {
+            return Err(Error::InSegment(s, Box::new(Error::HeaderChecksum { stored: e.head_checksum, computed })));
+        }
+        Ok(body)
+    }
+
+    /// The segment holding frame `frame` of the whole asset, and the frame's index within it.
+    pub fn locate(&self, frame: usize) -> Option<(usize, usize)> {
+        if !self.is_segmented() {
+            return Some((0, frame));
+        }
+        let s = self.table.partition_point(|e| e.first_frame as usize + e.frame_count as usize <= frame);
+        let e = self.table.get(s)?;
+        (frame >= e.first_frame as usize).then(|| (s, frame - e.first_frame as usize))
+    }
+
+    /// Checks every section's checksum and that the padding between sections
+    /// (and between segments) is zero, so every byte of a verified file is
+    /// the one written (a cache of assets may trust it); the first failure is the error.
+    pub fn verify(&self) -> Result<(), Error> {
+        if self.is_segmented() {
+            let mut spans = Vec::with_capacity(self.table.len());
+            for s in 0..self.table.len() {
+                self.segment(s)?.verify().map_err(|e| Error::InSegment(s, Box::new(e)))?;
+                spans.push((self.table[s].offset, self.table[s].offset + self.table[s].size));
+            }
+            return self.zero_between(HEADER_LEN + segments::SEGMENT_ENTRY_LEN * self.table.len(), spans);
+        }
+        for s in &self.sections {
+            let computed = checksum(self.raw(s));
+            if computed != s.checksum {
+                return Err(Error::SectionChecksum { kind: s.kind, index: s.index, stored: s.checksum, computed });
+            }
+        }
+        let spans = self.sections.iter().map(|s| (s.offset, s.offset + s.size)).collect();
+        self.zero_between(HEADER_LEN + ENTRY_LEN * self.sections.len(), spans)
+    }
+
+    /// Every byte from `from` on outside `spans` is zero.
+    fn zero_between(&self, from: usize, mut spans: Vec<(u64, u64)>) -> Result<(), Error> {
+        let b = self.bytes();
+        spans.sort_unstable();
+        let mut at = from as u64;
+        for (start, end) in spans.into_iter().chain([(b.len() as u64, b.len() as u64)]) {
+            if let Some(k) = b.get(at as usize..start.max(at) as usize).and_then(|gap| gap.iter().position(|&x| x != 0)) {
+                return Err(Error::Padding(at + k as u64));
+            }
+            at = at.max(end);
+        }
+        Ok(())
+    }
+
+    fn raw(&self, s: &SectionEntry) -> &[u8] {
+        &self.bytes()[s.offset as usize..(s.offset + s.size) as usize]
+    }
+
+    /// Bytes of section (`kind`, `index`).
+    pub fn section(&self, kind: u32, index: u32) -> Result<&[u8], Error> {
+        if self.is_segmented() {
+            return Err(Error::Segmented(self.table.len()));
+        }
+        self.sections.iter().find(|s| s.kind == kind && s.index == index).map(|s| self.raw(s)).ok_or(Error::Missing { kind, index })
+    }
+
+    /// Section (`kind`, 0) as `u32`s, without copying.
+    pub fn u32s(&self, kind: u32) -> Result<&[u32], Error> {
+        self.words(kind, 0)
+    }
+
+    /// Section (`kind`, 0) as `f32`s, without copying.
+    pub fn f32s(&self, kind: u32) -> Result<&[f32], Error> {
+        self.words(kind, 0)
+    }
+
+    /// Section (`kind`, `index`) as 4-byte items, without copying.
+    pub fn words<T: bytemuck::Pod>(&self, kind: u32, index: u32) -> Result<&[T], Error> {
+        let b = self.section(kind, index)?;
+        bytemuck::try_cast_slice(b).map_err(|_| Error::Shape { kind, size: b.len(), unit: std::mem::size_of::<T>() })
+    }
+
+    /// The metadata: a body's own, or the whole sequence's merged from every
+    /// segment's ([`segments::merged`]: frames, sources and value ranges of
+    /// all; planes and placement of the first segment).
+    pub fn metadata(&self) -> Result<Metadata, Error> {
+        if self.is_segmented() {
+            let metas = (0..self.table.len()).map(|s| self.segment(s)?.metadata().map_err(|e| Error::InSegment(s, Box::new(e)))).collect::<Result<Vec<_>, _>>()?;
+            if let Some((s, m)) = metas.iter().enumerate().find(|(s, m)| m.frame_count != self.table[*s].frame_count) {
+                return Err(Error::InSegment(s, Box::new(Error::Invalid(format!("its metadata has {} frames, the segment table {}", m.frame_count, self.table[s].frame_count)))));
+            }
+            return segments::merged(&metas);
+        }
+        Metadata::from_bytes(self.section(kind::METADATA, 0)?)
+    }
+
+    /// Validates every segment ([`Checked`]) and returns the whole sequence's metadata.
+    pub fn check(&self) -> Result<Metadata, Error> {
+        for s in 0..self.segment_count() {
+            let seg = self.segment(s)?;
+            Checked::new(&seg).map_err(|e| if self.is_segmented() { Error::InSegment(s, Box::new(e)) } else { e })?;
+        }
+        self.metadata()
+    }
+
+    /// Every section of a body, copied: edit them and `assemble` a new asset
+    /// (its checksums are computed afresh).
+    pub fn to_sections(&self) -> Vec<Section> {
+        self.sections.iter().map(|s| Section { kind: s.kind, index: s.index, data: self.raw(s).to_vec() }).collect()
+    }
+}
+
