@@ -38,7 +38,11 @@ pub fn unpack_level(asset: &Asset, frame: usize, level: u32) -> Result<Vec<Grid>
         // The frame's segment alone, and the frame within it.
         let count = asset.segments()?.last().map_or(0, |e| e.frames().end);
         let (s, local) = asset.locate(frame).ok_or(Error::NoFrame { frame, count })?;
-        return unpack_level(&asset.segment(s)?, local, level).map_err(|e| match e {
+        let seg = asset.segment(s)?;
+        let grids = unpack_level(&seg, local, level);
+        // A long asset is read a segment at a time: the pages read go again.
+        seg.release();
+        return grids.map_err(|e| match e {
             Error::TooBig { leaves, bytes, budget, .. } => Error::TooBig { frame, leaves, bytes, budget },
             e => e,
         });

@@ -179,7 +179,7 @@ pub fn selection_of(meta: &vdbcook_vpak::Metadata) -> GridSelection {
 /// and what `render` draws for a .vdb.
 pub fn cook_lossless_levels(files: Vec<FrameFile>, sel: GridSelection, levels: vdbcook_vpak::LevelCount, segment: Option<usize>, bars: &dyn Progress) -> Result<Asset> {
     let count = segment_count(files.len(), segment);
-    let mut out = Output::memory(count)?;
+    let mut out = Output::scratch(count)?;
     let mut write = |cookers: Vec<Cooker>| -> Result<()> {
         for c in cookers {
             out.add(c, &vdbcook_cook::NoProgress)?;
@@ -215,6 +215,13 @@ enum Sink {
 impl Output {
     fn memory(count: u32) -> Result<Output> {
         Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new() })
+    }
+
+    /// An asset of `count` segments that is read back and let go: written into
+    /// an unnamed file in the system's temporary directory (never given a name,
+    /// so it goes with the process), read through a mapping a segment at a time.
+    fn scratch(count: u32) -> Result<Output> {
+        Output::file(&std::env::temp_dir().join("vdbcook-scratch.vpak"), true, count, None)
     }
 
     /// An asset (or, with `part`, a part file) of `count` segments written into an unnamed file for `path`.
@@ -412,7 +419,7 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         })
         .collect::<Result<Vec<_>>>()?;
     if job.reference {
-        outs.push(Output::memory(count)?);
+        outs.push(Output::scratch(count)?);
     }
     let mut write = |cookers: Vec<Cooker>| -> Result<()> {
         for (i, (c, out)) in cookers.into_iter().zip(outs.iter_mut()).enumerate() {

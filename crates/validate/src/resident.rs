@@ -35,6 +35,8 @@ impl<'a> Resident<'a> {
                 let offset = seg.metadata()?.index_offset;
                 let d = std::array::from_fn(|i| offset[i] - self.origin[i]);
                 let gpu = Arc::new(renderer.upload_for(&seg, &scene.shifted(d))?);
+                // On the GPU now: its pages need not stay in this process's memory.
+                seg.release();
                 self.now = Some((s, gpu.clone(), d));
                 Ok((gpu, local, d))
             }

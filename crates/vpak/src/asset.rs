@@ -302,7 +302,11 @@ impl Asset {
         if self.is_segmented() {
             let mut spans = Vec::with_capacity(self.table.len());
             for s in 0..self.table.len() {
-                self.segment(s)?.verify().map_err(|e| Error::InSegment(s, Box::new(e)))?;
+                // A segment at a time, its pages let go once checked (a long asset is larger than memory).
+                let seg = self.segment(s)?;
+                let checked = seg.verify().map_err(|e| Error::InSegment(s, Box::new(e)));
+                seg.release();
+                checked?;
                 spans.push((self.table[s].offset, self.table[s].offset + self.table[s].size));
             }
             return self.zero_between(HEADER_LEN + segments::SEGMENT_ENTRY_LEN * self.table.len(), spans);
@@ -388,4 +392,3 @@ impl Asset {
         self.sections.iter().map(|s| Section { kind: s.kind, index: s.index, data: self.raw(s).to_vec() }).collect()
     }
 }
-
