@@ -30,7 +30,7 @@ pub fn try_reserve<T>(v: &mut Vec<T>, additional: usize, what: &'static str) -> 
 }
 
 /// What to do when memory runs out, in both messages.
-const ADVICE: &str = "cook fewer frames or grids at once, or give it more memory";
+const ADVICE: &str = "cut the sequence into shorter segments (--segment-frames), cook fewer grids at once, or give it more memory";
 
 /// A buffer that could not be allocated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
