@@ -161,6 +161,14 @@ fn parts_join_to_what_one_process_writes_and_bad_parts_are_refused() {
         assert!(err.contains(want) && err.lines().count() == 1, "expected \"{want}\", got: {err}");
         assert!(!out.exists(), "{want}: an output was left");
     }
+    // A full disk (a file-size limit of 8 KiB here) while joining: one line, nothing left.
+    let o = Command::new("sh")
+        .args(["-c", "ulimit -f 8 && exec \"$0\" join \"$1\" \"$2\" \"$3\" -o \"$4\"", env!("CARGO_BIN_EXE_vdbcook"), s(&a), s(&b), s(&c), s(&out)])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.code() == Some(1) && err.lines().count() == 1 && err.contains("bad.vpak"), "{:?}: {err}", o.status);
+    assert!(!out.exists());
     let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
     // A part is not an asset, and parts need segments.
