@@ -162,10 +162,7 @@ fn parts_join_to_what_one_process_writes_and_bad_parts_are_refused() {
         assert!(!out.exists(), "{want}: an output was left");
     }
     // A full disk (a file-size limit of 8 KiB here) while joining: one line, nothing left.
-    let o = Command::new("sh")
-        .args(["-c", "ulimit -f 8 && exec \"$0\" join \"$1\" \"$2\" \"$3\" -o \"$4\"", env!("CARGO_BIN_EXE_vdbcook"), s(&a), s(&b), s(&c), s(&out)])
-        .output()
-        .unwrap();
+    let o = Command::new("sh").args(["-c", "ulimit -f 8 && exec \"$0\" join \"$1\" \"$2\" \"$3\" -o \"$4\"", env!("CARGO_BIN_EXE_vdbcook"), s(&a), s(&b), s(&c), s(&out)]).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.code() == Some(1) && err.lines().count() == 1 && err.contains("bad.vpak"), "{:?}: {err}", o.status);
     assert!(!out.exists());

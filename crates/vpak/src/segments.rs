@@ -3,7 +3,7 @@
 //! ranges, tables and atlases, contiguous in the file), behind a segment
 //! table. A reader draws any frame of a segment from that segment's bytes
 //! alone. [`Writer`] writes segments one after the other as a cook finishes
-//! them (or copies them from part files, [`Writer::copy`]); [`merged`] is the
+//! them (or copies them from part files, [`Writer::copy_file`]); [`merged`] is the
 //! whole sequence's metadata.
 
 use crate::{body_head, checksum, file_len, header_checksum, write_body, Error, Metadata, Section, ALIGN, HEADER_LEN, MAGIC};
