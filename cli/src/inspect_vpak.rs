@@ -77,15 +77,10 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let nodes: Vec<(&str, u64, u64)> = (0..4).map(|i| (bodies[0].nodes[i].0, bodies.iter().map(|b| b.nodes[i].1).sum(), bodies.iter().map(|b| b.nodes[i].2).sum())).collect();
     let plane_bytes: Vec<u64> = (0..meta.planes.len()).map(|p| sum_at(|b| &b.plane_bytes, p)).collect();
     let channel_bytes = |c: usize| sum_at(|b| &b.channel_bytes, c);
-    let formats = bodies
-        .iter()
-        .map(|b| b.meta.format_names())
-        .reduce(|a, b| {
-            let mut names: Vec<String> = a.split('+').map(String::from).collect();
-            names.extend(b.split('+').map(String::from).filter(|n| !a.split('+').any(|m| m == n)));
-            names.join("+")
-        })
-        .unwrap_or_default();
+    // Over every segment, each format once (the merged metadata's planes are the first segment's).
+    let names_over = |names: &dyn Fn(&vdbcook_vpak::Metadata) -> String| bodies.iter().fold(String::new(), |all, b| vdbcook_vpak::union_names(&all, &names(&b.meta)));
+    let formats = names_over(&|m| m.format_names());
+    let channel_formats = |c: usize| names_over(&|m| m.channel_format_names(c));
     // Levels of detail: figures over every frame, and the bytes each level needs on its own.
     let levels: Vec<(u32, u64, u64, u64, u64)> = meta
         .stored_levels()
@@ -122,7 +117,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "channels": meta.channels.iter().enumerate().map(|(i, c)| json!({
                 "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
                 "background": super::num32(c.background), "value_range": c.value_range.map(super::num32), "group": c.group, "plane": c.plane, "lane": c.lane,
-                "alternates": c.alternates, "format": meta.channel_format_names(i), "bytes": channel_bytes(i),
+                "alternates": c.alternates, "format": channel_formats(i), "bytes": channel_bytes(i),
             })).collect::<Vec<_>>(),
             "bricks": meta.brick_count,
             "planes": meta.planes.iter().zip(&plane_bytes).enumerate().map(|(i, (p, b))| json!({
@@ -176,7 +171,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             s,
             "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} {}",
             c.name,
-            meta.channel_format_names(i),
+            channel_formats(i),
             if c.alternates.is_empty() { format!("{}.{}", c.plane, c.lane) } else { planes },
             channel_bytes(i),
             c.class,

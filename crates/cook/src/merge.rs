@@ -5,18 +5,7 @@
 use crate::report::{ClusterReport, FormatShare, Sums};
 use crate::{CookReport, ErrorFigures};
 use vdbcook_encode::ErrorStats;
-use vdbcook_vpak::Metadata;
-
-/// `a` and `b` joined by "+", each name once, in order of first appearance.
-fn union_names(a: &str, b: &str) -> String {
-    let mut names: Vec<&str> = a.split('+').filter(|n| !n.is_empty()).collect();
-    for n in b.split('+') {
-        if !n.is_empty() && !names.contains(&n) {
-            names.push(n);
-        }
-    }
-    names.join("+")
-}
+use vdbcook_vpak::{union_names, Metadata};
 
 fn union_range(a: [f32; 2], b: [f32; 2]) -> [f32; 2] {
     [a[0].min(b[0]), a[1].max(b[1])]

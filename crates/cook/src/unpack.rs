@@ -36,8 +36,7 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Vec<Grid>, Error> {
 pub fn unpack_level(asset: &Asset, frame: usize, level: u32) -> Result<Vec<Grid>, Error> {
     if asset.is_segmented() {
         // The frame's segment alone, and the frame within it.
-        let count = asset.segments()?.last().map_or(0, |e| e.frames().end);
-        let (s, local) = asset.locate(frame).ok_or(Error::NoFrame { frame, count })?;
+        let Some((s, local)) = asset.locate(frame) else { return Err(Error::NoFrame { frame, count: asset.frame_count()? }) };
         let seg = asset.segment(s)?;
         let grids = unpack_level(&seg, local, level);
         // A long asset is read a segment at a time: the pages read go again.

@@ -6,7 +6,7 @@
 use crate::flip::DEFAULT_PPD;
 use crate::options::Viewing;
 use crate::resident::Resident;
-use crate::{compare, FlipMap, Gate, GpuAsset, Image, ImageMetrics, Model, Renderer, Scene, Size};
+use crate::{compare, FlipMap, Gate, Image, ImageMetrics, Model, Renderer, Scene, Size};
 use rayon::prelude::*;
 use serde_json::json;
 use std::path::PathBuf;
@@ -331,13 +331,14 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
     for &f in frames {
         // The voxel errors (one core) are found while the GPU renders (on a
         // CPU driver, the rendering leaves that core some time).
-        let (gpu_ref, ref_frame, ref_shift) = p.gpu_ref.borrow_mut().at(renderer, scene, f).map_err(|e| CompareError::In("reference".into(), e.into()))?;
-        let (gpu_asset, asset_frame, asset_shift) = p.gpu_asset.borrow_mut().at(renderer, scene, f).map_err(|e| CompareError::In(name.to_string(), e.into()))?;
-        in_shader |= gpu_asset.decodes_in_shader();
-        let draw = |gpu: &GpuAsset, frame: usize, d: [i32; 3]| renderer.render_views_level(gpu, &scene.shifted(d), frame, lod, &views.iter().map(|v| v.shifted(d)).collect::<Vec<_>>(), w, h);
+        // The frame's segments on the GPU (uploaded here, so that an upload's error names its asset).
+        let (mut gpu_ref, mut gpu_asset) = (p.gpu_ref.borrow_mut(), p.gpu_asset.borrow_mut());
+        gpu_ref.at(renderer, scene, f).map_err(|e| CompareError::In("reference".into(), e.into()))?;
+        in_shader |= gpu_asset.at(renderer, scene, f).map_err(|e| CompareError::In(name.to_string(), e.into()))?.0.decodes_in_shader();
         let (vox, rendered) = std::thread::scope(|s| {
             let vox = s.spawn(|| voxel_errors(p.asset, p.reference, f, lod, shown));
-            let rendered = draw(&gpu_ref, ref_frame, ref_shift).and_then(|refs| Ok((refs, draw(&gpu_asset, asset_frame, asset_shift)?)));
+            let draw = |r: &mut Resident| r.draw(renderer, scene, (f, lod), &views, (w, h));
+            let rendered = draw(&mut gpu_ref).and_then(|refs| Ok((refs, draw(&mut gpu_asset)?)));
             (vox.join().unwrap_or_else(|e| std::panic::resume_unwind(e)), rendered)
         });
         let (errors, nonzero) = vox?;
@@ -400,7 +401,10 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
         .collect();
     // The voxel figures of the channel the images show.
     let vox_total = channel_totals.get(shown).copied().unwrap_or_default();
-    let format = meta.format_names();
+    // Over every segment (the merged metadata's planes are the first segment's).
+    let in_asset = |e: vdbcook_vpak::Error| CompareError::In(name.to_string(), e.into());
+    let format = p.asset.format_names().map_err(in_asset)?;
+    let channel_formats = (0..meta.channels.len()).map(|c| p.asset.channel_format_names(c)).collect::<Result<Vec<_>, _>>().map_err(in_asset)?;
     let num = |v: f64| if v.is_finite() { json!(v) } else { serde_json::Value::Null };
     let doc = json!({
         "asset": name,
@@ -423,7 +427,7 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
             "rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak(shown))), "max_error": vox_total.max_abs,
             "frames": voxel.iter().map(|(f, e)| { let e = e.get(shown).copied().unwrap_or_default(); json!({"frame": f, "rmse": e.rmse(), "psnr": num(e.psnr(peak(shown))), "max_error": e.max_abs}) }).collect::<Vec<_>>(),
         },
-        "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": meta.channel_format_names(c), "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
+        "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": channel_formats[c], "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
         "gate": {"max_rmse": opts.gate.max_rmse, "min_psnr": opts.gate.min_psnr, "max_flip": opts.gate.max_flip},
         "levels": [{
             "level": lod,

@@ -24,10 +24,7 @@ impl<'a> Resident<'a> {
     /// The GPU copy of frame `frame`'s segment, the frame's index there and
     /// the shift of the segment's index space from the scene's.
     pub fn at(&mut self, renderer: &Renderer, scene: &Scene, frame: usize) -> Result<(Arc<GpuAsset>, usize, [i32; 3]), Error> {
-        let Some((s, local)) = self.asset.locate(frame) else {
-            let count = self.asset.segments()?.last().map_or(0, |e| e.frames().end);
-            return Err(Error::Frame { frame, count });
-        };
+        let Some((s, local)) = self.asset.locate(frame) else { return Err(Error::Frame { frame, count: self.asset.frame_count()? }) };
         match &self.now {
             Some((now, gpu, d)) if *now == s => Ok((gpu.clone(), local, *d)),
             _ => {

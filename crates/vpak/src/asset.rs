@@ -285,6 +285,31 @@ impl Asset {
         Ok(body)
     }
 
+    /// Frames of the whole asset (from the segment table; a body's from its metadata).
+    pub fn frame_count(&self) -> Result<usize, Error> {
+        Ok(self.segments()?.last().map_or(0, |e| e.frames().end))
+    }
+
+    /// Every segment's planes' formats, each name once ("bc4+bc7"): the merged
+    /// metadata's planes are the first segment's only.
+    pub fn format_names(&self) -> Result<String, Error> {
+        self.over_segments(|m| m.format_names())
+    }
+
+    /// Channel `c`'s formats over every segment, each name once.
+    pub fn channel_format_names(&self, c: usize) -> Result<String, Error> {
+        self.over_segments(|m| m.channel_format_names(c))
+    }
+
+    /// `names` of every segment's metadata, joined by [`crate::union_names`].
+    fn over_segments(&self, names: impl Fn(&Metadata) -> String) -> Result<String, Error> {
+        let mut all = String::new();
+        for s in 0..self.segment_count() {
+            all = crate::union_names(&all, &names(&self.segment(s)?.metadata()?));
+        }
+        Ok(all)
+    }
+
     /// The segment holding frame `frame` of the whole asset, and the frame's index within it.
     pub fn locate(&self, frame: usize) -> Option<(usize, usize)> {
         if !self.is_segmented() {

@@ -414,6 +414,23 @@ impl Metadata {
     }
 }
 
+/// Two lists of names joined by "+" ("bc4+bc7"), as one: `a` as it is, then
+/// each name of `b` that is not in it yet. How the formats of several
+/// segments are named (one segment's stay as [`Metadata::format_names`] gives them).
+pub fn union_names(a: &str, b: &str) -> String {
+    let mut names: Vec<&str> = a.split('+').filter(|n| !n.is_empty()).collect();
+    let given = names.len();
+    for n in b.split('+') {
+        if !n.is_empty() && !names.contains(&n) {
+            names.push(n);
+        }
+    }
+    match given {
+        0 => b.to_string(),
+        _ => names.join("+"),
+    }
+}
+
 /// A section to write.
 pub struct Section {
     pub kind: u32,
