@@ -4,6 +4,7 @@ use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::path::Path;
 use vdbcook_vpak::nodes::{l1_records, l3_node_count, L2_WORDS};
+use vdbcook_vpak::coding::Coding;
 use vdbcook_vpak::{kind, Asset, AtlasLayout, Checked};
 
 pub enum Described {
@@ -22,12 +23,16 @@ struct Body {
     channel_bytes: Vec<u64>,
     /// Per stored level, the bytes it needs on its own.
     level_bytes: Vec<u64>,
-    sections: Vec<vdbcook_vpak::SectionEntry>,
+    /// The sections as stored, each with its restored size and how it is coded (when supercompressed).
+    sections: Vec<(vdbcook_vpak::SectionEntry, u64, Option<Coding>)>,
+    /// Bytes of the sections a renderer uploads (restored).
+    gpu_bytes: u64,
     /// Where the body lies in the file.
     offset: u64,
 }
 
-fn body(asset: &Asset, offset: u64) -> Result<Body, vdbcook_vpak::Error> {
+/// The figures of a body from its restored sections (`asset`) and its sections as stored.
+fn body(stored: &Asset, asset: &Asset, offset: u64) -> Result<Body, vdbcook_vpak::Error> {
     let checked = Checked::new(asset)?;
     let meta = checked.meta.clone();
     let size = |k: u32| asset.sections.iter().filter(|s| s.kind == k).map(|s| s.size).sum::<u64>();
@@ -56,7 +61,20 @@ fn body(asset: &Asset, offset: u64) -> Result<Body, vdbcook_vpak::Error> {
     let channel_bytes =
         (0..meta.channels.len()).map(|c| meta.channel_planes(c).iter().map(|&p| plane_bytes[p as usize] / sharing(p as usize)).sum::<u64>() + section_bytes(kind::CHANNEL_TABLE, c as u32)).collect();
     let level_bytes = meta.stored_levels().map(|k| checked.level_bytes(k)).collect();
-    Ok(Body { meta, nodes, plane_bytes, channel_bytes, level_bytes, sections: asset.sections.clone(), offset })
+    let codings = match stored.section(kind::CODING, 0) {
+        Ok(b) => Coding::parse_all(b)?,
+        Err(_) => Vec::new(),
+    };
+    let sections = stored
+        .sections
+        .iter()
+        .map(|e| {
+            let c = codings.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)).copied();
+            (*e, c.map_or(e.size, |c| c.raw_size), c)
+        })
+        .collect();
+    let gpu_bytes = asset.sections.iter().filter(|e| e.kind != kind::METADATA).map(|e| e.size).sum();
+    Ok(Body { meta, nodes, plane_bytes, channel_bytes, level_bytes, sections, gpu_bytes, offset })
 }
 
 pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
@@ -64,13 +82,14 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let asset = Asset::open(path).with_context(|| name.clone())?;
     let table = asset.segments().with_context(|| name.clone())?;
     let bodies = (0..asset.segment_count())
-        .map(|s| asset.segment(s).and_then(|seg| body(&seg, table[s].offset)).map_err(|e| if asset.is_segmented() { vdbcook_vpak::Error::InSegment(s, Box::new(e)) } else { e }))
+        .map(|s| asset.stored_segment(s).and_then(|seg| body(&seg, &seg.restored()?, table[s].offset)).map_err(|e| if asset.is_segmented() { vdbcook_vpak::Error::InSegment(s, Box::new(e)) } else { e }))
         .collect::<Result<Vec<Body>, _>>()
         .with_context(|| name.clone())?;
     let merged = asset.metadata().with_context(|| name.clone())?;
     let meta = &merged;
     let version = if asset.is_segmented() { vdbcook_vpak::VERSION } else { vdbcook_vpak::segments::BODY_VERSION };
     let file_bytes = asset.bytes().len() as u64;
+    let gpu_bytes: u64 = bodies.iter().map(|b| b.gpu_bytes).sum();
     let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));
     // Figures of the whole asset: each body's added up (planes and channels by position, as the merged metadata lists them).
     let sum_at = |f: fn(&Body) -> &Vec<u64>, i: usize| bodies.iter().filter_map(|b| f(b).get(i)).sum::<u64>();
@@ -97,12 +116,15 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let segments: Vec<Value> = bodies
         .iter()
         .zip(&table)
-        .map(|(b, e)| json!({"first_frame": e.first_frame, "frames": e.frame_count, "offset": e.offset, "bytes": e.size, "bricks": b.meta.brick_count, "format": b.meta.format_names(), "index_offset": b.meta.index_offset}))
+        .map(|(b, e)| json!({"first_frame": e.first_frame, "frames": e.frame_count, "offset": e.offset, "bytes": e.size, "gpu_bytes": b.gpu_bytes, "bricks": b.meta.brick_count, "format": b.meta.format_names(), "index_offset": b.meta.index_offset}))
         .collect();
     let section_json = |b: &Body| {
         b.sections
             .iter()
-            .map(|s| json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": b.offset + s.offset, "bytes": s.size, "checksum": format!("{:016x}", s.checksum)}))
+            .map(|(s, restored, c)| {
+                json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": b.offset + s.offset, "bytes": restored, "disk_bytes": s.size, "checksum": format!("{:016x}", s.checksum),
+                    "coding": c.map(|c| json!({"scheme": "zstd", "filter": c.filter.name(), "checksum": format!("{:016x}", c.raw_checksum)}))})
+            })
             .collect::<Vec<_>>()
     };
     if as_json {
@@ -131,6 +153,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "index_bbox": meta.index_bbox.map(|(a, b)| json!({"min": a, "max": b})),
             "active_voxels": active,
             "file_bytes": file_bytes,
+            "gpu_bytes": gpu_bytes,
             "bits_per_active_voxel": if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 },
             "nodes": nodes.iter().map(|(n, c, b)| (n.to_string(), json!({"count": c, "bytes": b}))).collect::<serde_json::Map<_, _>>(),
             "segments": segments,
@@ -164,6 +187,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         let _ = writeln!(s, "  index bbox     {a:?} .. {b:?}");
     }
     let _ = writeln!(s, "  size           {} bytes, {} active voxels, {:.3} bits per active voxel", file_bytes, active, if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 });
+    let _ = writeln!(s, "  on the GPU     {gpu_bytes} bytes of sections (the file is {:.3}× that{})", file_bytes as f64 / gpu_bytes.max(1) as f64, if bodies.iter().any(|b| b.sections.iter().any(|x| x.2.is_some())) { ", supercompressed" } else { "" });
     let _ = writeln!(s, "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} background", "channel", "format", "plane", "bytes", "class", "values");
     for (i, c) in meta.channels.iter().enumerate() {
         let planes = meta.channel_planes(i).iter().map(|p| p.to_string()).collect::<Vec<_>>().join(",");
@@ -194,16 +218,17 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         }
     }
     if table.len() > 1 {
-        let _ = writeln!(s, "  {:<8} {:>7} {:>7} {:>10} {:>14}  format", "segment", "frames", "from", "bricks", "bytes");
+        let _ = writeln!(s, "  {:<8} {:>7} {:>7} {:>10} {:>14} {:>14}  format", "segment", "frames", "from", "bricks", "bytes", "gpu bytes");
         for (k, (b, e)) in bodies.iter().zip(&table).enumerate() {
-            let _ = writeln!(s, "  {k:<8} {:>7} {:>7} {:>10} {:>14}  {}", e.frame_count, e.first_frame, b.meta.brick_count, e.size, b.meta.format_names());
+            let _ = writeln!(s, "  {k:<8} {:>7} {:>7} {:>10} {:>14} {:>14}  {}", e.frame_count, e.first_frame, b.meta.brick_count, e.size, b.gpu_bytes, b.meta.format_names());
         }
     }
     for (k, b) in bodies.iter().enumerate() {
         let _ = writeln!(s, "  sections{}:", if table.len() > 1 { format!(" of segment {k}") } else { String::new() });
-        for e in &b.sections {
+        for (e, restored, c) in &b.sections {
             let label = kind::label(e.kind, e.index);
-            let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}", e.size, b.offset + e.offset, e.checksum);
+            let coding = c.map_or(String::new(), |c| format!("  zstd, {}: {restored} bytes restored", c.filter.name()));
+            let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}{coding}", e.size, b.offset + e.offset, e.checksum);
         }
     }
     for (p, info) in meta.planes.iter().enumerate() {

@@ -6,6 +6,7 @@ mod diff;
 mod gpu;
 mod inspect;
 mod join;
+mod recompress;
 mod progress;
 mod unpack;
 mod validate;
@@ -78,6 +79,8 @@ enum Command {
     Render(validate::RenderArgs),
     /// Join the part files of `cook --part I/N` into one asset, copying their segments.
     Join(join::JoinArgs),
+    /// Store an asset's sections another way on disk (supercompressed or not), without its sources.
+    Recompress(recompress::RecompressArgs),
     /// Cook (and validate) every asset of a bake.toml manifest, with a cache, shards and one report.
     #[command(after_help = bake::AFTER_HELP)]
     Bake(bake::BakeArgs),
@@ -202,6 +205,7 @@ fn main() -> ExitCode {
         Command::Render(args) => validate::render(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Bake(args) => bake::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Join(args) => join::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::Recompress(args) => recompress::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
     };
     ExitCode::from(code)
 }

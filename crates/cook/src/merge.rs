@@ -46,6 +46,8 @@ impl CookReport {
             r.tiles += p.tiles;
             r.textures += p.textures;
             add_by_name(&mut r.sections, &p.sections);
+            add_by_name(&mut r.disk_sections, &p.disk_sections);
+            r.gpu_bytes += p.gpu_bytes;
             r.tree_bytes += p.tree_bytes;
             r.value_range = union_range(r.value_range, p.value_range);
             r.non_finite_voxels += p.non_finite_voxels;

@@ -134,9 +134,16 @@ pub struct CookReport {
     pub tiles: usize,
     /// Atlas textures over all planes.
     pub textures: usize,
-    /// (section name, bytes) in file order.
+    /// (section name, bytes) in file order: the bytes a reader restores.
     pub sections: Vec<(String, u64)>,
+    /// (section name, bytes in the file): `sections` unless supercompressed
+    /// (then smaller, and with the coding section).
+    pub disk_sections: Vec<(String, u64)>,
+    /// The file's bytes (on disk).
     pub file_bytes: u64,
+    /// Bytes of every section but the metadata, restored: what a renderer
+    /// uploads to the GPU to draw any frame.
+    pub gpu_bytes: u64,
     /// Node arrays (frames, L1, L2, L3, entries, tiles) in bytes.
     pub tree_bytes: u64,
     /// What the seed thesis's layout needs for the same frames.
@@ -185,6 +192,8 @@ pub struct SegmentReport {
     pub stored_bricks: usize,
     /// The segment's body in the file.
     pub bytes: u64,
+    /// Its sections but the metadata, restored (uploaded to draw its frames).
+    pub gpu_bytes: u64,
 }
 
 /// Error sums behind a report's figures.
@@ -288,6 +297,7 @@ impl Cooker {
         let channels = peaks.len();
         let totals = &measured.totals;
         let file_bytes = vdbcook_vpak::file_len(sections);
+        let gpu_bytes = gpu_bytes(sections);
         let tree_bytes: u64 = nodes.byte_sizes().iter().map(|(_, b)| *b as u64).sum();
         let active: u64 = self.frames.iter().map(|f| f.active_voxels).sum();
         let psnr = |c: usize| totals[c].psnr(peaks[c]);
@@ -326,7 +336,9 @@ impl Cooker {
             tiles: nodes.tile_count(),
             textures: meta.texture_count(),
             sections: sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect(),
+            disk_sections: sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect(),
             file_bytes,
+            gpu_bytes,
             tree_bytes,
             thesis_tree_bytes: vdbcook_flipbook::thesis_tree_bytes(self.frames.len(), built.leaves_in),
             bits_per_active_voxel: if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 },
@@ -357,8 +369,14 @@ impl Cooker {
             channels: channel_reports,
             clustering,
             timings,
-            segments: vec![SegmentReport { first_frame: self.first_frame, frames: self.frames.len(), unique_bricks: built.pool.len(), stored_bricks, bytes: file_bytes }],
+            segments: vec![SegmentReport { first_frame: self.first_frame, frames: self.frames.len(), unique_bricks: built.pool.len(), stored_bricks, bytes: file_bytes, gpu_bytes }],
             sums: Sums { totals: totals.clone(), levels: measured.levels.clone(), peaks: peaks.to_vec() },
         }
     }
+}
+
+/// Bytes of a body's sections that a renderer uploads: all but the metadata
+/// (and the coding record of how they are stored).
+pub fn gpu_bytes(sections: &[Section]) -> u64 {
+    sections.iter().filter(|s| !matches!(s.kind, kind::METADATA | kind::CODING)).map(|s| s.data.len() as u64).sum()
 }

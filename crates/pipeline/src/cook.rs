@@ -4,7 +4,7 @@
 //! as soon as its last frame is in.
 
 use crate::grids::{read_frame, Channels, Frame, FrameFile, GridSelection};
-use crate::options::CookSettings;
+use crate::options::{CookSettings, Supercompress};
 use crate::{Context, Error, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -204,6 +204,8 @@ pub fn segment_count(frames: usize, segment: Option<usize>) -> u32 {
 struct Output {
     sink: Sink,
     reports: Vec<CookReport>,
+    /// How each segment's sections are stored.
+    coding: Supercompress,
 }
 
 enum Sink {
@@ -213,19 +215,19 @@ enum Sink {
 }
 
 impl Output {
-    fn memory(count: u32) -> Result<Output> {
-        Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new() })
+    fn memory(count: u32, coding: Supercompress) -> Result<Output> {
+        Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new(), coding })
     }
 
     /// An asset of `count` segments that is read back and let go: written into
     /// an unnamed file in the system's temporary directory (never given a name,
     /// so it goes with the process), read through a mapping a segment at a time.
     fn scratch(count: u32) -> Result<Output> {
-        Output::file(&std::env::temp_dir().join("vdbcook-scratch.vpak"), true, count, None)
+        Output::file(&std::env::temp_dir().join("vdbcook-scratch.vpak"), true, count, None, Supercompress::None)
     }
 
     /// An asset (or, with `part`, a part file) of `count` segments written into an unnamed file for `path`.
-    fn file(path: &Path, overwrite: bool, count: u32, part: Option<&PartInfo>) -> Result<Output> {
+    fn file(path: &Path, overwrite: bool, count: u32, part: Option<&PartInfo>, coding: Supercompress) -> Result<Output> {
         let ctx = || path.display().to_string();
         let mut file = AtomicFile::create(path, overwrite).with_context(ctx)?;
         let handle = std::io::BufWriter::with_capacity(1 << 20, file.file().try_clone().with_context(ctx)?);
@@ -234,7 +236,7 @@ impl Output {
             None => Writer::new(handle, count),
         }
         .with_context(ctx)?;
-        Ok(Output { sink: Sink::File(writer, file, ctx()), reports: Vec::new() })
+        Ok(Output { sink: Sink::File(writer, file, ctx()), reports: Vec::new(), coding })
     }
 
     /// Finishes a segment's cooker and writes the segment.
@@ -242,7 +244,7 @@ impl Output {
         let frames = cooker.frame_count() as u32;
         // A group naming no channel, or too many channels to cluster, is the settings' fault.
         let table = vdbcook_vpak::segments::first_offset(1);
-        let (sections, mut report) = cooker.finish(bars).map_err(|e| match e {
+        let (mut sections, mut report) = cooker.finish(bars).map_err(|e| match e {
             // A byte budget is the whole file's: the segment table included.
             vdbcook_cook::Error::OverBudget { budget, smallest, level } => Error::from(vdbcook_cook::Error::OverBudget { budget: budget + table, smallest: smallest + table, level }),
             e if e.is_settings_error() => Error::Usage(e.to_string()),
@@ -251,6 +253,12 @@ impl Output {
         if let Some(b) = report.budget.as_mut() {
             b.max_bytes += table;
             b.tries.iter_mut().for_each(|t| t.bytes += table);
+        }
+        if let Supercompress::Zstd(level) = self.coding {
+            let t0 = Instant::now();
+            sections = vdbcook_vpak::coding::supercompress(sections, &report.metadata, level)?;
+            report.timings.push(("supercompress".into(), t0.elapsed().as_secs_f64()));
+            report.disk_sections = sections.iter().map(|s| (vdbcook_vpak::kind::label(s.kind, s.index), s.data.len() as u64)).collect();
         }
         let t0 = Instant::now();
         let entry = match &mut self.sink {
@@ -279,6 +287,7 @@ impl Output {
         let report = match self.reports.len() {
             1 => self.reports.into_iter().next().map(|mut r| {
                 r.file_bytes = asset.bytes().len() as u64;
+                r.bits_per_active_voxel = if r.active_voxels > 0 { r.file_bytes as f64 * 8.0 / r.active_voxels as f64 } else { 0.0 };
                 r
             }),
             _ => CookReport::merged(self.reports, asset.metadata()?, asset.bytes().len() as u64),
@@ -413,9 +422,9 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
     let mut outs = formats
         .iter()
         .map(|_| match job.output {
-            Some((path, overwrite)) => Output::file(path, overwrite, count, part.as_ref()),
+            Some((path, overwrite)) => Output::file(path, overwrite, count, part.as_ref(), s.supercompress),
             None if part.is_some() => Err(Error::Failed("a part is cooked into a file".into())),
-            None => Output::memory(count),
+            None => Output::memory(count, s.supercompress),
         })
         .collect::<Result<Vec<_>>>()?;
     if job.reference {

@@ -15,6 +15,7 @@ pub use vdbcook_validate::options::{FlipBudget, PsnrFloor, RmseBudget, Viewing, 
 pub use vdbcook_validate::{Gate, Size};
 pub use vdbcook_vpak::settings::{SettingText, Settings};
 use vdbcook_vpak::{bounded, settings_group};
+pub use vdbcook_vpak::coding::Supercompress;
 pub use vdbcook_vpak::{Level, LevelCount};
 
 /// A setting out of its range or at odds with another; `name` is the setting's.
@@ -252,6 +253,11 @@ settings_group! {
         /// work within a segment. Default: one segment of every frame.
         #[cfg_attr(feature = "clap", arg(long, value_name = "N"))]
         pub segment_frames: Option<SegmentFrames> = None;
+        /// How sections are stored on disk: none, zstd, or zstd:LEVEL (1 to 22; zstd alone is
+        /// level 9). Each segment's sections are filtered and zstd-compressed: a smaller file,
+        /// the same GPU bytes (a reader restores a segment when it loads it, at zstd's speed).
+        #[cfg_attr(feature = "clap", arg(long, value_name = "none|zstd[:LEVEL]", default_value_t = CookSettings::default().supercompress))]
+        pub supercompress: Supercompress = Supercompress::None;
         /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
         #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim))]
         pub max_texture_dim: TextureDim = TextureDim(cook_defaults().max_texture_dim);
@@ -355,6 +361,7 @@ impl CookSettings {
             ("lods".into(), self.lods.text()),
             ("max_bytes".into(), self.max_bytes.text()),
             ("segment_frames".into(), self.segment_frames.text()),
+            ("supercompress".into(), self.supercompress.text()),
             ("clusters".into(), self.clusters.text()),
             ("iterations".into(), if clustered { self.iterations.text() } else { String::new() }),
             ("variance_threshold".into(), if clustered { self.variance_threshold.text() } else { String::new() }),

@@ -34,8 +34,10 @@ pub struct Asset {
     len: usize,
     /// A body's sections (none in a file with a segment table).
     pub sections: Vec<SectionEntry>,
-    /// A version-7 file's segment table (empty for a body).
+    /// A segmented file's table (empty for a body).
     table: Vec<SegmentEntry>,
+    /// Whether its bodies may hold supercompressed sections (version 8).
+    coded: bool,
 }
 
 impl Asset {
@@ -90,11 +92,14 @@ impl Asset {
 
     /// Parses the asset that is bytes `[start, start + len)` of `bytes`.
     fn parse_at(bytes: std::sync::Arc<Bytes>, start: usize, len: usize) -> Result<Asset, Error> {
-        let whole = Asset { bytes, start, len, sections: Vec::new(), table: Vec::new() };
+        let mut whole = Asset { bytes, start, len, sections: Vec::new(), table: Vec::new(), coded: false };
         let version = whole.version()?;
         match version {
             segments::BODY_VERSION => whole.body(),
-            segments::VERSION => whole.container(),
+            segments::VERSION | segments::VERSION_7 => {
+                whole.coded = version == segments::VERSION;
+                whole.container()
+            }
             v => Err(Error::Version(v)),
         }
     }
@@ -126,7 +131,8 @@ impl Asset {
         Ok(&b[HEADER_LEN..table_end])
     }
 
-    /// A body (version 6): its section table.
+    /// A body (version 6): its section table; a coding section only where
+    /// the file's version allows one.
     fn body(mut self) -> Result<Asset, Error> {
         let table = self.table_bytes(ENTRY_LEN, MAX_SECTIONS, Error::SectionCount)?;
         let table_end = (HEADER_LEN + table.len()) as u64;
@@ -147,6 +153,9 @@ impl Asset {
         keys.sort_unstable();
         if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
             return Err(Error::DuplicateSection { kind: w[0].0, index: w[0].1 });
+        }
+        if !self.coded && sections.iter().any(|s| s.kind == kind::CODING) {
+            return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION)));
         }
         self.sections = sections;
         Ok(self)
@@ -259,10 +268,38 @@ impl Asset {
         Ok(vec![SegmentEntry { first_frame: 0, frame_count: frames, offset: 0, size: self.len as u64, head_checksum: checksum(head) }])
     }
 
-    /// Segment `s`'s body, as an asset of its own (its frames counted from 0);
-    /// for a body, segment 0 is the asset itself. Checks the body's header and
-    /// section table, and that they are the ones the segment table names.
+    /// Segment `s`'s body ready for use, as an asset of its own (its frames
+    /// counted from 0): [`Asset::stored_segment`], its supercompressed
+    /// sections restored ([`Asset::restored`]).
     pub fn segment(&self, s: usize) -> Result<Asset, Error> {
+        let seg = self.stored_segment(s)?;
+        seg.restored().map_err(|e| if self.is_segmented() { Error::InSegment(s, Box::new(e)) } else { e })
+    }
+
+    /// Whether this body holds supercompressed sections.
+    pub fn is_coded(&self) -> bool {
+        self.sections.iter().any(|s| s.kind == kind::CODING)
+    }
+
+    /// This body with its supercompressed sections restored to the bytes the
+    /// cooker chose (each checked against its checksum): a body in memory.
+    /// A body without them is itself.
+    pub fn restored(&self) -> Result<Asset, Error> {
+        if !self.is_coded() {
+            return Ok(self.clone());
+        }
+        let sections = crate::coding::restore_all(self.sections.iter().map(|e| (*e, self.raw(e))).collect())?;
+        let len = crate::file_len(&sections) as usize;
+        let mut words = vec![0u64; len.div_ceil(8)];
+        crate::write_to(&mut &mut bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..len], &sections)?;
+        Asset::parse(Bytes::Owned(words, len))
+    }
+
+    /// Segment `s`'s body as the file stores it (supercompressed sections
+    /// left so), as an asset of its own (its frames counted from 0); for a
+    /// body, segment 0 is the asset itself. Checks the body's header and
+    /// section table, and that they are the ones the segment table names.
+    pub fn stored_segment(&self, s: usize) -> Result<Asset, Error> {
         if !self.is_segmented() {
             return match s {
                 0 => Ok(self.clone()),
@@ -270,7 +307,7 @@ impl Asset {
             };
         }
         let e = self.table.get(s).ok_or(Error::NoSegment { segment: s, count: self.table.len() })?;
-        let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new() };
+        let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new(), coded: self.coded };
         let body = match seg.version() {
             Ok(segments::BODY_VERSION) => seg.body(),
             Ok(v) => Err(Error::Invalid(format!("a body of version {v} (segments are version {})", segments::BODY_VERSION))),
@@ -305,7 +342,7 @@ impl Asset {
     fn over_segments(&self, names: impl Fn(&Metadata) -> String) -> Result<String, Error> {
         let mut all = String::new();
         for s in 0..self.segment_count() {
-            all = crate::union_names(&all, &names(&self.segment(s)?.metadata()?));
+            all = crate::union_names(&all, &names(&self.stored_segment(s)?.metadata()?));
         }
         Ok(all)
     }
@@ -328,7 +365,7 @@ impl Asset {
             let mut spans = Vec::with_capacity(self.table.len());
             for s in 0..self.table.len() {
                 // A segment at a time, its pages let go once checked (a long asset is larger than memory).
-                let seg = self.segment(s)?;
+                let seg = self.stored_segment(s)?;
                 let checked = seg.verify().map_err(|e| Error::InSegment(s, Box::new(e)));
                 seg.release();
                 checked?;
@@ -393,7 +430,7 @@ impl Asset {
     /// all; planes and placement of the first segment).
     pub fn metadata(&self) -> Result<Metadata, Error> {
         if self.is_segmented() {
-            let metas = (0..self.table.len()).map(|s| self.segment(s)?.metadata().map_err(|e| Error::InSegment(s, Box::new(e)))).collect::<Result<Vec<_>, _>>()?;
+            let metas = (0..self.table.len()).map(|s| self.stored_segment(s)?.metadata().map_err(|e| Error::InSegment(s, Box::new(e)))).collect::<Result<Vec<_>, _>>()?;
             if let Some((s, m)) = metas.iter().enumerate().find(|(s, m)| m.frame_count != self.table[*s].frame_count) {
                 return Err(Error::InSegment(s, Box::new(Error::Invalid(format!("its metadata has {} frames, the segment table {}", m.frame_count, self.table[s].frame_count)))));
             }
@@ -407,6 +444,7 @@ impl Asset {
         for s in 0..self.segment_count() {
             let seg = self.segment(s)?;
             Checked::new(&seg).map_err(|e| if self.is_segmented() { Error::InSegment(s, Box::new(e)) } else { e })?;
+            seg.release();
         }
         self.metadata()
     }

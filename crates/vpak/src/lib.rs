@@ -25,6 +25,7 @@
 mod asset;
 mod atomic;
 mod check;
+pub mod coding;
 pub mod layout;
 pub mod nodes;
 pub mod segments;
@@ -88,6 +89,9 @@ pub mod kind {
     /// brick, the plane (bits 28 to 31: 0 the channel's `plane`, j its
     /// `alternates[j − 1]`) and the plane brick there (bits 0 to 27).
     pub const CHANNEL_TABLE: u32 = 12;
+    /// Which sections of a body are supercompressed and how: one record per
+    /// section ([`super::coding::Coding`]); version 8.
+    pub const CODING: u32 = 13;
 
     pub fn name(k: u32) -> &'static str {
         match k {
@@ -103,6 +107,7 @@ pub mod kind {
             ATLAS => "brick atlas",
             BRICK_TABLE => "brick table",
             CHANNEL_TABLE => "channel table",
+            CODING => "coding",
             _ => "unknown",
         }
     }
@@ -125,7 +130,7 @@ pub enum Error {
     Io(#[from] std::io::Error),
     #[error("not a .vpak file (bad magic)")]
     Magic,
-    #[error("unsupported .vpak version {0} (this build reads versions 6 and {VERSION}: cook the asset again)")]
+    #[error("unsupported .vpak version {0} (this build reads versions 6 to {VERSION}: cook the asset again)")]
     Version(u32),
     #[error("truncated: the header says {expected} bytes, the file has {actual}")]
     Size { expected: u64, actual: u64 },
@@ -169,6 +174,8 @@ pub enum Error {
     NotPart,
     #[error("part header checksum mismatch (the part file is damaged)")]
     PartChecksum,
+    #[error("supercompressed section {name} #{index} {problem}", name = kind::name(*kind))]
+    Coding { kind: u32, index: u32, problem: String },
 }
 
 /// A source file and its content hash.

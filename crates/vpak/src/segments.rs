@@ -9,8 +9,11 @@
 use crate::{body_head, checksum, file_len, header_checksum, write_body, Error, Metadata, Section, ALIGN, HEADER_LEN, MAGIC};
 use std::io::{Read, Seek, SeekFrom, Write};
 
-/// Version of a file with a segment table.
-pub const VERSION: u32 = 7;
+/// Version of a file with a segment table whose bodies may hold
+/// supercompressed sections ([`crate::coding`]).
+pub const VERSION: u32 = 8;
+/// Version of a file with a segment table and no supercompression (still read).
+pub const VERSION_7: u32 = 7;
 /// Version of a segment's body (and of a file that is one body, as version 6 files are).
 pub const BODY_VERSION: u32 = 6;
 pub const SEGMENT_ENTRY_LEN: usize = 32;
@@ -88,7 +91,7 @@ pub fn join(parts: &[(PartInfo, crate::Asset)], files: &[std::fs::File], names: 
     }
     // Which BC7 kernels wrote each part (a setting every segment records).
     let kernels = |a: &crate::Asset| -> Result<String, Error> {
-        let m = a.segment(0)?.metadata()?;
+        let m = a.stored_segment(0)?.metadata()?;
         Ok(m.settings.iter().find(|(k, _)| k == "bc7_kernels").map_or_else(String::new, |(_, v)| v.clone()))
     };
     let first_kernels = kernels(&parts[0].1)?;
@@ -118,7 +121,7 @@ pub fn join(parts: &[(PartInfo, crate::Asset)], files: &[std::fs::File], names: 
     for (i, ((_, asset), file)) in parts.iter().zip(files).enumerate() {
         // A segment at a time: read in, checked, copied, let go.
         for (s, e) in asset.segments()?.iter().enumerate() {
-            let seg = asset.segment(s).map_err(|err| bad(i, err.to_string()))?;
+            let seg = asset.stored_segment(s).map_err(|err| bad(i, err.to_string()))?;
             seg.populate();
             seg.verify().map_err(|err| bad(i, Error::InSegment(s, Box::new(err)).to_string()))?;
             seg.release();
@@ -311,7 +314,8 @@ pub fn rewrite_metadata(asset: &crate::Asset, mut edit: impl FnMut(&mut Metadata
     let table = asset.segments()?;
     let mut w = Writer::new(std::io::Cursor::new(Vec::new()), table.len() as u32)?;
     for (s, e) in table.iter().enumerate() {
-        let mut sections = asset.segment(s)?.to_sections();
+        // Stored sections: supercompressed ones stay as they are.
+        let mut sections = asset.stored_segment(s)?.to_sections();
         let meta = sections.iter_mut().find(|x| x.kind == crate::kind::METADATA).ok_or(Error::Missing { kind: crate::kind::METADATA, index: 0 })?;
         let mut m = Metadata::from_bytes(&meta.data)?;
         edit(&mut m);
@@ -484,6 +488,56 @@ mod tests {
             // table holds a checksum of each body's whole header).
             assert_eq!(r.is_err(), !(40..HEADER_LEN).contains(&i), "byte {i}");
         }
+    }
+
+    #[test]
+    fn supercompressed_segments_restore_the_bytes_written() {
+        let long = |m: &Metadata, marker: u32| {
+            let mut b = body(m, marker);
+            b.push(Section { kind: kind::L2_ENTRIES, index: 0, data: (0..5000u32).flat_map(|i| (i / 3 + marker).to_le_bytes()).collect() });
+            b
+        };
+        let (a, b) = (meta(2, &["a.vdb", "b.vdb"], [0.0, 1.0], 0), meta(3, &["c.vdb"], [-1.0, 0.5], -128));
+        let plain = [(2, long(&a, 100)), (3, long(&b, 200))];
+        let coded = [(2, crate::coding::supercompress(long(&a, 100), &a, 3).unwrap()), (3, crate::coding::supercompress(long(&b, 200), &b, 3).unwrap())];
+        let (plain, coded) = (assemble_segments(&plain).unwrap(), assemble_segments(&coded).unwrap());
+        assert!(coded.len() < plain.len(), "{} vs {} bytes", coded.len(), plain.len());
+        let (p, c) = (Asset::from_bytes(&plain).unwrap(), Asset::from_bytes(&coded).unwrap());
+        c.verify().unwrap();
+        assert_eq!(c.metadata().unwrap(), p.metadata().unwrap());
+        for s in 0..2 {
+            assert!(c.stored_segment(s).unwrap().is_coded());
+            assert_eq!(c.segment(s).unwrap().bytes(), p.segment(s).unwrap().bytes(), "segment {s}");
+        }
+        // A flipped byte of a compressed section fails the stored checksum; a
+        // coding record rewritten with its checksums made good fails restoring.
+        let seg = c.stored_segment(1).unwrap();
+        let e = *seg.sections.iter().find(|e| e.kind == kind::L2_ENTRIES).unwrap();
+        let mut bad = coded.clone();
+        bad[(c.segments().unwrap()[1].offset + e.offset) as usize + 9] ^= 1;
+        assert!(Asset::from_bytes(&bad).unwrap().verify().is_err());
+        let mut sections = seg.to_sections();
+        let coding = sections.iter_mut().find(|x| x.kind == kind::CODING).unwrap();
+        coding.data[24] ^= 4; // the restored size of the first record
+        let lied = assemble_segments(&[(3, sections)]).unwrap();
+        let a = Asset::from_bytes(&lied).unwrap();
+        a.verify().unwrap();
+        let err = a.segment(0).err().unwrap().to_string();
+        assert!(err.contains("supercompressed section") && err.contains("coding table says"), "{err}");
+    }
+
+    #[test]
+    fn a_version_7_file_holds_no_supercompressed_section() {
+        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        let mut sections = body(&m, 1);
+        sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096] });
+        let mut b = assemble_segments(&[(2, crate::coding::supercompress(sections, &m, 3).unwrap())]).unwrap();
+        b[8..12].copy_from_slice(&VERSION_7.to_le_bytes());
+        let table_end = HEADER_LEN + SEGMENT_ENTRY_LEN;
+        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..table_end]);
+        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
+        assert!(err.contains("older than version 8"), "{err}");
     }
 
     #[test]

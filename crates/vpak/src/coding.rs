@@ -1,0 +1,452 @@
+//! Supercompression (version 8): a body's sections stored zstd-compressed
+//! after a filter that lines up what repeats (bytes of equal weight together,
+//! differences of neighbouring texels), as KTX2 does for GPU textures. The
+//! coding section lists each compressed section with its filter and its
+//! restored size and checksum; [`restore`] gives back the exact GPU bytes.
+
+use crate::{checksum, kind, Error, Format, Metadata, Section};
+use rayon::prelude::*;
+
+/// Bytes of one coding record.
+pub const RECORD_LEN: usize = 40;
+/// The only compression scheme: a zstd frame.
+pub const SCHEME_ZSTD: u32 = 1;
+/// A zstd frame decodes to at most this many times its own size (an RLE
+/// block of 4 bytes stands for up to 128 KiB): a larger claimed size is a lie.
+const MAX_RATIO: u64 = 1 << 15;
+
+/// How an asset's sections are stored on disk: `none`, or `zstd[:LEVEL]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Supercompress {
+    #[default]
+    None,
+    Zstd(i32),
+}
+
+impl Supercompress {
+    pub const DEFAULT_LEVEL: i32 = 9;
+    pub const LEVELS: std::ops::RangeInclusive<i32> = 1..=22;
+}
+
+impl std::fmt::Display for Supercompress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Supercompress::None => f.write_str("none"),
+            Supercompress::Zstd(l) => write!(f, "zstd:{l}"),
+        }
+    }
+}
+
+impl std::str::FromStr for Supercompress {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("\"{s}\" is not a supercompression (none, zstd or zstd:LEVEL with LEVEL 1 to 22)");
+        match s.split_once(':') {
+            None if s == "none" => Ok(Supercompress::None),
+            None if s == "zstd" => Ok(Supercompress::Zstd(Supercompress::DEFAULT_LEVEL)),
+            Some(("zstd", l)) => l.parse().ok().filter(|l| Supercompress::LEVELS.contains(l)).map(Supercompress::Zstd).ok_or_else(bad),
+            _ => Err(bad()),
+        }
+    }
+}
+
+/// A manifest writes it as the flag does: "zstd:19".
+impl<'de> serde::Deserialize<'de> for Supercompress {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        String::deserialize(d)?.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// Recorded as the flag's text; empty when off (as unset settings are).
+impl crate::settings::SettingText for Supercompress {
+    fn text(&self) -> String {
+        match self {
+            Supercompress::None => String::new(),
+            s => s.to_string(),
+        }
+    }
+}
+
+/// A filter applied before compression (undone after decompression).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Filter {
+    /// The bytes as they are.
+    None,
+    /// Byte j of every `width`-byte element together, for j = 0, 1, ….
+    Shuffle { width: u32 },
+    /// Each `width`-byte little-endian element minus the one `stride`
+    /// elements before it (wrapping), then shuffled as above.
+    Delta { width: u32, stride: u32 },
+}
+
+impl Filter {
+    fn code(self) -> (u32, u32, u32) {
+        match self {
+            Filter::None => (0, 1, 0),
+            Filter::Shuffle { width } => (1, width, 0),
+            Filter::Delta { width, stride } => (2, width, stride),
+        }
+    }
+
+    fn from_code(filter: u32, width: u32, stride: u32) -> Option<Filter> {
+        match (filter, width, stride) {
+            (0, 1, 0) => Some(Filter::None),
+            (1, 1 | 2 | 4 | 8 | 16, 0) => Some(Filter::Shuffle { width }),
+            (2, 1 | 2 | 4, 1..=4096) => Some(Filter::Delta { width, stride }),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> String {
+        match self {
+            Filter::None => "none".into(),
+            Filter::Shuffle { width } => format!("shuffle {width}"),
+            Filter::Delta { width, stride } => format!("delta {width}/{stride}"),
+        }
+    }
+
+    fn width(self) -> usize {
+        self.code().1 as usize
+    }
+
+    /// The filtered bytes (`raw.len()` a multiple of the width).
+    fn apply(self, raw: &[u8]) -> Vec<u8> {
+        let w = self.width();
+        let mut src = raw.to_vec();
+        if let Filter::Delta { width, stride } = self {
+            let s = stride as usize;
+            let n = raw.len() / w;
+            for i in (s..n).rev() {
+                let (a, b) = (element(raw, i, width), element(raw, i - s, width));
+                set_element(&mut src, i, width, a.wrapping_sub(b));
+            }
+        }
+        if w == 1 {
+            return src;
+        }
+        let n = raw.len() / w;
+        let mut out = vec![0u8; raw.len()];
+        for (i, e) in src.chunks_exact(w).enumerate() {
+            for (j, &b) in e.iter().enumerate() {
+                out[j * n + i] = b;
+            }
+        }
+        out
+    }
+
+    /// Undoes [`Filter::apply`] on `data` into `out` (same length).
+    fn undo(self, data: &[u8], out: &mut [u8]) {
+        let w = self.width();
+        let n = data.len() / w;
+        match self {
+            Filter::None => out.copy_from_slice(data),
+            Filter::Shuffle { .. } => {
+                for (i, e) in out.chunks_exact_mut(w).enumerate() {
+                    for (j, b) in e.iter_mut().enumerate() {
+                        *b = data[j * n + i];
+                    }
+                }
+            }
+            Filter::Delta { width: 1, stride } => {
+                let s = stride as usize;
+                out.copy_from_slice(data);
+                for i in s..n {
+                    out[i] = out[i].wrapping_add(out[i - s]);
+                }
+            }
+            Filter::Delta { width: 2, stride } => {
+                let s = stride as usize;
+                let (lo, hi) = data.split_at(n);
+                let o: &mut [[u8; 2]] = bytemuck::cast_slice_mut(out);
+                for i in 0..n {
+                    let mut v = u16::from_le_bytes([lo[i], hi[i]]);
+                    if i >= s {
+                        v = v.wrapping_add(u16::from_le_bytes(o[i - s]));
+                    }
+                    o[i] = v.to_le_bytes();
+                }
+            }
+            Filter::Delta { width, stride } => {
+                let s = stride as usize;
+                for i in 0..n {
+                    let mut v = (0..w).fold(0u32, |v, j| v | u32::from(data[j * n + i]) << (8 * j));
+                    if i >= s {
+                        v = v.wrapping_add(element(out, i - s, width));
+                    }
+                    set_element(out, i, width, v);
+                }
+            }
+        }
+    }
+}
+
+fn element(b: &[u8], i: usize, width: u32) -> u32 {
+    let w = width as usize;
+    b[i * w..(i + 1) * w].iter().rev().fold(0u32, |v, &x| v << 8 | u32::from(x))
+}
+
+fn set_element(b: &mut [u8], i: usize, width: u32, v: u32) {
+    let w = width as usize;
+    b[i * w..(i + 1) * w].copy_from_slice(&v.to_le_bytes()[..w]);
+}
+
+/// One record of the coding section: how section (`kind`, `index`) is stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Coding {
+    pub kind: u32,
+    pub index: u32,
+    pub scheme: u32,
+    pub filter: Filter,
+    /// Bytes and XXH3-64 of the restored section.
+    pub raw_size: u64,
+    pub raw_checksum: u64,
+}
+
+impl Coding {
+    fn bytes(&self) -> [u8; RECORD_LEN] {
+        let (f, w, s) = self.filter.code();
+        let mut b = [0u8; RECORD_LEN];
+        for (i, v) in [self.kind, self.index, self.scheme, f, w, s].into_iter().enumerate() {
+            b[i * 4..i * 4 + 4].copy_from_slice(&v.to_le_bytes());
+        }
+        b[24..32].copy_from_slice(&self.raw_size.to_le_bytes());
+        b[32..40].copy_from_slice(&self.raw_checksum.to_le_bytes());
+        b
+    }
+
+    /// Parses a coding section.
+    pub fn parse_all(b: &[u8]) -> Result<Vec<Coding>, Error> {
+        if !b.len().is_multiple_of(RECORD_LEN) {
+            return Err(Error::Shape { kind: kind::CODING, size: b.len(), unit: RECORD_LEN });
+        }
+        b.chunks_exact(RECORD_LEN)
+            .map(|r| {
+                let u = |i: usize| u32::from_le_bytes(r[i * 4..i * 4 + 4].try_into().unwrap_or([0; 4]));
+                let (kind, index, scheme) = (u(0), u(1), u(2));
+                if scheme != SCHEME_ZSTD {
+                    return Err(Error::Coding { kind, index, problem: format!("unknown scheme {scheme}") });
+                }
+                let filter = Filter::from_code(u(3), u(4), u(5)).ok_or_else(|| Error::Coding { kind, index, problem: format!("unknown filter {} (width {}, stride {})", u(3), u(4), u(5)) })?;
+                let raw_size = u64::from_le_bytes(r[24..32].try_into().unwrap_or([0; 8]));
+                let raw_checksum = u64::from_le_bytes(r[32..40].try_into().unwrap_or([0; 8]));
+                Ok(Coding { kind, index, scheme, filter, raw_size, raw_checksum })
+            })
+            .collect()
+    }
+}
+
+/// The filters worth trying on a section, by what its bytes are: `u32`
+/// tables and node words, `f32` ranges and tiles, and an atlas's texels in
+/// its plane's format (lanes interleaved, so a texel's neighbour along x is
+/// `lanes` elements back).
+fn candidates(s: &Section, meta: &Metadata) -> Vec<Filter> {
+    let words = vec![Filter::None, Filter::Shuffle { width: 4 }, Filter::Delta { width: 4, stride: 1 }];
+    match s.kind {
+        kind::METADATA | kind::CODING => Vec::new(),
+        kind::ATLAS => match atlas_plane(meta, s.index) {
+            Some(p) => {
+                let lanes = p.lanes;
+                match p.format {
+                    Format::Bc4 | Format::Bc7 => vec![Filter::None, Filter::Shuffle { width: p.format.block_bytes() as u32 }],
+                    Format::F32 => vec![Filter::Shuffle { width: 4 }, Filter::Delta { width: 4, stride: lanes }],
+                    Format::F16 | Format::Unorm16 => vec![Filter::Shuffle { width: 2 }, Filter::Delta { width: 2, stride: lanes }],
+                    Format::Unorm8 => vec![Filter::None, Filter::Delta { width: 1, stride: lanes }],
+                    Format::Constant => vec![Filter::None],
+                }
+            }
+            None => vec![Filter::None],
+        },
+        _ => words,
+    }
+}
+
+fn atlas_plane(meta: &Metadata, section: u32) -> Option<&crate::Plane> {
+    let mut first = 0usize;
+    for p in &meta.planes {
+        if (section as usize) < first + p.atlases.len() {
+            return Some(&p.plane);
+        }
+        first += p.atlases.len();
+    }
+    None
+}
+
+/// Compresses every section worth it (the smallest of its filters' outputs,
+/// tried at a fast level, then compressed at `level`) and adds the coding
+/// section; sections that do not shrink stay as they are. Deterministic:
+/// each section is one single-threaded zstd frame.
+pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Result<Vec<Section>, Error> {
+    let coded: Vec<(Section, Option<Coding>)> = sections
+        .into_par_iter()
+        .map(|s| {
+            let filters: Vec<Filter> = candidates(&s, meta).into_iter().filter(|f| s.data.len().is_multiple_of(f.width())).collect();
+            if filters.is_empty() || s.data.is_empty() {
+                return Ok((s, None));
+            }
+            let best = match filters.as_slice() {
+                [only] => *only,
+                _ => {
+                    let mut sized = Vec::with_capacity(filters.len());
+                    for f in &filters {
+                        sized.push((zstd::bulk::compress(&f.apply(&s.data), 1)?.len(), *f));
+                    }
+                    sized.iter().min_by_key(|x| x.0).map_or(Filter::None, |x| x.1)
+                }
+            };
+            let data = zstd::bulk::compress(&best.apply(&s.data), level)?;
+            if data.len() >= s.data.len() {
+                return Ok((s, None));
+            }
+            let c = Coding { kind: s.kind, index: s.index, scheme: SCHEME_ZSTD, filter: best, raw_size: s.data.len() as u64, raw_checksum: checksum(&s.data) };
+            Ok((Section { kind: s.kind, index: s.index, data }, Some(c)))
+        })
+        .collect::<Result<_, std::io::Error>>()?;
+    let mut table = Vec::new();
+    let mut out = Vec::with_capacity(coded.len() + 1);
+    for (s, c) in coded {
+        if let Some(c) = c {
+            table.extend_from_slice(&c.bytes());
+        }
+        out.push(s);
+    }
+    if !table.is_empty() {
+        out.push(Section { kind: kind::CODING, index: 0, data: table });
+    }
+    Ok(out)
+}
+
+/// Restores one section's GPU bytes from its stored bytes.
+pub fn restore(c: &Coding, stored: &[u8]) -> Result<Vec<u8>, Error> {
+    let err = |problem: String| Error::Coding { kind: c.kind, index: c.index, problem };
+    if c.raw_size > (stored.len() as u64).saturating_mul(MAX_RATIO) || !c.raw_size.is_multiple_of(c.filter.width() as u64) {
+        return Err(err(format!("claims {} restored bytes from {} stored", c.raw_size, stored.len())));
+    }
+    let n = c.raw_size as usize;
+    let mut plain = Vec::new();
+    plain.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} restored bytes")))?;
+    let got = zstd::bulk::Decompressor::new()
+        .and_then(|mut d| d.decompress_to_buffer(stored, &mut plain))
+        .map_err(|e| err(format!("does not decompress ({e})")))?;
+    if got != n {
+        return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
+    }
+    let raw = match c.filter {
+        Filter::None => plain,
+        f => {
+            let mut out = vec![0u8; n];
+            f.undo(&plain, &mut out);
+            out
+        }
+    };
+    let computed = checksum(&raw);
+    if computed != c.raw_checksum {
+        return Err(err(format!("restored checksum mismatch (stored {:#018x}, computed {computed:#018x})", c.raw_checksum)));
+    }
+    Ok(raw)
+}
+
+/// Every section of a body restored (the coding section left out), in table order.
+pub fn restore_all(sections: Vec<(crate::SectionEntry, &[u8])>) -> Result<Vec<Section>, Error> {
+    let coding = sections.iter().find(|(e, _)| e.kind == kind::CODING && e.index == 0).map(|(_, b)| Coding::parse_all(b)).transpose()?.unwrap_or_default();
+    let mut seen = std::collections::HashSet::new();
+    for c in &coding {
+        if matches!(c.kind, kind::METADATA | kind::CODING) || !sections.iter().any(|(e, _)| (e.kind, e.index) == (c.kind, c.index)) || !seen.insert((c.kind, c.index)) {
+            return Err(Error::Coding { kind: c.kind, index: c.index, problem: "is not a section the coding table may name once".into() });
+        }
+    }
+    sections
+        .into_par_iter()
+        .filter(|(e, _)| e.kind != kind::CODING)
+        .map(|(e, b)| match coding.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)) {
+            Some(c) => Ok(Section { kind: e.kind, index: e.index, data: restore(c, b)? }),
+            None => Ok(Section { kind: e.kind, index: e.index, data: b.to_vec() }),
+        })
+        .collect()
+}
+
+/// Writes `asset` again with its sections stored as `to` says (each segment
+/// restored, then supercompressed or not), its recorded `supercompress`
+/// setting changed to match; nodes, bricks and every other byte the GPU
+/// sees stay as they are. A segment at a time: memory holds one.
+pub fn recompress<W: std::io::Write + std::io::Seek>(asset: &crate::Asset, to: Supercompress, out: W) -> Result<W, Error> {
+    let table = asset.segments()?;
+    let mut w = crate::Writer::new(out, table.len() as u32)?;
+    for (s, e) in table.iter().enumerate() {
+        let stored = asset.stored_segment(s)?;
+        let restored = stored.restored().map_err(|err| Error::InSegment(s, Box::new(err)))?;
+        stored.release();
+        let mut sections = restored.to_sections();
+        drop(restored);
+        let meta = sections.iter_mut().find(|x| x.kind == kind::METADATA).ok_or(Error::Missing { kind: kind::METADATA, index: 0 })?;
+        let mut m = Metadata::from_bytes(&meta.data)?;
+        let text = crate::settings::SettingText::text(&to);
+        match m.settings.iter_mut().find(|(k, _)| k == "supercompress") {
+            Some((_, v)) => *v = text,
+            None => m.settings.push(("supercompress".into(), text)),
+        }
+        meta.data = m.to_bytes()?;
+        if let Supercompress::Zstd(level) = to {
+            sections = supercompress(sections, &m, level)?;
+        }
+        w.add(e.frame_count, &sections)?;
+    }
+    Ok(w.finish()?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn filters_undo_what_they_do() {
+        let raw: Vec<u8> = (0..4096u32).map(|i| (i * 7 % 251 + i / 64) as u8).collect();
+        for f in [Filter::None, Filter::Shuffle { width: 2 }, Filter::Shuffle { width: 16 }, Filter::Delta { width: 1, stride: 1 }, Filter::Delta { width: 1, stride: 4 }, Filter::Delta { width: 2, stride: 2 }, Filter::Delta { width: 4, stride: 1 }] {
+            let filtered = f.apply(&raw);
+            assert_eq!(filtered.len(), raw.len());
+            let mut back = vec![0u8; raw.len()];
+            f.undo(&filtered, &mut back);
+            assert_eq!(back, raw, "{f:?}");
+            if f != Filter::None {
+                assert_ne!(filtered, raw, "{f:?} changed nothing");
+            }
+        }
+    }
+
+    #[test]
+    fn a_delta_of_a_ramp_is_constant() {
+        let raw: Vec<u8> = (0..256u32).flat_map(|i| ((i * 3) as u16).to_le_bytes()).collect();
+        let f = Filter::Delta { width: 2, stride: 1 }.apply(&raw);
+        // Low bytes: 0 then all 3; high bytes: all 0.
+        assert_eq!(f[0], 0);
+        assert!(f[1..256].iter().all(|&b| b == 3));
+        assert!(f[256..].iter().all(|&b| b == 0));
+    }
+
+    #[test]
+    fn supercompress_parses() {
+        for (s, want) in [("none", Supercompress::None), ("zstd", Supercompress::Zstd(Supercompress::DEFAULT_LEVEL)), ("zstd:19", Supercompress::Zstd(19))] {
+            assert_eq!(s.parse::<Supercompress>(), Ok(want));
+            assert_eq!(want.to_string().parse::<Supercompress>(), Ok(want));
+        }
+        for bad in ["zstd:0", "zstd:23", "zstd:x", "gzip", "zstd:"] {
+            assert!(bad.parse::<Supercompress>().unwrap_err().contains(bad));
+        }
+    }
+
+    #[test]
+    fn lying_sizes_and_bad_frames_are_refused() {
+        let raw = vec![5u8; 10_000];
+        let stored = zstd::bulk::compress(&raw, 3).unwrap();
+        let good = Coding { kind: kind::TILES, index: 0, scheme: SCHEME_ZSTD, filter: Filter::None, raw_size: raw.len() as u64, raw_checksum: checksum(&raw) };
+        assert_eq!(restore(&good, &stored).unwrap(), raw);
+        for (c, b) in [
+            (Coding { raw_size: 9_999, ..good }, stored.clone()),
+            (Coding { raw_size: 10_001, ..good }, stored.clone()),
+            (Coding { raw_size: 1 << 40, ..good }, stored.clone()),
+            (Coding { raw_checksum: 1, ..good }, stored.clone()),
+            (good, stored[..stored.len() - 1].to_vec()),
+        ] {
+            assert!(matches!(restore(&c, &b), Err(Error::Coding { .. })), "{c:?}");
+        }
+    }
+}
