@@ -141,6 +141,9 @@ pub struct CookOptions {
     /// shown voxels decode within this absolute error (`format` and `groups`
     /// are not used); merged bricks (`clustering`) are held to it too.
     pub max_error: Option<ErrorBound>,
+    /// With `max_error`: each brick's texels on the coarsest grid within the
+    /// bound (for an asset that will be supercompressed: fewer distinct values).
+    pub texels_for_disk: bool,
     /// Every setting, recorded verbatim in the asset's metadata.
     pub settings: Vec<(String, String)>,
     /// A byte budget for the asset: the finest levels of detail that do not
@@ -160,6 +163,7 @@ impl Default for CookOptions {
             max_texture_dim: 2048,
             clustering: None,
             max_error: None,
+            texels_for_disk: false,
             settings: Vec::new(),
             levels: LevelCount::ONE,
             max_bytes: None,

@@ -25,7 +25,7 @@ pub fn single_plane(format: Format) -> Plane {
     }
 }
 
-fn encode_one(format: Format, quality: Quality, values: &Brick, range: [f32; 2], mask: &[u64; 8]) -> Vec<u8> {
+pub(crate) fn encode_one(format: Format, quality: Quality, values: &Brick, range: [f32; 2], mask: &[u64; 8]) -> Vec<u8> {
     let plane = single_plane(format);
     let mut out = vec![0u8; plane.brick_bytes()];
     match format {
@@ -77,8 +77,10 @@ fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<f32> {
 }
 
 /// The cheapest encoding of one brick channel whose voxels of `mask`
-/// decode within `max_error` of `values` (`f32` always does).
-pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality) -> Choice {
+/// decode within `max_error` of `values` (`f32` always does); with
+/// `for_disk`, its texels moved to the coarsest grid that stays within the
+/// bound (`snap`: fewer distinct values for a supercompressed file).
+pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, for_disk: bool) -> Choice {
     let range = range_of(values);
     for format in Format::BY_COST.into_iter().filter(|&f| f != Format::F32) {
         let range = match format {
@@ -90,24 +92,27 @@ pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qualit
         };
         let bytes = encode_one(format, quality, values, range, mask);
         if within(values, &decode_one(format, &bytes, range), mask, max_error) {
+            let bytes = if for_disk { crate::snap::coarsest(format, values, range, mask, max_error).unwrap_or(bytes) } else { bytes };
             return Choice { format, range, bytes };
         }
     }
     // Exact, NaN and ±∞ included.
-    Choice { format: Format::F32, range, bytes: encode_one(Format::F32, quality, values, range, mask) }
+    let bytes = encode_one(Format::F32, quality, values, range, mask);
+    let bytes = if for_disk { crate::snap::coarsest(Format::F32, values, range, mask, max_error).unwrap_or(bytes) } else { bytes };
+    Choice { format: Format::F32, range, bytes }
 }
 
 /// [`cheapest`] for every channel of every brick (`channels` [`Brick`]s a
 /// brick, `masks[i]` the voxels brick i shows), in parallel;
 /// `progress(n)` after each `n` bricks.
-pub fn cheapest_all(bricks: &[Brick], channels: usize, masks: &[[u64; 8]], max_error: f32, quality: Quality, progress: &(dyn Fn(usize) + Sync)) -> Vec<Choice> {
+pub fn cheapest_all(bricks: &[Brick], channels: usize, masks: &[[u64; 8]], max_error: f32, quality: Quality, for_disk: bool, progress: &(dyn Fn(usize) + Sync)) -> Vec<Choice> {
     let channels = channels.max(1);
     bricks
         .par_chunks(channels)
         .enumerate()
         .flat_map_iter(|(i, brick)| {
             let mask = masks.get(i).copied().unwrap_or([u64::MAX; 8]);
-            let out: Vec<Choice> = brick.iter().map(|v| cheapest(v, &mask, max_error, quality)).collect();
+            let out: Vec<Choice> = brick.iter().map(|v| cheapest(v, &mask, max_error, quality, for_disk)).collect();
             progress(1);
             out
         })

@@ -71,6 +71,7 @@ impl vdbcook_vpak::settings::SettingText for Quality {
 mod bc;
 mod choose;
 mod encoded;
+mod snap;
 mod stats;
 mod texels;
 pub use bc::bc7_kernels;

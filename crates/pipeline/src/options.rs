@@ -333,6 +333,7 @@ impl CookSettings {
             max_texture_dim: self.max_texture_dim.get(),
             clustering: self.clustering(),
             max_error: self.max_error,
+            texels_for_disk: self.max_error.is_some() && self.supercompress != Supercompress::None,
             settings: self.recorded(inputs),
             levels: self.lods,
             // The cooker budgets the one segment's body; the file adds the segment table.
