@@ -137,7 +137,8 @@ pub struct CookReport {
     /// (section name, bytes) in file order: the bytes a reader restores.
     pub sections: Vec<(String, u64)>,
     /// (section name, bytes in the file): `sections` unless supercompressed
-    /// (then smaller, and with the coding section).
+    /// (then smaller, and with the coding section). The JSON gives them in `sections`.
+    #[serde(skip)]
     pub disk_sections: Vec<(String, u64)>,
     /// The file's bytes (on disk).
     pub file_bytes: u64,

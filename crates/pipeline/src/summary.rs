@@ -14,6 +14,9 @@ pub fn summary_text(output: &Path, grid: Option<&str>, r: &CookReport) -> String
     let mut s = String::new();
     let what = if r.channels.len() == 1 { format!("grid \"{}\"", grid.unwrap_or("")) } else { format!("{} channels", r.channels.len()) };
     let _ = writeln!(s, "cooked {} frame{} of {what} into {} ({}, {})", r.frames, if r.frames == 1 { "" } else { "s" }, output.display(), r.format, mb(r.file_bytes));
+    if r.disk_sections != r.sections {
+        let _ = writeln!(s, "  supercompressed {} on disk, {} of sections on the GPU (the file is {:.3}× that)", mb(r.file_bytes), mb(r.gpu_bytes), r.file_bytes as f64 / r.gpu_bytes.max(1) as f64);
+    }
     let _ = writeln!(s, "  active voxels   {} ({:.3} bits per active voxel)", r.active_voxels, r.bits_per_active_voxel);
     let _ = writeln!(s, "  bricks          {} leaves -> {} unique -> {} stored in {} texture{}", r.bricks, r.unique_bricks, r.stored_bricks, r.textures, if r.textures == 1 { "" } else { "s" });
     let _ = writeln!(s, "  nodes           L1 {}, L2 {}, L3 {}, tiles {}; tree {} (thesis layout: {})", r.l1_nodes, r.l2_nodes, r.l3_nodes, r.tiles, mb(r.tree_bytes), mb(r.thesis_tree_bytes));
@@ -108,7 +111,11 @@ pub fn summary_json(output: &Path, grid: Option<&str>, r: &CookReport, validatio
         }
         o.insert("output".into(), serde_json::json!(output.display().to_string()));
         o.insert("grid".into(), serde_json::json!(grid));
-        o.insert("sections".into(), serde_json::json!(r.sections.iter().map(|(n, b)| serde_json::json!({"name": n, "bytes": b})).collect::<Vec<_>>()));
+        // Each section restored (what the GPU is given) and on disk; the coding section is on disk only.
+        let disk = |name: &str| r.disk_sections.iter().find(|(n, _)| n == name).map_or(0, |(_, b)| *b);
+        let restored = r.sections.iter().map(|(n, b)| serde_json::json!({"name": n, "bytes": b, "disk_bytes": disk(n)}));
+        let disk_only = r.disk_sections.iter().filter(|(n, _)| !r.sections.iter().any(|(m, _)| m == n)).map(|(n, b)| serde_json::json!({"name": n, "bytes": 0, "disk_bytes": b}));
+        o.insert("sections".into(), serde_json::json!(restored.chain(disk_only).collect::<Vec<_>>()));
         o.insert("timings".into(), serde_json::json!(r.timings.iter().map(|(n, s)| (n.clone(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>()));
         o.insert(
             "frame_errors".into(),

@@ -1,0 +1,160 @@
+//! Supercompression (`cook --supercompress`, format version 8) and
+//! `recompress`: a supercompressed asset restores exactly the GPU bytes of
+//! the same asset stored plainly, for every format, channel packing, level
+//! and segment; damaged compressed sections are refused in one line; the
+//! reports give bytes on disk and on the GPU.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+
+fn cook(dir: &Path, name: &str, inputs: &[&str], flags: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let mut args = vec!["cook", "-q", "--force", "-o", s(&out)];
+    args.extend(flags);
+    args.extend(inputs);
+    ok(vdbcook(&args));
+    out
+}
+
+fn recompress(asset: &Path, out: &Path, to: &str) {
+    ok(vdbcook(&["recompress", "-q", "--force", s(asset), "-o", s(out), "--supercompress", to]));
+}
+
+fn inspect(asset: &Path) -> serde_json::Value {
+    let v: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["inspect", "--json", s(asset)])).stdout).unwrap();
+    v["files"][0].clone()
+}
+
+fn smoke() -> String {
+    s(&root().join("fixtures/smoke_seq")).to_string()
+}
+
+#[test]
+fn supercompressed_assets_restore_the_plain_assets_bytes() {
+    let dir = scratch_dir("supercompress", "same");
+    let multi = s(&root().join("fixtures/multi_grid.vdb")).to_string();
+    let smoke = smoke();
+    let cases: Vec<(Vec<&str>, Vec<&str>)> = vec![
+        (vec![&smoke], vec!["--format", "f32"]),
+        (vec![&smoke], vec!["--format", "f16", "--lods", "3"]),
+        (vec![&smoke], vec!["--format", "unorm8", "--segment-frames", "3"]),
+        (vec![&smoke], vec!["--format", "unorm16"]),
+        (vec![&smoke], vec!["--format", "bc4", "--segment-frames", "2", "--lods", "2"]),
+        (vec![&smoke], vec!["--format", "bc7", "--clusters", "40"]),
+        (vec![&multi], vec!["--grids", "all", "--format", "unorm8"]),
+        (vec![&multi], vec!["--grids", "all", "--group", "density,temperature=bc7"]),
+    ];
+    let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |&(k, (inputs, flags))| {
+        let plain = cook(&dir, &format!("p{k}.vpak"), inputs, flags);
+        let level = if k % 2 == 0 { "zstd" } else { "zstd:19" };
+        let coded = cook(&dir, &format!("z{k}.vpak"), inputs, &[flags.as_slice(), &["--supercompress", level]].concat());
+        // The GPU bytes are the plain cook's: stored plainly again, the file is the plain one byte for byte.
+        let back = dir.join(format!("b{k}.vpak"));
+        recompress(&coded, &back, "none");
+        let (p, c, b) = (std::fs::read(&plain).unwrap(), std::fs::read(&coded).unwrap(), std::fs::read(&back).unwrap());
+        assert!(b == p, "{flags:?}: recompressed to none differs from the plain cook");
+        // And the plain asset supercompressed is the supercompressed cook byte for byte.
+        let again = dir.join(format!("a{k}.vpak"));
+        recompress(&plain, &again, level);
+        assert!(std::fs::read(&again).unwrap() == c, "{flags:?}: recompressing the plain asset differs from the supercompressed cook");
+        assert!(c.len() < p.len(), "{flags:?}: {} bytes supercompressed, {} plain", c.len(), p.len());
+        (p.len(), c.len())
+    });
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(results.len(), cases.len());
+}
+
+#[test]
+fn texels_for_the_disk_stay_within_the_bound_and_compress_further() {
+    let dir = scratch_dir("supercompress", "bound");
+    let smoke = smoke();
+    let plain = cook(&dir, "p.vpak", &[&smoke], &["--max-error", "0.01"]);
+    let coded = cook(&dir, "z.vpak", &[&smoke], &["--max-error", "0.01", "--supercompress", "zstd"]);
+    // The same plain asset, supercompressed without moving its texels: the snapped one is smaller still.
+    let unsnapped = dir.join("u.vpak");
+    recompress(&plain, &unsnapped, "zstd");
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+    assert!(size(&coded) < size(&unsnapped), "{} bytes with texels for the disk, {} without", size(&coded), size(&unsnapped));
+    // Every frame within E of its source, voxel by voxel (`diff`'s largest difference).
+    for (frame, src) in vdb_files(&root().join("fixtures/smoke_seq")).iter().enumerate() {
+        let vdb = dir.join(format!("z{frame}.vdb"));
+        ok(vdbcook(&["unpack", "-q", "--force", s(&coded), "--frame", &frame.to_string(), "-o", s(&vdb)]));
+        let d: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["diff", "--json", s(src), s(&vdb)])).stdout).unwrap();
+        let max = d["max_error"].as_f64().unwrap_or(f64::MAX);
+        assert!(max <= 0.01, "frame {frame}: max error {max}: {d}");
+        assert_eq!(d["inactive_in_b"].as_u64(), Some(0), "{d}");
+        assert!(d["voxels"].as_u64() > Some(1000), "{d}");
+    }
+    // Same bytes on one thread.
+    let one = dir.join("z1.vpak");
+    let r = std::process::Command::new(env!("CARGO_BIN_EXE_vdbcook"))
+        .env("RAYON_NUM_THREADS", "1")
+        .args(["cook", "-q", "--force", "--max-error", "0.01", "--supercompress", "zstd", "-o", s(&one), &smoke])
+        .output()
+        .unwrap();
+    assert!(r.status.success());
+    assert!(std::fs::read(&one).unwrap() == std::fs::read(&coded).unwrap(), "one thread wrote another asset");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn damaged_compressed_sections_are_refused_in_one_line() {
+    let dir = scratch_dir("supercompress", "damaged");
+    let coded = cook(&dir, "z.vpak", &[&smoke()], &["--format", "unorm8", "--supercompress", "zstd"]);
+    let bytes = std::fs::read(&coded).unwrap();
+    let j = inspect(&coded);
+    let atlas = j["sections"].as_array().unwrap().iter().find(|x| x["name"] == "brick atlas" && !x["coding"].is_null()).expect("a supercompressed atlas").clone();
+    let at = atlas["offset"].as_u64().unwrap() as usize + 5;
+    let mut flipped = bytes.clone();
+    flipped[at] ^= 0x40;
+    let cases = [("flipped.vpak", flipped), ("truncated.vpak", bytes[..at].to_vec())];
+    for (name, b) in cases {
+        let p = dir.join(name);
+        std::fs::write(&p, b).unwrap();
+        for cmd in [vec!["inspect", s(&p)], vec!["unpack", "-q", "--force", s(&p), "--frame", "0", "-o", s(&dir.join("x.vdb"))]] {
+            let r = vdbcook(&cmd);
+            let err = String::from_utf8_lossy(&r.stderr);
+            assert_eq!(r.status.code(), Some(1), "{cmd:?}: {err}");
+            assert_eq!(err.trim_end().lines().count(), 1, "{cmd:?}: {err}");
+            assert!(err.contains(name), "{cmd:?}: {err}");
+        }
+        assert!(!dir.join("x.vdb").exists());
+    }
+    // A bad level is a usage error.
+    let r = vdbcook(&["cook", "-q", "--supercompress", "zstd:30", "-o", s(&dir.join("y.vpak")), &smoke()]);
+    assert_eq!(r.status.code(), Some(2), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("zstd:30"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn reports_give_bytes_on_disk_and_on_the_gpu() {
+    let dir = scratch_dir("supercompress", "reports");
+    let out = dir.join("z.vpak");
+    let r = ok(vdbcook(&["cook", "--json", "--force", "--format", "f16", "--segment-frames", "2", "--supercompress", "zstd", "-o", s(&out), &smoke()]));
+    let c: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let (file, gpu) = (c["file_bytes"].as_u64().unwrap(), c["gpu_bytes"].as_u64().unwrap());
+    assert_eq!(file, std::fs::metadata(&out).unwrap().len());
+    assert!(file < gpu, "{file} on disk, {gpu} on the GPU");
+    let sections = c["sections"].as_array().unwrap();
+    let sum = |k: &str| sections.iter().filter(|x| x["name"] != "metadata").map(|x| x[k].as_u64().unwrap()).sum::<u64>();
+    assert_eq!(sum("bytes"), gpu);
+    assert!(sum("disk_bytes") < gpu && sections.iter().any(|x| x["name"] == "coding" && x["disk_bytes"].as_u64() > Some(0)), "{sections:?}");
+    let segs = c["segments"].as_array().unwrap();
+    assert_eq!(segs.len(), 2);
+    assert_eq!(segs.iter().map(|x| x["gpu_bytes"].as_u64().unwrap()).sum::<u64>(), gpu);
+    // inspect agrees, per segment and per section.
+    let i = inspect(&out);
+    assert_eq!((i["file_bytes"].as_u64(), i["gpu_bytes"].as_u64(), i["version"].as_u64()), (Some(file), Some(gpu), Some(8)));
+    for (a, b) in i["segments"].as_array().unwrap().iter().zip(segs) {
+        assert_eq!((a["bytes"].as_u64(), a["gpu_bytes"].as_u64()), (b["bytes"].as_u64(), b["gpu_bytes"].as_u64()));
+    }
+    let coded: Vec<&serde_json::Value> = i["sections"].as_array().unwrap().iter().filter(|x| !x["coding"].is_null()).collect();
+    assert!(!coded.is_empty() && coded.iter().all(|x| x["disk_bytes"].as_u64() < x["bytes"].as_u64()), "{coded:?}");
+    // The text says both.
+    let text = String::from_utf8_lossy(&ok(vdbcook(&["cook", "--force", "--format", "f16", "--supercompress", "zstd", "-o", s(&out), &smoke()])).stderr).into_owned()
+        + &String::from_utf8_lossy(&ok(vdbcook(&["cook", "--force", "--format", "f16", "--supercompress", "zstd", "-o", s(&out), &smoke()])).stdout);
+    assert!(text.contains("supercompressed") && text.contains("on the GPU"), "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
