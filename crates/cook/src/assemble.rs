@@ -79,7 +79,7 @@ impl Cooker {
         let encoded = match max_error {
             None => encode::in_planes(pool, channels, specs, opts.quality, masks.as_deref(), clustered.as_ref(), progress),
             Some(bound) => {
-                let choices = choose::per_brick(pool, channels, masks.as_deref().unwrap_or(&[]), bound, opts.quality, opts.texels_for_disk, clustered.as_mut(), progress);
+                let choices = choose::per_brick(pool, channels, masks.as_deref().unwrap_or(&[]), bound, opts.quality, opts.disk, clustered.as_mut(), progress);
                 encode::as_chosen(pool, channels, choices, clustered.as_ref())
             }
         };
@@ -100,7 +100,7 @@ impl Cooker {
         let decode_stored = |b: u32| stored.decode(&encoded, b);
         let measured = errors::measure(built, first, opts.levels.get(), channels, &decode_stored);
         let cluster_report = clustered.as_ref().zip(opts.clustering.as_ref()).map(|(c, co)| {
-            let without = cluster::Unclustered { built, first, channels, specs: &encoded.specs, quality: opts.quality, max_error, for_disk: opts.texels_for_disk, masks: masks.as_deref() };
+            let without = cluster::Unclustered { built, first, channels, specs: &encoded.specs, quality: opts.quality, max_error, disk: opts.disk, masks: masks.as_deref() };
             cluster::report(c, co, &without, &decode_stored, measured.totals[0].rmse())
         });
         lap(&mut timings, "error", t0);

@@ -129,8 +129,8 @@ pub(crate) struct Unclustered<'a> {
     pub(crate) specs: &'a [PlaneSpec],
     pub(crate) quality: Quality,
     pub(crate) max_error: Option<f32>,
-    /// Texels on the coarsest grid within `max_error` (as the stored bricks' are).
-    pub(crate) for_disk: bool,
+    /// Texels for a supercompressed file (as the stored bricks' are).
+    pub(crate) disk: Option<vdbcook_encode::Optimize>,
     /// The pool's shown voxels, when encoding used them.
     pub(crate) masks: Option<&'a [[u64; 8]]>,
 }
@@ -145,7 +145,7 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
     let own_masks: Option<Vec<[u64; 8]>> = u.masks.map(|m| merged.iter().map(|&i| m[i]).collect());
     let own_enc = match u.max_error {
         None => Encoded::new(u.specs.to_vec(), u.quality, &own, channels, own_masks.as_deref(), &|_| {}),
-        Some(e) => Encoded::from_choices(&own, channels, vdbcook_encode::cheapest_all(&own, channels, own_masks.as_deref().unwrap_or(&[]), e, u.quality, u.for_disk, &|_| {}), &vec![true; merged.len()]),
+        Some(e) => Encoded::from_choices(&own, channels, vdbcook_encode::cheapest_all(&own, channels, own_masks.as_deref().unwrap_or(&[]), e, u.quality, u.disk, &|_| {}), &vec![true; merged.len()]),
     };
     let mut slot = vec![u32::MAX; c.merged.len()];
     for (k, &i) in merged.iter().enumerate() {

@@ -141,9 +141,10 @@ pub struct CookOptions {
     /// shown voxels decode within this absolute error (`format` and `groups`
     /// are not used); merged bricks (`clustering`) are held to it too.
     pub max_error: Option<ErrorBound>,
-    /// With `max_error`: each brick's texels on the coarsest grid within the
-    /// bound (for an asset that will be supercompressed: fewer distinct values).
-    pub texels_for_disk: bool,
+    /// With `max_error`, for an asset that will be supercompressed: each
+    /// brick's texels on the coarsest grid within the bound (fewer distinct
+    /// values), and what its format choice minimises (GPU or file bytes).
+    pub disk: Option<vdbcook_encode::Optimize>,
     /// Every setting, recorded verbatim in the asset's metadata.
     pub settings: Vec<(String, String)>,
     /// A byte budget for the asset: the finest levels of detail that do not
@@ -163,7 +164,7 @@ impl Default for CookOptions {
             max_texture_dim: 2048,
             clustering: None,
             max_error: None,
-            texels_for_disk: false,
+            disk: None,
             settings: Vec::new(),
             levels: LevelCount::ONE,
             max_bytes: None,

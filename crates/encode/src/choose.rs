@@ -4,7 +4,7 @@
 //! voxels must decode to themselves (only `f16` and `f32` keep them).
 
 use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of};
-use crate::{bc, group_planes, Brick, Format, Plane, Quality};
+use crate::{bc, group_planes, Brick, Format, Optimize, Plane, Quality};
 use rayon::prelude::*;
 
 /// One brick channel's chosen encoding.
@@ -77,11 +77,17 @@ fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<f32> {
 }
 
 /// The cheapest encoding of one brick channel whose voxels of `mask`
-/// decode within `max_error` of `values` (`f32` always does); with
-/// `for_disk`, its texels moved to the coarsest grid that stays within the
-/// bound (`snap`: fewer distinct values for a supercompressed file).
-pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, for_disk: bool) -> Choice {
+/// decode within `max_error` of `values` (`f32` always does). For a
+/// supercompressed asset (`disk`), texels are moved to the coarsest grid
+/// within the bound (`snap`: fewer distinct values to compress), and with
+/// [`Optimize::Disk`] "cheapest" is the fewest bytes in the file (each
+/// format's texels filtered and compressed as the writer would, brick by
+/// brick) rather than on the GPU.
+pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>) -> Choice {
     let range = range_of(values);
+    let snap = |format: Format, bytes: Vec<u8>| if disk.is_some() { crate::snap::coarsest(format, values, range, mask, max_error).unwrap_or(bytes) } else { bytes };
+    // Smallest file: every format within the bound, the one of fewest compressed bytes (the first of equals).
+    let mut smallest: Option<(usize, Choice)> = None;
     for format in Format::BY_COST.into_iter().filter(|&f| f != Format::F32) {
         let range = match format {
             Format::Constant => match constant_of(values, mask) {
@@ -92,27 +98,35 @@ pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qualit
         };
         let bytes = encode_one(format, quality, values, range, mask);
         if within(values, &decode_one(format, &bytes, range), mask, max_error) {
-            let bytes = if for_disk { crate::snap::coarsest(format, values, range, mask, max_error).unwrap_or(bytes) } else { bytes };
-            return Choice { format, range, bytes };
+            let choice = Choice { format, range, bytes: snap(format, bytes) };
+            if disk != Some(Optimize::Disk) || format == Format::Constant {
+                return choice;
+            }
+            let cost = vdbcook_vpak::coding::brick_cost(&single_plane(format), &choice.bytes);
+            if smallest.as_ref().is_none_or(|(c, _)| cost < *c) {
+                smallest = Some((cost, choice));
+            }
         }
+    }
+    if let Some((_, c)) = smallest {
+        return c;
     }
     // Exact, NaN and ±∞ included.
     let bytes = encode_one(Format::F32, quality, values, range, mask);
-    let bytes = if for_disk { crate::snap::coarsest(Format::F32, values, range, mask, max_error).unwrap_or(bytes) } else { bytes };
-    Choice { format: Format::F32, range, bytes }
+    Choice { format: Format::F32, range, bytes: snap(Format::F32, bytes) }
 }
 
 /// [`cheapest`] for every channel of every brick (`channels` [`Brick`]s a
 /// brick, `masks[i]` the voxels brick i shows), in parallel;
 /// `progress(n)` after each `n` bricks.
-pub fn cheapest_all(bricks: &[Brick], channels: usize, masks: &[[u64; 8]], max_error: f32, quality: Quality, for_disk: bool, progress: &(dyn Fn(usize) + Sync)) -> Vec<Choice> {
+pub fn cheapest_all(bricks: &[Brick], channels: usize, masks: &[[u64; 8]], max_error: f32, quality: Quality, disk: Option<Optimize>, progress: &(dyn Fn(usize) + Sync)) -> Vec<Choice> {
     let channels = channels.max(1);
     bricks
         .par_chunks(channels)
         .enumerate()
         .flat_map_iter(|(i, brick)| {
             let mask = masks.get(i).copied().unwrap_or([u64::MAX; 8]);
-            let out: Vec<Choice> = brick.iter().map(|v| cheapest(v, &mask, max_error, quality, for_disk)).collect();
+            let out: Vec<Choice> = brick.iter().map(|v| cheapest(v, &mask, max_error, quality, disk)).collect();
             progress(1);
             out
         })

@@ -62,6 +62,29 @@ impl Quality {
     }
 }
 
+/// What `cook --max-error` minimises brick by brick when the asset is
+/// supercompressed: the GPU's bytes (the cheapest format within the bound,
+/// as without supercompression) or the file's (the format whose texels,
+/// filtered and compressed, take the fewest bytes; it may be a larger
+/// GPU format).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum Optimize {
+    #[default]
+    Gpu,
+    Disk,
+}
+
+impl vdbcook_vpak::settings::SettingText for Optimize {
+    fn text(&self) -> String {
+        match self {
+            Optimize::Gpu => "gpu".into(),
+            Optimize::Disk => "disk".into(),
+        }
+    }
+}
+
 impl vdbcook_vpak::settings::SettingText for Quality {
     fn text(&self) -> String {
         self.name().to_string()

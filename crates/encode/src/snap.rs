@@ -35,7 +35,9 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
             let l = levels(values, range, 65535.0);
             let span = f64::from(range[1]) - f64::from(range[0]);
             let k0 = (2.0 * f64::from(max_error) * 65535.0 / span).floor().min(65535.0) as u32;
-            largest_step(k0, |k| {
+            // Steps of a power of two: the low byte of every level (and of its difference
+            // from its neighbour) then takes few values, which a byte-wise coder sees.
+            largest_step(k0.checked_ilog2().map_or(0, |b| 1 << b), |k| {
                 let q = l.map(|x| step_level(x, k, 65535) as u16);
                 let mut out = vec![0u8; 2 * BRICK_VOXELS];
                 put_lane(&mut out, 1, 0, swap_xz(&q).iter().map(|q| q.to_le_bytes()));
@@ -70,14 +72,15 @@ fn step_level(x: f32, k: u32, top: u32) -> u32 {
 
 /// The texels of the largest step from `k0` down to 2 that `try_step`
 /// accepts: `k0` first (where the bound says it should hold), then smaller
-/// steps by a quarter each time (rounding may cost a step or two).
+/// steps by a quarter each time (rounding may cost a step or two), or by
+/// half when `k0` is a power of two (so they stay powers of two).
 fn largest_step(k0: u32, try_step: impl Fn(u32) -> Option<Vec<u8>>) -> Option<Vec<u8>> {
     let mut k = k0;
     while k >= 2 {
         if let Some(b) = try_step(k) {
             return Some(b);
         }
-        k = (k * 3 / 4).min(k - 1);
+        k = if k.is_power_of_two() { k / 2 } else { (k * 3 / 4).min(k - 1) };
     }
     None
 }

@@ -306,7 +306,7 @@ fn per_brick_formats_meet_the_bound_with_the_cheapest_format() {
         let brick = kind_of_brick(&mut rng, trial % 5);
         let mask: [u64; 8] = if trial % 3 == 0 { std::array::from_fn(|_| rng.next_u64() & rng.next_u64()) } else { [u64::MAX; 8] };
         let e = 10f32.powf(-6.0 + 6.0 * rng.unit());
-        let choice = cheapest(&brick, &mask, e, Quality::VeryFast, false);
+        let choice = cheapest(&brick, &mask, e, Quality::VeryFast, None);
         seen.insert(choice.format);
         let encoded = Encoded::from_choices(std::slice::from_ref(&brick), 1, vec![choice.clone()], &[true]);
         assert_eq!(encoded.specs.len(), 1);

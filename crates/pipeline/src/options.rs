@@ -10,7 +10,7 @@
 use std::fmt;
 use std::str::FromStr;
 pub use vdbcook_cook::ChannelGroup;
-pub use vdbcook_encode::{ErrorBound, Format, Quality};
+pub use vdbcook_encode::{ErrorBound, Format, Optimize, Quality};
 pub use vdbcook_validate::options::{FlipBudget, PsnrFloor, RmseBudget, Viewing, Views};
 pub use vdbcook_validate::{Gate, Size};
 pub use vdbcook_vpak::settings::{SettingText, Settings};
@@ -258,6 +258,12 @@ settings_group! {
         /// the same GPU bytes (a reader restores a segment when it loads it, at zstd's speed).
         #[cfg_attr(feature = "clap", arg(long, value_name = "none|zstd[:LEVEL]", default_value_t = CookSettings::default().supercompress))]
         pub supercompress: Supercompress = Supercompress::None;
+        /// With --max-error and --supercompress, what each brick's format choice minimises: gpu
+        /// (the cheapest format within E on the GPU, as without --supercompress) or disk (the
+        /// format whose texels compress to the fewest bytes: a smaller file, often larger GPU
+        /// formats; the cook encodes every format within E, so it takes longer).
+        #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().optimize))]
+        pub optimize: Optimize = Optimize::Gpu;
         /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
         #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim))]
         pub max_texture_dim: TextureDim = TextureDim(cook_defaults().max_texture_dim);
@@ -279,6 +285,9 @@ impl CookSettings {
     pub fn check(&self) -> Result<(), SettingError> {
         if self.max_error.is_some() && !self.group.is_empty() {
             return Err(SettingError { name: "max_error", message: vdbcook_cook::Error::MaxErrorGroups.to_string() });
+        }
+        if self.optimize == Optimize::Disk && (self.max_error.is_none() || self.supercompress == Supercompress::None) {
+            return Err(SettingError { name: "optimize", message: "disk chooses each brick's format for the smallest file: it needs max_error (per-brick formats) and supercompress".into() });
         }
         if self.max_bytes.is_some() && self.segment_frames.is_some() {
             return Err(SettingError { name: "max_bytes", message: "decides which levels of detail the whole asset keeps: it takes no segment_frames (cook one segment)".into() });
@@ -333,7 +342,7 @@ impl CookSettings {
             max_texture_dim: self.max_texture_dim.get(),
             clustering: self.clustering(),
             max_error: self.max_error,
-            texels_for_disk: self.max_error.is_some() && self.supercompress != Supercompress::None,
+            disk: (self.max_error.is_some() && self.supercompress != Supercompress::None).then_some(self.optimize),
             settings: self.recorded(inputs),
             levels: self.lods,
             // The cooker budgets the one segment's body; the file adds the segment table.
@@ -363,6 +372,7 @@ impl CookSettings {
             ("max_bytes".into(), self.max_bytes.text()),
             ("segment_frames".into(), self.segment_frames.text()),
             ("supercompress".into(), self.supercompress.text()),
+            ("optimize".into(), if self.optimize == Optimize::Disk { self.optimize.text() } else { String::new() }),
             ("clusters".into(), self.clusters.text()),
             ("iterations".into(), if clustered { self.iterations.text() } else { String::new() }),
             ("variance_threshold".into(), if clustered { self.variance_threshold.text() } else { String::new() }),

@@ -271,6 +271,21 @@ fn atlas_plane(meta: &Metadata, section: u32) -> Option<&crate::Plane> {
     None
 }
 
+/// What one brick's texels (`bytes`, in `plane`) cost in a supercompressed
+/// file, as an estimate for choosing formats: compressed alone at a fast
+/// level after the filter the writer would try first for an atlas of that
+/// plane, plus its range pair.
+pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
+    let filter = match plane.format {
+        Format::Bc4 | Format::Bc7 => Filter::Shuffle { width: plane.format.block_bytes() as u32 },
+        Format::F32 | Format::F16 | Format::Unorm16 => Filter::Delta { width: plane.format.lane_bytes() as u32, stride: plane.lanes },
+        Format::Unorm8 => Filter::Delta { width: 1, stride: plane.lanes },
+        Format::Constant => Filter::None,
+    };
+    let filtered = if bytes.len().is_multiple_of(filter.width()) { filter.apply(bytes) } else { bytes.to_vec() };
+    zstd::bulk::compress(&filtered, 1).map_or(bytes.len(), |c| c.len()) + 8
+}
+
 /// Compresses every section worth it (the smallest of its filters' outputs,
 /// tried at a fast level, then compressed at `level`) and adds the coding
 /// section; sections that do not shrink stay as they are. Deterministic:

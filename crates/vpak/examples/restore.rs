@@ -1,0 +1,43 @@
+//! Times restoring an asset's supercompressed segments (decompression and
+//! unfiltering, as a reader does before upload), for `scripts/bench_disk.py`:
+//!
+//!     restore ASSET [FRAMES_OUT]
+//!
+//! Prints one JSON line: the restored bytes of the compressed sections, their
+//! stored bytes, and the best of five passes in seconds. With FRAMES_OUT,
+//! also writes the compressed sections' zstd frames one after the other (what
+//! `zstd -d` is timed on, the same bytes). Run with `RAYON_NUM_THREADS=1` for one core.
+
+use std::io::Write;
+use vdbcook_vpak::coding::Coding;
+use vdbcook_vpak::{kind, Asset};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let asset = Asset::open(std::path::Path::new(args.get(1).ok_or("usage: restore ASSET [FRAMES_OUT]")?))?;
+    let segments: Vec<Asset> = (0..asset.segment_count()).map(|s| asset.stored_segment(s)).collect::<Result<_, _>>()?;
+    let (mut raw, mut stored) = (0u64, 0u64);
+    let mut frames = Vec::new();
+    for seg in &segments {
+        let Ok(table) = seg.section(kind::CODING, 0) else { continue };
+        for c in Coding::parse_all(table)? {
+            raw += c.raw_size;
+            let b = seg.section(c.kind, c.index)?;
+            stored += b.len() as u64;
+            frames.extend_from_slice(b);
+        }
+    }
+    if let Some(out) = args.get(2) {
+        std::fs::File::create(out)?.write_all(&frames)?;
+    }
+    let mut best = f64::MAX;
+    for _ in 0..5 {
+        let t = std::time::Instant::now();
+        for seg in &segments {
+            std::hint::black_box(seg.restored()?);
+        }
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    println!("{{\"restored_bytes\": {raw}, \"stored_bytes\": {stored}, \"seconds\": {best}}}");
+    Ok(())
+}
