@@ -20,7 +20,7 @@ pub struct RecompressArgs {
     /// The asset to write.
     #[arg(short, long, value_name = "OUT.vpak")]
     pub output: PathBuf,
-    /// How the sections are stored: none, zstd, or zstd:LEVEL (1 to 22; zstd alone is level 9).
+    /// How the sections are stored: none, zstd, or zstd:LEVEL (1 to 22; zstd alone is level 5).
     #[arg(long, value_name = "none|zstd[:LEVEL]")]
     pub supercompress: Supercompress,
     /// Replace OUT if it exists.

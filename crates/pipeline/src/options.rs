@@ -254,7 +254,7 @@ settings_group! {
         #[cfg_attr(feature = "clap", arg(long, value_name = "N"))]
         pub segment_frames: Option<SegmentFrames> = None;
         /// How sections are stored on disk: none, zstd, or zstd:LEVEL (1 to 22; zstd alone is
-        /// level 9). Each segment's sections are filtered and zstd-compressed: a smaller file,
+        /// level 5). Each segment's sections are filtered and zstd-compressed: a smaller file,
         /// the same GPU bytes (a reader restores a segment when it loads it, at zstd's speed).
         #[cfg_attr(feature = "clap", arg(long, value_name = "none|zstd[:LEVEL]", default_value_t = CookSettings::default().supercompress))]
         pub supercompress: Supercompress = Supercompress::None;

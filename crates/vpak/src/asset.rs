@@ -288,10 +288,8 @@ impl Asset {
         if !self.is_coded() {
             return Ok(self.clone());
         }
-        let sections = crate::coding::restore_all(self.sections.iter().map(|e| (*e, self.raw(e))).collect())?;
-        let len = crate::file_len(&sections) as usize;
-        let mut words = vec![0u64; len.div_ceil(8)];
-        crate::write_to(&mut &mut bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..len], &sections)?;
+        let stored: Vec<(SectionEntry, &[u8])> = self.sections.iter().map(|e| (*e, self.raw(e))).collect();
+        let (words, len) = crate::coding::restore_body(&stored)?;
         Asset::parse(Bytes::Owned(words, len))
     }
 

@@ -24,7 +24,7 @@ pub enum Supercompress {
 }
 
 impl Supercompress {
-    pub const DEFAULT_LEVEL: i32 = 9;
+    pub const DEFAULT_LEVEL: i32 = 5;
     pub const LEVELS: std::ops::RangeInclusive<i32> = 1..=22;
 }
 
@@ -140,13 +140,7 @@ impl Filter {
         let n = data.len() / w;
         match self {
             Filter::None => out.copy_from_slice(data),
-            Filter::Shuffle { .. } => {
-                for (i, e) in out.chunks_exact_mut(w).enumerate() {
-                    for (j, b) in e.iter_mut().enumerate() {
-                        *b = data[j * n + i];
-                    }
-                }
-            }
+            Filter::Shuffle { .. } => unshuffle(data, out, w),
             Filter::Delta { width: 1, stride } => {
                 let s = stride as usize;
                 out.copy_from_slice(data);
@@ -166,14 +160,44 @@ impl Filter {
                     o[i] = v.to_le_bytes();
                 }
             }
-            Filter::Delta { width, stride } => {
+            Filter::Delta { width: _, stride } => {
                 let s = stride as usize;
-                for i in 0..n {
-                    let mut v = (0..w).fold(0u32, |v, j| v | u32::from(data[j * n + i]) << (8 * j));
-                    if i >= s {
-                        v = v.wrapping_add(element(out, i - s, width));
-                    }
-                    set_element(out, i, width, v);
+                unshuffle(data, out, 4);
+                let o: &mut [[u8; 4]] = bytemuck::cast_slice_mut(out);
+                for i in s..n {
+                    o[i] = u32::from_le_bytes(o[i]).wrapping_add(u32::from_le_bytes(o[i - s])).to_le_bytes();
+                }
+            }
+        }
+    }
+}
+
+/// Element i of `out` from byte j of every element's plane `data[j·n ..]`:
+/// the planes read in step (two and four of them zipped, which compiles to
+/// vector shuffles), not a strided gather per byte.
+fn unshuffle(data: &[u8], out: &mut [u8], w: usize) {
+    let n = data.len() / w;
+    match w {
+        1 => out.copy_from_slice(data),
+        2 => {
+            let (a, b) = data.split_at(n);
+            for ((o, &x), &y) in out.chunks_exact_mut(2).zip(a).zip(b) {
+                o.copy_from_slice(&[x, y]);
+            }
+        }
+        4 => {
+            let (a, rest) = data.split_at(n);
+            let (b, rest) = rest.split_at(n);
+            let (c, d) = rest.split_at(n);
+            for ((((o, &x), &y), &z), &t) in out.chunks_exact_mut(4).zip(a).zip(b).zip(c).zip(d) {
+                o.copy_from_slice(&[x, y, z, t]);
+            }
+        }
+        _ => {
+            // A plane at a time (BC blocks: 8 or 16 planes), each written at its stride.
+            for (j, plane) in data.chunks_exact(n).enumerate() {
+                for (o, &x) in out[j..].iter_mut().step_by(w).zip(plane) {
+                    *o = x;
                 }
             }
         }
@@ -303,7 +327,8 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
                 _ => {
                     let mut sized = Vec::with_capacity(filters.len());
                     for f in &filters {
-                        sized.push((zstd::bulk::compress(&f.apply(&s.data), 1)?.len(), *f));
+                        let sample: Vec<u8> = sample(&s.data).flat_map(|chunk| f.apply(chunk)).collect();
+                        sized.push((zstd::bulk::compress(&sample, 1)?.len(), *f));
                     }
                     sized.iter().min_by_key(|x| x.0).map_or(Filter::None, |x| x.1)
                 }
@@ -330,53 +355,105 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
     Ok(out)
 }
 
-/// Restores one section's GPU bytes from its stored bytes.
-pub fn restore(c: &Coding, stored: &[u8]) -> Result<Vec<u8>, Error> {
-    let err = |problem: String| Error::Coding { kind: c.kind, index: c.index, problem };
-    if c.raw_size > (stored.len() as u64).saturating_mul(MAX_RATIO) || !c.raw_size.is_multiple_of(c.filter.width() as u64) {
-        return Err(err(format!("claims {} restored bytes from {} stored", c.raw_size, stored.len())));
+/// Checks a record against its stored bytes before anything is allocated:
+/// a restored size no zstd frame of that size can reach is a lie.
+fn plausible(c: &Coding, stored: usize) -> Result<(), Error> {
+    if c.raw_size > (stored as u64).saturating_mul(MAX_RATIO) || !c.raw_size.is_multiple_of(c.filter.width() as u64) || c.raw_size > isize::MAX as u64 {
+        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("claims {} restored bytes from {stored} stored", c.raw_size) });
     }
-    let n = c.raw_size as usize;
-    let mut plain = Vec::new();
-    plain.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} restored bytes")))?;
-    let got = zstd::bulk::Decompressor::new()
-        .and_then(|mut d| d.decompress_to_buffer(stored, &mut plain))
-        .map_err(|e| err(format!("does not decompress ({e})")))?;
+    Ok(())
+}
+
+/// Restores one section's GPU bytes from its stored bytes into `out` (its
+/// restored size): decompressed in place when it has no filter, else into
+/// `scratch` and unfiltered from there; then checked against its checksum.
+fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>) -> Result<(), Error> {
+    let err = |problem: String| Error::Coding { kind: c.kind, index: c.index, problem };
+    let n = out.len();
+    let mut d = zstd::bulk::Decompressor::new().map_err(|e| err(format!("does not decompress ({e})")))?;
+    let got = match c.filter {
+        Filter::None => d.decompress_to_buffer(stored, out),
+        _ => {
+            scratch.clear();
+            scratch.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} restored bytes")))?;
+            d.decompress_to_buffer(stored, scratch)
+        }
+    }
+    .map_err(|e| err(format!("does not decompress to the {n} bytes the coding table says ({e})")))?;
     if got != n {
         return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
     }
-    let raw = match c.filter {
-        Filter::None => plain,
-        f => {
-            let mut out = vec![0u8; n];
-            f.undo(&plain, &mut out);
-            out
-        }
-    };
-    let computed = checksum(&raw);
+    if c.filter != Filter::None {
+        c.filter.undo(scratch, out);
+    }
+    let computed = checksum(out);
     if computed != c.raw_checksum {
         return Err(err(format!("restored checksum mismatch (stored {:#018x}, computed {computed:#018x})", c.raw_checksum)));
     }
-    Ok(raw)
+    Ok(())
 }
 
-/// Every section of a body restored (the coding section left out), in table order.
-pub fn restore_all(sections: Vec<(crate::SectionEntry, &[u8])>) -> Result<Vec<Section>, Error> {
+/// What a filter is judged on: a section of up to 1 MiB whole, a larger one
+/// by 16 chunks of 64 KiB spread over it (a multiple of every filter's width).
+fn sample(data: &[u8]) -> impl Iterator<Item = &[u8]> {
+    const CHUNK: usize = 64 << 10;
+    let (count, step) = if data.len() <= 1 << 20 { (1, 0) } else { (16, (data.len() - CHUNK) / 15 / CHUNK * CHUNK) };
+    (0..count).map(move |k| if count == 1 { data } else { &data[k * step..k * step + CHUNK] })
+}
+
+/// Restores one section's GPU bytes from its stored bytes.
+pub fn restore(c: &Coding, stored: &[u8]) -> Result<Vec<u8>, Error> {
+    plausible(c, stored.len())?;
+    let mut out = Vec::new();
+    out.try_reserve_exact(c.raw_size as usize).map_err(|_| Error::Coding { kind: c.kind, index: c.index, problem: format!("no memory for its {} restored bytes", c.raw_size) })?;
+    out.resize(c.raw_size as usize, 0);
+    restore_into(c, stored, &mut out, &mut Vec::new())?;
+    Ok(out)
+}
+
+/// A body's sections (as stored, in table order) restored into one new body
+/// laid out as the writer lays out a plain one (the coding section left
+/// out): its bytes in 8-byte words and its length. Each section is
+/// decompressed straight into its place, the sections in parallel.
+pub(crate) fn restore_body(sections: &[(crate::SectionEntry, &[u8])]) -> Result<(Vec<u64>, usize), Error> {
     let coding = sections.iter().find(|(e, _)| e.kind == kind::CODING && e.index == 0).map(|(_, b)| Coding::parse_all(b)).transpose()?.unwrap_or_default();
     let mut seen = std::collections::HashSet::new();
     for c in &coding {
-        if matches!(c.kind, kind::METADATA | kind::CODING) || !sections.iter().any(|(e, _)| (e.kind, e.index) == (c.kind, c.index)) || !seen.insert((c.kind, c.index)) {
-            return Err(Error::Coding { kind: c.kind, index: c.index, problem: "is not a section the coding table may name once".into() });
+        let stored = sections.iter().find(|(e, _)| (e.kind, e.index) == (c.kind, c.index)).map(|(_, b)| b.len());
+        match stored {
+            Some(len) if !matches!(c.kind, kind::METADATA | kind::CODING) && seen.insert((c.kind, c.index)) => plausible(c, len)?,
+            _ => return Err(Error::Coding { kind: c.kind, index: c.index, problem: "is not a section the coding table may name once".into() }),
         }
     }
-    sections
-        .into_par_iter()
-        .filter(|(e, _)| e.kind != kind::CODING)
-        .map(|(e, b)| match coding.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)) {
-            Some(c) => Ok(Section { kind: e.kind, index: e.index, data: restore(c, b)? }),
-            None => Ok(Section { kind: e.kind, index: e.index, data: b.to_vec() }),
-        })
-        .collect()
+    let parts: Vec<(crate::SectionEntry, &[u8], Option<&Coding>)> =
+        sections.iter().filter(|(e, _)| e.kind != kind::CODING).map(|(e, b)| (*e, *b, coding.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)))).collect();
+    // The restored table: each section at its restored size, with its restored checksum.
+    let entries: Vec<(u32, u32, usize, u64)> = parts.iter().map(|(e, b, c)| (e.kind, e.index, c.map_or(b.len(), |c| c.raw_size as usize), c.map_or(e.checksum, |c| c.raw_checksum))).collect();
+    let (head, offsets, len) = crate::head_of(&entries);
+    let mut words = Vec::new();
+    words.try_reserve_exact(len.div_ceil(8)).map_err(|_| Error::Invalid(format!("no memory for the {len} bytes of a restored segment")))?;
+    words.resize(len.div_ceil(8), 0u64);
+    let bytes = &mut bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..len];
+    bytes[..head.len()].copy_from_slice(&head);
+    // Disjoint places, in offset order.
+    let mut slots = Vec::with_capacity(parts.len());
+    let mut rest = &mut bytes[..];
+    let mut at = 0;
+    for ((_, stored, c), (&off, e)) in parts.iter().zip(offsets.iter().zip(&entries)) {
+        let (_, tail) = std::mem::take(&mut rest).split_at_mut(off - at);
+        let (slot, tail) = tail.split_at_mut(e.2);
+        slots.push((slot, *stored, *c));
+        rest = tail;
+        at = off + e.2;
+    }
+    slots.into_par_iter().try_for_each_init(Vec::new, |scratch, (slot, stored, c)| match c {
+        Some(c) => restore_into(c, stored, slot, scratch),
+        None => {
+            slot.copy_from_slice(stored);
+            Ok(())
+        }
+    })?;
+    Ok((words, len))
 }
 
 /// Writes `asset` again with its sections stored as `to` says (each segment

@@ -455,13 +455,18 @@ fn align(n: usize) -> usize {
 
 /// Offsets of each section, the table's end and the file's length.
 fn plan(sections: &[Section]) -> (Vec<usize>, usize, usize) {
-    let table_end = HEADER_LEN + ENTRY_LEN * sections.len();
-    let mut offsets = Vec::with_capacity(sections.len());
+    plan_lens(sections.iter().map(|s| s.data.len()))
+}
+
+/// [`plan`] of sections of these lengths.
+fn plan_lens(lens: impl ExactSizeIterator<Item = usize>) -> (Vec<usize>, usize, usize) {
+    let table_end = HEADER_LEN + ENTRY_LEN * lens.len();
+    let mut offsets = Vec::with_capacity(lens.len());
     let mut pos = align(table_end);
     let mut end = pos;
-    for s in sections {
+    for len in lens {
         offsets.push(pos);
-        end = pos + s.data.len();
+        end = pos + len;
         pos = align(end);
     }
     (offsets, table_end, end)
@@ -480,23 +485,30 @@ pub fn write_to<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section]) -> 
 
 /// A body's header and section table (every section's checksum computed once, here).
 pub(crate) fn body_head(sections: &[Section]) -> Vec<u8> {
-    let (offsets, table_end, total) = plan(sections);
+    let entries: Vec<(u32, u32, usize, u64)> = sections.iter().map(|s| (s.kind, s.index, s.data.len(), checksum(&s.data))).collect();
+    head_of(&entries).0
+}
+
+/// The header and section table of a body of sections (kind, index, length,
+/// checksum), the offset of each and the body's length.
+pub(crate) fn head_of(entries: &[(u32, u32, usize, u64)]) -> (Vec<u8>, Vec<usize>, usize) {
+    let (offsets, table_end, total) = plan_lens(entries.iter().map(|e| e.2));
     let mut head = vec![0u8; table_end];
     head[..8].copy_from_slice(&MAGIC);
     head[8..12].copy_from_slice(&segments::BODY_VERSION.to_le_bytes());
-    head[16..20].copy_from_slice(&(sections.len() as u32).to_le_bytes());
+    head[16..20].copy_from_slice(&(entries.len() as u32).to_le_bytes());
     head[24..32].copy_from_slice(&(total as u64).to_le_bytes());
-    for (i, (s, &off)) in sections.iter().zip(&offsets).enumerate() {
+    for (i, (&(kind, index, len, sum), &off)) in entries.iter().zip(&offsets).enumerate() {
         let e = HEADER_LEN + i * ENTRY_LEN;
-        head[e..e + 4].copy_from_slice(&s.kind.to_le_bytes());
-        head[e + 4..e + 8].copy_from_slice(&s.index.to_le_bytes());
+        head[e..e + 4].copy_from_slice(&kind.to_le_bytes());
+        head[e + 4..e + 8].copy_from_slice(&index.to_le_bytes());
         head[e + 8..e + 16].copy_from_slice(&(off as u64).to_le_bytes());
-        head[e + 16..e + 24].copy_from_slice(&(s.data.len() as u64).to_le_bytes());
-        head[e + 24..e + 32].copy_from_slice(&checksum(&s.data).to_le_bytes());
+        head[e + 16..e + 24].copy_from_slice(&(len as u64).to_le_bytes());
+        head[e + 24..e + 32].copy_from_slice(&sum.to_le_bytes());
     }
     let h = header_checksum(&head[..32], &head[HEADER_LEN..table_end]);
     head[32..40].copy_from_slice(&h.to_le_bytes());
-    head
+    (head, offsets, total)
 }
 
 /// Writes a body: its `head` ([`body_head`]), then its sections.
