@@ -10,7 +10,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 . scripts/debian-packages.sh
-need python3-openvdb python3-numpy python3-pil python3-xxhash libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1 python3-junitparser chromium make g++
+need python3-openvdb python3-numpy python3-pil python3-xxhash python3-zstandard libopenvdb-tools libnanovdb-tools libblosc1 mesa-vulkan-drivers libvulkan1 python3-junitparser chromium make g++
 
 # Mesa's Vulkan loader wants a runtime directory; the GPU tests run on its
 # CPU driver (lavapipe) when there is no GPU.

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (versions 7 and 6).
+"""Independent reader for vdbcook's `.vpak` volume asset format (versions 8, 7 and 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -12,13 +12,15 @@ frame's active voxels (every active voxel of every L3 node and every voxel of ev
 tile), sorted by i, then j, then k, at the asset's first stored level (0, the frame
 itself, unless the cook left finer levels out). With `--lod K`, the frame's level K, in
 that level's index space (level index = level asset index + index_offset >> K). `--json` prints a summary of the metadata.
-Frame N of a version-7 file is read from its segment's body alone.
+Frame N of a version-7 or 8 file is read from its segment's body alone; a version-8
+body's supercompressed sections are restored (scripts/vpak_coding.py) before use.
 
-As a module: `open_segments(path)` opens a version-6 or 7 file (every body validated,
+As a module: `open_segments(path)` opens a version-6, 7 or 8 file (every body validated,
 every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
 `open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
-Dependencies (Debian): python3-numpy, python3-pil (BC7 blocks), python3-xxhash.
+Dependencies (Debian): python3-numpy, python3-pil (BC7 blocks), python3-xxhash,
+python3-zstandard (version-8 assets with supercompressed sections).
 Bad input exits with status 1 and one line `vpak_read.py: FILE: problem` on stderr.
 """
 
@@ -30,8 +32,10 @@ import sys
 
 import numpy as np
 
+from vpak_coding import K_CODING, CodingError, parse_records, restore
+
 MAGIC = b"VPAK\r\n\x1a\n"
-BODY_VERSION, SEGMENTED_VERSION = 6, 7
+BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION = 6, 7, 8
 MAX_LEVELS = 5
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
@@ -142,10 +146,11 @@ def read_header(buf):
 
 
 class Sections:
-    """Section bytes by (kind, index), checksum verified on first use."""
+    """Section bytes by (kind, index), checksum verified on first use; a supercompressed
+    section (named in `coding`) restored, and its restored checksum verified, on first use."""
 
     def __init__(self, buf, table):
-        self.buf, self.table, self.checked = buf, table, set()
+        self.buf, self.table, self.checked, self.coding, self.restored = buf, table, set(), {}, {}
 
     def get(self, kind, index=0):
         if (kind, index) not in self.table:
@@ -156,6 +161,13 @@ class Sections:
             if xxh3_64(data) != checksum:
                 raise VpakError(f"checksum mismatch in section kind {kind} index {index}")
             self.checked.add((kind, index))
+        if (kind, index) in self.coding:
+            if (kind, index) not in self.restored:
+                try:
+                    self.restored[(kind, index)] = restore(data, self.coding[(kind, index)], xxh3_64)
+                except CodingError as e:
+                    raise VpakError(f"section kind {kind} index {index}: {e}") from None
+            return self.restored[(kind, index)]
         return data
 
     def u32(self, kind, index=0):
@@ -396,6 +408,9 @@ def validate_plane(m, secs, p, pl):
             raise VpakError(f"plane {p}: last atlas's bricks cannot be placed with the first atlas's shape")
     if first != bricks:
         raise VpakError(f"plane {p}: atlases do not cover the plane's bricks")
+    for a in range(len(atlases)):
+        if len(secs.get(K_ATLAS, atlas_section(m, p, a))) != texture_shape(pl, a)[3]:
+            raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
 
 
 # ---------------------------------------------------------------------------
@@ -578,23 +593,28 @@ def blocks_to_texture(texels, W, H, D):
     return t.transpose(0, 1, 3, 2, 4, 5).reshape(D, H, W, lanes)
 
 
+def texture_shape(pl, a):
+    """(W, H, D) texels of atlas a of plane `pl`, and its bytes (format.md, "Validation")."""
+    bx, by, bz = pl["atlases"][a]["bricks"]
+    W, H, D = 8 * bx, 8 * by, (8 // pl["z_per_texel"]) * bz
+    if pl["format"] in (BC4, BC7):
+        return W, H, D, (W // 4) * (H // 4) * D * (8 if pl["format"] == BC4 else 16)
+    return W, H, D, W * H * D * pl["lanes"] * {F32: 4, F16: 2, UNORM8: 1, UNORM16: 2}[pl["format"]]
+
+
 def load_plane_texture(secs, m, p, a):
     """Plane p of atlas a as a float32 array [z, y, x, lane] of levels or values."""
     pl = m["planes"][p]
-    fmt, lanes, zpt = pl["format"], pl["lanes"], pl["z_per_texel"]
-    bx, by, bz = pl["atlases"][a]["bricks"]
-    W, H, D = 8 * bx, 8 * by, (8 // zpt) * bz
+    fmt, lanes = pl["format"], pl["lanes"]
+    W, H, D, size = texture_shape(pl, a)
     data = secs.get(K_ATLAS, atlas_section(m, p, a))
+    if len(data) != size:
+        raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
     if fmt in (F32, F16, UNORM8, UNORM16):
-        dtype, size = {F32: ("<f4", 4), F16: ("<f2", 2), UNORM8: ("u1", 1), UNORM16: ("<u2", 2)}[fmt]
-        if len(data) != W * H * D * lanes * size:
-            raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
+        dtype = {F32: "<f4", F16: "<f2", UNORM8: "u1", UNORM16: "<u2"}[fmt]
         tex = np.frombuffer(data, dtype=dtype).reshape(D, H, W, lanes).astype(np.float32)
         scale = {UNORM8: 255, UNORM16: 65535}.get(fmt)
         return tex / np.float32(scale) if scale else tex
-    B = 8 if fmt == BC4 else 16
-    if W % 4 or H % 4 or len(data) != (W // 4) * (H // 4) * D * B:
-        raise VpakError(f"plane {p} atlas {a} texture has the wrong size")
     return decode_bc4(data, W, H, D) if fmt == BC4 else decode_bc7(data, W, H, D)
 
 
@@ -734,9 +754,10 @@ SHARED = ("tool", "settings", "map_type", "transform", "levels", "first_level", 
 SHARED_CHANNEL = ("name", "grid", "component", "value_type", "class", "group")
 
 
-def open_body(buf, head_sum=None):
+def open_body(buf, head_sum=None, coded=False):
     """(metadata, sections) of a body validated as a version-6 file, every checksum verified;
-    `head_sum`: the segment table's checksum of its header and section table."""
+    `head_sum`: the segment table's checksum of its header and section table; `coded`: a
+    version-8 body, whose supercompressed sections are restored and checked here."""
     secs = Sections(buf, read_header(buf))
     if head_sum is not None and xxh3_64(buf[:HEADER_SIZE + 32 * len(secs.table)]) != head_sum:
         raise VpakError("its header and section table are not the ones the segment table names")
@@ -744,6 +765,15 @@ def open_body(buf, head_sum=None):
     # whichever frame is asked for, not only when the damaged bytes are used.
     for kind, index in secs.table:
         secs.get(kind, index)
+    if any(kind == K_CODING for kind, _ in secs.table) and not coded:
+        raise VpakError("a coding section (kind 13) outside a version-8 file")
+    if (K_CODING, 0) in secs.table:  # (another index of kind 13 is not one the page defines: ignored)
+        try:
+            secs.coding = parse_records(secs.get(K_CODING), secs.table)
+        except CodingError as e:
+            raise VpakError(str(e)) from None
+        for kind, index in secs.table:  # restore every compressed section, checking each
+            secs.get(kind, index)
     m = decode_metadata(secs.get(K_METADATA))
     validate(m, secs)
     return m, secs
@@ -752,7 +782,7 @@ def open_body(buf, head_sum=None):
 def check_segment_table(buf, table):
     """Bodies inside the file at 256-byte boundaries, in order, frames counted on without a gap."""
     if not table:
-        raise VpakError("a version-7 file of 0 segments")
+        raise VpakError("a segmented file of 0 segments")
     at, frame = HEADER_SIZE + 32 * len(table), 0
     for s, (first, count, offset, size, _) in enumerate(table):
         if offset % SECTION_ALIGN or offset < at or offset + size > len(buf):
@@ -805,12 +835,12 @@ def merged(metas):
 
 
 class Asset:
-    """A version-6 or 7 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
+    """A version-6, 7 or 8 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
     and `bodies` [(metadata, sections)] per segment (frames numbered from 0 in each), `meta`
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
     def __init__(self, buf):
-        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION), "file")
+        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION), "file")
         if self.version == BODY_VERSION:
             self.bodies = [open_body(buf)]
             self.meta = self.bodies[0][0]
@@ -820,7 +850,7 @@ class Asset:
         self.table, self.bodies = table, []
         for s, (_, count, offset, size, head_sum) in enumerate(table):
             try:
-                m, secs = open_body(buf[offset:offset + size], head_sum)
+                m, secs = open_body(buf[offset:offset + size], head_sum, self.version == CODED_VERSION)
                 if m["frame_count"] != count:
                     raise VpakError(f"its metadata has {m['frame_count']} frames, the segment table {count}")
             except VpakError as e:
@@ -849,7 +879,7 @@ class Asset:
 
 
 def open_segments(path):
-    """A version-6 or 7 file as an `Asset`, every body validated."""
+    """A version-6, 7 or 8 file as an `Asset`, every body validated (and restored)."""
     try:
         with open(path, "rb") as f:
             buf = memoryview(f.read())
@@ -859,7 +889,7 @@ def open_segments(path):
 
 
 def open_asset(path):
-    """(metadata, sections) of a file of one body: version 6, or version 7 of one segment."""
+    """(metadata, sections) of a file of one body: version 6, or version 7 or 8 of one segment."""
     a = open_segments(path)
     if len(a.bodies) != 1:
         raise VpakError(f"the asset has {len(a.bodies)} segments: read it with open_segments")

@@ -1,8 +1,9 @@
 //! The specification is complete: `scripts/vpak_read.py`, written from
-//! docs/format.md alone (numpy, Pillow, xxhash; nothing shared with the Rust),
+//! docs/format.md alone (numpy, Pillow, xxhash, zstandard; nothing shared with the Rust),
 //! decodes every channel of every frame of assets in each format and packing,
 //! and gives the values `vdbcook unpack` writes (read back by OpenVDB), voxel
-//! by voxel, over the same active voxels.
+//! by voxel, over the same active voxels; version-8 assets with supercompressed
+//! sections included (the reader restores them from the page's "Supercompression").
 
 mod common;
 use common::*;
@@ -21,8 +22,8 @@ fn python(args: &[&str]) -> std::process::Output {
 
 /// The reader's Python modules are there (CI: they must be).
 fn reader_available() -> bool {
-    let ok = python(&["-c", "import numpy, PIL, xxhash, pyopenvdb"]).status.success();
-    assert!(ok || !in_ci(), "CI=true but /usr/bin/python3 lacks numpy, PIL, xxhash or pyopenvdb (scripts/test.sh installs them)");
+    let ok = python(&["-c", "import numpy, PIL, xxhash, zstandard, pyopenvdb"]).status.success();
+    assert!(ok || !in_ci(), "CI=true but /usr/bin/python3 lacks numpy, PIL, xxhash, zstandard or pyopenvdb (scripts/test.sh installs them)");
     ok
 }
 
@@ -69,22 +70,32 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
         (vec![smoke.clone()], vec!["--max-error", "0.001"]),
         // Segments (version 7): each frame read from its own segment's body.
         (vec![smoke.clone()], vec!["--max-error", "0.004", "--segment-frames", "3"]),
-        (vec![smoke], vec!["--max-error", "0.004", "--max-texture-dim", "16"]),
+        (vec![smoke.clone()], vec!["--max-error", "0.004", "--max-texture-dim", "16"]),
         (vec![w.clone()], vec!["--grids", "density,velocity", "--format", "unorm16"]),
         (vec![w.clone()], vec!["--grids", "all", "--format", "f16"]),
         (vec![w.clone()], vec!["--grids", "all", "--format", "unorm8", "--max-texture-dim", "16"]),
         (vec![w.clone()], vec!["--grids", "density,temperature,flame,shadow", "--format", "bc7"]),
         (vec![w.clone()], vec!["--grids", "density,temperature,velocity", "--format", "bc4", "--group", "velocity=f32", "--group", "density,temperature=bc7"]),
-        (vec![w], vec!["--grids", "density,shadow,temperature,flame", "--format", "f16", "--group", "density,shadow,temperature,flame=bc7"]),
+        (vec![w.clone()], vec!["--grids", "density,shadow,temperature,flame", "--format", "f16", "--group", "density,shadow,temperature,flame=bc7"]),
         (e.clone(), vec!["--grids", "all", "--format", "bc7"]),
         (e.clone(), vec!["--grids", "all", "--format", "unorm8", "--group", "flames=bc4"]),
         (e.clone(), vec!["--grids", "all", "--format", "bc7", "--segment-frames", "2"]),
-        (e, vec!["--grids", "all", "--max-error", "0.02"]),
+        (e.clone(), vec!["--grids", "all", "--max-error", "0.02"]),
         (vec![tiles.clone()], vec!["--format", "f16"]),
         (vec![tiles], vec!["--max-error", "0.002"]),
         (vec![wide.clone()], vec!["--format", "f16"]),
         (vec![wide.clone()], vec!["--format", "bc4", "--lods", "3"]),
-        (vec![wide], vec!["--format", "f16", "--lods", "2", "--segment-frames", "1"]),
+        (vec![wide.clone()], vec!["--format", "f16", "--lods", "2", "--segment-frames", "1"]),
+        // Supercompressed sections (version 8): every format, packings and groups,
+        // per-brick formats, levels of detail, several segments, a high zstd level.
+        (vec![smoke.clone()], vec!["--format", "f32", "--supercompress", "zstd", "--segment-frames", "3"]),
+        (vec![smoke.clone()], vec!["--format", "f16", "--supercompress", "zstd:19"]),
+        (vec![smoke], vec!["--max-error", "0.004", "--supercompress", "zstd", "--segment-frames", "2", "--lods", "2"]),
+        (vec![w.clone()], vec!["--grids", "density,velocity", "--format", "unorm16", "--supercompress", "zstd"]),
+        (vec![w], vec!["--grids", "density,temperature,velocity", "--format", "bc4", "--group", "velocity=f32", "--group", "density,temperature=bc7", "--supercompress", "zstd"]),
+        (e.clone(), vec!["--grids", "all", "--format", "unorm8", "--group", "flames=bc4", "--supercompress", "zstd:19", "--segment-frames", "2"]),
+        (e, vec!["--grids", "all", "--max-error", "0.02", "--supercompress", "zstd", "--segment-frames", "2"]),
+        (vec![wide], vec!["--format", "bc4", "--lods", "3", "--supercompress", "zstd"]),
     ];
     let dir = scratch();
     let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |(k, (inputs, flags))| -> Result<usize, String> {
@@ -95,6 +106,18 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
         let r = vdbcook(&args);
         if !r.status.success() {
             return Err(format!("{flags:?}: cook failed: {}", String::from_utf8_lossy(&r.stderr)));
+        }
+        if flags.contains(&"--supercompress") {
+            // The reader restored sections in every segment (not a file stored as it is).
+            let coded = python(&[
+                "-c",
+                "import sys; sys.path.insert(0, 'scripts'); import vpak_read as v; a = v.open_segments(sys.argv[1]); print(a.version, min(len(s.coding) for _, s in a.bodies))",
+                s(&asset),
+            ]);
+            let said = String::from_utf8_lossy(&coded.stdout);
+            if !said.starts_with("8 ") || said.trim().ends_with(" 0") {
+                return Err(format!("{flags:?}: not supercompressed in every segment (version, fewest records: {said}) {}", String::from_utf8_lossy(&coded.stderr)));
+            }
         }
         let meta: serde_json::Value = serde_json::from_slice(&vdbcook(&["inspect", "--json", s(&asset)]).stdout).unwrap();
         let meta = &meta["files"][0];
@@ -144,4 +167,28 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
     }
     let _ = std::fs::remove_dir_all(&dir);
     assert!(total > 500_000, "{total} values compared");
+}
+
+/// Files built and damaged in Python from what vdbcook cooks: segmented files
+/// (scripts/test_vpak_segments.py), and supercompressed ones
+/// (scripts/test_vpak_coding.py: restored sections equal `recompress
+/// --supercompress none`'s, every filter the page allows decodes, corrupt coding
+/// (truncated or bit-flipped frames, a restored size that lies, broken records)
+/// refused in one line).
+fn python_check(script: &str) {
+    if !reader_available() {
+        return;
+    }
+    let out = python(&[script, "--vdbcook", env!("CARGO_BIN_EXE_vdbcook")]);
+    assert!(out.status.success(), "{script}: {}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn the_spec_only_reader_reads_segmented_files_and_refuses_damaged_ones() {
+    python_check("scripts/test_vpak_segments.py");
+}
+
+#[test]
+fn the_spec_only_reader_restores_supercompressed_sections_and_refuses_corrupt_ones() {
+    python_check("scripts/test_vpak_coding.py");
 }

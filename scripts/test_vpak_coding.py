@@ -1,0 +1,297 @@
+#!/usr/bin/python3
+"""Tests scripts/vpak_read.py on version-8 files with supercompressed sections
+(docs/format.md, "Supercompression").
+
+    /usr/bin/python3 scripts/test_vpak_coding.py [--vdbcook PATH]
+
+Cooks fixtures/smoke_seq with `--supercompress zstd` (several formats, levels and
+segments) and rewrites each with `vdbcook recompress --supercompress none`: every
+restored section must be the uncompressed asset's, byte for byte, and every frame decode
+alike. Then files rewritten here with every filter the page allows (its own forward
+filters, not the reader's) must decode alike too, and corrupt or rule-breaking coding
+must be refused with the rule's message. Everything is written to a temporary
+directory, removed at the end. Exit status 0 when every check passes.
+"""
+
+import argparse
+import os
+import struct
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+import zstandard
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+import vpak_read as v  # noqa: E402
+from vpak_coding import FILTER_NAMES  # noqa: E402
+from test_vpak_segments import container, reseal, refused, same_frame, up, xxh  # noqa: E402
+
+FIXTURE = os.path.join(ROOT, "fixtures", "smoke_seq")
+K_CODING = 13
+
+
+def sections_of(body):
+    """The body's sections as stored, in table order: [kind, index, bytes]."""
+    n = struct.unpack_from("<I", body, 16)[0]
+    out = []
+    for i in range(n):
+        kind, index, off, size, _ = struct.unpack_from("<IIQQQ", body, 64 + 32 * i)
+        out.append([kind, index, bytes(body[off:off + size])])
+    return out
+
+
+def make_body(sections):
+    """A version-6 body of `sections` [kind, index, bytes], each at the next 256-byte boundary."""
+    at, table = up(64 + 32 * len(sections)), []
+    for kind, index, data in sections:
+        table.append((kind, index, at, len(data), xxh(data)))
+        at = up(at + len(data))
+    out = bytearray(max([64 + 32 * len(sections)] + [e[2] + e[3] for e in table]))
+    out[0:8] = v.MAGIC
+    struct.pack_into("<IIIIQ", out, 8, 6, 0, len(sections), 0, len(out))
+    for i, e in enumerate(table):
+        struct.pack_into("<IIQQQ", out, 64 + 32 * i, *e)
+        out[e[2]:e[2] + e[3]] = sections[i][2]
+    return reseal(out)
+
+
+def make_file(bodies, version=8):
+    """A file of `bodies` (segments), of the given version."""
+    out = bytearray(container(bodies))
+    struct.pack_into("<I", out, 8, version)
+    return reseal(out)
+
+
+def bodies_of(data):
+    """The bodies of a segmented file, as the segment table places them (not validated)."""
+    _, table = v.read_table(memoryview(data), (7, 8), "file")
+    return [bytes(data[e[2]:e[2] + e[3]]) for e in table]
+
+
+def records_of(sections):
+    coding = [d for k, _, d in sections if k == K_CODING]
+    if not coding:
+        return {}
+    recs = [list(struct.unpack_from("<IIIIIIQQ", coding[0], 40 * r)) for r in range(len(coding[0]) // 40)]
+    return {(r[0], r[1]): r for r in recs}
+
+
+def coding_bytes(recs):
+    return b"".join(struct.pack("<IIIIIIQQ", *r) for r in recs)
+
+
+def shuffle(data, w):
+    """Forward shuffle: byte j of every w-byte element together."""
+    return np.frombuffer(data, np.uint8).reshape(len(data) // w, w).T.tobytes()
+
+
+def delta(data, w, s):
+    """Forward delta: d[i] = x[i] - x[i - s] (mod 2^(8w)) for i >= s, then shuffled."""
+    x = np.frombuffer(data, {1: "<u1", 2: "<u2", 4: "<u4"}[w]).astype(np.int64)
+    d = x.copy()
+    d[s:] = (x[s:] - x[:-s]) % (1 << (8 * w)) if s < len(x) else d[s:]
+    return shuffle(d.astype({1: "<u1", 2: "<u2", 4: "<u4"}[w]).tobytes(), w)
+
+
+def cook(vdbcook, work, tag, flags):
+    path = os.path.join(work, f"{tag}.vpak")
+    subprocess.run([vdbcook, "cook", "-q", "--force", "-o", path, FIXTURE, *flags], check=True)
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def recompress(vdbcook, work, data, coding):
+    src, dst = os.path.join(work, "in.vpak"), os.path.join(work, "out.vpak")
+    with open(src, "wb") as f:
+        f.write(data)
+    subprocess.run([vdbcook, "recompress", "-q", "--force", src, "-o", dst, "--supercompress", coding], check=True)
+    with open(dst, "rb") as f:
+        return f.read()
+
+
+def same_asset(a, b, frames=4):
+    """Two files decode alike: same segments, every frame and level equal."""
+    x, y = v.Asset(memoryview(a)), v.Asset(memoryview(b))
+    assert [e[:2] for e in x.table] == [e[:2] for e in y.table]
+    for lod in range(x.meta["first_level"], x.meta["levels"]):
+        for f in range(frames):
+            same_frame(x.read_frame(f, lod), y.read_frame(f, lod))
+    return x, y
+
+
+def check_restores(vdbcook, work, flags):
+    """A vdbcook zstd asset restores exactly the sections of the same asset uncompressed."""
+    packed = cook(vdbcook, work, "z", ["--supercompress", "zstd", *flags])
+    plain = recompress(vdbcook, work, packed, "none")
+    assert struct.unpack_from("<I", packed, 8)[0] == 8
+    z, p = same_asset(packed, plain)
+    filters = set()
+    for (mz, sz), (_, sp), body in zip(z.bodies, p.bodies, bodies_of(packed)):
+        assert (K_CODING, 0) not in sp.table, "recompress --supercompress none left a coding section"
+        recs = records_of(sections_of(body))
+        assert recs, f"{flags}: no section supercompressed"
+        filters |= {(r[3], r[4]) for r in recs.values()}
+        for key in sp.table:
+            if key[0] != v.K_METADATA:  # the metadata records the supercompress setting
+                assert bytes(sz.get(*key)) == bytes(sp.get(*key)), f"{flags}: section {key} restored differs"
+        assert set(sz.table) - {(K_CODING, 0)} == set(sp.table)
+        stored = sum(sz.table[k][1] for k in recs)
+        assert stored < sum(r[6] for r in recs.values()), "compressed sections not smaller than restored"
+    return packed, plain, filters
+
+
+def check_every_filter(plain):
+    """Sections compressed here with every allowed filter (forward filters written from the
+    page) decode as the plain asset does."""
+    variants = [(0, 1, 0)] + [(1, w, 0) for w in (1, 2, 4, 8, 16)] + [(2, w, s) for w in (1, 2, 4) for s in (1, 3, 4096)]
+    bodies, used, k = [], set(), 0
+    for body in bodies_of(plain):
+        secs, recs = sections_of(body), []
+        for sec in secs:
+            kind, index, data = sec
+            if kind == v.K_METADATA or not data:
+                continue
+            # The first filter not yet used that fits the section (else any that fits).
+            fits = [x for x in variants if len(data) % x[1] == 0]
+            filt, w, s = next((x for x in fits if x not in used), fits[k % len(fits)])
+            k += 1
+            used.add((filt, w, s))
+            f = data if filt == 0 else shuffle(data, w) if filt == 1 else delta(data, w, s)
+            # Frames with and without their content size in the header.
+            sec[2] = zstandard.ZstdCompressor(level=3, write_content_size=k % 2 == 0).compress(f)
+            recs.append((kind, index, 1, filt, w, s, len(data), xxh(data)))
+        bodies.append(make_body(secs + [[K_CODING, 0, coding_bytes(recs)]]))
+    assert len(used) == len(variants), f"only {len(used)} of {len(variants)} filters used"
+    same_asset(make_file(bodies), plain)
+
+
+def with_body(packed, edit, seg=0):
+    """`packed` rebuilt with segment `seg`'s sections (a list of [kind, index, bytes]) edited."""
+    bodies = bodies_of(packed)
+    secs = sections_of(bodies[seg])
+    edit(secs)
+    bodies[seg] = make_body(secs)
+    return make_file(bodies)
+
+
+def edit_section(kind, fn):
+    """An edit of the first compressed section of `kind` (its stored bytes)."""
+    def edit(secs):
+        recs = records_of(secs)
+        sec = next(s for s in secs if (s[0], s[1]) in recs and s[0] == kind)
+        sec[2] = fn(sec[2])
+    return edit
+
+
+def edit_record(fn):
+    """An edit of the coding records (list of [kind, index, scheme, filter, w, s, n, checksum])."""
+    def edit(secs):
+        recs = list(records_of(secs).values())
+        fn(recs)
+        next(s for s in secs if s[0] == K_CODING)[2] = coding_bytes(recs)
+    return edit
+
+
+def check_refusals(packed, plain, work):
+    # The file rebuilt by this script's writer, unedited, reads alike (the helpers are sound).
+    same_asset(with_body(packed, lambda secs: None), plain)
+    recs = records_of(sections_of(bodies_of(packed)[0]))
+    atlas = min(k for k in recs if k[0] == v.K_ATLAS)  # an atlas vdbcook compressed
+    at = lambda f: edit_section(v.K_ATLAS, f)
+    refused(with_body(packed, at(lambda d: d[:-5])), "section kind 10 index")
+    refused(with_body(packed, at(lambda d: d[:len(d) // 2])), "zstd frame")
+    refused(with_body(packed, at(lambda d: d + b"\0\0\0\1")), "bytes follow its zstd frame")
+    refused(with_body(packed, at(lambda d: d + zstandard.ZstdCompressor().compress(b"more"))), "bytes follow its zstd frame")
+    flipped = 0
+    for i in range(20, 4000, 131):
+        def flip(d, i=i):
+            d = bytearray(d)
+            d[i % len(d)] ^= 0x04
+            return bytes(d)
+        refused(with_body(packed, at(flip)), "section kind 10 index")
+        flipped += 1
+    # The record's facts: restored size, checksum, scheme, filters, names.
+    def rec(f):
+        def edit(recs):
+            r = next(r for r in recs if (r[0], r[1]) == atlas)
+            f(r)
+        return edit_record(edit)
+    n = recs[atlas][6]
+    w = recs[atlas][4]
+    refused(with_body(packed, rec(lambda r: r.__setitem__(6, n + w))), f"record says {n + w}")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(6, n - w))), f"record says {n - w}")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(6, (1 << 40) * w))), "more than a")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(7, r[7] ^ 1))), "restored bytes do not match")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(2, 2))), "scheme 2")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(3, 3))), "filter 3")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [0, 2, 0]))), "filter 0 with width 2")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [1, 3, 0]))), "filter 1 with width 3")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [1, 4, 1]))), "filter 1 with width 4 and stride 1")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [2, 8, 1]))), "filter 2 with width 8")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [2, 4, 0]))), "stride 0")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [2, 4, 4097]))), "stride 4097")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 7), [1, 16, 0, 16 * (n // 16) + 8]))), "not a multiple of the width 16")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(1, 999))), "names a section the body does not hold")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(slice(0, 2), [1, 0]))), "never compressed")
+    refused(with_body(packed, edit_record(lambda rs: rs.append(list(rs[0])))), "named before")
+    refused(with_body(packed, edit_record(lambda rs: rs.clear())), "without records")
+    def short(secs):
+        c = next(s for s in secs if s[0] == K_CODING)
+        c[2] = c[2][:-1]
+    refused(with_body(packed, short), "not whole 40-byte records")
+    # Kind 13 of another index is no coding section: ignored, as sections of unknown kinds are.
+    same_asset(with_body(packed, lambda secs: secs.extend([[K_CODING, 1, b"x"], [99, 0, b"y"]])), plain)
+    # A section no record names is stored as it is: drop a record and the stored zstd
+    # frame is taken as the section, which then fails validation (or its use).
+    refused(with_body(packed, edit_record(lambda rs: rs.remove(next(r for r in rs if (r[0], r[1]) == atlas)))), "texture has the wrong size")
+    # A frame without its content size that decodes to more, or fewer, bytes than the record says.
+    def unsized(lie):
+        def edit(secs):
+            sec = next(s for s in secs if (s[0], s[1]) == atlas)
+            rec = (*atlas, 1, 0, 1, 0, len(sec[2]) + lie, xxh(sec[2]))
+            sec[2] = zstandard.ZstdCompressor(write_content_size=False).compress(sec[2])
+            secs.append([K_CODING, 0, coding_bytes([rec])])
+        return edit
+    plain_secs = sections_of(bodies_of(plain)[0])
+    n0 = len(next(d for k, i, d in plain_secs if (k, i) == atlas))
+    refused(with_body(plain, unsized(-1)), f"decodes to more than the record's {n0 - 1} bytes")
+    refused(with_body(plain, unsized(1)), f"decodes to {n0} bytes, the record says {n0 + 1}")
+    # Supercompression is version 8 only.
+    refused(make_file(bodies_of(packed), version=7), "outside a version-8 file")
+    refused(bodies_of(packed)[0], "outside a version-8 file")
+    # Segment 1 too, and the command line: one line naming the file and the problem.
+    segs = len(bodies_of(packed))
+    bad = with_body(packed, rec(lambda r: r.__setitem__(6, n + w)), seg=segs - 1) if segs == 1 else \
+        with_body(packed, edit_record(lambda rs: rs[0].__setitem__(7, rs[0][7] ^ 1)), seg=1)
+    path = os.path.join(work, "bad.vpak")
+    with open(path, "wb") as f:
+        f.write(bad)
+    r = subprocess.run([sys.executable, os.path.join(ROOT, "scripts", "vpak_read.py"), path, "--frame", "0"], capture_output=True, text=True)
+    assert r.returncode == 1 and r.stderr.count("\n") == 1 and r.stderr.startswith(f"vpak_read.py: {path}: segment {segs - 1}: section kind"), r.stderr
+    return flipped
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vdbcook", default=os.environ.get("VDBCOOK", os.path.join(ROOT, "target", "release", "vdbcook")))
+    args = ap.parse_args()
+    filters = set()
+    with tempfile.TemporaryDirectory(prefix="vpak-coding-") as work:
+        for flags in (["--format", "f16", "--segment-frames", "2"], ["--max-error", "0.004", "--lods", "2"],
+                      ["--format", "bc7", "--segment-frames", "3"], ["--format", "unorm8"]):
+            packed, plain, used = check_restores(args.vdbcook, work, flags)
+            filters |= used
+            if flags[:2] == ["--format", "f16"]:
+                kept = packed, plain
+        check_every_filter(kept[1])
+        flips = check_refusals(*kept, work)
+    names = sorted(f"{FILTER_NAMES[f]}/{w}" for f, w in filters)
+    print(f"ok: 4 supercompressed cooks restore the uncompressed sections (filter/width used: {', '.join(names)}); "
+          f"every allowed filter decodes; corrupt coding refused ({flips} flipped compressed bytes)")
+
+
+if __name__ == "__main__":
+    main()
