@@ -767,7 +767,9 @@ def open_body(buf, head_sum=None, coded=False):
         secs.get(kind, index)
     if any(kind == K_CODING for kind, _ in secs.table) and not coded:
         raise VpakError("a coding section (kind 13) outside a version-8 file")
-    if (K_CODING, 0) in secs.table:  # (another index of kind 13 is not one the page defines: ignored)
+    if any(kind == K_CODING and index != 0 for kind, index in secs.table):
+        raise VpakError("a coding section (kind 13) of an index other than 0")
+    if (K_CODING, 0) in secs.table:
         try:
             secs.coding = parse_records(secs.get(K_CODING), secs.table)
         except CodingError as e:

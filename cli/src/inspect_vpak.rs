@@ -3,8 +3,8 @@
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::path::Path;
-use vdbcook_vpak::nodes::{l1_records, l3_node_count, L2_WORDS};
 use vdbcook_vpak::coding::Coding;
+use vdbcook_vpak::nodes::{l1_records, l3_node_count, L2_WORDS};
 use vdbcook_vpak::{kind, Asset, AtlasLayout, Checked};
 
 pub enum Described {
@@ -82,7 +82,9 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let asset = Asset::open(path).with_context(|| name.clone())?;
     let table = asset.segments().with_context(|| name.clone())?;
     let bodies = (0..asset.segment_count())
-        .map(|s| asset.stored_segment(s).and_then(|seg| body(&seg, &seg.restored()?, table[s].offset)).map_err(|e| if asset.is_segmented() { vdbcook_vpak::Error::InSegment(s, Box::new(e)) } else { e }))
+        .map(|s| {
+            asset.stored_segment(s).and_then(|seg| body(&seg, &seg.restored()?, table[s].offset)).map_err(|e| if asset.is_segmented() { vdbcook_vpak::Error::InSegment(s, Box::new(e)) } else { e })
+        })
         .collect::<Result<Vec<Body>, _>>()
         .with_context(|| name.clone())?;
     let merged = asset.metadata().with_context(|| name.clone())?;
@@ -187,7 +189,12 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         let _ = writeln!(s, "  index bbox     {a:?} .. {b:?}");
     }
     let _ = writeln!(s, "  size           {} bytes, {} active voxels, {:.3} bits per active voxel", file_bytes, active, if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 });
-    let _ = writeln!(s, "  on the GPU     {gpu_bytes} bytes of sections (the file is {:.3}× that{})", file_bytes as f64 / gpu_bytes.max(1) as f64, if bodies.iter().any(|b| b.sections.iter().any(|x| x.2.is_some())) { ", supercompressed" } else { "" });
+    let _ = writeln!(
+        s,
+        "  on the GPU     {gpu_bytes} bytes of sections (the file is {:.3}× that{})",
+        file_bytes as f64 / gpu_bytes.max(1) as f64,
+        if bodies.iter().any(|b| b.sections.iter().any(|x| x.2.is_some())) { ", supercompressed" } else { "" }
+    );
     let _ = writeln!(s, "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} background", "channel", "format", "plane", "bytes", "class", "values");
     for (i, c) in meta.channels.iter().enumerate() {
         let planes = meta.channel_planes(i).iter().map(|p| p.to_string()).collect::<Vec<_>>().join(",");

@@ -6,8 +6,8 @@ mod diff;
 mod gpu;
 mod inspect;
 mod join;
-mod recompress;
 mod progress;
+mod recompress;
 mod unpack;
 mod validate;
 

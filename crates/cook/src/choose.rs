@@ -56,7 +56,16 @@ pub(crate) fn plan_planes(opts: &CookOptions, specs: &[ChannelSpec]) -> Result<(
 /// order.  Merged bricks are held to the bound too: one that its cluster's
 /// stored brick leaves past it becomes a stray, stored (and chosen for) on
 /// its own, after the centroids.
-pub(crate) fn per_brick(pool: &[Brick], channels: usize, masks: &[[u64; 8]], bound: f32, quality: Quality, disk: Option<vdbcook_encode::Optimize>, clustered: Option<&mut Clustered>, progress: &dyn Progress) -> Vec<Choice> {
+pub(crate) fn per_brick(
+    pool: &[Brick],
+    channels: usize,
+    masks: &[[u64; 8]],
+    bound: f32,
+    quality: Quality,
+    disk: Option<vdbcook_encode::Optimize>,
+    clustered: Option<&mut Clustered>,
+    progress: &dyn Progress,
+) -> Vec<Choice> {
     let choose = |bricks: &[Brick], masks: &[[u64; 8]]| {
         progress.start("choosing formats", (bricks.len() / channels) as u64);
         let c = vdbcook_encode::cheapest_all(bricks, channels, masks, bound, quality, disk, &|n| progress.advance(n as u64));

@@ -13,9 +13,9 @@ pub use vdbcook_cook::ChannelGroup;
 pub use vdbcook_encode::{ErrorBound, Format, Optimize, Quality};
 pub use vdbcook_validate::options::{FlipBudget, PsnrFloor, RmseBudget, Viewing, Views};
 pub use vdbcook_validate::{Gate, Size};
+pub use vdbcook_vpak::coding::Supercompress;
 pub use vdbcook_vpak::settings::{SettingText, Settings};
 use vdbcook_vpak::{bounded, settings_group};
-pub use vdbcook_vpak::coding::Supercompress;
 pub use vdbcook_vpak::{Level, LevelCount};
 
 /// A setting out of its range or at odds with another; `name` is the setting's.

@@ -416,7 +416,11 @@ pub fn restore(c: &Coding, stored: &[u8]) -> Result<Vec<u8>, Error> {
 /// out): its bytes in 8-byte words and its length. Each section is
 /// decompressed straight into its place, the sections in parallel.
 pub(crate) fn restore_body(sections: &[(crate::SectionEntry, &[u8])]) -> Result<(Vec<u64>, usize), Error> {
-    let coding = sections.iter().find(|(e, _)| e.kind == kind::CODING && e.index == 0).map(|(_, b)| Coding::parse_all(b)).transpose()?.unwrap_or_default();
+    // One coding section, index 0, of at least one record (a body without compressed sections has none).
+    if let Some((e, _)) = sections.iter().find(|(e, b)| e.kind == kind::CODING && (e.index != 0 || b.is_empty())) {
+        return Err(Error::Coding { kind: e.kind, index: e.index, problem: "is a coding section other than one of index 0 with at least one record".into() });
+    }
+    let coding = sections.iter().find(|(e, _)| e.kind == kind::CODING).map(|(_, b)| Coding::parse_all(b)).transpose()?.unwrap_or_default();
     let mut seen = std::collections::HashSet::new();
     for c in &coding {
         let stored = sections.iter().find(|(e, _)| (e.kind, e.index) == (c.kind, c.index)).map(|(_, b)| b.len());
@@ -482,7 +486,7 @@ pub fn recompress<W: std::io::Write + std::io::Seek>(asset: &crate::Asset, to: S
         }
         w.add(e.frame_count, &sections)?;
     }
-    Ok(w.finish()?)
+    w.finish()
 }
 
 #[cfg(test)]
@@ -492,7 +496,15 @@ mod tests {
     #[test]
     fn filters_undo_what_they_do() {
         let raw: Vec<u8> = (0..4096u32).map(|i| (i * 7 % 251 + i / 64) as u8).collect();
-        for f in [Filter::None, Filter::Shuffle { width: 2 }, Filter::Shuffle { width: 16 }, Filter::Delta { width: 1, stride: 1 }, Filter::Delta { width: 1, stride: 4 }, Filter::Delta { width: 2, stride: 2 }, Filter::Delta { width: 4, stride: 1 }] {
+        for f in [
+            Filter::None,
+            Filter::Shuffle { width: 2 },
+            Filter::Shuffle { width: 16 },
+            Filter::Delta { width: 1, stride: 1 },
+            Filter::Delta { width: 1, stride: 4 },
+            Filter::Delta { width: 2, stride: 2 },
+            Filter::Delta { width: 4, stride: 1 },
+        ] {
             let filtered = f.apply(&raw);
             assert_eq!(filtered.len(), raw.len());
             let mut back = vec![0u8; raw.len()];
