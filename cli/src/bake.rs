@@ -14,9 +14,12 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 use vdbcook_bake::manifest::resolve;
+use vdbcook_bake::parts::{cached_part, part_key, part_output, Unit};
 use vdbcook_bake::place;
-use vdbcook_bake::{bake_one, cached, skipped, AssetReport, Baker, KeyContext, Manifest, PlannedAsset, Report, Shard, Sources, Status};
+use vdbcook_bake::{bake_unit, cached, join_parts, skipped_unit, whole_cached, AssetReport, Baker, KeyContext, Manifest, PlannedAsset, Report, Shard, Sources, Status};
 use vdbcook_pipeline::inputs;
+
+mod parts;
 
 pub const AFTER_HELP: &str = "\
 The manifest (TOML) has a [defaults] table and [[asset]] entries. Each entry has a
@@ -160,24 +163,31 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
         let names: Vec<&str> = planned.iter().map(|a| a.name.as_str()).collect();
         return Err(Usage(format!("--only: no asset named \"{n}\" in {mname} (it has: {})", names.join(", "))).into());
     }
-    let selected: Vec<PlannedAsset> = planned.into_iter().filter(|a| args.only.is_empty() || args.only.contains(&a.name)).filter(|a| args.shard.is_none_or(|s| s.takes(a.index))).collect();
+    let units = parts::choose(&planned, &args.only, args.shard);
+    let selected: Vec<PlannedAsset> = planned.iter().enumerate().filter(|(i, _)| units.iter().any(|u| u.asset == *i)).map(|(_, a)| a.clone()).collect();
     let out_dir = args.out_dir.clone().unwrap_or_else(|| base.clone());
     let report_dir = args.report_dir.clone().unwrap_or_else(|| out_dir.clone());
     if !args.allow_outside {
         place::check_outputs(&m, &selected, &out_dir).map_err(|e| Usage(format!("{mname}:{}", e.located(&text))))?;
     }
     if args.plan {
-        return print_plan(&args, &mname, &out_dir, &selected, quiet);
+        return print_plan(&args, &mname, &out_dir, &planned, &units, quiet);
     }
     preflight(&args, &out_dir, &report_dir)?;
+    let joins = parts::complete(&planned, &units);
     if args.dry_run {
-        return dry_run(&args, &out_dir, &selected, quiet);
+        return dry_run(&args, &out_dir, &planned, &units, &joins, quiet);
     }
 
     let gpu = args.gpu.clone();
     let ctx = Baker::new(out_dir, report_dir.clone(), args.cache.clone(), base, args.force, move || gpu.renderer().map_err(Into::into));
-    let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize).clamp(1, selected.len().max(1));
-    let show = Shown::new(quiet || args.json, selected.len());
+    // An asset this run joins that is already in place (or in the cache) is one unit: no part is cooked.
+    let whole: Vec<usize> = joins.iter().copied().filter(|&i| whole_cached(&planned[i], &ctx)).collect();
+    let mut work: Vec<Unit> = units.iter().copied().filter(|u| !whole.contains(&u.asset)).collect();
+    work.extend(whole.iter().map(|&asset| Unit { asset, part: None }));
+    work.sort_by_key(|u| (u.asset, u.part.map_or(0, |p| p.index)));
+    let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize).clamp(1, work.len().max(1));
+    let show = Shown::new(quiet || args.json, work.len());
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
     let results: Mutex<Vec<AssetReport>> = Mutex::new(Vec::new());
@@ -185,8 +195,9 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
         for _ in 0..jobs {
             scope.spawn(|| loop {
                 let i = next.fetch_add(1, Ordering::SeqCst);
-                let Some(a) = selected.get(i) else { break };
-                let r = if stop.load(Ordering::SeqCst) { skipped(a) } else { bake_one(a, &ctx) };
+                let Some(u) = work.get(i) else { break };
+                let a = &planned[u.asset];
+                let r = if stop.load(Ordering::SeqCst) { skipped_unit(a, u.part) } else { bake_unit(a, u.part, &ctx) };
                 if args.fail_fast && r.status == Status::Failed {
                     stop.store(true, Ordering::SeqCst);
                 }
@@ -198,7 +209,17 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
         }
     });
     show.done();
-    let assets = results.into_inner().map_err(|_| anyhow!("a bake worker panicked"))?;
+    let mut assets = results.into_inner().map_err(|_| anyhow!("a bake worker panicked"))?;
+    // The assets whose every part this run baked are joined (after every part, as a merge would).
+    for &i in joins.iter().filter(|i| !whole.contains(i)) {
+        let (mine, rest): (Vec<AssetReport>, Vec<AssetReport>) = assets.into_iter().partition(|r| r.index == planned[i].index && r.part.is_some());
+        let mut mine = mine;
+        mine.sort_by_key(AssetReport::order);
+        let joined = join_parts(&planned[i], &mine.iter().collect::<Vec<_>>(), &ctx);
+        show.finished(&joined);
+        assets = rest;
+        assets.push(joined);
+    }
     let report = Report::new(tool_version(), mname, args.shard, assets, started.elapsed().as_secs_f64());
     write_reports(&report_dir, &report)?;
     finish(&report, &report_dir, args.json, quiet)
@@ -281,20 +302,34 @@ fn merge(args: &BakeArgs, quiet: bool) -> Result<u8> {
     for p in &args.merge {
         let name = p.display().to_string();
         let text = std::fs::read_to_string(p).map_err(|e| Usage(format!("{name}: {e}")))?;
-        parts.push((name.clone(), Report::from_json(&name, &text).map_err(|e| Usage(e.to_string()))?));
+        let mut r = Report::from_json(&name, &text).map_err(|e| Usage(e.to_string()))?;
+        // A shard's part files are in its output directory: where its report is, unless it was given --report-dir.
+        let dir = p.parent().unwrap_or(Path::new(""));
+        for pr in r.assets.iter_mut().filter_map(|a| a.part.as_mut()) {
+            pr.file = dir.join(&pr.file).display().to_string();
+        }
+        parts.push((name.clone(), r));
     }
-    let report = Report::merge(parts).map_err(|e| Usage(e.to_string()))?;
+    let mut report = Report::merge(parts).map_err(|e| Usage(e.to_string()))?;
     let dir = args.report_dir.clone().or_else(|| args.out_dir.clone()).unwrap_or_else(|| PathBuf::from("."));
+    let out_dir = args.out_dir.clone().unwrap_or_else(|| dir.clone());
     place::check_dir(&dir, "--report-dir").map_err(Usage)?;
+    place::check_dir(&out_dir, "--out-dir").map_err(Usage)?;
     check_reports(&dir, args.force)?;
+    parts::join_merged(&mut report, &out_dir, args.allow_outside, args.force, &args.gpu)?;
     write_reports(&dir, &report)?;
     finish(&report, &dir, args.json, quiet)
 }
 
-fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, assets: &[PlannedAsset], quiet: bool) -> Result<u8> {
+fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, planned: &[PlannedAsset], units: &[Unit], quiet: bool) -> Result<u8> {
     if quiet {
         return Ok(exit::SUCCESS);
     }
+    let assets: Vec<&PlannedAsset> = planned.iter().enumerate().filter(|(i, _)| units.iter().any(|u| u.asset == *i)).map(|(_, a)| a).collect();
+    // An asset's parts in this plan (with --shard, those of this shard).
+    let parts_of = |a: &PlannedAsset| -> Vec<(String, String, String)> {
+        units.iter().filter(|u| planned[u.asset].index == a.index).filter_map(|u| u.part).map(|p| (p.to_string(), part_output(&a.output, p), part_key(&a.key, p))).collect()
+    };
     let text = if args.json {
         let doc = json!({
             "version": 1,
@@ -310,6 +345,12 @@ fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, assets: &[Planned
                 "files": a.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
                 "cache_key": a.key,
                 "settings": a.settings.pairs().into_iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
+                "parts": a.parts.map(|_| parts_of(a).into_iter().map(|(p, o, k)| json!({
+                    "part": p,
+                    "output": o,
+                    "output_path": resolve(out_dir, &o).display().to_string(),
+                    "cache_key": k,
+                })).collect::<Vec<_>>()),
             })).collect::<Vec<_>>(),
         });
         format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default())
@@ -317,6 +358,9 @@ fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, assets: &[Planned
         let mut t = String::new();
         for a in assets {
             t += &format!("{}  {}  {} <- {} file{}\n", a.name, a.key, resolve(out_dir, &a.output).display(), a.files.len(), if a.files.len() == 1 { "" } else { "s" });
+            for (p, o, k) in parts_of(a) {
+                t += &format!("  part {p}  {k}  {}\n", resolve(out_dir, &o).display());
+            }
         }
         t
     };
@@ -324,29 +368,47 @@ fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, assets: &[Planned
     Ok(exit::SUCCESS)
 }
 
-fn dry_run(args: &BakeArgs, out_dir: &Path, assets: &[PlannedAsset], quiet: bool) -> Result<u8> {
+fn dry_run(args: &BakeArgs, out_dir: &Path, planned: &[PlannedAsset], units: &[Unit], joins: &[usize], quiet: bool) -> Result<u8> {
     let mut rows = Vec::new();
-    for a in assets {
-        let out = resolve(out_dir, &a.output);
-        let action = if cached(&out, &a.key).is_some() {
+    let in_cache = |file: String, check: &dyn Fn(&Path) -> bool| args.cache.as_ref().is_some_and(|c| check(&c.join(file)));
+    for u in units {
+        let a = &planned[u.asset];
+        // An asset this run would join: one row when it is already made.
+        let whole = joins.contains(&u.asset) && (cached(&resolve(out_dir, &a.output), &a.key).is_some() || in_cache(format!("{}.vpak", a.key), &|p| cached(p, &a.key).is_some()));
+        if whole && u.part.is_some_and(|p| p.index > 1) {
+            continue;
+        }
+        let (output, key, part) = match u.part.filter(|_| !whole) {
+            Some(p) => (part_output(&a.output, p), part_key(&a.key, p), Some(p)),
+            None => (a.output.clone(), a.key.clone(), None),
+        };
+        let out = resolve(out_dir, &output);
+        let found = |p: &Path| if part.is_some() { cached_part(p, &key).is_some() } else { cached(p, &key).is_some() };
+        let action = if found(&out) {
             "cached"
         } else if place::may_replace(&out, args.force).is_err() {
             "refused"
-        } else if args.cache.as_ref().is_some_and(|c| cached(&c.join(format!("{}.vpak", a.key)), &a.key).is_some()) {
+        } else if in_cache(format!("{key}.{}", if part.is_some() { "vpakpart" } else { "vpak" }), &found) {
             "from-cache"
         } else {
             "bake"
         };
-        rows.push((a, out, action));
+        rows.push((parts::label(&a.name, part), output, out, key, part, action));
     }
     if quiet {
         return Ok(exit::SUCCESS);
     }
     let text = if args.json {
-        let doc = json!({ "assets": rows.iter().map(|(a, out, action)| json!({"name": a.name, "action": action, "output": a.output, "output_path": out.display().to_string(), "cache_key": a.key})).collect::<Vec<_>>() });
+        let doc = json!({ "assets": rows.iter().map(|(name, output, out, key, part, action)| {
+            let mut v = json!({"name": name, "action": action, "output": output, "output_path": out.display().to_string(), "cache_key": key});
+            if let Some(p) = part {
+                v["part"] = json!(p.to_string());
+            }
+            v
+        }).collect::<Vec<_>>() });
         format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default())
     } else {
-        rows.iter().map(|(a, out, action)| format!("{action:<10} {}  {}\n", a.name, out.display())).collect()
+        rows.iter().map(|(name, _, out, _, _, action)| format!("{action:<10} {name}  {}\n", out.display())).collect()
     };
     crate::emit_final(&text)?;
     Ok(exit::SUCCESS)
@@ -373,7 +435,8 @@ impl Shown {
     fn finished(&self, r: &AssetReport) {
         if let Some(bar) = &self.bar {
             let size = r.bytes.map(vdbcook_bake::report::human_bytes).unwrap_or_default();
-            bar.println(format!("{:>12} {} {} ({:.1} s)", r.status.name(), r.name, size, r.seconds));
+            let name = parts::label(&r.name, r.part.as_ref().map(|p| vdbcook_bake::PartNo { index: p.index, count: p.count }));
+            bar.println(format!("{:>12} {} {} ({:.1} s)", r.status.name(), name, size, r.seconds));
             bar.inc(1);
         }
     }

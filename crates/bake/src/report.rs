@@ -154,6 +154,27 @@ pub struct AssetReport {
     /// Per-asset validation page, relative to the output directory, when one exists.
     pub validation_report: Option<String>,
     pub seconds: f64,
+    /// A part of an asset with `parts` (in a shard's report; `bake --merge` joins them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part: Option<PartRef>,
+}
+
+/// Which part of its asset an entry is, and its part file.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PartRef {
+    /// From 1.
+    pub index: u32,
+    pub count: u32,
+    /// The part file, relative to the output directory (and so to the report
+    /// of a shard whose report directory is its output directory).
+    pub file: String,
+}
+
+impl AssetReport {
+    /// Where the entry sorts: its asset's position, then its part's.
+    pub fn order(&self) -> (usize, u32) {
+        (self.index, self.part.as_ref().map_or(0, |p| p.index))
+    }
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -198,7 +219,7 @@ pub struct Report {
 
 impl Report {
     pub fn new(tool: String, manifest: String, shard: Option<Shard>, mut assets: Vec<AssetReport>, seconds: f64) -> Report {
-        assets.sort_by_key(|a| a.index);
+        assets.sort_by_key(AssetReport::order);
         Report { version: REPORT_VERSION, tool, manifest, shard, merged: 0, summary: Summary::of(&assets), seconds, assets }
     }
 
@@ -230,8 +251,10 @@ impl Report {
                 return Err(Error::Report(name, format!("is a report of manifest \"{}\", not \"{manifest}\"", r.manifest)));
             }
             for a in r.assets {
-                if let Some(o) = assets.iter().find(|o| o.index == a.index || o.name == a.name) {
-                    return Err(Error::Report(name, format!("asset \"{}\" is in two reports (expected the reports of disjoint shards)", o.name)));
+                let part = |x: &AssetReport| x.part.as_ref().map(|p| p.index);
+                if let Some(o) = assets.iter().find(|o| (o.index == a.index || o.name == a.name) && part(o) == part(&a)) {
+                    let what = o.part.as_ref().map_or(String::new(), |p| format!(" (part {}/{})", p.index, p.count));
+                    return Err(Error::Report(name, format!("asset \"{}\"{what} is in two reports (expected the reports of disjoint shards)", o.name)));
                 }
                 assets.push(a);
             }
@@ -442,6 +465,7 @@ mod tests {
             message: (status == Status::Failed).then(|| "x.vdb: bad <magic> & \"stuff\"".into()),
             validation_report: None,
             seconds: 0.5,
+            part: None,
         }
     }
 
