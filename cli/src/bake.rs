@@ -7,26 +7,27 @@ use crate::gpu::GpuArgs;
 use crate::{exit, one_line, Usage};
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use serde_json::json;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
-use vdbcook_bake::manifest::resolve;
-use vdbcook_bake::parts::{cached_part, part_key, part_output, Unit};
+use vdbcook_bake::parts::Unit;
 use vdbcook_bake::place;
-use vdbcook_bake::{bake_unit, cached, join_parts, skipped_unit, whole_cached, AssetReport, Baker, KeyContext, Manifest, PlannedAsset, Report, Shard, Sources, Status};
+use vdbcook_bake::{bake_unit, join_parts, skipped_unit, whole_cached, AssetReport, Baker, KeyContext, Manifest, PlannedAsset, Report, Shard, Sources, Status};
 use vdbcook_pipeline::inputs;
 
 mod parts;
+mod plan;
+use plan::{dry_run, print_plan};
 
 pub const AFTER_HELP: &str = "\
 The manifest (TOML) has a [defaults] table and [[asset]] entries. Each entry has a
 name, an output (relative to --out-dir) and inputs (files, directories, globs or frame
 patterns, relative to the manifest), and any cook setting under its flag's name with
 '_' for '-' (frames, grid, allow_missing, format, quality, clusters, iterations,
-variance_threshold, max_brick_error, max_texture_dim), and a quality gate: validate
+variance_threshold, max_brick_error, max_texture_dim, lods, max_bytes, segment_frames),
+and a quality gate: validate
 (true/false), max_rmse, min_psnr, max_flip, views, size. An entry's setting overrides
 [defaults], which overrides the built-in default (the same as `vdbcook cook`'s).
 
@@ -62,10 +63,22 @@ their share of its bricks, 256-pixel previews exposed from each volume) in
 --report-dir, default --out-dir; each
 validated asset's own page in validation/NAME/ there.
 
-Scale-out: --shard I/N takes every N-th asset (round robin in manifest order), so N
+Scale-out: --shard I/N takes every N-th unit (round robin in manifest order), so N
 CI jobs bake each asset once; `vdbcook bake --merge shard*/report.json` joins their
 reports. `--plan --json` lists each asset's inputs, output and key, for build systems
 that run `vdbcook bake bake.toml --only NAME` per asset (see docs/ci.md).
+
+Parts: an asset with `parts = N` (an entry's key, with segment_frames, at most one part
+per segment, and without validate) is N units, each the `cook --part I/N` part file
+OUTPUT.partIofN, cached under its own key; the units of a manifest are its assets in
+order, such an asset as N units in a row, so shards share its parts. A bake that bakes
+every part (no --shard) joins them into OUTPUT (the part files then go; an asset already
+in place or in the cache is not cooked again); shards each write their parts, and
+`bake --merge` joins them, finding each part file relative to the report that lists it,
+into --out-dir (default: the report directory). A missing part is a one-line error
+naming the asset and the part, and nothing is written. The joined asset is byte for byte
+the unsplit bake's but for the key (it counts the parts) and the record (its voxel RMSE
+and PSNR are the worst part's).
 
 Exit codes: 0 every asset baked or cached and every gate held; 1 an asset failed
 (bad input, I/O); 3 only quality gates failed; 2 usage or manifest errors (nothing is
@@ -76,7 +89,8 @@ pub struct BakeArgs {
     /// The manifest (see below).
     #[arg(value_name = "bake.toml", required_unless_present = "merge")]
     pub manifest: Option<PathBuf>,
-    /// Directory the manifest's outputs are relative to (default: the manifest's directory).
+    /// Directory the manifest's outputs are relative to (default: the manifest's directory);
+    /// with --merge, where the assets joined from parts go (default: --report-dir).
     #[arg(long, value_name = "DIR")]
     pub out_dir: Option<PathBuf>,
     /// Directory for report.json, report.xml, report.html and validation pages (default: --out-dir).
@@ -112,7 +126,8 @@ pub struct BakeArgs {
     /// Stop starting new assets after the first failure (the rest are reported as skipped).
     #[arg(long)]
     pub fail_fast: bool,
-    /// Join the report.json files of shards into one report (written to --report-dir, default ".").
+    /// Join the report.json files of shards into one report (written to --report-dir, default "."),
+    /// and the part files they list into their assets (see Parts below).
     #[arg(long, value_name = "REPORT.json", num_args = 1.., conflicts_with_all = ["manifest", "plan", "dry_run", "shard", "only", "cache", "fail_fast"])]
     pub merge: Vec<PathBuf>,
     #[command(flatten)]
@@ -319,99 +334,6 @@ fn merge(args: &BakeArgs, quiet: bool) -> Result<u8> {
     parts::join_merged(&mut report, &out_dir, args.allow_outside, args.force, &args.gpu)?;
     write_reports(&dir, &report)?;
     finish(&report, &dir, args.json, quiet)
-}
-
-fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, planned: &[PlannedAsset], units: &[Unit], quiet: bool) -> Result<u8> {
-    if quiet {
-        return Ok(exit::SUCCESS);
-    }
-    let assets: Vec<&PlannedAsset> = planned.iter().enumerate().filter(|(i, _)| units.iter().any(|u| u.asset == *i)).map(|(_, a)| a).collect();
-    // An asset's parts in this plan (with --shard, those of this shard).
-    let parts_of = |a: &PlannedAsset| -> Vec<(String, String, String)> {
-        units.iter().filter(|u| planned[u.asset].index == a.index).filter_map(|u| u.part).map(|p| (p.to_string(), part_output(&a.output, p), part_key(&a.key, p))).collect()
-    };
-    let text = if args.json {
-        let doc = json!({
-            "version": 1,
-            "manifest": manifest,
-            "out_dir": out_dir.display().to_string(),
-            "shard": args.shard,
-            "assets": assets.iter().map(|a| json!({
-                "index": a.index,
-                "name": a.name,
-                "output": a.output,
-                "output_path": resolve(out_dir, &a.output).display().to_string(),
-                "inputs": a.inputs,
-                "files": a.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
-                "cache_key": a.key,
-                "settings": a.settings.pairs().into_iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
-                "parts": a.parts.map(|_| parts_of(a).into_iter().map(|(p, o, k)| json!({
-                    "part": p,
-                    "output": o,
-                    "output_path": resolve(out_dir, &o).display().to_string(),
-                    "cache_key": k,
-                })).collect::<Vec<_>>()),
-            })).collect::<Vec<_>>(),
-        });
-        format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default())
-    } else {
-        let mut t = String::new();
-        for a in assets {
-            t += &format!("{}  {}  {} <- {} file{}\n", a.name, a.key, resolve(out_dir, &a.output).display(), a.files.len(), if a.files.len() == 1 { "" } else { "s" });
-            for (p, o, k) in parts_of(a) {
-                t += &format!("  part {p}  {k}  {}\n", resolve(out_dir, &o).display());
-            }
-        }
-        t
-    };
-    crate::emit_final(&text)?;
-    Ok(exit::SUCCESS)
-}
-
-fn dry_run(args: &BakeArgs, out_dir: &Path, planned: &[PlannedAsset], units: &[Unit], joins: &[usize], quiet: bool) -> Result<u8> {
-    let mut rows = Vec::new();
-    let in_cache = |file: String, check: &dyn Fn(&Path) -> bool| args.cache.as_ref().is_some_and(|c| check(&c.join(file)));
-    for u in units {
-        let a = &planned[u.asset];
-        // An asset this run would join: one row when it is already made.
-        let whole = joins.contains(&u.asset) && (cached(&resolve(out_dir, &a.output), &a.key).is_some() || in_cache(format!("{}.vpak", a.key), &|p| cached(p, &a.key).is_some()));
-        if whole && u.part.is_some_and(|p| p.index > 1) {
-            continue;
-        }
-        let (output, key, part) = match u.part.filter(|_| !whole) {
-            Some(p) => (part_output(&a.output, p), part_key(&a.key, p), Some(p)),
-            None => (a.output.clone(), a.key.clone(), None),
-        };
-        let out = resolve(out_dir, &output);
-        let found = |p: &Path| if part.is_some() { cached_part(p, &key).is_some() } else { cached(p, &key).is_some() };
-        let action = if found(&out) {
-            "cached"
-        } else if place::may_replace(&out, args.force).is_err() {
-            "refused"
-        } else if in_cache(format!("{key}.{}", if part.is_some() { "vpakpart" } else { "vpak" }), &found) {
-            "from-cache"
-        } else {
-            "bake"
-        };
-        rows.push((parts::label(&a.name, part), output, out, key, part, action));
-    }
-    if quiet {
-        return Ok(exit::SUCCESS);
-    }
-    let text = if args.json {
-        let doc = json!({ "assets": rows.iter().map(|(name, output, out, key, part, action)| {
-            let mut v = json!({"name": name, "action": action, "output": output, "output_path": out.display().to_string(), "cache_key": key});
-            if let Some(p) = part {
-                v["part"] = json!(p.to_string());
-            }
-            v
-        }).collect::<Vec<_>>() });
-        format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default())
-    } else {
-        rows.iter().map(|(name, _, out, _, _, action)| format!("{action:<10} {name}  {}\n", out.display())).collect()
-    };
-    crate::emit_final(&text)?;
-    Ok(exit::SUCCESS)
 }
 
 /// Progress on a terminal: one overall bar and a line per finished asset.

@@ -155,7 +155,7 @@ pub struct AssetReport {
     pub validation_report: Option<String>,
     pub seconds: f64,
     /// A part of an asset with `parts` (in a shard's report; `bake --merge` joins them).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default)]
     pub part: Option<PartRef>,
 }
 
