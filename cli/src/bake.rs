@@ -357,8 +357,7 @@ impl Shown {
     fn finished(&self, r: &AssetReport) {
         if let Some(bar) = &self.bar {
             let size = r.bytes.map(vdbcook_bake::report::human_bytes).unwrap_or_default();
-            let name = parts::label(&r.name, r.part.as_ref().map(|p| vdbcook_bake::PartNo { index: p.index, count: p.count }));
-            bar.println(format!("{:>12} {} {} ({:.1} s)", r.status.name(), name, size, r.seconds));
+            bar.println(format!("{:>12} {} {} ({:.1} s)", r.status.name(), r.label(), size, r.seconds));
             bar.inc(1);
         }
     }

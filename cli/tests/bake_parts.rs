@@ -96,6 +96,8 @@ fn parts_on_two_shards_merge_into_the_unsplit_asset() {
     assert_eq!(code, Some(0), "{err}");
     assert_eq!(entries(&v), [("smoke".into(), "baked".into(), Some("1/2".into()))]);
     assert_eq!(files_in(&out("s2/seq")), ["smoke.vpak.part1of2"]);
+    let junit = std::fs::read_to_string(out("s2/report.xml")).unwrap();
+    assert!(junit.contains("<testcase name=\"smoke (part 1/2)\""), "{junit}");
     let (code, v, err) = bake(&["--merge", s(&out("s1/report.json")), s(&out("s2/report.json")), "--report-dir", s(&out("merged"))]);
     assert_eq!(code, Some(0), "{err}");
     assert_eq!(entries(&v), [("fog".into(), "baked".into(), None), ("smoke".into(), "baked".into(), None)]);

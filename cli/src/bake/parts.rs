@@ -83,7 +83,7 @@ pub fn join_merged(report: &mut Report, out_dir: &Path, allow_outside: bool, for
             r.message = Some(format!("part {p}: {}", bad.message.as_deref().unwrap_or("failed")));
         } else {
             let files: Vec<PathBuf> = g.iter().filter_map(|a| a.part.as_ref()).map(|p| PathBuf::from(&p.file)).collect();
-            match parts::join(&r.name, &files, &out_dir.join(&r.output), force, &thumb) {
+            match parts::join(&r.name, &files, &vdbcook_bake::manifest::resolve(out_dir, &r.output), force, &thumb) {
                 Ok(j) => {
                     r.status = if g.iter().any(|a| a.status == Status::Baked) { Status::Baked } else { Status::Cached };
                     r.message = None;

@@ -171,6 +171,14 @@ pub struct PartRef {
 }
 
 impl AssetReport {
+    /// "smoke", or "smoke (part 1/2)" for a part's entry.
+    pub fn label(&self) -> String {
+        match &self.part {
+            Some(p) => format!("{} (part {}/{})", self.name, p.index, p.count),
+            None => self.name.clone(),
+        }
+    }
+
     /// Where the entry sorts: its asset's position, then its part's.
     pub fn order(&self) -> (usize, u32) {
         (self.index, self.part.as_ref().map_or(0, |p| p.index))
@@ -274,7 +282,7 @@ impl Report {
         let _ = writeln!(s, "<testsuites name=\"vdbcook bake\" tests=\"{}\" failures=\"{failures}\" errors=\"0\" time=\"{:.3}\">", self.assets.len(), self.seconds);
         let _ = writeln!(s, "  <testsuite name=\"{}\" tests=\"{}\" failures=\"{failures}\" errors=\"0\" skipped=\"{skipped}\" time=\"{:.3}\">", xml(&self.manifest), self.assets.len(), self.seconds);
         for a in &self.assets {
-            let _ = write!(s, "    <testcase name=\"{}\" classname=\"vdbcook.bake\" time=\"{:.3}\"", xml(&a.name), a.seconds);
+            let _ = write!(s, "    <testcase name=\"{}\" classname=\"vdbcook.bake\" time=\"{:.3}\"", xml(&a.label()), a.seconds);
             let msg = a.message.clone().unwrap_or_default();
             match a.status {
                 Status::Failed => {
@@ -323,7 +331,7 @@ impl Report {
                 rows,
                 "<tr class='{st}'><td class='pic'>{thumb}</td><td class='t' data-v='{n}'>{n}<div class='sub'>{out}</div>{link}</td><td class='t' data-v='{st}'>{st}{gate}{msg}</td>{frames}{fmt}{bytes}{bpv}{vr}{vp}{ir}{ip}{fl}{secs}</tr>",
                 st = a.status.name(),
-                n = esc(&a.name),
+                n = esc(&a.label()),
                 out = esc(&a.output),
                 msg = a.message.as_ref().map(|m| format!("<div class='sub msg'>{}</div>", esc(m))).unwrap_or_default(),
                 frames = cell(r.frames.map(f64::from), r.frames.map(|f| f.to_string()).unwrap_or_default()),
