@@ -7,23 +7,27 @@ use crate::gpu::GpuArgs;
 use crate::{exit, one_line, Usage};
 use anyhow::{anyhow, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use serde_json::json;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
-use vdbcook_bake::manifest::resolve;
+use vdbcook_bake::parts::Unit;
 use vdbcook_bake::place;
-use vdbcook_bake::{bake_one, cached, skipped, AssetReport, Baker, KeyContext, Manifest, PlannedAsset, Report, Shard, Sources, Status};
+use vdbcook_bake::{bake_unit, join_parts, skipped_unit, whole_cached, AssetReport, Baker, KeyContext, Manifest, PlannedAsset, Report, Shard, Sources, Status};
 use vdbcook_pipeline::inputs;
+
+mod parts;
+mod plan;
+use plan::{dry_run, print_plan};
 
 pub const AFTER_HELP: &str = "\
 The manifest (TOML) has a [defaults] table and [[asset]] entries. Each entry has a
 name, an output (relative to --out-dir) and inputs (files, directories, globs or frame
 patterns, relative to the manifest), and any cook setting under its flag's name with
 '_' for '-' (frames, grid, allow_missing, format, quality, clusters, iterations,
-variance_threshold, max_brick_error, max_texture_dim), and a quality gate: validate
+variance_threshold, max_brick_error, max_texture_dim, lods, max_bytes, segment_frames),
+and a quality gate: validate
 (true/false), max_rmse, min_psnr, max_flip, views, size. An entry's setting overrides
 [defaults], which overrides the built-in default (the same as `vdbcook cook`'s).
 
@@ -59,10 +63,22 @@ their share of its bricks, 256-pixel previews exposed from each volume) in
 --report-dir, default --out-dir; each
 validated asset's own page in validation/NAME/ there.
 
-Scale-out: --shard I/N takes every N-th asset (round robin in manifest order), so N
+Scale-out: --shard I/N takes every N-th unit (round robin in manifest order), so N
 CI jobs bake each asset once; `vdbcook bake --merge shard*/report.json` joins their
 reports. `--plan --json` lists each asset's inputs, output and key, for build systems
 that run `vdbcook bake bake.toml --only NAME` per asset (see docs/ci.md).
+
+Parts: an asset with `parts = N` (an entry's key, with segment_frames, at most one part
+per segment, and without validate) is N units, each the `cook --part I/N` part file
+OUTPUT.partIofN, cached under its own key; the units of a manifest are its assets in
+order, such an asset as N units in a row, so shards share its parts. A bake that bakes
+every part (no --shard) joins them into OUTPUT (the part files then go; an asset already
+in place or in the cache is not cooked again); shards each write their parts, and
+`bake --merge` joins them, finding each part file relative to the report that lists it,
+into --out-dir (default: the report directory). A missing part is a one-line error
+naming the asset and the part, and nothing is written. The joined asset is byte for byte
+the unsplit bake's but for the key (it counts the parts) and the record (its voxel RMSE
+and PSNR are the worst part's).
 
 Exit codes: 0 every asset baked or cached and every gate held; 1 an asset failed
 (bad input, I/O); 3 only quality gates failed; 2 usage or manifest errors (nothing is
@@ -73,7 +89,8 @@ pub struct BakeArgs {
     /// The manifest (see below).
     #[arg(value_name = "bake.toml", required_unless_present = "merge")]
     pub manifest: Option<PathBuf>,
-    /// Directory the manifest's outputs are relative to (default: the manifest's directory).
+    /// Directory the manifest's outputs are relative to (default: the manifest's directory);
+    /// with --merge, where the assets joined from parts go (default: --report-dir).
     #[arg(long, value_name = "DIR")]
     pub out_dir: Option<PathBuf>,
     /// Directory for report.json, report.xml, report.html and validation pages (default: --out-dir).
@@ -109,7 +126,8 @@ pub struct BakeArgs {
     /// Stop starting new assets after the first failure (the rest are reported as skipped).
     #[arg(long)]
     pub fail_fast: bool,
-    /// Join the report.json files of shards into one report (written to --report-dir, default ".").
+    /// Join the report.json files of shards into one report (written to --report-dir, default "."),
+    /// and the part files they list into their assets (see Parts below).
     #[arg(long, value_name = "REPORT.json", num_args = 1.., conflicts_with_all = ["manifest", "plan", "dry_run", "shard", "only", "cache", "fail_fast"])]
     pub merge: Vec<PathBuf>,
     #[command(flatten)]
@@ -160,24 +178,31 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
         let names: Vec<&str> = planned.iter().map(|a| a.name.as_str()).collect();
         return Err(Usage(format!("--only: no asset named \"{n}\" in {mname} (it has: {})", names.join(", "))).into());
     }
-    let selected: Vec<PlannedAsset> = planned.into_iter().filter(|a| args.only.is_empty() || args.only.contains(&a.name)).filter(|a| args.shard.is_none_or(|s| s.takes(a.index))).collect();
+    let units = parts::choose(&planned, &args.only, args.shard);
+    let selected: Vec<PlannedAsset> = planned.iter().enumerate().filter(|(i, _)| units.iter().any(|u| u.asset == *i)).map(|(_, a)| a.clone()).collect();
     let out_dir = args.out_dir.clone().unwrap_or_else(|| base.clone());
     let report_dir = args.report_dir.clone().unwrap_or_else(|| out_dir.clone());
     if !args.allow_outside {
         place::check_outputs(&m, &selected, &out_dir).map_err(|e| Usage(format!("{mname}:{}", e.located(&text))))?;
     }
     if args.plan {
-        return print_plan(&args, &mname, &out_dir, &selected, quiet);
+        return print_plan(&args, &mname, &out_dir, &planned, &units, quiet);
     }
     preflight(&args, &out_dir, &report_dir)?;
+    let joins = parts::complete(&planned, &units);
     if args.dry_run {
-        return dry_run(&args, &out_dir, &selected, quiet);
+        return dry_run(&args, &out_dir, &planned, &units, &joins, quiet);
     }
 
     let gpu = args.gpu.clone();
     let ctx = Baker::new(out_dir, report_dir.clone(), args.cache.clone(), base, args.force, move || gpu.renderer().map_err(Into::into));
-    let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize).clamp(1, selected.len().max(1));
-    let show = Shown::new(quiet || args.json, selected.len());
+    // An asset this run joins that is already in place (or in the cache) is one unit: no part is cooked.
+    let whole: Vec<usize> = joins.iter().copied().filter(|&i| whole_cached(&planned[i], &ctx)).collect();
+    let mut work: Vec<Unit> = units.iter().copied().filter(|u| !whole.contains(&u.asset)).collect();
+    work.extend(whole.iter().map(|&asset| Unit { asset, part: None }));
+    work.sort_by_key(|u| (u.asset, u.part.map_or(0, |p| p.index)));
+    let jobs = args.jobs.map_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()), |j| j as usize).clamp(1, work.len().max(1));
+    let show = Shown::new(quiet || args.json, work.len());
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
     let results: Mutex<Vec<AssetReport>> = Mutex::new(Vec::new());
@@ -185,8 +210,9 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
         for _ in 0..jobs {
             scope.spawn(|| loop {
                 let i = next.fetch_add(1, Ordering::SeqCst);
-                let Some(a) = selected.get(i) else { break };
-                let r = if stop.load(Ordering::SeqCst) { skipped(a) } else { bake_one(a, &ctx) };
+                let Some(u) = work.get(i) else { break };
+                let a = &planned[u.asset];
+                let r = if stop.load(Ordering::SeqCst) { skipped_unit(a, u.part) } else { bake_unit(a, u.part, &ctx) };
                 if args.fail_fast && r.status == Status::Failed {
                     stop.store(true, Ordering::SeqCst);
                 }
@@ -198,7 +224,17 @@ pub fn run(args: BakeArgs, quiet: bool) -> Result<u8> {
         }
     });
     show.done();
-    let assets = results.into_inner().map_err(|_| anyhow!("a bake worker panicked"))?;
+    let mut assets = results.into_inner().map_err(|_| anyhow!("a bake worker panicked"))?;
+    // The assets whose every part this run baked are joined (after every part, as a merge would).
+    for &i in joins.iter().filter(|i| !whole.contains(i)) {
+        let (mine, rest): (Vec<AssetReport>, Vec<AssetReport>) = assets.into_iter().partition(|r| r.index == planned[i].index && r.part.is_some());
+        let mut mine = mine;
+        mine.sort_by_key(AssetReport::order);
+        let joined = join_parts(&planned[i], &mine.iter().collect::<Vec<_>>(), &ctx);
+        show.finished(&joined);
+        assets = rest;
+        assets.push(joined);
+    }
     let report = Report::new(tool_version(), mname, args.shard, assets, started.elapsed().as_secs_f64());
     write_reports(&report_dir, &report)?;
     finish(&report, &report_dir, args.json, quiet)
@@ -281,75 +317,23 @@ fn merge(args: &BakeArgs, quiet: bool) -> Result<u8> {
     for p in &args.merge {
         let name = p.display().to_string();
         let text = std::fs::read_to_string(p).map_err(|e| Usage(format!("{name}: {e}")))?;
-        parts.push((name.clone(), Report::from_json(&name, &text).map_err(|e| Usage(e.to_string()))?));
+        let mut r = Report::from_json(&name, &text).map_err(|e| Usage(e.to_string()))?;
+        // A shard's part files are in its output directory: where its report is, unless it was given --report-dir.
+        let dir = p.parent().unwrap_or(Path::new(""));
+        for pr in r.assets.iter_mut().filter_map(|a| a.part.as_mut()) {
+            pr.file = dir.join(&pr.file).display().to_string();
+        }
+        parts.push((name.clone(), r));
     }
-    let report = Report::merge(parts).map_err(|e| Usage(e.to_string()))?;
+    let mut report = Report::merge(parts).map_err(|e| Usage(e.to_string()))?;
     let dir = args.report_dir.clone().or_else(|| args.out_dir.clone()).unwrap_or_else(|| PathBuf::from("."));
+    let out_dir = args.out_dir.clone().unwrap_or_else(|| dir.clone());
     place::check_dir(&dir, "--report-dir").map_err(Usage)?;
+    place::check_dir(&out_dir, "--out-dir").map_err(Usage)?;
     check_reports(&dir, args.force)?;
+    parts::join_merged(&mut report, &out_dir, args.allow_outside, args.force, &args.gpu)?;
     write_reports(&dir, &report)?;
     finish(&report, &dir, args.json, quiet)
-}
-
-fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, assets: &[PlannedAsset], quiet: bool) -> Result<u8> {
-    if quiet {
-        return Ok(exit::SUCCESS);
-    }
-    let text = if args.json {
-        let doc = json!({
-            "version": 1,
-            "manifest": manifest,
-            "out_dir": out_dir.display().to_string(),
-            "shard": args.shard,
-            "assets": assets.iter().map(|a| json!({
-                "index": a.index,
-                "name": a.name,
-                "output": a.output,
-                "output_path": resolve(out_dir, &a.output).display().to_string(),
-                "inputs": a.inputs,
-                "files": a.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
-                "cache_key": a.key,
-                "settings": a.settings.pairs().into_iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
-            })).collect::<Vec<_>>(),
-        });
-        format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default())
-    } else {
-        let mut t = String::new();
-        for a in assets {
-            t += &format!("{}  {}  {} <- {} file{}\n", a.name, a.key, resolve(out_dir, &a.output).display(), a.files.len(), if a.files.len() == 1 { "" } else { "s" });
-        }
-        t
-    };
-    crate::emit_final(&text)?;
-    Ok(exit::SUCCESS)
-}
-
-fn dry_run(args: &BakeArgs, out_dir: &Path, assets: &[PlannedAsset], quiet: bool) -> Result<u8> {
-    let mut rows = Vec::new();
-    for a in assets {
-        let out = resolve(out_dir, &a.output);
-        let action = if cached(&out, &a.key).is_some() {
-            "cached"
-        } else if place::may_replace(&out, args.force).is_err() {
-            "refused"
-        } else if args.cache.as_ref().is_some_and(|c| cached(&c.join(format!("{}.vpak", a.key)), &a.key).is_some()) {
-            "from-cache"
-        } else {
-            "bake"
-        };
-        rows.push((a, out, action));
-    }
-    if quiet {
-        return Ok(exit::SUCCESS);
-    }
-    let text = if args.json {
-        let doc = json!({ "assets": rows.iter().map(|(a, out, action)| json!({"name": a.name, "action": action, "output": a.output, "output_path": out.display().to_string(), "cache_key": a.key})).collect::<Vec<_>>() });
-        format!("{}\n", serde_json::to_string_pretty(&doc).unwrap_or_default())
-    } else {
-        rows.iter().map(|(a, out, action)| format!("{action:<10} {}  {}\n", a.name, out.display())).collect()
-    };
-    crate::emit_final(&text)?;
-    Ok(exit::SUCCESS)
 }
 
 /// Progress on a terminal: one overall bar and a line per finished asset.
@@ -373,7 +357,7 @@ impl Shown {
     fn finished(&self, r: &AssetReport) {
         if let Some(bar) = &self.bar {
             let size = r.bytes.map(vdbcook_bake::report::human_bytes).unwrap_or_default();
-            bar.println(format!("{:>12} {} {} ({:.1} s)", r.status.name(), r.name, size, r.seconds));
+            bar.println(format!("{:>12} {} {} ({:.1} s)", r.status.name(), r.label(), size, r.seconds));
             bar.inc(1);
         }
     }

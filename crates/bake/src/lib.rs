@@ -12,6 +12,7 @@
 
 pub mod key;
 pub mod manifest;
+pub mod parts;
 /// The typed cook settings (vdbcook-pipeline owns them; manifests are built from them).
 pub use vdbcook_pipeline::options;
 pub mod place;
@@ -22,8 +23,9 @@ pub mod table;
 pub use key::{cache_key, KeyContext};
 pub use manifest::{line_column, plan, Manifest, ManifestError, PlannedAsset, Sources};
 pub use options::{CookSettings, FrameRange, SettingText, Size};
-pub use report::{AssetReport, ChannelFormats, FormatBricks, Gate, Record, Report, Status, Summary, Validation};
-pub use step::{bake_one, cached, skipped, Baker};
+pub use parts::{units, PartNo, Unit};
+pub use report::{AssetReport, ChannelFormats, FormatBricks, Gate, PartRef, Record, Report, Status, Summary, Validation};
+pub use step::{bake_one, bake_unit, cached, join_parts, preview, skipped, skipped_unit, whole_cached, Baker};
 pub use table::{AssetTable, SettingsTable};
 
 #[derive(Debug, thiserror::Error)]
@@ -61,9 +63,10 @@ impl std::fmt::Display for Shard {
 }
 
 impl Shard {
-    /// Whether the asset at `index` (its position in the manifest, from 0)
-    /// belongs to this shard: round robin, so shards differ by at most one asset
-    /// and the split depends on nothing but the manifest.
+    /// Whether the unit at `index` (its position in the manifest's units,
+    /// [`parts::units`], from 0; an asset's position when no asset has
+    /// `parts`) belongs to this shard: round robin, so shards differ by at
+    /// most one unit and the split depends on nothing but the manifest.
     pub fn takes(&self, index: usize) -> bool {
         index % self.count as usize == (self.index - 1) as usize
     }

@@ -95,6 +95,8 @@ pub struct PlannedAsset {
     /// Every input file, in cook order, as the cooker will read it.
     pub files: Vec<PathBuf>,
     pub settings: CookSettings,
+    /// `parts = N`: cooked as N part units, joined into the asset (see [`crate::parts`]).
+    pub parts: Option<u32>,
     pub key: String,
 }
 
@@ -189,11 +191,44 @@ pub fn plan(m: &Manifest, base: &Path, sources: &dyn Sources, ctx: &KeyContext) 
             let rel = f.strip_prefix(base).unwrap_or(f).to_string_lossy().into_owned();
             digests.push(FileDigest::of(rel, bytes.as_deref()));
         }
+        let parts = check_parts(m, a, &settings, files.len())?;
         let written: Vec<String> = inputs.iter().map(|i| i.get_ref().clone()).collect();
         let key = cache_key(ctx, &settings, &written, &digests);
-        out.push(PlannedAsset { index, name, output, inputs: written, input_paths, files, settings, key });
+        // The record a joined asset carries follows its parts (see crate::parts), so they are in its key.
+        let key = match parts {
+            Some(n) => crate::parts::parted_key(&key, n),
+            None => key,
+        };
+        out.push(PlannedAsset { index, name, output, inputs: written, input_paths, files, settings, parts, key });
     }
     Ok(out)
+}
+
+/// The largest `parts` (a sanity bound: a part is a CI job).
+pub const MAX_PARTS: u32 = 1024;
+
+/// `parts = N` of an asset of `frames` files: 2 to [`MAX_PARTS`], with
+/// `segment_frames` (parts share segments) and at least N segments, and
+/// without `validate` (it decides over the whole asset: validate the joined one).
+fn check_parts(m: &Manifest, a: &AssetTable, s: &CookSettings, frames: usize) -> Result<Option<u32>, ManifestError> {
+    let Some(p) = &a.parts else { return Ok(None) };
+    let (n, span) = (*p.get_ref(), p.span());
+    let err = |message: String| Err(ManifestError::at(span.clone(), format!("parts: {message}")));
+    if !(2..=MAX_PARTS).contains(&n) {
+        return err(format!("{n} is not in 2..={MAX_PARTS}"));
+    }
+    let Some(seg) = s.segment_frames else {
+        return err("needs segment_frames (the parts are groups of the asset's segments, e.g. segment_frames = 24)".into());
+    };
+    if s.validate {
+        let at = a.settings.span("validate").or_else(|| m.defaults.span("validate")).unwrap_or(span.clone());
+        return Err(ManifestError::at(at, "validate: decides over the whole asset, so an asset cooked in parts takes none (validate = false; `vdbcook validate` the joined asset)"));
+    }
+    let segments = frames.div_ceil(seg.get() as usize);
+    if n as usize > segments {
+        return err(format!("{n} parts of {segments} segment(s) ({frames} frames, segment_frames = {}): expected at most one part per segment", seg.get()));
+    }
+    Ok(Some(n))
 }
 
 #[cfg(test)]
@@ -285,6 +320,31 @@ mod tests {
         let text = GOOD.replace("frames = \"1-2\"", "frames = \"1-3\"\nallow_missing = true");
         let p = run(&text).unwrap();
         assert_eq!(p[1].files.len(), 3);
+    }
+
+    #[test]
+    fn parts_need_segments_and_no_validation() {
+        let seg = |extra: &str| GOOD.replace("clusters = 4", &format!("segment_frames = 1\n{extra}"));
+        let p = run(&seg("parts = 2")).unwrap();
+        assert_eq!((p[0].parts, p[1].parts), (None, Some(2)));
+        // The parts are in the key (the joined asset's record follows them); nothing else moves.
+        let whole = run(&seg("")).unwrap();
+        assert_ne!(p[1].key, whole[1].key);
+        assert_eq!(p[1].key, crate::parts::parted_key(&whole[1].key, 2));
+        assert_eq!(p[0].key, whole[0].key);
+        let cases = [
+            (GOOD.replace("clusters = 4", "parts = 2"), "16:9: parts: needs segment_frames"),
+            (seg("parts = 1"), "17:9: parts: 1 is not in 2..=1024"),
+            (seg("parts = 3"), "17:9: parts: 3 parts of 2 segment(s)"),
+            (seg("parts = -1"), "parts: invalid value"),
+            (seg("parts = 2\nvalidate = true"), "18:12: validate: decides over the whole asset"),
+            (seg("parts = 2").replace("quality = \"fast\"", "validate = true"), "3:12: validate: decides over the whole asset"),
+            (GOOD.replace("format = \"bc7\"", "parts = 2"), "unknown field `parts`"),
+        ];
+        for (text, want) in cases {
+            let e = run(&text).unwrap_err();
+            assert!(e.starts_with(want) || (!want.starts_with(char::is_numeric) && e.contains(want)), "{e:?} does not start with {want:?}");
+        }
     }
 
     #[test]

@@ -71,7 +71,7 @@ pub fn check_outputs(m: &Manifest, planned: &[PlannedAsset], out_dir: &Path) -> 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Existing {
     Nothing,
-    /// A file (or a link to one) that starts with the .vpak magic.
+    /// A file (or a link to one) that starts with the .vpak magic (or a part file's).
     Vpak,
     /// Anything else: a file of another kind, a directory, a dangling link.
     Other,
@@ -90,7 +90,7 @@ pub fn existing(path: &Path) -> std::io::Result<Existing> {
     let mut head = [0u8; 8];
     let f = std::fs::File::open(path)?;
     let n = f.take(8).read(&mut head)?;
-    Ok(if n == 8 && head == vdbcook_vpak::MAGIC { Existing::Vpak } else { Existing::Other })
+    Ok(if n == 8 && (head == vdbcook_vpak::MAGIC || head == vdbcook_vpak::segments::PART_MAGIC) { Existing::Vpak } else { Existing::Other })
 }
 
 /// Err with a one-line reason when an asset may not be written at `path`:

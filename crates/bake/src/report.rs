@@ -154,6 +154,35 @@ pub struct AssetReport {
     /// Per-asset validation page, relative to the output directory, when one exists.
     pub validation_report: Option<String>,
     pub seconds: f64,
+    /// A part of an asset with `parts` (in a shard's report; `bake --merge` joins them).
+    #[serde(default)]
+    pub part: Option<PartRef>,
+}
+
+/// Which part of its asset an entry is, and its part file.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PartRef {
+    /// From 1.
+    pub index: u32,
+    pub count: u32,
+    /// The part file, relative to the output directory (and so to the report
+    /// of a shard whose report directory is its output directory).
+    pub file: String,
+}
+
+impl AssetReport {
+    /// "smoke", or "smoke (part 1/2)" for a part's entry.
+    pub fn label(&self) -> String {
+        match &self.part {
+            Some(p) => format!("{} (part {}/{})", self.name, p.index, p.count),
+            None => self.name.clone(),
+        }
+    }
+
+    /// Where the entry sorts: its asset's position, then its part's.
+    pub fn order(&self) -> (usize, u32) {
+        (self.index, self.part.as_ref().map_or(0, |p| p.index))
+    }
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -198,7 +227,7 @@ pub struct Report {
 
 impl Report {
     pub fn new(tool: String, manifest: String, shard: Option<Shard>, mut assets: Vec<AssetReport>, seconds: f64) -> Report {
-        assets.sort_by_key(|a| a.index);
+        assets.sort_by_key(AssetReport::order);
         Report { version: REPORT_VERSION, tool, manifest, shard, merged: 0, summary: Summary::of(&assets), seconds, assets }
     }
 
@@ -230,8 +259,10 @@ impl Report {
                 return Err(Error::Report(name, format!("is a report of manifest \"{}\", not \"{manifest}\"", r.manifest)));
             }
             for a in r.assets {
-                if let Some(o) = assets.iter().find(|o| o.index == a.index || o.name == a.name) {
-                    return Err(Error::Report(name, format!("asset \"{}\" is in two reports (expected the reports of disjoint shards)", o.name)));
+                let part = |x: &AssetReport| x.part.as_ref().map(|p| p.index);
+                if let Some(o) = assets.iter().find(|o| (o.index == a.index || o.name == a.name) && part(o) == part(&a)) {
+                    let what = o.part.as_ref().map_or(String::new(), |p| format!(" (part {}/{})", p.index, p.count));
+                    return Err(Error::Report(name, format!("asset \"{}\"{what} is in two reports (expected the reports of disjoint shards)", o.name)));
                 }
                 assets.push(a);
             }
@@ -251,7 +282,7 @@ impl Report {
         let _ = writeln!(s, "<testsuites name=\"vdbcook bake\" tests=\"{}\" failures=\"{failures}\" errors=\"0\" time=\"{:.3}\">", self.assets.len(), self.seconds);
         let _ = writeln!(s, "  <testsuite name=\"{}\" tests=\"{}\" failures=\"{failures}\" errors=\"0\" skipped=\"{skipped}\" time=\"{:.3}\">", xml(&self.manifest), self.assets.len(), self.seconds);
         for a in &self.assets {
-            let _ = write!(s, "    <testcase name=\"{}\" classname=\"vdbcook.bake\" time=\"{:.3}\"", xml(&a.name), a.seconds);
+            let _ = write!(s, "    <testcase name=\"{}\" classname=\"vdbcook.bake\" time=\"{:.3}\"", xml(&a.label()), a.seconds);
             let msg = a.message.clone().unwrap_or_default();
             match a.status {
                 Status::Failed => {
@@ -300,7 +331,7 @@ impl Report {
                 rows,
                 "<tr class='{st}'><td class='pic'>{thumb}</td><td class='t' data-v='{n}'>{n}<div class='sub'>{out}</div>{link}</td><td class='t' data-v='{st}'>{st}{gate}{msg}</td>{frames}{fmt}{bytes}{bpv}{vr}{vp}{ir}{ip}{fl}{secs}</tr>",
                 st = a.status.name(),
-                n = esc(&a.name),
+                n = esc(&a.label()),
                 out = esc(&a.output),
                 msg = a.message.as_ref().map(|m| format!("<div class='sub msg'>{}</div>", esc(m))).unwrap_or_default(),
                 frames = cell(r.frames.map(f64::from), r.frames.map(|f| f.to_string()).unwrap_or_default()),
@@ -442,6 +473,7 @@ mod tests {
             message: (status == Status::Failed).then(|| "x.vdb: bad <magic> & \"stuff\"".into()),
             validation_report: None,
             seconds: 0.5,
+            part: None,
         }
     }
 

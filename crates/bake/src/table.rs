@@ -39,17 +39,21 @@ impl SettingsTable {
     }
 }
 
-/// One `[[asset]]` entry: name, output, inputs and any setting.
+/// One `[[asset]]` entry: name, output, inputs, parts and any setting.
 #[derive(Clone, Debug)]
 pub struct AssetTable {
     pub name: Spanned<String>,
     pub output: Spanned<String>,
     pub inputs: Spanned<Vec<Spanned<String>>>,
+    /// Cook the asset as this many parts (bake units of their own), joined
+    /// into the asset: how the work is spread, not a cook setting, so an
+    /// asset's own key only (not in `[defaults]`).
+    pub parts: Option<Spanned<u32>>,
     pub settings: SettingsTable,
 }
 
 impl AssetTable {
-    const OWN: [&'static str; 3] = ["name", "output", "inputs"];
+    const OWN: [&'static str; 4] = ["name", "output", "inputs", "parts"];
 }
 
 /// A key the table knows (else serde's "unknown field" error, at the key).
@@ -129,16 +133,17 @@ impl<'de> Deserialize<'de> for AssetTable {
         impl<'de> Visitor<'de> for V {
             type Value = AssetTable;
             fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-                f.write_str("an asset: name, output, inputs and cook settings")
+                f.write_str("an asset: name, output, inputs, parts and cook settings")
             }
             fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<AssetTable, A::Error> {
-                let (mut name, mut output, mut inputs) = (None, None, None);
+                let (mut name, mut output, mut inputs, mut parts) = (None, None, None, None);
                 let mut settings = SettingsTable::default();
                 while let Some(key) = map.next_key_seed(Key(asset_keys()))? {
                     match key.as_str() {
                         "name" => name = Some(map.next_value()?),
                         "output" => output = Some(map.next_value()?),
                         "inputs" => inputs = Some(map.next_value()?),
+                        "parts" => parts = Some(map.next_value::<Spanned<u32>>().map_err(|e| A::Error::custom(format!("parts: {e}")))?),
                         _ => settings.read(key, &mut map)?,
                     }
                 }
@@ -146,6 +151,7 @@ impl<'de> Deserialize<'de> for AssetTable {
                     name: name.ok_or_else(|| A::Error::missing_field("name"))?,
                     output: output.ok_or_else(|| A::Error::missing_field("output"))?,
                     inputs: inputs.ok_or_else(|| A::Error::missing_field("inputs"))?,
+                    parts,
                     settings,
                 })
             }
