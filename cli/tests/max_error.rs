@@ -25,13 +25,16 @@ fn active_values(file: &Path, grid: &str, dump: &Path) -> HashMap<[i32; 3], f64>
     out
 }
 
+/// Inputs, the grid, E.
+type Case<'a> = (Vec<String>, &'a str, f32);
+
 #[test]
 fn unpacked_voxels_are_within_the_bound_through_openvdb() {
     if !oracle_available() {
         return;
     }
     let dir = scratch_dir("max_error", "openvdb");
-    let mut cases: Vec<(Vec<String>, &str, f32)> = vec![
+    let mut cases: Vec<Case> = vec![
         (vec![s(&root().join("fixtures/smoke_seq/smoke_0002.vdb")).into(), s(&root().join("fixtures/smoke_seq/smoke_0003.vdb")).into()], "density", 0.003),
         (vec![s(&root().join("fixtures/tiles.vdb")).into()], "density", 0.0005),
     ];
@@ -39,7 +42,7 @@ fn unpacked_voxels_are_within_the_bound_through_openvdb() {
         cases.push((vec![s(&samples.join("vfx-toolkit-embergen/embergen_fire_a_2.vdb")).into()], "flames", 0.01));
     }
     // Each case as GPU texels and as texels for the disk (supercompressed: on the coarsest grid within the bound).
-    let runs: Vec<(usize, &(Vec<String>, &str, f32), bool)> = cases.iter().enumerate().flat_map(|(k, c)| [(k, c, false), (k, c, true)]).collect();
+    let runs: Vec<_> = cases.iter().enumerate().flat_map(|(k, c)| [(k, c, false), (k, c, true)]).collect::<Vec<(usize, &Case, bool)>>();
     let results = par_map(&runs, |&(k, (inputs, grid, e), disk)| -> Result<usize, String> {
         let k = format!("{k}{}", if disk { "z" } else { "" });
         let asset = dir.join(format!("m{k}.vpak"));

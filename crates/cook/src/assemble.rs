@@ -79,7 +79,7 @@ impl Cooker {
         let encoded = match max_error {
             None => encode::in_planes(pool, channels, specs, opts.quality, masks.as_deref(), clustered.as_ref(), progress),
             Some(bound) => {
-                let choices = choose::per_brick(pool, channels, masks.as_deref().unwrap_or(&[]), bound, opts.quality, opts.disk, clustered.as_mut(), progress);
+                let choices = choose::per_brick(pool, channels, masks.as_deref().unwrap_or(&[]), bound, opts, clustered.as_mut(), progress);
                 encode::as_chosen(pool, channels, choices, clustered.as_ref())
             }
         };

@@ -4,7 +4,7 @@
 
 use crate::cluster::Clustered;
 use crate::{channels_named, ChannelSpec, CookOptions, Error, Format, Progress};
-use vdbcook_encode::{Brick, Choice, PlaneSpec, Quality};
+use vdbcook_encode::{Brick, Choice, PlaneSpec};
 
 /// The planes of every channel group, in order: explicit groups first,
 /// then each other channel alone in `format`, in a texture of its own
@@ -56,19 +56,10 @@ pub(crate) fn plan_planes(opts: &CookOptions, specs: &[ChannelSpec]) -> Result<(
 /// order.  Merged bricks are held to the bound too: one that its cluster's
 /// stored brick leaves past it becomes a stray, stored (and chosen for) on
 /// its own, after the centroids.
-pub(crate) fn per_brick(
-    pool: &[Brick],
-    channels: usize,
-    masks: &[[u64; 8]],
-    bound: f32,
-    quality: Quality,
-    disk: Option<vdbcook_encode::Optimize>,
-    clustered: Option<&mut Clustered>,
-    progress: &dyn Progress,
-) -> Vec<Choice> {
+pub(crate) fn per_brick(pool: &[Brick], channels: usize, masks: &[[u64; 8]], bound: f32, opts: &CookOptions, clustered: Option<&mut Clustered>, progress: &dyn Progress) -> Vec<Choice> {
     let choose = |bricks: &[Brick], masks: &[[u64; 8]]| {
         progress.start("choosing formats", (bricks.len() / channels) as u64);
-        let c = vdbcook_encode::cheapest_all(bricks, channels, masks, bound, quality, disk, &|n| progress.advance(n as u64));
+        let c = vdbcook_encode::cheapest_all(bricks, channels, masks, bound, opts.quality, opts.disk, &|n| progress.advance(n as u64));
         progress.finish();
         c
     };
