@@ -158,3 +158,25 @@ fn reports_give_bytes_on_disk_and_on_the_gpu() {
     assert!(text.contains("supercompressed") && text.contains("on the GPU"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_bake_records_both_sizes_and_a_cached_asset_reports_them_again() {
+    let dir = scratch_dir("supercompress", "bake");
+    let manifest = dir.join("bake.toml");
+    let smoke = root().join("fixtures/smoke_seq").display().to_string();
+    std::fs::write(&manifest, format!("[[asset]]\nname = \"smoke\"\noutput = \"smoke.vpak\"\ninputs = [\"{smoke}\"]\nmax_error = 0.01\nsupercompress = \"zstd:3\"\noptimize = \"disk\"\n")).unwrap();
+    let out = dir.join("out");
+    for run in 0..2 {
+        let r = ok(vdbcook(&["bake", "--json", s(&manifest), "--out-dir", s(&out)]));
+        let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+        let a = &v["assets"][0];
+        assert_eq!(a["status"], if run == 0 { "baked" } else { "cached" }, "{a}");
+        let (bytes, gpu) = (a["bytes"].as_u64().unwrap(), a["gpu_bytes"].as_u64().unwrap());
+        assert_eq!(bytes, std::fs::metadata(out.join("smoke.vpak")).unwrap().len());
+        assert!(bytes < gpu, "{bytes} on disk, {gpu} on the GPU");
+    }
+    let i = inspect(&out.join("smoke.vpak"));
+    let set = &i["settings"];
+    assert_eq!((set["supercompress"].as_str(), set["optimize"].as_str()), (Some("zstd:3"), Some("disk")), "{set}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

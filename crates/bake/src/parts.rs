@@ -219,6 +219,7 @@ pub fn join(name: &str, files: &[PathBuf], out: &Path, force: bool, thumbnail: &
     let voxels = record.active_voxels.unwrap_or(0);
     record.bits_per_active_voxel = Some(if voxels > 0 { plain.bytes().len() as f64 * 8.0 / voxels as f64 } else { 0.0 });
     record.thumbnail = thumbnail(&plain);
+    record.gpu_bytes = Some(plain.gpu_bytes().with_context(|| oname.clone())?);
     let key = notes[0].asset_key.clone();
     let extra = [("cache_key".to_string(), key.clone()), ("bake_record".to_string(), record.to_setting())];
     let bytes = rewrite_metadata(&plain, |m| m.settings.extend(extra.iter().cloned())).with_context(|| oname.clone())?;

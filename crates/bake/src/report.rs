@@ -73,6 +73,10 @@ pub struct Record {
     /// Per channel, its formats and their bricks (`None` in records written before them).
     #[serde(default)]
     pub channels: Option<Vec<ChannelFormats>>,
+    /// Bytes a renderer uploads (every section but the metadata, restored): the
+    /// file's size unless it is supercompressed (`None` in records written before it).
+    #[serde(default)]
+    pub gpu_bytes: Option<u64>,
 }
 
 /// One channel's formats: the cook report's `formats`, in its order (cheapest first).
@@ -336,7 +340,14 @@ impl Report {
                 msg = a.message.as_ref().map(|m| format!("<div class='sub msg'>{}</div>", esc(m))).unwrap_or_default(),
                 frames = cell(r.frames.map(f64::from), r.frames.map(|f| f.to_string()).unwrap_or_default()),
                 fmt = format_cell(r),
-                bytes = cell(a.bytes.map(|b| b as f64), a.bytes.map(human_bytes).unwrap_or_default()),
+                bytes = cell(
+                    a.bytes.map(|b| b as f64),
+                    match (a.bytes, r.gpu_bytes) {
+                        // Supercompressed: the GPU's bytes beside the file's.
+                        (Some(b), Some(g)) if g > b => format!("{}<div class='sub'>{} on the GPU</div>", human_bytes(b), human_bytes(g)),
+                        (b, _) => b.map(human_bytes).unwrap_or_default(),
+                    }
+                ),
                 bpv = cell(r.bits_per_active_voxel, r.bits_per_active_voxel.map(|b| format!("{b:.3}")).unwrap_or_default()),
                 vr = cell(r.voxel_rmse, r.voxel_rmse.map(sci).unwrap_or_default()),
                 vp = cell(r.voxel_psnr, psnr_text(r.voxel_rmse, r.voxel_psnr)),

@@ -313,6 +313,7 @@ fn cook_record(cooked: &Cooked) -> Record {
         voxel_rmse: Some(r.voxel_rmse),
         voxel_psnr: finite(r.voxel_psnr),
         channels: Some(r.channels.iter().map(ChannelFormats::from).collect()),
+        gpu_bytes: Some(r.gpu_bytes),
         ..Record::default()
     }
 }

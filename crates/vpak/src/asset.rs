@@ -320,6 +320,24 @@ impl Asset {
         Ok(body)
     }
 
+    /// Bytes a renderer uploads to draw any frame, summed over the segments:
+    /// every section but the metadata, at its restored size (from the coding
+    /// records; nothing is decompressed).
+    pub fn gpu_bytes(&self) -> Result<u64, Error> {
+        let mut total = 0;
+        for s in 0..self.segment_count() {
+            let seg = self.stored_segment(s)?;
+            let codings = match seg.section(kind::CODING, 0) {
+                Ok(b) => crate::coding::Coding::parse_all(b)?,
+                Err(_) => Vec::new(),
+            };
+            for e in seg.sections.iter().filter(|e| !matches!(e.kind, kind::METADATA | kind::CODING)) {
+                total += codings.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)).map_or(e.size, |c| c.raw_size);
+            }
+        }
+        Ok(total)
+    }
+
     /// Frames of the whole asset (from the segment table; a body's from its metadata).
     pub fn frame_count(&self) -> Result<usize, Error> {
         Ok(self.segments()?.last().map_or(0, |e| e.frames().end))
