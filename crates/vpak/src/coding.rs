@@ -267,20 +267,22 @@ fn candidates(s: &Section, meta: &Metadata) -> Vec<Filter> {
     let words = vec![Filter::None, Filter::Shuffle { width: 4 }, Filter::Delta { width: 4, stride: 1 }];
     match s.kind {
         kind::METADATA | kind::CODING => Vec::new(),
-        kind::ATLAS => match atlas_plane(meta, s.index) {
-            Some(p) => {
-                let lanes = p.lanes;
-                match p.format {
-                    Format::Bc4 | Format::Bc7 => vec![Filter::None, Filter::Shuffle { width: p.format.block_bytes() as u32 }],
-                    Format::F32 => vec![Filter::Shuffle { width: 4 }, Filter::Delta { width: 4, stride: lanes }],
-                    Format::F16 | Format::Unorm16 => vec![Filter::Shuffle { width: 2 }, Filter::Delta { width: 2, stride: lanes }],
-                    Format::Unorm8 => vec![Filter::None, Filter::Delta { width: 1, stride: lanes }],
-                    Format::Constant => vec![Filter::None],
-                }
-            }
-            None => vec![Filter::None],
-        },
+        kind::ATLAS => atlas_plane(meta, s.index).map_or(vec![Filter::None], texel_filters),
         _ => words,
+    }
+}
+
+/// The filters for texels of `plane`: the plain one first, then the one
+/// that usually wins on smooth volumes (a texel's difference from its
+/// neighbour along x, `lanes` elements back; BC blocks' bytes by weight).
+fn texel_filters(plane: &crate::Plane) -> Vec<Filter> {
+    let lanes = plane.lanes;
+    match plane.format {
+        Format::Bc4 | Format::Bc7 => vec![Filter::None, Filter::Shuffle { width: plane.format.block_bytes() as u32 }],
+        Format::F32 => vec![Filter::Shuffle { width: 4 }, Filter::Delta { width: 4, stride: lanes }],
+        Format::F16 | Format::Unorm16 => vec![Filter::Shuffle { width: 2 }, Filter::Delta { width: 2, stride: lanes }],
+        Format::Unorm8 => vec![Filter::None, Filter::Delta { width: 1, stride: lanes }],
+        Format::Constant => vec![Filter::None],
     }
 }
 
@@ -297,15 +299,9 @@ fn atlas_plane(meta: &Metadata, section: u32) -> Option<&crate::Plane> {
 
 /// What one brick's texels (`bytes`, in `plane`) cost in a supercompressed
 /// file, as an estimate for choosing formats: compressed alone at a fast
-/// level after the filter the writer would try first for an atlas of that
-/// plane, plus its range pair.
+/// level after the plane's usual filter ([`texel_filters`]' last), plus its range pair.
 pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
-    let filter = match plane.format {
-        Format::Bc4 | Format::Bc7 => Filter::Shuffle { width: plane.format.block_bytes() as u32 },
-        Format::F32 | Format::F16 | Format::Unorm16 => Filter::Delta { width: plane.format.lane_bytes() as u32, stride: plane.lanes },
-        Format::Unorm8 => Filter::Delta { width: 1, stride: plane.lanes },
-        Format::Constant => Filter::None,
-    };
+    let filter = texel_filters(plane).pop().unwrap_or(Filter::None);
     let filtered = if bytes.len().is_multiple_of(filter.width()) { filter.apply(bytes) } else { bytes.to_vec() };
     zstd::bulk::compress(&filtered, 1).map_or(bytes.len(), |c| c.len()) + 8
 }
