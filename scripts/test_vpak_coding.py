@@ -242,8 +242,10 @@ def check_refusals(packed, plain, work):
         c = next(s for s in secs if s[0] == K_CODING)
         c[2] = c[2][:-1]
     refused(with_body(packed, short), "not whole 40-byte records")
-    # Kind 13 of another index is no coding section: ignored, as sections of unknown kinds are.
-    same_asset(with_body(packed, lambda secs: secs.extend([[K_CODING, 1, b"x"], [99, 0, b"y"]])), plain)
+    # A body has one coding section, of index 0: kind 13 of another index is refused;
+    # a section of an unknown kind is ignored.
+    refused(with_body(packed, lambda secs: secs.append([K_CODING, 1, b"x"])), "index other than 0")
+    same_asset(with_body(packed, lambda secs: secs.append([99, 0, b"y"])), plain)
     # A section no record names is stored as it is: drop a record and the stored zstd
     # frame is taken as the section, which then fails validation (or its use).
     refused(with_body(packed, edit_record(lambda rs: rs.remove(next(r for r in rs if (r[0], r[1]) == atlas)))), "texture has the wrong size")
