@@ -154,14 +154,21 @@ fn obtain_part(a: &PlannedAsset, p: PartNo, key: &str, ctx: &Baker, out: &Path) 
     let extra = [("cache_key".to_string(), key.to_string()), (parts::PART_SETTING.to_string(), serde_json::to_string(&note).unwrap_or_default())];
     let bytes = parts::rewrite_part(&info, &asset, |m| m.settings.extend(extra.iter().cloned())).with_context(|| name.clone())?;
     drop((asset, cooked));
+    write_out(out, cache_file.as_deref(), ctx, &bytes, &name)?;
+    Ok((Status::Baked, note, bytes.len() as u64))
+}
+
+/// Writes what was baked to `out` and, with a cache, to its cache file.
+fn write_out(out: &Path, cache_file: Option<&Path>, ctx: &Baker, bytes: &[u8], name: &str) -> Result<()> {
+    let may_write = |p: &Path| place::may_replace(p, ctx.force).map_err(Error::Failed);
     may_write(out)?;
-    vdbcook_vpak::write_atomic(out, &bytes, true).with_context(|| name.clone())?;
-    if let (Some(cf), Some(dir)) = (&cache_file, &ctx.cache) {
+    vdbcook_vpak::write_atomic(out, bytes, true).with_context(|| name.to_string())?;
+    if let (Some(cf), Some(dir)) = (cache_file, &ctx.cache) {
         std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
         may_write(cf)?;
-        vdbcook_vpak::write_atomic(cf, &bytes, true).with_context(|| cf.display().to_string())?;
+        vdbcook_vpak::write_atomic(cf, bytes, true).with_context(|| cf.display().to_string())?;
     }
-    Ok((Status::Baked, note, bytes.len() as u64))
+    Ok(())
 }
 
 /// Joins the asset from its parts' files, which `units` (the reports of its
@@ -255,13 +262,7 @@ fn obtain(a: &PlannedAsset, ctx: &Baker, out: &Path) -> Result<(Status, Record, 
         may_write(cf)?;
     }
     let (bytes, record) = cook_fresh(a, ctx)?;
-    may_write(out)?;
-    vdbcook_vpak::write_atomic(out, &bytes, true).with_context(|| name.clone())?;
-    if let (Some(cf), Some(dir)) = (&cache_file, &ctx.cache) {
-        std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
-        may_write(cf)?;
-        vdbcook_vpak::write_atomic(cf, &bytes, true).with_context(|| cf.display().to_string())?;
-    }
+    write_out(out, cache_file.as_deref(), ctx, &bytes, &name)?;
     Ok((Status::Baked, record, bytes.len() as u64))
 }
 
