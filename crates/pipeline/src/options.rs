@@ -260,8 +260,8 @@ settings_group! {
         pub supercompress: Supercompress = Supercompress::None;
         /// With --max-error and --supercompress, what each brick's format choice minimises: gpu
         /// (the cheapest format within E on the GPU, as without --supercompress) or disk (the
-        /// format whose texels compress to the fewest bytes: a smaller file, often larger GPU
-        /// formats; the cook encodes every format within E, so it takes longer).
+        /// format whose texels, compressed alone, take the fewest bytes: larger GPU formats,
+        /// and a file smaller only where that estimate holds in context; docs/benchmarks.md).
         #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().optimize))]
         pub optimize: Optimize = Optimize::Gpu;
         /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
