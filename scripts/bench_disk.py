@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Bytes on disk within an error bound: supercompressed assets against NanoVDB's zipped FpN.
 
-    /usr/bin/python3 scripts/bench_disk.py [--no-build] [--quick]
+    /usr/bin/python3 scripts/bench_disk.py [--no-build] [--quick] [--sizes]
 
 One run, release binary (built first unless --no-build), inputs: the real samples of
 ../shared/vdb-samples with at least 10 k active voxels in the grid cooked, and a generated
@@ -83,6 +83,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--no-build", action="store_true")
     ap.add_argument("--quick", action="store_true", help="the first three inputs only")
+    ap.add_argument("--sizes", action="store_true", help="the size tables only (no timings)")
     a = ap.parse_args()
     if not a.no_build:
         subprocess.run(["cargo", "build", "--release", "-q"], cwd=ROOT, check=True)
@@ -131,6 +132,8 @@ def main():
                                                      size(stem + "_z19.vpak") / zz, size(src) / size(stem + "_z19.vpak")))
         sys.stdout.flush()
 
+    if a.sizes:
+        return
     print("\n## Cook time with and without --supercompress (median of 3, alternating)\n")
     print("| input | flags | plain | zstd | ratio |")
     print("|---|---|---:|---:|---:|")

@@ -39,6 +39,7 @@ BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION = 6, 7, 8
 MAX_LEVELS = 5
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
+CODED_ALIGN = 8  # the coding section and the sections it names (version 8)
 
 # Section kinds (format.md, "Sections").
 K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_RANGES, K_ATLAS, K_TABLE, K_CHANNEL_TABLE = range(1, 13)
@@ -136,8 +137,8 @@ def read_header(buf):
     _, table = read_table(buf, (BODY_VERSION,), "body")
     sections = {}
     for s, (kind, index, offset, size, checksum) in enumerate(table):
-        if offset % SECTION_ALIGN or offset + size > len(buf):
-            raise VpakError(f"section {s} (kind {kind}) not inside the body at a 256-byte boundary")
+        if offset % CODED_ALIGN or offset + size > len(buf):
+            raise VpakError(f"section {s} (kind {kind}) not inside the body at an 8-byte boundary")
         if (kind, index) in sections:
             raise VpakError(f"section kind {kind} index {index} appears twice")
         sections[(kind, index)] = (offset, size, checksum)
@@ -776,6 +777,10 @@ def open_body(buf, head_sum=None, coded=False):
             raise VpakError(str(e)) from None
         for kind, index in secs.table:  # restore every compressed section, checking each
             secs.get(kind, index)
+    # Every other section starts at a multiple of 256 bytes.
+    for (kind, index), (offset, _, _) in secs.table.items():
+        if kind != K_CODING and (kind, index) not in secs.coding and offset % SECTION_ALIGN:
+            raise VpakError(f"section kind {kind} index {index} is not at a 256-byte boundary")
     m = decode_metadata(secs.get(K_METADATA))
     validate(m, secs)
     return m, secs

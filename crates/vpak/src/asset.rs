@@ -143,10 +143,15 @@ impl Asset {
             let u64_at = |o: usize| u64::from_le_bytes(e[o..o + 8].try_into().unwrap_or([0; 8]));
             let s = SectionEntry { kind: u32_at(0), index: u32_at(4), offset: u64_at(8), size: u64_at(16), checksum: u64_at(24) };
             let end = s.offset.checked_add(s.size);
-            if !s.offset.is_multiple_of(ALIGN as u64) || s.offset < table_end || end.is_none_or(|e| e > len) {
+            if !s.offset.is_multiple_of(crate::CODED_ALIGN as u64) || s.offset < table_end || end.is_none_or(|e| e > len) {
                 return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
             }
             sections.push(s);
+        }
+        // Every section at a multiple of 256 but the coding section and those it names (at a multiple of 8).
+        let coded = crate::coding::coded_sections(sections.iter().map(|e| (e.kind, e.index, self.raw(e))));
+        if let Some(s) = sections.iter().find(|s| !coded.contains(&(s.kind, s.index)) && !s.offset.is_multiple_of(ALIGN as u64)) {
+            return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
         }
         // One section per (kind, index): a reader must not have to pick.
         let mut keys: Vec<(u32, u32)> = sections.iter().map(|s| (s.kind, s.index)).collect();

@@ -259,6 +259,17 @@ impl Coding {
     }
 }
 
+/// The sections of a body that start at [`crate::CODED_ALIGN`]: the coding
+/// section and those its records name (none when it has no readable one).
+pub(crate) fn coded_sections<'a>(sections: impl Iterator<Item = (u32, u32, &'a [u8])>) -> std::collections::HashSet<(u32, u32)> {
+    let mut coded = std::collections::HashSet::new();
+    for (k, i, data) in sections.filter(|s| s.0 == kind::CODING) {
+        coded.insert((k, i));
+        coded.extend(Coding::parse_all(data).unwrap_or_default().iter().map(|c| (c.kind, c.index)));
+    }
+    coded
+}
+
 /// The filters worth trying on a section, by what its bytes are: `u32`
 /// tables and node words, `f32` ranges and tiles, and an atlas's texels in
 /// its plane's format (lanes interleaved, so a texel's neighbour along x is
@@ -428,7 +439,7 @@ pub(crate) fn restore_body(sections: &[(crate::SectionEntry, &[u8])]) -> Result<
     let parts: Vec<(crate::SectionEntry, &[u8], Option<&Coding>)> =
         sections.iter().filter(|(e, _)| e.kind != kind::CODING).map(|(e, b)| (*e, *b, coding.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)))).collect();
     // The restored table: each section at its restored size, with its restored checksum.
-    let entries: Vec<(u32, u32, usize, u64)> = parts.iter().map(|(e, b, c)| (e.kind, e.index, c.map_or(b.len(), |c| c.raw_size as usize), c.map_or(e.checksum, |c| c.raw_checksum))).collect();
+    let entries: Vec<crate::Entry> = parts.iter().map(|(e, b, c)| (e.kind, e.index, c.map_or(b.len(), |c| c.raw_size as usize), c.map_or(e.checksum, |c| c.raw_checksum), crate::ALIGN)).collect();
     let (head, offsets, len) = crate::head_of(&entries);
     let mut words = Vec::new();
     words.try_reserve_exact(len.div_ceil(8)).map_err(|_| Error::Invalid(format!("no memory for the {len} bytes of a restored segment")))?;

@@ -61,6 +61,9 @@ pub const HEADER_LEN: usize = 64;
 pub const ENTRY_LEN: usize = 32;
 /// Every section starts at a multiple of this (GPU upload and mmap friendly).
 pub const ALIGN: usize = 256;
+/// A supercompressed section and the coding section start at a multiple of
+/// this instead (they are restored, not uploaded, so 256 would only pad).
+pub const CODED_ALIGN: usize = 8;
 /// Refuse section tables larger than this (a sanity bound, not a format limit).
 const MAX_SECTIONS: u32 = 1 << 16;
 
@@ -453,21 +456,25 @@ fn align(n: usize) -> usize {
     n.div_ceil(ALIGN) * ALIGN
 }
 
-/// Offsets of each section, the table's end and the file's length.
+/// Offsets of each section, the table's end and the file's length: every
+/// section at a multiple of [`ALIGN`], but the coding section and the
+/// sections it names at a multiple of [`CODED_ALIGN`].
 fn plan(sections: &[Section]) -> (Vec<usize>, usize, usize) {
-    plan_lens(sections.iter().map(|s| s.data.len()))
+    let coded = coding::coded_sections(sections.iter().map(|s| (s.kind, s.index, s.data.as_slice())));
+    plan_lens(sections.iter().map(|s| (s.data.len(), if coded.contains(&(s.kind, s.index)) { CODED_ALIGN } else { ALIGN })))
 }
 
-/// [`plan`] of sections of these lengths.
-fn plan_lens(lens: impl ExactSizeIterator<Item = usize>) -> (Vec<usize>, usize, usize) {
+/// [`plan`] of sections of these lengths and alignments.
+fn plan_lens(lens: impl ExactSizeIterator<Item = (usize, usize)>) -> (Vec<usize>, usize, usize) {
     let table_end = HEADER_LEN + ENTRY_LEN * lens.len();
     let mut offsets = Vec::with_capacity(lens.len());
-    let mut pos = align(table_end);
-    let mut end = pos;
-    for len in lens {
+    let mut pos = table_end;
+    let mut end = align(table_end);
+    for (len, to) in lens {
+        pos = pos.div_ceil(to) * to;
         offsets.push(pos);
         end = pos + len;
-        pos = align(end);
+        pos = end;
     }
     (offsets, table_end, end)
 }
@@ -485,20 +492,24 @@ pub fn write_to<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section]) -> 
 
 /// A body's header and section table (every section's checksum computed once, here).
 pub(crate) fn body_head(sections: &[Section]) -> Vec<u8> {
-    let entries: Vec<(u32, u32, usize, u64)> = sections.iter().map(|s| (s.kind, s.index, s.data.len(), checksum(&s.data))).collect();
+    let coded = coding::coded_sections(sections.iter().map(|s| (s.kind, s.index, s.data.as_slice())));
+    let entries: Vec<Entry> = sections.iter().map(|s| (s.kind, s.index, s.data.len(), checksum(&s.data), if coded.contains(&(s.kind, s.index)) { CODED_ALIGN } else { ALIGN })).collect();
     head_of(&entries).0
 }
 
-/// The header and section table of a body of sections (kind, index, length,
-/// checksum), the offset of each and the body's length.
-pub(crate) fn head_of(entries: &[(u32, u32, usize, u64)]) -> (Vec<u8>, Vec<usize>, usize) {
-    let (offsets, table_end, total) = plan_lens(entries.iter().map(|e| e.2));
+/// A section of a body to lay out: kind, index, length, checksum, alignment.
+pub(crate) type Entry = (u32, u32, usize, u64, usize);
+
+/// The header and section table of a body of sections, the offset of each
+/// and the body's length.
+pub(crate) fn head_of(entries: &[Entry]) -> (Vec<u8>, Vec<usize>, usize) {
+    let (offsets, table_end, total) = plan_lens(entries.iter().map(|e| (e.2, e.4)));
     let mut head = vec![0u8; table_end];
     head[..8].copy_from_slice(&MAGIC);
     head[8..12].copy_from_slice(&segments::BODY_VERSION.to_le_bytes());
     head[16..20].copy_from_slice(&(entries.len() as u32).to_le_bytes());
     head[24..32].copy_from_slice(&(total as u64).to_le_bytes());
-    for (i, (&(kind, index, len, sum), &off)) in entries.iter().zip(&offsets).enumerate() {
+    for (i, (&(kind, index, len, sum, _), &off)) in entries.iter().zip(&offsets).enumerate() {
         let e = HEADER_LEN + i * ENTRY_LEN;
         head[e..e + 4].copy_from_slice(&kind.to_le_bytes());
         head[e + 4..e + 8].copy_from_slice(&index.to_le_bytes());
