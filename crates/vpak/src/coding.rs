@@ -179,10 +179,11 @@ fn unshuffle(data: &[u8], out: &mut [u8], w: usize) {
     let n = data.len() / w;
     match w {
         1 => out.copy_from_slice(data),
+        // Whole elements assembled in registers (little-endian), which compiles to byte interleaves.
         2 => {
             let (a, b) = data.split_at(n);
             for ((o, &x), &y) in out.chunks_exact_mut(2).zip(a).zip(b) {
-                o.copy_from_slice(&[x, y]);
+                o.copy_from_slice(&(u16::from(x) | u16::from(y) << 8).to_le_bytes());
             }
         }
         4 => {
@@ -190,7 +191,7 @@ fn unshuffle(data: &[u8], out: &mut [u8], w: usize) {
             let (b, rest) = rest.split_at(n);
             let (c, d) = rest.split_at(n);
             for ((((o, &x), &y), &z), &t) in out.chunks_exact_mut(4).zip(a).zip(b).zip(c).zip(d) {
-                o.copy_from_slice(&[x, y, z, t]);
+                o.copy_from_slice(&u32::from_le_bytes([x, y, z, t]).to_le_bytes());
             }
         }
         _ => {
