@@ -245,6 +245,7 @@ settings_group! {
         /// Byte budget B (bytes, or e.g. 500kB, 1.5MB, 2MiB): keep the finest levels of detail
         /// (of --lods) whose asset fits, leaving out the finer ones; the coarsest always stays, and
         /// when even it alone is larger the cook fails (exit 1) naming the smallest size reachable.
+        /// With --supercompress the budget holds the asset's GPU bytes (the file is smaller).
         #[cfg_attr(feature = "clap", arg(long, value_name = "B"))]
         pub max_bytes: Option<ByteBudget> = None;
         /// Cut the flip-book into segments of N frames, each with its own bricks, atlases and
