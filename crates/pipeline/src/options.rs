@@ -257,6 +257,7 @@ settings_group! {
         /// How sections are stored on disk: none, zstd, or zstd:LEVEL (1 to 22; zstd alone is
         /// level 5). Each segment's sections are filtered and zstd-compressed: a smaller file,
         /// the same GPU bytes (a reader restores a segment when it loads it, at zstd's speed).
+        /// With --max-error the texels are also moved to the coarsest grid within E.
         #[cfg_attr(feature = "clap", arg(long, value_name = "none|zstd[:LEVEL]", default_value_t = CookSettings::default().supercompress))]
         pub supercompress: Supercompress = Supercompress::None;
         /// With --max-error and --supercompress, what each brick's format choice minimises: gpu
