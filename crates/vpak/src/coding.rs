@@ -409,6 +409,22 @@ fn sample(data: &[u8]) -> impl Iterator<Item = &[u8]> {
     (0..count).map(move |k| if count == 1 { data } else { &data[k * step..k * step + CHUNK] })
 }
 
+/// `n` zeroed words from the allocator's zeroed memory (fresh pages are not
+/// touched until written: a restored size that lies costs address space, not
+/// memory, until its frame fails to fill it), or `None` when it has none.
+fn zeroed_words(n: usize) -> Option<Vec<u64>> {
+    if n == 0 {
+        return Some(Vec::new());
+    }
+    let layout = std::alloc::Layout::array::<u64>(n).ok()?;
+    // SAFETY: the layout's size is not zero; a null pointer is handled; all-zero
+    // bits are a valid u64, and the Vec takes the allocation with this layout.
+    unsafe {
+        let p = std::alloc::alloc_zeroed(layout) as *mut u64;
+        (!p.is_null()).then(|| Vec::from_raw_parts(p, n, n))
+    }
+}
+
 /// Restores one section's GPU bytes from its stored bytes.
 pub fn restore(c: &Coding, stored: &[u8]) -> Result<Vec<u8>, Error> {
     plausible(c, stored.len())?;
@@ -442,9 +458,7 @@ pub(crate) fn restore_body(sections: &[(crate::SectionEntry, &[u8])]) -> Result<
     // The restored table: each section at its restored size, with its restored checksum.
     let entries: Vec<crate::Entry> = parts.iter().map(|(e, b, c)| (e.kind, e.index, c.map_or(b.len(), |c| c.raw_size as usize), c.map_or(e.checksum, |c| c.raw_checksum), crate::ALIGN)).collect();
     let (head, offsets, len) = crate::head_of(&entries);
-    let mut words = Vec::new();
-    words.try_reserve_exact(len.div_ceil(8)).map_err(|_| Error::Invalid(format!("no memory for the {len} bytes of a restored segment")))?;
-    words.resize(len.div_ceil(8), 0u64);
+    let mut words = zeroed_words(len.div_ceil(8)).ok_or_else(|| Error::Invalid(format!("no memory for the {len} bytes of a restored segment")))?;
     let bytes = &mut bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..len];
     bytes[..head.len()].copy_from_slice(&head);
     // Disjoint places, in offset order.
