@@ -77,8 +77,7 @@ in place or in the cache is not cooked again); shards each write their parts, an
 `bake --merge` joins them, finding each part file relative to the report that lists it,
 into --out-dir (default: the report directory). A missing part is a one-line error
 naming the asset and the part, and nothing is written. The joined asset is byte for byte
-the unsplit bake's but for the key (it counts the parts) and the record (its voxel RMSE
-and PSNR are the worst part's).
+the unsplit bake's, its key and record included.
 
 Exit codes: 0 every asset baked or cached and every gate held; 1 an asset failed
 (bad input, I/O); 3 only quality gates failed; 2 usage or manifest errors (nothing is

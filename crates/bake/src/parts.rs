@@ -5,11 +5,10 @@
 //!
 //! A part file carries, in every segment's metadata, its own cache key and a
 //! `bake_part` note (the asset's key and the part's record); the join takes
-//! both out again and writes the asset's key and record, so the joined asset's
-//! sections, metadata included, are the unsplit bake's but for the record's
-//! voxel RMSE and PSNR: those are the worst part's (an upper bound on the
-//! whole sequence's RMSE, a lower bound on its PSNR), since the parts' error
-//! sums do not travel between processes (see [`merged_record`]).
+//! both out again and writes the asset's key and record, so the joined asset
+//! is the unsplit bake's byte for byte: the note carries each segment's error
+//! sums, which add up (in segment order) to the figures one cook gives
+//! (`vdbcook_cook::Sums::sequence_error`).
 
 use crate::report::{ChannelFormats, FormatBricks};
 use crate::{place, PlannedAsset, Record};
@@ -65,10 +64,6 @@ fn hash_hex(fields: &[&[u8]]) -> String {
 }
 
 /// The key of an asset cooked in `parts` parts, from its key as one cook.
-pub fn parted_key(key: &str, parts: u32) -> String {
-    hash_hex(&[b"vdbcook-bake-parts 1", key.as_bytes(), &parts.to_le_bytes()])
-}
-
 /// The cache key of one part of the asset whose key is `asset_key`.
 pub fn part_key(asset_key: &str, part: PartNo) -> String {
     hash_hex(&[b"vdbcook-bake-part 1", asset_key.as_bytes(), &part.index.to_le_bytes(), &part.count.to_le_bytes()])
@@ -89,6 +84,8 @@ pub const PART_SETTING: &str = "bake_part";
 pub struct PartNote {
     pub asset_key: String,
     pub record: Record,
+    /// Each of the part's segments' error sums, in order.
+    pub segments: Vec<vdbcook_cook::Sums>,
 }
 
 fn setting<'a>(m: &'a Metadata, key: &str) -> Option<&'a str> {
@@ -124,12 +121,9 @@ pub fn rewrite_part(info: &PartInfo, asset: &Asset, mut edit: impl FnMut(&mut Me
 
 /// The record of an asset from its parts' records (in order): frames, voxels
 /// and each channel's bricks per format added up, the formats' union (in
-/// order of first appearance, as a segmented cook adds up its segments),
-/// and the worst part's voxel RMSE and PSNR: the whole sequence's RMSE is at
-/// most the largest part's and its PSNR at least the smallest (its value range
-/// holds every part's), while the exact figures need the parts' error sums,
-/// which a part file does not carry. Bits per voxel, thumbnail and
-/// validation are the caller's (they are of the joined asset).
+/// order of first appearance, as a segmented cook adds up its segments).
+/// The voxel error (from the segments' sums), bits per voxel, GPU bytes,
+/// thumbnail and validation are the caller's (they are of the whole asset).
 pub fn merged_record(parts: &[Record]) -> Record {
     let mut r = Record { grid: parts.first().and_then(|p| p.grid.clone()), ..Record::default() };
     for p in parts {
@@ -138,15 +132,6 @@ pub fn merged_record(parts: &[Record]) -> Record {
         r.format = match (r.format.take(), &p.format) {
             (Some(a), Some(b)) => Some(vdbcook_vpak::union_names(&a, b)),
             (a, b) => a.or(b.clone()),
-        };
-        r.voxel_rmse = match (r.voxel_rmse, p.voxel_rmse) {
-            (Some(a), Some(b)) => Some(a.max(b)),
-            (a, b) => a.or(b),
-        };
-        // No PSNR is an exact part (infinite PSNR): the smallest given is the worst.
-        r.voxel_psnr = match (r.voxel_psnr, p.voxel_psnr) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
         };
         if let Some(pc) = &p.channels {
             let acc = r.channels.get_or_insert_with(Vec::new);
@@ -219,6 +204,12 @@ pub fn join(name: &str, files: &[PathBuf], out: &Path, force: bool, thumbnail: &
     let voxels = record.active_voxels.unwrap_or(0);
     record.bits_per_active_voxel = Some(if voxels > 0 { plain.bytes().len() as f64 * 8.0 / voxels as f64 } else { 0.0 });
     record.thumbnail = thumbnail(&plain);
+    // The voxel error one cook of every segment gives: the segments' sums added up in order.
+    let segments: Vec<vdbcook_cook::Sums> = notes.iter().flat_map(|x| x.segments.iter().cloned()).collect();
+    if let Some(e) = vdbcook_cook::Sums::sequence_error(&segments, &plain.metadata().with_context(|| oname.clone())?) {
+        record.voxel_rmse = Some(e.voxel_rmse);
+        record.voxel_psnr = e.voxel_psnr.is_finite().then_some(e.voxel_psnr);
+    }
     record.gpu_bytes = Some(plain.gpu_bytes().with_context(|| oname.clone())?);
     let key = notes[0].asset_key.clone();
     let extra = [("cache_key".to_string(), key.clone()), ("bake_record".to_string(), record.to_setting())];
@@ -245,9 +236,9 @@ mod tests {
     }
 
     #[test]
-    fn a_record_from_parts_adds_up_and_keeps_the_worst_error() {
+    fn a_record_from_parts_adds_up() {
         let r = merged_record(&[rec(4, 0.01, Some(50.0), &[("bc7", 3), ("bc4", 1)]), rec(2, 0.02, None, &[("unorm8", 2), ("bc7", 5)])]);
-        assert_eq!((r.frames, r.active_voxels, r.voxel_rmse, r.voxel_psnr), (Some(6), Some(200), Some(0.02), Some(50.0)));
+        assert_eq!((r.frames, r.active_voxels), (Some(6), Some(200)));
         assert_eq!(r.format.as_deref(), Some(vdbcook_vpak::union_names("bc7+bc4", "unorm8+bc7").as_str()));
         let ch = &r.channels.unwrap()[0];
         let got: Vec<(&str, u32)> = ch.formats.iter().map(|f| (f.format.as_str(), f.bricks)).collect();
@@ -258,7 +249,6 @@ mod tests {
     fn keys_and_units() {
         let k = "0123456789abcdef0123456789abcdef";
         let p = |index, count| PartNo { index, count };
-        assert_ne!(parted_key(k, 2), parted_key(k, 3));
         assert_ne!(part_key(k, p(1, 2)), part_key(k, p(2, 2)));
         assert_ne!(part_key(k, p(1, 2)), part_key(k, p(1, 3)));
         assert_eq!(part_key(k, p(1, 2)).len(), 32);

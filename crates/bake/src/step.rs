@@ -148,7 +148,7 @@ fn obtain_part(a: &PlannedAsset, p: PartNo, key: &str, ctx: &Baker, out: &Path) 
     // Cooked into an unnamed file beside `out` that is never given a name: the part is written again with the bake's note.
     let mut cooked =
         cook_asset(CookJob { settings: s, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: false, output: Some((out, true)), part }, &vdbcook_cook::NoProgress)?;
-    let note = PartNote { asset_key: a.key.clone(), record: cook_record(&cooked) };
+    let note = PartNote { asset_key: a.key.clone(), record: cook_record(&cooked), segments: cooked.report.segments.iter().map(|s| s.sums.clone()).collect() };
     let file = cooked.file.as_mut().ok_or_else(|| Error::Failed("a part is cooked into a file".into()))?;
     let (info, asset) = vdbcook_vpak::Asset::from_part_file(file.file()).with_context(|| name.clone())?;
     let extra = [("cache_key".to_string(), key.to_string()), (parts::PART_SETTING.to_string(), serde_json::to_string(&note).unwrap_or_default())];

@@ -79,26 +79,15 @@ impl CookReport {
             };
             add_by_name(&mut r.timings, &p.timings);
             r.segments.extend(p.segments);
-            add_stats(&mut r.sums.totals, &p.sums.totals);
-            for (l, pl) in r.sums.levels.iter_mut().zip(&p.sums.levels) {
-                add_stats(l, pl);
-            }
-            r.sums.peaks.iter_mut().zip(&p.sums.peaks).for_each(|(a, b)| *a = a.max(*b));
+            r.sums.add(&p.sums);
         }
-        // Peaks: the span of the whole sequence's range where it is finite and not empty.
-        for (peak, ch) in r.sums.peaks.iter_mut().zip(&metadata.channels) {
-            let span = f64::from(ch.value_range[1] - ch.value_range[0]);
-            if span > 0.0 && span.is_finite() {
-                *peak = span;
-            }
+        r.sums.take_peaks(&metadata);
+        if let Some(e) = r.sums.worst() {
+            r.error = e;
         }
         let Sums { totals, levels, peaks } = &r.sums;
         let psnr = |stats: &[ErrorStats], c: usize| stats[c].psnr(peaks[c]);
         let worst = |stats: &[ErrorStats]| (0..stats.len()).min_by(|&a, &b| psnr(stats, a).total_cmp(&psnr(stats, b))).unwrap_or(0);
-        if !totals.is_empty() {
-            let w = worst(totals);
-            r.error = ErrorFigures::of(&totals[w], peaks[w]);
-        }
         for (c, ch) in r.channels.iter_mut().enumerate() {
             if let (Some(t), Some(&p)) = (totals.get(c), peaks.get(c)) {
                 ch.error = ErrorFigures::of(t, p);
@@ -118,6 +107,46 @@ impl CookReport {
         r.bits_per_active_voxel = if r.active_voxels > 0 { file_bytes as f64 * 8.0 / r.active_voxels as f64 } else { 0.0 };
         r.metadata = metadata;
         Some(r)
+    }
+}
+
+impl Sums {
+    /// Adds a later segment's sums (in segment order: the float sums depend on it).
+    fn add(&mut self, p: &Sums) {
+        add_stats(&mut self.totals, &p.totals);
+        for (l, pl) in self.levels.iter_mut().zip(&p.levels) {
+            add_stats(l, pl);
+        }
+        self.peaks.iter_mut().zip(&p.peaks).for_each(|(a, b)| *a = a.max(*b));
+    }
+
+    /// Peaks: the span of the whole sequence's range where it is finite and not empty.
+    fn take_peaks(&mut self, metadata: &Metadata) {
+        for (peak, ch) in self.peaks.iter_mut().zip(&metadata.channels) {
+            let span = f64::from(ch.value_range[1] - ch.value_range[0]);
+            if span > 0.0 && span.is_finite() {
+                *peak = span;
+            }
+        }
+    }
+
+    /// The figures of the channel of lowest PSNR (none without channels).
+    fn worst(&self) -> Option<ErrorFigures> {
+        let psnr = |c: usize| self.totals[c].psnr(self.peaks[c]);
+        let w = (0..self.totals.len()).min_by(|&a, &b| psnr(a).total_cmp(&psnr(b)))?;
+        Some(ErrorFigures::of(&self.totals[w], self.peaks[w]))
+    }
+
+    /// The error figures of a sequence from its segments' sums (in order)
+    /// and its whole metadata: what [`CookReport::merged`] gives the cook of
+    /// every segment in one process, to the bit, however the segments were
+    /// cooked (`bake` joins parts so).
+    pub fn sequence_error(segments: &[Sums], metadata: &Metadata) -> Option<ErrorFigures> {
+        let (first, rest) = segments.split_first()?;
+        let mut s = first.clone();
+        rest.iter().for_each(|p| s.add(p));
+        s.take_peaks(metadata);
+        s.worst()
     }
 }
 

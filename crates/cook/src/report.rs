@@ -195,11 +195,15 @@ pub struct SegmentReport {
     pub bytes: u64,
     /// Its sections but the metadata, restored (uploaded to draw its frames).
     pub gpu_bytes: u64,
+    /// Its error sums: segments cooked apart (parts) add up to the figures
+    /// of one cook ([`Sums::sequence_error`]).
+    #[serde(skip)]
+    pub sums: Sums,
 }
 
 /// Error sums behind a report's figures.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct Sums {
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Sums {
     /// Per channel, the first stored level over every frame.
     pub(crate) totals: Vec<ErrorStats>,
     /// Per coarser stored level, per channel.
@@ -322,6 +326,7 @@ impl Cooker {
             })
             .collect();
         let worst = (0..channels).min_by(|&a, &b| psnr(a).total_cmp(&psnr(b))).unwrap_or(0);
+        let sums = Sums { totals: totals.clone(), levels: measured.levels.clone(), peaks: peaks.to_vec() };
         CookReport {
             metadata: meta.clone(),
             format: meta.format_names(),
@@ -370,8 +375,16 @@ impl Cooker {
             channels: channel_reports,
             clustering,
             timings,
-            segments: vec![SegmentReport { first_frame: self.first_frame, frames: self.frames.len(), unique_bricks: built.pool.len(), stored_bricks, bytes: file_bytes, gpu_bytes }],
-            sums: Sums { totals: totals.clone(), levels: measured.levels.clone(), peaks: peaks.to_vec() },
+            segments: vec![SegmentReport {
+                first_frame: self.first_frame,
+                frames: self.frames.len(),
+                unique_bricks: built.pool.len(),
+                stored_bricks,
+                bytes: file_bytes,
+                gpu_bytes,
+                sums: sums.clone(),
+            }],
+            sums,
         }
     }
 }

@@ -3,7 +3,7 @@
 use crate::BRICK_VOXELS;
 
 /// Counts of non-finite values.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct NonFinite {
     pub nan: u64,
     pub pos_inf: u64,
@@ -35,7 +35,7 @@ impl NonFinite {
 /// error) over the voxels whose reference value is finite: a NaN or ±∞
 /// reference has no error to measure (and one would make every figure NaN),
 /// so it is only counted, in `non_finite`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ErrorStats {
     /// Voxels measured (finite reference values).
     pub count: u64,
