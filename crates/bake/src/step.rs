@@ -124,51 +124,61 @@ pub fn bake_unit(a: &PlannedAsset, part: Option<PartNo>, ctx: &Baker) -> AssetRe
 
 /// The part file at `out`: left in place, copied from the cache, or cooked.
 fn obtain_part(a: &PlannedAsset, p: PartNo, key: &str, ctx: &Baker, out: &Path) -> Result<(Status, PartNote, u64)> {
-    if let Some((note, bytes)) = parts::cached_part(out, key) {
-        return Ok((Status::Cached, note, bytes));
+    let cache_file = ctx.cache.as_ref().map(|c| c.join(format!("{key}.vpakpart")));
+    obtain_with(
+        out,
+        cache_file,
+        ctx,
+        |path| parts::cached_part(path, key),
+        || {
+            let name = out.display().to_string();
+            let part = Some(Part { index: p.index - 1, count: p.count });
+            // Cooked into an unnamed file beside `out` that is never given a name: the part is written again with the bake's note.
+            let job = CookJob { settings: &a.settings, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: false, output: Some((out, true)), part };
+            let mut cooked = cook_asset(job, &vdbcook_cook::NoProgress)?;
+            let note = PartNote { asset_key: a.key.clone(), record: cook_record(&cooked), segments: cooked.report.segments.iter().map(|s| s.sums.clone()).collect() };
+            let file = cooked.file.as_mut().ok_or_else(|| Error::Failed("a part is cooked into a file".into()))?;
+            let (info, asset) = vdbcook_vpak::Asset::from_part_file(file.file()).with_context(|| name.clone())?;
+            let extra = [("cache_key".to_string(), key.to_string()), (parts::PART_SETTING.to_string(), serde_json::to_string(&note).unwrap_or_default())];
+            let bytes = parts::rewrite_part(&info, &asset, |m| m.settings.extend(extra.iter().cloned())).with_context(|| name.clone())?;
+            Ok((bytes, note))
+        },
+    )
+}
+
+/// What a bake unit (an asset or a part) gives at `out`: the file left in
+/// place when `hit` finds it current, else copied from `cache_file`, else
+/// cooked (`cook`: its bytes and figures) and written to both.
+fn obtain_with<T>(out: &Path, cache_file: Option<PathBuf>, ctx: &Baker, hit: impl Fn(&Path) -> Option<(T, u64)>, cook: impl FnOnce() -> Result<(Vec<u8>, T)>) -> Result<(Status, T, u64)> {
+    if let Some((found, bytes)) = hit(out) {
+        return Ok((Status::Cached, found, bytes));
     }
     let name = out.display().to_string();
+    // Checked before the cook (so a refusal costs nothing) and again before
+    // each write (the file may have appeared meanwhile).
     let may_write = |p: &Path| place::may_replace(p, ctx.force).map_err(Error::Failed);
     may_write(out)?;
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| parent.display().to_string())?;
     }
-    let cache_file = ctx.cache.as_ref().map(|c| c.join(format!("{key}.vpakpart")));
     if let Some(cf) = &cache_file {
-        if let Some((note, bytes)) = parts::cached_part(cf, key) {
+        if let Some((found, bytes)) = hit(cf) {
             let data = std::fs::read(cf).with_context(|| cf.display().to_string())?;
             may_write(out)?;
             vdbcook_vpak::write_atomic(out, &data, true).with_context(|| name.clone())?;
-            return Ok((Status::Cached, note, bytes));
+            return Ok((Status::Cached, found, bytes));
         }
         may_write(cf)?;
     }
-    let s = &a.settings;
-    let part = Some(Part { index: p.index - 1, count: p.count });
-    // Cooked into an unnamed file beside `out` that is never given a name: the part is written again with the bake's note.
-    let mut cooked =
-        cook_asset(CookJob { settings: s, files: a.files.clone(), inputs: &a.inputs, base: Some(ctx.base.clone()), reference: false, output: Some((out, true)), part }, &vdbcook_cook::NoProgress)?;
-    let note = PartNote { asset_key: a.key.clone(), record: cook_record(&cooked), segments: cooked.report.segments.iter().map(|s| s.sums.clone()).collect() };
-    let file = cooked.file.as_mut().ok_or_else(|| Error::Failed("a part is cooked into a file".into()))?;
-    let (info, asset) = vdbcook_vpak::Asset::from_part_file(file.file()).with_context(|| name.clone())?;
-    let extra = [("cache_key".to_string(), key.to_string()), (parts::PART_SETTING.to_string(), serde_json::to_string(&note).unwrap_or_default())];
-    let bytes = parts::rewrite_part(&info, &asset, |m| m.settings.extend(extra.iter().cloned())).with_context(|| name.clone())?;
-    drop((asset, cooked));
-    write_out(out, cache_file.as_deref(), ctx, &bytes, &name)?;
-    Ok((Status::Baked, note, bytes.len() as u64))
-}
-
-/// Writes what was baked to `out` and, with a cache, to its cache file.
-fn write_out(out: &Path, cache_file: Option<&Path>, ctx: &Baker, bytes: &[u8], name: &str) -> Result<()> {
-    let may_write = |p: &Path| place::may_replace(p, ctx.force).map_err(Error::Failed);
+    let (bytes, found) = cook()?;
     may_write(out)?;
-    vdbcook_vpak::write_atomic(out, bytes, true).with_context(|| name.to_string())?;
-    if let (Some(cf), Some(dir)) = (cache_file, &ctx.cache) {
+    vdbcook_vpak::write_atomic(out, &bytes, true).with_context(|| name.clone())?;
+    if let (Some(cf), Some(dir)) = (&cache_file, &ctx.cache) {
         std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
         may_write(cf)?;
-        vdbcook_vpak::write_atomic(cf, bytes, true).with_context(|| cf.display().to_string())?;
+        vdbcook_vpak::write_atomic(cf, &bytes, true).with_context(|| cf.display().to_string())?;
     }
-    Ok(())
+    Ok((Status::Baked, found, bytes.len() as u64))
 }
 
 /// Joins the asset from its parts' files, which `units` (the reports of its
@@ -240,30 +250,8 @@ pub fn bake_one(a: &PlannedAsset, ctx: &Baker) -> AssetReport {
 
 /// The asset at `out`: left in place, copied from the cache, or cooked.
 fn obtain(a: &PlannedAsset, ctx: &Baker, out: &Path) -> Result<(Status, Record, u64)> {
-    if let Some((record, bytes)) = cached(out, &a.key) {
-        return Ok((Status::Cached, record, bytes));
-    }
-    let name = out.display().to_string();
-    // Checked before the cook (so a refusal costs nothing) and again before
-    // each write (the file may have appeared meanwhile).
-    let may_write = |p: &Path| place::may_replace(p, ctx.force).map_err(Error::Failed);
-    may_write(out)?;
-    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).with_context(|| parent.display().to_string())?;
-    }
     let cache_file = ctx.cache.as_ref().map(|c| c.join(format!("{}.vpak", a.key)));
-    if let Some(cf) = &cache_file {
-        if let Some((record, bytes)) = cached(cf, &a.key) {
-            let data = std::fs::read(cf).with_context(|| cf.display().to_string())?;
-            may_write(out)?;
-            vdbcook_vpak::write_atomic(out, &data, true).with_context(|| name.clone())?;
-            return Ok((Status::Cached, record, bytes));
-        }
-        may_write(cf)?;
-    }
-    let (bytes, record) = cook_fresh(a, ctx)?;
-    write_out(out, cache_file.as_deref(), ctx, &bytes, &name)?;
-    Ok((Status::Baked, record, bytes.len() as u64))
+    obtain_with(out, cache_file, ctx, |path| cached(path, &a.key), || cook_fresh(a, ctx))
 }
 
 /// Pixels on a side of a report preview (shown at that size in report.html).
