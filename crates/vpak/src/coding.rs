@@ -141,31 +141,20 @@ impl Filter {
         match self {
             Filter::None => out.copy_from_slice(data),
             Filter::Shuffle { .. } => unshuffle(data, out, w),
-            Filter::Delta { width: 1, stride } => {
+            Filter::Delta { width, stride } => {
+                unshuffle(data, out, w);
+                // x[i] = d[i] + x[i − s], in increasing i, wrapping at the width.
                 let s = stride as usize;
-                out.copy_from_slice(data);
-                for i in s..n {
-                    out[i] = out[i].wrapping_add(out[i - s]);
-                }
-            }
-            Filter::Delta { width: 2, stride } => {
-                let s = stride as usize;
-                let (lo, hi) = data.split_at(n);
-                let o: &mut [[u8; 2]] = bytemuck::cast_slice_mut(out);
-                for i in 0..n {
-                    let mut v = u16::from_le_bytes([lo[i], hi[i]]);
-                    if i >= s {
-                        v = v.wrapping_add(u16::from_le_bytes(o[i - s]));
+                match width {
+                    1 => (s..n).for_each(|i| out[i] = out[i].wrapping_add(out[i - s])),
+                    2 => {
+                        let o: &mut [[u8; 2]] = bytemuck::cast_slice_mut(out);
+                        (s..n).for_each(|i| o[i] = u16::from_le_bytes(o[i]).wrapping_add(u16::from_le_bytes(o[i - s])).to_le_bytes());
                     }
-                    o[i] = v.to_le_bytes();
-                }
-            }
-            Filter::Delta { width: _, stride } => {
-                let s = stride as usize;
-                unshuffle(data, out, 4);
-                let o: &mut [[u8; 4]] = bytemuck::cast_slice_mut(out);
-                for i in s..n {
-                    o[i] = u32::from_le_bytes(o[i]).wrapping_add(u32::from_le_bytes(o[i - s])).to_le_bytes();
+                    _ => {
+                        let o: &mut [[u8; 4]] = bytemuck::cast_slice_mut(out);
+                        (s..n).for_each(|i| o[i] = u32::from_le_bytes(o[i]).wrapping_add(u32::from_le_bytes(o[i - s])).to_le_bytes());
+                    }
                 }
             }
         }
