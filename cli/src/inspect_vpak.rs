@@ -72,8 +72,8 @@ fn body(stored: &Asset, asset: &Asset, offset: u64) -> Result<Body, vdbcook_vpak
             let c = codings.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)).copied();
             (*e, c.map_or(e.size, |c| c.raw_size), c)
         })
-        .collect();
-    let gpu_bytes = asset.sections.iter().filter(|e| e.kind != kind::METADATA).map(|e| e.size).sum();
+        .collect::<Vec<_>>();
+    let gpu_bytes = sections.iter().filter(|(e, _, _)| kind::uploaded(e.kind)).map(|(_, restored, _)| restored).sum();
     Ok(Body { meta, nodes, plane_bytes, channel_bytes, level_bytes, sections, gpu_bytes, offset })
 }
 

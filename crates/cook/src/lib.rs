@@ -24,7 +24,7 @@ mod report;
 mod unpack;
 
 pub use build::Cooker;
-pub use report::{figure, gpu_bytes, BudgetReport, BudgetTry, ChannelReport, ClusterReport, CookReport, ErrorFigures, Figure, FormatShare, LevelReport, SegmentReport, Sums};
+pub use report::{figure, BudgetReport, BudgetTry, ChannelReport, ClusterReport, CookReport, ErrorFigures, Figure, FormatShare, LevelReport, SegmentReport, Sums};
 pub use unpack::{unpack_frame, unpack_level};
 pub use vdbcook_encode::NonFinite;
 pub use vdbcook_encode::{ErrorBound, Format, Quality};

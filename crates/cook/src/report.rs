@@ -302,7 +302,8 @@ impl Cooker {
         let channels = peaks.len();
         let totals = &measured.totals;
         let file_bytes = vdbcook_vpak::file_len(sections);
-        let gpu_bytes = gpu_bytes(sections);
+        // What a renderer uploads (the sections are not supercompressed yet).
+        let gpu_bytes = sections.iter().filter(|s| kind::uploaded(s.kind)).map(|s| s.data.len() as u64).sum();
         let tree_bytes: u64 = nodes.byte_sizes().iter().map(|(_, b)| *b as u64).sum();
         let active: u64 = self.frames.iter().map(|f| f.active_voxels).sum();
         let psnr = |c: usize| totals[c].psnr(peaks[c]);
@@ -387,10 +388,4 @@ impl Cooker {
             sums,
         }
     }
-}
-
-/// Bytes of a body's sections that a renderer uploads: all but the metadata
-/// (and the coding record of how they are stored).
-pub fn gpu_bytes(sections: &[Section]) -> u64 {
-    sections.iter().filter(|s| !matches!(s.kind, kind::METADATA | kind::CODING)).map(|s| s.data.len() as u64).sum()
 }

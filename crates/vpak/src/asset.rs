@@ -336,7 +336,7 @@ impl Asset {
                 Ok(b) => crate::coding::Coding::parse_all(b)?,
                 Err(_) => Vec::new(),
             };
-            for e in seg.sections.iter().filter(|e| !matches!(e.kind, kind::METADATA | kind::CODING)) {
+            for e in seg.sections.iter().filter(|e| kind::uploaded(e.kind)) {
                 total += codings.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)).map_or(e.size, |c| c.raw_size);
             }
         }

@@ -96,6 +96,12 @@ pub mod kind {
     /// section ([`super::coding::Coding`]); version 8.
     pub const CODING: u32 = 13;
 
+    /// Whether a renderer uploads sections of kind `k` (restored): every one
+    /// but the metadata and the record of how the others are stored.
+    pub fn uploaded(k: u32) -> bool {
+        !matches!(k, METADATA | CODING)
+    }
+
     pub fn name(k: u32) -> &'static str {
         match k {
             METADATA => "metadata",
