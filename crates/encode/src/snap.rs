@@ -6,8 +6,8 @@
 //! and no more. The format, the range and the bound are unchanged.
 
 use crate::choose::{decode_one, single_plane, within};
-use crate::texels::{levels, put_lane, swap_xz};
-use crate::{Brick, Format, BRICK_VOXELS};
+use crate::texels::{levels, swap_xz};
+use crate::{Brick, Format};
 
 /// The brick's texels in `format` over `range` on the coarsest grid whose
 /// decoded voxels of `mask` stay within `max_error`; `None` when no grid
@@ -18,42 +18,31 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
         return None;
     }
     let passes = |bytes: &[u8]| within(values, &decode_one(format, bytes, range), mask, max_error);
+    // Levels of a ranged format over [0, top] in steps of k (the largest the bound allows first).
+    let stepped = |top: u32, k0_of: fn(u32) -> u32, push: fn(&mut Vec<u8>, u32)| {
+        let l = levels(values, range, top as f32);
+        let span = f64::from(range[1]) - f64::from(range[0]);
+        // Snapping to multiples of k moves a level by at most k/2: k up to 2E/(span/top).
+        let k0 = (2.0 * f64::from(max_error) * f64::from(top) / span).floor().min(f64::from(top)) as u32;
+        largest_step(k0_of(k0), |k| {
+            let mut out = Vec::with_capacity(2 * l.len());
+            swap_xz(&l.map(|x| step_level(x, k, top))).into_iter().for_each(|q| push(&mut out, q));
+            passes(&out).then_some(out)
+        })
+    };
     match format {
-        Format::Unorm8 => {
-            let l = levels(values, range, 255.0);
-            let span = f64::from(range[1]) - f64::from(range[0]);
-            // Snapping to multiples of k moves a level by at most k/2: k up to 2E/(span/255).
-            let k0 = (2.0 * f64::from(max_error) * 255.0 / span).floor().min(255.0) as u32;
-            largest_step(k0, |k| {
-                let q = l.map(|x| step_level(x, k, 255) as u8);
-                let mut out = vec![0u8; BRICK_VOXELS];
-                put_lane(&mut out, 1, 0, swap_xz(&q).iter().map(|&q| [q]));
-                passes(&out).then_some(out)
-            })
-        }
-        Format::Unorm16 => {
-            let l = levels(values, range, 65535.0);
-            let span = f64::from(range[1]) - f64::from(range[0]);
-            let k0 = (2.0 * f64::from(max_error) * 65535.0 / span).floor().min(65535.0) as u32;
-            // Steps of a power of two: the low byte of every level (and of its difference
-            // from its neighbour) then takes few values, which a byte-wise coder sees.
-            largest_step(k0.checked_ilog2().map_or(0, |b| 1 << b), |k| {
-                let q = l.map(|x| step_level(x, k, 65535) as u16);
-                let mut out = vec![0u8; 2 * BRICK_VOXELS];
-                put_lane(&mut out, 1, 0, swap_xz(&q).iter().map(|q| q.to_le_bytes()));
-                passes(&out).then_some(out)
-            })
-        }
+        Format::Unorm8 => stepped(255, |k0| k0, |out, q| out.push(q as u8)),
+        // Steps of a power of two: the low byte of every level (and of its difference
+        // from its neighbour) then takes few values, which a byte-wise coder sees.
+        Format::Unorm16 => stepped(65535, |k0| k0.checked_ilog2().map_or(0, |b| 1 << b), |out, q| out.extend_from_slice(&(q as u16).to_le_bytes())),
         Format::F16 => largest_bits(10, |bits| {
             let h = values.map(|v| round_bits(u32::from(half::f16::from_f32(v).to_bits()), bits, 0x8000) as u16);
-            let mut out = vec![0u8; 2 * BRICK_VOXELS];
-            put_lane(&mut out, 1, 0, swap_xz(&h).iter().map(|h| h.to_le_bytes()));
+            let out: Vec<u8> = swap_xz(&h).iter().flat_map(|h| h.to_le_bytes()).collect();
             passes(&out).then_some(out)
         }),
         Format::F32 => largest_bits(23, |bits| {
             let f = values.map(|v| round_bits(v.to_bits(), bits, 0x8000_0000));
-            let mut out = vec![0u8; 4 * BRICK_VOXELS];
-            put_lane(&mut out, 1, 0, swap_xz(&f).iter().map(|f| f.to_le_bytes()));
+            let out: Vec<u8> = swap_xz(&f).iter().flat_map(|f| f.to_le_bytes()).collect();
             passes(&out).then_some(out)
         }),
         Format::Bc4 | Format::Bc7 | Format::Constant => None,

@@ -154,7 +154,7 @@ pub(crate) fn round_trip(format: Format, values: &Brick, range: [f32; 2], out: &
 
 /// Writes lane `lane` of every texel (`lanes` lanes of `N` bytes each). The
 /// lane size is a constant, so each write is a store, not a call to memcpy.
-pub(crate) fn put_lane<const N: usize>(out: &mut [u8], lanes: usize, lane: usize, texels: impl Iterator<Item = [u8; N]>) {
+fn put_lane<const N: usize>(out: &mut [u8], lanes: usize, lane: usize, texels: impl Iterator<Item = [u8; N]>) {
     if lanes == 1 {
         for (dst, b) in out.chunks_exact_mut(N).zip(texels) {
             dst.copy_from_slice(&b);
