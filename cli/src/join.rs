@@ -4,7 +4,7 @@ use crate::exit;
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
-use vdbcook_vpak::{Asset, AtomicFile};
+use vdbcook_vpak::Asset;
 
 #[derive(clap::Args)]
 #[command(after_help = "\
@@ -32,15 +32,7 @@ pub fn run(args: JoinArgs, quiet: bool) -> Result<u8> {
     let files = args.parts.iter().zip(&names).map(|(p, n)| std::fs::File::open(p).with_context(|| n.clone())).collect::<Result<Vec<_>>>()?;
     let parts = files.iter().zip(&names).map(|(f, n)| Asset::from_part_file(f).with_context(|| n.clone())).collect::<Result<Vec<_>>>()?;
     let out = args.output.display().to_string();
-    let mut file = AtomicFile::create(&args.output, args.force).with_context(|| out.clone())?;
-    let handle = file.file().try_clone().with_context(|| out.clone())?;
-    let f = vdbcook_vpak::segments::join(&parts, &files, &names, handle).with_context(|| out.clone())?;
-    // The joined asset is checked whole (every segment, and what segments must share) before it gets its name.
-    let asset = Asset::from_file(&f).with_context(|| out.clone())?;
-    let meta = asset.check().with_context(|| out.clone())?;
-    let bytes = asset.bytes().len();
-    drop(asset);
-    file.commit().with_context(|| out.clone())?;
+    let (meta, bytes) = crate::write_checked(&args.output, args.force, |handle| vdbcook_vpak::segments::join(&parts, &files, &names, handle).with_context(|| out.clone()))?;
     if !quiet {
         crate::emit_final(&format!(
             "joined {} parts into {out}: {} frames in {} segments, {:.2} MB, {:.2}s\n",

@@ -107,6 +107,23 @@ pub fn refuse_existing(path: &std::path::Path, force: bool) -> anyhow::Result<()
     Ok(())
 }
 
+/// Writes an asset to `path` through `write` (given the unnamed file, it
+/// returns it written), checks it whole (every segment, and what segments
+/// must share), and only then gives it its name: the asset's metadata and
+/// size. Nothing is left behind when any step fails.
+pub fn write_checked(path: &std::path::Path, force: bool, write: impl FnOnce(std::fs::File) -> anyhow::Result<std::fs::File>) -> anyhow::Result<(vdbcook_vpak::Metadata, usize)> {
+    use anyhow::Context;
+    let out = path.display().to_string();
+    let mut file = vdbcook_vpak::AtomicFile::create(path, force).with_context(|| out.clone())?;
+    let f = write(file.file().try_clone().with_context(|| out.clone())?)?;
+    let asset = vdbcook_vpak::Asset::from_file(&f).with_context(|| out.clone())?;
+    let meta = asset.check().with_context(|| out.clone())?;
+    let bytes = asset.bytes().len();
+    drop(asset);
+    file.commit().with_context(|| out.clone())?;
+    Ok((meta, bytes))
+}
+
 /// Stdout was closed by its reader (`| head`): the output ends there, and the
 /// command exits with 0, as ripgrep does.
 #[derive(Debug)]

@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use std::path::PathBuf;
 use std::time::Instant;
 use vdbcook_vpak::coding::Supercompress;
-use vdbcook_vpak::{Asset, AtomicFile};
+use vdbcook_vpak::Asset;
 
 #[derive(clap::Args)]
 #[command(after_help = "\
@@ -34,20 +34,15 @@ pub fn run(args: RecompressArgs, quiet: bool) -> Result<u8> {
     let input = args.input.display().to_string();
     let asset = Asset::open(&args.input).with_context(|| input.clone())?;
     let out = args.output.display().to_string();
-    let mut file = AtomicFile::create(&args.output, args.force).with_context(|| out.clone())?;
-    let handle = std::io::BufWriter::with_capacity(1 << 20, file.file().try_clone().with_context(|| out.clone())?);
-    let written = vdbcook_vpak::coding::recompress(&asset, args.supercompress, handle).map_err(|e| match e {
-        // A segment that does not restore is the input's fault; writing, the output's.
-        e @ vdbcook_vpak::Error::Io(_) => anyhow::Error::from(e).context(out.clone()),
-        e => anyhow::Error::from(e).context(input.clone()),
+    let (_, to) = crate::write_checked(&args.output, args.force, |handle| {
+        let written = vdbcook_vpak::coding::recompress(&asset, args.supercompress, std::io::BufWriter::with_capacity(1 << 20, handle)).map_err(|e| match e {
+            // A segment that does not restore is the input's fault; writing, the output's.
+            e @ vdbcook_vpak::Error::Io(_) => anyhow::Error::from(e).context(out.clone()),
+            e => anyhow::Error::from(e).context(input.clone()),
+        })?;
+        written.into_inner().map_err(|e| anyhow::Error::from(e.into_error()).context(out.clone()))
     })?;
-    let f = written.into_inner().map_err(|e| anyhow::Error::from(e.into_error()).context(out.clone()))?;
-    // Checked whole before it gets its name.
-    let new = Asset::from_file(&f).with_context(|| out.clone())?;
-    new.check().with_context(|| out.clone())?;
-    let (from, to) = (asset.bytes().len(), new.bytes().len());
-    drop(new);
-    file.commit().with_context(|| out.clone())?;
+    let from = asset.bytes().len();
     if !quiet {
         crate::emit_final(&format!(
             "recompressed {input} ({:.2} MB) into {out} ({:.2} MB, {:.3}×, supercompress {}), {:.2}s\n",
