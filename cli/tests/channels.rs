@@ -13,11 +13,6 @@ fn sample(rel: &str) -> Option<String> {
     shared_samples().map(|p| p.join(rel).to_string_lossy().into_owned())
 }
 
-fn inspect(asset: &Path) -> serde_json::Value {
-    let v: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["inspect", "--json", s(asset)])).stdout).unwrap();
-    v["files"][0].clone()
-}
-
 #[test]
 fn a_missing_grid_or_a_bad_group_is_a_usage_error_that_says_what_there_is() {
     let Some(w) = sample("waveletturbulence") else { return };

@@ -34,17 +34,7 @@ fn python_ok() -> bool {
 }
 
 fn cook(dir: &Path, name: &str, input: &str, flags: &[&str]) -> PathBuf {
-    let out = dir.join(name);
-    let mut args = vec!["cook", "-q", "--force", "-o", s(&out)];
-    args.extend(flags);
-    args.push(input);
-    ok(vdbcook(&args));
-    out
-}
-
-fn inspect(asset: &Path) -> serde_json::Value {
-    let v: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["inspect", "--json", s(asset)])).stdout).unwrap();
-    v["files"][0].clone()
+    cook_into(dir, name, &[input], flags)
 }
 
 fn unpacked(dir: &Path, asset: &Path, frame: usize, lod: Option<u32>) -> Vec<u8> {

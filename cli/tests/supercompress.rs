@@ -6,24 +6,12 @@
 
 mod common;
 use common::*;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-fn cook(dir: &Path, name: &str, inputs: &[&str], flags: &[&str]) -> PathBuf {
-    let out = dir.join(name);
-    let mut args = vec!["cook", "-q", "--force", "-o", s(&out)];
-    args.extend(flags);
-    args.extend(inputs);
-    ok(vdbcook(&args));
-    out
-}
+use common::cook_into as cook;
 
 fn recompress(asset: &Path, out: &Path, to: &str) {
     ok(vdbcook(&["recompress", "-q", "--force", s(asset), "-o", s(out), "--supercompress", to]));
-}
-
-fn inspect(asset: &Path) -> serde_json::Value {
-    let v: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["inspect", "--json", s(asset)])).stdout).unwrap();
-    v["files"][0].clone()
 }
 
 fn smoke() -> String {

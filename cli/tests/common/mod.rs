@@ -198,3 +198,19 @@ pub fn documented_keys(doc: &str) -> Vec<(String, Vec<String>)> {
     }
     out
 }
+
+/// `vdbcook inspect --json` of one asset: its document.
+pub fn inspect(asset: &Path) -> serde_json::Value {
+    let v: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["inspect", "--json", s(asset)])).stdout).unwrap();
+    v["files"][0].clone()
+}
+
+/// `vdbcook cook` of `inputs` with `flags` into `dir/name` (replaced if there).
+pub fn cook_into(dir: &Path, name: &str, inputs: &[&str], flags: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let mut args = vec!["cook", "-q", "--force", "-o", s(&out)];
+    args.extend(flags);
+    args.extend(inputs);
+    ok(vdbcook(&args));
+    out
+}
