@@ -49,6 +49,63 @@ impl Rng {
     }
 }
 
+/// The link flags of a Rust static library on this platform (what
+/// `--print native-static-libs` prints; include/vpak.h lists them too).
+pub const STATIC_LIB_FLAGS: &[&str] = if cfg!(target_os = "macos") { &["-lSystem", "-lc", "-lm"] } else { &["-lgcc_s", "-lutil", "-lrt", "-lpthread", "-lm", "-ldl", "-lc"] };
+
+/// The workspace's root directory.
+pub fn workspace_root() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Runs `cargo build` with `args` (in the profile of the running test) and
+/// returns the file it built whose path ends in `suffix`, of the target
+/// named `target` (from cargo's JSON messages).
+pub fn cargo_build(args: &[&str], target: &str, suffix: &str) -> Result<std::path::PathBuf, String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut build = std::process::Command::new(cargo);
+    build.current_dir(workspace_root()).args(["build", "-q", "--message-format=json-render-diagnostics"]).args(args);
+    if !cfg!(debug_assertions) {
+        build.arg("--release");
+    }
+    let out = build.output().map_err(|e| format!("cargo: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("cargo build {args:?} failed: {}", String::from_utf8_lossy(&out.stderr)));
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let name = format!("\"name\":\"{target}\"");
+    text.lines()
+        .filter(|l| l.contains("\"compiler-artifact\"") && l.contains(&name))
+        .flat_map(|l| l.split('"'))
+        .find(|f| f.ends_with(suffix))
+        .map(std::path::PathBuf::from)
+        .ok_or_else(|| format!("cargo build {args:?} named no file ending in {suffix}: {text}"))
+}
+
+/// Builds the C ABI's static library (`cargo build -p vdbcook-vpak-c`) and
+/// compiles `examples/c/{name}.c` against it and `include/vpak.h` with `cc
+/// -std=c99 -Wall -Wextra -Werror -pedantic`, into `out_dir`; returns the program's path.
+pub fn c_example(name: &str, out_dir: &std::path::Path) -> Result<std::path::PathBuf, String> {
+    let root = workspace_root();
+    let lib = cargo_build(&["-p", "vdbcook-vpak-c"], "vpak", if cfg!(windows) { "vpak.lib" } else { "libvpak.a" })?;
+    let exe = out_dir.join(name);
+    let src = root.join("examples/c").join(format!("{name}.c"));
+    let cc = std::process::Command::new(std::env::var("CC").unwrap_or_else(|_| "cc".into()))
+        .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-I"])
+        .arg(root.join("include"))
+        .arg(&src)
+        .arg(&lib)
+        .args(STATIC_LIB_FLAGS)
+        .arg("-o")
+        .arg(&exe)
+        .output()
+        .map_err(|e| format!("cc: {e}"))?;
+    if !cc.status.success() {
+        return Err(format!("cc {} failed: {}", src.display(), String::from_utf8_lossy(&cc.stderr)));
+    }
+    Ok(exe)
+}
+
 #[cfg(test)]
 mod tests {
     use super::Rng;

@@ -3,7 +3,7 @@
 //! the same mapping.
 
 use crate::segments::{self, SegmentEntry};
-use crate::{checksum, header_checksum, kind, Checked, Error, Metadata, Section, SectionEntry, ALIGN, ENTRY_LEN, HEADER_LEN, MAGIC, MAX_SECTIONS};
+use crate::{checksum, kind, Checked, Error, Metadata, Section, SectionEntry, ENTRY_LEN, HEADER_LEN, MAX_SECTIONS};
 use std::path::Path;
 
 enum Bytes {
@@ -106,63 +106,24 @@ impl Asset {
 
     /// The version field, after the magic and the file size are checked.
     fn version(&self) -> Result<u32, Error> {
-        let b = self.bytes();
-        if b.len() < HEADER_LEN || b[..8] != MAGIC {
-            return Err(Error::Magic);
-        }
-        let size = u64::from_le_bytes(b[24..32].try_into().unwrap_or([0; 8]));
-        if size != b.len() as u64 {
-            return Err(Error::Size { expected: size, actual: b.len() as u64 });
-        }
-        Ok(u32::from_le_bytes(b[8..12].try_into().unwrap_or([0; 4])))
+        crate::head::version(self.bytes(), self.len as u64)
     }
 
-    /// Checks a table of `n` entries of `entry_len` bytes after the header
+    /// Checks a table of entries of `entry_len` bytes after the header
     /// against the header checksum; returns the table's bytes.
     fn table_bytes(&self, entry_len: usize, max: u32, count_error: fn(u32) -> Error) -> Result<&[u8], Error> {
         let b = self.bytes();
-        let n = u32::from_le_bytes(b[16..20].try_into().unwrap_or([0; 4]));
-        let table_end = (n as usize).checked_mul(entry_len).and_then(|t| t.checked_add(HEADER_LEN)).filter(|&e| n <= max && e <= b.len()).ok_or(count_error(n))?;
-        let computed = header_checksum(&b[..32], &b[HEADER_LEN..table_end]);
-        let stored = u64::from_le_bytes(b[32..40].try_into().unwrap_or([0; 8]));
-        if stored != computed {
-            return Err(Error::HeaderChecksum { stored, computed });
-        }
-        Ok(&b[HEADER_LEN..table_end])
+        let n = crate::head::table_len(b, entry_len, max, count_error, b.len() as u64)?;
+        let table = &b[HEADER_LEN..HEADER_LEN + n];
+        crate::head::check_checksum(b, table)?;
+        Ok(table)
     }
 
     /// A body (version 6): its section table; a coding section only where
     /// the file's version allows one.
     fn body(mut self) -> Result<Asset, Error> {
         let table = self.table_bytes(ENTRY_LEN, MAX_SECTIONS, Error::SectionCount)?;
-        let table_end = (HEADER_LEN + table.len()) as u64;
-        let len = self.len as u64;
-        let mut sections = Vec::with_capacity(table.len() / ENTRY_LEN);
-        for e in table.chunks_exact(ENTRY_LEN) {
-            let u32_at = |o: usize| u32::from_le_bytes(e[o..o + 4].try_into().unwrap_or([0; 4]));
-            let u64_at = |o: usize| u64::from_le_bytes(e[o..o + 8].try_into().unwrap_or([0; 8]));
-            let s = SectionEntry { kind: u32_at(0), index: u32_at(4), offset: u64_at(8), size: u64_at(16), checksum: u64_at(24) };
-            let end = s.offset.checked_add(s.size);
-            if !s.offset.is_multiple_of(crate::CODED_ALIGN as u64) || s.offset < table_end || end.is_none_or(|e| e > len) {
-                return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
-            }
-            sections.push(s);
-        }
-        // Every section at a multiple of 256 but the coding section and those it names (at a multiple of 8).
-        let coded = crate::coding::coded_sections(sections.iter().map(|e| (e.kind, e.index, self.raw(e))));
-        if let Some(s) = sections.iter().find(|s| !coded.contains(&(s.kind, s.index)) && !s.offset.is_multiple_of(ALIGN as u64)) {
-            return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
-        }
-        // One section per (kind, index): a reader must not have to pick.
-        let mut keys: Vec<(u32, u32)> = sections.iter().map(|s| (s.kind, s.index)).collect();
-        keys.sort_unstable();
-        if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
-            return Err(Error::DuplicateSection { kind: w[0].0, index: w[0].1 });
-        }
-        if !self.coded && sections.iter().any(|s| s.kind == kind::CODING) {
-            return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION)));
-        }
-        self.sections = sections;
+        self.sections = crate::head::sections(table, self.len as u64, self.coded, |e| Ok(std::borrow::Cow::Borrowed(self.raw(e))))?;
         Ok(self)
     }
 
@@ -170,27 +131,7 @@ impl Asset {
     /// order, inside the file, frames counted on from 0 without a gap.
     fn container(mut self) -> Result<Asset, Error> {
         let table = self.table_bytes(segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount)?;
-        if table.is_empty() {
-            return Err(Error::SegmentCount(0));
-        }
-        let mut entries: Vec<SegmentEntry> = table.chunks_exact(segments::SEGMENT_ENTRY_LEN).map(SegmentEntry::parse).collect();
-        let mut at = segments::first_offset(entries.len() as u32);
-        let mut frame = 0u64;
-        for (s, e) in entries.iter().enumerate() {
-            let end = e.offset.checked_add(e.size);
-            if !e.offset.is_multiple_of(ALIGN as u64) || e.offset < at || end.is_none_or(|end| end > self.len as u64) || e.size < HEADER_LEN as u64 {
-                return Err(Error::SegmentBounds { segment: s, offset: e.offset, size: e.size });
-            }
-            if u64::from(e.first_frame) != frame {
-                return Err(Error::Invalid(format!("segment {s} starts at frame {}, the segments before it end at frame {frame}", e.first_frame)));
-            }
-            frame += u64::from(e.frame_count);
-            at = e.offset + e.size;
-        }
-        if frame > u64::from(u32::MAX) {
-            return Err(Error::Invalid("more than 2^32 frames".into()));
-        }
-        self.table = std::mem::take(&mut entries);
+        self.table = crate::head::segments(table, self.len as u64)?;
         Ok(self)
     }
 
@@ -290,12 +231,47 @@ impl Asset {
     /// cooker chose (each checked against its checksum): a body in memory.
     /// A body without them is itself.
     pub fn restored(&self) -> Result<Asset, Error> {
+        self.restored_into(Vec::new())
+    }
+
+    /// [`Asset::restored`], the restored body written into `buf` when it
+    /// has room (a buffer given back by [`Asset::into_words`], say).
+    pub fn restored_into(&self, buf: Vec<u64>) -> Result<Asset, Error> {
         if !self.is_coded() {
             return Ok(self.clone());
         }
         let stored: Vec<(SectionEntry, &[u8])> = self.sections.iter().map(|e| (*e, self.raw(e))).collect();
-        let (words, len) = crate::coding::restore_body(&stored)?;
+        let (words, len) = crate::coding::restore_body(&stored, buf)?;
         Asset::parse(Bytes::Owned(words, len))
+    }
+
+    /// Parses the body or file held in `words` (`len` bytes of them): its
+    /// header and section (or segment) table checked, as [`Asset::from_bytes`]
+    /// does, without a copy.
+    pub fn from_words(words: Vec<u64>, len: usize) -> Result<Asset, Error> {
+        if len > words.len().saturating_mul(8) {
+            return Err(Error::Size { expected: len as u64, actual: words.len() as u64 * 8 });
+        }
+        Asset::parse(Bytes::Owned(words, len))
+    }
+
+    /// A segment's stored body held in `words` (`len` bytes of them) of a
+    /// file whose bodies may (`coded`) hold supercompressed sections: its
+    /// header (version 6) and section table checked.
+    pub(crate) fn stored_body_from_words(words: Vec<u64>, len: usize, coded: bool) -> Result<Asset, Error> {
+        let body = Asset { bytes: std::sync::Arc::new(Bytes::Owned(words, len)), start: 0, len, sections: Vec::new(), table: Vec::new(), coded };
+        crate::head::body_version(body.bytes(), len as u64)?;
+        body.body()
+    }
+
+    /// The words this asset was read into, for reuse ([`Asset::restored_into`],
+    /// the runtime reader's `segment_asset`): `None` for a mapped file, or
+    /// while a clone or a segment of it lives.
+    pub fn into_words(self) -> Option<Vec<u64>> {
+        match std::sync::Arc::try_unwrap(self.bytes).ok()? {
+            Bytes::Owned(words, _) => Some(words),
+            Bytes::Mapped(_) => None,
+        }
     }
 
     /// Segment `s`'s body as the file stores it (supercompressed sections
@@ -311,12 +287,7 @@ impl Asset {
         }
         let e = self.table.get(s).ok_or(Error::NoSegment { segment: s, count: self.table.len() })?;
         let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new(), coded: self.coded };
-        let body = match seg.version() {
-            Ok(segments::BODY_VERSION) => seg.body(),
-            Ok(v) => Err(Error::Invalid(format!("a body of version {v} (segments are version {})", segments::BODY_VERSION))),
-            Err(e) => Err(e),
-        }
-        .map_err(|err| Error::InSegment(s, Box::new(err)))?;
+        let body = crate::head::body_version(seg.bytes(), seg.len as u64).and_then(|()| seg.body()).map_err(|err| Error::InSegment(s, Box::new(err)))?;
         let head = &body.bytes()[..segments::head_len(body.sections.len())];
         let computed = checksum(head);
         if computed != e.head_checksum {

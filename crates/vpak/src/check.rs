@@ -87,6 +87,11 @@ pub struct Checked<'a> {
     pub atlases: Vec<&'a [u8]>,
 }
 
+/// A section's bytes as 4-byte items, without copying.
+fn cast<T: bytemuck::Pod>(kind: u32, b: &[u8]) -> Result<&[T], Error> {
+    bytemuck::try_cast_slice(b).map_err(|_| Error::Shape { kind, size: b.len(), unit: std::mem::size_of::<T>() })
+}
+
 fn invalid<T>(what: String) -> Result<T, Error> {
     Err(Error::Invalid(what))
 }
@@ -95,7 +100,14 @@ impl<'a> Checked<'a> {
     /// Checks everything a reader relies on (section checksums are
     /// [`Asset::verify`]'s job, done by [`Asset::open`]).
     pub fn new(asset: &'a Asset) -> Result<Checked<'a>, Error> {
-        let meta = asset.metadata()?;
+        Checked::from_sections(asset.metadata()?, |k, i| asset.section(k, i))
+    }
+
+    /// [`Checked::new`] of a body given as its metadata and its sections,
+    /// found by (kind, index) (buffers a runtime reader filled, say; each
+    /// section of 4-byte items must start at a multiple of 4 bytes).
+    pub fn from_sections(meta: Metadata, section: impl Fn(u32, u32) -> Result<&'a [u8], Error>) -> Result<Checked<'a>, Error> {
+        let words = |k: u32, i: u32| -> Result<&'a [u32], Error> { cast(k, section(k, i)?) };
         let channels = meta.channels.len();
         if channels == 0 || channels > MAX_CHANNELS {
             return invalid(format!("{channels} channels (need 1 to {MAX_CHANNELS})"));
@@ -127,27 +139,27 @@ impl<'a> Checked<'a> {
             return invalid(format!("first stored level {} of {} levels", meta.first_level, meta.levels));
         }
         let stored = meta.levels - meta.first_level;
-        let frames = asset.u32s(kind::FRAMES)?;
+        let frames = words(kind::FRAMES, 0)?;
         if frames.len() as u64 != u64::from(meta.frame_count) * u64::from(stored) {
             return invalid(format!("{} trees in the frame table, {} frames × {stored} stored levels in the metadata", frames.len(), meta.frame_count));
         }
-        let words = |k: u32, unit: usize, what: &str| -> Result<&'a [u32], Error> {
-            let w = asset.u32s(k)?;
+        let whole = |k: u32, unit: usize, what: &str| -> Result<&'a [u32], Error> {
+            let w = words(k, 0)?;
             if !w.len().is_multiple_of(unit) {
                 return invalid(format!("{what} holds {} words, not a multiple of {unit}", w.len()));
             }
             Ok(w)
         };
-        let l1 = asset.u32s(kind::L1_NODES)?;
+        let l1 = words(kind::L1_NODES, 0)?;
         // L1 nodes differ in size: the array must be whole nodes, and every
         // tree must start at one (samplers read its L from the frame entry).
         let Some(starts) = l1_records(l1) else { return invalid(format!("l1 nodes: {} words are not a sequence of whole L1 nodes", l1.len())) };
         if let Some(t) = frames.iter().position(|f| starts.binary_search(f).is_err()) {
             return invalid(format!("tree {t} of the frame table points at word {} of the l1 nodes, where no node starts", frames[t]));
         }
-        let l2 = words(kind::L2_NODES, L2_WORDS, "l2 nodes")?;
-        let tiles = words(kind::TILES, channels, "tiles")?;
-        let l3 = asset.u32s(kind::L3_NODES)?;
+        let l2 = whole(kind::L2_NODES, L2_WORDS, "l2 nodes")?;
+        let tiles = whole(kind::TILES, channels, "tiles")?;
+        let l3 = words(kind::L3_NODES, 0)?;
         let Some(l3_nodes) = l3_node_count(l3) else {
             return invalid(format!("l3 nodes: {} words cannot hold the {} nodes the section counts", l3.len(), l3.first().copied().unwrap_or(0)));
         };
@@ -157,7 +169,7 @@ impl<'a> Checked<'a> {
         }
         let (mut ranges, mut tables) = (Vec::with_capacity(meta.planes.len()), Vec::with_capacity(meta.planes.len()));
         for (p, info) in meta.planes.iter().enumerate() {
-            let r: &[f32] = asset.words(kind::BRICK_RANGES, p as u32)?;
+            let r: &[f32] = cast(kind::BRICK_RANGES, section(kind::BRICK_RANGES, p as u32)?)?;
             let want = u64::from(info.bricks) * u64::from(info.range_slots()) * 2;
             if r.len() as u64 != want {
                 return invalid(format!("plane {p}: {} brick range values, {} plane bricks of {} slots need {want}", r.len(), info.bricks, info.range_slots()));
@@ -168,7 +180,7 @@ impl<'a> Checked<'a> {
             }
             ranges.push(r);
             let has_table = meta.plane_has_table(p);
-            let table = match asset.words::<u32>(kind::BRICK_TABLE, p as u32) {
+            let table = match words(kind::BRICK_TABLE, p as u32) {
                 Err(Error::Missing { .. }) if !has_table => None,
                 Ok(_) if !has_table => return invalid(format!("plane {p} has a brick table it must not have (it stores every brick, or a channel table addresses it)")),
                 Ok(t) if t.len() as u64 != u64::from(meta.brick_count) => return invalid(format!("plane {p}: a brick table of {} entries for {} bricks", t.len(), meta.brick_count)),
@@ -187,7 +199,7 @@ impl<'a> Checked<'a> {
         }
         let mut channel_tables = Vec::with_capacity(channels);
         for (c, ch) in meta.channels.iter().enumerate() {
-            let table = match asset.words::<u32>(kind::CHANNEL_TABLE, c as u32) {
+            let table = match words(kind::CHANNEL_TABLE, c as u32) {
                 Err(Error::Missing { .. }) if ch.alternates.is_empty() => None,
                 Ok(_) if ch.alternates.is_empty() => return invalid(format!("channel {c} ({}) is in one plane but has a channel table", ch.name)),
                 Ok(t) if t.len() as u64 != u64::from(meta.brick_count) => return invalid(format!("channel {c} ({}): a channel table of {} entries for {} bricks", ch.name, t.len(), meta.brick_count)),
@@ -206,7 +218,7 @@ impl<'a> Checked<'a> {
         let mut atlases = Vec::with_capacity(meta.texture_count());
         for (p, info) in meta.planes.iter().enumerate() {
             for (a, atlas) in info.atlases.iter().enumerate() {
-                let bytes = asset.section(kind::ATLAS, meta.atlas_section(p, a))?;
+                let bytes = section(kind::ATLAS, meta.atlas_section(p, a))?;
                 let layout = AtlasLayout { plane: info.plane, atlas: *atlas };
                 if bytes.len() != layout.byte_len() {
                     return invalid(format!("atlas {a} of plane {p}: {} bytes, its size needs {}", bytes.len(), layout.byte_len()));
@@ -214,7 +226,7 @@ impl<'a> Checked<'a> {
                 atlases.push(bytes);
             }
         }
-        Ok(Checked { frames, l1, l1_entries: asset.u32s(kind::L1_ENTRIES)?, l2, l2_entries: asset.u32s(kind::L2_ENTRIES)?, l3, tiles, ranges, tables, channel_tables, atlases, meta })
+        Ok(Checked { frames, l1, l1_entries: words(kind::L1_ENTRIES, 0)?, l2, l2_entries: words(kind::L2_ENTRIES, 0)?, l3, tiles, ranges, tables, channel_tables, atlases, meta })
     }
 
     /// The L1 node of frame `frame` at level `level`.

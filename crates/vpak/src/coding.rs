@@ -424,51 +424,118 @@ pub fn restore(c: &Coding, stored: &[u8]) -> Result<Vec<u8>, Error> {
     Ok(out)
 }
 
-/// A body's sections (as stored, in table order) restored into one new body
-/// laid out as the writer lays out a plain one (the coding section left
-/// out): its bytes in 8-byte words and its length. Each section is
-/// decompressed straight into its place, the sections in parallel.
-pub(crate) fn restore_body(sections: &[(crate::SectionEntry, &[u8])]) -> Result<(Vec<u64>, usize), Error> {
-    // One coding section, index 0, of at least one record (a body without compressed sections has none).
-    if let Some((e, _)) = sections.iter().find(|(e, b)| e.kind == kind::CODING && (e.index != 0 || b.is_empty())) {
+/// How a body's sections are restored: the restored body's header and
+/// section table, its length, and per stored section (in table order, the
+/// coding section left out) its record and place there.
+pub(crate) struct Plan {
+    pub head: Vec<u8>,
+    pub len: usize,
+    pub parts: Vec<Part>,
+}
+
+/// One section of a [`Plan`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Part {
+    /// As stored.
+    pub stored: crate::SectionEntry,
+    /// Its record, if it is stored compressed.
+    pub coding: Option<Coding>,
+    /// Its offset and size in the restored body.
+    pub offset: usize,
+    pub size: usize,
+}
+
+impl Part {
+    /// The restored section's checksum.
+    pub fn checksum(&self) -> u64 {
+        self.coding.map_or(self.stored.checksum, |c| c.raw_checksum)
+    }
+}
+
+/// The plan of a body of stored sections `sections` (in table order) whose
+/// coding section (kind 13, index 0), if any, holds `coding`: the coding
+/// records checked (one section of index 0 with at least one record, each
+/// naming a section of the body once, none the metadata, each restored size
+/// plausible for its stored size) and the restored body laid out as the
+/// writer lays out a plain one. Nothing is read or allocated by the records' claims.
+pub(crate) fn plan(sections: &[crate::SectionEntry], coding: Option<&[u8]>) -> Result<Plan, Error> {
+    if let Some(e) = sections.iter().find(|e| e.kind == kind::CODING && (e.index != 0 || e.size == 0)) {
         return Err(Error::Coding { kind: e.kind, index: e.index, problem: "is a coding section other than one of index 0 with at least one record".into() });
     }
-    let coding = sections.iter().find(|(e, _)| e.kind == kind::CODING).map(|(_, b)| Coding::parse_all(b)).transpose()?.unwrap_or_default();
+    let coding = match sections.iter().any(|e| e.kind == kind::CODING) {
+        true => Coding::parse_all(coding.unwrap_or_default())?,
+        false => Vec::new(),
+    };
     let mut seen = std::collections::HashSet::new();
     for c in &coding {
-        let stored = sections.iter().find(|(e, _)| (e.kind, e.index) == (c.kind, c.index)).map(|(_, b)| b.len());
+        let stored = sections.iter().find(|e| (e.kind, e.index) == (c.kind, c.index)).map(|e| e.size as usize);
         match stored {
             Some(len) if !matches!(c.kind, kind::METADATA | kind::CODING) && seen.insert((c.kind, c.index)) => plausible(c, len)?,
             _ => return Err(Error::Coding { kind: c.kind, index: c.index, problem: "is not a section the coding table may name once".into() }),
         }
     }
-    let parts: Vec<(crate::SectionEntry, &[u8], Option<&Coding>)> =
-        sections.iter().filter(|(e, _)| e.kind != kind::CODING).map(|(e, b)| (*e, *b, coding.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)))).collect();
+    let parts: Vec<(crate::SectionEntry, Option<Coding>)> =
+        sections.iter().filter(|e| e.kind != kind::CODING).map(|e| (*e, coding.iter().find(|c| (c.kind, c.index) == (e.kind, e.index)).copied())).collect();
     // The restored table: each section at its restored size, with its restored checksum.
-    let entries: Vec<crate::Entry> = parts.iter().map(|(e, b, c)| (e.kind, e.index, c.map_or(b.len(), |c| c.raw_size as usize), c.map_or(e.checksum, |c| c.raw_checksum), crate::ALIGN)).collect();
+    let entries: Vec<crate::Entry> = parts.iter().map(|(e, c)| (e.kind, e.index, c.map_or(e.size as usize, |c| c.raw_size as usize), c.map_or(e.checksum, |c| c.raw_checksum), crate::ALIGN)).collect();
     let (head, offsets, len) = crate::head_of(&entries);
-    let mut words = zeroed_words(len.div_ceil(8)).ok_or_else(|| Error::Invalid(format!("no memory for the {len} bytes of a restored segment")))?;
-    let bytes = &mut bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..len];
-    bytes[..head.len()].copy_from_slice(&head);
-    // Disjoint places, in offset order.
-    let mut slots = Vec::with_capacity(parts.len());
-    let mut rest = &mut bytes[..];
-    let mut at = 0;
-    for ((_, stored, c), (&off, e)) in parts.iter().zip(offsets.iter().zip(&entries)) {
-        let (_, tail) = std::mem::take(&mut rest).split_at_mut(off - at);
-        let (slot, tail) = tail.split_at_mut(e.2);
-        slots.push((slot, *stored, *c));
-        rest = tail;
-        at = off + e.2;
-    }
-    slots.into_par_iter().try_for_each_init(Vec::new, |scratch, (slot, stored, c)| match c {
-        Some(c) => restore_into(c, stored, slot, scratch),
+    let parts = parts.into_iter().zip(offsets.iter().zip(&entries)).map(|((stored, coding), (&offset, e))| Part { stored, coding, offset, size: e.2 }).collect();
+    Ok(Plan { head, len, parts })
+}
+
+/// Restores `part`'s section from its stored bytes into `out` (its restored
+/// size): decompressed and unfiltered (through `scratch`), or copied.
+pub(crate) fn restore_part(part: &Part, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>) -> Result<(), Error> {
+    match &part.coding {
+        Some(c) => restore_into(c, stored, out, scratch),
         None => {
-            slot.copy_from_slice(stored);
+            out.copy_from_slice(stored);
             Ok(())
         }
-    })?;
+    }
+}
+
+/// A body's sections (as stored, in table order) restored into one new body
+/// laid out as the writer lays out a plain one (the coding section left
+/// out): its bytes in 8-byte words, in `buf` when it is large enough (its
+/// old bytes overwritten), and its length. Each section is decompressed
+/// straight into its place, the sections in parallel.
+pub(crate) fn restore_body(sections: &[(crate::SectionEntry, &[u8])], buf: Vec<u64>) -> Result<(Vec<u64>, usize), Error> {
+    let entries: Vec<crate::SectionEntry> = sections.iter().map(|(e, _)| *e).collect();
+    let coding = sections.iter().find(|(e, _)| (e.kind, e.index) == (kind::CODING, 0)).map(|(_, b)| *b);
+    let plan = plan(&entries, coding)?;
+    let len = plan.len;
+    let mut words = reuse_words(buf, len.div_ceil(8)).ok_or_else(|| Error::Invalid(format!("no memory for the {len} bytes of a restored segment")))?;
+    let bytes = &mut bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..len];
+    bytes[..plan.head.len()].copy_from_slice(&plan.head);
+    // Disjoint places, in offset order; the padding between them zero.
+    let stored = sections.iter().filter(|(e, _)| e.kind != kind::CODING).map(|(_, b)| *b);
+    let mut slots = Vec::with_capacity(plan.parts.len());
+    let mut rest = &mut bytes[plan.head.len()..];
+    let mut at = plan.head.len();
+    for (part, stored) in plan.parts.iter().zip(stored) {
+        let (gap, tail) = std::mem::take(&mut rest).split_at_mut(part.offset - at);
+        gap.fill(0);
+        let (slot, tail) = tail.split_at_mut(part.size);
+        slots.push((part, slot, stored));
+        rest = tail;
+        at = part.offset + part.size;
+    }
+    rest.fill(0);
+    slots.into_par_iter().try_for_each_init(Vec::new, |scratch, (part, slot, stored)| restore_part(part, stored, slot, scratch))?;
     Ok((words, len))
+}
+
+/// `buf` made `n` words long when it has room for them (its contents left
+/// for the caller to overwrite), else fresh zeroed words ([`zeroed_words`]).
+pub(crate) fn reuse_words(mut buf: Vec<u64>, n: usize) -> Option<Vec<u64>> {
+    if buf.capacity() >= n {
+        buf.resize(n, 0);
+        buf.truncate(n);
+        return Some(buf);
+    }
+    drop(buf);
+    zeroed_words(n)
 }
 
 /// Writes `asset` again with its sections stored as `to` says (each segment

@@ -26,8 +26,10 @@ mod asset;
 mod atomic;
 mod check;
 pub mod coding;
+mod head;
 pub mod layout;
 pub mod nodes;
+pub mod runtime;
 pub mod segments;
 pub mod settings;
 

@@ -392,11 +392,11 @@ pub fn merged(metas: &[Metadata]) -> Result<Metadata, Error> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::{kind, Asset, FrameInfo, SourceFile};
 
-    fn meta(frames: u32, sources: &[&str], range: [f32; 2], offset: i32) -> Metadata {
+    pub(crate) fn meta(frames: u32, sources: &[&str], range: [f32; 2], offset: i32) -> Metadata {
         let channel = crate::Channel {
             name: "density".into(),
             grid: "density".into(),
@@ -429,7 +429,7 @@ mod tests {
         }
     }
 
-    fn body(m: &Metadata, marker: u32) -> Vec<Section> {
+    pub(crate) fn body(m: &Metadata, marker: u32) -> Vec<Section> {
         vec![
             Section { kind: kind::METADATA, index: 0, data: m.to_bytes().unwrap() },
             Section { kind: kind::FRAMES, index: 0, data: (0..m.frame_count).flat_map(|f| (f + marker).to_le_bytes()).collect() },
