@@ -144,6 +144,37 @@ vpak_status vpak_read_section(const vpak_reader *reader, uint32_t segment, uint3
  * import step, not for playback. */
 vpak_status vpak_check(const vpak_reader *reader);
 
+/* The asset's index-to-world matrix (row-vector convention: world = [i j k 1] * M),
+ * row by row into matrix[16]. A segment's index i is source index i + its
+ * index offset (vpak_segment_index_offset); level k's: docs/format.md, "Levels". */
+vpak_status vpak_transform(const vpak_reader *reader, double *matrix);
+
+/* The levels of detail stored: first_level to levels - 1. Either out pointer may be NULL. */
+vpak_status vpak_levels(const vpak_reader *reader, uint32_t *first_level, uint32_t *levels);
+
+/* Channels of the asset (0 for a NULL reader). */
+uint32_t vpak_channel_count(const vpak_reader *reader);
+
+/* A channel's name ("density", "vel.x"), owned by the reader (valid until
+ * vpak_close); NULL past the last channel. */
+const char *vpak_channel_name(const vpak_reader *reader, uint32_t channel);
+
+/* A segment's index offset (source index = segment index + offset), into offset[3]. */
+vpak_status vpak_segment_index_offset(const vpak_reader *reader, uint32_t segment, int32_t *offset);
+
+/* The number of channel records of a segment: one per channel, then one per
+ * alternate plane of the channels stored in several planes. */
+vpak_status vpak_segment_channel_records(const vpak_reader *reader, uint32_t segment, uint32_t *count);
+
+/* A segment's channel records as shaders/vpak.wgsl's VpakChannel reads them:
+ * `count` (vpak_segment_channel_records') records of 20 uint32_t into words.
+ * They index a tables buffer (the brick tables, kind 11, of the planes that
+ * have one in plane order, then the channel tables, kind 12, in channel
+ * order, back to back), a ranges buffer (every plane's brick ranges, kind
+ * 9, in plane order, back to back) and the atlases as texture slots (the
+ * atlas section index). Valid for a segment vpak_fill_segment accepted. */
+vpak_status vpak_segment_channels(const vpak_reader *reader, uint32_t segment, uint32_t *words, uint32_t count);
+
 #ifdef __cplusplus
 }
 #endif

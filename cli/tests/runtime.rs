@@ -18,7 +18,15 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 /// What vpak_dump prints of `asset`, made from the validator's view (and
 /// the runtime reader's section order, which the C ABI follows).
 fn expected_dump(asset: &Asset, reader: &Reader) -> String {
-    let mut out = format!("asset {} {}\n", asset.frame_count().unwrap(), asset.segment_count());
+    let meta = asset.metadata().unwrap();
+    let mut out = format!("asset {} {}\nlevels {} {}\ntransform", asset.frame_count().unwrap(), asset.segment_count(), meta.first_level, meta.levels);
+    for v in meta.transform.iter().flatten() {
+        out += &format!(" {v:.6}");
+    }
+    out += "\n";
+    for (c, ch) in meta.channels.iter().enumerate() {
+        out += &format!("channel {c} {}\n", ch.name);
+    }
     for f in 0..asset.frame_count().unwrap() {
         let (s, local) = asset.locate(f).unwrap();
         out += &format!("frame {f} {s} {local}\n");
@@ -28,6 +36,11 @@ fn expected_dump(asset: &Asset, reader: &Reader) -> String {
         let e = asset.segments().unwrap()[s];
         let info = reader.segment(s).unwrap();
         out += &format!("segment {s} {} {} {}\n", e.first_frame, e.frame_count, info.sections.len());
+        let [x, y, z] = seg.metadata().unwrap().index_offset;
+        // The channel records from the validator's view of the segment.
+        let records = vdbcook_vpak::Checked::new(&seg).unwrap().gpu_channels();
+        let le: Vec<u8> = records.iter().flat_map(|c| c.words()).flat_map(u32::to_le_bytes).collect();
+        out += &format!("offset {x} {y} {z}\nrecords {} {:016x}\n", records.len(), fnv1a(&le));
         for x in &info.sections {
             let b = seg.section(x.kind, x.index).unwrap();
             out += &format!("section {} {} {} {} {:016x}", x.kind, x.index, b.len(), u32::from(kind::uploaded(x.kind)), fnv1a(b));

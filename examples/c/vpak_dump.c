@@ -10,8 +10,13 @@
  *
  * Output, one record a line:
  *     asset FRAMES SEGMENTS
+ *     levels FIRST_LEVEL LEVELS
+ *     transform M00 M01 ... M33                    (index to world, %.6f)
+ *     channel C NAME                               (every channel)
  *     frame F SEGMENT FRAME_IN_SEGMENT             (every frame)
- *     segment S FIRST_FRAME FRAME_COUNT SECTIONS   (every segment, then its sections:)
+ *     segment S FIRST_FRAME FRAME_COUNT SECTIONS   (every segment, then:)
+ *     offset X Y Z                                 (its index offset)
+ *     records N FNV1A64                            (its channel records, as little-endian bytes)
  *     section KIND INDEX SIZE UPLOADED FNV1A64     (of the GPU-ready bytes, hex; for an
  *             atlas then: texture PLANE FORMAT LANES WIDTH HEIGHT DEPTH)
  * Exit status 0, or 1 with "vpak_dump: error: ..." on stderr.
@@ -66,6 +71,30 @@ static int dump_segment(vpak_reader *r, uint32_t s) {
         goto done;
     }
     printf("segment %u %u %u %u\n", s, first, frames, count);
+    int32_t offset[3];
+    uint32_t records;
+    if (vpak_segment_index_offset(r, s, offset) != VPAK_OK || vpak_segment_channel_records(r, s, &records) != VPAK_OK) {
+        status = fail("segment");
+        goto done;
+    }
+    printf("offset %d %d %d\n", offset[0], offset[1], offset[2]);
+    uint32_t *words = malloc((records ? records : 1) * 20 * sizeof *words);
+    if (!words || vpak_segment_channels(r, s, words, records) != VPAK_OK) {
+        free(words);
+        status = words ? fail("channel records") : 1;
+        goto done;
+    }
+    unsigned char *le = malloc((records ? records : 1) * 80);
+    for (uint32_t i = 0; le && i < records * 20; i++) {
+        for (int b = 0; b < 4; b++) {
+            le[4 * i + b] = (unsigned char)(words[i] >> (8 * b));
+        }
+    }
+    if (le) {
+        printf("records %u %016llx\n", records, (unsigned long long)fnv1a(le, (uint64_t)records * 80));
+    }
+    free(le);
+    free(words);
     for (uint32_t i = 0; i < count; i++) {
         const vpak_section *x = &sections[i];
         if (x->kind == VPAK_KIND_METADATA) {
@@ -107,6 +136,21 @@ int main(int argc, char **argv) {
     }
     uint32_t frames = vpak_frame_count(r), segments = vpak_segment_count(r);
     printf("asset %u %u\n", frames, segments);
+    uint32_t first_level, levels;
+    double m[16];
+    if (vpak_levels(r, &first_level, &levels) != VPAK_OK || vpak_transform(r, m) != VPAK_OK) {
+        int status = fail("metadata");
+        vpak_close(r);
+        return status;
+    }
+    printf("levels %u %u\ntransform", first_level, levels);
+    for (int i = 0; i < 16; i++) {
+        printf(" %.6f", m[i]);
+    }
+    printf("\n");
+    for (uint32_t c = 0; c < vpak_channel_count(r); c++) {
+        printf("channel %u %s\n", c, vpak_channel_name(r, c));
+    }
     int status = 0;
     for (uint32_t f = 0; f < frames && status == 0; f++) {
         uint32_t s, local;

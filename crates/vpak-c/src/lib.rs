@@ -8,7 +8,7 @@ use std::cell::RefCell;
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use vdbcook_vpak::runtime::Reader;
-use vdbcook_vpak::{kind, Error};
+use vdbcook_vpak::{kind, Error, GPU_CHANNEL_WORDS};
 
 pub const VPAK_OK: i32 = 0;
 /// The file could not be opened or read.
@@ -49,6 +49,8 @@ pub struct VpakBuffer {
 /// The opaque `vpak_reader`.
 pub struct VpakReader {
     reader: Reader,
+    /// The channels' names, for `vpak_channel_name`.
+    names: Vec<CString>,
 }
 
 thread_local! {
@@ -134,8 +136,9 @@ pub unsafe extern "C" fn vpak_open(path: *const c_char, out: *mut *mut VpakReade
             let f = Failure::from(e);
             Failure(f.0, format!("{text}: {}", f.1))
         })?;
+        let names = reader.metadata().channels.iter().map(|c| CString::new(c.name.replace('\0', "")).unwrap_or_default()).collect();
         // SAFETY: as above.
-        unsafe { out.write(Box::into_raw(Box::new(VpakReader { reader }))) };
+        unsafe { out.write(Box::into_raw(Box::new(VpakReader { reader, names }))) };
         Ok(())
     })
 }
@@ -336,4 +339,119 @@ pub unsafe extern "C" fn vpak_read_section(r: *const VpakReader, segment: u32, s
 pub unsafe extern "C" fn vpak_check(r: *const VpakReader) -> i32 {
     // SAFETY: the caller's promise.
     guard(|| Ok(unsafe { reader(r) }?.check()?))
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; `matrix` is null or valid for 16 writes.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_transform(r: *const VpakReader, matrix: *mut f64) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let m = unsafe { reader(r) }?.metadata().transform;
+        if matrix.is_null() {
+            return Err(argument("vpak_transform: a null matrix"));
+        }
+        for (i, v) in m.iter().flatten().enumerate() {
+            // SAFETY: i < 16, the caller's promise.
+            unsafe { matrix.add(i).write(*v) };
+        }
+        Ok(())
+    })
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; each out pointer is null or valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_levels(r: *const VpakReader, first_level: *mut u32, levels: *mut u32) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let m = unsafe { reader(r) }?.metadata();
+        // SAFETY: the caller's promise.
+        unsafe {
+            put(first_level, m.first_level);
+            put(levels, m.levels);
+        }
+        Ok(())
+    })
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_channel_count(r: *const VpakReader) -> u32 {
+    // SAFETY: the caller's promise.
+    value(0, || unsafe { r.as_ref() }.map_or(0, |r| r.names.len() as u32))
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_channel_name(r: *const VpakReader, channel: u32) -> *const c_char {
+    // SAFETY: the caller's promise.
+    value(std::ptr::null(), || unsafe { r.as_ref() }.and_then(|r| r.names.get(channel as usize)).map_or(std::ptr::null(), |n| n.as_ptr()))
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; `offset` is null or valid for 3 writes.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_segment_index_offset(r: *const VpakReader, segment: u32, offset: *mut i32) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let info = unsafe { reader(r) }?.segment(segment as usize)?;
+        if offset.is_null() {
+            return Err(argument("vpak_segment_index_offset: a null offset"));
+        }
+        for (i, v) in info.metadata.index_offset.iter().enumerate() {
+            // SAFETY: i < 3, the caller's promise.
+            unsafe { offset.add(i).write(*v) };
+        }
+        Ok(())
+    })
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; `count` is null or valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_segment_channel_records(r: *const VpakReader, segment: u32, count: *mut u32) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let info = unsafe { reader(r) }?.segment(segment as usize)?;
+        // SAFETY: the caller's promise.
+        unsafe { put(count, info.metadata.gpu_channels().len() as u32) };
+        Ok(())
+    })
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; `words` is valid for `count` · 20 writes.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_segment_channels(r: *const VpakReader, segment: u32, words: *mut u32, count: u32) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let info = unsafe { reader(r) }?.segment(segment as usize)?;
+        let records = info.metadata.gpu_channels();
+        if words.is_null() || count as usize != records.len() {
+            return Err(argument(format!("vpak_segment_channels: room for {count} records, segment {segment} has {}", records.len())));
+        }
+        for (i, w) in records.iter().flat_map(|c| c.words()).enumerate() {
+            // SAFETY: i < count · GPU_CHANNEL_WORDS, the caller's promise.
+            unsafe { words.add(i).write(w) };
+        }
+        debug_assert_eq!(GPU_CHANNEL_WORDS, 20);
+        Ok(())
+    })
 }

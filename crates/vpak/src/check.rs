@@ -348,26 +348,38 @@ impl<'a> Checked<'a> {
         self.ranges.iter().flat_map(|r| r.iter().copied()).collect()
     }
 
+    /// The channel table a shader reads ([`Metadata::gpu_channels`]).
+    pub fn gpu_channels(&self) -> Vec<GpuChannel> {
+        self.meta.gpu_channels()
+    }
+}
+
+impl Metadata {
     /// The channel table a shader reads: one record per channel, then one
-    /// per alternate plane of the channels stored in several planes.
+    /// per alternate plane of the channels stored in several planes. Of a
+    /// body this metadata describes once it is validated ([`Checked`]: its
+    /// brick tables are the planes' [`Metadata::plane_has_table`], its
+    /// channel tables the channels' with alternates), which is what
+    /// [`Checked::gpu_tables`] and [`Checked::gpu_ranges`] lay out.
     pub fn gpu_channels(&self) -> Vec<GpuChannel> {
         // Per plane: its table's first word, its first range pair, its first texture slot.
-        let mut bases = Vec::with_capacity(self.meta.planes.len());
+        let mut bases = Vec::with_capacity(self.planes.len());
         let (mut table, mut range) = (0u32, 0u32);
-        for (p, info) in self.meta.planes.iter().enumerate() {
-            let has = self.tables.get(p).is_some_and(Option::is_some);
-            bases.push((if has { table } else { u32::MAX }, range, self.meta.atlas_section(p, 0)));
-            table = table.saturating_add(if has { self.meta.brick_count } else { 0 });
+        for (p, info) in self.planes.iter().enumerate() {
+            let has = self.plane_has_table(p);
+            bases.push((if has { table } else { u32::MAX }, range, self.atlas_section(p, 0)));
+            table = table.saturating_add(if has { self.brick_count } else { 0 });
             range = range.saturating_add(info.bricks.saturating_mul(info.range_slots()));
         }
         // Channel tables follow the planes' tables.
-        let mut channel_table = Vec::with_capacity(self.channel_tables.len());
-        for t in &self.channel_tables {
-            channel_table.push(if t.is_some() { table } else { u32::MAX });
-            table = table.saturating_add(if t.is_some() { self.meta.brick_count } else { 0 });
+        let mut channel_table = Vec::with_capacity(self.channels.len());
+        for ch in &self.channels {
+            let has = !ch.alternates.is_empty();
+            channel_table.push(if has { table } else { u32::MAX });
+            table = table.saturating_add(if has { self.brick_count } else { 0 });
         }
         let record = |p: usize, lane: u32, background: f32, table: u32, alternates: u32| {
-            let info = &self.meta.planes[p];
+            let info = &self.planes[p];
             let plane = info.plane;
             let (plane_table, range_base, slot) = bases[p];
             let atlas_bricks = info.atlases.first().map_or([1, 1, 1, 1], |a| {
@@ -393,7 +405,7 @@ impl<'a> Checked<'a> {
                 alternates,
             }
         };
-        let channels = &self.meta.channels;
+        let channels = &self.channels;
         let mut out: Vec<GpuChannel> = Vec::with_capacity(channels.len());
         let mut next = channels.len() as u32;
         for (c, ch) in channels.iter().enumerate() {

@@ -398,18 +398,18 @@ fn sample(data: &[u8]) -> impl Iterator<Item = &[u8]> {
     (0..count).map(move |k| if count == 1 { data } else { &data[k * step..k * step + CHUNK] })
 }
 
-/// `n` zeroed words from the allocator's zeroed memory (fresh pages are not
+/// `n` zeroed items from the allocator's zeroed memory (fresh pages are not
 /// touched until written: a restored size that lies costs address space, not
 /// memory, until its frame fails to fill it), or `None` when it has none.
-fn zeroed_words(n: usize) -> Option<Vec<u64>> {
-    if n == 0 {
+pub(crate) fn zeroed<T: bytemuck::Zeroable>(n: usize) -> Option<Vec<T>> {
+    let layout = std::alloc::Layout::array::<T>(n).ok()?;
+    if layout.size() == 0 {
         return Some(Vec::new());
     }
-    let layout = std::alloc::Layout::array::<u64>(n).ok()?;
     // SAFETY: the layout's size is not zero; a null pointer is handled; all-zero
-    // bits are a valid u64, and the Vec takes the allocation with this layout.
+    // bits are a valid T (Zeroable), and the Vec takes the allocation with this layout.
     unsafe {
-        let p = std::alloc::alloc_zeroed(layout) as *mut u64;
+        let p = std::alloc::alloc_zeroed(layout) as *mut T;
         (!p.is_null()).then(|| Vec::from_raw_parts(p, n, n))
     }
 }
@@ -527,15 +527,15 @@ pub(crate) fn restore_body(sections: &[(crate::SectionEntry, &[u8])], buf: Vec<u
 }
 
 /// `buf` made `n` words long when it has room for them (its contents left
-/// for the caller to overwrite), else fresh zeroed words ([`zeroed_words`]).
-pub(crate) fn reuse_words(mut buf: Vec<u64>, n: usize) -> Option<Vec<u64>> {
+/// for the caller to overwrite), else fresh zeroed words ([`zeroed`]).
+pub(crate) fn reuse_words<T: bytemuck::Zeroable + Clone>(mut buf: Vec<T>, n: usize) -> Option<Vec<T>> {
     if buf.capacity() >= n {
-        buf.resize(n, 0);
+        buf.resize(n, T::zeroed());
         buf.truncate(n);
         return Some(buf);
     }
     drop(buf);
-    zeroed_words(n)
+    zeroed(n)
 }
 
 /// Writes `asset` again with its sections stored as `to` says (each segment

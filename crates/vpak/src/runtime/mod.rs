@@ -288,9 +288,8 @@ impl Reader {
         buffers.sizes = info.sections.iter().map(|x| x.size as usize).collect();
         buffers.words.resize_with(buffers.sizes.len(), Vec::new);
         for (w, &size) in buffers.words.iter_mut().zip(&buffers.sizes) {
-            w.clear();
-            w.try_reserve_exact(size.div_ceil(4)).map_err(|_| Error::Invalid(format!("no memory for a section of {size} bytes")))?;
-            w.resize(size.div_ceil(4), 0);
+            // Fresh memory zeroed lazily: a size that lies costs address space until reading fails.
+            *w = coding::reuse_words(std::mem::take(w), size.div_ceil(4)).ok_or_else(|| Error::Invalid(format!("no memory for a section of {size} bytes")))?;
         }
         let mut views: Vec<&mut [u8]> = buffers.words.iter_mut().zip(&buffers.sizes).map(|(w, &n)| &mut bytemuck::cast_slice_mut::<u32, u8>(w)[..n]).collect();
         self.fill_segment(s, &mut views)
