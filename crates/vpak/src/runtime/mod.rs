@@ -119,17 +119,24 @@ impl Reader {
         if let Some(e) = entry.filter(|e| e.head_checksum != head_checksum) {
             return Err(Error::HeaderChecksum { stored: e.head_checksum, computed: head_checksum });
         }
-        let stored = head::sections(&table, size, self.coded, |e| self.read_section(offset, e).map(std::borrow::Cow::Owned))?;
+        // The coding section is read once: the table's check needs it, and the restore plan.
+        let mut coding_bytes = None;
+        let stored = head::sections(&table, size, self.coded, |e| {
+            let b = self.read_section(offset, e)?;
+            if e.index == 0 {
+                coding_bytes = Some(b.clone());
+            }
+            Ok(std::borrow::Cow::Owned(b))
+        })?;
         let find = |k: u32| stored.iter().find(|e| (e.kind, e.index) == (k, 0));
         let meta_entry = find(kind::METADATA).ok_or(Error::Missing { kind: kind::METADATA, index: 0 })?;
         let metadata = Metadata::from_bytes(&self.read_section(offset, meta_entry)?)?;
         if let Some(e) = entry.filter(|e| e.frame_count != metadata.frame_count) {
             return Err(Error::Invalid(format!("its metadata has {} frames, the segment table {}", metadata.frame_count, e.frame_count)));
         }
-        let coding = find(kind::CODING).map(|e| self.read_section(offset, e)).transpose()?;
-        let plan = coding::plan(&stored, coding.as_deref())?;
+        let plan = coding::plan(&stored, coding_bytes.as_deref())?;
         // A body stored plainly is used as it is stored; one with supercompressed sections as the plan lays it out.
-        let plain = coding.is_none();
+        let plain = coding_bytes.is_none();
         let sections = plan
             .parts
             .iter()
