@@ -186,6 +186,20 @@ pub struct GpuAsset {
 }
 
 impl GpuAsset {
+    /// Bytes this asset holds on the GPU: its buffers and its atlases' textures
+    /// or buffers (the small placeholders of unused slots included).
+    pub fn resident_bytes(&self) -> u64 {
+        let atlas = |a: &Atlas| match a {
+            Atlas::Texture { _texture: t, .. } => {
+                let (w, h) = t.format().block_dimensions();
+                let s = t.size();
+                u64::from(s.width.div_ceil(w)) * u64::from(s.height.div_ceil(h)) * u64::from(s.depth_or_array_layers) * u64::from(t.format().block_copy_size(None).unwrap_or(0))
+            }
+            Atlas::Buffer(b) => b.size(),
+        };
+        self.buffers.iter().map(wgpu::Buffer::size).sum::<u64>() + self.atlases.iter().map(atlas).sum::<u64>()
+    }
+
     /// True when BC bricks are decoded by the shader rather than the texture unit.
     pub fn decodes_in_shader(&self) -> bool {
         matches!(self.atlases.first(), Some(Atlas::Buffer(_)))

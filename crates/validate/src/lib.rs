@@ -13,6 +13,7 @@ pub mod flip;
 mod gpu;
 mod html;
 pub mod options;
+pub mod play;
 pub mod report;
 mod resident;
 mod scene;
@@ -22,6 +23,7 @@ pub use cpu::{render_cpu, render_cpu_level};
 pub use flip::{flip, FlipMap};
 pub use gpu::{open_gpu, shader_sources, wanted_features, BcDecode, Gpu, GpuAsset, Renderer};
 pub use options::{Gate, Size, Viewing, Views};
+pub use play::{play, FrameStats, PlayOptions, PlaySummary};
 pub use resident::Resident;
 pub use scene::{coverage, Model};
 

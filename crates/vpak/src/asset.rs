@@ -36,8 +36,8 @@ pub struct Asset {
     pub sections: Vec<SectionEntry>,
     /// A segmented file's table (empty for a body).
     table: Vec<SegmentEntry>,
-    /// Whether its bodies may hold supercompressed sections (version 8).
-    coded: bool,
+    /// The file's version (a segment's: its file's).
+    version: u32,
 }
 
 impl Asset {
@@ -92,20 +92,22 @@ impl Asset {
 
     /// Parses the asset that is bytes `[start, start + len)` of `bytes`.
     fn parse_at(bytes: std::sync::Arc<Bytes>, start: usize, len: usize) -> Result<Asset, Error> {
-        let mut whole = Asset { bytes, start, len, sections: Vec::new(), table: Vec::new(), coded: false };
-        let version = whole.version()?;
-        match version {
+        let mut whole = Asset { bytes, start, len, sections: Vec::new(), table: Vec::new(), version: 0 };
+        whole.version = whole.version_field()?;
+        match whole.version {
             segments::BODY_VERSION => whole.body(),
-            segments::VERSION | segments::VERSION_7 => {
-                whole.coded = version == segments::VERSION;
-                whole.container()
-            }
+            segments::VERSION | segments::VERSION_8 | segments::VERSION_7 => whole.container(),
             v => Err(Error::Version(v)),
         }
     }
 
+    /// The file's format version (6 to [`crate::VERSION`]).
+    pub fn version(&self) -> u32 {
+        self.version
+    }
+
     /// The version field, after the magic and the file size are checked.
-    fn version(&self) -> Result<u32, Error> {
+    fn version_field(&self) -> Result<u32, Error> {
         let b = self.bytes();
         if b.len() < HEADER_LEN || b[..8] != MAGIC {
             return Err(Error::Magic);
@@ -159,8 +161,8 @@ impl Asset {
         if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
             return Err(Error::DuplicateSection { kind: w[0].0, index: w[0].1 });
         }
-        if !self.coded && sections.iter().any(|s| s.kind == kind::CODING) {
-            return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION)));
+        if self.version < segments::VERSION_8 && sections.iter().any(|s| s.kind == kind::CODING) {
+            return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION_8)));
         }
         self.sections = sections;
         Ok(self)
@@ -310,8 +312,8 @@ impl Asset {
             };
         }
         let e = self.table.get(s).ok_or(Error::NoSegment { segment: s, count: self.table.len() })?;
-        let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new(), coded: self.coded };
-        let body = match seg.version() {
+        let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new(), version: self.version };
+        let body = match seg.version_field() {
             Ok(segments::BODY_VERSION) => seg.body(),
             Ok(v) => Err(Error::Invalid(format!("a body of version {v} (segments are version {})", segments::BODY_VERSION))),
             Err(e) => Err(e),
