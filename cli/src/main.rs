@@ -85,7 +85,7 @@ enum Command {
     /// Cook (and validate) every asset of a bake.toml manifest, with a cache, shards and one report.
     #[command(after_help = bake::AFTER_HELP)]
     Bake(bake::BakeArgs),
-    /// Play an asset in a window: step, scrub, orbit, zoom, switch level and channel (keys below).
+    /// Play an asset in a window: step, scrub, orbit, zoom, switch level and channel.
     #[command(after_help = view::AFTER_HELP)]
     View(view::ViewArgs),
 }

@@ -35,6 +35,8 @@ fn tools_available() -> bool {
 struct Xvfb {
     child: Child,
     env: Vec<(String, String)>,
+    /// The private XDG_RUNTIME_DIR given to the programs (Mesa warns without one).
+    runtime: PathBuf,
 }
 
 impl Xvfb {
@@ -53,7 +55,7 @@ impl Xvfb {
         let runtime = std::env::temp_dir().join(format!("vdbcook-view-runtime-{}", std::process::id()));
         std::fs::create_dir_all(&runtime).unwrap();
         let env = vec![("DISPLAY".into(), display), ("XAUTHORITY".into(), auth), ("XDG_RUNTIME_DIR".into(), runtime.display().to_string())];
-        Xvfb { child, env }
+        Xvfb { child, env, runtime }
     }
 
     /// `program` with this display's environment (and no Wayland to prefer).
@@ -75,6 +77,7 @@ impl Drop for Xvfb {
             let _ = self.child.kill();
             self.child.wait().ok()
         });
+        let _ = std::fs::remove_dir_all(&self.runtime);
     }
 }
 
