@@ -11,6 +11,7 @@ mod progress;
 mod recompress;
 mod unpack;
 mod validate;
+mod view;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -88,6 +89,9 @@ enum Command {
     /// Cook (and validate) every asset of a bake.toml manifest, with a cache, shards and one report.
     #[command(after_help = bake::AFTER_HELP)]
     Bake(bake::BakeArgs),
+    /// Play an asset in a window: step, scrub, orbit, zoom, switch level and channel.
+    #[command(after_help = view::AFTER_HELP)]
+    View(view::ViewArgs),
 }
 
 /// A usage problem found after parsing (exit code 2).
@@ -228,6 +232,7 @@ fn main() -> ExitCode {
         Command::Bake(args) => bake::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Join(args) => join::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Recompress(args) => recompress::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::View(args) => view::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
     };
     ExitCode::from(code)
 }
