@@ -144,6 +144,17 @@ vpak_status vpak_read_section(const vpak_reader *reader, uint32_t segment, uint3
  * import step, not for playback. */
 vpak_status vpak_check(const vpak_reader *reader);
 
+/* The sequence's frame rate in frames per second (0 for a NULL reader). An
+ * asset older than format version 9 records none: 24. */
+double vpak_fps(const vpak_reader *reader);
+
+/* Frame `frame`'s number in the source sequence (fire_1001.vdb is 1001; gaps
+ * and steps kept). An asset older than version 9 numbers its frames from 0. */
+vpak_status vpak_frame_number(const vpak_reader *reader, uint32_t frame, int64_t *number);
+
+/* The frame (counted from 0) whose source number is `number`; VPAK_ERROR_ARGUMENT if none. */
+vpak_status vpak_frame_of_number(const vpak_reader *reader, int64_t number, uint32_t *frame);
+
 /* The asset's index-to-world matrix (row-vector convention: world = [i j k 1] * M),
  * row by row into matrix[16]. A segment's index i is source index i + its
  * index offset (vpak_segment_index_offset); level k's: docs/format.md, "Levels". */

@@ -67,7 +67,7 @@ def make_file(bodies, version=8):
 
 def bodies_of(data):
     """The bodies of a segmented file, as the segment table places them (not validated)."""
-    _, table = v.read_table(memoryview(data), (7, 8), "file")
+    _, table = v.read_table(memoryview(data), (7, 8, 9), "file")
     return [bytes(data[e[2]:e[2] + e[3]]) for e in table]
 
 
@@ -126,7 +126,7 @@ def check_restores(vdbcook, work, flags):
     """A vdbcook zstd asset restores exactly the sections of the same asset uncompressed."""
     packed = cook(vdbcook, work, "z", ["--supercompress", "zstd", *flags])
     plain = recompress(vdbcook, work, packed, "none")
-    assert struct.unpack_from("<I", packed, 8)[0] == 8
+    assert struct.unpack_from("<I", packed, 8)[0] == 9
     z, p = same_asset(packed, plain)
     filters = set()
     for (mz, sz), (_, sp), body in zip(z.bodies, p.bodies, bodies_of(packed)):
@@ -261,9 +261,9 @@ def check_refusals(packed, plain, work):
     n0 = len(next(d for k, i, d in plain_secs if (k, i) == atlas))
     refused(with_body(plain, unsized(-1)), f"decodes to more than the record's {n0 - 1} bytes")
     refused(with_body(plain, unsized(1)), f"decodes to {n0} bytes, the record says {n0 + 1}")
-    # Supercompression is version 8 only.
-    refused(make_file(bodies_of(packed), version=7), "outside a version-8 file")
-    refused(bodies_of(packed)[0], "outside a version-8 file")
+    # Supercompression is version 8 on.
+    refused(make_file(bodies_of(packed), version=7), "older than version 8")
+    refused(bodies_of(packed)[0], "older than version 8")
     # Segment 1 too, and the command line: one line naming the file and the problem.
     segs = len(bodies_of(packed))
     bad = with_body(packed, rec(lambda r: r.__setitem__(6, n + w)), seg=segs - 1) if segs == 1 else \

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (versions 8, 7 and 6).
+"""Independent reader for vdbcook's `.vpak` volume asset format (versions 9, 8, 7 and 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -12,21 +12,25 @@ frame's active voxels (every active voxel of every L3 node and every voxel of ev
 tile), sorted by i, then j, then k, at the asset's first stored level (0, the frame
 itself, unless the cook left finer levels out). With `--lod K`, the frame's level K, in
 that level's index space (level index = level asset index + index_offset >> K). `--json` prints a summary of the metadata.
-Frame N of a version-7 or 8 file is read from its segment's body alone; a version-8
+Frame N of a version-7, 8 or 9 file is read from its segment's body alone; a version-8 or 9
 body's supercompressed sections are restored (scripts/vpak_coding.py) before use.
+`--source-frame S` reads the frame whose source frame number is S (version 9 records
+each frame's number; older assets number their frames from 0). `--json` gives `fps` and
+`frame_numbers` too (24 and 0, 1, ... when the asset records none).
 
-As a module: `open_segments(path)` opens a version-6, 7 or 8 file (every body validated,
+As a module: `open_segments(path)` opens a version-6, 7, 8 or 9 file (every body validated,
 every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
 `open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
 Dependencies (Debian): python3-numpy, python3-pil (BC7 blocks), python3-xxhash,
-python3-zstandard (version-8 assets with supercompressed sections).
+python3-zstandard (version-8 and 9 assets with supercompressed sections).
 Bad input exits with status 1 and one line `vpak_read.py: FILE: problem` on stderr.
 """
 
 import argparse
 import bisect
 import json
+import math
 import struct
 import sys
 
@@ -35,7 +39,8 @@ import numpy as np
 from vpak_coding import K_CODING, CodingError, parse_records, restore
 
 MAGIC = b"VPAK\r\n\x1a\n"
-BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION = 6, 7, 8
+BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION = 6, 7, 8, 9
+DEFAULT_FPS = 24.0  # the frame rate of an asset that records none
 MAX_LEVELS = 5
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
@@ -276,9 +281,29 @@ def decode_metadata(data):
     m["levels"] = r.uint()
     m["level_filters"] = r.vec(r.uint)
     m["first_level"] = r.uint()
+    m["time"] = None
     if r.pos != len(r.data):
-        raise VpakError(f"metadata has {len(r.data) - r.pos} trailing bytes")
+        # Version 9: the Time record follows (format.md, "Time").
+        t = {"fps": r.f64(), "numbers": r.vec(r.int)}
+        if r.pos != len(r.data):
+            raise VpakError(f"metadata has {len(r.data) - r.pos} bytes after the time record")
+        if not (math.isfinite(t["fps"]) and t["fps"] > 0):
+            raise VpakError(f"metadata: frame rate {t['fps']} is not a finite number above 0")
+        if len(t["numbers"]) != m["frame_count"]:
+            raise VpakError(f"metadata: {len(t['numbers'])} frame numbers for {m['frame_count']} frames")
+        if any(a >= b for a, b in zip(t["numbers"], t["numbers"][1:])):
+            raise VpakError("metadata: frame numbers do not increase")
+        m["time"] = t
     return m
+
+
+def frame_numbers(m):
+    """Each frame's source number: recorded (version 9), else 0, 1, ..."""
+    return m["time"]["numbers"] if m["time"] else list(range(m["frame_count"]))
+
+
+def fps(m):
+    return m["time"]["fps"] if m["time"] else DEFAULT_FPS
 
 
 # ---------------------------------------------------------------------------
@@ -767,7 +792,7 @@ def open_body(buf, head_sum=None, coded=False):
     for kind, index in secs.table:
         secs.get(kind, index)
     if any(kind == K_CODING for kind, _ in secs.table) and not coded:
-        raise VpakError("a coding section (kind 13) outside a version-8 file")
+        raise VpakError("a coding section (kind 13) in a file older than version 8")
     if any(kind == K_CODING and index != 0 for kind, index in secs.table):
         raise VpakError("a coding section (kind 13) of an index other than 0")
     if (K_CODING, 0) in secs.table:
@@ -811,6 +836,9 @@ def check_shared(a, b, s):
     same = lambda x, y: all(x[k] == y[k] for k in SHARED_CHANNEL) and bits(x) == bits(y)
     if len(a["channels"]) != len(b["channels"]) or not all(map(same, a["channels"], b["channels"])):
         raise VpakError(f"segment {s}'s channels differ from segment 0's")
+    rate = lambda m: m["time"] and struct.pack("<d", m["time"]["fps"])
+    if rate(a) != rate(b):
+        raise VpakError(f"segment {s}'s frame rate differs from segment 0's")
 
 
 def merged(metas):
@@ -838,6 +866,12 @@ def merged(metas):
             else:
                 f["source"] = None
             m["frames"].append(f)
+    m["time"] = None
+    if metas[0]["time"]:
+        numbers = [n for x in metas for n in x["time"]["numbers"]]
+        if any(a >= b for a, b in zip(numbers, numbers[1:])):
+            raise VpakError("the segments' frame numbers do not increase")
+        m["time"] = {"fps": metas[0]["time"]["fps"], "numbers": numbers}
     return m
 
 
@@ -847,7 +881,7 @@ class Asset:
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
     def __init__(self, buf):
-        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION), "file")
+        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION), "file")
         if self.version == BODY_VERSION:
             self.bodies = [open_body(buf)]
             self.meta = self.bodies[0][0]
@@ -857,7 +891,7 @@ class Asset:
         self.table, self.bodies = table, []
         for s, (_, count, offset, size, head_sum) in enumerate(table):
             try:
-                m, secs = open_body(buf[offset:offset + size], head_sum, self.version == CODED_VERSION)
+                m, secs = open_body(buf[offset:offset + size], head_sum, self.version >= CODED_VERSION)
                 if m["frame_count"] != count:
                     raise VpakError(f"its metadata has {m['frame_count']} frames, the segment table {count}")
             except VpakError as e:
@@ -878,11 +912,20 @@ class Asset:
         s, f = self.locate(frame)
         return read_frame(*self.bodies[s], f, lod)
 
+    def frame_of_number(self, number):
+        """The frame whose source frame number is `number`."""
+        numbers = frame_numbers(self.meta)
+        i = bisect.bisect_left(numbers, number)
+        if i == len(numbers) or numbers[i] != number:
+            raise VpakError(f"no frame has source number {number} (frames {numbers[0] if numbers else '-'} to {numbers[-1] if numbers else '-'})")
+        return i
+
     def summary(self):
+        time = {"fps": fps(self.meta), "frame_numbers": frame_numbers(self.meta)}
         if self.version == BODY_VERSION:
-            return summary(self.meta)
+            return dict(summary(self.meta), **time)
         keys = ("first_frame", "frame_count", "offset", "size")
-        return dict(self.meta, segments=[dict(zip(keys, e), **summary(m)) for e, (m, _) in zip(self.table, self.bodies)])
+        return dict(self.meta, **time, segments=[dict(zip(keys, e), **summary(m)) for e, (m, _) in zip(self.table, self.bodies)])
 
 
 def open_segments(path):
@@ -907,6 +950,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description="Decode a .vpak frame (written from docs/format.md).")
     ap.add_argument("asset")
     ap.add_argument("--frame", type=int, default=None)
+    ap.add_argument("--source-frame", type=int, default=None, help="the frame of this source frame number")
     ap.add_argument("--lod", type=int, default=None, help="level of detail (0: the frame itself; default: the asset's first stored level)")
     ap.add_argument("--out", help="write C.ijk / C.values per channel to this .npz")
     ap.add_argument("--json", action="store_true", help="print a metadata summary")
@@ -915,8 +959,11 @@ def main(argv=None):
         asset = open_segments(args.asset)
         if args.json:
             print(json.dumps(asset.summary(), indent=2))
-        if args.frame is not None or args.out:
-            chans = asset.read_frame(0 if args.frame is None else args.frame, args.lod)
+        frame = args.frame
+        if args.source_frame is not None:
+            frame = asset.frame_of_number(args.source_frame)
+        if frame is not None or args.out:
+            chans = asset.read_frame(0 if frame is None else frame, args.lod)
             if args.out:
                 arrays = {}
                 for name, (ijk, vals) in chans.items():

@@ -1,9 +1,9 @@
-//! The GPU flags of `validate`, `render` and `bake`.
+//! The GPU flags of `validate`, `render`, `view` and `bake`.
 
 use anyhow::Result;
-use vdbcook_validate::{BcDecode, Renderer};
+use vdbcook_validate::{BcDecode, Gpu, Renderer};
 
-/// The GPU options of `validate` and `render`.
+/// The GPU options of `validate`, `render` and `view`.
 #[derive(clap::Args, Clone, Default)]
 pub struct GpuArgs {
     /// Use the first GPU adapter whose name contains NAME (e.g. "llvmpipe").
@@ -26,11 +26,19 @@ pub enum BcDecodeArg {
 
 impl GpuArgs {
     pub fn renderer(&self) -> Result<Renderer> {
-        let decode = match self.bc_decode {
+        Ok(Renderer::new(self.adapter.as_deref())?.with_bc_decode(self.decode()))
+    }
+
+    /// A renderer on a device the caller opened (`view`: one that can present to its window).
+    pub fn renderer_on(&self, gpu: Gpu) -> Renderer {
+        Renderer::from_device(gpu).with_bc_decode(self.decode())
+    }
+
+    fn decode(&self) -> BcDecode {
+        match self.bc_decode {
             BcDecodeArg::Auto => BcDecode::Auto,
             BcDecodeArg::Texture => BcDecode::Texture,
             BcDecodeArg::Shader => BcDecode::Shader,
-        };
-        Ok(Renderer::new(self.adapter.as_deref())?.with_bc_decode(decode))
+        }
     }
 }

@@ -89,7 +89,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         .with_context(|| name.clone())?;
     let merged = asset.metadata().with_context(|| name.clone())?;
     let meta = &merged;
-    let version = if asset.is_segmented() { vdbcook_vpak::VERSION } else { vdbcook_vpak::segments::BODY_VERSION };
+    let version = asset.version();
     let file_bytes = asset.bytes().len() as u64;
     let gpu_bytes: u64 = bodies.iter().map(|b| b.gpu_bytes).sum();
     let active: u64 = meta.frames.iter().fold(0u64, |a, f| a.saturating_add(f.active_voxels));
@@ -118,7 +118,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let segments: Vec<Value> = bodies
         .iter()
         .zip(&table)
-        .map(|(b, e)| json!({"first_frame": e.first_frame, "frames": e.frame_count, "offset": e.offset, "bytes": e.size, "gpu_bytes": b.gpu_bytes, "bricks": b.meta.brick_count, "format": b.meta.format_names(), "index_offset": b.meta.index_offset}))
+        .map(|(b, e)| json!({"first_frame": e.first_frame, "first_number": meta.frame_number(e.first_frame as usize), "frames": e.frame_count, "offset": e.offset, "bytes": e.size, "gpu_bytes": b.gpu_bytes, "bricks": b.meta.brick_count, "format": b.meta.format_names(), "index_offset": b.meta.index_offset}))
         .collect();
     let section_json = |b: &Body| {
         b.sections
@@ -138,6 +138,9 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "tool": meta.tool,
             "format": formats,
             "frames": meta.frame_count,
+            "fps": meta.fps(),
+            "time_recorded": meta.time.is_some(),
+            "frame_numbers": (0..meta.frame_count as usize).map(|f| meta.frame_number(f)).collect::<Vec<_>>(),
             "channels": meta.channels.iter().enumerate().map(|(i, c)| json!({
                 "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
                 "background": super::num32(c.background), "value_range": c.value_range.map(super::num32), "group": c.group, "plane": c.plane, "lane": c.lane,
@@ -162,7 +165,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             "sections": bodies.iter().flat_map(section_json).collect::<Vec<_>>(),
             "settings": meta.settings.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
             "sources": meta.sources.iter().map(|s| json!({"path": s.path, "bytes": s.bytes, "xxh3_128": s.xxh3_128})).collect::<Vec<_>>(),
-            "frame_info": meta.frames.iter().map(|f| json!({"source": f.source, "active_voxels": f.active_voxels, "leaves": f.leaves, "tiles": f.tiles,
+            "frame_info": meta.frames.iter().enumerate().map(|(i, f)| json!({"number": meta.frame_number(i), "source": f.source, "active_voxels": f.active_voxels, "leaves": f.leaves, "tiles": f.tiles,
                 "coarse": f.coarse.iter().map(|c| json!({"active_voxels": c.active_voxels, "leaves": c.leaves, "tiles": c.tiles})).collect::<Vec<_>>()})).collect::<Vec<_>>(),
             "first_level": meta.first_level,
             "level_filters": meta.level_filters.iter().map(|f| f.name()).collect::<Vec<_>>(),
@@ -184,6 +187,11 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         },
     );
     let _ = writeln!(s, "  written by     {}", meta.tool);
+    let numbers: Vec<i64> = (0..meta.frame_count as usize).map(|f| meta.frame_number(f)).collect();
+    let _ = match meta.time {
+        Some(_) => writeln!(s, "  time           frames {} at {} fps", vdbcook_vpak::time::numbers_text(&numbers), meta.fps()),
+        None => writeln!(s, "  time           not recorded (an asset older than version 9): frames {}, {} fps assumed", vdbcook_vpak::time::numbers_text(&numbers), meta.fps()),
+    };
     let _ = writeln!(s, "  transform      {}, index offset {:?}", meta.map_type, meta.index_offset);
     if let Some((a, b)) = meta.index_bbox {
         let _ = writeln!(s, "  index bbox     {a:?} .. {b:?}");
@@ -225,9 +233,10 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         }
     }
     if table.len() > 1 {
-        let _ = writeln!(s, "  {:<8} {:>7} {:>7} {:>10} {:>14} {:>14}  format", "segment", "frames", "from", "bricks", "bytes", "gpu bytes");
+        let _ = writeln!(s, "  {:<8} {:>7} {:>7} {:>8} {:>10} {:>14} {:>14}  format", "segment", "frames", "from", "number", "bricks", "bytes", "gpu bytes");
         for (k, (b, e)) in bodies.iter().zip(&table).enumerate() {
-            let _ = writeln!(s, "  {k:<8} {:>7} {:>7} {:>10} {:>14} {:>14}  {}", e.frame_count, e.first_frame, b.meta.brick_count, e.size, b.gpu_bytes, b.meta.format_names());
+            let number = meta.frame_number(e.first_frame as usize);
+            let _ = writeln!(s, "  {k:<8} {:>7} {:>7} {number:>8} {:>10} {:>14} {:>14}  {}", e.frame_count, e.first_frame, b.meta.brick_count, e.size, b.gpu_bytes, b.meta.format_names());
         }
     }
     for (k, b) in bodies.iter().enumerate() {

@@ -6,10 +6,12 @@ mod diff;
 mod gpu;
 mod inspect;
 mod join;
+mod play;
 mod progress;
 mod recompress;
 mod unpack;
 mod validate;
+mod view;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -77,6 +79,9 @@ enum Command {
     Validate(validate::ValidateArgs),
     /// Render one frame of a .vpak (or a .vdb) to a PNG preview.
     Render(validate::RenderArgs),
+    /// Play a .vpak's frames in order through the GPU, streaming its segments (timings, PNG frames).
+    #[command(after_help = play::AFTER_HELP)]
+    Play(play::PlayArgs),
     /// Join the part files of `cook --part I/N` into one asset, copying their segments.
     Join(join::JoinArgs),
     /// Store an asset's sections another way on disk (supercompressed or not), without its sources.
@@ -84,6 +89,9 @@ enum Command {
     /// Cook (and validate) every asset of a bake.toml manifest, with a cache, shards and one report.
     #[command(after_help = bake::AFTER_HELP)]
     Bake(bake::BakeArgs),
+    /// Play an asset in a window: step, scrub, orbit, zoom, switch level and channel.
+    #[command(after_help = view::AFTER_HELP)]
+    View(view::ViewArgs),
 }
 
 /// A usage problem found after parsing (exit code 2).
@@ -220,9 +228,11 @@ fn main() -> ExitCode {
         Command::Diff(args) => diff::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Validate(args) => validate::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Render(args) => validate::render(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::Play(args) => play::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Bake(args) => bake::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Join(args) => join::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Recompress(args) => recompress::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::View(args) => view::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
     };
     ExitCode::from(code)
 }

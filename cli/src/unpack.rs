@@ -14,6 +14,10 @@ pub struct UnpackArgs {
     /// asset has one frame).
     #[arg(long, value_name = "N")]
     pub frame: Option<usize>,
+    /// Frame to decode, by its number in the source sequence (fire_1001.vdb: 1001; see
+    /// `inspect`), instead of --frame.
+    #[arg(long, value_name = "S", conflicts_with = "frame", allow_negative_numbers = true)]
+    pub source_frame: Option<i64>,
     /// Level of detail to decode (0: the frame itself; k: voxels 2^k times as large, in the
     /// level's index space, with a transform to match). Default: the asset's finest level (0
     /// unless `cook --max-bytes` left finer ones out).
@@ -37,7 +41,8 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
     let asset = vdbcook_vpak::Asset::open(&args.asset).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
     let lod = args.lod.map_or(meta.first_level, vdbcook_vpak::Level::get);
-    let frame = match (args.frame, meta.frame_count) {
+    let by_number = args.source_frame.map(|n| meta.frame_by_number(n).map_err(|e| anyhow::anyhow!("{name}: {e}"))).transpose()?;
+    let frame = match (args.frame.or(by_number), meta.frame_count) {
         (Some(f), _) => f,
         (None, 1) => 0,
         (None, n) => return Err(crate::Usage(format!("{name} has {n} frames: say which with --frame N (0 to {})", n.saturating_sub(1))).into()),
@@ -76,7 +81,13 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
         });
         let what = if out.len() == 1 { "1 grid".to_string() } else { format!("{} grids", out.len()) };
         let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
-        crate::emit_final(&format!("wrote frame {}{level} of {} to {} ({what}, {voxels} active voxels, {leaves} leaves)\n", frame, name, args.output.display()))?;
+        crate::emit_final(&format!(
+            "wrote frame {} (source frame {}){level} of {} to {} ({what}, {voxels} active voxels, {leaves} leaves)\n",
+            frame,
+            meta.frame_number(frame),
+            name,
+            args.output.display()
+        ))?;
     }
     Ok(exit::SUCCESS)
 }

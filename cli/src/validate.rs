@@ -130,6 +130,10 @@ pub struct RenderArgs {
     /// Frame of the asset (counted from 0); a .vdb file has one.
     #[arg(long, default_value_t = 0)]
     pub frame: usize,
+    /// Frame of the asset by its number in the source sequence (fire_1001.vdb: 1001; see
+    /// `inspect`), instead of --frame.
+    #[arg(long, value_name = "S", conflicts_with = "frame", allow_negative_numbers = true)]
+    pub source_frame: Option<i64>,
     /// The PNG to write.
     #[arg(short, long, value_name = "OUT.png")]
     pub output: PathBuf,
@@ -177,8 +181,12 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     };
     let meta = asset.metadata().with_context(|| name.clone())?;
     let lod = args.lod.map_or(meta.first_level, Level::get);
-    if args.frame >= meta.frame_count as usize {
-        return Err(anyhow!("{name}: frame {} is out of range (it has {} frames, numbered from 0)", args.frame, meta.frame_count));
+    let frame = match args.source_frame {
+        Some(n) => meta.frame_by_number(n).map_err(|e| anyhow!("{name}: {e}"))?,
+        None => args.frame,
+    };
+    if frame >= meta.frame_count as usize {
+        return Err(anyhow!("{name}: frame {frame} is out of range (it has {} frames, numbered from 0)", meta.frame_count));
     }
     if let Some(why) = meta.missing_level(lod) {
         let hint = if lod >= meta.levels { format!("; cook it with --lods {}", lod + 1) } else { String::new() };
@@ -188,14 +196,15 @@ pub fn render(args: RenderArgs, quiet: bool) -> Result<u8> {
     let renderer = args.gpu.renderer()?;
     let view = scene.orbit(views.count())[args.view as usize];
     let img = vdbcook_validate::Resident::new(&asset, meta.index_offset)
-        .draw(&renderer, &scene, (args.frame, lod), &[view], (size.width(), size.height()))
+        .draw(&renderer, &scene, (frame, lod), &[view], (size.width(), size.height()))
         .with_context(|| name.clone())?
         .pop()
         .ok_or_else(|| anyhow!("no image"))?;
     vdbcook_vpak::write_atomic(&args.output, &report::png_rgb(&img), args.force).with_context(|| args.output.display().to_string())?;
     if !quiet {
         let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
-        crate::emit_final(&format!("rendered frame {}{level} of {name} to {} ({}×{}, {})\n", args.frame, args.output.display(), size.width(), size.height(), renderer.adapter))?;
+        let number = meta.frame_number(frame);
+        crate::emit_final(&format!("rendered frame {frame} (source frame {number}){level} of {name} to {} ({}×{}, {})\n", args.output.display(), size.width(), size.height(), renderer.adapter))?;
     }
     Ok(exit::SUCCESS)
 }

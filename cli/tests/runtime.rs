@@ -19,7 +19,7 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 /// the runtime reader's section order, which the C ABI follows).
 fn expected_dump(asset: &Asset, reader: &Reader) -> String {
     let meta = asset.metadata().unwrap();
-    let mut out = format!("asset {} {}\nlevels {} {}\ntransform", asset.frame_count().unwrap(), asset.segment_count(), meta.first_level, meta.levels);
+    let mut out = format!("asset {} {}\nfps {:.6}\nlevels {} {}\ntransform", asset.frame_count().unwrap(), asset.segment_count(), meta.fps(), meta.first_level, meta.levels);
     for v in meta.transform.iter().flatten() {
         out += &format!(" {v:.6}");
     }
@@ -29,7 +29,7 @@ fn expected_dump(asset: &Asset, reader: &Reader) -> String {
     }
     for f in 0..asset.frame_count().unwrap() {
         let (s, local) = asset.locate(f).unwrap();
-        out += &format!("frame {f} {s} {local}\n");
+        out += &format!("frame {f} {s} {local} {}\n", meta.frame_number(f));
     }
     for s in 0..asset.segment_count() {
         let seg = asset.segment(s).unwrap();
@@ -221,4 +221,22 @@ fn the_guide_shows_the_example_as_it_is() {
     let example = std::fs::read_to_string(root().join("crates/vpak/examples/stream.rs")).unwrap();
     let code: Vec<&str> = example.lines().skip_while(|l| l.starts_with("//!") || l.is_empty()).collect();
     assert_eq!(shown.trim_end(), code.join("\n").trim_end(), "docs/runtime.md's program is not crates/vpak/examples/stream.rs");
+}
+
+#[test]
+fn frames_keep_their_source_numbers_and_rate_in_rust_and_in_c() {
+    let dir = scratch_dir("runtime", "time");
+    numbered_copies(&dir, "fire", 1001..=1010);
+    let asset = cook_into(&dir, "fire.vpak", &[s(&dir.join("fire_####.vdb"))], &["--frames", "1001-1010:3", "--fps", "30", "--segment-frames", "2", "--supercompress", "zstd"]);
+    let r = Reader::open(&asset).unwrap();
+    assert_eq!(r.version(), vdbcook_vpak::VERSION);
+    let numbers: Vec<i64> = (0..r.frame_count()).map(|f| r.frame_number(f)).collect();
+    assert_eq!((numbers, r.fps()), (vec![1001, 1004, 1007, 1010], 30.0));
+    assert_eq!((r.frame_of_number(1007), r.frame_of_number(1005)), (Some(2), None));
+    let out = run(&programs().0, &asset);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && text.contains("\nfps 30.000000\n"), "{text}");
+    let frames: Vec<&str> = text.lines().filter(|l| l.starts_with("frame ")).collect();
+    assert_eq!(frames, ["frame 0 0 0 1001", "frame 1 0 1 1004", "frame 2 1 0 1007", "frame 3 1 1 1010"]);
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -115,7 +115,7 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
                 s(&asset),
             ]);
             let said = String::from_utf8_lossy(&coded.stdout);
-            if !said.starts_with("8 ") || said.trim().ends_with(" 0") {
+            if !said.starts_with("9 ") || said.trim().ends_with(" 0") {
                 return Err(format!("{flags:?}: not supercompressed in every segment (version, fewest records: {said}) {}", String::from_utf8_lossy(&coded.stderr)));
             }
         }

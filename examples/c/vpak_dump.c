@@ -10,10 +10,11 @@
  *
  * Output, one record a line:
  *     asset FRAMES SEGMENTS
+ *     fps FPS                                      (%.6f)
  *     levels FIRST_LEVEL LEVELS
  *     transform M00 M01 ... M33                    (index to world, %.6f)
  *     channel C NAME                               (every channel)
- *     frame F SEGMENT FRAME_IN_SEGMENT             (every frame)
+ *     frame F SEGMENT FRAME_IN_SEGMENT NUMBER      (every frame; NUMBER: in the source sequence)
  *     segment S FIRST_FRAME FRAME_COUNT SECTIONS   (every segment, then:)
  *     offset X Y Z                                 (its index offset)
  *     records N FNV1A64                            (its channel records, as little-endian bytes)
@@ -143,7 +144,7 @@ int main(int argc, char **argv) {
         vpak_close(r);
         return status;
     }
-    printf("levels %u %u\ntransform", first_level, levels);
+    printf("fps %.6f\nlevels %u %u\ntransform", vpak_fps(r), first_level, levels);
     for (int i = 0; i < 16; i++) {
         printf(" %.6f", m[i]);
     }
@@ -153,11 +154,14 @@ int main(int argc, char **argv) {
     }
     int status = 0;
     for (uint32_t f = 0; f < frames && status == 0; f++) {
-        uint32_t s, local;
-        if (vpak_locate(r, f, &s, &local) != VPAK_OK) {
+        uint32_t s, local, back;
+        int64_t number;
+        if (vpak_locate(r, f, &s, &local) != VPAK_OK || vpak_frame_number(r, f, &number) != VPAK_OK) {
             status = fail("locate");
+        } else if (vpak_frame_of_number(r, number, &back) != VPAK_OK || back != f) {
+            status = fail("frame of number");
         } else {
-            printf("frame %u %u %u\n", f, s, local);
+            printf("frame %u %u %u %lld\n", f, s, local, (long long)number);
         }
     }
     for (uint32_t s = 0; s < segments && status == 0; s++) {

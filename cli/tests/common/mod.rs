@@ -205,6 +205,14 @@ pub fn inspect(asset: &Path) -> serde_json::Value {
     v["files"][0].clone()
 }
 
+/// Copies the fixture's frames, cycling, to `dir/NAME_NNNN.vdb` for each number.
+pub fn numbered_copies(dir: &Path, name: &str, numbers: impl Iterator<Item = i64>) {
+    let src = vdb_files(&root().join("fixtures/smoke_seq"));
+    for (i, n) in numbers.enumerate() {
+        std::fs::copy(&src[i % src.len()], dir.join(format!("{name}_{n:04}.vdb"))).unwrap();
+    }
+}
+
 /// `vdbcook cook` of `inputs` with `flags` into `dir/name` (replaced if there).
 pub fn cook_into(dir: &Path, name: &str, inputs: &[&str], flags: &[&str]) -> PathBuf {
     let out = dir.join(name);

@@ -26,6 +26,12 @@ pub struct Cooker {
     pub(crate) level_secs: f64,
     /// The number of this cooker's first frame in the whole sequence (0 but for later segments).
     pub(crate) first_frame: usize,
+    /// Per frame, its number in the source sequence ([`Cooker::number_next`]).
+    pub(crate) numbers: Vec<i64>,
+    /// The number of the frame pushed next, when the caller gave one.
+    next_number: Option<i64>,
+    /// The last frame number of the segments before this one's.
+    number_before: Option<i64>,
 }
 
 /// The asset's transform and the grid that set it.
@@ -65,6 +71,9 @@ impl Cooker {
             build_secs: 0.0,
             level_secs: 0.0,
             first_frame: 0,
+            numbers: Vec::new(),
+            next_number: None,
+            number_before: None,
         }
     }
 
@@ -91,7 +100,34 @@ impl Cooker {
             build_secs: 0.0,
             level_secs: 0.0,
             first_frame,
+            numbers: Vec::new(),
+            next_number: None,
+            number_before: self.last_number(),
         }
+    }
+
+    /// Gives the next frame pushed its number in the source sequence
+    /// (`fire_1001.vdb`: 1001); numbers must increase. Without one, a frame's
+    /// number is its index in the whole sequence.
+    pub fn number_next(&mut self, number: i64) -> Result<(), Error> {
+        match self.last_number() {
+            Some(after) if number <= after => Err(Error::FrameNumber { number, after }),
+            _ => {
+                self.next_number = Some(number);
+                Ok(())
+            }
+        }
+    }
+
+    /// The number of the last frame pushed, in this segment or before.
+    fn last_number(&self) -> Option<i64> {
+        self.numbers.last().copied().or(self.number_before)
+    }
+
+    /// Takes the number of the frame being pushed.
+    fn take_number(&mut self) {
+        let n = self.next_number.take().unwrap_or_else(|| self.last_number().map_or(self.first_frame as i64, |l| l.saturating_add(1)));
+        self.numbers.push(n);
     }
 
     /// Records a source file once (a file listed twice is one source).
@@ -163,6 +199,7 @@ impl Cooker {
         }
         let coarse = self.push_levels(grids)?;
         let source = self.add_source(source);
+        self.take_number();
         self.frames.push(FrameInfo { source, active_voxels: fs.active_voxels, leaves: fs.leaves as u32, tiles: fs.tiles as u32, coarse });
         self.build_secs += t0.elapsed().as_secs_f64();
         Ok(())
@@ -210,6 +247,7 @@ impl Cooker {
             self.builder.push_empty_level(k);
         }
         let source = self.add_source(source);
+        self.take_number();
         self.frames.push(FrameInfo { source, active_voxels: 0, leaves: 0, tiles: 0, coarse: vec![LevelFigures::default(); levels as usize - 1] });
     }
 

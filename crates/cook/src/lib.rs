@@ -24,7 +24,7 @@ mod report;
 mod unpack;
 
 pub use build::Cooker;
-pub use report::{figure, BudgetReport, BudgetTry, ChannelReport, ClusterReport, CookReport, ErrorFigures, Figure, FormatShare, LevelReport, SegmentReport, Sums};
+pub use report::{figure, BudgetReport, BudgetTry, ChannelReport, ClusterReport, CookReport, ErrorFigures, Figure, FormatShare, LevelReport, SegmentReport, SourceTime, Sums};
 pub use unpack::{unpack_frame, unpack_level};
 pub use vdbcook_encode::NonFinite;
 pub use vdbcook_encode::{ErrorBound, Format, Quality};
@@ -60,6 +60,8 @@ pub enum Error {
     MaxErrorGroups,
     #[error("a plane of {0} bricks is more than a channel table can address")]
     TooManyPlaneBricks(u32),
+    #[error("frame number {number} after {after}: a sequence's frame numbers must increase")]
+    FrameNumber { number: i64, after: i64 },
     #[error("{0}")]
     NoLevel(String),
     #[error("no asset fits in {budget} bytes: the smallest reachable, level {level} alone, is {smallest} bytes")]
@@ -153,6 +155,8 @@ pub struct CookOptions {
     /// Levels of detail (1: none): levels 1 … levels − 1 of every frame, each
     /// filtered from the one before (`vdbcook_grid::lod`), are trees of the asset too.
     pub levels: LevelCount,
+    /// The sequence's frame rate, recorded with the frames' numbers.
+    pub fps: vdbcook_vpak::Fps,
 }
 
 impl Default for CookOptions {
@@ -168,6 +172,7 @@ impl Default for CookOptions {
             settings: Vec::new(),
             levels: LevelCount::ONE,
             max_bytes: None,
+            fps: vdbcook_vpak::Fps::DEFAULT,
         }
     }
 }

@@ -69,6 +69,7 @@ impl Cooker {
             levels: self.opts.levels.get(),
             level_filters: if self.opts.levels.get() > 1 { self.filters().into_iter().map(level_filter).collect() } else { Vec::new() },
             first_level: first,
+            time: Some(vdbcook_vpak::Time { fps: self.opts.fps.get(), numbers: self.numbers.clone() }),
         }
     }
 

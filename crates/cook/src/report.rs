@@ -174,6 +174,8 @@ pub struct CookReport {
     pub timings: Vec<(String, f64)>,
     /// Per segment (one for an asset cut into none): its frames, bricks and bytes.
     pub segments: Vec<SegmentReport>,
+    /// What the sources' metadata said of time, when they said anything (set by the caller that read them).
+    pub source_time: Option<SourceTime>,
     /// The asset's metadata as written in its first section (typed, so that a
     /// caller adding settings, as bake does, need not read the bytes back);
     /// for an asset of several segments, the whole sequence's (`vdbcook_vpak::segments::merged`).
@@ -182,6 +184,22 @@ pub struct CookReport {
     /// What the figures were computed from, to add up segments' reports exactly.
     #[serde(skip)]
     pub(crate) sums: Sums,
+}
+
+/// What the source files' metadata said of time (EmberGen writes
+/// `simulation_time`): reported, not used (`--fps` sets the asset's rate).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SourceTime {
+    /// The metadata key read (file-level first, then the first grid's).
+    pub key: String,
+    /// Frames whose file states it, and the first and last values (seconds).
+    pub frames: usize,
+    pub first: f64,
+    pub last: f64,
+    /// Frames per second those times imply (frames − 1 over the time they span), when they span any.
+    pub implied_fps: Option<f64>,
+    /// A frame rate a file states (key `fps`, `frame_rate` or `framerate`), when one does.
+    pub stated_fps: Option<f64>,
 }
 
 /// One segment of an asset: its frames, distinct and stored bricks, and bytes.
@@ -385,6 +403,7 @@ impl Cooker {
                 gpu_bytes,
                 sums: sums.clone(),
             }],
+            source_time: None,
             sums,
         }
     }

@@ -61,7 +61,7 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
 /// asset. A frame the asset has empty may be missing its file or grid there
 /// too (it was cooked with `--allow-missing`); every other frame must read.
 fn reference(meta: &Metadata, files: Vec<Option<PathBuf>>, lod: u32, segment: Option<usize>, bars: &dyn Progress) -> Result<Asset> {
-    let frames = files.into_iter().enumerate().map(|(f, path)| FrameFile { path, allow_missing: meta.frames.get(f).is_some_and(|fr| fr.active_voxels == 0) }).collect();
+    let frames = files.into_iter().enumerate().map(|(f, path)| FrameFile { path, allow_missing: meta.frames.get(f).is_some_and(|fr| fr.active_voxels == 0), number: None }).collect();
     let levels = vdbcook_vpak::LevelCount::new(lod + 1).map_err(Error::Failed)?;
     crate::cook_lossless_levels(frames, crate::selection_of(meta), levels, segment, bars).context("cooking the reference")
 }

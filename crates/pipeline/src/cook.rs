@@ -28,7 +28,7 @@ pub fn feed(
     segment: Option<usize>,
     on_segment: &mut dyn FnMut(Vec<Cooker>) -> Result<()>,
     bars: &dyn Progress,
-) -> Result<(Option<Channels>, f64)> {
+) -> Result<Fed> {
     // Each frame comes with the channels when they are first resolved.
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
     let total = files.len() as u64;
@@ -63,13 +63,16 @@ pub fn feed(
     let mut segments = Segments { cookers: Vec::new(), pushed: 0, emitted: 0, segment: segment.unwrap_or(usize::MAX).max(1), on_segment };
     let mut channels: Option<Channels> = None;
     // Frames before the first one whose file resolves the channels: empty.
-    let mut leading: Vec<Option<SourceFile>> = Vec::new();
+    let mut leading: Vec<(Option<SourceFile>, Option<i64>)> = Vec::new();
     // The cookers, for the channels (or, when no frame resolved any, one
     // channel named by nothing), with the leading empty frames.
-    let start = |specs: Option<&Channels>, leading: &mut Vec<Option<SourceFile>>, segments: &mut Segments| -> Result<()> {
+    let start = |specs: Option<&Channels>, leading: &mut Vec<(Option<SourceFile>, Option<i64>)>, segments: &mut Segments| -> Result<()> {
         segments.cookers = opts.iter().map(|o| specs.map_or_else(|| Cooker::new(o.clone()), |ch| Cooker::with_channels(o.clone(), ch.specs.clone()))).collect();
-        for s in leading.drain(..) {
+        for (s, number) in leading.drain(..) {
             segments.push(|c| {
+                if let Some(n) = number {
+                    c.number_next(n)?;
+                }
                 c.push_empty(s.clone());
                 Ok(())
             })?;
@@ -77,23 +80,31 @@ pub fn feed(
         }
         Ok(())
     };
+    let mut stated = Vec::new();
     for (r, ch) in rx {
         read_secs += wait.elapsed().as_secs_f64();
         let pushed = r.and_then(|frame| {
+            stated.push(frame.stated);
             if let Some(ch) = ch {
                 start(Some(&ch), &mut leading, &mut segments)?;
                 channels = Some(ch);
             }
             if segments.cookers.is_empty() {
-                leading.push(frame.source);
+                leading.push((frame.source, frame.number));
                 return Ok(());
             }
             let n = segments.pushed;
-            segments.push(|c| match &frame.grids {
-                Some(g) => c.push_channels(&g.iter().map(Option::as_ref).collect::<Vec<_>>(), frame.source.clone()).with_context(|| format!("{}: frame {n}", frame.path.display())),
-                None => {
-                    c.push_empty(frame.source.clone());
-                    Ok(())
+            segments.push(|c| {
+                let named = || format!("{}: frame {n}", frame.path.display());
+                if let Some(number) = frame.number {
+                    c.number_next(number).with_context(named)?;
+                }
+                match &frame.grids {
+                    Some(g) => c.push_channels(&g.iter().map(Option::as_ref).collect::<Vec<_>>(), frame.source.clone()).with_context(named),
+                    None => {
+                        c.push_empty(frame.source.clone());
+                        Ok(())
+                    }
                 }
             })
         });
@@ -113,7 +124,17 @@ pub fn feed(
         start(None, &mut leading, &mut segments)?;
     }
     segments.flush()?;
-    Ok((channels, read_secs))
+    Ok(Fed { channels, read_secs, source_time: crate::source_time::summarize(&stated) })
+}
+
+/// What [`feed`] read besides the frames it pushed.
+pub struct Fed {
+    /// The channels, once a frame resolved them.
+    pub channels: Option<Channels>,
+    /// Seconds spent waiting for frames to be read.
+    pub read_secs: f64,
+    /// What the files' metadata said of time.
+    pub source_time: Option<vdbcook_cook::SourceTime>,
 }
 
 /// The cookers of the segment being fed, and where finished segments go.
@@ -401,6 +422,8 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
     let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
     let segment = s.segment_frames.map(|n| n.get() as usize);
     let mut files = job.files;
+    // Numbered from the whole sequence's names, so that parts number as one process does.
+    let mut numbers = crate::inputs::frame_numbers(&files);
     let mut count = segment_count(files.len(), segment);
     // A part: its segments' frames alone, into a part file.
     let part = match job.part {
@@ -414,6 +437,7 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
             let n = segment.unwrap_or(files.len());
             let frames = (range.start as usize * n).min(files.len())..(range.end as usize * n).min(files.len());
             files = files.drain(frames.clone()).collect();
+            numbers = numbers.map(|mut n| n.drain(frames.clone()).collect());
             count = range.len() as u32;
             Some(PartInfo { index: p.index, count: p.count, segments: total, first_segment: range.start, first_frame: frames.start as u32, fingerprint: fp })
         }
@@ -440,7 +464,7 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         }
         Ok(())
     };
-    let (channels, read_secs) = feed(all, FrameFile::each(files, s.allow_missing), sel, job.base, segment, &mut write, bars)?;
+    let Fed { channels, read_secs, source_time } = feed(all, FrameFile::numbered(files, numbers, s.allow_missing), sel, job.base, segment, &mut write, bars)?;
     let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
     let mut outs = outs.into_iter();
     let mut cooked = Vec::new();
@@ -448,6 +472,7 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         let (asset, file, report) = out.finish()?;
         let mut report = report.ok_or_else(|| Error::Failed("no frames to cook".into()))?;
         report.timings.insert(0, ("read".into(), read_secs));
+        report.source_time = source_time.clone();
         cooked.push(Cooked { asset, file, report, grid: grid_name.clone(), reference: None });
     }
     let reference = outs.next().map(|o| o.finish().map(|(a, _, _)| a)).transpose().context("cooking the reference")?;

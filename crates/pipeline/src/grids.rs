@@ -103,6 +103,10 @@ pub struct Frame {
     /// `None` for a missing file (with `--allow-missing`).
     pub grids: Option<Vec<Option<Grid>>>,
     pub source: Option<SourceFile>,
+    /// Its number in the source sequence, when known.
+    pub number: Option<i64>,
+    /// What its file's metadata says of time.
+    pub stated: crate::source_time::Stated,
 }
 
 /// A source's recorded hash: XXH3-128 as 32 hex digits (`SourceFile::xxh3_128`).
@@ -118,36 +122,46 @@ pub struct FrameFile {
     pub path: Option<PathBuf>,
     /// A missing file or grid makes an empty frame rather than an error.
     pub allow_missing: bool,
+    /// Its number in the source sequence (`None`: numbered on from the frame before, from 0).
+    pub number: Option<i64>,
 }
 
 impl FrameFile {
-    /// One frame per file, each with the same rule for what is missing.
+    /// One frame per file, each with the same rule for what is missing, numbered from 0.
     pub fn each(files: Vec<PathBuf>, allow_missing: bool) -> Vec<FrameFile> {
-        files.into_iter().map(|p| FrameFile { path: Some(p), allow_missing }).collect()
+        files.into_iter().map(|p| FrameFile { path: Some(p), allow_missing, number: None }).collect()
+    }
+
+    /// [`FrameFile::each`], frame `f` numbered `numbers[f]` when given.
+    pub fn numbered(files: Vec<PathBuf>, numbers: Option<Vec<i64>>, allow_missing: bool) -> Vec<FrameFile> {
+        let mut numbers = numbers.into_iter().flatten();
+        files.into_iter().map(|p| FrameFile { path: Some(p), allow_missing, number: numbers.next() }).collect()
     }
 }
 
 /// Reads one frame; the channels are resolved by the first frame that has a file.
 pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Channels>) -> Result<Frame> {
-    let FrameFile { path, allow_missing } = file;
-    let Some(path) = path else { return Ok(Frame { path: PathBuf::new(), grids: None, source: None }) };
+    let FrameFile { path, allow_missing, number } = file;
+    let stated = crate::source_time::Stated::default();
+    let Some(path) = path else { return Ok(Frame { path: PathBuf::new(), grids: None, source: None, number, stated }) };
     let p = path.display().to_string();
     if !path.exists() {
         if allow_missing {
-            return Ok(Frame { path, grids: None, source: None });
+            return Ok(Frame { path, grids: None, source: None, number, stated });
         }
         return Err(Error::Failed(format!("{p}: no such file (use --allow-missing to cook it as an empty frame)")));
     }
     let vdb = vdbcook_vdb::open(&path).with_context(|| p.clone())?;
+    let stated = crate::source_time::stated(&vdb);
     let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(xxhash_rust::xxh3::xxh3_128(vdb.bytes())) };
     if channels.is_none() {
         match resolve(&vdb, &p, sel) {
             Ok(c) => *channels = Some(c),
-            Err(_) if allow_missing && !matches!(sel, GridSelection::Many(_) | GridSelection::All) => return Ok(Frame { path, grids: None, source: Some(source) }),
+            Err(_) if allow_missing && !matches!(sel, GridSelection::Many(_) | GridSelection::All) => return Ok(Frame { path, grids: None, source: Some(source), number, stated }),
             Err(e) => return Err(e),
         }
     }
-    let Some(ch) = channels.as_ref() else { return Ok(Frame { path, grids: None, source: Some(source) }) };
+    let Some(ch) = channels.as_ref() else { return Ok(Frame { path, grids: None, source: Some(source), number, stated }) };
     let mut grids: Vec<Option<Grid>> = Vec::with_capacity(ch.specs.len());
     // Each source grid once (a vec3 grid gives its three channels in order).
     let mut read: Option<(String, Vec<Grid>)> = None;
@@ -158,7 +172,7 @@ pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Ch
                 continue;
             }
             if allow_missing {
-                return Ok(Frame { path, grids: None, source: Some(source) });
+                return Ok(Frame { path, grids: None, source: Some(source), number, stated });
             }
             return Err(Error::Failed(format!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(&vdb))));
         };
@@ -172,5 +186,5 @@ pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Ch
         };
         grids.push(grid);
     }
-    Ok(Frame { path, grids: Some(grids), source: Some(source) })
+    Ok(Frame { path, grids: Some(grids), source: Some(source), number, stated })
 }

@@ -147,6 +147,28 @@ pub fn expand(inputs: &[String], frames: Option<FrameRange>) -> Result<Vec<PathB
     Ok(out)
 }
 
+/// The frame number a file's name carries: the last run of digits in its
+/// stem (`fire_1001.vdb`: 1001; `smoke.0042.vdb`: 42), negative when a `-`
+/// comes right before the digits and after something other than a letter or
+/// digit (`smoke_-003.vdb`: -3; `fire-0012.vdb`: 12).
+pub fn number_in_name(path: &Path) -> Option<i64> {
+    let stem = path.file_stem()?.to_str()?;
+    let b = stem.as_bytes();
+    let end = b.iter().rposition(u8::is_ascii_digit)? + 1;
+    let start = b[..end].iter().rposition(|c| !c.is_ascii_digit()).map_or(0, |i| i + 1);
+    let n: i64 = stem[start..end].parse().ok()?;
+    let signed = start >= 1 && b[start - 1] == b'-' && (start == 1 || !b[start - 2].is_ascii_alphanumeric());
+    Some(if signed { -n } else { n })
+}
+
+/// The frames' numbers in their source sequence, from their file names
+/// ([`number_in_name`]), when every name carries one and they increase
+/// (else the frames are numbered from 0).
+pub fn frame_numbers(files: &[PathBuf]) -> Option<Vec<i64>> {
+    let numbers: Vec<i64> = files.iter().map(|f| number_in_name(f)).collect::<Option<_>>()?;
+    numbers.windows(2).all(|w| w[0] < w[1]).then_some(numbers)
+}
+
 /// Moves the plain files gathered so far, in natural order, to the frame list.
 fn flush(plain: &mut Vec<PathBuf>, out: &mut Vec<PathBuf>) {
     natural_sort(plain);
@@ -156,6 +178,22 @@ fn flush(plain: &mut Vec<PathBuf>, out: &mut Vec<PathBuf>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn numbers_in_names() {
+        let n = |s: &str| number_in_name(Path::new(s));
+        assert_eq!(n("fire_1001.vdb"), Some(1001));
+        assert_eq!(n("dir9/smoke.0042.vdb"), Some(42));
+        assert_eq!(n("smoke_-003.vdb"), Some(-3));
+        assert_eq!(n("fire-0012.vdb"), Some(12));
+        assert_eq!(n("-7.vdb"), Some(-7));
+        assert_eq!(n("cloud.vdb"), None);
+        assert_eq!(n("a2_b.vdb"), Some(2));
+        let files = |v: &[&str]| v.iter().map(PathBuf::from).collect::<Vec<_>>();
+        assert_eq!(frame_numbers(&files(&["f_1001.vdb", "f_1004.vdb", "f_1007.vdb"])), Some(vec![1001, 1004, 1007]));
+        assert_eq!(frame_numbers(&files(&["a_1.vdb", "b_1.vdb"])), None, "numbers that do not increase");
+        assert_eq!(frame_numbers(&files(&["f_1.vdb", "g.vdb"])), None, "a name without a number");
+    }
 
     #[test]
     fn natural_order() {

@@ -15,6 +15,7 @@ pub mod grids;
 pub mod inputs;
 pub mod options;
 pub mod recorded;
+pub mod source_time;
 pub mod summary;
 
 pub use check::{validate_file, Sources};

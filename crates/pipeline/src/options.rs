@@ -16,7 +16,7 @@ pub use vdbcook_validate::{Gate, Size};
 pub use vdbcook_vpak::coding::Supercompress;
 pub use vdbcook_vpak::settings::{SettingText, Settings};
 use vdbcook_vpak::{bounded, settings_group};
-pub use vdbcook_vpak::{Level, LevelCount};
+pub use vdbcook_vpak::{Fps, Level, LevelCount};
 
 /// A setting out of its range or at odds with another; `name` is the setting's.
 #[derive(Debug, thiserror::Error)]
@@ -266,6 +266,11 @@ settings_group! {
         /// and a file smaller only where that estimate holds in context; docs/benchmarks.md).
         #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().optimize))]
         pub optimize: Optimize = Optimize::Gpu;
+        /// The sequence's frame rate in frames per second (e.g. 24, 30, 23.976), recorded in the
+        /// asset with each frame's number in the source sequence (from its file name:
+        /// fire_1001.vdb is frame 1001, when every name has an increasing number; else from 0).
+        #[cfg_attr(feature = "clap", arg(long, value_name = "FPS", allow_negative_numbers = true, default_value_t = CookSettings::default().fps))]
+        pub fps: Fps = Fps::DEFAULT;
         /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
         #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim))]
         pub max_texture_dim: TextureDim = TextureDim(cook_defaults().max_texture_dim);
@@ -347,6 +352,7 @@ impl CookSettings {
             disk: (self.max_error.is_some() && self.supercompress != Supercompress::None).then_some(self.optimize),
             settings: self.recorded(inputs),
             levels: self.lods,
+            fps: self.fps,
             // The cooker budgets the one segment's body; the file adds the segment table.
             max_bytes: self.max_bytes.map(|b| b.0.saturating_sub(vdbcook_vpak::segments::first_offset(1))),
         }
@@ -368,6 +374,7 @@ impl CookSettings {
             ("grid".into(), self.grids.clone().or_else(|| self.grid.clone()).unwrap_or_default()),
             ("groups".into(), self.group.iter().map(ChannelGroup::to_string).collect::<Vec<_>>().join(" ")),
             ("frames".into(), self.frames.text()),
+            ("fps".into(), self.fps.text()),
             ("allow_missing".into(), self.allow_missing.text()),
             ("max_texture_dim".into(), self.max_texture_dim.text()),
             ("lods".into(), self.lods.text()),

@@ -14,6 +14,12 @@ pub fn summary_text(output: &Path, grid: Option<&str>, r: &CookReport) -> String
     let mut s = String::new();
     let what = if r.channels.len() == 1 { format!("grid \"{}\"", grid.unwrap_or("")) } else { format!("{} channels", r.channels.len()) };
     let _ = writeln!(s, "cooked {} frame{} of {what} into {} ({}, {})", r.frames, if r.frames == 1 { "" } else { "s" }, output.display(), r.format, mb(r.file_bytes));
+    let m = &r.metadata;
+    let numbers: Vec<i64> = (0..r.frames).map(|f| m.frame_number(f)).collect();
+    let _ = writeln!(s, "  time            frames {} at {} fps", vdbcook_vpak::time::numbers_text(&numbers), m.fps());
+    if let Some(t) = &r.source_time {
+        let _ = writeln!(s, "  source time     {}", crate::source_time::text(t, m.fps()));
+    }
     if r.disk_sections != r.sections {
         let _ = writeln!(s, "  supercompressed {} on disk, {} of sections on the GPU (the file is {:.3}× that)", mb(r.file_bytes), mb(r.gpu_bytes), r.file_bytes as f64 / r.gpu_bytes.max(1) as f64);
     }
@@ -110,6 +116,8 @@ pub fn summary_json(output: &Path, grid: Option<&str>, r: &CookReport, validatio
             o.insert("validation".into(), val.clone());
         }
         o.insert("output".into(), serde_json::json!(output.display().to_string()));
+        o.insert("fps".into(), serde_json::json!(r.metadata.fps()));
+        o.insert("frame_numbers".into(), serde_json::json!((0..r.frames).map(|f| r.metadata.frame_number(f)).collect::<Vec<_>>()));
         o.insert("grid".into(), serde_json::json!(grid));
         // Each section restored (what the GPU is given) and on disk; the coding section is on disk only.
         let disk = |name: &str| r.disk_sections.iter().find(|(n, _)| n == name).map_or(0, |(_, b)| *b);
@@ -119,7 +127,12 @@ pub fn summary_json(output: &Path, grid: Option<&str>, r: &CookReport, validatio
         o.insert("timings".into(), serde_json::json!(r.timings.iter().map(|(n, s)| (n.clone(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>()));
         o.insert(
             "frame_errors".into(),
-            serde_json::json!(r.frame_errors.iter().enumerate().map(|(i, (rmse, max))| serde_json::json!({"frame": i, "rmse": Figure(*rmse), "max_error": Figure(*max)})).collect::<Vec<_>>()),
+            serde_json::json!(r
+                .frame_errors
+                .iter()
+                .enumerate()
+                .map(|(i, (rmse, max))| serde_json::json!({"frame": i, "number": r.metadata.frame_number(i), "rmse": Figure(*rmse), "max_error": Figure(*max)}))
+                .collect::<Vec<_>>()),
         );
     }
     v

@@ -191,6 +191,16 @@ impl GpuAsset {
         matches!(self.atlases.first(), Some(Atlas::Buffer(_)))
     }
 
+    /// The bytes this asset holds on the GPU: its buffers and atlases (the
+    /// empty ones filling unused slots included), as allocated.
+    pub fn resident_bytes(&self) -> u64 {
+        let atlas = |a: &Atlas| match a {
+            Atlas::Texture { _texture: t, .. } => t.format().theoretical_memory_footprint(t.size()),
+            Atlas::Buffer(b) => b.size(),
+        };
+        self.buffers.iter().map(wgpu::Buffer::size).sum::<u64>() + self.atlases.iter().map(atlas).sum::<u64>()
+    }
+
     /// The format code every one of `channels` (`NONE` ones aside) has in its
     /// single plane, or `NONE` when they differ or one has per-brick formats.
     fn common_format(&self, channels: &[u32]) -> u32 {
@@ -270,24 +280,37 @@ pub fn wanted_features() -> wgpu::Features {
 /// whichever of [`wanted_features`] it has.
 pub fn open_gpu(filter: Option<&str>) -> Result<Gpu, Error> {
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let adapter = match filter {
+    open_device(&open_adapter(&instance, filter, None)?)
+}
+
+/// The adapter of `instance` [`open_gpu`] would choose; with `surface`, only
+/// one that can present to it (a window's surface, made on the same instance).
+pub fn open_adapter(instance: &wgpu::Instance, filter: Option<&str>, surface: Option<&wgpu::Surface<'_>>) -> Result<wgpu::Adapter, Error> {
+    match filter {
         Some(f) => {
             let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
             let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
             let f_low = f.to_lowercase();
-            adapters
-                .into_iter()
-                .find(|a| a.get_info().name.to_lowercase().contains(&f_low))
-                .ok_or_else(|| Error::NoAdapter(format!(" matching \"{f}\" (adapters: {})", if names.is_empty() { "none".to_string() } else { names.join(", ") })))?
+            adapters.into_iter().find(|a| a.get_info().name.to_lowercase().contains(&f_low) && surface.is_none_or(|s| a.is_surface_supported(s))).ok_or_else(|| {
+                Error::NoAdapter(format!(
+                    " matching \"{f}\"{} (adapters: {})",
+                    if surface.is_some() { " that can draw to the window" } else { "" },
+                    if names.is_empty() { "none".to_string() } else { names.join(", ") }
+                ))
+            })
         }
         None => pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
             force_fallback_adapter: false,
-            compatible_surface: None,
+            compatible_surface: surface,
             ..Default::default()
         }))
-        .map_err(|e| Error::NoAdapter(format!(" ({e})")))?,
-    };
+        .map_err(|e| Error::NoAdapter(format!(" ({e})"))),
+    }
+}
+
+/// A device on `adapter` with the adapter's limits and whichever of [`wanted_features`] it has.
+pub fn open_device(adapter: &wgpu::Adapter) -> Result<Gpu, Error> {
     let mut features = adapter.features() & wanted_features();
     if !features.contains(BC_3D) {
         features.remove(BC_3D);

@@ -13,6 +13,7 @@ pub mod flip;
 mod gpu;
 mod html;
 pub mod options;
+pub mod play;
 pub mod report;
 mod resident;
 mod scene;
@@ -20,10 +21,13 @@ mod scene;
 pub use compare::{compare_assets, CompareError, CompareOptions, Comparison, LevelFigures, Levels, Shot, Worst};
 pub use cpu::{render_cpu, render_cpu_level};
 pub use flip::{flip, FlipMap};
-pub use gpu::{open_gpu, shader_sources, wanted_features, BcDecode, Gpu, GpuAsset, Renderer};
+pub use gpu::{open_adapter, open_device, open_gpu, shader_sources, wanted_features, BcDecode, Gpu, GpuAsset, Renderer};
 pub use options::{Gate, Size, Viewing, Views};
+pub use play::{play, FrameStats, PlayOptions, PlaySummary};
 pub use resident::Resident;
 pub use scene::{coverage, Model};
+/// The wgpu the renderer is built with, for callers that present its images (`vdbcook view`).
+pub use wgpu;
 
 use vdbcook_vpak::{Asset, Checked, Metadata};
 

@@ -6,6 +6,14 @@ use crate::{Error, GpuAsset, Image, Renderer, Scene, View};
 use std::sync::Arc;
 use vdbcook_vpak::Asset;
 
+/// Uploads a segment (restored) for drawing in `scene`, made for index offset
+/// `origin`: the GPU copy and the shift of the segment's index space from the scene's.
+pub fn upload_segment(renderer: &Renderer, seg: &Asset, scene: &Scene, origin: [i32; 3]) -> Result<(GpuAsset, [i32; 3]), Error> {
+    let offset = seg.metadata()?.index_offset;
+    let d = std::array::from_fn(|i| offset[i] - origin[i]);
+    Ok((renderer.upload_for(seg, &scene.shifted(d))?, d))
+}
+
 /// The resident segment of `asset`.
 pub struct Resident<'a> {
     asset: &'a Asset,
@@ -31,15 +39,19 @@ impl<'a> Resident<'a> {
                 // The old segment goes before the new one comes.
                 self.now = None;
                 let seg = self.asset.segment(s)?;
-                let offset = seg.metadata()?.index_offset;
-                let d = std::array::from_fn(|i| offset[i] - self.origin[i]);
-                let gpu = Arc::new(renderer.upload_for(&seg, &scene.shifted(d))?);
+                let (gpu, d) = upload_segment(renderer, &seg, scene, self.origin)?;
                 // On the GPU now: its pages need not stay in this process's memory.
                 seg.release();
+                let gpu = Arc::new(gpu);
                 self.now = Some((s, gpu.clone(), d));
                 Ok((gpu, local, d))
             }
         }
+    }
+
+    /// The bytes the resident segment holds on the GPU (0 before the first draw).
+    pub fn resident_bytes(&self) -> u64 {
+        self.now.as_ref().map_or(0, |(_, gpu, _)| gpu.resident_bytes())
     }
 
     /// Frame `frame` at level `level`, from each of `views` of `scene`, as images of `(width, height)`.

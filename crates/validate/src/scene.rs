@@ -192,6 +192,7 @@ mod tests {
             levels: 1,
             level_filters: Vec::new(),
             first_level: 0,
+            time: None,
         }
     }
 

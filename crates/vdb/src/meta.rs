@@ -42,6 +42,16 @@ impl MetaValue {
             _ => None,
         }
     }
+    /// A number (an integer or a float).
+    pub fn as_f64(&self) -> Option<f64> {
+        match self {
+            MetaValue::Int32(v) => Some(f64::from(*v)),
+            MetaValue::Int64(v) => Some(*v as f64),
+            MetaValue::Float(v) => Some(f64::from(*v)),
+            MetaValue::Double(v) => Some(*v),
+            _ => None,
+        }
+    }
     pub fn as_bool(&self) -> Option<bool> {
         match self {
             MetaValue::Bool(b) => Some(*b),

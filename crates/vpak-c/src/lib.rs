@@ -455,3 +455,47 @@ pub unsafe extern "C" fn vpak_segment_channels(r: *const VpakReader, segment: u3
         Ok(())
     })
 }
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_fps(r: *const VpakReader) -> f64 {
+    // SAFETY: the caller's promise.
+    value(0.0, || unsafe { reader(r) }.map_or(0.0, |r| r.fps()))
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; `number` is null or valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_frame_number(r: *const VpakReader, frame: u32, number: *mut i64) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let r = unsafe { reader(r) }?;
+        if frame as usize >= r.frame_count() {
+            return Err(argument(format!("frame {frame} is out of range (the asset has {})", r.frame_count())));
+        }
+        // SAFETY: the caller's promise.
+        unsafe { put(number, r.frame_number(frame as usize)) };
+        Ok(())
+    })
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; `frame` is null or valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_frame_of_number(r: *const VpakReader, number: i64, frame: *mut u32) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let r = unsafe { reader(r) }?;
+        let f = r.metadata().frame_by_number(number).map_err(argument)?;
+        // SAFETY: the caller's promise.
+        unsafe { put(frame, f as u32) };
+        Ok(())
+    })
+}

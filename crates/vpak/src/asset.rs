@@ -36,8 +36,8 @@ pub struct Asset {
     pub sections: Vec<SectionEntry>,
     /// A segmented file's table (empty for a body).
     table: Vec<SegmentEntry>,
-    /// Whether its bodies may hold supercompressed sections (version 8).
-    coded: bool,
+    /// The file's version (a segment's: its file's).
+    version: u32,
 }
 
 impl Asset {
@@ -92,20 +92,22 @@ impl Asset {
 
     /// Parses the asset that is bytes `[start, start + len)` of `bytes`.
     fn parse_at(bytes: std::sync::Arc<Bytes>, start: usize, len: usize) -> Result<Asset, Error> {
-        let mut whole = Asset { bytes, start, len, sections: Vec::new(), table: Vec::new(), coded: false };
-        let version = whole.version()?;
-        match version {
+        let mut whole = Asset { bytes, start, len, sections: Vec::new(), table: Vec::new(), version: 0 };
+        whole.version = whole.version_field()?;
+        match whole.version {
             segments::BODY_VERSION => whole.body(),
-            segments::VERSION | segments::VERSION_7 => {
-                whole.coded = version == segments::VERSION;
-                whole.container()
-            }
+            segments::VERSION | segments::VERSION_8 | segments::VERSION_7 => whole.container(),
             v => Err(Error::Version(v)),
         }
     }
 
+    /// The file's format version (6 to [`crate::VERSION`]).
+    pub fn version(&self) -> u32 {
+        self.version
+    }
+
     /// The version field, after the magic and the file size are checked.
-    fn version(&self) -> Result<u32, Error> {
+    fn version_field(&self) -> Result<u32, Error> {
         crate::head::version(self.bytes(), self.len as u64)
     }
 
@@ -123,7 +125,7 @@ impl Asset {
     /// the file's version allows one.
     fn body(mut self) -> Result<Asset, Error> {
         let table = self.table_bytes(ENTRY_LEN, MAX_SECTIONS, Error::SectionCount)?;
-        self.sections = crate::head::sections(table, self.len as u64, self.coded, |e| Ok(std::borrow::Cow::Borrowed(self.raw(e))))?;
+        self.sections = crate::head::sections(table, self.len as u64, self.version >= segments::VERSION_8, |e| Ok(std::borrow::Cow::Borrowed(self.raw(e))))?;
         Ok(self)
     }
 
@@ -256,10 +258,9 @@ impl Asset {
     }
 
     /// A segment's stored body held in `words` (`len` bytes of them) of a
-    /// file whose bodies may (`coded`) hold supercompressed sections: its
-    /// header (version 6) and section table checked.
-    pub(crate) fn stored_body_from_words(words: Vec<u64>, len: usize, coded: bool) -> Result<Asset, Error> {
-        let body = Asset { bytes: std::sync::Arc::new(Bytes::Owned(words, len)), start: 0, len, sections: Vec::new(), table: Vec::new(), coded };
+    /// file of version `version`: its header (version 6) and section table checked.
+    pub(crate) fn stored_body_from_words(words: Vec<u64>, len: usize, version: u32) -> Result<Asset, Error> {
+        let body = Asset { bytes: std::sync::Arc::new(Bytes::Owned(words, len)), start: 0, len, sections: Vec::new(), table: Vec::new(), version };
         crate::head::body_version(body.bytes(), len as u64)?;
         body.body()
     }
@@ -286,7 +287,7 @@ impl Asset {
             };
         }
         let e = self.table.get(s).ok_or(Error::NoSegment { segment: s, count: self.table.len() })?;
-        let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new(), coded: self.coded };
+        let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new(), version: self.version };
         let body = crate::head::body_version(seg.bytes(), seg.len as u64).and_then(|()| seg.body()).map_err(|err| Error::InSegment(s, Box::new(err)))?;
         let head = &body.bytes()[..segments::head_len(body.sections.len())];
         let computed = checksum(head);

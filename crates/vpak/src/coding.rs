@@ -558,6 +558,9 @@ pub fn recompress<W: std::io::Write + std::io::Seek>(asset: &crate::Asset, to: S
             Some((_, v)) => *v = text,
             None => m.settings.push(("supercompress".into(), text)),
         }
+        // An asset older than version 9 records no time: its frames' indices and the default rate, said outright.
+        let first = i64::from(e.first_frame);
+        m.time.get_or_insert_with(|| crate::Time { fps: crate::DEFAULT_FPS, numbers: (first..first + i64::from(e.frame_count)).collect() });
         meta.data = m.to_bytes()?;
         if let Supercompress::Zstd(level) = to {
             sections = supercompress(sections, &m, level)?;

@@ -78,7 +78,7 @@ pub(crate) fn sections<'a>(table: &[u8], len: u64, coded: bool, mut coding: impl
         return Err(Error::DuplicateSection { kind: w[0].0, index: w[0].1 });
     }
     if !coded && sections.iter().any(|s| s.kind == crate::kind::CODING) {
-        return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION)));
+        return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION_8)));
     }
     Ok(sections)
 }

@@ -32,13 +32,15 @@ pub mod nodes;
 pub mod runtime;
 pub mod segments;
 pub mod settings;
+pub mod time;
 
 pub use asset::Asset;
 pub use atomic::{write_atomic, write_atomic_with, write_file, AtomicFile};
 pub use check::{Checked, GpuChannel, GPU_CHANNEL_WORDS, MAX_CHANNELS};
 pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, PlaneInfo, BRICK_VOXELS, MAX_BRICK_BYTES};
 pub use segments::{assemble_segments, SegmentEntry, Writer};
-pub use settings::{Level, LevelCount};
+pub use settings::{Fps, Level, LevelCount};
+pub use time::{Time, DEFAULT_FPS};
 
 #[doc(hidden)]
 pub use serde; // for the settings macros
@@ -305,18 +307,67 @@ pub struct Metadata {
     /// The finest level stored: 0, unless finer levels were left out to fit
     /// a byte budget (`cook --max-bytes`); levels `first_level .. levels` are stored.
     pub first_level: u32,
+    /// When the frames are (version 9): encoded after the record, not in it,
+    /// so the record reads as before; `None` in older assets.
+    #[serde(skip)]
+    pub time: Option<Time>,
 }
 
 impl Metadata {
     pub fn to_bytes(&self) -> Result<Vec<u8>, Error> {
-        bincode::serde::encode_to_vec(self, bincode::config::standard()).map_err(|e| Error::Metadata(e.to_string()))
+        let cfg = bincode::config::standard();
+        let mut b = bincode::serde::encode_to_vec(self, cfg).map_err(|e| Error::Metadata(e.to_string()))?;
+        if let Some(t) = &self.time {
+            b.extend(bincode::serde::encode_to_vec(t, cfg).map_err(|e| Error::Metadata(e.to_string()))?);
+        }
+        Ok(b)
     }
+
+    /// The record, then the [`Time`] record when bytes follow it (nothing
+    /// else may).
     pub fn from_bytes(b: &[u8]) -> Result<Metadata, Error> {
         // A fixed cap on what a (possibly hostile) length prefix can make the
         // decoder allocate; real metadata is kilobytes.
         let cfg = bincode::config::standard().with_limit::<{ 64 << 20 }>();
-        let (m, _) = bincode::serde::decode_from_slice(b, cfg).map_err(|e| Error::Metadata(e.to_string()))?;
+        let (mut m, used): (Metadata, usize) = bincode::serde::decode_from_slice(b, cfg).map_err(|e| Error::Metadata(e.to_string()))?;
+        let rest = &b[used.min(b.len())..];
+        if !rest.is_empty() {
+            let (t, n): (Time, usize) = bincode::serde::decode_from_slice(rest, cfg).map_err(|e| Error::Metadata(format!("time: {e}")))?;
+            if n != rest.len() {
+                return Err(Error::Metadata(format!("{} bytes after the time record", rest.len() - n)));
+            }
+            if let Some(p) = t.problem(m.frame_count) {
+                return Err(Error::Metadata(format!("time: {p}")));
+            }
+            m.time = Some(t);
+        }
         Ok(m)
+    }
+
+    /// Frame `f`'s number in the source sequence (`f` itself when the asset records none).
+    pub fn frame_number(&self, f: usize) -> i64 {
+        self.time.as_ref().and_then(|t| t.numbers.get(f).copied()).unwrap_or(f as i64)
+    }
+
+    /// The frame with source number `n`, if there is one.
+    pub fn frame_of_number(&self, n: i64) -> Option<usize> {
+        match &self.time {
+            Some(t) => t.numbers.binary_search(&n).ok(),
+            None => usize::try_from(n).ok().filter(|&f| f < self.frame_count as usize),
+        }
+    }
+
+    /// [`Metadata::frame_of_number`], or why there is none, naming the numbers there are.
+    pub fn frame_by_number(&self, n: i64) -> Result<usize, String> {
+        self.frame_of_number(n).ok_or_else(|| {
+            let numbers: Vec<i64> = (0..self.frame_count as usize).map(|f| self.frame_number(f)).collect();
+            format!("no frame has source number {n} (its frames are {})", time::numbers_text(&numbers))
+        })
+    }
+
+    /// The frame rate ([`DEFAULT_FPS`] when the asset records none).
+    pub fn fps(&self) -> f64 {
+        self.time.as_ref().map_or(DEFAULT_FPS, |t| t.fps)
     }
 
     /// The section index of atlas `atlas` of plane `plane`: the atlases of
@@ -573,8 +624,8 @@ pub struct SectionEntry {
 mod tests {
     use super::*;
 
-    fn sample() -> Vec<u8> {
-        let meta = Metadata {
+    fn sample_meta() -> Metadata {
+        Metadata {
             tool: "t".into(),
             frame_count: 1,
             map_type: "UniformScaleMap".into(),
@@ -590,7 +641,12 @@ mod tests {
             levels: 1,
             level_filters: vec![],
             first_level: 0,
-        };
+            time: None,
+        }
+    }
+
+    fn sample() -> Vec<u8> {
+        let meta = sample_meta();
         assemble(&[
             Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap() },
             Section { kind: kind::FRAMES, index: 0, data: [7u32, 9].iter().flat_map(|v| v.to_le_bytes()).collect() },
@@ -606,6 +662,27 @@ mod tests {
         assert_eq!(a.metadata().unwrap().index_offset, [0, -128, 0]);
         assert!(a.sections.iter().all(|s| s.offset % 256 == 0));
         assert!(matches!(a.u32s(kind::L1_NODES), Err(Error::Missing { .. })));
+    }
+
+    #[test]
+    fn time_follows_the_record() {
+        let mut m = sample_meta();
+        // Without time, the record alone (as before version 9): frames numbered from 0.
+        let old = m.to_bytes().unwrap();
+        assert_eq!(Metadata::from_bytes(&old).unwrap(), m);
+        assert_eq!((m.frame_number(0), m.fps(), m.frame_of_number(0), m.frame_of_number(1)), (0, DEFAULT_FPS, Some(0), None));
+        m.time = Some(Time { fps: 30.0, numbers: vec![1001] });
+        let b = m.to_bytes().unwrap();
+        assert!(b.starts_with(&old) && b.len() > old.len());
+        let back = Metadata::from_bytes(&b).unwrap();
+        assert_eq!(back, m);
+        assert_eq!((back.frame_number(0), back.fps(), back.frame_of_number(1001), back.frame_of_number(0)), (1001, 30.0, Some(0), None));
+        // Bytes after the time record, or a time that does not fit the frames, are refused.
+        let mut extra = b.clone();
+        extra.push(0);
+        assert!(Metadata::from_bytes(&extra).unwrap_err().to_string().contains("after the time record"));
+        m.time = Some(Time { fps: 30.0, numbers: vec![1, 2] });
+        assert!(Metadata::from_bytes(&m.to_bytes().unwrap()).unwrap_err().to_string().contains("2 frame numbers for 1 frames"));
     }
 
     #[test]

@@ -10,8 +10,11 @@ use crate::{body_head, checksum, file_len, header_checksum, write_body, Error, M
 use std::io::{Read, Seek, SeekFrom, Write};
 
 /// Version of a file with a segment table whose bodies may hold
-/// supercompressed sections ([`crate::coding`]).
-pub const VERSION: u32 = 8;
+/// supercompressed sections ([`crate::coding`]) and record their frames'
+/// time ([`crate::Time`]).
+pub const VERSION: u32 = 9;
+/// Version of a file with a segment table and supercompression, without time (still read).
+pub const VERSION_8: u32 = 8;
 /// Version of a file with a segment table and no supercompression (still read).
 pub const VERSION_7: u32 = 7;
 /// Version of a segment's body (and of a file that is one body, as version 6 files are).
@@ -372,6 +375,9 @@ pub fn merged(metas: &[Metadata]) -> Result<Metadata, Error> {
                 (a, b) => a.or(b),
             };
         }
+        if seg.time.as_ref().map(|t| t.fps.to_bits()) != first.time.as_ref().map(|t| t.fps.to_bits()) {
+            return differs("frame rate");
+        }
         for f in &seg.frames {
             let mut f = f.clone();
             f.source = match f.source.and_then(|i| seg.sources.get(i as usize)) {
@@ -387,6 +393,12 @@ pub fn merged(metas: &[Metadata]) -> Result<Metadata, Error> {
             m.frames.push(f);
         }
         m.frame_count = m.frame_count.checked_add(seg.frame_count).ok_or_else(|| Error::Invalid("more than 2^32 frames".into()))?;
+    }
+    if let Some(t) = &mut m.time {
+        t.numbers = metas.iter().flat_map(|seg| seg.time.iter().flat_map(|t| t.numbers.iter().copied())).collect();
+        if let Some(p) = t.problem(m.frame_count) {
+            return Err(Error::Invalid(format!("the segments' time: {p}")));
+        }
     }
     Ok(m)
 }
@@ -426,6 +438,7 @@ pub(crate) mod tests {
             levels: 1,
             level_filters: vec![],
             first_level: 0,
+            time: None,
         }
     }
 
@@ -538,6 +551,32 @@ pub(crate) mod tests {
         b[32..40].copy_from_slice(&sum.to_le_bytes());
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("older than version 8"), "{err}");
+    }
+
+    #[test]
+    fn time_is_merged_and_an_older_file_records_none() {
+        let timed = |frames: u32, first: i64, fps: f64| Metadata {
+            time: Some(crate::Time { fps, numbers: (0..i64::from(frames)).map(|i| first + 3 * i).collect() }),
+            ..meta(frames, &["a.vdb"], [0.0, 1.0], 0)
+        };
+        let b = assemble_segments(&[(2, body(&timed(2, 1001, 30.0), 1)), (3, body(&timed(3, 1007, 30.0), 2))]).unwrap();
+        let m = Asset::from_bytes(&b).unwrap().metadata().unwrap();
+        assert_eq!(m.time, Some(crate::Time { fps: 30.0, numbers: vec![1001, 1004, 1007, 1010, 1013] }));
+        assert_eq!((m.frame_of_number(1010), m.frame_number(4)), (Some(3), 1013));
+        // Segments that disagree on the rate, or whose numbers go back, are refused.
+        let b = assemble_segments(&[(2, body(&timed(2, 1001, 30.0), 1)), (3, body(&timed(3, 1007, 24.0), 2))]).unwrap();
+        assert!(Asset::from_bytes(&b).unwrap().metadata().unwrap_err().to_string().contains("frame rate differs"));
+        let b = assemble_segments(&[(2, body(&timed(2, 1001, 30.0), 1)), (3, body(&timed(3, 1002, 30.0), 2))]).unwrap();
+        assert!(Asset::from_bytes(&b).unwrap().metadata().unwrap_err().to_string().contains("must increase"));
+        // A version-8 file (no time): frames numbered from 0 at the default rate.
+        let mut b = assemble_segments(&[(2, body(&meta(2, &["a.vdb"], [0.0, 1.0], 0), 1))]).unwrap();
+        b[8..12].copy_from_slice(&VERSION_8.to_le_bytes());
+        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
+        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        let a = Asset::from_bytes(&b).unwrap();
+        assert_eq!(a.version(), VERSION_8);
+        let m = a.metadata().unwrap();
+        assert_eq!((m.time.is_none(), m.frame_number(1), m.fps()), (true, 1, crate::DEFAULT_FPS));
     }
 
     #[test]

@@ -191,6 +191,18 @@ bounded!(
     |k| if k < crate::MAX_LEVELS { Ok(()) } else { Err(format!("level {k} does not exist (expected 0 to {}: 0 is the frame itself)", crate::MAX_LEVELS - 1)) }
 );
 
+bounded!(
+    /// A frame rate in frames per second (`--fps`, `fps`): above 0, at most 1000.
+    Fps(f64),
+    "frame rate",
+    |r| if r > 0.0 && r <= 1000.0 { Ok(()) } else { Err(format!("{r} frames per second is not above 0 and at most 1000")) }
+);
+
+impl Fps {
+    /// 24 frames per second, the rate of film and of most simulation caches.
+    pub const DEFAULT: Fps = Fps(crate::DEFAULT_FPS);
+}
+
 impl LevelCount {
     /// The frames alone.
     pub const ONE: LevelCount = LevelCount(1);

@@ -121,6 +121,7 @@ fn asset(bricks: u32, channels: Vec<Channel>, planes: Vec<PlaneDef>, max_dim: u3
         levels: 1,
         level_filters: Vec::new(),
         first_level: 0,
+        time: None,
     };
     sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap() });
     (meta, sections)

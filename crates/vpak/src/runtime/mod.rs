@@ -38,7 +38,8 @@ pub struct Reader {
     source: Box<dyn Source>,
     /// A file of segments (version 7 or 8), not a single body (version 6).
     segmented: bool,
-    coded: bool,
+    /// The file's format version.
+    version: u32,
     segments: Vec<(SegmentInfo, Inner)>,
     metadata: Metadata,
     bytes_read: AtomicU64,
@@ -64,7 +65,7 @@ impl Reader {
     /// segment table's head checksum), metadata and coding records, as
     /// docs/format.md asks before a segment is used; merges the metadata.
     pub fn new(source: impl Source + 'static) -> Result<Reader, Error> {
-        let mut r = Reader { source: Box::new(source), segmented: false, coded: false, segments: Vec::new(), metadata: empty_metadata(), bytes_read: AtomicU64::new(0) };
+        let mut r = Reader { source: Box::new(source), segmented: false, version: 0, segments: Vec::new(), metadata: empty_metadata(), bytes_read: AtomicU64::new(0) };
         let len = r.source.len();
         if len < HEADER_LEN as u64 {
             return Err(Error::Magic);
@@ -76,7 +77,7 @@ impl Reader {
         let version = head::version(&header, len)?;
         let entries = match version {
             segments::BODY_VERSION => None,
-            segments::VERSION | segments::VERSION_7 => {
+            segments::VERSION | segments::VERSION_8 | segments::VERSION_7 => {
                 let n = head::table_len(&header, segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount, len)?;
                 let table = r.read_vec(HEADER_LEN as u64, n as u64)?;
                 head::check_checksum(&header, &table)?;
@@ -84,7 +85,7 @@ impl Reader {
             }
             v => return Err(Error::Version(v)),
         };
-        r.coded = version == segments::VERSION;
+        r.version = version;
         r.segmented = entries.is_some();
         match entries {
             None => {
@@ -121,7 +122,7 @@ impl Reader {
         }
         // The coding section is read once: the table's check needs it, and the restore plan.
         let mut coding_bytes = None;
-        let stored = head::sections(&table, size, self.coded, |e| {
+        let stored = head::sections(&table, size, self.version >= segments::VERSION_8, |e| {
             let b = self.read_section(offset, e)?;
             if e.index == 0 {
                 coding_bytes = Some(b.clone());
@@ -211,6 +212,27 @@ impl Reader {
         let s = self.segments.partition_point(|(i, _)| i.frames().end <= frame);
         let (info, _) = self.segments.get(s)?;
         info.frames().contains(&frame).then(|| (s, frame - info.first_frame as usize))
+    }
+
+    /// Frame `frame`'s number in the source sequence (version 9; an older
+    /// asset's frames are numbered from 0).
+    pub fn frame_number(&self, frame: usize) -> i64 {
+        self.metadata.frame_number(frame)
+    }
+
+    /// The frame whose source number is `number`, if there is one.
+    pub fn frame_of_number(&self, number: i64) -> Option<usize> {
+        self.metadata.frame_of_number(number)
+    }
+
+    /// The sequence's frame rate (version 9; [`crate::DEFAULT_FPS`] for an older asset).
+    pub fn fps(&self) -> f64 {
+        self.metadata.fps()
+    }
+
+    /// The file's format version (6 to [`crate::VERSION`]).
+    pub fn version(&self) -> u32 {
+        self.version
     }
 
     /// Bytes read from the source so far (opening included).
@@ -324,7 +346,7 @@ impl Reader {
         let bytes = bytemuck::cast_slice_mut::<u64, u8>(&mut words);
         bytes[size..].fill(0);
         self.read(info.offset, &mut bytes[..size])?;
-        let stored = Asset::stored_body_from_words(words, size, self.coded)?;
+        let stored = Asset::stored_body_from_words(words, size, self.version)?;
         let computed = checksum(stored.bytes().get(..segments::head_len(stored.sections.len())).unwrap_or_default());
         if computed != inner.head_checksum {
             return Err(Error::HeaderChecksum { stored: inner.head_checksum, computed });
@@ -400,5 +422,6 @@ fn empty_metadata() -> Metadata {
         levels: 1,
         level_filters: Vec::new(),
         first_level: 0,
+        time: None,
     }
 }

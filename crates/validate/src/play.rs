@@ -1,0 +1,204 @@
+//! Playing a flip-book: frames drawn in order, one segment on the GPU while
+//! the next is read, restored and uploaded on a worker thread, so that at
+//! most two segments (and the metadata) are resident at once.
+
+use crate::resident::upload_segment;
+use crate::{Error, GpuAsset, Image, Renderer, Scene, View};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver};
+use std::time::{Duration, Instant};
+use vdbcook_vpak::{Asset, Metadata};
+
+/// What to play and how.
+#[derive(Clone, Debug)]
+pub struct PlayOptions {
+    /// Asset frames in the order drawn (a loop repeats them).
+    pub frames: Vec<usize>,
+    pub level: u32,
+    pub view: View,
+    pub width: u32,
+    pub height: u32,
+    /// Frames per second to hold to (sleeping before a frame that is early);
+    /// `None`: as fast as frames are drawn.
+    pub fps: Option<f64>,
+}
+
+/// One frame as played.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FrameStats {
+    /// Position in the play order (from 0).
+    pub index: usize,
+    /// The asset frame and its source frame number.
+    pub frame: usize,
+    pub number: i64,
+    pub segment: usize,
+    /// Reading and restoring (decompressing) the segment that became
+    /// resident for this frame, and uploading it; 0 when it already was.
+    pub decode_ms: f64,
+    pub upload_ms: f64,
+    pub render_ms: f64,
+    /// How long this frame waited for its segment (0 when prefetched in time).
+    pub wait_ms: f64,
+    /// Bytes on the GPU while the frame was drawn: the player's sum of its buffers and textures.
+    pub resident_bytes: u64,
+}
+
+/// A whole play.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct PlaySummary {
+    pub frames: usize,
+    pub seconds: f64,
+    /// Frames per second sustained over the play.
+    pub fps: f64,
+    /// The slowest frame, wait included.
+    pub worst_frame_ms: f64,
+    pub worst_frame: usize,
+    pub peak_resident_bytes: u64,
+    /// Segment bodies read from the file (as stored, compressed or not).
+    pub bytes_read: u64,
+    pub segments_loaded: usize,
+    /// Frames that waited for their segment after the first segment's load.
+    pub frames_waited: usize,
+}
+
+/// A segment on the GPU, with what it took to get there.
+struct Loaded {
+    segment: usize,
+    gpu: GpuAsset,
+    shift: [i32; 3],
+    decode_ms: f64,
+    upload_ms: f64,
+    bytes_read: u64,
+    resident: u64,
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// The segments in the order `frames` visits them (a segment again when the play comes back to it).
+fn visits(asset: &Asset, frames: &[usize]) -> Result<Vec<usize>, Error> {
+    let mut out: Vec<usize> = Vec::new();
+    for &f in frames {
+        let (s, _) = asset.locate(f).ok_or(Error::Frame { frame: f, count: asset.frame_count()? })?;
+        if out.last() != Some(&s) {
+            out.push(s);
+        }
+    }
+    Ok(out)
+}
+
+/// Reads, restores and uploads segment `s`.
+fn load(renderer: &Renderer, asset: &Asset, s: usize, scene: &Scene, origin: [i32; 3]) -> Result<Loaded, Error> {
+    let t0 = Instant::now();
+    let stored = asset.stored_segment(s)?;
+    let bytes_read = stored.bytes().len() as u64;
+    let seg = asset.segment(s)?;
+    let decoded = t0.elapsed();
+    let t1 = Instant::now();
+    let (gpu, shift) = upload_segment(renderer, &seg, scene, origin)?;
+    let uploaded = t1.elapsed();
+    // On the GPU now: the file's pages need not stay in this process's memory.
+    seg.release();
+    stored.release();
+    let resident = gpu.resident_bytes();
+    Ok(Loaded { segment: s, gpu, shift, decode_ms: ms(decoded), upload_ms: ms(uploaded), bytes_read, resident })
+}
+
+/// Plays `opts.frames` of `asset` (whose whole metadata is `meta`) in
+/// `scene`, calling `on_frame` with each frame's figures and image; the
+/// next segment is made resident on a worker thread while the current one
+/// is drawn.
+pub fn play(renderer: &Renderer, asset: &Asset, meta: &Metadata, scene: &Scene, opts: &PlayOptions, on_frame: &mut dyn FnMut(&FrameStats, &Image) -> Result<(), Error>) -> Result<PlaySummary, Error> {
+    if let Some(why) = meta.missing_level(opts.level) {
+        return Err(Error::Level(why));
+    }
+    let order = visits(asset, &opts.frames)?;
+    let origin = meta.index_offset;
+    // Bytes of the segment the worker has uploaded and not yet handed over.
+    let held = AtomicU64::new(0);
+    let held = &held;
+    std::thread::scope(|scope| {
+        // Capacity 0: the worker hands a segment over only when the player
+        // takes it, and starts the next one after, so it holds one at most.
+        let (tx, rx) = sync_channel::<Result<Loaded, Error>>(0);
+        let worker = std::thread::Builder::new()
+            .name("segment loader".into())
+            .spawn_scoped(scope, move || {
+                for &s in &order {
+                    let loaded = load(renderer, asset, s, scene, origin);
+                    if let Ok(l) = &loaded {
+                        held.fetch_add(l.resident, Ordering::SeqCst);
+                    }
+                    let failed = loaded.is_err();
+                    if tx.send(loaded).is_err() || failed {
+                        return;
+                    }
+                }
+            })
+            .map_err(|e| Error::Gpu(format!("cannot start the segment loader thread: {e}")))?;
+        let result = draw_frames(renderer, asset, meta, scene, opts, (&rx, held), on_frame);
+        // Unblocks the worker if the player stopped early.
+        drop(rx);
+        worker.join().map_err(|_| Error::Gpu("the segment loader thread panicked".into()))?;
+        result
+    })
+}
+
+fn draw_frames(
+    renderer: &Renderer,
+    asset: &Asset,
+    meta: &Metadata,
+    scene: &Scene,
+    opts: &PlayOptions,
+    (rx, held): (&Receiver<Result<Loaded, Error>>, &AtomicU64),
+    on_frame: &mut dyn FnMut(&FrameStats, &Image) -> Result<(), Error>,
+) -> Result<PlaySummary, Error> {
+    let start = Instant::now();
+    let mut now: Option<Loaded> = None;
+    let mut sum = PlaySummary::default();
+    for (index, &frame) in opts.frames.iter().enumerate() {
+        let (s, local) = asset.locate(frame).ok_or(Error::Frame { frame, count: meta.frame_count as usize })?;
+        let t0 = Instant::now();
+        let (mut wait_ms, mut decode_ms, mut upload_ms) = (0.0, 0.0, 0.0);
+        if now.as_ref().is_none_or(|l| l.segment != s) {
+            // The segment drawn so far goes before the next is taken.
+            drop(now.take());
+            let waited = Instant::now();
+            let loaded = rx.recv().map_err(|_| Error::Gpu("the segment loader stopped".into()))??;
+            held.fetch_sub(loaded.resident, Ordering::SeqCst);
+            wait_ms = ms(waited.elapsed());
+            if wait_ms >= 1.0 && sum.segments_loaded > 0 {
+                sum.frames_waited += 1;
+            }
+            (decode_ms, upload_ms) = (loaded.decode_ms, loaded.upload_ms);
+            sum.bytes_read += loaded.bytes_read;
+            sum.segments_loaded += 1;
+            now = Some(loaded);
+        }
+        let Some(cur) = now.as_ref() else { continue };
+        if let Some(fps) = opts.fps {
+            let due = Duration::from_secs_f64(index as f64 / fps);
+            if let Some(early) = due.checked_sub(start.elapsed()) {
+                std::thread::sleep(early);
+            }
+        }
+        let t1 = Instant::now();
+        let view = opts.view.shifted(cur.shift);
+        let image = renderer.render_views_level(&cur.gpu, &scene.shifted(cur.shift), local, opts.level, &[view], opts.width, opts.height)?.pop().ok_or_else(|| Error::Gpu("no image".into()))?;
+        let render_ms = ms(t1.elapsed());
+        // The next segment, once the worker has uploaded it, is resident as well.
+        let resident = cur.resident + held.load(Ordering::SeqCst);
+        let stats = FrameStats { index, frame, number: meta.frame_number(frame), segment: s, decode_ms, upload_ms, render_ms, wait_ms, resident_bytes: resident };
+        let took = ms(t0.elapsed());
+        if took > sum.worst_frame_ms {
+            (sum.worst_frame_ms, sum.worst_frame) = (took, index);
+        }
+        sum.peak_resident_bytes = sum.peak_resident_bytes.max(resident);
+        on_frame(&stats, &image)?;
+    }
+    sum.frames = opts.frames.len();
+    sum.seconds = start.elapsed().as_secs_f64();
+    sum.fps = if sum.seconds > 0.0 { sum.frames as f64 / sum.seconds } else { 0.0 };
+    Ok(sum)
+}
