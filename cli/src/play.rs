@@ -7,7 +7,8 @@ use anyhow::{anyhow, Context, Result};
 use std::path::PathBuf;
 use vdbcook_pipeline::options::FrameRange;
 use vdbcook_validate::{PlayOptions, Scene, Viewing};
-use vdbcook_vpak::{Asset, Level};
+use vdbcook_vpak::runtime::Reader;
+use vdbcook_vpak::Level;
 
 pub const AFTER_HELP: &str = "\
 The asset is streamed a segment at a time (cook --segment-frames): while one segment is
@@ -71,8 +72,10 @@ pub fn run(args: PlayArgs, quiet: bool) -> Result<u8> {
     if args.view >= views.get() {
         return Err(Usage(format!("--view {} is out of range (0 to {})", args.view, views.get() - 1)).into());
     }
-    let asset = Asset::open(&args.asset).with_context(|| name.clone())?;
-    let meta = asset.metadata().with_context(|| name.clone())?;
+    // The runtime reader: tables and metadata now, each segment when it is played.
+    let file = std::fs::File::open(&args.asset).with_context(|| name.clone())?;
+    let reader = std::sync::Arc::new(Reader::from_file(file).with_context(|| name.clone())?);
+    let meta = reader.metadata().clone();
     let count = meta.frame_count as usize;
     let frames: Vec<usize> = match args.frames {
         Some(r) => r.frames().map(|f| usize::try_from(f).unwrap_or(usize::MAX)).collect(),
@@ -89,7 +92,7 @@ pub fn run(args: PlayArgs, quiet: bool) -> Result<u8> {
         std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
     }
     let scene = Scene::for_asset_with(&meta, args.viewing.extinction.as_deref()).map_err(|e| Usage(format!("--extinction: {e}")))?;
-    let renderer = args.gpu.renderer()?;
+    let renderer = std::sync::Arc::new(args.gpu.renderer()?);
     let opts = PlayOptions {
         frames: frames.iter().copied().cycle().take(frames.len() * args.loops as usize).collect(),
         level: lod,
@@ -100,7 +103,7 @@ pub fn run(args: PlayArgs, quiet: bool) -> Result<u8> {
     };
     let mut per_frame = Vec::new();
     let mut write_err = None;
-    let summary = vdbcook_validate::play(&renderer, &asset, &meta, &scene, &opts, &mut |stats, image| {
+    let summary = vdbcook_validate::play(renderer.clone(), reader.clone(), &scene, &opts, &mut |stats, image| {
         if let Some(dir) = &args.out {
             let path = dir.join(format!("{:05}.png", stats.index));
             if let Err(e) = vdbcook_vpak::write_atomic(&path, &vdbcook_validate::report::png_rgb(image), true) {
@@ -115,7 +118,7 @@ pub fn run(args: PlayArgs, quiet: bool) -> Result<u8> {
         return Err(e);
     }
     let summary = summary.with_context(|| name.clone())?;
-    let segments = asset.segment_count();
+    let segments = reader.segment_count();
     if args.json {
         let doc = serde_json::json!({
             "asset": name,

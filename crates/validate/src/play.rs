@@ -5,9 +5,9 @@
 use crate::resident::upload_segment;
 use crate::{Error, GpuAsset, Image, Renderer, Scene, View};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
-use vdbcook_vpak::{Asset, Metadata};
+use vdbcook_vpak::runtime::{Prefetcher, Reader};
 
 /// What to play and how.
 #[derive(Clone, Debug)]
@@ -54,7 +54,8 @@ pub struct PlaySummary {
     pub worst_frame_ms: f64,
     pub worst_frame: usize,
     pub peak_resident_bytes: u64,
-    /// Segment bodies read from the file (as stored, compressed or not).
+    /// Bytes read from the file: its tables and metadata when opened, and
+    /// each segment's body as stored (compressed or not) each time it is loaded.
     pub bytes_read: u64,
     pub segments_loaded: usize,
     /// Frames that waited for their segment after the first segment's load.
@@ -63,12 +64,10 @@ pub struct PlaySummary {
 
 /// A segment on the GPU, with what it took to get there.
 struct Loaded {
-    segment: usize,
     gpu: GpuAsset,
     shift: [i32; 3],
     decode_ms: f64,
     upload_ms: f64,
-    bytes_read: u64,
     resident: u64,
 }
 
@@ -77,10 +76,10 @@ fn ms(d: Duration) -> f64 {
 }
 
 /// The segments in the order `frames` visits them (a segment again when the play comes back to it).
-fn visits(asset: &Asset, frames: &[usize]) -> Result<Vec<usize>, Error> {
+fn visits(reader: &Reader, frames: &[usize]) -> Result<Vec<usize>, Error> {
     let mut out: Vec<usize> = Vec::new();
     for &f in frames {
-        let (s, _) = asset.locate(f).ok_or(Error::Frame { frame: f, count: asset.frame_count()? })?;
+        let (s, _) = reader.locate(f).ok_or(Error::Frame { frame: f, count: reader.frame_count() })?;
         if out.last() != Some(&s) {
             out.push(s);
         }
@@ -88,95 +87,65 @@ fn visits(asset: &Asset, frames: &[usize]) -> Result<Vec<usize>, Error> {
     Ok(out)
 }
 
-/// Reads, restores and uploads segment `s`.
-fn load(renderer: &Renderer, asset: &Asset, s: usize, scene: &Scene, origin: [i32; 3]) -> Result<Loaded, Error> {
+/// Reads, restores and uploads segment `s` (on the prefetch worker).
+fn load(renderer: &Renderer, reader: &Reader, s: usize, scene: &Scene, origin: [i32; 3]) -> Result<Loaded, Error> {
     let t0 = Instant::now();
-    let stored = asset.stored_segment(s)?;
-    let bytes_read = stored.bytes().len() as u64;
-    let seg = asset.segment(s)?;
+    let seg = reader.segment_asset(s, Vec::new())?;
     let decoded = t0.elapsed();
     let t1 = Instant::now();
     let (gpu, shift) = upload_segment(renderer, &seg, scene, origin)?;
     let uploaded = t1.elapsed();
-    // On the GPU now: the file's pages need not stay in this process's memory.
-    seg.release();
-    stored.release();
     let resident = gpu.resident_bytes();
-    Ok(Loaded { segment: s, gpu, shift, decode_ms: ms(decoded), upload_ms: ms(uploaded), bytes_read, resident })
+    Ok(Loaded { gpu, shift, decode_ms: ms(decoded), upload_ms: ms(uploaded), resident })
 }
 
-/// Plays `opts.frames` of `asset` (whose whole metadata is `meta`) in
-/// `scene`, calling `on_frame` with each frame's figures and image; the
-/// next segment is made resident on a worker thread while the current one
-/// is drawn.
-pub fn play(renderer: &Renderer, asset: &Asset, meta: &Metadata, scene: &Scene, opts: &PlayOptions, on_frame: &mut dyn FnMut(&FrameStats, &Image) -> Result<(), Error>) -> Result<PlaySummary, Error> {
+/// Plays `opts.frames` of the asset `reader` reads in `scene`, calling
+/// `on_frame` with each frame's figures and image. The runtime reader's
+/// prefetch worker reads, restores and uploads the next segment while the
+/// current one is drawn; it is asked for one segment ahead, so at most two
+/// are on the GPU.
+pub fn play(renderer: Arc<Renderer>, reader: Arc<Reader>, scene: &Scene, opts: &PlayOptions, on_frame: &mut dyn FnMut(&FrameStats, &Image) -> Result<(), Error>) -> Result<PlaySummary, Error> {
+    let meta = reader.metadata();
     if let Some(why) = meta.missing_level(opts.level) {
         return Err(Error::Level(why));
     }
-    let order = visits(asset, &opts.frames)?;
+    let order = visits(&reader, &opts.frames)?;
     let origin = meta.index_offset;
-    // Bytes of the segment the worker has uploaded and not yet handed over.
-    let held = AtomicU64::new(0);
-    let held = &held;
-    std::thread::scope(|scope| {
-        // Capacity 0: the worker hands a segment over only when the player
-        // takes it, and starts the next one after, so it holds one at most.
-        let (tx, rx) = sync_channel::<Result<Loaded, Error>>(0);
-        let worker = std::thread::Builder::new()
-            .name("segment loader".into())
-            .spawn_scoped(scope, move || {
-                for &s in &order {
-                    let loaded = load(renderer, asset, s, scene, origin);
-                    if let Ok(l) = &loaded {
-                        held.fetch_add(l.resident, Ordering::SeqCst);
-                    }
-                    let failed = loaded.is_err();
-                    if tx.send(loaded).is_err() || failed {
-                        return;
-                    }
-                }
-            })
-            .map_err(|e| Error::Gpu(format!("cannot start the segment loader thread: {e}")))?;
-        let result = draw_frames(renderer, asset, meta, scene, opts, (&rx, held), on_frame);
-        // Unblocks the worker if the player stopped early.
-        drop(rx);
-        worker.join().map_err(|_| Error::Gpu("the segment loader thread panicked".into()))?;
-        result
-    })
-}
-
-fn draw_frames(
-    renderer: &Renderer,
-    asset: &Asset,
-    meta: &Metadata,
-    scene: &Scene,
-    opts: &PlayOptions,
-    (rx, held): (&Receiver<Result<Loaded, Error>>, &AtomicU64),
-    on_frame: &mut dyn FnMut(&FrameStats, &Image) -> Result<(), Error>,
-) -> Result<PlaySummary, Error> {
+    // Bytes of segments the worker has uploaded and the player not yet taken.
+    let held = Arc::new(AtomicU64::new(0));
+    let (worker_held, worker_scene, worker_renderer) = (held.clone(), *scene, renderer.clone());
+    let mut ahead = Prefetcher::new(reader.clone(), move |r: &Reader, s| {
+        let loaded = load(&worker_renderer, r, s, &worker_scene, origin)?;
+        worker_held.fetch_add(loaded.resident, Ordering::SeqCst);
+        Ok::<Loaded, Error>(loaded)
+    });
     let start = Instant::now();
-    let mut now: Option<Loaded> = None;
     let mut sum = PlaySummary::default();
+    let mut now: Option<(usize, Loaded)> = None;
+    let mut visit = 0;
     for (index, &frame) in opts.frames.iter().enumerate() {
-        let (s, local) = asset.locate(frame).ok_or(Error::Frame { frame, count: meta.frame_count as usize })?;
+        let (s, local) = reader.locate(frame).ok_or(Error::Frame { frame, count: reader.frame_count() })?;
         let t0 = Instant::now();
         let (mut wait_ms, mut decode_ms, mut upload_ms) = (0.0, 0.0, 0.0);
-        if now.as_ref().is_none_or(|l| l.segment != s) {
+        if now.as_ref().is_none_or(|(at, _)| *at != s) {
             // The segment drawn so far goes before the next is taken.
             drop(now.take());
-            let waited = Instant::now();
-            let loaded = rx.recv().map_err(|_| Error::Gpu("the segment loader stopped".into()))??;
+            let fetched = ahead.take(order[visit])?;
+            visit += 1;
+            if let Some(&next) = order.get(visit) {
+                ahead.request(next);
+            }
+            let loaded = fetched.value;
             held.fetch_sub(loaded.resident, Ordering::SeqCst);
-            wait_ms = ms(waited.elapsed());
+            wait_ms = ms(fetched.waited);
             if wait_ms >= 1.0 && sum.segments_loaded > 0 {
                 sum.frames_waited += 1;
             }
             (decode_ms, upload_ms) = (loaded.decode_ms, loaded.upload_ms);
-            sum.bytes_read += loaded.bytes_read;
             sum.segments_loaded += 1;
-            now = Some(loaded);
+            now = Some((s, loaded));
         }
-        let Some(cur) = now.as_ref() else { continue };
+        let Some((_, cur)) = now.as_ref() else { continue };
         if let Some(fps) = opts.fps {
             let due = Duration::from_secs_f64(index as f64 / fps);
             if let Some(early) = due.checked_sub(start.elapsed()) {
@@ -200,5 +169,7 @@ fn draw_frames(
     sum.frames = opts.frames.len();
     sum.seconds = start.elapsed().as_secs_f64();
     sum.fps = if sum.seconds > 0.0 { sum.frames as f64 / sum.seconds } else { 0.0 };
+    drop(ahead);
+    sum.bytes_read = reader.bytes_read();
     Ok(sum)
 }
