@@ -68,7 +68,8 @@ def main():
         waited = [sum(1 for f in r["frames"] if f["segment"] > 0 and f["wait_ms"] > 0.5) for r in runs]
         worst_wait = max(f["wait_ms"] for r in runs for f in r["frames"] if f["segment"] > 0) if len(seg_gpu) > 1 and name == "streamed" else 0.0
         read = runs[0]["summary"]["bytes_read"]
-        print(f"{name:9} fps {fps[name]:.1f} (runs {', '.join(f'{r['summary']['fps']:.1f}' for r in runs)}), peak resident {peak} bytes, read {read} bytes, "
+        each = ", ".join("%.1f" % r["summary"]["fps"] for r in runs)
+        print(f"{name:9} fps {fps[name]:.1f} (runs {each}), peak resident {peak} bytes, read {read} bytes, "
               f"frames waiting after segment 0 per run {waited}, worst such wait {worst_wait:.1f} ms")
         if name == "streamed":
             print(f"          peak resident / two largest consecutive segments' GPU bytes = {peak / two:.3f}")

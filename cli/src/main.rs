@@ -228,6 +228,7 @@ fn main() -> ExitCode {
         Command::Diff(args) => diff::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Validate(args) => validate::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Render(args) => validate::render(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
+        Command::Play(args) if !args.headless => play_in_window(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Play(args) => play::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Bake(args) => bake::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
         Command::Join(args) => join::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
@@ -235,6 +236,18 @@ fn main() -> ExitCode {
         Command::View(args) => view::run(args, cli.quiet).unwrap_or_else(|e| fail(&e)),
     };
     ExitCode::from(code)
+}
+
+/// `play` without `--headless`: the asset plays in `view`'s window, from the
+/// first frame asked for, looping; what only a headless play does is refused.
+fn play_in_window(args: play::PlayArgs, quiet: bool) -> anyhow::Result<u8> {
+    let headless_only = [(args.json, "--json"), (args.out.is_some(), "--out"), (args.loops != 1, "--loop"), (args.frames.is_some_and(|r| r.step != 1 || r.first != r.last), "--frames")];
+    if let Some((_, flag)) = headless_only.iter().find(|(given, _)| *given) {
+        return Err(Usage(format!("{flag} needs --headless (in a window, play loops the whole asset from --frames N: the keys of `vdbcook view` apply)")).into());
+    }
+    let frame = args.frames.map_or(0, |r| usize::try_from(r.first).unwrap_or(usize::MAX));
+    let size = args.viewing.size;
+    view::run(view::ViewArgs { asset: args.asset, fps: args.fps, size, frame, lod: args.lod, extinction: args.viewing.extinction, paused: false, gpu: args.gpu }, quiet)
 }
 
 /// Prints what clap has to say; the exit code. Help and version go to stdout,

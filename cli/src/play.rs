@@ -23,17 +23,20 @@ asset frame, source frame number, segment, decode_ms (reading and restoring the 
 that became resident for it), upload_ms, render_ms, wait_ms (how long it waited for its
 segment) and resident_bytes (the player's buffers and textures on the GPU), then a
 summary: fps sustained, the worst frame, peak resident bytes, bytes read from disk.
-To watch an asset in a window, use `vdbcook view`.";
+Without --headless the asset plays in a window instead: `vdbcook view`'s, looping, with
+its keys (space pauses; arrows step; L and C switch level and channel).";
 
 #[derive(clap::Args)]
 pub struct PlayArgs {
     /// The asset.
     #[arg(value_name = "ASSET.vpak")]
     pub asset: PathBuf,
-    /// Draw offscreen, with no window (the only way `play` draws: see `vdbcook view` for a window).
+    /// Draw offscreen, with no window: for CI, benchmarks and preview clips. Without it the
+    /// asset plays in `vdbcook view`'s window (looping, from the first frame of --frames).
     #[arg(long)]
     pub headless: bool,
-    /// Asset frames to play, counted from 0: A-B or A-B:STEP (default: all).
+    /// Asset frames to play, counted from 0: A-B or A-B:STEP (default: all); in a window, N
+    /// (the frame to start at).
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<FrameRange>,
     /// Play the frames N times (default 1).
@@ -62,9 +65,6 @@ pub struct PlayArgs {
 
 pub fn run(args: PlayArgs, quiet: bool) -> Result<u8> {
     let name = args.asset.display().to_string();
-    if !args.headless {
-        return Err(Usage("play draws offscreen: pass --headless (to watch an asset in a window, use `vdbcook view`)".into()).into());
-    }
     if args.loops == 0 {
         return Err(Usage("--loop must be at least 1".into()).into());
     }

@@ -35,6 +35,12 @@ fn frames_keep_their_source_numbers_and_rate() {
     assert_eq!((report["fps"].as_f64(), numbers(&report, "frame_numbers")), (Some(30.0), vec![1001, 1004, 1007, 1010]));
     assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&asset).unwrap(), "the same cook gives the same bytes");
 
+    // play reports them (and holds to no rate unless asked).
+    if gpu_available() {
+        let played = json(vdbcook(&["play", "--headless", "--json", s(&asset), "--size", "16x16"]));
+        let played_numbers: Vec<i64> = played["frames"].as_array().unwrap().iter().map(|f| f["number"].as_i64().unwrap()).collect();
+        assert_eq!((played["asset_fps"].as_f64(), played_numbers, played["fps_held"].is_null()), (Some(30.0), vec![1001, 1004, 1007, 1010], true));
+    }
     // A frame chosen by its source number is the frame at its index.
     let (by_number, by_index) = (dir.join("n.vdb"), dir.join("i.vdb"));
     ok(vdbcook(&["unpack", s(&asset), "--source-frame", "1007", "-o", s(&by_number)]));
@@ -129,11 +135,16 @@ fn play_refuses_what_it_cannot_do() {
     let asset = cook_into(&dir, "smoke.vpak", &[s(&root().join("fixtures/smoke_seq"))], &[]);
     let missing = dir.join("missing.vpak");
     let cases: [(&[&str], i32, &str); 4] = [
-        (&["play", s(&asset)], 2, "--headless"),
+        (&["play", s(&asset), "--json"], 2, "--json needs --headless"),
         (&["play", "--headless", s(&asset), "--frames", "2-9"], 1, "frame 4 is out of range"),
         (&["play", "--headless", s(&asset), "--loop", "0"], 2, "--loop"),
         (&["play", "--headless", s(&missing)], 1, "missing.vpak"),
     ];
+    // Without --headless it plays in view's window, which needs a display.
+    let windowless = Command::new(env!("CARGO_BIN_EXE_vdbcook")).args(["play", s(&asset)]).env_remove("DISPLAY").env_remove("WAYLAND_DISPLAY").output().unwrap();
+    let err = String::from_utf8_lossy(&windowless.stderr);
+    assert_eq!((windowless.status.code(), err.lines().count()), (Some(1), 1), "{err}");
+    assert!(err.contains("no display"), "{err}");
     for (args, code, says) in cases {
         let out = vdbcook(args);
         let err = String::from_utf8_lossy(&out.stderr);
