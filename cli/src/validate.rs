@@ -61,6 +61,11 @@ pub struct ValidateArgs {
     /// Asset frames to render, counted from 0: A-B or A-B:STEP (default: all).
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<FrameRange>,
+    /// Render only the asset frame whose number in the source sequence is S (fire_1001.vdb:
+    /// 1001; see `inspect`), instead of --frames. (--source-frames is another thing: the range
+    /// a --source frame pattern expands over.)
+    #[arg(long, value_name = "S", conflicts_with = "frames", allow_negative_numbers = true)]
+    pub source_frame: Option<i64>,
     #[command(flatten)]
     pub viewing: Viewing,
     #[command(flatten)]
@@ -119,7 +124,14 @@ pub fn evaluate(mut args: ValidateArgs, quiet: bool) -> Result<Comparison> {
     let (path, source) = recorded::asset_and_sources(args.asset.take(), std::mem::take(&mut args.source)).map_err(Usage)?;
     let bars = Bars::new(quiet || args.json);
     let sources = if source.is_empty() { Sources::Recorded } else { Sources::Inputs(source, args.source_frames) };
-    Ok(vdbcook_pipeline::validate_file(&path, sources, &args.compare_options(), || args.gpu.renderer().map(Box::new), &bars)?)
+    let mut opts = args.compare_options();
+    if let Some(n) = args.source_frame {
+        // The frame's index, from the asset's time (its tables and metadata alone).
+        let name = path.display().to_string();
+        let meta = Asset::open_unverified(&path).and_then(|a| a.metadata()).with_context(|| name.clone())?;
+        opts.frames = Some(vec![meta.frame_by_number(n).map_err(|e| anyhow!("{name}: {e}"))?]);
+    }
+    Ok(vdbcook_pipeline::validate_file(&path, sources, &opts, || args.gpu.renderer().map(Box::new), &bars)?)
 }
 
 #[derive(clap::Args)]
