@@ -12,7 +12,8 @@ use present::Screen;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use vdbcook_validate::{Image, Renderer, Resident, Scene, Size, View};
+use vdbcook_validate::{upload_segment, GpuAsset, Image, Renderer, Scene, Size, View};
+use vdbcook_vpak::runtime::{Prefetcher, Reader};
 use vdbcook_vpak::{Asset, Level, Metadata};
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, KeyEvent, MouseButton, MouseScrollDelta, WindowEvent};
@@ -72,33 +73,65 @@ pub struct ViewArgs {
     pub gpu: GpuArgs,
 }
 
-/// Where the frames come from: the one place that obtains segments. Today
-/// the validator's [`Resident`]: the segment of the frame drawn is on the GPU,
-/// one at a time, read when its first frame is drawn; the runtime reader
-/// (with prefetch) can take its place here.
-struct Frames<'a> {
-    asset: &'a Asset,
+/// Where the frames come from: the one place that obtains segments. The
+/// runtime reader reads the file a segment at a time; its prefetch worker
+/// restores the segment after the one drawn (in playing order, wrapping
+/// around) while this one is shown, and the segment drawn is uploaded when
+/// its first frame is: one segment on the GPU, the next one restored in
+/// memory.
+struct Frames {
+    reader: Arc<Reader>,
     origin: [i32; 3],
-    resident: Resident<'a>,
+    /// The segment on the GPU: (segment, index of the scene it was uploaded for, its GPU copy, its shift).
+    now: Option<(usize, usize, GpuAsset, [i32; 3])>,
+    /// The worker and the segment asked of it (a jump elsewhere starts a new worker).
+    ahead: Option<(Prefetcher<Asset>, usize)>,
 }
 
-impl<'a> Frames<'a> {
-    fn new(asset: &'a Asset, meta: &Metadata) -> Frames<'a> {
-        Frames { asset, origin: meta.index_offset, resident: Resident::new(asset, meta.index_offset) }
+impl Frames {
+    fn new(reader: Arc<Reader>) -> Frames {
+        let origin = reader.metadata().index_offset;
+        Frames { reader, origin, now: None, ahead: None }
     }
 
-    /// Frame `frame` at `level` from `view`, as an image of `size`.
-    fn draw(&mut self, renderer: &Renderer, scene: &Scene, (frame, level): (usize, u32), view: &View, size: (u32, u32)) -> Result<Image> {
-        self.resident.draw(renderer, scene, (frame, level), std::slice::from_ref(view), size)?.pop().ok_or_else(|| anyhow!("no image"))
+    /// Segment `s` restored: the prefetched one when it was asked for, else read now.
+    fn restored(&mut self, s: usize) -> Result<Asset> {
+        if let Some((worker, asked)) = self.ahead.as_mut() {
+            if *asked == s {
+                let fetched = worker.take(s)?;
+                self.ahead = None;
+                return Ok(fetched.value);
+            }
+        }
+        // Not the one prefetched (a jump, or another channel's upload): read it here.
+        Ok(self.reader.segment_asset(s, Vec::new())?)
     }
 
-    /// Drops what is on the GPU: a scene showing other channels needs their planes uploaded.
-    fn reset(&mut self) {
-        self.resident = Resident::new(self.asset, self.origin);
+    /// Frame `frame` at `level` from `view` of the scene `shown` (`scenes[shown]`), as an image of `size`.
+    fn draw(&mut self, renderer: &Renderer, (scene, shown): (&Scene, usize), (frame, level): (usize, u32), view: &View, size: (u32, u32)) -> Result<Image> {
+        let count = self.reader.frame_count();
+        let (s, local) = self.reader.locate(frame).ok_or_else(|| anyhow!("frame {frame} is out of range ({count} frames)"))?;
+        if self.now.as_ref().is_none_or(|(at, for_scene, _, _)| (*at, *for_scene) != (s, shown)) {
+            // The old copy goes before the new one comes.
+            self.now = None;
+            let seg = self.restored(s)?;
+            let (gpu, shift) = upload_segment(renderer, &seg, scene, self.origin)?;
+            self.now = Some((s, shown, gpu, shift));
+        }
+        // Prefetch the segment playing reaches next.
+        let next = (s + 1) % self.reader.segment_count();
+        if next != s && self.ahead.as_ref().is_none_or(|(_, asked)| *asked != next) {
+            let mut worker = Prefetcher::new(self.reader.clone(), |r: &Reader, s| r.segment_asset(s, Vec::new()));
+            worker.request(next);
+            self.ahead = Some((worker, next));
+        }
+        let Some((_, _, gpu, shift)) = &self.now else { return Err(anyhow!("no segment on the GPU")) };
+        let image = renderer.render_views_level(gpu, &scene.shifted(*shift), local, level, &[view.shifted(*shift)], size.0, size.1)?;
+        image.into_iter().next().ok_or_else(|| anyhow!("no image"))
     }
 
     fn resident_bytes(&self) -> u64 {
-        self.resident.resident_bytes()
+        self.now.as_ref().map_or(0, |(_, _, gpu, _)| gpu.resident_bytes())
     }
 }
 
@@ -165,9 +198,9 @@ fn bytes_text(b: u64) -> String {
     }
 }
 
-struct App<'a> {
+struct App {
     name: String,
-    frames: Frames<'a>,
+    frames: Frames,
     count: usize,
     frame: usize,
     /// Each frame's source number (what the HUD calls it).
@@ -196,7 +229,7 @@ struct App<'a> {
     error: Option<anyhow::Error>,
 }
 
-impl App<'_> {
+impl App {
     fn fail(&mut self, event_loop: &ActiveEventLoop, e: anyhow::Error) {
         self.error.get_or_insert(e);
         event_loop.exit();
@@ -226,7 +259,7 @@ impl App<'_> {
         let size = window.inner_size();
         screen.resize(size.width, size.height);
         let scene = &self.shown[self.channel].scene;
-        let img = self.frames.draw(renderer, scene, (self.frame, self.level), &self.camera.view(scene.orbit(1)[0]), screen.size()).with_context(|| self.name.clone())?;
+        let img = self.frames.draw(renderer, (scene, self.channel), (self.frame, self.level), &self.camera.view(scene.orbit(1)[0]), screen.size()).with_context(|| self.name.clone())?;
         let now = Instant::now();
         self.shown_at.push_back(now);
         while self.shown_at.front().is_some_and(|t| now.duration_since(*t) > Duration::from_secs(2)) {
@@ -277,10 +310,8 @@ impl App<'_> {
                 "-" | "_" => self.camera.zoom_by(1.0 / 0.9),
                 "r" | "R" => self.camera = Camera::START,
                 "l" | "L" => self.level = if self.level + 1 >= self.levels.end { self.levels.start } else { self.level + 1 },
-                "c" | "C" => {
-                    self.channel = (self.channel + 1) % self.shown.len().max(1);
-                    self.frames.reset();
-                }
+                // The segment is uploaded again for the new scene's channels at the next draw.
+                "c" | "C" => self.channel = (self.channel + 1) % self.shown.len().max(1),
                 d if d.len() == 1 && d.as_bytes()[0].is_ascii_digit() => {
                     let k = u32::from(d.as_bytes()[0] - b'0');
                     moved = self.levels.contains(&k);
@@ -296,7 +327,7 @@ impl App<'_> {
     }
 }
 
-impl ApplicationHandler for App<'_> {
+impl ApplicationHandler for App {
     fn resumed(&mut self, event_loop: &ActiveEventLoop) {
         if self.window.is_some() {
             return;
@@ -384,8 +415,10 @@ pub fn run(args: ViewArgs, _quiet: bool) -> Result<u8> {
     if !args.asset.exists() {
         return Err(anyhow!("{name}: no such file"));
     }
-    let asset = Asset::open(&args.asset).with_context(|| name.clone())?;
-    let meta = asset.metadata().with_context(|| name.clone())?;
+    // The runtime reader: tables and metadata now, each segment when it is shown.
+    let file = std::fs::File::open(&args.asset).with_context(|| name.clone())?;
+    let reader = Arc::new(Reader::from_file(file).with_context(|| name.clone())?);
+    let meta = reader.metadata().clone();
     let count = meta.frame_count as usize;
     if args.frame >= count {
         return Err(Usage(format!("--frame {} is out of range ({name} has {count} frames, numbered from 0)", args.frame)).into());
@@ -400,7 +433,7 @@ pub fn run(args: ViewArgs, _quiet: bool) -> Result<u8> {
     let event_loop = EventLoop::new().map_err(|e| anyhow!("cannot open the X display \"{display}\": {}", winit_error(&e)))?;
     let mut app = App {
         name,
-        frames: Frames::new(&asset, &meta),
+        frames: Frames::new(reader),
         count,
         frame: args.frame,
         levels: meta.stored_levels(),
