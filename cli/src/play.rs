@@ -18,11 +18,13 @@ by the ray-marcher of `render` and `validate`, offscreen: --out writes them as n
 PNGs (00000.png, 00001.png, ...: a preview clip), identical to `render` of each frame.
 
 Headless play runs as fast as frames are drawn, unless --fps is given; the asset's own
-frame rate (cook --fps) is reported. --json prints one document: per frame its index,
-asset frame, source frame number, segment, decode_ms (reading and restoring the segment
-that became resident for it), upload_ms, render_ms, wait_ms (how long it waited for its
-segment) and resident_bytes (the player's buffers and textures on the GPU), then a
-summary: fps sustained, the worst frame, peak resident bytes, bytes read from disk.
+frame rate (cook --fps) is reported. --json prints one document (docs/play-json.md):
+per frame its index, asset frame, source frame number, segment, decode_ms (reading and
+restoring the segment that became resident for it), upload_ms, render_ms, wait_ms (how
+long it waited for its segment) and resident_bytes (the player's buffers and textures
+on the GPU), then a summary: fps sustained, the worst frame, peak resident bytes, bytes
+read from disk.
+
 Without --headless the asset plays in a window instead: `vdbcook view`'s, looping, with
 its keys (space pauses; arrows step; L and C switch level and channel).";
 

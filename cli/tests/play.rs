@@ -101,6 +101,11 @@ fn play_streams_segments_and_draws_what_render_draws() {
     let played = json(vdbcook(&["play", "--headless", s(&asset), "--json", "--size", "64x48", "--out", s(&frames)]));
     let per_frame = played["frames"].as_array().unwrap();
     assert_eq!(per_frame.len(), 8);
+    // Every key is documented, and every documented key is there.
+    let doc = std::fs::read_to_string(root().join("docs/play-json.md")).unwrap();
+    assert_documented(&played, &doc_section(&doc, "Top level"), "play");
+    assert_documented(&per_frame[0], &doc_section(&doc, "Frame objects"), "play frame");
+    assert_documented(&played["summary"], &doc_section(&doc, "Summary"), "play summary");
     let summary = &played["summary"];
     assert_eq!((summary["frames"].as_u64(), summary["segments_loaded"].as_u64(), played["segments"].as_u64()), (Some(8), Some(4), Some(4)));
     for (i, f) in per_frame.iter().enumerate() {
