@@ -42,8 +42,8 @@ fn frames_keep_their_source_numbers_and_rate() {
         assert_eq!((played["asset_fps"].as_f64(), played_numbers, played["fps_held"].is_null()), (Some(30.0), vec![1001, 1004, 1007, 1010], true));
         // validate --source-frame renders that frame alone.
         let checked = json(vdbcook(&["validate", s(&asset), "--source-frame", "1007", "--size", "16x16", "--views", "1", "--json"]));
-        let images: Vec<u64> = checked["images"].as_array().unwrap().iter().map(|i| i["frame"].as_u64().unwrap()).collect();
-        assert_eq!(images, [2]);
+        let images: Vec<(u64, i64)> = checked["images"].as_array().unwrap().iter().map(|i| (i["frame"].as_u64().unwrap(), i["number"].as_i64().unwrap())).collect();
+        assert_eq!((images, checked["worst"]["number"].as_i64()), (vec![(2, 1007)], Some(1007)));
     }
     // A frame chosen by its source number is the frame at its index.
     let (by_number, by_index) = (dir.join("n.vdb"), dir.join("i.vdb"));

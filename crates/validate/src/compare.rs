@@ -419,13 +419,13 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
         "views": opts.viewing.views,
         "size": [w, h],
         "flip_ppd": DEFAULT_PPD,
-        "images": shots.iter().map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "max_error": s.metrics.max_error, "flip": s.flip, "coverage": s.coverage})).collect::<Vec<_>>(),
+        "images": shots.iter().map(|s| json!({"frame": s.frame, "number": meta.frame_number(s.frame), "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "max_error": s.metrics.max_error, "flip": s.flip, "coverage": s.coverage})).collect::<Vec<_>>(),
         "coverage": coverage_figures(&shots).map(|(min, mean)| json!({"min": min, "mean": mean})),
-        "worst": worst.map(|s| json!({"frame": s.frame, "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "flip": s.flip})),
-        "worst_flip": worst_flip.map(|s| json!({"frame": s.frame, "view": s.view, "flip": s.flip})),
+        "worst": worst.map(|s| json!({"frame": s.frame, "number": meta.frame_number(s.frame), "view": s.view, "rmse": s.metrics.rmse, "psnr": num(s.metrics.psnr), "flip": s.flip})),
+        "worst_flip": worst_flip.map(|s| json!({"frame": s.frame, "number": meta.frame_number(s.frame), "view": s.view, "flip": s.flip})),
         "voxel": {
             "rmse": vox_total.rmse(), "psnr": num(vox_total.psnr(peak(shown))), "max_error": vox_total.max_abs,
-            "frames": voxel.iter().map(|(f, e)| { let e = e.get(shown).copied().unwrap_or_default(); json!({"frame": f, "rmse": e.rmse(), "psnr": num(e.psnr(peak(shown))), "max_error": e.max_abs}) }).collect::<Vec<_>>(),
+            "frames": voxel.iter().map(|(f, e)| { let e = e.get(shown).copied().unwrap_or_default(); json!({"frame": f, "number": meta.frame_number(*f), "rmse": e.rmse(), "psnr": num(e.psnr(peak(shown))), "max_error": e.max_abs}) }).collect::<Vec<_>>(),
         },
         "voxel_channels": meta.channels.iter().zip(&channel_totals).enumerate().map(|(c, (ch, e))| json!({"name": ch.name, "format": channel_formats[c], "rmse": e.rmse(), "psnr": num(e.psnr(peak(c))), "max_error": e.max_abs})).collect::<Vec<_>>(),
         "gate": {"max_rmse": opts.gate.max_rmse, "min_psnr": opts.gate.min_psnr, "max_flip": opts.gate.max_flip},
@@ -437,6 +437,11 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
         }],
     });
     let failed: Vec<&Shot> = shots.iter().filter(|s| opts.gate.fails(s.metrics.rmse, s.metrics.psnr, s.flip)).collect();
+    // A frame's source number beside its index, where they differ (fire_1007.vdb is frame 2 of a 1001-1010:3 cook).
+    let source = |f: usize| match meta.frame_number(f) {
+        n if n == f as i64 => String::new(),
+        n => format!(" (source frame {n})"),
+    };
     let decoder = if in_shader { ", BC decoded in the shader" } else { "" };
     let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
     let mut text = format!("{name}: {format} vs lossless reference{level}, {} frame(s) × {} view(s) at {w}×{h} on {}{decoder}\n", frames.len(), opts.viewing.views, renderer.adapter);
@@ -446,21 +451,30 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
     }
     text += "\n";
     if let Some(s) = worst {
-        text += &format!("  images   worst: frame {} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, flip {:.4}\n", s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.metrics.max_error, s.flip);
+        text += &format!(
+            "  images   worst: frame {}{} view {}: rmse {:.3e}, psnr {:.1} dB, max {:.3e}, flip {:.4}\n",
+            s.frame,
+            source(s.frame),
+            s.view,
+            s.metrics.rmse,
+            s.metrics.psnr,
+            s.metrics.max_error,
+            s.flip
+        );
         let mean = |f: fn(&Shot) -> f64| shots.iter().map(f).sum::<f64>() / shots.len() as f64;
         text += &format!("           mean rmse {:.3e}, mean flip {:.4}\n", mean(|s| s.metrics.rmse), mean(|s| s.flip));
     }
     if let Some(s) = worst_flip {
-        text += &format!("  flip     worst: frame {} view {}: flip {:.4} (at {DEFAULT_PPD} pixels per degree)\n", s.frame, s.view, s.flip);
+        text += &format!("  flip     worst: frame {}{} view {}: flip {:.4} (at {DEFAULT_PPD} pixels per degree)\n", s.frame, source(s.frame), s.view, s.flip);
     }
     for (c, (ch, e)) in meta.channels.iter().zip(&channel_totals).enumerate() {
         let label = if meta.channels.len() == 1 { "voxels".to_string() } else { ch.name.clone() };
         text += &format!("  {label:<8} rmse {:.3e}, psnr {:.1} dB, max {:.3e}\n", e.rmse(), e.psnr(peak(c)), e.max_abs);
     }
     text += &format!("  time     {:.2} s to render and compare, FLIP {:.2} s of it\n", started.elapsed().as_secs_f64(), flip_secs);
-    let gate_failure = failed
-        .first()
-        .map(|s| format!("{} image(s) over budget, first frame {} view {} (rmse {:.3e}, psnr {:.1} dB, flip {:.4})", failed.len(), s.frame, s.view, s.metrics.rmse, s.metrics.psnr, s.flip));
+    let gate_failure = failed.first().map(|s| {
+        format!("{} image(s) over budget, first frame {}{} view {} (rmse {:.3e}, psnr {:.1} dB, flip {:.4})", failed.len(), s.frame, source(s.frame), s.view, s.metrics.rmse, s.metrics.psnr, s.flip)
+    });
     let worst_shot = worst.copied();
     let worst = worst.zip(worst_flip).map(|(w, f)| Worst { rmse: w.metrics.rmse, psnr: w.metrics.psnr, flip: f.flip });
     Ok(LevelRun { figures: LevelFigures { lod, shots, worst_shot, worst, voxel: vox_total, gate_failure }, doc, text, kept })
