@@ -49,11 +49,6 @@ impl<'a> Resident<'a> {
         }
     }
 
-    /// The bytes the resident segment holds on the GPU (0 before the first draw).
-    pub fn resident_bytes(&self) -> u64 {
-        self.now.as_ref().map_or(0, |(_, gpu, _)| gpu.resident_bytes())
-    }
-
     /// Frame `frame` at level `level`, from each of `views` of `scene`, as images of `(width, height)`.
     pub fn draw(&mut self, renderer: &Renderer, scene: &Scene, (frame, level): (usize, u32), views: &[View], (width, height): (u32, u32)) -> Result<Vec<Image>, Error> {
         let (gpu, local, d) = self.at(renderer, scene, frame)?;

@@ -247,16 +247,6 @@ impl Asset {
         Asset::parse(Bytes::Owned(words, len))
     }
 
-    /// Parses the body or file held in `words` (`len` bytes of them): its
-    /// header and section (or segment) table checked, as [`Asset::from_bytes`]
-    /// does, without a copy.
-    pub fn from_words(words: Vec<u64>, len: usize) -> Result<Asset, Error> {
-        if len > words.len().saturating_mul(8) {
-            return Err(Error::Size { expected: len as u64, actual: words.len() as u64 * 8 });
-        }
-        Asset::parse(Bytes::Owned(words, len))
-    }
-
     /// A segment's stored body held in `words` (`len` bytes of them) of a
     /// file of version `version`: its header (version 6) and section table checked.
     pub(crate) fn stored_body_from_words(words: Vec<u64>, len: usize, version: u32) -> Result<Asset, Error> {
