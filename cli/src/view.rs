@@ -12,7 +12,7 @@ use present::Screen;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use vdbcook_validate::{upload_segment, GpuAsset, Image, Renderer, Scene, Size, View};
+use vdbcook_validate::{Image, PlacedSegment, Renderer, Scene, Size, View};
 use vdbcook_vpak::runtime::{Prefetcher, Reader};
 use vdbcook_vpak::{Asset, Level, Metadata};
 use winit::application::ApplicationHandler;
@@ -82,8 +82,8 @@ pub struct ViewArgs {
 struct Frames {
     reader: Arc<Reader>,
     origin: [i32; 3],
-    /// The segment on the GPU: (segment, index of the scene it was uploaded for, its GPU copy, its shift).
-    now: Option<(usize, usize, GpuAsset, [i32; 3])>,
+    /// The segment on the GPU: (segment, index of the scene it was uploaded for, the segment).
+    now: Option<(usize, usize, PlacedSegment)>,
     /// The worker and the segment asked of it (a jump elsewhere starts a new worker).
     ahead: Option<(Prefetcher<Asset>, usize)>,
 }
@@ -111,12 +111,11 @@ impl Frames {
     fn draw(&mut self, renderer: &Renderer, (scene, shown): (&Scene, usize), (frame, level): (usize, u32), view: &View, size: (u32, u32)) -> Result<Image> {
         let count = self.reader.frame_count();
         let (s, local) = self.reader.locate(frame).ok_or_else(|| anyhow!("frame {frame} is out of range ({count} frames)"))?;
-        if self.now.as_ref().is_none_or(|(at, for_scene, _, _)| (*at, *for_scene) != (s, shown)) {
+        if self.now.as_ref().is_none_or(|(at, for_scene, _)| (*at, *for_scene) != (s, shown)) {
             // The old copy goes before the new one comes.
             self.now = None;
             let seg = self.restored(s)?;
-            let (gpu, shift) = upload_segment(renderer, &seg, scene, self.origin)?;
-            self.now = Some((s, shown, gpu, shift));
+            self.now = Some((s, shown, PlacedSegment::upload(renderer, &seg, scene, self.origin)?));
         }
         // Prefetch the segment playing reaches next.
         let next = (s + 1) % self.reader.segment_count();
@@ -125,13 +124,12 @@ impl Frames {
             worker.request(next);
             self.ahead = Some((worker, next));
         }
-        let Some((_, _, gpu, shift)) = &self.now else { return Err(anyhow!("no segment on the GPU")) };
-        let image = renderer.render_views_level(gpu, &scene.shifted(*shift), local, level, &[view.shifted(*shift)], size.0, size.1)?;
-        image.into_iter().next().ok_or_else(|| anyhow!("no image"))
+        let Some((_, _, placed)) = &self.now else { return Err(anyhow!("no segment on the GPU")) };
+        placed.draw(renderer, scene, (local, level), std::slice::from_ref(view), size)?.pop().ok_or_else(|| anyhow!("no image"))
     }
 
     fn resident_bytes(&self) -> u64 {
-        self.now.as_ref().map_or(0, |(_, _, gpu, _)| gpu.resident_bytes())
+        self.now.as_ref().map_or(0, |(_, _, placed)| placed.gpu.resident_bytes())
     }
 }
 

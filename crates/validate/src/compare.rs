@@ -198,7 +198,7 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>, E: Into<BoxError>>(
         // The driver compiles the asset's pipelines (on the CPU, mostly on one
         // core) while the reference renders, not between the two renders.
         let r: &Renderer = &renderer;
-        s.spawn(|| r.prepare(&first, &scene));
+        s.spawn(|| r.prepare(&first.gpu, &scene));
         let mut runs: Vec<LevelRun> = Vec::new();
         for lod in levels {
             // Coarser levels keep the finest level's worst view: the report shows it at every level.
@@ -334,7 +334,7 @@ fn compare_level(p: &Pair, opts: &CompareOptions, lod: u32, frames: &[usize], fo
         // The frame's segments on the GPU (uploaded here, so that an upload's error names its asset).
         let (mut gpu_ref, mut gpu_asset) = (p.gpu_ref.borrow_mut(), p.gpu_asset.borrow_mut());
         gpu_ref.at(renderer, scene, f).map_err(|e| CompareError::In("reference".into(), e.into()))?;
-        in_shader |= gpu_asset.at(renderer, scene, f).map_err(|e| CompareError::In(name.to_string(), e.into()))?.0.decodes_in_shader();
+        in_shader |= gpu_asset.at(renderer, scene, f).map_err(|e| CompareError::In(name.to_string(), e.into()))?.0.gpu.decodes_in_shader();
         let (vox, rendered) = std::thread::scope(|s| {
             let vox = s.spawn(|| voxel_errors(p.asset, p.reference, f, lod, shown));
             let draw = |r: &mut Resident| r.draw(renderer, scene, (f, lod), &views, (w, h));

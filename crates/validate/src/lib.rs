@@ -24,7 +24,7 @@ pub use flip::{flip, FlipMap};
 pub use gpu::{open_adapter, open_device, open_gpu, shader_sources, wanted_features, BcDecode, Gpu, GpuAsset, Renderer};
 pub use options::{Gate, Size, Viewing, Views};
 pub use play::{play, FrameStats, PlayOptions, PlaySummary};
-pub use resident::{upload_segment, Resident};
+pub use resident::{PlacedSegment, Resident};
 pub use scene::{coverage, Model};
 /// The wgpu the renderer is built with, for callers that present its images (`vdbcook view`).
 pub use wgpu;

@@ -2,8 +2,8 @@
 //! the next is read, restored and uploaded on a worker thread, so that at
 //! most two segments (and the metadata) are resident at once.
 
-use crate::resident::upload_segment;
-use crate::{Error, GpuAsset, Image, Renderer, Scene, View};
+use crate::resident::PlacedSegment;
+use crate::{Error, Image, Renderer, Scene, View};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -64,8 +64,7 @@ pub struct PlaySummary {
 
 /// A segment on the GPU, with what it took to get there.
 struct Loaded {
-    gpu: GpuAsset,
-    shift: [i32; 3],
+    placed: PlacedSegment,
     decode_ms: f64,
     upload_ms: f64,
     resident: u64,
@@ -93,10 +92,10 @@ fn load(renderer: &Renderer, reader: &Reader, s: usize, scene: &Scene, origin: [
     let seg = reader.segment_asset(s, Vec::new())?;
     let decoded = t0.elapsed();
     let t1 = Instant::now();
-    let (gpu, shift) = upload_segment(renderer, &seg, scene, origin)?;
+    let placed = PlacedSegment::upload(renderer, &seg, scene, origin)?;
     let uploaded = t1.elapsed();
-    let resident = gpu.resident_bytes();
-    Ok(Loaded { gpu, shift, decode_ms: ms(decoded), upload_ms: ms(uploaded), resident })
+    let resident = placed.gpu.resident_bytes();
+    Ok(Loaded { placed, decode_ms: ms(decoded), upload_ms: ms(uploaded), resident })
 }
 
 /// Plays `opts.frames` of the asset `reader` reads in `scene`, calling
@@ -153,8 +152,7 @@ pub fn play(renderer: Arc<Renderer>, reader: Arc<Reader>, scene: &Scene, opts: &
             }
         }
         let t1 = Instant::now();
-        let view = opts.view.shifted(cur.shift);
-        let image = renderer.render_views_level(&cur.gpu, &scene.shifted(cur.shift), local, opts.level, &[view], opts.width, opts.height)?.pop().ok_or_else(|| Error::Gpu("no image".into()))?;
+        let image = cur.placed.draw(&renderer, scene, (local, opts.level), &[opts.view], (opts.width, opts.height))?.pop().ok_or_else(|| Error::Gpu("no image".into()))?;
         let render_ms = ms(t1.elapsed());
         // The next segment, once the worker has uploaded it, is resident as well.
         let resident = cur.resident + held.load(Ordering::SeqCst);

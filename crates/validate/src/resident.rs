@@ -6,12 +6,28 @@ use crate::{Error, GpuAsset, Image, Renderer, Scene, View};
 use std::sync::Arc;
 use vdbcook_vpak::Asset;
 
-/// Uploads a segment (restored) for drawing in `scene`, made for index offset
-/// `origin`: the GPU copy and the shift of the segment's index space from the scene's.
-pub fn upload_segment(renderer: &Renderer, seg: &Asset, scene: &Scene, origin: [i32; 3]) -> Result<(GpuAsset, [i32; 3]), Error> {
-    let offset = seg.metadata()?.index_offset;
-    let d = std::array::from_fn(|i| offset[i] - origin[i]);
-    Ok((renderer.upload_for(seg, &scene.shifted(d))?, d))
+/// A segment on the GPU, placed in a scene made for the whole asset: its GPU
+/// copy and the shift of its index space from the scene's. Drawing shifts the
+/// scene and the views to the segment's index space.
+pub struct PlacedSegment {
+    pub gpu: GpuAsset,
+    pub shift: [i32; 3],
+}
+
+impl PlacedSegment {
+    /// Uploads `seg` (a restored segment) for drawing in `scene`, made for index offset `origin`.
+    pub fn upload(renderer: &Renderer, seg: &Asset, scene: &Scene, origin: [i32; 3]) -> Result<PlacedSegment, Error> {
+        let offset = seg.metadata()?.index_offset;
+        let shift = std::array::from_fn(|i| offset[i] - origin[i]);
+        Ok(PlacedSegment { gpu: renderer.upload_for(seg, &scene.shifted(shift))?, shift })
+    }
+
+    /// The segment's frame `local` at level `level`, from each of `views` of
+    /// `scene` (the whole asset's), as images of `(width, height)`.
+    pub fn draw(&self, renderer: &Renderer, scene: &Scene, (local, level): (usize, u32), views: &[View], (width, height): (u32, u32)) -> Result<Vec<Image>, Error> {
+        let views: Vec<View> = views.iter().map(|v| v.shifted(self.shift)).collect();
+        renderer.render_views_level(&self.gpu, &scene.shifted(self.shift), local, level, &views, width, height)
+    }
 }
 
 /// The resident segment of `asset`.
@@ -19,7 +35,7 @@ pub struct Resident<'a> {
     asset: &'a Asset,
     /// The scene's index offset: segments are drawn with the scene shifted to theirs.
     origin: [i32; 3],
-    now: Option<(usize, Arc<GpuAsset>, [i32; 3])>,
+    now: Option<(usize, Arc<PlacedSegment>)>,
 }
 
 impl<'a> Resident<'a> {
@@ -29,30 +45,27 @@ impl<'a> Resident<'a> {
         Resident { asset, origin, now: None }
     }
 
-    /// The GPU copy of frame `frame`'s segment, the frame's index there and
-    /// the shift of the segment's index space from the scene's.
-    pub fn at(&mut self, renderer: &Renderer, scene: &Scene, frame: usize) -> Result<(Arc<GpuAsset>, usize, [i32; 3]), Error> {
+    /// Frame `frame`'s segment on the GPU, and the frame's index there.
+    pub fn at(&mut self, renderer: &Renderer, scene: &Scene, frame: usize) -> Result<(Arc<PlacedSegment>, usize), Error> {
         let Some((s, local)) = self.asset.locate(frame) else { return Err(Error::Frame { frame, count: self.asset.frame_count()? }) };
         match &self.now {
-            Some((now, gpu, d)) if *now == s => Ok((gpu.clone(), local, *d)),
+            Some((now, placed)) if *now == s => Ok((placed.clone(), local)),
             _ => {
                 // The old segment goes before the new one comes.
                 self.now = None;
                 let seg = self.asset.segment(s)?;
-                let (gpu, d) = upload_segment(renderer, &seg, scene, self.origin)?;
+                let placed = Arc::new(PlacedSegment::upload(renderer, &seg, scene, self.origin)?);
                 // On the GPU now: its pages need not stay in this process's memory.
                 seg.release();
-                let gpu = Arc::new(gpu);
-                self.now = Some((s, gpu.clone(), d));
-                Ok((gpu, local, d))
+                self.now = Some((s, placed.clone()));
+                Ok((placed, local))
             }
         }
     }
 
-    /// Frame `frame` at level `level`, from each of `views` of `scene`, as images of `(width, height)`.
-    pub fn draw(&mut self, renderer: &Renderer, scene: &Scene, (frame, level): (usize, u32), views: &[View], (width, height): (u32, u32)) -> Result<Vec<Image>, Error> {
-        let (gpu, local, d) = self.at(renderer, scene, frame)?;
-        let views: Vec<View> = views.iter().map(|v| v.shifted(d)).collect();
-        renderer.render_views_level(&gpu, &scene.shifted(d), local, level, &views, width, height)
+    /// Frame `frame` at level `level`, from each of `views` of `scene`, as images of `size`.
+    pub fn draw(&mut self, renderer: &Renderer, scene: &Scene, (frame, level): (usize, u32), views: &[View], size: (u32, u32)) -> Result<Vec<Image>, Error> {
+        let (placed, local) = self.at(renderer, scene, frame)?;
+        placed.draw(renderer, scene, (local, level), views, size)
     }
 }
