@@ -201,8 +201,6 @@ struct App {
     frames: Frames,
     count: usize,
     frame: usize,
-    /// Each frame's source number (what the HUD calls it).
-    numbers: Vec<i64>,
     levels: std::ops::Range<u32>,
     level: u32,
     shown: Vec<Shown>,
@@ -246,7 +244,7 @@ impl App {
         let state = if self.playing { "playing" } else { "paused" };
         let channel = self.shown.get(self.channel).map_or("", |s| s.label.as_str());
         vec![
-            format!("frame {} (index {}, 0-{})  {state}", self.numbers[self.frame], self.frame, self.count.saturating_sub(1)),
+            format!("frame {} (index {}, 0-{})  {state}", self.frames.reader.metadata().frame_number(self.frame), self.frame, self.count.saturating_sub(1)),
             format!("lod {}  {channel}", self.level),
             format!("{:.1} fps  gpu {}", self.fps(), bytes_text(self.frames.resident_bytes())),
         ]
@@ -441,7 +439,6 @@ pub fn run(args: ViewArgs, _quiet: bool) -> Result<u8> {
         camera: Camera::START,
         playing: !args.paused,
         period: Duration::from_secs_f64(1.0 / args.fps.map_or(meta.fps(), vdbcook_vpak::Fps::get)),
-        numbers: (0..count).map(|f| meta.frame_number(f)).collect(),
         due: Instant::now(),
         size: args.size,
         gpu: args.gpu,
