@@ -32,17 +32,22 @@ struct Inner {
     parts: Vec<Part>,
 }
 
+/// The source and what has been read of it.
+struct Io {
+    source: Box<dyn Source>,
+    bytes_read: AtomicU64,
+}
+
 /// An opened asset, read on demand from its [`Source`]. Shared between
 /// threads (`Arc<Reader>`): every method takes `&self`.
 pub struct Reader {
-    source: Box<dyn Source>,
-    /// A file of segments (version 7 or 8), not a single body (version 6).
+    io: Io,
+    /// A file of segments (version 7 or later), not a single body (version 6).
     segmented: bool,
     /// The file's format version.
     version: u32,
     segments: Vec<(SegmentInfo, Inner)>,
     metadata: Metadata,
-    bytes_read: AtomicU64,
 }
 
 impl Reader {
@@ -65,121 +70,35 @@ impl Reader {
     /// segment table's head checksum), metadata and coding records, as
     /// docs/format.md asks before a segment is used; merges the metadata.
     pub fn new(source: impl Source + 'static) -> Result<Reader, Error> {
-        let mut r = Reader { source: Box::new(source), segmented: false, version: 0, segments: Vec::new(), metadata: empty_metadata(), bytes_read: AtomicU64::new(0) };
-        let len = r.source.len();
+        let io = Io { source: Box::new(source), bytes_read: AtomicU64::new(0) };
+        let len = io.source.len();
         if len < HEADER_LEN as u64 {
             return Err(Error::Magic);
         }
-        let header = r.read_vec(0, HEADER_LEN as u64)?;
+        let header = io.read_vec(0, HEADER_LEN as u64)?;
         if header.starts_with(&segments::PART_MAGIC) {
             return Err(Error::Part);
         }
         let version = head::version(&header, len)?;
-        let entries = match version {
-            segments::BODY_VERSION => None,
+        let bodies = match version {
+            segments::BODY_VERSION => vec![io.body(version, 0, len, None)?],
             segments::VERSION | segments::VERSION_8 | segments::VERSION_7 => {
                 let n = head::table_len(&header, segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount, len)?;
-                let table = r.read_vec(HEADER_LEN as u64, n as u64)?;
+                let table = io.read_vec(HEADER_LEN as u64, n as u64)?;
                 head::check_checksum(&header, &table)?;
-                Some(head::segments(&table, len)?)
+                let entries = head::segments(&table, len)?;
+                let read = entries.iter().enumerate().map(|(s, e)| io.body(version, e.offset, e.size, Some(e)).map_err(|err| Error::InSegment(s, Box::new(err))));
+                read.collect::<Result<Vec<_>, _>>()?
             }
             v => return Err(Error::Version(v)),
         };
-        r.version = version;
-        r.segmented = entries.is_some();
-        match entries {
-            None => {
-                let (info, inner) = r.body(0, len, None)?;
-                r.segments.push((info, inner));
-            }
-            Some(entries) => {
-                for (s, e) in entries.iter().enumerate() {
-                    let seg = r.body(e.offset, e.size, Some(e)).map_err(|err| Error::InSegment(s, Box::new(err)))?;
-                    r.segments.push(seg);
-                }
-            }
-        }
-        let metas: Vec<Metadata> = r.segments.iter().map(|(i, _)| i.metadata.clone()).collect();
-        r.metadata = match r.segmented {
-            true => segments::merged(&metas)?,
-            false => metas.into_iter().next().unwrap_or_else(empty_metadata),
+        let segmented = version != segments::BODY_VERSION;
+        // A file that is one body: its own metadata; a file of segments: theirs merged.
+        let metadata = match &bodies[..] {
+            [(one, _)] if !segmented => one.metadata.clone(),
+            _ => segments::merged(&bodies.iter().map(|(i, _)| i.metadata.clone()).collect::<Vec<_>>())?,
         };
-        Ok(r)
-    }
-
-    /// The body at `offset`, `size` bytes, named by segment table entry `entry`
-    /// (none for a file that is one body): its header and table checked, its
-    /// metadata and coding records read, its restored layout planned.
-    fn body(&self, offset: u64, size: u64, entry: Option<&SegmentEntry>) -> Result<(SegmentInfo, Inner), Error> {
-        let header = self.read_vec(offset, HEADER_LEN.min(size as usize) as u64)?;
-        head::body_version(&header, size)?;
-        let n = head::table_len(&header, ENTRY_LEN, MAX_SECTIONS, Error::SectionCount, size)?;
-        let table = self.read_vec(offset + HEADER_LEN as u64, n as u64)?;
-        head::check_checksum(&header, &table)?;
-        let head_checksum = checksum(&[header.as_slice(), &table].concat());
-        if let Some(e) = entry.filter(|e| e.head_checksum != head_checksum) {
-            return Err(Error::HeaderChecksum { stored: e.head_checksum, computed: head_checksum });
-        }
-        // The coding section is read once: the table's check needs it, and the restore plan.
-        let mut coding_bytes = None;
-        let stored = head::sections(&table, size, self.version >= segments::VERSION_8, |e| {
-            let b = self.read_section(offset, e)?;
-            if e.index == 0 {
-                coding_bytes = Some(b.clone());
-            }
-            Ok(std::borrow::Cow::Owned(b))
-        })?;
-        let find = |k: u32| stored.iter().find(|e| (e.kind, e.index) == (k, 0));
-        let meta_entry = find(kind::METADATA).ok_or(Error::Missing { kind: kind::METADATA, index: 0 })?;
-        let metadata = Metadata::from_bytes(&self.read_section(offset, meta_entry)?)?;
-        if let Some(e) = entry.filter(|e| e.frame_count != metadata.frame_count) {
-            return Err(Error::Invalid(format!("its metadata has {} frames, the segment table {}", metadata.frame_count, e.frame_count)));
-        }
-        let plan = coding::plan(&stored, coding_bytes.as_deref())?;
-        // A body stored plainly is used as it is stored; one with supercompressed sections as the plan lays it out.
-        let plain = coding_bytes.is_none();
-        let sections = plan
-            .parts
-            .iter()
-            .map(|p| SectionInfo {
-                kind: p.stored.kind,
-                index: p.stored.index,
-                size: p.size as u64,
-                offset: if plain { p.stored.offset } else { p.offset as u64 },
-                checksum: p.checksum(),
-                stored_size: p.stored.size,
-                compressed: p.coding.is_some(),
-                texture: (p.stored.kind == kind::ATLAS).then(|| TextureInfo::of(&metadata, p.stored.index)).flatten(),
-            })
-            .collect();
-        let body_size = if plain { size } else { plan.len as u64 };
-        let (first_frame, frame_count) = entry.map_or((0, metadata.frame_count), |e| (e.first_frame, e.frame_count));
-        let info = SegmentInfo { first_frame, frame_count, offset, stored_size: size, body_size, metadata, sections };
-        Ok((info, Inner { head_checksum, parts: plan.parts }))
-    }
-
-    /// Reads `len` bytes at `offset` into a new buffer, counted; refused
-    /// before anything is allocated when they lie past the source's end.
-    fn read_vec(&self, offset: u64, len: u64) -> Result<Vec<u8>, Error> {
-        if offset.checked_add(len).is_none_or(|end| end > self.source.len()) {
-            return Err(Error::Io(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, format!("{len} bytes at {offset} lie past the end of the {}-byte source", self.source.len()))));
-        }
-        let mut b = vec![0u8; len as usize];
-        self.read(offset, &mut b)?;
-        Ok(b)
-    }
-
-    fn read(&self, offset: u64, buf: &mut [u8]) -> Result<(), Error> {
-        self.source.read_at(offset, buf)?;
-        self.bytes_read.fetch_add(buf.len() as u64, Ordering::Relaxed);
-        Ok(())
-    }
-
-    /// A section's stored bytes (of the body at `body`), their checksum checked.
-    fn read_section(&self, body: u64, e: &SectionEntry) -> Result<Vec<u8>, Error> {
-        let b = self.read_vec(body + e.offset, e.size)?;
-        check_sum(e, &b)?;
-        Ok(b)
+        Ok(Reader { io, segmented, version, segments: bodies, metadata })
     }
 
     /// The whole sequence's metadata ([`segments::merged`]: frames, sources
@@ -197,7 +116,7 @@ impl Reader {
         self.segments.len()
     }
 
-    /// Whether the file has a segment table (version 7 or 8), not one body (version 6).
+    /// Whether the file has a segment table (version 7 or later), not one body (version 6).
     pub fn is_segmented(&self) -> bool {
         self.segmented
     }
@@ -237,7 +156,7 @@ impl Reader {
 
     /// Bytes read from the source so far (opening included).
     pub fn bytes_read(&self) -> u64 {
-        self.bytes_read.load(Ordering::Relaxed)
+        self.io.bytes_read.load(Ordering::Relaxed)
     }
 
     /// An error of segment `s`, named as the segment's where the file has segments.
@@ -264,13 +183,13 @@ impl Reader {
     fn read_part(&self, body: u64, part: &Part, out: &mut [u8], stored: &mut Vec<u8>, scratch: &mut Vec<u8>) -> Result<(), Error> {
         let e = &part.stored;
         if part.coding.is_none() {
-            self.read(body + e.offset, out)?;
+            self.io.read(body + e.offset, out)?;
             return check_sum(e, out);
         }
         // Bounded by the source: the section lies inside it.
         stored.clear();
         stored.resize(e.size as usize, 0);
-        self.read(body + e.offset, stored)?;
+        self.io.read(body + e.offset, stored)?;
         check_sum(e, stored)?;
         coding::restore_part(part, stored, out, scratch)
     }
@@ -345,7 +264,7 @@ impl Reader {
         let mut words = coding::reuse_words(stored_buf, size.div_ceil(8)).ok_or_else(no_memory)?;
         let bytes = bytemuck::cast_slice_mut::<u64, u8>(&mut words);
         bytes[size..].fill(0);
-        self.read(info.offset, &mut bytes[..size])?;
+        self.io.read(info.offset, &mut bytes[..size])?;
         let stored = Asset::stored_body_from_words(words, size, self.version)?;
         let computed = checksum(stored.bytes().get(..segments::head_len(stored.sections.len())).unwrap_or_default());
         if computed != inner.head_checksum {
@@ -378,13 +297,13 @@ impl Reader {
             return Ok(());
         }
         let mut at = (HEADER_LEN + segments::SEGMENT_ENTRY_LEN * self.segments.len()) as u64;
-        let ends = self.segments.iter().map(|(i, _)| (i.offset, i.offset + i.stored_size)).chain([(self.source.len(), self.source.len())]);
+        let ends = self.segments.iter().map(|(i, _)| (i.offset, i.offset + i.stored_size)).chain([(self.io.source.len(), self.io.source.len())]);
         let mut chunk = Vec::new();
         for (start, end) in ends {
             while at < start {
                 let n = (start - at).min(1 << 16);
                 chunk.resize(n as usize, 0);
-                self.read(at, &mut chunk)?;
+                self.io.read(at, &mut chunk)?;
                 if let Some(k) = chunk.iter().position(|&x| x != 0) {
                     return Err(Error::Padding(at + k as u64));
                 }
@@ -396,32 +315,88 @@ impl Reader {
     }
 }
 
+impl Io {
+    /// The body at `offset`, `size` bytes, of a file of version `version`,
+    /// named by segment table entry `entry` (none for a file that is one
+    /// body): its header and table checked, its metadata and coding records
+    /// read, its restored layout planned.
+    fn body(&self, version: u32, offset: u64, size: u64, entry: Option<&SegmentEntry>) -> Result<(SegmentInfo, Inner), Error> {
+        let header = self.read_vec(offset, HEADER_LEN.min(size as usize) as u64)?;
+        head::body_version(&header, size)?;
+        let n = head::table_len(&header, ENTRY_LEN, MAX_SECTIONS, Error::SectionCount, size)?;
+        let table = self.read_vec(offset + HEADER_LEN as u64, n as u64)?;
+        head::check_checksum(&header, &table)?;
+        let head_checksum = checksum(&[header.as_slice(), &table].concat());
+        if let Some(e) = entry.filter(|e| e.head_checksum != head_checksum) {
+            return Err(Error::HeaderChecksum { stored: e.head_checksum, computed: head_checksum });
+        }
+        // The coding section is read once: the table's check needs it, and the restore plan.
+        let mut coding_bytes = None;
+        let stored = head::sections(&table, size, version >= segments::VERSION_8, |e| {
+            let b = self.read_section(offset, e)?;
+            if e.index == 0 {
+                coding_bytes = Some(b.clone());
+            }
+            Ok(std::borrow::Cow::Owned(b))
+        })?;
+        let find = |k: u32| stored.iter().find(|e| (e.kind, e.index) == (k, 0));
+        let meta_entry = find(kind::METADATA).ok_or(Error::Missing { kind: kind::METADATA, index: 0 })?;
+        let metadata = Metadata::from_bytes(&self.read_section(offset, meta_entry)?)?;
+        if let Some(e) = entry.filter(|e| e.frame_count != metadata.frame_count) {
+            return Err(Error::Invalid(format!("its metadata has {} frames, the segment table {}", metadata.frame_count, e.frame_count)));
+        }
+        let plan = coding::plan(&stored, coding_bytes.as_deref())?;
+        // A body stored plainly is used as it is stored; one with supercompressed sections as the plan lays it out.
+        let plain = coding_bytes.is_none();
+        let sections = plan
+            .parts
+            .iter()
+            .map(|p| SectionInfo {
+                kind: p.stored.kind,
+                index: p.stored.index,
+                size: p.size as u64,
+                offset: if plain { p.stored.offset } else { p.offset as u64 },
+                checksum: p.checksum(),
+                stored_size: p.stored.size,
+                compressed: p.coding.is_some(),
+                texture: (p.stored.kind == kind::ATLAS).then(|| TextureInfo::of(&metadata, p.stored.index)).flatten(),
+            })
+            .collect();
+        let body_size = if plain { size } else { plan.len as u64 };
+        let (first_frame, frame_count) = entry.map_or((0, metadata.frame_count), |e| (e.first_frame, e.frame_count));
+        let info = SegmentInfo { first_frame, frame_count, offset, stored_size: size, body_size, metadata, sections };
+        Ok((info, Inner { head_checksum, parts: plan.parts }))
+    }
+
+    /// Reads `len` bytes at `offset` into a new buffer, counted; refused
+    /// before anything is allocated when they lie past the source's end.
+    fn read_vec(&self, offset: u64, len: u64) -> Result<Vec<u8>, Error> {
+        if offset.checked_add(len).is_none_or(|end| end > self.source.len()) {
+            return Err(Error::Io(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, format!("{len} bytes at {offset} lie past the end of the {}-byte source", self.source.len()))));
+        }
+        let mut b = vec![0u8; len as usize];
+        self.read(offset, &mut b)?;
+        Ok(b)
+    }
+
+    fn read(&self, offset: u64, buf: &mut [u8]) -> Result<(), Error> {
+        self.source.read_at(offset, buf)?;
+        self.bytes_read.fetch_add(buf.len() as u64, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// A section's stored bytes (of the body at `body`), their checksum checked.
+    fn read_section(&self, body: u64, e: &SectionEntry) -> Result<Vec<u8>, Error> {
+        let b = self.read_vec(body + e.offset, e.size)?;
+        check_sum(e, &b)?;
+        Ok(b)
+    }
+}
+
 fn check_sum(e: &SectionEntry, b: &[u8]) -> Result<(), Error> {
     let computed = checksum(b);
     match computed == e.checksum {
         true => Ok(()),
         false => Err(Error::SectionChecksum { kind: e.kind, index: e.index, stored: e.checksum, computed }),
-    }
-}
-
-/// A placeholder while a reader opens (never seen by a caller).
-fn empty_metadata() -> Metadata {
-    Metadata {
-        tool: String::new(),
-        frame_count: 0,
-        map_type: String::new(),
-        transform: [[0.0; 4]; 4],
-        index_offset: [0; 3],
-        index_bbox: None,
-        channels: Vec::new(),
-        planes: Vec::new(),
-        brick_count: 0,
-        settings: Vec::new(),
-        sources: Vec::new(),
-        frames: Vec::new(),
-        levels: 1,
-        level_filters: Vec::new(),
-        first_level: 0,
-        time: None,
     }
 }
