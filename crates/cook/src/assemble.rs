@@ -25,6 +25,7 @@ impl Cooker {
     /// Returns the asset's sections (write them with `vdbcook_vpak::write_file`) and the report.
     /// With `max_bytes`, the finest levels that fit are kept (see [`CookReport::budget`]).
     pub fn finish(mut self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
+        // The level-0 channels keep at least one level: their coarsest.
         let levels = self.opts.levels.get();
         let timings = vec![("build".to_string(), self.build_secs - self.level_secs), ("levels".to_string(), self.level_secs)];
         let built = std::mem::take(&mut self.builder).finish()?;
@@ -98,9 +99,10 @@ impl Cooker {
         // clustering, what they would have been without).
         let t0 = Instant::now();
         let decode_stored = |b: u32| stored.decode(&encoded, b);
-        let measured = errors::measure(built, first, opts.levels.get(), channels, &decode_stored);
+        let own: Vec<u32> = self.channel_levels().iter().map(|&l| l.max(first)).collect();
+        let measured = errors::measure(built, first, self.levels(), &own, &decode_stored);
         let cluster_report = clustered.as_ref().zip(opts.clustering.as_ref()).map(|(c, co)| {
-            let without = cluster::Unclustered { built, first, channels, specs: &encoded.specs, quality: opts.quality, max_error, disk: opts.disk, masks: masks.as_deref() };
+            let without = cluster::Unclustered { built, first, own: &own, channels, specs: &encoded.specs, quality: opts.quality, max_error, disk: opts.disk, masks: masks.as_deref() };
             cluster::report(c, co, &without, &decode_stored, measured.totals[0].rmse())
         });
         lap(&mut timings, "error", t0);

@@ -122,8 +122,9 @@ pub(crate) fn used_work(clustered: Option<&Clustered>, n: usize) -> Vec<bool> {
 /// How the cook would have encoded without clustering, for its report.
 pub(crate) struct Unclustered<'a> {
     pub(crate) built: &'a Built,
-    /// The first stored level.
+    /// The first stored level, and each channel's.
     pub(crate) first: u32,
+    pub(crate) own: &'a [u32],
     pub(crate) channels: usize,
     /// The planes of a cook without per-brick formats.
     pub(crate) specs: &'a [PlaneSpec],
@@ -156,7 +157,7 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
         _ => decode_stored(b),
     };
     let mut without = ErrorStats::default();
-    for e in frame_errors(u.built, u.first, &decode_unclustered) {
+    for e in frame_errors(u.built, u.first, u.own, &decode_unclustered) {
         without.merge(&e[0]);
     }
     ClusterReport {

@@ -18,20 +18,24 @@ pub(crate) struct Measured {
     pub(crate) totals: Vec<ErrorStats>,
 }
 
-/// Measures every tree of `built` (levels `first` … `levels` − 1).
-pub(crate) fn measure(built: &Built, first: u32, levels: u32, channels: usize, decoded: &Decode) -> Measured {
+/// Measures every tree of `built` (levels `first` … `levels` − 1); `own`:
+/// each channel's first stored level, where its per-frame figures are taken.
+pub(crate) fn measure(built: &Built, first: u32, levels: u32, own: &[u32], decoded: &Decode) -> Measured {
+    let channels = own.len();
     let tree_err = voxel_errors(built, decoded);
     let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
+    // A coarser level's figure holds the channels for which it is coarser
+    // than their first level (a coarse channel's own level is in `frames`).
     let level_err: Vec<Vec<ErrorStats>> = (first + 1..levels)
         .map(|k| {
             let mut t = vec![ErrorStats::default(); channels];
             for (e, _) in tree_err.iter().zip(&tree_level).filter(|(_, &l)| l == k) {
-                t.iter_mut().zip(e).for_each(|(t, e)| t.merge(e));
+                t.iter_mut().zip(e).zip(own).filter(|(_, &o)| o < k).for_each(|((t, e), _)| t.merge(e));
             }
             t
         })
         .collect();
-    let frames: Vec<Vec<ErrorStats>> = tree_err.into_iter().zip(&tree_level).filter(|(_, &l)| l == first).map(|(e, _)| e).collect();
+    let frames = by_frame(tree_err, &tree_level, first, own);
     let totals = (0..channels)
         .map(|c| {
             let mut t = ErrorStats::default();
@@ -44,9 +48,28 @@ pub(crate) fn measure(built: &Built, first: u32, levels: u32, channels: usize, d
     Measured { frames, levels: level_err, totals }
 }
 
-/// Per frame of level `first` (the first stored), its error per channel.
-pub(crate) fn frame_errors(built: &Built, first: u32, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
-    voxel_errors(built, decoded).into_iter().zip(&built.frames).filter(|(_, f)| f.level == first).map(|(e, _)| e).collect()
+/// Per frame, each channel's error at its first stored level (`own`); a
+/// frame's trees are pushed together, its level-`first` tree first.
+fn by_frame(tree_err: Vec<Vec<ErrorStats>>, tree_level: &[u32], first: u32, own: &[u32]) -> Vec<Vec<ErrorStats>> {
+    let mut frames: Vec<Vec<ErrorStats>> = Vec::new();
+    for (e, &l) in tree_err.into_iter().zip(tree_level) {
+        if l == first {
+            frames.push(vec![ErrorStats::default(); own.len()]);
+        }
+        if let Some(f) = frames.last_mut() {
+            for ((acc, e), _) in f.iter_mut().zip(e).zip(own).filter(|(_, &o)| o == l) {
+                *acc = e;
+            }
+        }
+    }
+    frames
+}
+
+/// Per frame of level `first` (the first stored), its error per channel at
+/// the channel's first stored level (`own`).
+pub(crate) fn frame_errors(built: &Built, first: u32, own: &[u32], decoded: &Decode) -> Vec<Vec<ErrorStats>> {
+    let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
+    by_frame(voxel_errors(built, decoded), &tree_level, first, own)
 }
 
 /// Error of decoded bricks (`decoded(pool brick)`, one [`Brick`] per

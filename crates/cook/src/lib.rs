@@ -25,7 +25,7 @@ mod unpack;
 
 pub use build::Cooker;
 pub use report::{figure, BudgetReport, BudgetTry, ChannelReport, ClusterReport, CookReport, ErrorFigures, Figure, FormatShare, LevelReport, SegmentReport, SourceTime, Sums};
-pub use unpack::{unpack_frame, unpack_level};
+pub use unpack::{unpack_frame, unpack_level, unpack_near};
 pub use vdbcook_encode::NonFinite;
 pub use vdbcook_encode::{ErrorBound, Format, Quality};
 pub use vdbcook_vpak::LevelCount;
@@ -38,8 +38,15 @@ pub enum Error {
     Asset(#[from] vdbcook_vpak::Error),
     /// Every grid of every frame needs the asset's transform, which the first
     /// grid pushed set (`first`: its frame, and the frame's source path).
-    #[error("grid \"{grid}\" has transform {found}, but the asset's transform, set by grid \"{first_grid}\" of {first}, is {expected}")]
+    #[error("grid \"{grid}\" has transform {found}, but the channel's transform, set by grid \"{first_grid}\" of {first}, is {expected}")]
     Transform { grid: String, found: String, first: String, first_grid: String, expected: String },
+    /// A grid whose voxels cannot be stored at a level of the asset's.
+    #[error("grid \"{grid}\" has voxel size {size} ({found}), grid \"{first_grid}\" of {first} voxel size {first_size} ({expected}): a channel's voxels must be 1, 2, 4 or 8 times the finest grid's along the same axes, offset from them by a whole or half voxel")]
+    Resolution { grid: String, size: String, found: String, first_grid: String, first: String, first_size: String, expected: String },
+    #[error("grid \"{grid}\" has voxels 2^{level} times the asset's, so {lods} levels of detail from its own would need {} levels, more than {}: ask for fewer levels (--lods)", level + lods, vdbcook_vpak::MAX_LEVELS)]
+    TooManyLevels { grid: String, level: u32, lods: u32 },
+    #[error("grid \"{grid}\" first appears after the first frame with voxels 2^{level} times the asset's, coarser than every channel of the first frame: give it in the first frame (an empty grid will do)")]
+    LateCoarseChannel { grid: String, level: u32 },
     #[error("{grid} has background {found}, earlier frames {expected} (a channel keeps one background)")]
     Background { grid: String, found: f32, expected: f32 },
     #[error("frame {frame} is out of range (the asset has {count} frames, numbered from 0)")]
@@ -74,7 +81,16 @@ impl Error {
     /// True for errors in the settings a cook was given (its channel groups,
     /// clustering of too many channels) rather than in its input.
     pub fn is_settings_error(&self) -> bool {
-        matches!(self, Error::UnknownChannel { .. } | Error::TwiceGrouped(_) | Error::MultiChannelClustering(_) | Error::ConstantFormat | Error::MaxErrorGroups)
+        matches!(
+            self,
+            Error::UnknownChannel { .. }
+                | Error::TwiceGrouped(_)
+                | Error::MultiChannelClustering(_)
+                | Error::ConstantFormat
+                | Error::MaxErrorGroups
+                | Error::Resolution { .. }
+                | Error::TooManyLevels { .. }
+        )
     }
 }
 
@@ -203,5 +219,7 @@ pub fn channels_named(specs: &[ChannelSpec], name: &str) -> Vec<usize> {
     }
 }
 
+#[cfg(test)]
+mod resolution_tests;
 #[cfg(test)]
 mod tests;

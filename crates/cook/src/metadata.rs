@@ -66,10 +66,20 @@ impl Cooker {
             settings: self.opts.settings.clone(),
             sources: self.sources.clone(),
             frames: self.frames.clone(),
-            levels: self.opts.levels.get(),
-            level_filters: if self.opts.levels.get() > 1 { self.filters().into_iter().map(level_filter).collect() } else { Vec::new() },
+            levels: self.levels(),
+            level_filters: if self.levels() > 1 { self.filters().into_iter().map(level_filter).collect() } else { Vec::new() },
             first_level: first,
             time: Some(vdbcook_vpak::Time { fps: self.opts.fps.get(), numbers: self.numbers.clone() }),
+            resolutions: self.resolutions(),
+        }
+    }
+
+    /// Each channel's resolution; none recorded when all are the asset's own.
+    pub(crate) fn resolutions(&self) -> Vec<vdbcook_vpak::Resolution> {
+        let r: Vec<_> = self.placed.iter().map(|p| p.as_ref().map(|p| p.resolution).unwrap_or_default()).collect();
+        match r.iter().all(|r| *r == Default::default()) {
+            true => Vec::new(),
+            false => r,
         }
     }
 

@@ -91,6 +91,10 @@ pub struct FormatShare {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ChannelReport {
     pub name: String,
+    /// The level whose voxels are the channel's own (0: the asset's voxel
+    /// size; k: 2^k times as wide), and that voxel size in world units.
+    pub level: u32,
+    pub voxel_size: [f64; 3],
     /// Its format, or its formats cheapest first ("constant+bc7+unorm16", per-brick formats).
     pub format: String,
     /// Bytes of the planes the channel is stored in (atlases, ranges, brick
@@ -334,6 +338,8 @@ impl Cooker {
                     planes_of[c].iter().map(|&p| FormatShare { format: specs[p].plane.format, bricks: meta.planes[p].bricks, bytes: plane_bytes[p] / specs[p].channels.len().max(1) as u64 }).collect();
                 ChannelReport {
                     name: ch.name.clone(),
+                    level: meta.resolution(c).level,
+                    voxel_size: meta.channel_voxel_size(c),
                     format: formats.iter().map(|f| f.format.name()).collect::<Vec<_>>().join("+"),
                     bytes: formats.iter().map(|f| f.bytes).sum::<u64>() + channel_table_bytes[c],
                     bricks: formats.iter().map(|f| f.bricks).sum(),

@@ -24,15 +24,42 @@ const MAX_TILES: usize = 1 << 22;
 /// Decodes frame `frame` (counted from 0) of an opened asset: one grid per
 /// channel, in the metadata's channel order, each active over the frame's
 /// active voxels (the union of the channels'), holding the channel's
-/// background where its own grid was inactive. At the asset's first stored
-/// level (0 unless `cook --max-bytes` left finer levels out).
+/// background where its own grid was inactive. Each channel at its first
+/// stored level: its own voxels (level 0 unless its voxels are coarser than
+/// the asset's, or `cook --max-bytes` left finer levels out).
 pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Vec<Grid>, Error> {
-    unpack_level(asset, frame, asset.metadata()?.first_level)
+    unpack_near(asset, frame, None)
 }
 
-/// [`unpack_frame`] at level of detail `level` (0: the frame itself): the
-/// grids are in the level's index space, with the level's transform (voxels
-/// 2^level times as large, a voxel's centre at its children's centre).
+/// Each channel of frame `frame` at its stored level nearest `level` (its
+/// first stored level for `None`), on its own transform. One
+/// [`unpack_level`] per level that some channel is taken from.
+pub fn unpack_near(asset: &Asset, frame: usize, level: Option<u32>) -> Result<Vec<Grid>, Error> {
+    let meta = asset.metadata()?;
+    if !meta.is_multi_resolution() {
+        return unpack_level(asset, frame, level.unwrap_or(meta.first_level));
+    }
+    let want: Vec<u32> = (0..meta.channels.len()).map(|c| meta.channel_level_near(c, level.unwrap_or(0))).collect();
+    let mut levels = want.clone();
+    levels.sort_unstable();
+    levels.dedup();
+    let mut out: Vec<Option<Grid>> = vec![None; want.len()];
+    for l in levels {
+        for (c, g) in unpack_level(asset, frame, l)?.into_iter().enumerate() {
+            if want.get(c) == Some(&l) {
+                out[c] = Some(g);
+            }
+        }
+    }
+    out.into_iter().map(|g| g.ok_or_else(|| Error::Corrupt("a channel has no stored level".into()))).collect()
+}
+
+/// Frame `frame` at level of detail `level` (0: the frame itself): the
+/// grids are in the level's index space, each with its channel's transform
+/// there (voxels 2^level times as large, a voxel's centre at its children's
+/// centre, moved by the channel's offset). A channel not stored at the level
+/// (its own voxels are coarser, or its levels of detail end before) is an
+/// empty grid.
 pub fn unpack_level(asset: &Asset, frame: usize, level: u32) -> Result<Vec<Grid>, Error> {
     if asset.is_segmented() {
         // The frame's segment alone, and the frame within it.
@@ -86,25 +113,29 @@ pub fn unpack_level(asset: &Asset, frame: usize, level: u32) -> Result<Vec<Grid>
     }
     let tile_values: Vec<Vec<f32>> = tiles.iter().map(|&(_, _, t)| nodes.tile(t).ok_or_else(|| Error::Corrupt(format!("tile {t} is past the end of the tiles")))).collect::<Result<_, _>>()?;
     let map_type = MapType::from_vdb_name(&meta.map_type).unwrap_or(MapType::Affine);
-    let transform = match level {
-        0 => Transform { map_type, matrix: meta.transform },
-        // The map type a coarsened transform takes; the matrix straight from the metadata.
-        _ => Transform { map_type: vdbcook_grid::lod::coarsen_transform(&Transform { map_type, matrix: meta.transform }).map_type, matrix: meta.level_transform(level) },
-    };
     Ok(meta
         .channels
         .iter()
         .zip(out)
         .enumerate()
         .map(|(c, (ch, mut leaves))| {
+            let stored = meta.channel_levels(c).contains(&level);
             leaves.sort_by_key(|l| l.origin);
+            let transform = match (level, meta.resolution(c).half_offset) {
+                (0, [0, 0, 0]) => Transform { map_type, matrix: meta.transform },
+                // The map type a coarsened (or moved) transform takes; the matrix straight from the metadata.
+                _ => Transform { map_type: vdbcook_grid::lod::coarsen_transform(&Transform { map_type, matrix: meta.transform }).map_type, matrix: meta.channel_transform(c, level) },
+            };
             Grid {
                 name: ch.name.clone(),
                 class: GridClass::from_vdb_name(&ch.class),
                 background: ch.background,
                 transform,
-                leaves,
-                tiles: tiles.iter().zip(&tile_values).map(|(&(o, dim, _), v)| Tile { origin: Coord::new(o[0], o[1], o[2]), dim, value: v[c], active: true }).collect(),
+                leaves: if stored { leaves } else { Vec::new() },
+                tiles: match stored {
+                    true => tiles.iter().zip(&tile_values).map(|(&(o, dim, _), v)| Tile { origin: Coord::new(o[0], o[1], o[2]), dim, value: v[c], active: true }).collect(),
+                    false => Vec::new(),
+                },
             }
         })
         .collect())

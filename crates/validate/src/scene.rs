@@ -193,6 +193,7 @@ mod tests {
             level_filters: Vec::new(),
             first_level: 0,
             time: None,
+            resolutions: Vec::new(),
         }
     }
 

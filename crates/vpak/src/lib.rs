@@ -29,6 +29,7 @@ pub mod coding;
 mod head;
 pub mod layout;
 pub mod nodes;
+pub mod resolution;
 pub mod runtime;
 pub mod segments;
 pub mod settings;
@@ -38,6 +39,7 @@ pub use asset::Asset;
 pub use atomic::{write_atomic, write_atomic_with, write_file, AtomicFile};
 pub use check::{Checked, GpuChannel, GPU_CHANNEL_WORDS, MAX_CHANNELS};
 pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, PlaneInfo, BRICK_VOXELS, MAX_BRICK_BYTES};
+pub use resolution::Resolution;
 pub use segments::{assemble_segments, SegmentEntry, Writer};
 pub use settings::{Fps, Level, LevelCount};
 pub use time::{Time, DEFAULT_FPS};
@@ -56,6 +58,8 @@ pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
 /// 6: `Metadata::first_level`: an asset may leave out its finest levels (`cook --max-bytes`);
 ///    L1 nodes of 4³ to 32³ slots, as many as the tree needs (frame entries are word offsets).
 /// 7: segments: a table of version-6 bodies, each a run of frames ([`segments`]).
+/// 8: supercompressed sections ([`coding`]). 9: time (frame numbers and rate, [`time`]).
+/// 10: channels at their own voxel size ([`resolution`]).
 pub const VERSION: u32 = segments::VERSION;
 /// Levels an asset may have: level 4's bricks span 128³ source voxels, one
 /// L1 slot, and the asset's index offset (a multiple of 128) keeps every
@@ -311,6 +315,10 @@ pub struct Metadata {
     /// so the record reads as before; `None` in older assets.
     #[serde(skip)]
     pub time: Option<Time>,
+    /// Per channel, where its voxels are (version 10; encoded after the time
+    /// record): empty when every channel has the asset's voxels.
+    #[serde(skip)]
+    pub resolutions: Vec<Resolution>,
 }
 
 impl Metadata {
@@ -320,11 +328,17 @@ impl Metadata {
         if let Some(t) = &self.time {
             b.extend(bincode::serde::encode_to_vec(t, cfg).map_err(|e| Error::Metadata(e.to_string()))?);
         }
+        if !self.resolutions.is_empty() {
+            if self.time.is_none() {
+                return Err(Error::Metadata("channel resolutions without a time record".into()));
+            }
+            b.extend(bincode::serde::encode_to_vec(&self.resolutions, cfg).map_err(|e| Error::Metadata(e.to_string()))?);
+        }
         Ok(b)
     }
 
-    /// The record, then the [`Time`] record when bytes follow it (nothing
-    /// else may).
+    /// The record, then the [`Time`] record when bytes follow it, then the
+    /// channels' [`Resolution`]s when bytes follow that (nothing else may).
     pub fn from_bytes(b: &[u8]) -> Result<Metadata, Error> {
         // A fixed cap on what a (possibly hostile) length prefix can make the
         // decoder allocate; real metadata is kilobytes.
@@ -333,13 +347,21 @@ impl Metadata {
         let rest = &b[used.min(b.len())..];
         if !rest.is_empty() {
             let (t, n): (Time, usize) = bincode::serde::decode_from_slice(rest, cfg).map_err(|e| Error::Metadata(format!("time: {e}")))?;
-            if n != rest.len() {
-                return Err(Error::Metadata(format!("{} bytes after the time record", rest.len() - n)));
-            }
             if let Some(p) = t.problem(m.frame_count) {
                 return Err(Error::Metadata(format!("time: {p}")));
             }
             m.time = Some(t);
+            let rest = &rest[n.min(rest.len())..];
+            if !rest.is_empty() {
+                let (r, n): (Vec<Resolution>, usize) = bincode::serde::decode_from_slice(rest, cfg).map_err(|e| Error::Metadata(format!("channel resolutions: {e}")))?;
+                if n != rest.len() {
+                    return Err(Error::Metadata(format!("{} bytes after the channel resolutions", rest.len() - n)));
+                }
+                if let Some(p) = resolution::problem(&m, &r) {
+                    return Err(Error::Metadata(format!("channel resolutions: {p}")));
+                }
+                m.resolutions = r;
+            }
         }
         Ok(m)
     }
@@ -642,6 +664,7 @@ mod tests {
             level_filters: vec![],
             first_level: 0,
             time: None,
+            resolutions: vec![],
         }
     }
 
@@ -680,9 +703,57 @@ mod tests {
         // Bytes after the time record, or a time that does not fit the frames, are refused.
         let mut extra = b.clone();
         extra.push(0);
-        assert!(Metadata::from_bytes(&extra).unwrap_err().to_string().contains("after the time record"));
+        assert!(Metadata::from_bytes(&extra).unwrap_err().to_string().contains("channel resolutions: an empty record"));
         m.time = Some(Time { fps: 30.0, numbers: vec![1, 2] });
         assert!(Metadata::from_bytes(&m.to_bytes().unwrap()).unwrap_err().to_string().contains("2 frame numbers for 1 frames"));
+    }
+
+    #[test]
+    fn resolutions_follow_the_time() {
+        let mut m = sample_meta();
+        m.channels = vec![crate::Channel {
+            name: "vel.x".into(),
+            grid: "vel".into(),
+            component: Some(0),
+            value_type: "vec3s".into(),
+            class: "unknown".into(),
+            background: 0.0,
+            value_range: [0.0, 1.0],
+            group: 0,
+            plane: 0,
+            lane: 0,
+            alternates: vec![],
+        }];
+        m.channels.insert(0, Channel { name: "density".into(), grid: "density".into(), component: None, ..m.channels[0].clone() });
+        m.frames = vec![FrameInfo { source: None, active_voxels: 1, leaves: 1, tiles: 0, coarse: vec![LevelFigures::default()] }];
+        m.levels = 2;
+        m.level_filters = vec![LevelFilter::Mean; 2];
+        m.time = Some(Time { fps: 24.0, numbers: vec![0] });
+        let timed = m.to_bytes().unwrap();
+        m.resolutions = vec![Resolution::default(), Resolution { level: 1, half_offset: [-1, 0, 1] }];
+        let b = m.to_bytes().unwrap();
+        assert!(b.starts_with(&timed) && b.len() > timed.len());
+        let back = Metadata::from_bytes(&b).unwrap();
+        assert_eq!(back, m);
+        assert_eq!((back.channel_levels(0), back.channel_levels(1), back.detail_levels()), (0..1, 1..2, 1));
+        // vel.x's voxel 0 sits half a voxel before level 1's voxel 0 along x, half after along z.
+        assert_eq!(back.channel_transform(1, 1)[3], [0.0, 0.5, 1.0, 1.0]);
+        // Refused: a count that does not fit, a level no tree has, no channel at level 0, bytes after.
+        let refuse = |r: Vec<Resolution>, levels: u32, why: &str| {
+            let mut m = m.clone();
+            m.resolutions = r;
+            m.levels = levels;
+            m.level_filters = vec![LevelFilter::Mean; 2];
+            m.frames[0].coarse = vec![LevelFigures::default(); levels as usize - 1];
+            let e = Metadata::from_bytes(&m.to_bytes().unwrap()).unwrap_err().to_string();
+            assert!(e.contains(why), "{e}");
+        };
+        refuse(vec![Resolution::default()], 2, "1 channel resolutions for 2 channels");
+        refuse(vec![Resolution::default(), Resolution { level: 2, half_offset: [0; 3] }], 2, "a channel at level 2 of an asset of 2 levels");
+        refuse(vec![Resolution { level: 1, half_offset: [0; 3] }; 2], 2, "no channel at level 0");
+        let mut extra = b.clone();
+        extra.push(0);
+        assert!(Metadata::from_bytes(&extra).unwrap_err().to_string().contains("1 bytes after the channel resolutions"));
     }
 
     #[test]

@@ -10,9 +10,11 @@ use crate::{body_head, checksum, file_len, header_checksum, write_body, Error, M
 use std::io::{Read, Seek, SeekFrom, Write};
 
 /// Version of a file with a segment table whose bodies may hold
-/// supercompressed sections ([`crate::coding`]) and record their frames'
-/// time ([`crate::Time`]).
-pub const VERSION: u32 = 9;
+/// supercompressed sections ([`crate::coding`]), record their frames'
+/// time ([`crate::Time`]) and their channels' voxel sizes ([`crate::Resolution`]).
+pub const VERSION: u32 = 10;
+/// Version of a file whose channels all have the asset's voxels (still read).
+pub const VERSION_9: u32 = 9;
 /// Version of a file with a segment table and supercompression, without time (still read).
 pub const VERSION_8: u32 = 8;
 /// Version of a file with a segment table and no supercompression (still read).
@@ -378,6 +380,9 @@ pub fn merged(metas: &[Metadata]) -> Result<Metadata, Error> {
         if seg.time.as_ref().map(|t| t.fps.to_bits()) != first.time.as_ref().map(|t| t.fps.to_bits()) {
             return differs("frame rate");
         }
+        if seg.resolutions != first.resolutions {
+            return differs("channel resolutions");
+        }
         for f in &seg.frames {
             let mut f = f.clone();
             f.source = match f.source.and_then(|i| seg.sources.get(i as usize)) {
@@ -439,6 +444,7 @@ pub(crate) mod tests {
             level_filters: vec![],
             first_level: 0,
             time: None,
+            resolutions: Vec::new(),
         }
     }
 
@@ -557,6 +563,7 @@ pub(crate) mod tests {
     fn time_is_merged_and_an_older_file_records_none() {
         let timed = |frames: u32, first: i64, fps: f64| Metadata {
             time: Some(crate::Time { fps, numbers: (0..i64::from(frames)).map(|i| first + 3 * i).collect() }),
+            resolutions: Vec::new(),
             ..meta(frames, &["a.vdb"], [0.0, 1.0], 0)
         };
         let b = assemble_segments(&[(2, body(&timed(2, 1001, 30.0), 1)), (3, body(&timed(3, 1007, 30.0), 2))]).unwrap();

@@ -122,6 +122,7 @@ fn asset(bricks: u32, channels: Vec<Channel>, planes: Vec<PlaneDef>, max_dim: u3
         level_filters: Vec::new(),
         first_level: 0,
         time: None,
+        resolutions: Vec::new(),
     };
     sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap() });
     (meta, sections)
