@@ -62,6 +62,9 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
 /// too (it was cooked with `--allow-missing`); every other frame must read.
 fn reference(meta: &Metadata, files: Vec<Option<PathBuf>>, lod: u32, segment: Option<usize>, bars: &dyn Progress) -> Result<Asset> {
     let frames = files.into_iter().enumerate().map(|(f, path)| FrameFile { path, allow_missing: meta.frames.get(f).is_some_and(|fr| fr.active_voxels == 0), number: None }).collect();
-    let levels = vdbcook_vpak::LevelCount::new(lod + 1).map_err(Error::Failed)?;
+    // Levels of detail from each channel's own level: a channel with coarser
+    // voxels than the asset's adds levels of its own to the trees.
+    let coarsest_channel = meta.levels - meta.detail_levels();
+    let levels = vdbcook_vpak::LevelCount::new((lod + 1).saturating_sub(coarsest_channel).max(1)).map_err(Error::Failed)?;
     crate::cook_lossless_levels(frames, crate::selection_of(meta), levels, segment, bars).context("cooking the reference")
 }

@@ -263,12 +263,10 @@ impl Output {
     /// Finishes a segment's cooker and writes the segment.
     fn add(&mut self, cooker: Cooker, bars: &dyn Progress) -> Result<()> {
         let frames = cooker.frame_count() as u32;
-        // A group naming no channel, or too many channels to cluster, is the settings' fault.
         let table = vdbcook_vpak::segments::first_offset(1);
         let (mut sections, mut report) = cooker.finish(bars).map_err(|e| match e {
             // A byte budget is the whole file's: the segment table included.
             vdbcook_cook::Error::OverBudget { budget, smallest, level } => Error::from(vdbcook_cook::Error::OverBudget { budget: budget + table, smallest: smallest + table, level }),
-            e if e.is_settings_error() => Error::Usage(e.to_string()),
             e => Error::from(e),
         })?;
         if let Some(b) = report.budget.as_mut() {

@@ -58,7 +58,18 @@ impl Error {
 macro_rules! from_other {
     ($($t:ty),*) => {$( impl From<$t> for Error { fn from(e: $t) -> Self { Error::Other(Box::new(e)) } } )*};
 }
-from_other!(std::io::Error, vdbcook_vdb::Error, vdbcook_vpak::Error, vdbcook_cook::Error, vdbcook_validate::Error, glob::PatternError);
+from_other!(std::io::Error, vdbcook_vdb::Error, vdbcook_vpak::Error, vdbcook_validate::Error, glob::PatternError);
+
+/// A cook error in the settings (channel groups, grids whose voxel sizes do
+/// not combine) is the caller's fault.
+impl From<vdbcook_cook::Error> for Error {
+    fn from(e: vdbcook_cook::Error) -> Self {
+        match e.is_settings_error() {
+            true => Error::Usage(e.to_string()),
+            false => Error::Other(Box::new(e)),
+        }
+    }
+}
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 

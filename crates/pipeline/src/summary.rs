@@ -31,6 +31,9 @@ pub fn summary_text(output: &Path, grid: Option<&str>, r: &CookReport) -> String
         let most = r.segments.iter().map(|g| g.frames).max().unwrap_or(0);
         let _ = writeln!(s, "  segments        {} of up to {most} frames: {}", r.segments.len(), sizes.join(", "));
     }
+    if m.is_multi_resolution() {
+        let _ = writeln!(s, "  voxel sizes     {}", voxel_sizes_text(m));
+    }
     if r.channels.len() == 1 {
         let _ = writeln!(s, "  voxel error     rmse {:.3e}, psnr {:.1} dB, max {:.3e}", r.voxel_rmse, r.voxel_psnr, r.voxel_max_error);
     } else {
@@ -74,7 +77,9 @@ pub fn summary_text(output: &Path, grid: Option<&str>, r: &CookReport) -> String
         let figures = if r.first_level > 0 { format!("; the error figures above are level {}'s", r.first_level) } else { String::new() };
         let _ = writeln!(s, "  byte budget     {}: {kept}{dropped} ({}){figures}", mb(b.max_bytes), tries.join(", "));
     }
-    if !r.levels.is_empty() {
+    // With channels at their own voxel sizes and no levels of detail, the
+    // coarser trees are channels' own levels, reported above.
+    if !r.levels.is_empty() && m.detail_levels() > 1 {
         let per: Vec<String> = r.levels.iter().map(|l| format!("{} ({}x: {} leaves, rmse {:.3e})", l.level, l.voxel_scale, l.leaves, l.voxel_rmse)).collect();
         let _ = writeln!(s, "  levels          {}", per.join(", "));
     }
@@ -88,6 +93,41 @@ pub fn summary_text(output: &Path, grid: Option<&str>, r: &CookReport) -> String
     let t: Vec<String> = r.timings.iter().map(|(k, v)| format!("{k} {v:.2}s")).collect();
     let _ = writeln!(s, "  time            {}", t.join(", "));
     s
+}
+
+/// "0.1: density, temperature; 0.2 (level 1, offset -0.5 voxels): vel.x, vel.y, vel.z":
+/// the channels by voxel size, where their voxels are in the asset's.
+pub fn voxel_sizes_text(m: &vdbcook_vpak::Metadata) -> String {
+    let mut groups: Vec<(vdbcook_vpak::Resolution, Vec<&str>)> = Vec::new();
+    for (c, ch) in m.channels.iter().enumerate() {
+        match groups.iter_mut().find(|(r, _)| *r == m.resolution(c)) {
+            Some((_, names)) => names.push(&ch.name),
+            None => groups.push((m.resolution(c), vec![&ch.name])),
+        }
+    }
+    let size = |c: usize| {
+        let v = m.channel_voxel_size(c).map(|v| format!("{}", (v * 1e6).round() / 1e6));
+        if v[0] == v[1] && v[1] == v[2] {
+            v[0].clone()
+        } else {
+            v.join("×")
+        }
+    };
+    groups
+        .iter()
+        .map(|(r, names)| {
+            let c = m.channels.iter().position(|ch| ch.name == names[0]).unwrap_or(0);
+            let offset = r.offset();
+            let place = match (r.level, offset == [0.0; 3]) {
+                (0, true) => String::new(),
+                (k, true) => format!(" (level {k})"),
+                (k, false) if offset[0] == offset[1] && offset[1] == offset[2] => format!(" (level {k}, offset {} voxels)", offset[0]),
+                (k, false) => format!(" (level {k}, offset {:?} voxels)", offset),
+            };
+            format!("{}{place}: {}", size(c), names.join(", "))
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// What happened to a channel's NaN and ±inf source voxels, if it had any.

@@ -183,12 +183,13 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>, E: Into<BoxError>>(
     if let Some(&bad) = frames.iter().find(|&&f| f >= meta.frame_count as usize) {
         return Err(CompareError::Usage(format!("--frames: frame {bad} is out of range (the asset has {} frames, numbered from 0)", meta.frame_count)));
     }
-    let levels = if opts.levels == Levels::Every { meta.stored_levels() } else { lod..lod + 1 };
+    // The scene is the reference's: what the source is decides what is drawn.
+    let scene = Scene::for_asset_with(&ref_meta, opts.viewing.extinction.as_deref()).map_err(|e| CompareError::Usage(format!("--extinction: {e}")))?;
+    // Every level the drawn channel has (with channels at their own voxel sizes, not every level of the trees).
+    let levels = if opts.levels == Levels::Every { meta.channel_levels(scene.shown()) } else { lod..lod + 1 };
     if levels.end > ref_meta.levels.min(meta.levels) {
         return Err(CompareError::Failed(format!("{name}: level {} is out of range (the asset has {} levels of detail, the reference {})", levels.end - 1, meta.levels, ref_meta.levels)));
     }
-    // The scene is the reference's: what the source is decides what is drawn.
-    let scene = Scene::for_asset_with(&ref_meta, opts.viewing.extinction.as_deref()).map_err(|e| CompareError::Usage(format!("--extinction: {e}")))?;
     let renderer = renderer().map_err(|e| CompareError::Other(e.into()))?;
     let mut gpu_asset = Resident::new(asset, ref_meta.index_offset);
     let first = gpu_asset.at(&renderer, &scene, frames.first().copied().unwrap_or(0)).map_err(|e| CompareError::In(name.to_string(), e.into()))?.0;
@@ -281,8 +282,10 @@ fn combine(runs: &[LevelRun], opts: &CompareOptions, adapter: &str) -> Result<Co
 /// active voxels in the reference whose values are finite and not zero (what
 /// its images must show something of).
 fn voxel_errors(asset: &Asset, reference: &Asset, frame: usize, lod: u32, shown: usize) -> Result<(Vec<ErrorStats>, u64), CompareError> {
-    let a = vdbcook_cook::unpack_level(asset, frame, lod).map_err(|e| CompareError::Other(e.into()))?;
-    let r = vdbcook_cook::unpack_level(reference, frame, lod).map_err(|e| CompareError::Other(e.into()))?;
+    // Each channel at its stored level nearest `lod`: a coarse channel (a
+    // velocity at twice the voxel size) is checked at its own voxels.
+    let a = vdbcook_cook::unpack_near(asset, frame, Some(lod)).map_err(|e| CompareError::Other(e.into()))?;
+    let r = vdbcook_cook::unpack_near(reference, frame, Some(lod)).map_err(|e| CompareError::Other(e.into()))?;
     let errors = r
         .iter()
         .zip(&a)

@@ -326,7 +326,12 @@ pub fn render_cpu(asset: &Asset, scene: &Scene, frame: usize, view: &View, width
 /// [`render_cpu`] of level of detail `level` of the frame, as `render_views_level`.
 pub fn render_cpu_level(asset: &Asset, scene: &Scene, frame: usize, level: u32, view: &View, width: u32, height: u32) -> Result<Image, Error> {
     let d = AssetData::new(asset)?;
+    let level = match d.meta().missing_level(level) {
+        None => scene.drawn_level(d.meta(), level),
+        Some(_) => level,
+    };
     let l1 = d.tree_l1(frame, level)?;
+    let view = &view.moved(scene.shift);
     let ext = scene.channels[0] as usize;
     let model = scene.model();
     let skip = d.meta().channels.get(ext).is_some_and(|c| if model == Model::Surface { c.background > 0.0 } else { c.background == 0.0 });

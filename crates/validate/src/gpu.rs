@@ -556,6 +556,7 @@ impl Renderer {
     }
 
     fn params(&self, asset: &GpuAsset, scene: &Scene, (l1, level): (u32, u32), view: &View, width: u32, height: u32) -> wgpu::Buffer {
+        let view = view.moved(scene.shift);
         let (r, u, f) = view.basis();
         let tf = (view.fov_deg.to_radians() * 0.5).tan();
         let mut p: Vec<u32> = Vec::with_capacity(56);
@@ -594,6 +595,7 @@ impl Renderer {
         if let Some(why) = asset.meta.missing_level(level) {
             return Err(Error::Level(why));
         }
+        let level = scene.drawn_level(&asset.meta, level);
         let l1 = *asset.meta.tree_index(frame, level).and_then(|t| asset.frames.get(t)).ok_or(Error::Frame { frame, count: asset.meta.frame_count as usize })?;
         if let Some(&c) = scene.channels.iter().find(|&&c| c != crate::NONE && !asset.bound.get(c as usize).copied().unwrap_or(false)) {
             return Err(Error::NotUploaded(c));

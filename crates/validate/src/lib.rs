@@ -120,6 +120,10 @@ pub struct Scene {
     pub emission: [f32; 4],
     /// How `channels[0]` is drawn.
     model: Model,
+    /// Where the drawn channel's voxels are from its level's (its offset,
+    /// docs/format.md "Channel resolutions"), in level-0 voxels: the
+    /// renderers draw it there, moving the camera by as much the other way.
+    pub shift: [f32; 3],
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
@@ -137,7 +141,12 @@ impl View {
     /// The view in an index space whose origin is `d` voxels from this one's
     /// (a segment's, `d` = its index offset − the scene's).
     pub fn shifted(&self, d: [i32; 3]) -> View {
-        let m = |p: [f32; 3]| std::array::from_fn(|i| p[i] - d[i] as f32);
+        self.moved(d.map(|v| v as f32))
+    }
+
+    /// The view in an index space whose origin is `d` voxels from this one's.
+    pub fn moved(&self, d: [f32; 3]) -> View {
+        let m = |p: [f32; 3]| std::array::from_fn(|i| p[i] - d[i]);
         View { eye: m(self.eye), target: m(self.target), fov_deg: self.fov_deg }
     }
 
@@ -195,8 +204,11 @@ impl Scene {
             })
         };
         let peak = peak_of(extinction);
-        // A surface neither glows nor scatters.
+        // A surface neither glows nor scatters; a glow channel is drawn only
+        // on the voxels of the channel drawn (a coarse one is left out).
         let (temperature, flames) = if model == Model::Surface { (None, None) } else { emission_channels(meta) };
+        let same_voxels = |c: &Option<usize>| c.filter(|&c| meta.resolution(c) == meta.resolution(extinction));
+        let (temperature, flames) = (same_voxels(&temperature), same_voxels(&flames));
         Scene {
             box_min,
             box_max,
@@ -211,7 +223,15 @@ impl Scene {
             // A ray across the box through full-scale fire gathers about 6.
             emission: [1.0 / temperature.map_or(1.0, peak_of), 1.0 / flames.map_or(1.0, peak_of), 6.0 / diag, if model == Model::Scatter { 1.0 } else { 0.0 }],
             model,
+            shift: meta.resolution(extinction).offset().map(|v| v as f32),
         }
+    }
+
+    /// The level the renderers draw when asked for `level`: the drawn
+    /// channel's stored level nearest it (a channel with coarser voxels than
+    /// the asset's has no finer level than its own).
+    pub fn drawn_level(&self, meta: &Metadata, level: u32) -> u32 {
+        meta.channel_level_near(self.shown(), level)
     }
 
     /// Shadow-grid cells along each axis.
