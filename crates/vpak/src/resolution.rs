@@ -97,8 +97,9 @@ impl Metadata {
     pub fn channel_transform(&self, c: usize, level: u32) -> [[f64; 4]; 4] {
         let mut m = self.level_transform(level);
         let d = self.resolution(c).offset();
-        for col in 0..4 {
-            m[3][col] += d[0] * self.transform[0][col] + d[1] * self.transform[1][col] + d[2] * self.transform[2][col];
+        let t = &self.transform;
+        for (col, v) in m[3].iter_mut().enumerate() {
+            *v += d[0] * t[0][col] + d[1] * t[1][col] + d[2] * t[2][col];
         }
         m
     }
