@@ -211,12 +211,8 @@ impl Cooker {
                         None => {
                             return Err(Error::Resolution {
                                 grid: g.name.clone(),
-                                size: size_text(&g.transform),
-                                found: transform_text(&g.transform),
-                                first_grid: asset.grid.clone(),
-                                first: self.frame_text(&asset, frame),
-                                first_size: size_text(&asset.transform),
-                                expected: transform_text(&asset.transform),
+                                found: format!("voxel size {} ({})", size_text(&g.transform), transform_text(&g.transform)),
+                                first: format!("\"{}\" of {} voxel size {} ({})", asset.grid, self.frame_text(&asset, frame), size_text(&asset.transform), transform_text(&asset.transform)),
                             })
                         }
                     };

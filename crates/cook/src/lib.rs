@@ -41,8 +41,9 @@ pub enum Error {
     #[error("grid \"{grid}\" has transform {found}, but the channel's transform, set by grid \"{first_grid}\" of {first}, is {expected}")]
     Transform { grid: String, found: String, first: String, first_grid: String, expected: String },
     /// A grid whose voxels cannot be stored at a level of the asset's.
-    #[error("grid \"{grid}\" has voxel size {size} ({found}), grid \"{first_grid}\" of {first} voxel size {first_size} ({expected}): a channel's voxels must be 1, 2, 4 or 8 times the finest grid's along the same axes, offset from them by a whole or half voxel")]
-    Resolution { grid: String, size: String, found: String, first_grid: String, first: String, first_size: String, expected: String },
+    /// (`found`, `first`: each grid's voxel size and transform, the first's grid and frame too.)
+    #[error("grid \"{grid}\" has {found}, grid {first}: a channel's voxels must be 1, 2, 4 or 8 times the finest grid's along the same axes, offset from them by a whole or half voxel")]
+    Resolution { grid: String, found: String, first: String },
     #[error("grid \"{grid}\" has voxels 2^{level} times the asset's, so {lods} levels of detail from its own would need {} levels, more than {}: ask for fewer levels (--lods)", level + lods, vdbcook_vpak::MAX_LEVELS)]
     TooManyLevels { grid: String, level: u32, lods: u32 },
     #[error("grid \"{grid}\" first appears after the first frame with voxels 2^{level} times the asset's, coarser than every channel of the first frame: give it in the first frame (an empty grid will do)")]
