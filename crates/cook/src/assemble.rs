@@ -78,7 +78,11 @@ impl Cooker {
         let masks = encode::shown_masks(built, &specs, max_error);
         let t0 = Instant::now();
         let encoded = match max_error {
-            None => encode::in_planes(pool, channels, specs, opts.quality, masks.as_deref(), clustered.as_ref(), progress),
+            None => {
+                let stored: Vec<std::ops::Range<u32>> = self.channel_levels().iter().map(|&l| l.max(first)..l + opts.levels.get()).collect();
+                let absent = encode::absent_channels(built, &stored);
+                encode::in_planes(pool, channels, specs, opts.quality, masks.as_deref(), absent, clustered.as_ref(), progress)
+            }
             Some(bound) => {
                 let choices = choose::per_brick(pool, channels, masks.as_deref().unwrap_or(&[]), bound, opts, clustered.as_mut(), progress);
                 encode::as_chosen(pool, channels, choices, clustered.as_ref())

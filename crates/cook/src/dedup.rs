@@ -64,10 +64,17 @@ pub(crate) fn store(encoded: &Encoded, clustered: Option<&Clustered>) -> Stored 
     Stored { keep, planes, remap }
 }
 
-/// Brick `i`'s bytes in plane `p`: its encoding, then the range of each of the plane's channels.
+/// Brick `i`'s bytes in plane `p`: its encoding, then the range of each of
+/// the plane's channels; for a brick from which every channel of the plane
+/// is absent, one byte (no brick's bytes are that short): they are all one
+/// plane brick, found without encoding them.
 fn plane_brick_bytes(encoded: &Encoded, p: usize, i: usize, buf: &mut Vec<u8>) {
     let spec = &encoded.specs[p];
     buf.clear();
+    if encoded.plane_absent(p, i) {
+        buf.push(0xa5);
+        return;
+    }
     buf.resize(spec.plane.brick_bytes(), 0);
     encoded.write(p, i, buf);
     for &c in &spec.channels {

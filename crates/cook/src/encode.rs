@@ -27,13 +27,39 @@ pub(crate) fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8]
     out
 }
 
-/// The work bricks in the planes `specs` (`masks`: the pool's shown voxels).
+/// Per pool brick per channel, true when no tree that uses the brick is at
+/// a level where the channel is stored (`stored[c]`: channel c's levels);
+/// `None` when every channel is stored at every level.
+pub(crate) fn absent_channels(built: &Built, stored: &[std::ops::Range<u32>]) -> Option<Vec<bool>> {
+    let levels: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
+    if levels.iter().all(|l| stored.iter().all(|r| r.contains(l))) {
+        return None;
+    }
+    let channels = stored.len();
+    let mut absent = vec![true; built.pool.len() * channels];
+    for f in &built.frames {
+        for &(_, id) in &f.leaves {
+            let b = built.l3[id as usize].brick as usize;
+            for (c, r) in stored.iter().enumerate() {
+                if r.contains(&f.level) {
+                    absent[b * channels + c] = false;
+                }
+            }
+        }
+    }
+    Some(absent)
+}
+
+/// The work bricks in the planes `specs` (`masks`: the pool's shown voxels;
+/// `absent`: see [`absent_channels`], for an unclustered pool).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn in_planes<'a>(
     pool: &'a [Brick],
     channels: usize,
     specs: Vec<PlaneSpec>,
     quality: Quality,
     masks: Option<&[[u64; 8]]>,
+    absent: Option<Vec<bool>>,
     clustered: Option<&'a Clustered>,
     progress: &dyn Progress,
 ) -> Encoded<'a> {
@@ -43,7 +69,9 @@ pub(crate) fn in_planes<'a>(
         None => m.to_vec(),
     });
     progress.start("encoding", (work.len() / channels * specs.len()) as u64);
-    let encoded = Encoded::new(specs, quality, work, channels, work_masks.as_deref(), &|n| progress.advance(n as u64));
+    // Centroids stand for bricks of several levels: every channel counts.
+    let absent = absent.filter(|_| clustered.is_none());
+    let encoded = Encoded::with_absent(specs, quality, work, channels, work_masks.as_deref(), absent, &|n| progress.advance(n as u64));
     progress.finish();
     encoded
 }

@@ -26,6 +26,11 @@ pub struct Encoded<'a> {
     /// (min, max) per brick per channel.
     ranges: Vec<[f32; 2]>,
     planes: Vec<PlaneData>,
+    /// Per brick per channel, true when no reader samples the channel in the
+    /// brick (a channel at its own voxel size is absent from the levels of
+    /// other channels): a plane whose channels are all absent from a brick
+    /// gives it one canonical encoding, made once.
+    absent: Option<Vec<bool>>,
 }
 
 /// Bricks per parallel work item of the block encoders.
@@ -38,40 +43,93 @@ impl<'a> Encoded<'a> {
     /// the encoders that can use it (BC4): readers take the others from the
     /// background.
     pub fn new(specs: Vec<PlaneSpec>, quality: Quality, bricks: &'a [Brick], channels: usize, masks: Option<&[[u64; 8]]>, progress: &(dyn Fn(usize) + Sync)) -> Encoded<'a> {
+        Self::with_absent(specs, quality, bricks, channels, masks, None, progress)
+    }
+
+    /// [`Encoded::new`], told which channels of which bricks no reader
+    /// samples (`absent[i · channels + c]`): a block plane encodes one brick
+    /// of its channels' backgrounds for all the bricks from which every
+    /// channel of the plane is absent, and deduplication finds them equal
+    /// without hashing their texels.
+    #[allow(clippy::too_many_arguments)]
+    pub fn with_absent(
+        specs: Vec<PlaneSpec>,
+        quality: Quality,
+        bricks: &'a [Brick],
+        channels: usize,
+        masks: Option<&[[u64; 8]]>,
+        absent: Option<Vec<bool>>,
+        progress: &(dyn Fn(usize) + Sync),
+    ) -> Encoded<'a> {
         let channels = channels.max(1);
         let ranges: Vec<[f32; 2]> = bricks.par_iter().map(range_of).collect();
         let n = bricks.len() / channels;
-        let mut planes = Vec::with_capacity(specs.len());
-        for spec in &specs {
+        let mut e = Encoded { specs, bricks, channels, ranges, planes: Vec::new(), absent: absent.filter(|a| a.len() == n * channels) };
+        for p in 0..e.specs.len() {
+            let spec = &e.specs[p];
             if !spec.plane.format.is_block() {
                 progress(n);
-                planes.push(PlaneData::OnDemand);
+                e.planes.push(PlaneData::OnDemand);
                 continue;
             }
             let bb = spec.plane.brick_bytes();
             let mut data = vec![0u8; n * bb];
             vdbcook_grid::mem::advise_huge_pages(&data);
+            // The canonical encoding of an absent brick: the first one's, made without a mask.
+            let canonical = (0..n).find(|&i| e.plane_absent(p, i)).map(|i| {
+                let mut out = vec![0u8; bb];
+                e.encode_block(spec, quality, &[i], None, &mut out);
+                out
+            });
             data.par_chunks_mut(CHUNK * bb).enumerate().for_each(|(k, out)| {
                 let first = k * CHUNK;
                 let count = out.len() / bb;
-                let slot = |b: usize, c: usize| (&bricks[b * channels + c], ranges[b * channels + c]);
-                match spec.plane.format {
-                    Format::Bc4 => {
-                        let c = spec.channels[0];
-                        let lv: Vec<Brick> = (first..first + count).map(|b| levels(slot(b, c).0, slot(b, c).1, 255.0)).collect();
-                        bc::encode_bc4(quality, &lv, masks.and_then(|m| m.get(first..first + count)), out);
+                let todo: Vec<usize> = (first..first + count).filter(|&i| !e.plane_absent(p, i)).collect();
+                if todo.len() == count {
+                    e.encode_block(spec, quality, &todo, masks.and_then(|m| m.get(first..first + count)), out);
+                } else {
+                    let todo_masks: Option<Vec<[u64; 8]>> = masks.map(|m| todo.iter().map(|&i| m.get(i).copied().unwrap_or([u64::MAX; 8])).collect());
+                    let mut buf = vec![0u8; todo.len() * bb];
+                    e.encode_block(spec, quality, &todo, todo_masks.as_deref(), &mut buf);
+                    for (j, &i) in todo.iter().enumerate() {
+                        out[(i - first) * bb..(i - first + 1) * bb].copy_from_slice(&buf[j * bb..(j + 1) * bb]);
                     }
-                    _ => {
-                        let lv: Vec<Vec<[u8; BRICK_VOXELS]>> = (first..first + count).map(|b| spec.channels.iter().map(|&c| quantise(slot(b, c).0, slot(b, c).1)).collect()).collect();
-                        let zpt = spec.plane.z_per_texel as usize;
-                        bc::encode_bc7(quality, 8 / zpt, &bc7_texels(&lv, zpt), out);
+                    for (i, o) in out.chunks_exact_mut(bb).enumerate() {
+                        if let (true, Some(c)) = (e.plane_absent(p, first + i), &canonical) {
+                            o.copy_from_slice(c);
+                        }
                     }
                 }
                 progress(count);
             });
-            planes.push(PlaneData::Kept(data));
+            e.planes.push(PlaneData::Kept(data));
         }
-        Encoded { specs, bricks, channels, ranges, planes }
+        e
+    }
+
+    /// Encodes `bricks` in the block plane `spec` into `out`, one after the other.
+    fn encode_block(&self, spec: &PlaneSpec, quality: Quality, bricks: &[usize], masks: Option<&[[u64; 8]]>, out: &mut [u8]) {
+        let slot = |b: usize, c: usize| (&self.bricks[b * self.channels + c], self.ranges[b * self.channels + c]);
+        match spec.plane.format {
+            Format::Bc4 => {
+                let c = spec.channels[0];
+                let lv: Vec<Brick> = bricks.iter().map(|&b| levels(slot(b, c).0, slot(b, c).1, 255.0)).collect();
+                bc::encode_bc4(quality, &lv, masks, out);
+            }
+            _ => {
+                let lv: Vec<Vec<[u8; BRICK_VOXELS]>> = bricks.iter().map(|&b| spec.channels.iter().map(|&c| quantise(slot(b, c).0, slot(b, c).1)).collect()).collect();
+                let zpt = spec.plane.z_per_texel as usize;
+                bc::encode_bc7(quality, 8 / zpt, &bc7_texels(&lv, zpt), out);
+            }
+        }
+    }
+
+    /// True when every channel of plane `p` is absent from brick `i` (see [`Encoded::with_absent`]).
+    pub fn plane_absent(&self, p: usize, i: usize) -> bool {
+        match (&self.absent, self.specs.get(p)) {
+            (Some(a), Some(spec)) => spec.channels.iter().all(|&c| a.get(i * self.channels + c).copied().unwrap_or(false)),
+            _ => false,
+        }
     }
 
     /// Bricks.
@@ -185,7 +243,7 @@ impl<'a> Encoded<'a> {
                 planes.push(PlaneData::Chosen { bytes, at });
             }
         }
-        Encoded { specs, bricks, channels, ranges, planes }
+        Encoded { specs, bricks, channels, ranges, planes, absent: None }
     }
 }
 
