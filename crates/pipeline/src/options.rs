@@ -240,6 +240,8 @@ settings_group! {
         pub max_brick_error: Option<ErrorBound> = cluster_defaults().max_brick_error.and_then(|e| ErrorBound::new(e).ok());
         /// Levels of detail: N > 1 adds levels 1 to N-1 to every frame, level k with voxels 2^k
         /// times as large (each the mean of its 2x2x2 children; level sets: of the active ones).
+        /// A grid with voxels 2^j times the finest grid's is stored at level j, its own, and
+        /// gets N levels from there (j to j+N-1).
         #[cfg_attr(feature = "clap", arg(long, value_name = "N", default_value_t = CookSettings::default().lods))]
         pub lods: LevelCount = cook_defaults().levels;
         /// Byte budget B (bytes, or e.g. 500kB, 1.5MB, 2MiB): keep the finest levels of detail
