@@ -111,6 +111,13 @@ fn segments_parts_and_supercompression_keep_the_resolutions() {
     let joined = dir.join("joined.vpak");
     ok(vdbcook(&["join", "-q", s(&parts[0]), s(&parts[1]), "-o", s(&joined)]));
     assert_eq!(std::fs::read(&whole).unwrap(), std::fs::read(&joined).unwrap(), "parts joined differ from one process");
+    // One thread cooks the same bytes.
+    let one = dir.join("one.vpak");
+    let mut args = vec!["cook", "-q", "--force", "-o", s(&one)];
+    args.extend(with_grids(&seg));
+    args.push(&input);
+    ok(Command::new(env!("CARGO_BIN_EXE_vdbcook")).args(&args).env("RAYON_NUM_THREADS", "1").current_dir(root()).output().unwrap());
+    assert_eq!(std::fs::read(&whole).unwrap(), std::fs::read(&one).unwrap(), "one thread cooked other bytes");
     let doc = inspect(&whole);
     assert_eq!(doc["levels"].as_array().map(Vec::len), Some(3), "{}", doc["levels"]);
     // The plain asset, recompressed, is the supercompressed one's bytes restored.
