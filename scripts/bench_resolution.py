@@ -1,8 +1,9 @@
 #!/usr/bin/python3
 """Channels at their own voxel size (issue 26): bytes, wall time and peak memory of
 cooking a pyro-style sequence with `vel` on voxels twice (or more) the density's,
-against the density + temperature cook of the same files, and against `vel` resampled
-to the density's voxels (what an asset without per-channel voxel sizes must store).
+against the density + temperature cook of the same files, against `vel` resampled
+to the density's voxels (what an asset without per-channel voxel sizes must store), and
+`vel` cooked alone (the two cooks apart: a floor on the time of cooking them as one).
 Runs alternate (with vel, without), medians of --runs; ratios from the same run.
 
     /usr/bin/python3 scripts/make_pyro_sequence.py bench-out/pyro192 --frames 4 --size 192
@@ -76,13 +77,13 @@ def main():
     try:
         full = resampled(args.seq, tmp)
         print(f"{args.seq}; {args.runs} alternating runs per format; load {os.getloadavg()[0]:.2f}", flush=True)
-        print("| format | density+temperature: bytes, wall, peak | + vel at its own voxels: bytes, wall, peak | bytes ratio | wall ratio | peak ratio | + vel resampled to density's voxels: bytes (ratio) |")
-        print("|---|---|---|---:|---:|---:|---|")
+        print("| format | density+temperature: bytes, wall, peak | + vel at its own voxels: bytes, wall, peak | bytes ratio | wall ratio | peak ratio | + vel resampled to density's voxels: bytes (ratio) | vel alone: wall (density+temperature's + vel alone's, as a ratio) |")
+        print("|---|---|---|---:|---:|---:|---|---|")
         for fmt in args.formats.split(","):
             flags = ["--max-error", fmt.split(":", 1)[1]] if fmt.startswith("max-error:") else ["--format", fmt]
-            runs = {"fine": [], "vel": []}
+            runs = {"fine": [], "vel": [], "alone": []}
             for _ in range(args.runs):
-                for name, grids in (("fine", "density,temperature"), ("vel", "density,temperature,vel")):
+                for name, grids in (("fine", "density,temperature"), ("vel", "density,temperature,vel"), ("alone", "vel")):
                     out = os.path.join(tmp, name + ".vpak")
                     runs[name].append(timed([args.exe, "cook", "-q", "--force", "-o", out, "--grids", grids] + flags + [args.seq]))
             size = {k: os.path.getsize(os.path.join(tmp, k + ".vpak")) for k in runs}
@@ -92,7 +93,8 @@ def main():
             timed([args.exe, "cook", "-q", "--force", "-o", out, "--grids", "density,temperature,vel"] + flags + [full])
             fb = os.path.getsize(out)
             mb = lambda b: f"{b / 1e6:.2f} MB"
-            print(f"| {fmt} | {mb(size['fine'])}, {wall['fine']:.2f} s, {peak['fine'] / 1024:.0f} MiB | {mb(size['vel'])}, {wall['vel']:.2f} s, {peak['vel'] / 1024:.0f} MiB | {size['vel'] / size['fine']:.3f} | {wall['vel'] / wall['fine']:.2f} | {peak['vel'] / peak['fine']:.2f} | {mb(fb)} ({fb / size['fine']:.2f}) |", flush=True)
+            floor = (wall["fine"] + wall["alone"]) / wall["fine"]
+            print(f"| {fmt} | {mb(size['fine'])}, {wall['fine']:.2f} s, {peak['fine'] / 1024:.0f} MiB | {mb(size['vel'])}, {wall['vel']:.2f} s, {peak['vel'] / 1024:.0f} MiB | {size['vel'] / size['fine']:.3f} | {wall['vel'] / wall['fine']:.2f} | {peak['vel'] / peak['fine']:.2f} | {mb(fb)} ({fb / size['fine']:.2f}) | {wall['alone']:.2f} s ({floor:.2f}) |", flush=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
