@@ -245,7 +245,8 @@ impl App {
         let channel = self.shown.get(self.channel).map_or("", |s| s.label.as_str());
         vec![
             format!("frame {} (index {}, 0-{})  {state}", self.frames.reader.metadata().frame_number(self.frame), self.frame, self.count.saturating_sub(1)),
-            format!("lod {}  {channel}", self.level),
+            // A channel at its own voxel size is drawn at its stored level nearest the one asked for.
+            format!("lod {}  {channel}", self.shown.get(self.channel).map_or(self.level, |s| s.scene.drawn_level(self.frames.reader.metadata(), self.level))),
             format!("{:.1} fps  gpu {}", self.fps(), bytes_text(self.frames.resident_bytes())),
         ]
     }
