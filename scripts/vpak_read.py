@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (versions 9, 8, 7 and 6).
+"""Independent reader for vdbcook's `.vpak` volume asset format (versions 10, 9, 8, 7 and 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -12,13 +12,18 @@ frame's active voxels (every active voxel of every L3 node and every voxel of ev
 tile), sorted by i, then j, then k, at the asset's first stored level (0, the frame
 itself, unless the cook left finer levels out). With `--lod K`, the frame's level K, in
 that level's index space (level index = level asset index + index_offset >> K). `--json` prints a summary of the metadata.
-Frame N of a version-7, 8 or 9 file is read from its segment's body alone; a version-8 or 9
+A version-10 asset may store a channel at its own, coarser voxels (format.md, "Channel
+resolutions"): each channel is then decoded at its own first stored level (with `--lod
+K`, its stored level nearest K), and OUT.npz also holds per channel `C.level` (the
+level it was decoded at) and `C.transform` (4 x 4 float64, index to world of its
+voxels there, its half-voxel offset included; every asset gets these two).
+Frame N of a version-7 to 10 file is read from its segment's body alone; a version-8 to 10
 body's supercompressed sections are restored (scripts/vpak_coding.py) before use.
 `--source-frame S` reads the frame whose source frame number is S (version 9 records
 each frame's number; older assets number their frames from 0). `--json` gives `fps` and
 `frame_numbers` too (24 and 0, 1, ... when the asset records none).
 
-As a module: `open_segments(path)` opens a version-6, 7, 8 or 9 file (every body validated,
+As a module: `open_segments(path)` opens a version-6 to 10 file (every body validated,
 every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
 `open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
@@ -39,9 +44,12 @@ import numpy as np
 from vpak_coding import K_CODING, CodingError, parse_records, restore
 
 MAGIC = b"VPAK\r\n\x1a\n"
-BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION = 6, 7, 8, 9
+BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION = 6, 7, 8, 9, 10
 DEFAULT_FPS = 24.0  # the frame rate of an asset that records none
 MAX_LEVELS = 5
+# Channel resolutions (version 10): a channel's level at most 3 (voxels 8 times the
+# asset's), its offset at most 8192 level-0 voxels (16384 half voxels).
+MAX_CHANNEL_LEVEL, MAX_HALF_OFFSET = 3, 2 * 8192
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
 CODED_ALIGN = 8  # the coding section and the sections it names (version 8)
@@ -243,7 +251,9 @@ class Bincode:
         return [item() for _ in range(n)]
 
 
-def decode_metadata(data):
+def decode_metadata(data, version=RESOLVED_VERSION):
+    """The Metadata record, the Time record after it (version 9 on) and the channel
+    resolutions record after that (version 10)."""
     r = Bincode(data)
     m = {}
     m["tool"] = r.string()
@@ -282,9 +292,17 @@ def decode_metadata(data):
     m["level_filters"] = r.vec(r.uint)
     m["first_level"] = r.uint()
     m["time"] = None
+    m["resolutions"] = None
     if r.pos != len(r.data):
         # Version 9: the Time record follows (format.md, "Time").
         t = {"fps": r.f64(), "numbers": r.vec(r.int)}
+        if r.pos != len(r.data) and version in (BODY_VERSION, RESOLVED_VERSION):
+            # Version 10 (and a body of one on its own, a version-6 file): the channel
+            # resolutions record follows ("Channel resolutions").
+            m["resolutions"] = r.vec(lambda: {"level": r.uint(), "half_offset": r.array(r.int, 3)})
+            if r.pos != len(r.data):
+                raise VpakError(f"metadata has {len(r.data) - r.pos} bytes after the channel resolutions")
+            check_resolutions(m)
         if r.pos != len(r.data):
             raise VpakError(f"metadata has {len(r.data) - r.pos} bytes after the time record")
         if not (math.isfinite(t["fps"]) and t["fps"] > 0):
@@ -295,6 +313,59 @@ def decode_metadata(data):
             raise VpakError("metadata: frame numbers do not increase")
         m["time"] = t
     return m
+
+
+def check_resolutions(m):
+    """The rules of format.md's "Channel resolutions" for the record's items."""
+    res, C = m["resolutions"], len(m["channels"])
+    if not res or len(res) != C:
+        raise VpakError(f"metadata: {len(res)} channel resolutions for {C} channels")
+    for c, x in enumerate(res):
+        if x["level"] > MAX_CHANNEL_LEVEL or x["level"] >= m["levels"]:
+            raise VpakError(f"metadata: channel {c} at level {x['level']} (at most {MAX_CHANNEL_LEVEL}, below the asset's {m['levels']} levels)")
+        if any(abs(h) > MAX_HALF_OFFSET for h in x["half_offset"]):
+            raise VpakError(f"metadata: channel {c}'s offset is more than {MAX_HALF_OFFSET // 2} voxels")
+    if min(x["level"] for x in res) != 0:
+        raise VpakError("metadata: no channel at level 0")
+    if m["first_level"] >= detail_levels(m):
+        raise VpakError(f"metadata: first stored level {m['first_level']} leaves the level-0 channels no level")
+
+
+def resolution(m, c):
+    """Channel c's (level, half_offset): level 0 and no offset without the record."""
+    res = m.get("resolutions")
+    return (res[c]["level"], res[c]["half_offset"]) if res else (0, [0, 0, 0])
+
+
+def detail_levels(m):
+    """D: the levels each channel has, counted from its own (`levels` less the coarsest channel's level)."""
+    res = m.get("resolutions")
+    return m["levels"] - (max(x["level"] for x in res) if res else 0)
+
+
+def channel_levels(m, c):
+    """The levels channel c is stored at: max(level_c, first_level) to level_c + D - 1."""
+    own = resolution(m, c)[0]
+    return range(max(own, m["first_level"]), own + detail_levels(m))
+
+
+def channel_level(m, c, lod=None):
+    """The level channel c is decoded at: its first stored one, or its stored one nearest `lod`."""
+    levels = channel_levels(m, c)
+    return levels[0] if lod is None else min(max(lod, levels[0]), levels[-1])
+
+
+def channel_transform(m, c, k):
+    """Index to world of channel c's voxels at level k (format.md, "Levels" and
+    "Channel resolutions"): rows 0-2 of `transform` times 2^k; row 3 plus
+    ((2^k - 1)/2 + half_offset/2) times rows 0-2."""
+    t = np.array(m["transform"], dtype=np.float64)
+    h = resolution(m, c)[1]
+    out = t.copy()
+    out[:3] = t[:3] * float(1 << k)
+    out[3] = t[3] + (float((1 << k) - 1) / 2.0) * (t[0] + t[1] + t[2])
+    out[3] = out[3] + (h[0] * t[0] + h[1] * t[1] + h[2] * t[2]) / 2.0
+    return out
 
 
 def frame_numbers(m):
@@ -713,8 +784,26 @@ def brick_values(m, secs, bricks):
 # ---------------------------------------------------------------------------
 
 def read_frame(m, secs, frame, lod=None):
-    """Per-channel (ijk int32 n x 3, values float32 n), sorted by i, j, k (source space of the level)."""
-    lod = m["first_level"] if lod is None else lod
+    """Per-channel (ijk int32 n x 3, values float32 n), sorted by i, j, k (source space of
+    the level), each channel at `channel_level(m, c, lod)`: without channel resolutions,
+    every channel at `lod` (default: the first stored level)."""
+    if lod is not None and not m["first_level"] <= lod < m["levels"]:
+        raise VpakError(f"level {lod} is not stored (asset has levels {m['first_level']} to {m['levels'] - 1})")
+    want = [channel_level(m, c, lod) for c in range(len(m["channels"]))]
+    # One walk per level some channel is taken from; a channel is never read at a level
+    # where it is absent (its bricks there hold only its background).
+    trees = {k: read_level(m, secs, frame, k) for k in sorted(set(want))}
+    return {ch["name"]: (trees[want[c]][0], trees[want[c]][1][:, c]) for c, ch in enumerate(m["channels"])}
+
+
+def placement(m, lod=None):
+    """Per channel (level it is decoded at, its 4 x 4 index-to-world transform there)."""
+    return [(k, channel_transform(m, c, k)) for c, k in ((c, channel_level(m, c, lod)) for c in range(len(m["channels"])))]
+
+
+def read_level(m, secs, frame, lod):
+    """The frame's tree at stored level `lod`: (ijk int32 n x 3 sorted by i, j, k, in the
+    level's source index space; values float32 n x C, every channel)."""
     C = len(m["channels"])
     tile_parts, leaf_parts = walk_frame(m, secs, frame, lod)
     ijk_parts, val_parts = [], []
@@ -760,7 +849,7 @@ def read_frame(m, secs, frame, lod=None):
     ijk, vals = ijk[order].astype(np.int32), vals[order].astype(np.float32)
     if len(ijk) > 1 and not np.any(np.diff(ijk, axis=0) != 0, axis=1).all():
         raise VpakError(f"frame {frame} covers a voxel twice")
-    return {ch["name"]: (ijk, vals[:, c]) for c, ch in enumerate(m["channels"])}
+    return ijk, vals
 
 
 def summary(m):
@@ -776,14 +865,15 @@ def summary(m):
 # ---------------------------------------------------------------------------
 
 # Equal in every segment (format.md, "Segments"; `background` bit for bit); the rest is per segment.
-SHARED = ("tool", "settings", "map_type", "transform", "levels", "first_level", "level_filters")
+SHARED = ("tool", "settings", "map_type", "transform", "levels", "first_level", "level_filters", "resolutions")
 SHARED_CHANNEL = ("name", "grid", "component", "value_type", "class", "group")
 
 
-def open_body(buf, head_sum=None, coded=False):
+def open_body(buf, head_sum=None, coded=False, version=BODY_VERSION):
     """(metadata, sections) of a body validated as a version-6 file, every checksum verified;
     `head_sum`: the segment table's checksum of its header and section table; `coded`: a
-    version-8 body, whose supercompressed sections are restored and checked here."""
+    version-8 body, whose supercompressed sections are restored and checked here;
+    `version`: the file's (a version-10 file's metadata may record channel resolutions)."""
     secs = Sections(buf, read_header(buf))
     if head_sum is not None and xxh3_64(buf[:HEADER_SIZE + 32 * len(secs.table)]) != head_sum:
         raise VpakError("its header and section table are not the ones the segment table names")
@@ -806,7 +896,7 @@ def open_body(buf, head_sum=None, coded=False):
     for (kind, index), (offset, _, _) in secs.table.items():
         if kind != K_CODING and (kind, index) not in secs.coding and offset % SECTION_ALIGN:
             raise VpakError(f"section kind {kind} index {index} is not at a 256-byte boundary")
-    m = decode_metadata(secs.get(K_METADATA))
+    m = decode_metadata(secs.get(K_METADATA), version)
     validate(m, secs)
     return m, secs
 
@@ -876,12 +966,12 @@ def merged(metas):
 
 
 class Asset:
-    """A version-6, 7 or 8 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
+    """A version-6 to 10 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
     and `bodies` [(metadata, sections)] per segment (frames numbered from 0 in each), `meta`
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
     def __init__(self, buf):
-        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION), "file")
+        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION), "file")
         if self.version == BODY_VERSION:
             self.bodies = [open_body(buf)]
             self.meta = self.bodies[0][0]
@@ -891,7 +981,7 @@ class Asset:
         self.table, self.bodies = table, []
         for s, (_, count, offset, size, head_sum) in enumerate(table):
             try:
-                m, secs = open_body(buf[offset:offset + size], head_sum, self.version >= CODED_VERSION)
+                m, secs = open_body(buf[offset:offset + size], head_sum, self.version >= CODED_VERSION, self.version)
                 if m["frame_count"] != count:
                     raise VpakError(f"its metadata has {m['frame_count']} frames, the segment table {count}")
             except VpakError as e:
@@ -929,7 +1019,7 @@ class Asset:
 
 
 def open_segments(path):
-    """A version-6, 7 or 8 file as an `Asset`, every body validated (and restored)."""
+    """A version-6 to 10 file as an `Asset`, every body validated (and restored)."""
     try:
         with open(path, "rb") as f:
             buf = memoryview(f.read())
@@ -939,7 +1029,7 @@ def open_segments(path):
 
 
 def open_asset(path):
-    """(metadata, sections) of a file of one body: version 6, or version 7 or 8 of one segment."""
+    """(metadata, sections) of a file of one body: version 6, or version 7 to 10 of one segment."""
     a = open_segments(path)
     if len(a.bodies) != 1:
         raise VpakError(f"the asset has {len(a.bodies)} segments: read it with open_segments")
@@ -966,8 +1056,9 @@ def main(argv=None):
             chans = asset.read_frame(0 if frame is None else frame, args.lod)
             if args.out:
                 arrays = {}
-                for name, (ijk, vals) in chans.items():
+                for (name, (ijk, vals)), (level, transform) in zip(chans.items(), placement(asset.meta, args.lod)):
                     arrays[f"{name}.ijk"], arrays[f"{name}.values"] = ijk, vals
+                    arrays[f"{name}.level"], arrays[f"{name}.transform"] = np.int32(level), transform
                 np.savez(args.out, **arrays)
     except VpakError as e:
         print(f"vpak_read.py: {args.asset}: {e}", file=sys.stderr)
