@@ -155,7 +155,8 @@ fn an_asset_shows_each_channels_level_and_voxel_size() {
         assert_eq!(c["half_offset"], serde_json::json!([half, half, half]), "{c}");
         assert_eq!(c["levels"], serde_json::json!(levels), "{c}");
     }
-    let held: Vec<(u64, Vec<&str>)> = v["levels"].as_array().unwrap().iter().map(|l| (l["level"].as_u64().unwrap(), l["channels"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect())).collect();
+    let held: Vec<(u64, Vec<&str>)> =
+        v["levels"].as_array().unwrap().iter().map(|l| (l["level"].as_u64().unwrap(), l["channels"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect())).collect();
     let (fine, vel) = (vec!["density", "temperature"], vec!["vel.x", "vel.y", "vel.z"]);
     assert_eq!(held, [(0, fine.clone()), (1, fine), (2, vel.clone()), (3, vel)]);
     let text = String::from_utf8(ok(vdbcook(&["inspect", s(&asset)])).stdout).unwrap();

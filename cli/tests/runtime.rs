@@ -155,9 +155,15 @@ fn channels_at_their_own_voxels_in_rust_and_in_c() {
     }
     let dir = scratch_dir("runtime", "resolutions");
     let (c, _) = programs();
-    for (k, (scale, offset, flags)) in [("2", "0", &["--format", "f16", "--lods", "2", "--segment-frames", "2"][..]), ("4", "1", &["--format", "bc7", "--supercompress", "zstd"][..])].into_iter().enumerate() {
+    for (k, (scale, offset, flags)) in
+        [("2", "0", &["--format", "f16", "--lods", "2", "--segment-frames", "2"][..]), ("4", "1", &["--format", "bc7", "--supercompress", "zstd"][..])].into_iter().enumerate()
+    {
         let seq = dir.join(format!("pyro{k}"));
-        let made = Command::new("/usr/bin/python3").args(["scripts/make_pyro_sequence.py", s(&seq), "--frames", "3", "--size", "32", "--vel-scale", scale, "--offset", offset]).current_dir(root()).output().unwrap();
+        let made = Command::new("/usr/bin/python3")
+            .args(["scripts/make_pyro_sequence.py", s(&seq), "--frames", "3", "--size", "32", "--vel-scale", scale, "--offset", offset])
+            .current_dir(root())
+            .output()
+            .unwrap();
         assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
         let path = cook_into(&dir, &format!("p{k}.vpak"), &[s(&seq)], &[&["--grids", "density,temperature,vel"], flags].concat());
         same_as_validator(&path);

@@ -123,11 +123,8 @@ fn compare_case(dir: &std::path::Path, tag: &str, inputs: &[String], flags: &[&s
     }
     if flags.contains(&"--supercompress") {
         // The reader restored sections in every segment (not a file stored as it is).
-        let coded = python(&[
-            "-c",
-            "import sys; sys.path.insert(0, 'scripts'); import vpak_read as v; a = v.open_segments(sys.argv[1]); print(a.version, min(len(s.coding) for _, s in a.bodies))",
-            s(&asset),
-        ]);
+        let coded =
+            python(&["-c", "import sys; sys.path.insert(0, 'scripts'); import vpak_read as v; a = v.open_segments(sys.argv[1]); print(a.version, min(len(s.coding) for _, s in a.bodies))", s(&asset)]);
         let said = String::from_utf8_lossy(&coded.stdout);
         if !said.starts_with("10 ") || said.trim().ends_with(" 0") {
             return Err(format!("{flags:?}: not supercompressed in every segment (version, fewest records: {said}) {}", String::from_utf8_lossy(&coded.stderr)));
