@@ -27,29 +27,33 @@ As a module: `open_segments(path)` opens a version-6 to 10 file (every body vali
 every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
 `open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
+Modules beside it: vpak_metadata.py (the metadata records), vpak_decode.py (node masks,
+BC blocks, texture sizes), vpak_coding.py (supercompression).
 Dependencies (Debian): python3-numpy, python3-pil (BC7 blocks), python3-xxhash,
-python3-zstandard (version-8 and 9 assets with supercompressed sections).
+python3-zstandard (version-8 to 10 assets with supercompressed sections).
 Bad input exits with status 1 and one line `vpak_read.py: FILE: problem` on stderr.
 """
 
 import argparse
 import bisect
 import json
-import math
 import struct
 import sys
 
 import numpy as np
 
 from vpak_coding import K_CODING, CodingError, parse_records, restore
+from vpak_decode import (  # noqa: F401 (names the test scripts use as vpak_read.NAME)
+    BC4, BC7, CONSTANT, F16, F32, FORMAT_NAMES, FORMAT_RULES, L2_MASK_WORDS, L2_WORDS, L3_WORDS, RANGED, UNORM8, UNORM16,
+    decode_bc4, decode_bc7, l1_node_len, l1_starts, l3_active, slot_entries, slot_origin, texture_shape,
+)
+from vpak_metadata import (  # noqa: F401
+    BODY_VERSION, CODED_VERSION, DEFAULT_FPS, RESOLVED_VERSION, SEGMENTED_VERSION, TIMED_VERSION,
+    VpakError, channel_level, channel_transform, decode_metadata, fps, frame_numbers,
+)
 
 MAGIC = b"VPAK\r\n\x1a\n"
-BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION = 6, 7, 8, 9, 10
-DEFAULT_FPS = 24.0  # the frame rate of an asset that records none
 MAX_LEVELS = 5
-# Channel resolutions (version 10): a channel's level at most 3 (voxels 8 times the
-# asset's), its offset at most 8192 level-0 voxels (16384 half voxels).
-MAX_CHANNEL_LEVEL, MAX_HALF_OFFSET = 3, 2 * 8192
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
 CODED_ALIGN = 8  # the coding section and the sections it names (version 8)
@@ -58,48 +62,6 @@ CODED_ALIGN = 8  # the coding section and the sections it names (version 8)
 K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_RANGES, K_ATLAS, K_TABLE, K_CHANNEL_TABLE = range(1, 13)
 # Channel table entries: the plane's choice in bits 28..31, the plane brick below.
 CHOICE_SHIFT, PLANE_BRICK_MASK, MAX_ALTERNATES = 28, (1 << 28) - 1, 15
-
-L2_WORDS, L3_WORDS = 193, 3
-L2_MASK_WORDS = 128
-
-
-def l1_node_len(L):
-    """Words of an L1 node of 2^L slots per axis: L, mask, prefix counts, first entry."""
-    mask_words = (1 << (3 * L)) // 32
-    return 1 + mask_words + mask_words // 2 + 1
-
-
-def l1_starts(l1):
-    """The word each L1 node starts at (they differ in size); raises unless the array is whole nodes."""
-    starts, at = [], 0
-    while at < len(l1):
-        L = int(l1[at])
-        if not 2 <= L <= 5:
-            raise VpakError(f"L1 node at word {at} has L = {L} (need 2 to 5)")
-        starts.append(at)
-        at += l1_node_len(L)
-    if at != len(l1):
-        raise VpakError("L1 nodes are not whole")
-    return starts
-
-F32, F16, UNORM8, BC4, BC7, UNORM16, CONSTANT = range(7)
-FORMAT_NAMES = ["f32", "f16", "unorm8", "bc4", "bc7", "unorm16", "constant"]
-RANGED = (UNORM8, BC4, BC7, UNORM16)
-# Allowed (lanes, zpt) per format (format.md, planes table).
-FORMAT_RULES = {
-    F32: ({1, 2, 4}, {1}),
-    F16: ({1, 2, 4}, {1}),
-    UNORM8: ({1, 2, 4}, {1}),
-    BC4: ({1}, {1}),
-    BC7: ({4}, {1, 2, 4}),
-    UNORM16: ({1, 2, 4}, {1}),
-    CONSTANT: ({1}, {1}),
-}
-
-
-class VpakError(Exception):
-    """A problem with the input asset: reported as one line, never a traceback."""
-
 
 # ---------------------------------------------------------------------------
 # Header and section table
@@ -195,186 +157,6 @@ class Sections:
         if len(data) % 4:
             raise VpakError(f"section kind {kind} is not whole f32 words")
         return np.frombuffer(data, dtype="<f4")
-
-
-# ---------------------------------------------------------------------------
-# Metadata: bincode 2 standard configuration (varint integers, little-endian)
-# ---------------------------------------------------------------------------
-
-class Bincode:
-    def __init__(self, data):
-        self.data, self.pos = bytes(data), 0
-
-    def take(self, n):
-        if self.pos + n > len(self.data):
-            raise VpakError("metadata truncated")
-        out = self.data[self.pos:self.pos + n]
-        self.pos += n
-        return out
-
-    def uint(self):
-        # One byte below 251; else marker 251/252/253 then 2/4/8 little-endian bytes.
-        b = self.take(1)[0]
-        if b < 251:
-            return b
-        width = {251: 2, 252: 4, 253: 8}.get(b)
-        if width is None:
-            raise VpakError(f"metadata: bad varint marker {b}")
-        return int.from_bytes(self.take(width), "little")
-
-    def int(self):
-        z = self.uint()  # zigzag: 0, 1, 2, 3 -> 0, -1, 1, -2
-        return (z >> 1) ^ -(z & 1)
-
-    def f32(self):
-        return struct.unpack("<f", self.take(4))[0]
-
-    def f64(self):
-        return struct.unpack("<d", self.take(8))[0]
-
-    def string(self):
-        try:
-            return self.take(self.uint()).decode("utf-8")
-        except UnicodeDecodeError:
-            raise VpakError("metadata: string is not UTF-8") from None
-
-    def option(self, item):
-        tag = self.take(1)[0]
-        if tag > 1:
-            raise VpakError(f"metadata: bad Option tag {tag}")
-        return item() if tag else None
-
-    def vec(self, item):
-        return [item() for _ in range(self.uint())]
-
-    def array(self, item, n):
-        return [item() for _ in range(n)]
-
-
-def decode_metadata(data, version=RESOLVED_VERSION):
-    """The Metadata record, the Time record after it (version 9 on) and the channel
-    resolutions record after that (version 10)."""
-    r = Bincode(data)
-    m = {}
-    m["tool"] = r.string()
-    m["frame_count"] = r.uint()
-    m["map_type"] = r.string()
-    m["transform"] = r.array(lambda: r.array(r.f64, 4), 4)
-    m["index_offset"] = r.array(r.int, 3)
-    m["index_bbox"] = r.option(lambda: (r.array(r.int, 3), r.array(r.int, 3)))
-
-    def channel():
-        return {
-            "name": r.string(), "grid": r.string(), "component": r.option(r.uint),
-            "value_type": r.string(), "class": r.string(), "background": r.f32(),
-            "value_range": r.array(r.f32, 2), "group": r.uint(), "plane": r.uint(),
-            "lane": r.uint(), "alternates": r.vec(r.uint),
-        }
-
-    m["channels"] = r.vec(channel)
-    def plane():
-        # PlaneInfo { plane: Plane { format, lanes, z_per_texel }, bricks, atlases }, flattened.
-        pl = {"format": r.uint(), "lanes": r.uint(), "z_per_texel": r.uint()}
-        pl["bricks"] = r.uint()
-        pl["atlases"] = r.vec(lambda: {"bricks": r.array(r.uint, 3), "first_brick": r.uint(), "count": r.uint()})
-        return pl
-
-    m["planes"] = r.vec(plane)
-    m["brick_count"] = r.uint()
-    m["settings"] = r.vec(lambda: (r.string(), r.string()))
-    m["sources"] = r.vec(lambda: {"path": r.string(), "bytes": r.uint(), "xxh3_128": r.string()})
-    def level():
-        return {"active_voxels": r.uint(), "leaves": r.uint(), "tiles": r.uint()}
-
-    m["frames"] = r.vec(lambda: {"source": r.option(r.uint), "active_voxels": r.uint(),
-                                 "leaves": r.uint(), "tiles": r.uint(), "coarse": r.vec(level)})
-    m["levels"] = r.uint()
-    m["level_filters"] = r.vec(r.uint)
-    m["first_level"] = r.uint()
-    m["time"] = None
-    m["resolutions"] = None
-    if r.pos != len(r.data):
-        # Version 9: the Time record follows (format.md, "Time").
-        t = {"fps": r.f64(), "numbers": r.vec(r.int)}
-        if r.pos != len(r.data) and version in (BODY_VERSION, RESOLVED_VERSION):
-            # Version 10 (and a body of one on its own, a version-6 file): the channel
-            # resolutions record follows ("Channel resolutions").
-            m["resolutions"] = r.vec(lambda: {"level": r.uint(), "half_offset": r.array(r.int, 3)})
-            if r.pos != len(r.data):
-                raise VpakError(f"metadata has {len(r.data) - r.pos} bytes after the channel resolutions")
-            check_resolutions(m)
-        if r.pos != len(r.data):
-            raise VpakError(f"metadata has {len(r.data) - r.pos} bytes after the time record")
-        if not (math.isfinite(t["fps"]) and t["fps"] > 0):
-            raise VpakError(f"metadata: frame rate {t['fps']} is not a finite number above 0")
-        if len(t["numbers"]) != m["frame_count"]:
-            raise VpakError(f"metadata: {len(t['numbers'])} frame numbers for {m['frame_count']} frames")
-        if any(a >= b for a, b in zip(t["numbers"], t["numbers"][1:])):
-            raise VpakError("metadata: frame numbers do not increase")
-        m["time"] = t
-    return m
-
-
-def check_resolutions(m):
-    """The rules of format.md's "Channel resolutions" for the record's items."""
-    res, C = m["resolutions"], len(m["channels"])
-    if not res or len(res) != C:
-        raise VpakError(f"metadata: {len(res)} channel resolutions for {C} channels")
-    for c, x in enumerate(res):
-        if x["level"] > MAX_CHANNEL_LEVEL or x["level"] >= m["levels"]:
-            raise VpakError(f"metadata: channel {c} at level {x['level']} (at most {MAX_CHANNEL_LEVEL}, below the asset's {m['levels']} levels)")
-        if any(abs(h) > MAX_HALF_OFFSET for h in x["half_offset"]):
-            raise VpakError(f"metadata: channel {c}'s offset is more than {MAX_HALF_OFFSET // 2} voxels")
-    if min(x["level"] for x in res) != 0:
-        raise VpakError("metadata: no channel at level 0")
-    if m["first_level"] >= detail_levels(m):
-        raise VpakError(f"metadata: first stored level {m['first_level']} leaves the level-0 channels no level")
-
-
-def resolution(m, c):
-    """Channel c's (level, half_offset): level 0 and no offset without the record."""
-    res = m.get("resolutions")
-    return (res[c]["level"], res[c]["half_offset"]) if res else (0, [0, 0, 0])
-
-
-def detail_levels(m):
-    """D: the levels each channel has, counted from its own (`levels` less the coarsest channel's level)."""
-    res = m.get("resolutions")
-    return m["levels"] - (max(x["level"] for x in res) if res else 0)
-
-
-def channel_levels(m, c):
-    """The levels channel c is stored at: max(level_c, first_level) to level_c + D - 1."""
-    own = resolution(m, c)[0]
-    return range(max(own, m["first_level"]), own + detail_levels(m))
-
-
-def channel_level(m, c, lod=None):
-    """The level channel c is decoded at: its first stored one, or its stored one nearest `lod`."""
-    levels = channel_levels(m, c)
-    return levels[0] if lod is None else min(max(lod, levels[0]), levels[-1])
-
-
-def channel_transform(m, c, k):
-    """Index to world of channel c's voxels at level k (format.md, "Levels" and
-    "Channel resolutions"): rows 0-2 of `transform` times 2^k; row 3 plus
-    ((2^k - 1)/2 + half_offset/2) times rows 0-2."""
-    t = np.array(m["transform"], dtype=np.float64)
-    h = resolution(m, c)[1]
-    out = t.copy()
-    out[:3] = t[:3] * float(1 << k)
-    out[3] = t[3] + (float((1 << k) - 1) / 2.0) * (t[0] + t[1] + t[2])
-    out[3] = out[3] + (h[0] * t[0] + h[1] * t[1] + h[2] * t[2]) / 2.0
-    return out
-
-
-def frame_numbers(m):
-    """Each frame's source number: recorded (version 9), else 0, 1, ..."""
-    return m["time"]["numbers"] if m["time"] else list(range(m["frame_count"]))
-
-
-def fps(m):
-    return m["time"]["fps"] if m["time"] else DEFAULT_FPS
 
 
 # ---------------------------------------------------------------------------
@@ -514,68 +296,6 @@ def validate_plane(m, secs, p, pl):
 # Node walk
 # ---------------------------------------------------------------------------
 
-def occupied_slots(node, mask_words):
-    """Set bits s of the occupancy mask, with their ranks (entry offsets from `first`).
-
-    The stored prefix counts are what a GPU reader uses for constant-time lookup; here
-    every one is checked against the mask so a reader that trusts them reads the same.
-    """
-    mask = np.asarray(node[:mask_words], dtype=np.uint32)
-    bits = np.unpackbits(mask.view(np.uint8), bitorder="little")
-    slots = np.nonzero(bits)[0]
-    k = np.arange(mask_words)
-    words = np.asarray(node[mask_words + k // 2], dtype=np.uint32)
-    stored = (words >> (16 * (k % 2)).astype(np.uint32)) & 0xFFFF
-    counted = np.concatenate([[0], np.cumsum(bits.reshape(mask_words, 32).sum(axis=1))[:-1]])
-    if not np.array_equal(stored, counted):
-        raise VpakError("node prefix counts disagree with its occupancy mask")
-    # With the prefixes verified, the document's entry offset
-    # prefix(s / 32) + popcount(mask[s / 32] & ((1 << s % 32) - 1)) is the bit's rank.
-    return slots, np.arange(len(slots))
-
-
-def slot_entries(node, mask_words, entries, what):
-    slots, ranks = occupied_slots(node, mask_words)
-    first = int(node[-1])
-    idx = first + ranks
-    if len(idx) and idx[-1] >= len(entries):
-        raise VpakError(f"{what} entry index out of range")
-    return slots, entries[idx]
-
-
-def slot_origin(slots, L, shift):
-    """Slot s = (x << 2L) | (y << L) | z; its origin is (x, y, z) << shift voxels."""
-    m = (1 << L) - 1
-    return np.stack([(slots >> (2 * L)) & m, (slots >> L) & m, slots & m], axis=1).astype(np.int64) << shift
-
-
-def l3_active(l3, node_index):
-    """Active-voxel mask (512 bools, leaf order) of L3 node k, from states and sub-masks."""
-    base = 1 + L3_WORDS * node_index
-    states, first = int(l3[base + 1]), int(l3[base + 2])
-    active = np.zeros(512, dtype=bool)
-    x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
-    x, y, z = x.ravel(), y.ravel(), z.ravel()  # leaf order x*64 + y*8 + z
-    sub = (x // 4) * 4 + (y // 4) * 2 + z // 4
-    j = (x % 4) * 16 + (y % 4) * 4 + z % 4
-    r = 0
-    for b in range(8):
-        st = (states >> (2 * b)) & 3
-        sel = sub == b
-        if st == 1:
-            active[sel] = True
-        elif st == 2:
-            w0 = first + 2 * r
-            if w0 + 2 > len(l3):
-                raise VpakError("L3 sub-mask out of range")
-            bits = np.unpackbits(np.asarray(l3[w0:w0 + 2], dtype="<u4").view(np.uint8), bitorder="little")
-            active[sel] = bits[j[sel]].astype(bool)  # bit j%32 of word first+2r+j/32
-            r += 1
-        elif st == 3:
-            raise VpakError("L3 node has an invalid sub-block state")
-    return active
-
-
 def walk_frame(m, secs, frame, lod=None):
     """Walk a frame's L1 node and its L2 children.
 
@@ -638,66 +358,6 @@ def walk_frame(m, secs, frame, lod=None):
 # ---------------------------------------------------------------------------
 # Bricks: planes, atlases, texel addressing, block decoding and ranges
 # ---------------------------------------------------------------------------
-
-def decode_bc4(data, W, H, D):
-    """BC4 UNORM blocks to float32 levels in [0, 1], with the palette in float.
-
-    format.md: palette entries are the endpoints and their exact weighted means. The
-    document does not fix the float arithmetic; this order (endpoints e/255 in f32, then
-    ((7-k)*f0 + k*f1) / 7 in f32) was found by experiment to match `vdbcook unpack`
-    bit for bit; other orders differ by 1 ulp.
-    """
-    blocks = np.frombuffer(data, dtype=np.uint8).reshape(-1, 8)
-    f0 = (blocks[:, 0] / 255.0).astype(np.float32)
-    f1 = (blocks[:, 1] / 255.0).astype(np.float32)
-    eight = blocks[:, 0] > blocks[:, 1]  # e0 > e1: 8-level mode, else 6 levels + 0 and 1
-    pal = np.zeros((len(blocks), 8), dtype=np.float32)
-    pal[:, 0], pal[:, 1] = f0, f1
-    for k in range(1, 7):
-        mean = (np.float32(7 - k) * f0 + np.float32(k) * f1) / np.float32(7)
-        pal[:, 1 + k] = np.where(eight, mean, pal[:, 1 + k])
-    for k in range(1, 5):
-        mean = (np.float32(5 - k) * f0 + np.float32(k) * f1) / np.float32(5)
-        pal[:, 1 + k] = np.where(eight, pal[:, 1 + k], mean)
-    pal[:, 6] = np.where(eight, pal[:, 6], 0.0)
-    pal[:, 7] = np.where(eight, pal[:, 7], 1.0)
-    # 48 index bits after the endpoints, 3 bits per texel k = (Y%4)*4 + X%4 from bit 0.
-    bits = np.zeros(len(blocks), dtype=np.uint64)
-    for i in range(6):
-        bits |= blocks[:, 2 + i].astype(np.uint64) << np.uint64(8 * i)
-    shifts = np.arange(16, dtype=np.uint64) * np.uint64(3)
-    idx = ((bits[:, None] >> shifts[None, :]) & np.uint64(7)).astype(np.int64)
-    texels = np.take_along_axis(pal, idx, axis=1)
-    return blocks_to_texture(texels[:, :, None], W, H, D)
-
-
-def decode_bc7(data, W, H, D):
-    """BC7 UNORM to 8-bit RGBA lanes / 255 (Pillow's BCn decoder, slice by slice)."""
-    try:
-        from PIL import Image  # Debian python3-pil
-    except ImportError:
-        raise VpakError("cannot decode BC7: install python3-pil") from None
-    # Slices are stored one after another, blocks row-major: the same bytes form one
-    # W x (H*D) image, so one Pillow call decodes every slice.
-    img = Image.frombytes("RGBA", (W, H * D), bytes(data), "bcn", 7)
-    return np.asarray(img, dtype=np.uint8).reshape(D, H, W, 4).astype(np.float32) / np.float32(255)
-
-
-def blocks_to_texture(texels, W, H, D):
-    """(blocks, 16, lanes) in storage order -> (D, H, W, lanes) texel array."""
-    lanes = texels.shape[-1]
-    t = texels.reshape(D, H // 4, W // 4, 4, 4, lanes)  # k = row*4 + col
-    return t.transpose(0, 1, 3, 2, 4, 5).reshape(D, H, W, lanes)
-
-
-def texture_shape(pl, a):
-    """(W, H, D) texels of atlas a of plane `pl`, and its bytes (format.md, "Validation")."""
-    bx, by, bz = pl["atlases"][a]["bricks"]
-    W, H, D = 8 * bx, 8 * by, (8 // pl["z_per_texel"]) * bz
-    if pl["format"] in (BC4, BC7):
-        return W, H, D, (W // 4) * (H // 4) * D * (8 if pl["format"] == BC4 else 16)
-    return W, H, D, W * H * D * pl["lanes"] * {F32: 4, F16: 2, UNORM8: 1, UNORM16: 2}[pl["format"]]
-
 
 def load_plane_texture(secs, m, p, a):
     """Plane p of atlas a as a float32 array [z, y, x, lane] of levels or values."""
