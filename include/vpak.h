@@ -170,6 +170,27 @@ uint32_t vpak_channel_count(const vpak_reader *reader);
  * vpak_close); NULL past the last channel. */
 const char *vpak_channel_name(const vpak_reader *reader, uint32_t channel);
 
+/* Where a channel's voxels are (format version 10, docs/format.md "Channel
+ * resolutions"; an older asset has every channel at level 0, offset 0).
+ * *level: the level of detail whose voxels are the channel's own (0: the
+ * asset's voxel size; k: voxels 2^k times as wide, at most 3); half_offset[3]:
+ * its voxel centres minus those of that level's voxels, in half level-0
+ * voxels per axis. Either out pointer may be NULL. */
+vpak_status vpak_channel_resolution(const vpak_reader *reader, uint32_t channel, uint32_t *level, int32_t *half_offset);
+
+/* The levels a channel is stored at: *first_level to *end_level - 1 (its own
+ * level, or the asset's first stored level if that is coarser, and its levels
+ * of detail). At any other level its bricks and tiles hold only its
+ * background: do not sample it there. Either out pointer may be NULL. */
+vpak_status vpak_channel_levels(const vpak_reader *reader, uint32_t channel, uint32_t *first_level, uint32_t *end_level);
+
+/* The index-to-world matrix of a channel's voxels at `level` (one of
+ * vpak_channel_levels'), row by row into matrix[16] (row-vector convention,
+ * as vpak_transform): voxel i of the level's source index space is centred at
+ * world [i j k 1] * M. VPAK_ERROR_ARGUMENT for a level the channel is not
+ * stored at. */
+vpak_status vpak_channel_transform(const vpak_reader *reader, uint32_t channel, uint32_t level, double *matrix);
+
 /* A segment's index offset (source index = segment index + offset), into offset[3]. */
 vpak_status vpak_segment_index_offset(const vpak_reader *reader, uint32_t segment, int32_t *offset);
 

@@ -67,7 +67,7 @@ def make_file(bodies, version=8):
 
 def bodies_of(data):
     """The bodies of a segmented file, as the segment table places them (not validated)."""
-    _, table = v.read_table(memoryview(data), (7, 8, 9), "file")
+    _, table = v.read_table(memoryview(data), (7, 8, 9, 10), "file")
     return [bytes(data[e[2]:e[2] + e[3]]) for e in table]
 
 
@@ -126,7 +126,7 @@ def check_restores(vdbcook, work, flags):
     """A vdbcook zstd asset restores exactly the sections of the same asset uncompressed."""
     packed = cook(vdbcook, work, "z", ["--supercompress", "zstd", *flags])
     plain = recompress(vdbcook, work, packed, "none")
-    assert struct.unpack_from("<I", packed, 8)[0] == 9
+    assert struct.unpack_from("<I", packed, 8)[0] == 10
     z, p = same_asset(packed, plain)
     filters = set()
     for (mz, sz), (_, sp), body in zip(z.bodies, p.bodies, bodies_of(packed)):

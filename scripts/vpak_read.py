@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (versions 9, 8, 7 and 6).
+"""Independent reader for vdbcook's `.vpak` volume asset format (versions 10, 9, 8, 7 and 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -12,35 +12,47 @@ frame's active voxels (every active voxel of every L3 node and every voxel of ev
 tile), sorted by i, then j, then k, at the asset's first stored level (0, the frame
 itself, unless the cook left finer levels out). With `--lod K`, the frame's level K, in
 that level's index space (level index = level asset index + index_offset >> K). `--json` prints a summary of the metadata.
-Frame N of a version-7, 8 or 9 file is read from its segment's body alone; a version-8 or 9
+A version-10 asset may store a channel at its own, coarser voxels (format.md, "Channel
+resolutions"): each channel is then decoded at its own first stored level (with `--lod
+K`, its stored level nearest K), and OUT.npz also holds per channel `C.level` (the
+level it was decoded at) and `C.transform` (4 x 4 float64, index to world of its
+voxels there, its half-voxel offset included; every asset gets these two).
+Frame N of a version-7 to 10 file is read from its segment's body alone; a version-8 to 10
 body's supercompressed sections are restored (scripts/vpak_coding.py) before use.
 `--source-frame S` reads the frame whose source frame number is S (version 9 records
 each frame's number; older assets number their frames from 0). `--json` gives `fps` and
 `frame_numbers` too (24 and 0, 1, ... when the asset records none).
 
-As a module: `open_segments(path)` opens a version-6, 7, 8 or 9 file (every body validated,
+As a module: `open_segments(path)` opens a version-6 to 10 file (every body validated,
 every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
 `open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
+Modules beside it: vpak_metadata.py (the metadata records), vpak_decode.py (node masks,
+BC blocks, texture sizes), vpak_coding.py (supercompression).
 Dependencies (Debian): python3-numpy, python3-pil (BC7 blocks), python3-xxhash,
-python3-zstandard (version-8 and 9 assets with supercompressed sections).
+python3-zstandard (version-8 to 10 assets with supercompressed sections).
 Bad input exits with status 1 and one line `vpak_read.py: FILE: problem` on stderr.
 """
 
 import argparse
 import bisect
 import json
-import math
 import struct
 import sys
 
 import numpy as np
 
 from vpak_coding import K_CODING, CodingError, parse_records, restore
+from vpak_decode import (  # noqa: F401 (names the test scripts use as vpak_read.NAME)
+    BC4, BC7, CONSTANT, F16, F32, FORMAT_NAMES, FORMAT_RULES, L2_MASK_WORDS, L2_WORDS, L3_WORDS, RANGED, UNORM8, UNORM16,
+    decode_bc4, decode_bc7, l1_node_len, l1_starts, l3_active, slot_entries, slot_origin, texture_shape,
+)
+from vpak_metadata import (  # noqa: F401
+    BODY_VERSION, CODED_VERSION, DEFAULT_FPS, RESOLVED_VERSION, SEGMENTED_VERSION, TIMED_VERSION,
+    VpakError, channel_level, channel_transform, decode_metadata, fps, frame_numbers,
+)
 
 MAGIC = b"VPAK\r\n\x1a\n"
-BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION = 6, 7, 8, 9
-DEFAULT_FPS = 24.0  # the frame rate of an asset that records none
 MAX_LEVELS = 5
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
@@ -50,48 +62,6 @@ CODED_ALIGN = 8  # the coding section and the sections it names (version 8)
 K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_RANGES, K_ATLAS, K_TABLE, K_CHANNEL_TABLE = range(1, 13)
 # Channel table entries: the plane's choice in bits 28..31, the plane brick below.
 CHOICE_SHIFT, PLANE_BRICK_MASK, MAX_ALTERNATES = 28, (1 << 28) - 1, 15
-
-L2_WORDS, L3_WORDS = 193, 3
-L2_MASK_WORDS = 128
-
-
-def l1_node_len(L):
-    """Words of an L1 node of 2^L slots per axis: L, mask, prefix counts, first entry."""
-    mask_words = (1 << (3 * L)) // 32
-    return 1 + mask_words + mask_words // 2 + 1
-
-
-def l1_starts(l1):
-    """The word each L1 node starts at (they differ in size); raises unless the array is whole nodes."""
-    starts, at = [], 0
-    while at < len(l1):
-        L = int(l1[at])
-        if not 2 <= L <= 5:
-            raise VpakError(f"L1 node at word {at} has L = {L} (need 2 to 5)")
-        starts.append(at)
-        at += l1_node_len(L)
-    if at != len(l1):
-        raise VpakError("L1 nodes are not whole")
-    return starts
-
-F32, F16, UNORM8, BC4, BC7, UNORM16, CONSTANT = range(7)
-FORMAT_NAMES = ["f32", "f16", "unorm8", "bc4", "bc7", "unorm16", "constant"]
-RANGED = (UNORM8, BC4, BC7, UNORM16)
-# Allowed (lanes, zpt) per format (format.md, planes table).
-FORMAT_RULES = {
-    F32: ({1, 2, 4}, {1}),
-    F16: ({1, 2, 4}, {1}),
-    UNORM8: ({1, 2, 4}, {1}),
-    BC4: ({1}, {1}),
-    BC7: ({4}, {1, 2, 4}),
-    UNORM16: ({1, 2, 4}, {1}),
-    CONSTANT: ({1}, {1}),
-}
-
-
-class VpakError(Exception):
-    """A problem with the input asset: reported as one line, never a traceback."""
-
 
 # ---------------------------------------------------------------------------
 # Header and section table
@@ -187,123 +157,6 @@ class Sections:
         if len(data) % 4:
             raise VpakError(f"section kind {kind} is not whole f32 words")
         return np.frombuffer(data, dtype="<f4")
-
-
-# ---------------------------------------------------------------------------
-# Metadata: bincode 2 standard configuration (varint integers, little-endian)
-# ---------------------------------------------------------------------------
-
-class Bincode:
-    def __init__(self, data):
-        self.data, self.pos = bytes(data), 0
-
-    def take(self, n):
-        if self.pos + n > len(self.data):
-            raise VpakError("metadata truncated")
-        out = self.data[self.pos:self.pos + n]
-        self.pos += n
-        return out
-
-    def uint(self):
-        # One byte below 251; else marker 251/252/253 then 2/4/8 little-endian bytes.
-        b = self.take(1)[0]
-        if b < 251:
-            return b
-        width = {251: 2, 252: 4, 253: 8}.get(b)
-        if width is None:
-            raise VpakError(f"metadata: bad varint marker {b}")
-        return int.from_bytes(self.take(width), "little")
-
-    def int(self):
-        z = self.uint()  # zigzag: 0, 1, 2, 3 -> 0, -1, 1, -2
-        return (z >> 1) ^ -(z & 1)
-
-    def f32(self):
-        return struct.unpack("<f", self.take(4))[0]
-
-    def f64(self):
-        return struct.unpack("<d", self.take(8))[0]
-
-    def string(self):
-        try:
-            return self.take(self.uint()).decode("utf-8")
-        except UnicodeDecodeError:
-            raise VpakError("metadata: string is not UTF-8") from None
-
-    def option(self, item):
-        tag = self.take(1)[0]
-        if tag > 1:
-            raise VpakError(f"metadata: bad Option tag {tag}")
-        return item() if tag else None
-
-    def vec(self, item):
-        return [item() for _ in range(self.uint())]
-
-    def array(self, item, n):
-        return [item() for _ in range(n)]
-
-
-def decode_metadata(data):
-    r = Bincode(data)
-    m = {}
-    m["tool"] = r.string()
-    m["frame_count"] = r.uint()
-    m["map_type"] = r.string()
-    m["transform"] = r.array(lambda: r.array(r.f64, 4), 4)
-    m["index_offset"] = r.array(r.int, 3)
-    m["index_bbox"] = r.option(lambda: (r.array(r.int, 3), r.array(r.int, 3)))
-
-    def channel():
-        return {
-            "name": r.string(), "grid": r.string(), "component": r.option(r.uint),
-            "value_type": r.string(), "class": r.string(), "background": r.f32(),
-            "value_range": r.array(r.f32, 2), "group": r.uint(), "plane": r.uint(),
-            "lane": r.uint(), "alternates": r.vec(r.uint),
-        }
-
-    m["channels"] = r.vec(channel)
-    def plane():
-        # PlaneInfo { plane: Plane { format, lanes, z_per_texel }, bricks, atlases }, flattened.
-        pl = {"format": r.uint(), "lanes": r.uint(), "z_per_texel": r.uint()}
-        pl["bricks"] = r.uint()
-        pl["atlases"] = r.vec(lambda: {"bricks": r.array(r.uint, 3), "first_brick": r.uint(), "count": r.uint()})
-        return pl
-
-    m["planes"] = r.vec(plane)
-    m["brick_count"] = r.uint()
-    m["settings"] = r.vec(lambda: (r.string(), r.string()))
-    m["sources"] = r.vec(lambda: {"path": r.string(), "bytes": r.uint(), "xxh3_128": r.string()})
-    def level():
-        return {"active_voxels": r.uint(), "leaves": r.uint(), "tiles": r.uint()}
-
-    m["frames"] = r.vec(lambda: {"source": r.option(r.uint), "active_voxels": r.uint(),
-                                 "leaves": r.uint(), "tiles": r.uint(), "coarse": r.vec(level)})
-    m["levels"] = r.uint()
-    m["level_filters"] = r.vec(r.uint)
-    m["first_level"] = r.uint()
-    m["time"] = None
-    if r.pos != len(r.data):
-        # Version 9: the Time record follows (format.md, "Time").
-        t = {"fps": r.f64(), "numbers": r.vec(r.int)}
-        if r.pos != len(r.data):
-            raise VpakError(f"metadata has {len(r.data) - r.pos} bytes after the time record")
-        if not (math.isfinite(t["fps"]) and t["fps"] > 0):
-            raise VpakError(f"metadata: frame rate {t['fps']} is not a finite number above 0")
-        if len(t["numbers"]) != m["frame_count"]:
-            raise VpakError(f"metadata: {len(t['numbers'])} frame numbers for {m['frame_count']} frames")
-        if any(a >= b for a, b in zip(t["numbers"], t["numbers"][1:])):
-            raise VpakError("metadata: frame numbers do not increase")
-        m["time"] = t
-    return m
-
-
-def frame_numbers(m):
-    """Each frame's source number: recorded (version 9), else 0, 1, ..."""
-    return m["time"]["numbers"] if m["time"] else list(range(m["frame_count"]))
-
-
-def fps(m):
-    return m["time"]["fps"] if m["time"] else DEFAULT_FPS
 
 
 # ---------------------------------------------------------------------------
@@ -443,68 +296,6 @@ def validate_plane(m, secs, p, pl):
 # Node walk
 # ---------------------------------------------------------------------------
 
-def occupied_slots(node, mask_words):
-    """Set bits s of the occupancy mask, with their ranks (entry offsets from `first`).
-
-    The stored prefix counts are what a GPU reader uses for constant-time lookup; here
-    every one is checked against the mask so a reader that trusts them reads the same.
-    """
-    mask = np.asarray(node[:mask_words], dtype=np.uint32)
-    bits = np.unpackbits(mask.view(np.uint8), bitorder="little")
-    slots = np.nonzero(bits)[0]
-    k = np.arange(mask_words)
-    words = np.asarray(node[mask_words + k // 2], dtype=np.uint32)
-    stored = (words >> (16 * (k % 2)).astype(np.uint32)) & 0xFFFF
-    counted = np.concatenate([[0], np.cumsum(bits.reshape(mask_words, 32).sum(axis=1))[:-1]])
-    if not np.array_equal(stored, counted):
-        raise VpakError("node prefix counts disagree with its occupancy mask")
-    # With the prefixes verified, the document's entry offset
-    # prefix(s / 32) + popcount(mask[s / 32] & ((1 << s % 32) - 1)) is the bit's rank.
-    return slots, np.arange(len(slots))
-
-
-def slot_entries(node, mask_words, entries, what):
-    slots, ranks = occupied_slots(node, mask_words)
-    first = int(node[-1])
-    idx = first + ranks
-    if len(idx) and idx[-1] >= len(entries):
-        raise VpakError(f"{what} entry index out of range")
-    return slots, entries[idx]
-
-
-def slot_origin(slots, L, shift):
-    """Slot s = (x << 2L) | (y << L) | z; its origin is (x, y, z) << shift voxels."""
-    m = (1 << L) - 1
-    return np.stack([(slots >> (2 * L)) & m, (slots >> L) & m, slots & m], axis=1).astype(np.int64) << shift
-
-
-def l3_active(l3, node_index):
-    """Active-voxel mask (512 bools, leaf order) of L3 node k, from states and sub-masks."""
-    base = 1 + L3_WORDS * node_index
-    states, first = int(l3[base + 1]), int(l3[base + 2])
-    active = np.zeros(512, dtype=bool)
-    x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
-    x, y, z = x.ravel(), y.ravel(), z.ravel()  # leaf order x*64 + y*8 + z
-    sub = (x // 4) * 4 + (y // 4) * 2 + z // 4
-    j = (x % 4) * 16 + (y % 4) * 4 + z % 4
-    r = 0
-    for b in range(8):
-        st = (states >> (2 * b)) & 3
-        sel = sub == b
-        if st == 1:
-            active[sel] = True
-        elif st == 2:
-            w0 = first + 2 * r
-            if w0 + 2 > len(l3):
-                raise VpakError("L3 sub-mask out of range")
-            bits = np.unpackbits(np.asarray(l3[w0:w0 + 2], dtype="<u4").view(np.uint8), bitorder="little")
-            active[sel] = bits[j[sel]].astype(bool)  # bit j%32 of word first+2r+j/32
-            r += 1
-        elif st == 3:
-            raise VpakError("L3 node has an invalid sub-block state")
-    return active
-
-
 def walk_frame(m, secs, frame, lod=None):
     """Walk a frame's L1 node and its L2 children.
 
@@ -567,66 +358,6 @@ def walk_frame(m, secs, frame, lod=None):
 # ---------------------------------------------------------------------------
 # Bricks: planes, atlases, texel addressing, block decoding and ranges
 # ---------------------------------------------------------------------------
-
-def decode_bc4(data, W, H, D):
-    """BC4 UNORM blocks to float32 levels in [0, 1], with the palette in float.
-
-    format.md: palette entries are the endpoints and their exact weighted means. The
-    document does not fix the float arithmetic; this order (endpoints e/255 in f32, then
-    ((7-k)*f0 + k*f1) / 7 in f32) was found by experiment to match `vdbcook unpack`
-    bit for bit; other orders differ by 1 ulp.
-    """
-    blocks = np.frombuffer(data, dtype=np.uint8).reshape(-1, 8)
-    f0 = (blocks[:, 0] / 255.0).astype(np.float32)
-    f1 = (blocks[:, 1] / 255.0).astype(np.float32)
-    eight = blocks[:, 0] > blocks[:, 1]  # e0 > e1: 8-level mode, else 6 levels + 0 and 1
-    pal = np.zeros((len(blocks), 8), dtype=np.float32)
-    pal[:, 0], pal[:, 1] = f0, f1
-    for k in range(1, 7):
-        mean = (np.float32(7 - k) * f0 + np.float32(k) * f1) / np.float32(7)
-        pal[:, 1 + k] = np.where(eight, mean, pal[:, 1 + k])
-    for k in range(1, 5):
-        mean = (np.float32(5 - k) * f0 + np.float32(k) * f1) / np.float32(5)
-        pal[:, 1 + k] = np.where(eight, pal[:, 1 + k], mean)
-    pal[:, 6] = np.where(eight, pal[:, 6], 0.0)
-    pal[:, 7] = np.where(eight, pal[:, 7], 1.0)
-    # 48 index bits after the endpoints, 3 bits per texel k = (Y%4)*4 + X%4 from bit 0.
-    bits = np.zeros(len(blocks), dtype=np.uint64)
-    for i in range(6):
-        bits |= blocks[:, 2 + i].astype(np.uint64) << np.uint64(8 * i)
-    shifts = np.arange(16, dtype=np.uint64) * np.uint64(3)
-    idx = ((bits[:, None] >> shifts[None, :]) & np.uint64(7)).astype(np.int64)
-    texels = np.take_along_axis(pal, idx, axis=1)
-    return blocks_to_texture(texels[:, :, None], W, H, D)
-
-
-def decode_bc7(data, W, H, D):
-    """BC7 UNORM to 8-bit RGBA lanes / 255 (Pillow's BCn decoder, slice by slice)."""
-    try:
-        from PIL import Image  # Debian python3-pil
-    except ImportError:
-        raise VpakError("cannot decode BC7: install python3-pil") from None
-    # Slices are stored one after another, blocks row-major: the same bytes form one
-    # W x (H*D) image, so one Pillow call decodes every slice.
-    img = Image.frombytes("RGBA", (W, H * D), bytes(data), "bcn", 7)
-    return np.asarray(img, dtype=np.uint8).reshape(D, H, W, 4).astype(np.float32) / np.float32(255)
-
-
-def blocks_to_texture(texels, W, H, D):
-    """(blocks, 16, lanes) in storage order -> (D, H, W, lanes) texel array."""
-    lanes = texels.shape[-1]
-    t = texels.reshape(D, H // 4, W // 4, 4, 4, lanes)  # k = row*4 + col
-    return t.transpose(0, 1, 3, 2, 4, 5).reshape(D, H, W, lanes)
-
-
-def texture_shape(pl, a):
-    """(W, H, D) texels of atlas a of plane `pl`, and its bytes (format.md, "Validation")."""
-    bx, by, bz = pl["atlases"][a]["bricks"]
-    W, H, D = 8 * bx, 8 * by, (8 // pl["z_per_texel"]) * bz
-    if pl["format"] in (BC4, BC7):
-        return W, H, D, (W // 4) * (H // 4) * D * (8 if pl["format"] == BC4 else 16)
-    return W, H, D, W * H * D * pl["lanes"] * {F32: 4, F16: 2, UNORM8: 1, UNORM16: 2}[pl["format"]]
-
 
 def load_plane_texture(secs, m, p, a):
     """Plane p of atlas a as a float32 array [z, y, x, lane] of levels or values."""
@@ -713,8 +444,26 @@ def brick_values(m, secs, bricks):
 # ---------------------------------------------------------------------------
 
 def read_frame(m, secs, frame, lod=None):
-    """Per-channel (ijk int32 n x 3, values float32 n), sorted by i, j, k (source space of the level)."""
-    lod = m["first_level"] if lod is None else lod
+    """Per-channel (ijk int32 n x 3, values float32 n), sorted by i, j, k (source space of
+    the level), each channel at `channel_level(m, c, lod)`: without channel resolutions,
+    every channel at `lod` (default: the first stored level)."""
+    if lod is not None and not m["first_level"] <= lod < m["levels"]:
+        raise VpakError(f"level {lod} is not stored (asset has levels {m['first_level']} to {m['levels'] - 1})")
+    want = [channel_level(m, c, lod) for c in range(len(m["channels"]))]
+    # One walk per level some channel is taken from; a channel is never read at a level
+    # where it is absent (its bricks there hold only its background).
+    trees = {k: read_level(m, secs, frame, k) for k in sorted(set(want))}
+    return {ch["name"]: (trees[want[c]][0], trees[want[c]][1][:, c]) for c, ch in enumerate(m["channels"])}
+
+
+def placement(m, lod=None):
+    """Per channel (level it is decoded at, its 4 x 4 index-to-world transform there)."""
+    return [(k, channel_transform(m, c, k)) for c, k in ((c, channel_level(m, c, lod)) for c in range(len(m["channels"])))]
+
+
+def read_level(m, secs, frame, lod):
+    """The frame's tree at stored level `lod`: (ijk int32 n x 3 sorted by i, j, k, in the
+    level's source index space; values float32 n x C, every channel)."""
     C = len(m["channels"])
     tile_parts, leaf_parts = walk_frame(m, secs, frame, lod)
     ijk_parts, val_parts = [], []
@@ -760,7 +509,7 @@ def read_frame(m, secs, frame, lod=None):
     ijk, vals = ijk[order].astype(np.int32), vals[order].astype(np.float32)
     if len(ijk) > 1 and not np.any(np.diff(ijk, axis=0) != 0, axis=1).all():
         raise VpakError(f"frame {frame} covers a voxel twice")
-    return {ch["name"]: (ijk, vals[:, c]) for c, ch in enumerate(m["channels"])}
+    return ijk, vals
 
 
 def summary(m):
@@ -776,14 +525,15 @@ def summary(m):
 # ---------------------------------------------------------------------------
 
 # Equal in every segment (format.md, "Segments"; `background` bit for bit); the rest is per segment.
-SHARED = ("tool", "settings", "map_type", "transform", "levels", "first_level", "level_filters")
+SHARED = ("tool", "settings", "map_type", "transform", "levels", "first_level", "level_filters", "resolutions")
 SHARED_CHANNEL = ("name", "grid", "component", "value_type", "class", "group")
 
 
-def open_body(buf, head_sum=None, coded=False):
+def open_body(buf, head_sum=None, coded=False, version=BODY_VERSION):
     """(metadata, sections) of a body validated as a version-6 file, every checksum verified;
     `head_sum`: the segment table's checksum of its header and section table; `coded`: a
-    version-8 body, whose supercompressed sections are restored and checked here."""
+    version-8 body, whose supercompressed sections are restored and checked here;
+    `version`: the file's (a version-10 file's metadata may record channel resolutions)."""
     secs = Sections(buf, read_header(buf))
     if head_sum is not None and xxh3_64(buf[:HEADER_SIZE + 32 * len(secs.table)]) != head_sum:
         raise VpakError("its header and section table are not the ones the segment table names")
@@ -806,7 +556,7 @@ def open_body(buf, head_sum=None, coded=False):
     for (kind, index), (offset, _, _) in secs.table.items():
         if kind != K_CODING and (kind, index) not in secs.coding and offset % SECTION_ALIGN:
             raise VpakError(f"section kind {kind} index {index} is not at a 256-byte boundary")
-    m = decode_metadata(secs.get(K_METADATA))
+    m = decode_metadata(secs.get(K_METADATA), version)
     validate(m, secs)
     return m, secs
 
@@ -876,12 +626,12 @@ def merged(metas):
 
 
 class Asset:
-    """A version-6, 7 or 8 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
+    """A version-6 to 10 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
     and `bodies` [(metadata, sections)] per segment (frames numbered from 0 in each), `meta`
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
     def __init__(self, buf):
-        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION), "file")
+        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION), "file")
         if self.version == BODY_VERSION:
             self.bodies = [open_body(buf)]
             self.meta = self.bodies[0][0]
@@ -891,7 +641,7 @@ class Asset:
         self.table, self.bodies = table, []
         for s, (_, count, offset, size, head_sum) in enumerate(table):
             try:
-                m, secs = open_body(buf[offset:offset + size], head_sum, self.version >= CODED_VERSION)
+                m, secs = open_body(buf[offset:offset + size], head_sum, self.version >= CODED_VERSION, self.version)
                 if m["frame_count"] != count:
                     raise VpakError(f"its metadata has {m['frame_count']} frames, the segment table {count}")
             except VpakError as e:
@@ -929,7 +679,7 @@ class Asset:
 
 
 def open_segments(path):
-    """A version-6, 7 or 8 file as an `Asset`, every body validated (and restored)."""
+    """A version-6 to 10 file as an `Asset`, every body validated (and restored)."""
     try:
         with open(path, "rb") as f:
             buf = memoryview(f.read())
@@ -939,7 +689,7 @@ def open_segments(path):
 
 
 def open_asset(path):
-    """(metadata, sections) of a file of one body: version 6, or version 7 or 8 of one segment."""
+    """(metadata, sections) of a file of one body: version 6, or version 7 to 10 of one segment."""
     a = open_segments(path)
     if len(a.bodies) != 1:
         raise VpakError(f"the asset has {len(a.bodies)} segments: read it with open_segments")
@@ -966,8 +716,9 @@ def main(argv=None):
             chans = asset.read_frame(0 if frame is None else frame, args.lod)
             if args.out:
                 arrays = {}
-                for name, (ijk, vals) in chans.items():
+                for (name, (ijk, vals)), (level, transform) in zip(chans.items(), placement(asset.meta, args.lod)):
                     arrays[f"{name}.ijk"], arrays[f"{name}.values"] = ijk, vals
+                    arrays[f"{name}.level"], arrays[f"{name}.transform"] = np.int32(level), transform
                 np.savez(args.out, **arrays)
     except VpakError as e:
         print(f"vpak_read.py: {args.asset}: {e}", file=sys.stderr)

@@ -7,6 +7,30 @@ use vdbcook_vpak::coding::Coding;
 use vdbcook_vpak::nodes::{l1_records, l3_node_count, L2_WORDS};
 use vdbcook_vpak::{kind, Asset, AtlasLayout, Checked};
 
+/// "0.1", or "0.1×0.1×0.2" for voxels that are not cubes: channel `c`'s own voxel edge
+/// in world units (to six decimals, so 2 × 0.1 reads 0.2).
+fn voxel_size_text(meta: &vdbcook_vpak::Metadata, c: usize) -> String {
+    let v = meta.channel_voxel_size(c).map(|v| format!("{}", (v * 1e6).round() / 1e6));
+    if v[0] == v[1] && v[1] == v[2] {
+        v[0].clone()
+    } else {
+        v.join("×")
+    }
+}
+
+/// "density, temperature, vel": the channels stored at `level`, a vec3 grid's three by its name.
+fn channels_at(meta: &vdbcook_vpak::Metadata, level: u32) -> Vec<String> {
+    let mut names: Vec<String> = Vec::new();
+    for (c, ch) in meta.channels.iter().enumerate().filter(|(c, _)| meta.channel_levels(*c).contains(&level)) {
+        let whole = ch.component.is_some() && meta.channels.iter().enumerate().filter(|(o, x)| x.grid == ch.grid && x.component.is_some() && meta.channel_levels(*o).contains(&level)).count() == 3;
+        let name = if whole { ch.grid.clone() } else { meta.channels[c].name.clone() };
+        if !names.contains(&name) {
+            names.push(name);
+        }
+    }
+    names
+}
+
 pub enum Described {
     Text(String),
     Json(Value),
@@ -145,6 +169,8 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
                 "name": c.name, "grid": c.grid, "component": c.component, "value_type": c.value_type, "class": c.class,
                 "background": super::num32(c.background), "value_range": c.value_range.map(super::num32), "group": c.group, "plane": c.plane, "lane": c.lane,
                 "alternates": c.alternates, "format": channel_formats(i), "bytes": channel_bytes(i),
+                "level": meta.resolution(i).level, "voxel_size": meta.channel_voxel_size(i), "half_offset": meta.resolution(i).half_offset,
+                "levels": meta.channel_levels(i).collect::<Vec<_>>(),
             })).collect::<Vec<_>>(),
             "bricks": meta.brick_count,
             "planes": meta.planes.iter().zip(&plane_bytes).enumerate().map(|(i, (p, b))| json!({
@@ -169,7 +195,8 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
                 "coarse": f.coarse.iter().map(|c| json!({"active_voxels": c.active_voxels, "leaves": c.leaves, "tiles": c.tiles})).collect::<Vec<_>>()})).collect::<Vec<_>>(),
             "first_level": meta.first_level,
             "level_filters": meta.level_filters.iter().map(|f| f.name()).collect::<Vec<_>>(),
-            "levels": levels.iter().map(|&(k, l, t, a, b)| json!({"level": k, "voxel_scale": 1u64 << k, "leaves": l, "tiles": t, "active_voxels": a, "bytes": b})).collect::<Vec<_>>(),
+            "levels": levels.iter().map(|&(k, l, t, a, b)| json!({"level": k, "voxel_scale": 1u64 << k, "leaves": l, "tiles": t, "active_voxels": a, "bytes": b,
+                "channels": meta.channels.iter().enumerate().filter(|(c, _)| meta.channel_levels(*c).contains(&k)).map(|(_, ch)| ch.name.clone()).collect::<Vec<_>>()})).collect::<Vec<_>>(),
         })));
     }
     use std::fmt::Write;
@@ -203,20 +230,33 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         file_bytes as f64 / gpu_bytes.max(1) as f64,
         if bodies.iter().any(|b| b.sections.iter().any(|x| x.2.is_some())) { ", supercompressed" } else { "" }
     );
-    let _ = writeln!(s, "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} background", "channel", "format", "plane", "bytes", "class", "values");
+    let _ = writeln!(s, "  {:<16} {:<8} {:>3} {:>8} {:>6} {:>12}  {:<12} {:<24} background", "channel", "format", "lod", "voxel", "plane", "bytes", "class", "values");
     for (i, c) in meta.channels.iter().enumerate() {
         let planes = meta.channel_planes(i).iter().map(|p| p.to_string()).collect::<Vec<_>>().join(",");
         let _ = writeln!(
             s,
-            "  {:<16} {:<8} {:>6} {:>12}  {:<12} {:<24} {}",
+            "  {:<16} {:<8} {:>3} {:>8} {:>6} {:>12}  {:<12} {:<24} {}",
             c.name,
             channel_formats(i),
+            meta.resolution(i).level,
+            voxel_size_text(meta, i),
             if c.alternates.is_empty() { format!("{}.{}", c.plane, c.lane) } else { planes },
             channel_bytes(i),
             c.class,
             format!("[{}, {}]", c.value_range[0], c.value_range[1]),
             c.background
         );
+    }
+    // Channels whose voxel centres sit off their level's (grids that share an origin with the finest).
+    let mut offsets: Vec<(vdbcook_vpak::Resolution, Vec<&str>)> = Vec::new();
+    for (i, c) in meta.channels.iter().enumerate().filter(|(i, _)| meta.resolution(*i).half_offset != [0; 3]) {
+        match offsets.iter_mut().find(|(r, _)| *r == meta.resolution(i)) {
+            Some((_, names)) => names.push(&c.name),
+            None => offsets.push((meta.resolution(i), vec![&c.name])),
+        }
+    }
+    for (r, names) in &offsets {
+        let _ = writeln!(s, "  offset         {}: centres {:?} voxels from level {}'s", names.join(", "), r.offset(), r.level);
     }
     let _ = writeln!(s, "  {:<12} {:>10} {:>14}", "level", "count", "bytes");
     for (n, c, b) in nodes {
@@ -225,11 +265,15 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     if meta.levels > 1 {
         let filters: Vec<&str> = meta.level_filters.iter().map(|f| f.name()).collect();
         let stored = if meta.first_level > 0 { format!(", {} stored (finer ones left out to fit a byte budget)", meta.stored_levels_text()) } else { String::new() };
-        let _ = writeln!(s, "  levels of detail: {}{stored} (filters: {}); bytes: what a level needs on its own", meta.levels, filters.join(", "));
-        let _ = writeln!(s, "  {:<5} {:>6} {:>10} {:>8} {:>14} {:>14} {:>9}", "lod", "voxel", "leaves", "tiles", "active voxels", "bytes", format!("of lod {}", meta.first_level));
+        let own = match meta.is_multi_resolution() {
+            true => format!(" trees, {} from each channel's own voxels", meta.detail_levels()),
+            false => String::new(),
+        };
+        let _ = writeln!(s, "  levels of detail: {}{own}{stored} (filters: {}); bytes: what a level needs on its own", meta.levels, filters.join(", "));
+        let _ = writeln!(s, "  {:<5} {:>6} {:>10} {:>8} {:>14} {:>14} {:>9}  channels", "lod", "voxel", "leaves", "tiles", "active voxels", "bytes", format!("of lod {}", meta.first_level));
         let base = levels.first().map_or(1, |l| l.4.max(1));
         for &(k, l, t, a, b) in &levels {
-            let _ = writeln!(s, "  {k:<5} {:>6} {l:>10} {t:>8} {a:>14} {b:>14} {:>8.1}%", format!("{}x", 1u64 << k), b as f64 * 100.0 / base as f64);
+            let _ = writeln!(s, "  {k:<5} {:>6} {l:>10} {t:>8} {a:>14} {b:>14} {:>8.1}%  {}", format!("{}x", 1u64 << k), b as f64 * 100.0 / base as f64, channels_at(meta, k).join(", "));
         }
     }
     if table.len() > 1 {

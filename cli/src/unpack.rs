@@ -20,7 +20,8 @@ pub struct UnpackArgs {
     pub source_frame: Option<i64>,
     /// Level of detail to decode (0: the frame itself; k: voxels 2^k times as large, in the
     /// level's index space, with a transform to match). Default: the asset's finest level (0
-    /// unless `cook --max-bytes` left finer ones out).
+    /// unless `cook --max-bytes` left finer ones out). A channel stored at its own, coarser
+    /// voxels (format v10) is written at its stored level nearest K (default: its own).
     #[arg(long, value_name = "K")]
     pub lod: Option<vdbcook_vpak::Level>,
     /// The .vdb file to write: one float grid per scalar channel and one vec3s grid per
@@ -40,14 +41,18 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
     crate::refuse_existing(&args.output, args.force)?;
     let asset = vdbcook_vpak::Asset::open(&args.asset).with_context(|| name.clone())?;
     let meta = asset.metadata().with_context(|| name.clone())?;
-    let lod = args.lod.map_or(meta.first_level, vdbcook_vpak::Level::get);
+    let lod = args.lod.map(vdbcook_vpak::Level::get);
+    if let Some(why) = lod.and_then(|k| meta.missing_level(k)) {
+        return Err(anyhow::anyhow!("{name}: {why}"));
+    }
     let by_number = args.source_frame.map(|n| meta.frame_by_number(n).map_err(|e| anyhow::anyhow!("{name}: {e}"))).transpose()?;
     let frame = match (args.frame.or(by_number), meta.frame_count) {
         (Some(f), _) => f,
         (None, 1) => 0,
         (None, n) => return Err(crate::Usage(format!("{name} has {n} frames: say which with --frame N (0 to {})", n.saturating_sub(1))).into()),
     };
-    let grids = vdbcook_cook::unpack_level(&asset, frame, lod).with_context(|| name.clone())?;
+    // Each channel at its own stored level nearest the one asked for, on its own transform.
+    let grids = vdbcook_cook::unpack_near(&asset, frame, lod).with_context(|| name.clone())?;
     // Scalar channels become float grids; the x, y, z channels of a vec3 grid one vec3s grid again.
     let mut out: Vec<WriteGrid> = Vec::new();
     let mut done = vec![false; grids.len()];
@@ -80,7 +85,12 @@ pub fn run(args: UnpackArgs, quiet: bool) -> Result<u8> {
             (st.active_voxels, st.leaf_count)
         });
         let what = if out.len() == 1 { "1 grid".to_string() } else { format!("{} grids", out.len()) };
-        let level = if lod > 0 { format!(" at level {lod}") } else { String::new() };
+        let levels: Vec<u32> = (0..meta.channels.len()).map(|c| meta.channel_level_near(c, lod.unwrap_or(0))).collect();
+        let level = match (meta.is_multi_resolution(), lod.unwrap_or(meta.first_level)) {
+            (true, _) => format!(" at levels {}", levels.iter().map(u32::to_string).collect::<Vec<_>>().join(",")),
+            (false, 0) => String::new(),
+            (false, k) => format!(" at level {k}"),
+        };
         crate::emit_final(&format!(
             "wrote frame {} (source frame {}){level} of {} to {} ({what}, {voxels} active voxels, {leaves} leaves)\n",
             frame,

@@ -126,3 +126,58 @@ fn human_output_names_each_grid() {
     assert!(text.contains("active voxels"), "{text}");
     assert!(text.contains("OpenVDB file version 224"), "{text}");
 }
+
+/// Channels at their own voxel size (format v10): each channel's level, voxel
+/// size, offset and stored levels, in JSON and in text, and which channels each
+/// level of detail holds; an asset of one voxel size has every channel at level 0.
+#[test]
+fn an_asset_shows_each_channels_level_and_voxel_size() {
+    if !oracle_available() {
+        return;
+    }
+    let dir = scratch_dir("inspect", "resolutions");
+    let seq = dir.join("pyro");
+    // vel at four times the density's voxels, its origin half a density voxel off.
+    let made = std::process::Command::new("/usr/bin/python3")
+        .args(["scripts/make_pyro_sequence.py", s(&seq), "--frames", "2", "--size", "32", "--vel-scale", "4", "--offset", "1"])
+        .current_dir(root())
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let asset = cook_into(&dir, "p.vpak", &[s(&seq)], &["--grids", "density,temperature,vel", "--format", "f16", "--lods", "2"]);
+    let v = inspect(&asset);
+    let ch = |name: &str| v["channels"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap().clone();
+    for (name, level, size, half, levels) in [("density", 0, 0.1, 0, [0, 1]), ("temperature", 0, 0.1, 0, [0, 1]), ("vel.y", 2, 0.4, -2, [2, 3])] {
+        let c = ch(name);
+        assert_eq!(c["level"], level, "{c}");
+        assert!(c["voxel_size"].as_array().unwrap().iter().all(|x| (x.as_f64().unwrap() - size).abs() < 1e-12), "{c}");
+        // vel's voxel j is centred at 0.4·j + 0.05, level 2's at 0.4·j + 0.15: one density voxel (two halves) before.
+        assert_eq!(c["half_offset"], serde_json::json!([half, half, half]), "{c}");
+        assert_eq!(c["levels"], serde_json::json!(levels), "{c}");
+    }
+    let held: Vec<(u64, Vec<&str>)> =
+        v["levels"].as_array().unwrap().iter().map(|l| (l["level"].as_u64().unwrap(), l["channels"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect())).collect();
+    let (fine, vel) = (vec!["density", "temperature"], vec!["vel.x", "vel.y", "vel.z"]);
+    assert_eq!(held, [(0, fine.clone()), (1, fine), (2, vel.clone()), (3, vel)]);
+    let text = String::from_utf8(ok(vdbcook(&["inspect", s(&asset)])).stdout).unwrap();
+    // Channel rows: name, format, lod, voxel, ...
+    let row = |name: &str| text.lines().map(|l| l.split_whitespace().collect::<Vec<_>>()).find(|w| w.first() == Some(&name)).unwrap_or_else(|| panic!("no row {name}: {text}"));
+    assert_eq!(row("density")[1..4], ["f16", "0", "0.1"], "{text}");
+    assert_eq!(row("vel.z")[1..4], ["f16", "2", "0.4"], "{text}");
+    assert!(text.contains("\n  offset         vel.x, vel.y, vel.z: centres [-1.0, -1.0, -1.0] voxels from level 2's\n"), "{text}");
+    // The levels of detail say which channels each level holds (a vec3 grid by its name).
+    let lods: Vec<&str> = text.lines().skip_while(|l| !l.trim_start().starts_with("lod ")).skip(1).take(4).collect();
+    assert_eq!(lods.len(), 4, "{text}");
+    for (l, want) in lods.iter().zip(["density, temperature", "density, temperature", "vel", "vel"]) {
+        assert!(l.ends_with(&format!("%  {want}")), "{l}\n{text}");
+    }
+    // One voxel size: every channel at level 0, each level holding every channel.
+    let plain = cook_into(&dir, "plain.vpak", &[s(&root().join("fixtures/smoke_seq"))], &["--lods", "2"]);
+    let v = inspect(&plain);
+    for c in v["channels"].as_array().unwrap() {
+        assert_eq!((c["level"].as_u64(), &c["half_offset"], &c["levels"]), (Some(0), &serde_json::json!([0, 0, 0]), &serde_json::json!([0, 1])), "{c}");
+        assert_eq!(c["voxel_size"][0].as_f64().unwrap(), v["transform"][0][0].as_f64().unwrap().abs(), "{c}");
+    }
+    assert!(v["levels"].as_array().unwrap().iter().all(|l| l["channels"].as_array().unwrap().len() == v["channels"].as_array().unwrap().len()), "{v}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -25,7 +25,13 @@ fn expected_dump(asset: &Asset, reader: &Reader) -> String {
     }
     out += "\n";
     for (c, ch) in meta.channels.iter().enumerate() {
-        out += &format!("channel {c} {}\n", ch.name);
+        let (r, levels) = (meta.resolution(c), meta.channel_levels(c));
+        let [x, y, z] = r.half_offset;
+        out += &format!("channel {c} {} {} {x} {y} {z} {} {}\nvoxels {c}", ch.name, r.level, levels.start, levels.end);
+        for v in meta.channel_transform(c, levels.start).iter().flatten() {
+            out += &format!(" {v:.6}");
+        }
+        out += "\n";
     }
     for f in 0..asset.frame_count().unwrap() {
         let (s, local) = asset.locate(f).unwrap();
@@ -135,6 +141,50 @@ fn runtime_reader_and_c_abi_read_what_the_validator_reads() {
         let want = expected_dump(&Asset::open(&path).unwrap(), &Reader::open(&path).unwrap());
         assert_eq!(String::from_utf8_lossy(&out.stdout), want, "{flags:?}: the C ABI read other bytes");
     });
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Channels at their own voxel size (format v10): the C ABI gives each channel's level,
+/// offset, stored levels and transform as the Rust reader does, on a pyro-style
+/// sequence whose `vel` has voxels twice (and four times, half a voxel off) the
+/// density's.
+#[test]
+fn channels_at_their_own_voxels_in_rust_and_in_c() {
+    if !oracle_available() {
+        return;
+    }
+    let dir = scratch_dir("runtime", "resolutions");
+    let (c, _) = programs();
+    for (k, (scale, offset, flags)) in
+        [("2", "0", &["--format", "f16", "--lods", "2", "--segment-frames", "2"][..]), ("4", "1", &["--format", "bc7", "--supercompress", "zstd"][..])].into_iter().enumerate()
+    {
+        let seq = dir.join(format!("pyro{k}"));
+        let made = Command::new("/usr/bin/python3")
+            .args(["scripts/make_pyro_sequence.py", s(&seq), "--frames", "3", "--size", "32", "--vel-scale", scale, "--offset", offset])
+            .current_dir(root())
+            .output()
+            .unwrap();
+        assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+        let path = cook_into(&dir, &format!("p{k}.vpak"), &[s(&seq)], &[&["--grids", "density,temperature,vel"], flags].concat());
+        same_as_validator(&path);
+        let reader = Reader::open(&path).unwrap();
+        let meta = reader.metadata();
+        assert!(meta.is_multi_resolution());
+        let level = if scale == "2" { 1 } else { 2 };
+        let vel = meta.channels.iter().position(|ch| ch.name == "vel.x").unwrap();
+        assert_eq!(meta.resolution(vel).level, level);
+        assert_eq!(meta.channel_levels(0).start, 0);
+        // vel's voxels are `scale` times the density's, centred where the source put them.
+        let t = meta.channel_transform(vel, level);
+        // make_pyro_sequence.py moves vel's origin by `offset` half density voxels (0.05 each).
+        let shift = if offset == "1" { 0.05 } else { 0.0 };
+        assert!((t[0][0] - 0.1 * f64::from(1u32 << level)).abs() < 1e-12 && (t[3][0] - shift).abs() < 1e-12, "{t:?}");
+        let out = run(c, &path);
+        assert!(out.status.success(), "{flags:?}: vpak_dump failed: {}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(text, expected_dump(&Asset::open(&path).unwrap(), &reader), "{flags:?}: the C ABI said otherwise");
+        assert!(text.contains(&format!("\nchannel {vel} vel.x {level} ")), "{text}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

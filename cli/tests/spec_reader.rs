@@ -3,7 +3,9 @@
 //! decodes every channel of every frame of assets in each format and packing,
 //! and gives the values `vdbcook unpack` writes (read back by OpenVDB), voxel
 //! by voxel, over the same active voxels; version-8 assets with supercompressed
-//! sections included (the reader restores them from the page's "Supercompression").
+//! sections included (the reader restores them from the page's "Supercompression"),
+//! and version-10 assets whose channels have voxels of their own ("Channel
+//! resolutions"), each channel on its own transform.
 
 mod common;
 use common::*;
@@ -98,75 +100,155 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
         (vec![wide], vec!["--format", "bc4", "--lods", "3", "--supercompress", "zstd"]),
     ];
     let dir = scratch();
-    let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |(k, (inputs, flags))| -> Result<usize, String> {
-        let asset = dir.join(format!("a{k}.vpak"));
-        let mut args = vec!["cook", "-q", "--force", "-o", s(&asset)];
-        args.extend(flags.iter().copied());
-        args.extend(inputs.iter().map(String::as_str));
-        let r = vdbcook(&args);
-        if !r.status.success() {
-            return Err(format!("{flags:?}: cook failed: {}", String::from_utf8_lossy(&r.stderr)));
-        }
-        if flags.contains(&"--supercompress") {
-            // The reader restored sections in every segment (not a file stored as it is).
-            let coded = python(&[
-                "-c",
-                "import sys; sys.path.insert(0, 'scripts'); import vpak_read as v; a = v.open_segments(sys.argv[1]); print(a.version, min(len(s.coding) for _, s in a.bodies))",
-                s(&asset),
-            ]);
-            let said = String::from_utf8_lossy(&coded.stdout);
-            if !said.starts_with("9 ") || said.trim().ends_with(" 0") {
-                return Err(format!("{flags:?}: not supercompressed in every segment (version, fewest records: {said}) {}", String::from_utf8_lossy(&coded.stderr)));
-            }
-        }
-        let meta: serde_json::Value = serde_json::from_slice(&vdbcook(&["inspect", "--json", s(&asset)]).stdout).unwrap();
-        let meta = &meta["files"][0];
-        let mut compared = 0;
-        for frame in 0..meta["frames"].as_u64().unwrap() {
-            let (npz, vdb) = (dir.join(format!("a{k}-{frame}.npz")), dir.join(format!("a{k}-{frame}.vdb")));
-            let out = python(&["scripts/vpak_read.py", s(&asset), "--frame", &frame.to_string(), "--out", s(&npz)]);
-            if !out.status.success() {
-                return Err(format!("{flags:?} frame {frame}: vpak_read.py failed: {}", String::from_utf8_lossy(&out.stderr)));
-            }
-            let r = vdbcook(&["unpack", "-q", "--force", s(&asset), "--frame", &frame.to_string(), "-o", s(&vdb)]);
-            if !r.status.success() {
-                return Err(format!("{flags:?} frame {frame}: unpack failed: {}", String::from_utf8_lossy(&r.stderr)));
-            }
-            let out = python(&["cli/tests/spec_reader_check.py", s(&npz), s(&vdb)]);
-            if !out.status.success() {
-                return Err(format!("{flags:?} frame {frame}: the comparison failed: {}", String::from_utf8_lossy(&out.stderr)));
-            }
-            let cmp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-            for ch in meta["channels"].as_array().unwrap() {
-                let name = ch["name"].as_str().unwrap();
-                let c = &cmp[name];
-                let n = c["voxels"].as_u64().ok_or(format!("{flags:?} frame {frame}: the reader gave no channel {name}"))?;
-                // The same active voxels: every voxel the reader gives is active in
-                // the unpacked grid, and the unpacked grid has no others.
-                if c["active_in_unpacked"].as_u64() != Some(n) || c["unpacked_active_voxels"].as_u64() != Some(n) {
-                    return Err(format!("{flags:?} frame {frame} {name}: reader {n} voxels, unpacked {} active of them, {} in all", c["active_in_unpacked"], c["unpacked_active_voxels"]));
-                }
-                // BC4 may be decoded to 8 bits by the reader's library (half a level of
-                // the brick's range, at most the channel's); everything else exactly,
-                // up to float rounding.
-                let range = ch["value_range"][1].as_f64().unwrap() - ch["value_range"][0].as_f64().unwrap();
-                let top = ch["value_range"][0].as_f64().unwrap().abs().max(ch["value_range"][1].as_f64().unwrap().abs());
-                let tol = if ch["format"].as_str().is_some_and(|f| f.split('+').any(|f| f == "bc4")) { range / 255.0 * 0.5 + 1e-6 } else { top * 1e-6 + 1e-7 };
-                let diff = c["max_diff"].as_f64().unwrap();
-                if diff > tol {
-                    return Err(format!("{flags:?} frame {frame} {name} ({}): values differ by {diff} (tolerance {tol})", ch["format"]));
-                }
-                compared += n as usize;
-            }
-        }
-        Ok(compared)
-    });
+    let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |(k, (inputs, flags))| compare_case(&dir, &format!("a{k}"), inputs, flags, None));
     let mut total = 0;
     for r in results {
         total += r.unwrap();
     }
     let _ = std::fs::remove_dir_all(&dir);
     assert!(total > 500_000, "{total} values compared");
+}
+
+/// Cooks `inputs` with `flags` into `dir/TAG.vpak`, then per frame decodes it with the
+/// spec-only reader and with `vdbcook unpack` (at `lod`, when given) and compares them
+/// voxel by voxel, each channel's transform too. The values compared, or what differed.
+fn compare_case(dir: &std::path::Path, tag: &str, inputs: &[String], flags: &[&str], lod: Option<u32>) -> Result<usize, String> {
+    let asset = dir.join(format!("{tag}.vpak"));
+    let mut args = vec!["cook", "-q", "--force", "-o", s(&asset)];
+    args.extend(flags.iter().copied());
+    args.extend(inputs.iter().map(String::as_str));
+    let r = vdbcook(&args);
+    if !r.status.success() {
+        return Err(format!("{flags:?}: cook failed: {}", String::from_utf8_lossy(&r.stderr)));
+    }
+    if flags.contains(&"--supercompress") {
+        // The reader restored sections in every segment (not a file stored as it is).
+        let coded =
+            python(&["-c", "import sys; sys.path.insert(0, 'scripts'); import vpak_read as v; a = v.open_segments(sys.argv[1]); print(a.version, min(len(s.coding) for _, s in a.bodies))", s(&asset)]);
+        let said = String::from_utf8_lossy(&coded.stdout);
+        if !said.starts_with("10 ") || said.trim().ends_with(" 0") {
+            return Err(format!("{flags:?}: not supercompressed in every segment (version, fewest records: {said}) {}", String::from_utf8_lossy(&coded.stderr)));
+        }
+    }
+    let meta: serde_json::Value = serde_json::from_slice(&vdbcook(&["inspect", "--json", s(&asset)]).stdout).unwrap();
+    let meta = &meta["files"][0];
+    let lod_args: Vec<String> = lod.map(|k| vec!["--lod".to_string(), k.to_string()]).unwrap_or_default();
+    let lod_args: Vec<&str> = lod_args.iter().map(String::as_str).collect();
+    let mut compared = 0;
+    for frame in 0..meta["frames"].as_u64().unwrap() {
+        let (npz, vdb) = (dir.join(format!("{tag}-{frame}.npz")), dir.join(format!("{tag}-{frame}.vdb")));
+        let out = python(&[&["scripts/vpak_read.py", s(&asset), "--frame", &frame.to_string(), "--out", s(&npz)], &lod_args[..]].concat());
+        if !out.status.success() {
+            return Err(format!("{flags:?} frame {frame}: vpak_read.py failed: {}", String::from_utf8_lossy(&out.stderr)));
+        }
+        let r = vdbcook(&[&["unpack", "-q", "--force", s(&asset), "--frame", &frame.to_string(), "-o", s(&vdb)], &lod_args[..]].concat());
+        if !r.status.success() {
+            return Err(format!("{flags:?} frame {frame}: unpack failed: {}", String::from_utf8_lossy(&r.stderr)));
+        }
+        let out = python(&["cli/tests/spec_reader_check.py", s(&npz), s(&vdb)]);
+        if !out.status.success() {
+            return Err(format!("{flags:?} frame {frame}: the comparison failed: {}", String::from_utf8_lossy(&out.stderr)));
+        }
+        let cmp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        for ch in meta["channels"].as_array().unwrap() {
+            let name = ch["name"].as_str().unwrap();
+            let c = &cmp[name];
+            let n = c["voxels"].as_u64().ok_or(format!("{flags:?} frame {frame}: the reader gave no channel {name}"))?;
+            // The same active voxels: every voxel the reader gives is active in
+            // the unpacked grid, and the unpacked grid has no others.
+            if c["active_in_unpacked"].as_u64() != Some(n) || c["unpacked_active_voxels"].as_u64() != Some(n) {
+                return Err(format!("{flags:?} frame {frame} {name}: reader {n} voxels, unpacked {} active of them, {} in all", c["active_in_unpacked"], c["unpacked_active_voxels"]));
+            }
+            // The same voxels in the world: the reader's transform of the channel (its level and offset) is the unpacked grid's.
+            if c["transform_diff"].as_f64().is_none_or(|d| d > 1e-9) {
+                return Err(format!("{flags:?} frame {frame} {name}: the reader's transform (level {}) differs from the unpacked grid's by {}", c["level"], c["transform_diff"]));
+            }
+            // BC4 may be decoded to 8 bits by the reader's library (half a level of
+            // the brick's range, at most the channel's); everything else exactly,
+            // up to float rounding.
+            let range = ch["value_range"][1].as_f64().unwrap() - ch["value_range"][0].as_f64().unwrap();
+            let top = ch["value_range"][0].as_f64().unwrap().abs().max(ch["value_range"][1].as_f64().unwrap().abs());
+            let tol = if ch["format"].as_str().is_some_and(|f| f.split('+').any(|f| f == "bc4")) { range / 255.0 * 0.5 + 1e-6 } else { top * 1e-6 + 1e-7 };
+            let diff = c["max_diff"].as_f64().unwrap();
+            if diff > tol {
+                return Err(format!("{flags:?} frame {frame} {name} ({}): values differ by {diff} (tolerance {tol})", ch["format"]));
+            }
+            compared += n as usize;
+        }
+    }
+    Ok(compared)
+}
+
+/// A pyro-style sequence of three frames (scripts/make_pyro_sequence.py): density and
+/// temperature at voxel size 0.1, `vel` at its own, coarser voxels.
+fn pyro(dir: &std::path::Path, tag: &str, flags: &[&str]) -> String {
+    let out = dir.join(tag);
+    let r = python(&[&["scripts/make_pyro_sequence.py", s(&out), "--frames", "3", "--size", "32"], flags].concat());
+    assert!(r.status.success(), "make_pyro_sequence.py {flags:?}: {}", String::from_utf8_lossy(&r.stderr));
+    out.display().to_string()
+}
+
+#[test]
+fn the_spec_only_reader_decodes_channels_at_their_own_voxels() {
+    if !reader_available() {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("vdbcook-spec-multi-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // vel at twice the voxels of density, sharing its origin; four times, half a
+    // density voxel off; twice, a whole density voxel off the other way.
+    let (p2, p4, p2o) = (pyro(&dir, "p2", &[]), pyro(&dir, "p4", &["--vel-scale", "4", "--offset", "1"]), pyro(&dir, "p2o", &["--offset", "-2"]));
+    let g = ["--grids", "density,temperature,vel"];
+    let cases: Vec<(&String, Vec<&str>, Option<u32>)> = vec![
+        (&p2, vec!["--format", "f32"], None),
+        (&p2, vec!["--format", "f16"], None),
+        (&p2, vec!["--format", "unorm8"], None),
+        (&p2, vec!["--format", "unorm16"], None),
+        (&p2, vec!["--format", "bc4"], None),
+        (&p2, vec!["--format", "bc7"], None),
+        (&p2, vec!["--max-error", "0.01"], None),
+        (&p2, vec!["--format", "unorm8", "--group", "density,vel=bc7"], None),
+        // Levels of detail: each channel at its first stored level, and at its stored level nearest K.
+        (&p2, vec!["--format", "f16", "--lods", "2"], None),
+        (&p2, vec!["--format", "f16", "--lods", "2"], Some(1)),
+        (&p2, vec!["--format", "f16", "--lods", "2"], Some(2)),
+        // Finer levels left out to fit a byte budget (first_level 1).
+        (&p2o, vec!["--format", "f16", "--lods", "3", "--max-bytes", "300000"], None),
+        (&p2, vec!["--format", "bc7", "--segment-frames", "2", "--supercompress", "zstd"], None),
+        (&p4, vec!["--format", "f32", "--segment-frames", "1"], None),
+        (&p4, vec!["--format", "bc4", "--lods", "2", "--supercompress", "zstd"], Some(1)),
+        (&p2o, vec!["--format", "f32"], None),
+        (&p2o, vec!["--max-error", "0.004", "--lods", "2", "--segment-frames", "2", "--supercompress", "zstd:19"], Some(1)),
+    ];
+    let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |(k, (input, flags, lod))| {
+        let flags = [&g[..], flags].concat();
+        compare_case(&dir, &format!("m{k}"), &[(*input).clone()], &flags, *lod)
+    });
+    let mut total = 0;
+    for r in results {
+        total += r.unwrap();
+    }
+    assert!(total > 100_000, "{total} values compared");
+    // The f32 round trip through unpack and OpenVDB: every grid exact at its own
+    // voxels (active where the source is, the source's value wherever it is active),
+    // on the source grid's transform.
+    // Cases 0, 13 and 15 are the f32 assets; their unpacked frames are still there.
+    for (input, tag) in [(&p2, "m0"), (&p4, "m13"), (&p2o, "m15")] {
+        for frame in 0..3 {
+            let vdb = dir.join(format!("{tag}-{frame}.vdb"));
+            let source = format!("{input}/pyro_{:04}.vdb", frame + 1);
+            let out = python(&["cli/tests/spec_reader_check.py", "--source", &source, s(&vdb)]);
+            assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+            let cmp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            for grid in ["density", "temperature", "vel"] {
+                let c = &cmp[grid];
+                assert!(c["source_active"].as_u64().unwrap() > 0, "{source} {grid}: {c}");
+                assert_eq!((c["not_active"].as_u64(), c["max_diff"].as_f64(), c["other_values"].as_u64()), (Some(0), Some(0.0), Some(0)), "{source} {grid}: {c}");
+                assert!(c["transform_diff"].as_f64().unwrap() <= 1e-9, "{source} {grid}: {c}");
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Files built and damaged in Python from what vdbcook cooks: segmented files

@@ -13,7 +13,10 @@
  *     fps FPS                                      (%.6f)
  *     levels FIRST_LEVEL LEVELS
  *     transform M00 M01 ... M33                    (index to world, %.6f)
- *     channel C NAME                               (every channel)
+ *     channel C NAME LEVEL HX HY HZ FIRST END      (every channel: its own level, its
+ *                                                  offset in half voxels, the levels
+ *                                                  FIRST to END - 1 it is stored at)
+ *     voxels C M00 M01 ... M33                     (its index to world at level FIRST, %.6f)
  *     frame F SEGMENT FRAME_IN_SEGMENT NUMBER      (every frame; NUMBER: in the source sequence)
  *     segment S FIRST_FRAME FRAME_COUNT SECTIONS   (every segment, then:)
  *     offset X Y Z                                 (its index offset)
@@ -149,10 +152,22 @@ int main(int argc, char **argv) {
         printf(" %.6f", m[i]);
     }
     printf("\n");
-    for (uint32_t c = 0; c < vpak_channel_count(r); c++) {
-        printf("channel %u %s\n", c, vpak_channel_name(r, c));
-    }
     int status = 0;
+    for (uint32_t c = 0; c < vpak_channel_count(r) && status == 0; c++) {
+        uint32_t level, first, end;
+        int32_t h[3];
+        double v[16];
+        if (vpak_channel_resolution(r, c, &level, h) != VPAK_OK || vpak_channel_levels(r, c, &first, &end) != VPAK_OK ||
+            vpak_channel_transform(r, c, first, v) != VPAK_OK) {
+            status = fail("channel");
+            break;
+        }
+        printf("channel %u %s %u %d %d %d %u %u\nvoxels %u", c, vpak_channel_name(r, c), level, h[0], h[1], h[2], first, end, c);
+        for (int i = 0; i < 16; i++) {
+            printf(" %.6f", v[i]);
+        }
+        printf("\n");
+    }
     for (uint32_t f = 0; f < frames && status == 0; f++) {
         uint32_t s, local, back;
         int64_t number;

@@ -499,3 +499,80 @@ pub unsafe extern "C" fn vpak_frame_of_number(r: *const VpakReader, number: i64,
         Ok(())
     })
 }
+
+/// Channel `channel` of `r`'s metadata, or an argument failure naming `what`.
+fn channel_of(r: &Reader, channel: u32, what: &str) -> Result<usize, Failure> {
+    let n = r.metadata().channels.len();
+    match (channel as usize) < n {
+        true => Ok(channel as usize),
+        false => Err(argument(format!("{what}: channel {channel} is out of range (the asset has {n})"))),
+    }
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; `level` is null or valid for a write;
+/// `half_offset` is null or valid for 3 writes.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_channel_resolution(r: *const VpakReader, channel: u32, level: *mut u32, half_offset: *mut i32) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let r = unsafe { reader(r) }?;
+        let res = r.metadata().resolution(channel_of(r, channel, "vpak_channel_resolution")?);
+        // SAFETY: the caller's promise.
+        unsafe { put(level, res.level) };
+        if !half_offset.is_null() {
+            for (i, h) in res.half_offset.iter().enumerate() {
+                // SAFETY: i < 3, the caller's promise.
+                unsafe { half_offset.add(i).write(*h) };
+            }
+        }
+        Ok(())
+    })
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; each out pointer is null or valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_channel_levels(r: *const VpakReader, channel: u32, first_level: *mut u32, end_level: *mut u32) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let r = unsafe { reader(r) }?;
+        let levels = r.metadata().channel_levels(channel_of(r, channel, "vpak_channel_levels")?);
+        // SAFETY: the caller's promise.
+        unsafe {
+            put(first_level, levels.start);
+            put(end_level, levels.end);
+        }
+        Ok(())
+    })
+}
+
+/// See include/vpak.h.
+///
+/// # Safety
+/// `r` is null or an open reader; `matrix` is null or valid for 16 writes.
+#[no_mangle]
+pub unsafe extern "C" fn vpak_channel_transform(r: *const VpakReader, channel: u32, level: u32, matrix: *mut f64) -> i32 {
+    guard(|| {
+        // SAFETY: the caller's promise.
+        let r = unsafe { reader(r) }?;
+        let c = channel_of(r, channel, "vpak_channel_transform")?;
+        let meta = r.metadata();
+        let levels = meta.channel_levels(c);
+        if !levels.contains(&level) {
+            return Err(argument(format!("vpak_channel_transform: channel {channel} is not stored at level {level} (its levels: {} to {})", levels.start, levels.end.saturating_sub(1))));
+        }
+        if matrix.is_null() {
+            return Err(argument("vpak_channel_transform: a null matrix"));
+        }
+        for (i, v) in meta.channel_transform(c, level).iter().flatten().enumerate() {
+            // SAFETY: i < 16, the caller's promise.
+            unsafe { matrix.add(i).write(*v) };
+        }
+        Ok(())
+    })
+}
