@@ -419,7 +419,7 @@ impl Asset {
             }
             return segments::merged(&metas);
         }
-        Metadata::from_bytes(self.section(kind::METADATA, 0)?)
+        Metadata::from_bytes_of(self.section(kind::METADATA, 0)?, self.version)
     }
 
     /// Validates every segment ([`Checked`]) and returns the whole sequence's metadata.

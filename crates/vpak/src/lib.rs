@@ -366,6 +366,17 @@ impl Metadata {
         Ok(m)
     }
 
+    /// [`Metadata::from_bytes`] of a body of a file of version `version`:
+    /// channel resolutions are refused in a version-7, 8 or 9 file (a body
+    /// read on its own, as a version-6 file, keeps its record).
+    pub fn from_bytes_of(b: &[u8], version: u32) -> Result<Metadata, Error> {
+        let m = Metadata::from_bytes(b)?;
+        match (segments::VERSION_7..segments::VERSION).contains(&version) && !m.resolutions.is_empty() {
+            true => Err(Error::Metadata(format!("channel resolutions in a version-{version} file (they are version {})", segments::VERSION))),
+            false => Ok(m),
+        }
+    }
+
     /// Frame `f`'s number in the source sequence (`f` itself when the asset records none).
     pub fn frame_number(&self, f: usize) -> i64 {
         self.time.as_ref().and_then(|t| t.numbers.get(f).copied()).unwrap_or(f as i64)

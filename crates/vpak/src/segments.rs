@@ -587,6 +587,20 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn channel_resolutions_are_refused_before_version_10() {
+        let mut m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        m.time = Some(crate::Time { fps: 24.0, numbers: vec![0, 1] });
+        m.resolutions = vec![crate::Resolution { level: 0, half_offset: [1, 0, 0] }; m.channels.len()];
+        let mut b = assemble_segments(&[(2, body(&m, 1))]).unwrap();
+        assert_eq!(Asset::from_bytes(&b).unwrap().metadata().unwrap().resolutions, m.resolutions);
+        b[8..12].copy_from_slice(&VERSION_9.to_le_bytes());
+        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
+        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        let err = Asset::from_bytes(&b).unwrap().metadata().unwrap_err().to_string();
+        assert!(err.contains("channel resolutions in a version-9 file"), "{err}");
+    }
+
+    #[test]
     fn truncation_is_an_error() {
         let b = sample();
         for n in (0..b.len()).step_by(7) {

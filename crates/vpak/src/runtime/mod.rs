@@ -341,7 +341,7 @@ impl Io {
         })?;
         let find = |k: u32| stored.iter().find(|e| (e.kind, e.index) == (k, 0));
         let meta_entry = find(kind::METADATA).ok_or(Error::Missing { kind: kind::METADATA, index: 0 })?;
-        let metadata = Metadata::from_bytes(&self.read_section(offset, meta_entry)?)?;
+        let metadata = Metadata::from_bytes_of(&self.read_section(offset, meta_entry)?, version)?;
         if let Some(e) = entry.filter(|e| e.frame_count != metadata.frame_count) {
             return Err(Error::Invalid(format!("its metadata has {} frames, the segment table {}", metadata.frame_count, e.frame_count)));
         }
