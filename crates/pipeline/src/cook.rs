@@ -15,10 +15,12 @@ use vdbcook_vpak::{Asset, AtomicFile, SourceFile, Writer};
 /// Reads `files` on a thread that stays one frame ahead (at most two source
 /// frames live at once) and pushes each frame into one cooker per entry of
 /// `opts` (an asset and its lossless reference share one read), made for the
-/// channels the first frame with a file resolves. Every `segment` frames
-/// (and after the last frame) the cookers go to `on_segment`, and cookers
-/// for the next segment take their place, so only one segment's bricks are
-/// held at a time. Source paths are recorded relative to `base` when they
+/// channels the first frame with a file resolves (frames with `--with`
+/// files: the first file of each sequence). Every `segment` frames (and
+/// after the last frame) the cookers go to `on_segment` with the records of
+/// the segment's `--with` files (the cooker records each frame's main file),
+/// and cookers for the next segment take their place, so only one segment's
+/// bricks are held at a time. Source paths are recorded relative to `base` when they
 /// are below it. Returns the channels and the seconds spent waiting for frames.
 pub fn feed(
     opts: Vec<CookOptions>,
@@ -26,7 +28,7 @@ pub fn feed(
     sel: GridSelection,
     base: Option<PathBuf>,
     segment: Option<usize>,
-    on_segment: &mut dyn FnMut(Vec<Cooker>) -> Result<()>,
+    on_segment: &mut dyn FnMut(Vec<Cooker>, Vec<SourceFile>) -> Result<()>,
     bars: &dyn Progress,
 ) -> Result<Fed> {
     // Each frame comes with the channels when they are first resolved.
@@ -38,11 +40,29 @@ pub fn feed(
         .spawn(move || {
             let mut channels = None;
             let mut sent = false;
+            // Frames of several files: the channels from each sequence's first file, before any frame.
+            if files.iter().any(|f| !f.with.is_empty()) {
+                match crate::grids::resolve_sequences(&files, &sel) {
+                    Ok(c) => channels = Some(c),
+                    Err(e) => {
+                        let _ = tx.send((Err(e), None));
+                        return;
+                    }
+                }
+            }
             for f in files {
                 let r = read_frame(f, &sel, &mut channels).map(|mut frame| {
-                    if let (Some(s), Some(b)) = (frame.source.as_mut(), base.as_deref()) {
-                        if let Ok(rel) = frame.path.strip_prefix(b) {
-                            s.path = rel.display().to_string();
+                    if let Some(b) = base.as_deref() {
+                        let relative = |s: &mut SourceFile, p: &Path| {
+                            if let Ok(rel) = p.strip_prefix(b) {
+                                s.path = rel.display().to_string();
+                            }
+                        };
+                        if let Some(s) = frame.source.as_mut() {
+                            relative(s, &frame.path);
+                        }
+                        for (p, s) in frame.with_sources.iter_mut() {
+                            relative(s, p);
                         }
                     }
                     frame
@@ -60,7 +80,7 @@ pub fn feed(
     let mut read_secs = 0.0;
     let mut wait = Instant::now();
     let mut failure = None;
-    let mut segments = Segments { cookers: Vec::new(), pushed: 0, emitted: 0, segment: segment.unwrap_or(usize::MAX).max(1), on_segment };
+    let mut segments = Segments { cookers: Vec::new(), extra: Vec::new(), pushed: 0, emitted: 0, segment: segment.unwrap_or(usize::MAX).max(1), on_segment };
     let mut channels: Option<Channels> = None;
     // Frames before the first one whose file resolves the channels: empty.
     let mut leading: Vec<(Option<SourceFile>, Option<i64>)> = Vec::new();
@@ -94,6 +114,7 @@ pub fn feed(
                 return Ok(());
             }
             let n = segments.pushed;
+            segments.extra.extend(frame.with_sources.iter().map(|(_, s)| s.clone()));
             segments.push(|c| {
                 let named = || format!("{}: frame {n}", frame.path.display());
                 if let Some(number) = frame.number {
@@ -140,12 +161,14 @@ pub struct Fed {
 /// The cookers of the segment being fed, and where finished segments go.
 struct Segments<'a> {
     cookers: Vec<Cooker>,
+    /// The records of the segment's `--with` files, in frame order.
+    extra: Vec<SourceFile>,
     /// Frames pushed over every segment.
     pushed: usize,
     /// Segments handed on.
     emitted: usize,
     segment: usize,
-    on_segment: &'a mut dyn FnMut(Vec<Cooker>) -> Result<()>,
+    on_segment: &'a mut dyn FnMut(Vec<Cooker>, Vec<SourceFile>) -> Result<()>,
 }
 
 impl Segments<'_> {
@@ -165,7 +188,7 @@ impl Segments<'_> {
             let next = self.cookers.iter().map(|c| c.next_segment(self.pushed)).collect();
             let full = std::mem::replace(&mut self.cookers, next);
             self.emitted += 1;
-            (self.on_segment)(full)?;
+            (self.on_segment)(full, std::mem::take(&mut self.extra))?;
             vdbcook_grid::mem::release_free();
         }
         Ok(())
@@ -174,7 +197,7 @@ impl Segments<'_> {
     /// Hands on the last segment (also when it is the only one and has no frames).
     fn flush(&mut self) -> Result<()> {
         if self.emitted == 0 || self.cookers.first().is_some_and(|c| c.frame_count() > 0) {
-            (self.on_segment)(std::mem::take(&mut self.cookers))?;
+            (self.on_segment)(std::mem::take(&mut self.cookers), std::mem::take(&mut self.extra))?;
         }
         Ok(())
     }
@@ -201,9 +224,9 @@ pub fn selection_of(meta: &vdbcook_vpak::Metadata) -> GridSelection {
 pub fn cook_lossless_levels(files: Vec<FrameFile>, sel: GridSelection, levels: vdbcook_vpak::LevelCount, segment: Option<usize>, bars: &dyn Progress) -> Result<Asset> {
     let count = segment_count(files.len(), segment);
     let mut out = Output::scratch(count)?;
-    let mut write = |cookers: Vec<Cooker>| -> Result<()> {
+    let mut write = |cookers: Vec<Cooker>, extra: Vec<SourceFile>| -> Result<()> {
         for c in cookers {
-            out.add(c, &vdbcook_cook::NoProgress)?;
+            out.add(c, &extra, &vdbcook_cook::NoProgress)?;
         }
         Ok(())
     };
@@ -227,6 +250,8 @@ struct Output {
     reports: Vec<CookReport>,
     /// How each segment's sections are stored.
     coding: Supercompress,
+    /// Bytes of the budget left for the records of `--with` files ([`source_room`]).
+    room: u64,
 }
 
 enum Sink {
@@ -237,7 +262,7 @@ enum Sink {
 
 impl Output {
     fn memory(count: u32, coding: Supercompress) -> Result<Output> {
-        Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new(), coding })
+        Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new(), coding, room: 0 })
     }
 
     /// An asset of `count` segments that is read back and let go: written into
@@ -257,24 +282,28 @@ impl Output {
             None => Writer::new(handle, count),
         }
         .with_context(ctx)?;
-        Ok(Output { sink: Sink::File(writer, file, ctx()), reports: Vec::new(), coding })
+        Ok(Output { sink: Sink::File(writer, file, ctx()), reports: Vec::new(), coding, room: 0 })
     }
 
-    /// Finishes a segment's cooker and writes the segment.
-    fn add(&mut self, cooker: Cooker, bars: &dyn Progress) -> Result<()> {
+    /// Finishes a segment's cooker and writes the segment; `extra`: the
+    /// records of its `--with` files, for its metadata's sources.
+    fn add(&mut self, cooker: Cooker, extra: &[SourceFile], bars: &dyn Progress) -> Result<()> {
         let frames = cooker.frame_count() as u32;
         // A group naming no channel, or too many channels to cluster, is the settings' fault.
         let table = vdbcook_vpak::segments::first_offset(1);
         let (mut sections, mut report) = cooker.finish(bars).map_err(|e| match e {
             // A byte budget is the whole file's: the segment table included.
-            vdbcook_cook::Error::OverBudget { budget, smallest, level } => Error::from(vdbcook_cook::Error::OverBudget { budget: budget + table, smallest: smallest + table, level }),
+            vdbcook_cook::Error::OverBudget { budget, smallest, level } => {
+                Error::from(vdbcook_cook::Error::OverBudget { budget: budget + table + self.room, smallest: smallest + table + self.room, level })
+            }
             e if e.is_settings_error() => Error::Usage(e.to_string()),
             e => Error::from(e),
         })?;
         if let Some(b) = report.budget.as_mut() {
-            b.max_bytes += table;
+            b.max_bytes += table + self.room;
             b.tries.iter_mut().for_each(|t| t.bytes += table);
         }
+        record_sources(&mut sections, &mut report, extra)?;
         if let Supercompress::Zstd(level) = self.coding {
             let t0 = Instant::now();
             sections = vdbcook_vpak::coding::supercompress(sections, &report.metadata, level)?;
@@ -315,6 +344,39 @@ impl Output {
         };
         Ok((asset, file, report))
     }
+}
+
+/// Adds the records of a segment's `--with` files to its metadata's
+/// sources, after the cooker's own (each frame's main file), each file once;
+/// the report's sizes follow.
+fn record_sources(sections: &mut [vdbcook_vpak::Section], report: &mut CookReport, extra: &[SourceFile]) -> Result<()> {
+    if extra.is_empty() {
+        return Ok(());
+    }
+    let before = vdbcook_vpak::file_len(sections);
+    let section = sections.iter_mut().find(|s| s.kind == vdbcook_vpak::kind::METADATA).ok_or_else(|| Error::Failed("the cooker wrote no metadata".into()))?;
+    let mut meta = vdbcook_vpak::Metadata::from_bytes(&section.data)?;
+    for s in extra {
+        if !meta.sources.contains(s) {
+            meta.sources.push(s.clone());
+        }
+    }
+    section.data = meta.to_bytes()?;
+    report.metadata.sources = meta.sources;
+    let grown = vdbcook_vpak::file_len(sections).saturating_sub(before);
+    report.file_bytes += grown;
+    if let Some(b) = report.budget.as_mut() {
+        b.tries.iter_mut().for_each(|t| t.bytes += grown);
+    }
+    Ok(())
+}
+
+/// Bytes the records of `files` may add to an asset's metadata, at most (a
+/// `--max-bytes` cook leaves them room): each record's path, size and hash
+/// with their length prefixes, the list's longer prefix and a section's
+/// alignment.
+fn source_room(files: &[&Path]) -> u64 {
+    files.iter().map(|p| p.as_os_str().len() as u64 + 9 + 9 + 33).sum::<u64>() + 9 + 256
 }
 
 /// One asset to cook: typed settings, its frame files and what to record.
@@ -364,8 +426,9 @@ impl Part {
 }
 
 /// What parts of one cook share and parts of others do not: the tool, every
-/// setting recorded, the segment length and each input file's path and size.
-fn fingerprint(opts: &CookOptions, segment: Option<usize>, files: &[PathBuf]) -> u64 {
+/// setting recorded, the segment length and each input file's path and size
+/// (the `--with` files' after the main input's).
+fn fingerprint(opts: &CookOptions, segment: Option<usize>, files: &[PathBuf], with: &[Vec<Option<PathBuf>>]) -> u64 {
     let mut h = xxhash_rust::xxh3::Xxh3::new();
     h.update(env!("CARGO_PKG_VERSION").as_bytes());
     for (k, v) in &opts.settings {
@@ -375,9 +438,14 @@ fn fingerprint(opts: &CookOptions, segment: Option<usize>, files: &[PathBuf]) ->
         h.update(v.as_bytes());
     }
     h.update(&(segment.unwrap_or(0) as u64).to_le_bytes());
-    for f in files {
-        h.update(f.to_string_lossy().as_bytes());
-        h.update(&std::fs::metadata(f).map_or(u64::MAX, |m| m.len()).to_le_bytes());
+    for f in files.iter().map(Some).chain(with.iter().flatten().map(Option::as_ref)) {
+        match f {
+            Some(f) => {
+                h.update(f.to_string_lossy().as_bytes());
+                h.update(&std::fs::metadata(f).map_or(u64::MAX, |m| m.len()).to_le_bytes());
+            }
+            None => h.update(&[2]),
+        }
     }
     h.digest()
 }
@@ -422,6 +490,13 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
     let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
     let segment = s.segment_frames.map(|n| n.get() as usize);
     let mut files = job.files;
+    // Each frame's files of the --with sequences, matched over the whole sequence.
+    let mut with = crate::inputs::with_files(&files, &s.with, job.base.as_deref(), s.frames, s.allow_missing)?;
+    // A budget leaves room for the records of the --with files.
+    let room = if s.max_bytes.is_some() && !s.with.is_empty() { source_room(&with.iter().flatten().flatten().map(PathBuf::as_path).collect::<Vec<_>>()) } else { 0 };
+    for o in all.iter_mut().take(formats.len()) {
+        o.max_bytes = o.max_bytes.map(|b| b.saturating_sub(room));
+    }
     // Numbered from the whole sequence's names, so that parts number as one process does.
     let mut numbers = crate::inputs::frame_numbers(&files);
     let mut count = segment_count(files.len(), segment);
@@ -432,11 +507,12 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
             if p.count > total {
                 return Err(Error::Usage(format!("--part {}/{}: the asset has {total} segment(s) to share among {} parts (a smaller --segment-frames makes more)", p.index + 1, p.count, p.count)));
             }
-            let fp = fingerprint(&all[0], segment, &files);
+            let fp = fingerprint(&all[0], segment, &files, &with);
             let range = p.segments(total);
             let n = segment.unwrap_or(files.len());
             let frames = (range.start as usize * n).min(files.len())..(range.end as usize * n).min(files.len());
             files = files.drain(frames.clone()).collect();
+            with = with.drain(frames.clone()).collect();
             numbers = numbers.map(|mut n| n.drain(frames.clone()).collect());
             count = range.len() as u32;
             Some(PartInfo { index: p.index, count: p.count, segments: total, first_segment: range.start, first_frame: frames.start as u32, fingerprint: fp })
@@ -454,17 +530,24 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
     if job.reference {
         outs.push(Output::scratch(count)?);
     }
-    let mut write = |cookers: Vec<Cooker>| -> Result<()> {
+    for out in outs.iter_mut().take(formats.len()) {
+        out.room = room;
+    }
+    let mut write = |cookers: Vec<Cooker>, extra: Vec<SourceFile>| -> Result<()> {
         for (i, (c, out)) in cookers.into_iter().zip(outs.iter_mut()).enumerate() {
             if c.frame_count() == 0 {
                 return Err(Error::Failed("no frames to cook".into()));
             }
             let is_reference = job.reference && i == formats.len();
-            out.add(c, bars).map_err(|e| if is_reference { Error::In("cooking the reference".into(), Box::new(e)) } else { e })?;
+            out.add(c, &extra, bars).map_err(|e| if is_reference { Error::In("cooking the reference".into(), Box::new(e)) } else { e })?;
         }
         Ok(())
     };
-    let Fed { channels, read_secs, source_time } = feed(all, FrameFile::numbered(files, numbers, s.allow_missing), sel, job.base, segment, &mut write, bars)?;
+    let mut frames = FrameFile::numbered(files, numbers, s.allow_missing);
+    for (f, w) in frames.iter_mut().zip(with) {
+        f.with = w;
+    }
+    let Fed { channels, read_secs, source_time } = feed(all, frames, sel, job.base, segment, &mut write, bars)?;
     let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
     let mut outs = outs.into_iter();
     let mut cooked = Vec::new();
