@@ -25,11 +25,13 @@ pub const AFTER_HELP: &str = "\
 The manifest (TOML) has a [defaults] table and [[asset]] entries. Each entry has a
 name, an output (relative to --out-dir) and inputs (files, directories, globs or frame
 patterns, relative to the manifest), and any cook setting under its flag's name with
-'_' for '-' (frames, grid, allow_missing, format, quality, clusters, iterations,
+'_' for '-' (frames, grid, grids, with, allow_missing, format, quality, clusters, iterations,
 variance_threshold, max_brick_error, max_texture_dim, lods, max_bytes, segment_frames, supercompress, optimize, fps),
 and a quality gate: validate
 (true/false), max_rmse, min_psnr, max_flip, views, size. An entry's setting overrides
 [defaults], which overrides the built-in default (the same as `vdbcook cook`'s).
+`with` lists the other sequences of each frame's files (cook --with), relative to the
+manifest like inputs; their files' bytes are part of the asset's key.
 
   [defaults]
   format = \"bc7\"
@@ -41,6 +43,14 @@ and a quality gate: validate
   output = \"smoke.vpak\"
   inputs = [\"vdb/smoke_####.vdb\"]
   frames = \"1-120\"
+
+  [[asset]]
+  name = \"fire\"
+  output = \"fire.vpak\"
+  inputs = [\"blender/noise/fluid_noise_####.vdb\"]
+  with = [\"blender/data/fluid_data_####.vdb\"]
+  frames = \"1-120\"
+  grids = \"density@0,flame,vel\"
 
 Cache: an asset's key is an XXH3-128 hash of its input files' bytes, every setting,
 vdbcook's version and the .vpak format version, and is recorded in the asset. An asset

@@ -16,6 +16,23 @@ frame pattern (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb) expanded over --fr
 Several files are one animation; files, directories and globs are taken in natural
 order (frame_2 before frame_10), pattern frames in --frames order.
 
+Several files per frame (--with, repeatable): each --with INPUT is another sequence whose
+files give every frame more grids, e.g. Blender's smoke with noise:
+  vdbcook cook noise/fluid_noise_####.vdb --frames 1-120 \\
+      --with data/fluid_data_####.vdb --grids density@0,flame,vel -o fire.vpak
+INPUT's frames are the asset's; a --with sequence's files are matched to them by the
+number in their names (fluid_data_0007.vdb with fluid_noise_0007.vdb), or by position
+when the names carry none (the counts must then be equal). A frame a --with sequence
+has no file for is an error (exit 1); with --allow-missing that sequence's channels are
+empty there. Each name of --grids (or --grid) is found in whichever file of the frame has
+it; a name in several files is a usage error (exit 2) unless NAME@N says which: sequence
+N, 0 for INPUT, 1 for the first --with, and so on. The channel keeps the grid's name
+(density@1 is the channel density). --grids all takes every grid of every file and
+refuses a name found in two. The frame's grids, from all its files, are cooked as one
+frame (one voxel size). Every file read is recorded in the asset's sources and the
+--with inputs in its settings: validate finds them again, and --part, --auto and
+--validate read the same files.
+
 Formats (storage per voxel and channel in the brick atlas):
   f32     32 bits  exact
   f16     16 bits  IEEE half (default)
@@ -141,7 +158,7 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     if args.auto && !s.gate.is_set() {
         return Err(Usage("--auto needs a quality gate: --min-psnr, --max-rmse or --max-flip".into()).into());
     }
-    let files = inputs::expand(&args.inputs, s.frames)?;
+    let files = inputs::expand_main(&args.inputs, &s.with, s.frames)?;
     let started = Instant::now();
     let bars = Bars::new(quiet);
     if args.auto {
@@ -152,7 +169,7 @@ pub fn run(args: CookArgs, quiet: bool) -> Result<u8> {
     let report = &mut cooked.report;
     report.timings.push(("total".into(), started.elapsed().as_secs_f64()));
     let validation = if s.validate {
-        let sources = Sources::Inputs(args.inputs.clone(), s.frames);
+        let sources = Sources::Inputs { inputs: args.inputs.clone(), with: s.with.clone(), frames: s.frames };
         Some(vdbcook_pipeline::validate_file(&args.output, sources, &s.compare_options(None), || GpuArgs::default().renderer().map(Box::new), &Bars::new(quiet || args.json))?)
     } else {
         None

@@ -18,7 +18,10 @@ path is relative to the directory cook ran in), bake relative to the manifest's
 directory; a relative path is looked up in the current directory, then in the asset's.
 A recorded file that is missing here, or whose size or bytes differ from those
 recorded, is an error naming it: give the sources with --source. The asset may also
-come last: validate --source SRC... ASSET.vpak.
+come last: validate --source SRC... ASSET.vpak. An asset cooked with --with records those
+inputs too: they are expanded again from where its main files are found and matched as
+cook matched them, each file checked against its record; with --source, give them again
+with --with, in the cook's order.
 
 The source frames are cooked again in memory, losslessly (f32, no clustering), and
 both assets are rendered by the same deterministic wgpu ray-marcher (emission and
@@ -58,6 +61,10 @@ pub struct ValidateArgs {
     /// Frames of a source frame pattern: A-B or A-B:STEP.
     #[arg(long, value_name = "RANGE", requires = "source")]
     pub source_frames: Option<FrameRange>,
+    /// Another sequence the asset's frames were cooked from (`cook --with`; repeatable, in
+    /// the cook's order), matched to --source's frames as cook matched them.
+    #[arg(long, value_name = "INPUT", requires = "source")]
+    pub with: Vec<String>,
     /// Asset frames to render, counted from 0: A-B or A-B:STEP (default: all).
     #[arg(long, value_name = "RANGE")]
     pub frames: Option<FrameRange>,
@@ -123,7 +130,7 @@ pub fn run(args: ValidateArgs, quiet: bool) -> Result<u8> {
 pub fn evaluate(mut args: ValidateArgs, quiet: bool) -> Result<Comparison> {
     let (path, source) = recorded::asset_and_sources(args.asset.take(), std::mem::take(&mut args.source)).map_err(Usage)?;
     let bars = Bars::new(quiet || args.json);
-    let sources = if source.is_empty() { Sources::Recorded } else { Sources::Inputs(source, args.source_frames) };
+    let sources = if source.is_empty() { Sources::Recorded } else { Sources::Inputs { inputs: source, with: std::mem::take(&mut args.with), frames: args.source_frames } };
     let mut opts = args.compare_options();
     if let Some(n) = args.source_frame {
         // The frame's index, from the asset's time (its tables and metadata alone).

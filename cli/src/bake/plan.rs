@@ -30,7 +30,7 @@ pub fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, planned: &[Pl
                 "output": a.output,
                 "output_path": resolve(out_dir, &a.output).display().to_string(),
                 "inputs": a.inputs,
-                "files": a.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
+                "files": a.files.iter().chain(&a.with_files).map(|f| f.display().to_string()).collect::<Vec<_>>(),
                 "cache_key": a.key,
                 "settings": a.settings.pairs().into_iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
                 "parts": a.parts.map(|_| parts_of(a).into_iter().map(|(p, o, k)| json!({
@@ -45,7 +45,8 @@ pub fn print_plan(args: &BakeArgs, manifest: &str, out_dir: &Path, planned: &[Pl
     } else {
         let mut t = String::new();
         for a in assets {
-            t += &format!("{}  {}  {} <- {} file{}\n", a.name, a.key, resolve(out_dir, &a.output).display(), a.files.len(), if a.files.len() == 1 { "" } else { "s" });
+            let n = a.files.len() + a.with_files.len();
+            t += &format!("{}  {}  {} <- {n} file{}\n", a.name, a.key, resolve(out_dir, &a.output).display(), if n == 1 { "" } else { "s" });
             for (p, o, k) in parts_of(a) {
                 t += &format!("  part {p}  {k}  {}\n", resolve(out_dir, &o).display());
             }

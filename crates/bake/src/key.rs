@@ -3,9 +3,11 @@
 //!
 //! What is hashed, each field length-prefixed, in this order: a scheme tag, the
 //! tool version, the .vpak format version, every setting as (name, value) in
-//! [`CookSettings::NAMES`] order, the inputs as written, and per expanded input
-//! file its path relative to the manifest, its length and the XXH3-128 of its
-//! bytes (or a mark that it is missing, with `allow_missing`).
+//! [`CookSettings::NAMES`] order (the `with` inputs among them), the inputs as
+//! written, and per expanded input file (then each `with` sequence's file of
+//! each frame, sequence after sequence) its path relative to the manifest, its
+//! length and the XXH3-128 of its bytes (or a mark that it is missing, with
+//! `allow_missing`).
 
 use crate::CookSettings;
 use xxhash_rust::xxh3::{xxh3_128, Xxh3};

@@ -94,6 +94,9 @@ pub struct PlannedAsset {
     pub input_paths: Vec<String>,
     /// Every input file, in cook order, as the cooker will read it.
     pub files: Vec<PathBuf>,
+    /// The files of the `with` sequences the cook reads besides (each
+    /// sequence's, in frame order; the cook matches them to `files` again).
+    pub with_files: Vec<PathBuf>,
     pub settings: CookSettings,
     /// `parts = N`: cooked as N part units, joined into the asset (see [`crate::parts`]).
     pub parts: Option<u32>,
@@ -169,7 +172,9 @@ pub fn plan(m: &Manifest, base: &Path, sources: &dyn Sources, ctx: &KeyContext) 
         }
         let input_paths: Vec<String> = inputs.iter().map(|i| resolve(base, i.get_ref()).to_string_lossy().into_owned()).collect();
         let frames = settings.frames;
-        if frames.is_some() && !input_paths.iter().any(|i| sources.is_pattern(i)) {
+        let with_paths: Vec<String> = settings.with.iter().map(|w| resolve(base, w).to_string_lossy().into_owned()).collect();
+        let main_pattern = input_paths.iter().any(|i| sources.is_pattern(i));
+        if frames.is_some() && !main_pattern && !with_paths.iter().any(|i| sources.is_pattern(i)) {
             let span = a.settings.span("frames").or_else(|| m.defaults.span("frames")).unwrap_or(table_span.clone());
             return Err(ManifestError::at(span, "frames applies to frame patterns (smoke_####.vdb, smoke_%04d.vdb, smoke_$F4.vdb), and no input is one"));
         }
@@ -180,7 +185,7 @@ pub fn plan(m: &Manifest, base: &Path, sources: &dyn Sources, ctx: &KeyContext) 
             let files = sources.expand(std::slice::from_ref(p), f).map_err(|e| ManifestError::at(i.span(), format!("input \"{}\": {e}", i.get_ref())))?;
             owner.extend(files.into_iter().map(|f| (f, k)));
         }
-        let files = sources.expand(&input_paths, frames).map_err(|e| ManifestError::at(a.inputs.span(), e))?;
+        let files = sources.expand(&input_paths, if main_pattern { frames } else { None }).map_err(|e| ManifestError::at(a.inputs.span(), e))?;
         let mut digests = Vec::with_capacity(files.len());
         for f in &files {
             let span = owner.iter().find(|(p, _)| p == f).map_or(a.inputs.span(), |(_, k)| inputs[*k].span());
@@ -191,13 +196,59 @@ pub fn plan(m: &Manifest, base: &Path, sources: &dyn Sources, ctx: &KeyContext) 
             let rel = f.strip_prefix(base).unwrap_or(f).to_string_lossy().into_owned();
             digests.push(FileDigest::of(rel, bytes.as_deref()));
         }
+        let with_files = with_digests(m, a, base, sources, &settings, &with_paths, &files, &mut digests)?;
         let parts = check_parts(m, a, &settings, files.len())?;
         let written: Vec<String> = inputs.iter().map(|i| i.get_ref().clone()).collect();
         // The same key with or without parts: the joined asset is the unsplit one, byte for byte.
         let key = cache_key(ctx, &settings, &written, &digests);
-        out.push(PlannedAsset { index, name, output, inputs: written, input_paths, files, settings, parts, key });
+        out.push(PlannedAsset { index, name, output, inputs: written, input_paths, files, with_files, settings, parts, key });
     }
     Ok(out)
+}
+
+/// Appends the digests of each frame's `with` files (`with_paths`: the
+/// `with` inputs joined to the manifest's directory), sequence after
+/// sequence, matched to the main `files` as `cook --with` matches them; a
+/// frame without its file is an error unless `allow_missing`. Returns the
+/// files found.
+#[allow(clippy::too_many_arguments)]
+fn with_digests(
+    m: &Manifest,
+    a: &AssetTable,
+    base: &Path,
+    sources: &dyn Sources,
+    settings: &CookSettings,
+    with_paths: &[String],
+    files: &[PathBuf],
+    digests: &mut Vec<FileDigest>,
+) -> Result<Vec<PathBuf>, ManifestError> {
+    use vdbcook_pipeline::inputs::{distinct_numbers, match_with, missing_with};
+    let span = a.settings.span("with").or_else(|| m.defaults.span("with")).unwrap_or(a.inputs.span());
+    let at = |message: String| ManifestError::at(span.clone(), message);
+    // The pipeline's messages name the flags; a manifest has keys.
+    let keys = |e: &vdbcook_pipeline::Error| vdbcook_pipeline::one_line(e).replacen("--with ", "with ", 1).replace("--allow-missing", "allow_missing = true");
+    let main_numbers = distinct_numbers(files);
+    let mut read = Vec::new();
+    for (w, p) in settings.with.iter().zip(with_paths) {
+        let f = if sources.is_pattern(p) { settings.frames } else { None };
+        let seq = sources.expand(std::slice::from_ref(p), f).map_err(|e| at(format!("with \"{w}\": {e}")))?;
+        let found = match_with(files.len(), main_numbers.as_deref(), w, seq).map_err(|e| at(keys(&e)))?;
+        for (frame, file) in found.into_iter().enumerate() {
+            let bytes = match &file {
+                Some(f) => sources.read(f).map_err(|e| at(format!("{}: {e}", f.display())))?,
+                None => None,
+            };
+            if bytes.is_none() && !settings.allow_missing {
+                let number = main_numbers.as_ref().and_then(|n| n.get(frame).copied());
+                let main = files.get(frame).map_or(Path::new(""), PathBuf::as_path);
+                return Err(at(keys(&missing_with(frame, number, main, w, file.as_deref()))));
+            }
+            let rel = file.as_deref().map_or_else(String::new, |f| f.strip_prefix(base).unwrap_or(f).to_string_lossy().into_owned());
+            digests.push(FileDigest::of(rel, bytes.as_deref()));
+            read.extend(file.filter(|_| bytes.is_some()));
+        }
+    }
+    Ok(read)
 }
 
 /// The largest `parts` (a sanity bound: a part is a CI job).
@@ -339,6 +390,26 @@ mod tests {
             let e = run(&text).unwrap_err();
             assert!(e.starts_with(want) || (!want.starts_with(char::is_numeric) && e.contains(want)), "{e:?} does not start with {want:?}");
         }
+    }
+
+    #[test]
+    fn with_files_are_matched_and_keyed() {
+        let text = GOOD.replace("clusters = 4", "with = [\"w#.vdb\"]\ngrids = \"density@0,vel\"");
+        let mut files = mem();
+        files.0.insert("p/w1.vdb".into(), b"W1".to_vec());
+        files.0.insert("p/w2.vdb".into(), b"W2".to_vec());
+        let plan_with = |f: &Mem, text: &str| plan(&Manifest::parse(text).unwrap(), Path::new("p"), f, &KeyContext::new("vdbcook test".into())).map_err(|e| e.located(text));
+        let key = plan_with(&files, &text).unwrap()[1].key.clone();
+        files.0.insert("p/w2.vdb".into(), b"W2'".to_vec());
+        assert_ne!(plan_with(&files, &text).unwrap()[1].key, key, "a with file's bytes are in the key");
+        files.0.remove("p/w2.vdb");
+        let e = plan_with(&files, &text).unwrap_err();
+        assert!(e.starts_with("16:8: with w#.vdb has no file for frame 2") && e.contains("allow_missing = true"), "{e}");
+        let allowed = text.replace("frames = \"1-2\"", "frames = \"1-2\"\nallow_missing = true");
+        assert_ne!(plan_with(&files, &allowed).unwrap()[1].key, key);
+        // frames may apply to a with pattern alone.
+        let e = plan_with(&mem(), &GOOD.replace("inputs = [\"s#.vdb\"]", "inputs = [\"s1.vdb\", \"s2.vdb\"]").replace("clusters = 4", "with = [\"w#.vdb\"]")).unwrap_err();
+        assert!(e.contains("p/w1.vdb: no such file") || e.contains("with w#.vdb has no file"), "{e}");
     }
 
     #[test]

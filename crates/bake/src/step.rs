@@ -74,7 +74,7 @@ fn blank(a: &PlannedAsset) -> AssetReport {
         bytes: None,
         cache_key: a.key.clone(),
         inputs: a.inputs.clone(),
-        files: a.files.len(),
+        files: a.files.len() + a.with_files.len(),
         record: Record::default(),
         validate: a.settings.validate,
         gate: a.settings.gate,

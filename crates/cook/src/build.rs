@@ -158,6 +158,15 @@ impl Cooker {
         })
     }
 
+    /// Records files the frame just pushed was also read from (several files
+    /// per frame: `cook --with`): listed among the sources, each once; a
+    /// frame names only its main file.
+    pub fn add_sources(&mut self, extra: impl IntoIterator<Item = SourceFile>) {
+        for s in extra {
+            self.add_source(Some(s));
+        }
+    }
+
     /// Adds the next frame of a one-channel cook.
     pub fn push(&mut self, grid: &Grid, source: Option<SourceFile>) -> Result<(), Error> {
         self.push_channels(&[Some(grid)], source)

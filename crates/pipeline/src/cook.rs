@@ -15,10 +15,12 @@ use vdbcook_vpak::{Asset, AtomicFile, SourceFile, Writer};
 /// Reads `files` on a thread that stays one frame ahead (at most two source
 /// frames live at once) and pushes each frame into one cooker per entry of
 /// `opts` (an asset and its lossless reference share one read), made for the
-/// channels the first frame with a file resolves. Every `segment` frames
-/// (and after the last frame) the cookers go to `on_segment`, and cookers
-/// for the next segment take their place, so only one segment's bricks are
-/// held at a time. Source paths are recorded relative to `base` when they
+/// channels the first frame with a file resolves (frames with `--with`
+/// files: the first file of each sequence). Every `segment` frames (and
+/// after the last frame) the cookers go to `on_segment` with the records of
+/// the segment's `--with` files (the cooker records each frame's main file),
+/// and cookers for the next segment take their place, so only one segment's
+/// bricks are held at a time. Source paths are recorded relative to `base` when they
 /// are below it. Returns the channels and the seconds spent waiting for frames.
 pub fn feed(
     opts: Vec<CookOptions>,
@@ -38,11 +40,29 @@ pub fn feed(
         .spawn(move || {
             let mut channels = None;
             let mut sent = false;
+            // Frames of several files: the channels from each sequence's first file, before any frame.
+            if files.iter().any(|f| !f.with.is_empty()) {
+                match crate::grids::resolve_sequences(&files, &sel) {
+                    Ok(c) => channels = Some(c),
+                    Err(e) => {
+                        let _ = tx.send((Err(e), None));
+                        return;
+                    }
+                }
+            }
             for f in files {
                 let r = read_frame(f, &sel, &mut channels).map(|mut frame| {
-                    if let (Some(s), Some(b)) = (frame.source.as_mut(), base.as_deref()) {
-                        if let Ok(rel) = frame.path.strip_prefix(b) {
-                            s.path = rel.display().to_string();
+                    if let Some(b) = base.as_deref() {
+                        let relative = |s: &mut SourceFile, p: &Path| {
+                            if let Ok(rel) = p.strip_prefix(b) {
+                                s.path = rel.display().to_string();
+                            }
+                        };
+                        if let Some(s) = frame.source.as_mut() {
+                            relative(s, &frame.path);
+                        }
+                        for (p, s) in frame.with_sources.iter_mut() {
+                            relative(s, p);
                         }
                     }
                     frame
@@ -100,12 +120,11 @@ pub fn feed(
                     c.number_next(number).with_context(named)?;
                 }
                 match &frame.grids {
-                    Some(g) => c.push_channels(&g.iter().map(Option::as_ref).collect::<Vec<_>>(), frame.source.clone()).with_context(named),
-                    None => {
-                        c.push_empty(frame.source.clone());
-                        Ok(())
-                    }
+                    Some(g) => c.push_channels(&g.iter().map(Option::as_ref).collect::<Vec<_>>(), frame.source.clone()).with_context(named)?,
+                    None => c.push_empty(frame.source.clone()),
                 }
+                c.add_sources(frame.with_sources.iter().map(|(_, s)| s.clone()));
+                Ok(())
             })
         });
         if let Err(e) = pushed.and_then(|_| segments.hand_on_full()) {
@@ -362,8 +381,9 @@ impl Part {
 }
 
 /// What parts of one cook share and parts of others do not: the tool, every
-/// setting recorded, the segment length and each input file's path and size.
-fn fingerprint(opts: &CookOptions, segment: Option<usize>, files: &[PathBuf]) -> u64 {
+/// setting recorded, the segment length and each input file's path and size
+/// (the `--with` files' after the main input's).
+fn fingerprint(opts: &CookOptions, segment: Option<usize>, files: &[PathBuf], with: &[Vec<Option<PathBuf>>]) -> u64 {
     let mut h = xxhash_rust::xxh3::Xxh3::new();
     h.update(env!("CARGO_PKG_VERSION").as_bytes());
     for (k, v) in &opts.settings {
@@ -373,9 +393,14 @@ fn fingerprint(opts: &CookOptions, segment: Option<usize>, files: &[PathBuf]) ->
         h.update(v.as_bytes());
     }
     h.update(&(segment.unwrap_or(0) as u64).to_le_bytes());
-    for f in files {
-        h.update(f.to_string_lossy().as_bytes());
-        h.update(&std::fs::metadata(f).map_or(u64::MAX, |m| m.len()).to_le_bytes());
+    for f in files.iter().map(Some).chain(with.iter().flatten().map(Option::as_ref)) {
+        match f {
+            Some(f) => {
+                h.update(f.to_string_lossy().as_bytes());
+                h.update(&std::fs::metadata(f).map_or(u64::MAX, |m| m.len()).to_le_bytes());
+            }
+            None => h.update(&[2]),
+        }
     }
     h.digest()
 }
@@ -420,6 +445,8 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
     let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
     let segment = s.segment_frames.map(|n| n.get() as usize);
     let mut files = job.files;
+    // Each frame's files of the --with sequences, matched over the whole sequence.
+    let mut with = crate::inputs::with_files(&files, &s.with, job.base.as_deref(), s.frames, s.allow_missing)?;
     // Numbered from the whole sequence's names, so that parts number as one process does.
     let mut numbers = crate::inputs::frame_numbers(&files);
     let mut count = segment_count(files.len(), segment);
@@ -430,11 +457,12 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
             if p.count > total {
                 return Err(Error::Usage(format!("--part {}/{}: the asset has {total} segment(s) to share among {} parts (a smaller --segment-frames makes more)", p.index + 1, p.count, p.count)));
             }
-            let fp = fingerprint(&all[0], segment, &files);
+            let fp = fingerprint(&all[0], segment, &files, &with);
             let range = p.segments(total);
             let n = segment.unwrap_or(files.len());
             let frames = (range.start as usize * n).min(files.len())..(range.end as usize * n).min(files.len());
             files = files.drain(frames.clone()).collect();
+            with = with.drain(frames.clone()).collect();
             numbers = numbers.map(|mut n| n.drain(frames.clone()).collect());
             count = range.len() as u32;
             Some(PartInfo { index: p.index, count: p.count, segments: total, first_segment: range.start, first_frame: frames.start as u32, fingerprint: fp })
@@ -462,7 +490,11 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         }
         Ok(())
     };
-    let Fed { channels, read_secs, source_time } = feed(all, FrameFile::numbered(files, numbers, s.allow_missing), sel, job.base, segment, &mut write, bars)?;
+    let mut frames = FrameFile::numbered(files, numbers, s.allow_missing);
+    for (f, w) in frames.iter_mut().zip(with) {
+        f.with = w;
+    }
+    let Fed { channels, read_secs, source_time } = feed(all, frames, sel, job.base, segment, &mut write, bars)?;
     let grid_name = channels.as_ref().map(|c| c.specs.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", "));
     let mut outs = outs.into_iter();
     let mut cooked = Vec::new();

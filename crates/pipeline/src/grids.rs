@@ -37,6 +37,9 @@ impl GridSelection {
 #[derive(Clone, Debug)]
 pub struct Channels {
     pub specs: Vec<ChannelSpec>,
+    /// The sequence each channel is read from: 0 the main input, k the k-th
+    /// `--with` input (one entry per spec).
+    pub sequences: Vec<usize>,
     /// Whether several grids were asked for (a grid missing in a later frame
     /// is then an empty channel there, not an error).
     pub several: bool,
@@ -61,40 +64,148 @@ fn specs_of(g: &GridInfo) -> Vec<ChannelSpec> {
         .collect()
 }
 
+/// A `--grids` name and the sequence it picks, when it ends in `@N` (`vel@1`:
+/// the grid "vel" of the first `--with` input; 0 is the main input).
+pub fn split_sequence(name: &str) -> (&str, Option<usize>) {
+    match name.rsplit_once('@') {
+        Some((grid, n)) if !grid.is_empty() && !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()) => (grid, Some(n.parse().unwrap_or(usize::MAX))),
+        _ => (name, None),
+    }
+}
+
 /// Resolves the selection against the first frame's file.
 pub fn resolve(vdb: &VdbFile, path: &str, sel: &GridSelection) -> Result<Channels> {
-    let find = |name: &str| -> Result<&GridInfo> {
-        let g = vdb.grids.iter().find(|g| g.name == name).ok_or_else(|| Error::Usage(format!("{path}: no grid named \"{name}\" (the file has: {})", describe_grids(vdb))))?;
+    resolve_in(&[(path.to_string(), Some(vdb))], sel)
+}
+
+/// Resolves the selection against one file of each sequence (`None`: the
+/// sequence has no file to look in), the main input's first: each grid is
+/// found in whichever file has it; one in several files must be picked with
+/// `NAME@N`.
+pub fn resolve_in(files: &[(String, Option<&VdbFile>)], sel: &GridSelection) -> Result<Channels> {
+    let single = files.len() == 1;
+    let has = |k: usize, grid: &str| files.get(k).and_then(|f| f.1).is_some_and(|v| v.grids.iter().any(|g| g.name == grid));
+    let everything = || files.iter().map(|(p, v)| format!("{p} has: {}", v.map_or_else(|| "no file".into(), describe_grids))).collect::<Vec<_>>().join("; ");
+    let find = |name: &str| -> Result<(usize, &GridInfo)> {
+        let (grid, pick) = split_sequence(name);
+        let holders: Vec<usize> = match pick {
+            Some(k) if k >= files.len() => {
+                let with = if single { "no --with input is given".to_string() } else { format!("the --with inputs are 1 to {}", files.len() - 1) };
+                return Err(Error::Usage(format!("--grids {name}: there is no sequence {k} (0 is the main input; {with})")));
+            }
+            Some(k) => vec![k],
+            None => (0..files.len()).filter(|&k| has(k, grid)).collect(),
+        };
+        let k = match holders[..] {
+            [k] => k,
+            [] if single => return Err(Error::Usage(format!("{}: no grid named \"{grid}\" (the file has: {})", files[0].0, files[0].1.map_or_else(|| "no file".into(), describe_grids)))),
+            [] => return Err(Error::Usage(format!("no grid named \"{grid}\" in the frame's files ({})", everything()))),
+            [a, b, ..] => {
+                return Err(Error::Usage(format!("grid \"{grid}\" is in both {} and {}: say which with {grid}@{a} or {grid}@{b} (0 is the main input, 1 the first --with)", files[a].0, files[b].0)));
+            }
+        };
+        let (path, vdb) = &files[k];
+        let Some(vdb) = vdb else { return Err(Error::Usage(format!("--grids {name}: sequence {k} has no file to find it in"))) };
+        let g = vdb.grids.iter().find(|g| g.name == grid).ok_or_else(|| Error::Usage(format!("{path}: no grid named \"{grid}\" (the file has: {})", describe_grids(vdb))))?;
         match &g.unsupported {
-            Some(u) if !g.is_readable() => Err(Error::Usage(format!("{path}: grid \"{name}\" cannot be cooked: {u}"))),
-            _ => Ok(g),
+            Some(u) if !g.is_readable() => Err(Error::Usage(format!("{path}: grid \"{grid}\" cannot be cooked: {u}"))),
+            _ => Ok((k, g)),
         }
     };
-    let specs = match sel {
-        GridSelection::Default => specs_of(&vdb.grids[vdb.select(None).with_context(|| path.to_string())?]),
+    let mut chosen: Vec<(usize, &GridInfo)> = Vec::new();
+    match sel {
+        GridSelection::Default if single => {
+            let (path, vdb) = (&files[0].0, files[0].1.ok_or_else(|| Error::Failed(format!("{}: no file", files[0].0)))?);
+            chosen.push((0, &vdb.grids[vdb.select(None).with_context(|| path.clone())?]));
+        }
+        // "density" wherever it is, else the first float grid of the first sequence that has one.
+        GridSelection::Default => {
+            let density: Vec<usize> = (0..files.len()).filter(|&k| files[k].1.is_some_and(|v| v.grids.iter().any(|g| g.name == "density" && g.is_readable_scalar()))).collect();
+            let k = match density[..] {
+                [] => None,
+                [k] => Some(k),
+                _ => Some(find("density")?.0),
+            };
+            let pick = k.or_else(|| (0..files.len()).find(|&k| files[k].1.is_some_and(|v| v.select(None).is_ok()))).and_then(|k| files[k].1.map(|v| (k, v)));
+            let Some((k, vdb)) = pick else { return Err(Error::Usage(format!("no float grid in the frame's files ({})", everything()))) };
+            chosen.push((k, &vdb.grids[vdb.select(None).with_context(|| files[k].0.clone())?]));
+        }
         // One grid missing from a file is that frame's problem (exit 1, or an
         // empty frame with --allow-missing), as it is in any later frame.
-        GridSelection::One(name) if !vdb.grids.iter().any(|g| &g.name == name) => {
-            return Err(Error::Failed(format!("{path}: no grid named \"{name}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", describe_grids(vdb))));
+        GridSelection::One(name) if single && matches!(split_sequence(name), (g, None | Some(0)) if !has(0, g)) => {
+            let g = split_sequence(name).0;
+            let (path, vdb) = (&files[0].0, files[0].1.map_or_else(|| "no file".into(), describe_grids));
+            return Err(Error::Failed(format!("{path}: no grid named \"{g}\" (the file has: {vdb}; use --allow-missing to cook it as an empty frame)")));
         }
-        GridSelection::One(name) => specs_of(find(name)?),
+        GridSelection::One(name) => chosen.push(find(name)?),
         GridSelection::Many(names) => {
             let mut seen = std::collections::HashSet::new();
-            if let Some(dup) = names.iter().find(|n| !seen.insert(n.as_str())) {
-                return Err(Error::Usage(format!("--grids names \"{dup}\" twice")));
+            if let Some(dup) = names.iter().find(|n| !seen.insert(split_sequence(n).0)) {
+                return Err(Error::Usage(format!("--grids names \"{}\" twice", split_sequence(dup).0)));
             }
-            names.iter().map(|n| find(n).map(specs_of)).collect::<Result<Vec<_>>>()?.concat()
+            for n in names {
+                chosen.push(find(n)?);
+            }
         }
         GridSelection::All => {
-            let mut seen = std::collections::HashSet::new();
-            let all: Vec<ChannelSpec> = vdb.grids.iter().filter(|g| g.is_readable() && seen.insert(g.name.clone())).flat_map(specs_of).collect();
-            if all.is_empty() {
-                return Err(Error::Usage(format!("{path}: --grids all found no float, double, half or vec3 grid (the file has: {})", describe_grids(vdb))));
+            let mut seen: Vec<(&str, usize)> = Vec::new();
+            for (k, (_, vdb)) in files.iter().enumerate() {
+                for g in vdb.iter().flat_map(|v| v.grids.iter()).filter(|g| g.is_readable()) {
+                    match seen.iter().find(|(n, _)| *n == g.name) {
+                        Some(&(_, j)) if j == k => {}
+                        Some(&(_, j)) => {
+                            let n = &g.name;
+                            return Err(Error::Usage(format!(
+                                "--grids all: grid \"{n}\" is in both {} and {}: name the grids with --grids, picking one with {n}@{j} or {n}@{k}",
+                                files[j].0, files[k].0
+                            )));
+                        }
+                        None => {
+                            seen.push((&g.name, k));
+                            chosen.push((k, g));
+                        }
+                    }
+                }
             }
-            all
+            if chosen.is_empty() {
+                let what = if single {
+                    format!("{}: --grids all found no float, double, half or vec3 grid (the file has: {})", files[0].0, files[0].1.map_or_else(|| "no file".into(), describe_grids))
+                } else {
+                    format!("--grids all found no float, double, half or vec3 grid ({})", everything())
+                };
+                return Err(Error::Usage(what));
+            }
         }
-    };
-    Ok(Channels { several: specs.len() > 1 || matches!(sel, GridSelection::Many(_) | GridSelection::All), specs })
+    }
+    let mut specs = Vec::new();
+    let mut sequences = Vec::new();
+    for (k, g) in chosen {
+        let s = specs_of(g);
+        sequences.extend(std::iter::repeat_n(k, s.len()));
+        specs.extend(s);
+    }
+    Ok(Channels { several: specs.len() > 1 || !single || matches!(sel, GridSelection::Many(_) | GridSelection::All), specs, sequences })
+}
+
+/// Resolves the selection against the first file of each sequence of
+/// `files` (the frames of a cook with `--with` inputs): the first frame that
+/// has a file of that sequence on disk gives it.
+pub fn resolve_sequences(files: &[FrameFile], sel: &GridSelection) -> Result<Channels> {
+    let count = 1 + files.iter().map(|f| f.with.len()).max().unwrap_or(0);
+    let mut opened: Vec<(String, Option<VdbFile>)> = Vec::with_capacity(count);
+    for k in 0..count {
+        let first = files.iter().find_map(|f| if k == 0 { f.path.as_ref() } else { f.with.get(k - 1).and_then(Option::as_ref) }.filter(|p| p.exists()));
+        opened.push(match first {
+            Some(p) => {
+                let name = p.display().to_string();
+                let vdb = vdbcook_vdb::open(p).with_context(|| name.clone())?;
+                (name, Some(vdb))
+            }
+            None => (if k == 0 { "the main input".to_string() } else { format!("--with input {k}") }, None),
+        });
+    }
+    let refs: Vec<(String, Option<&VdbFile>)> = opened.iter().map(|(p, v)| (p.clone(), v.as_ref())).collect();
+    resolve_in(&refs, sel)
 }
 
 /// One frame as read: one grid per channel (`None`: missing or empty there).
@@ -103,6 +214,8 @@ pub struct Frame {
     /// `None` for a missing file (with `--allow-missing`).
     pub grids: Option<Vec<Option<Grid>>>,
     pub source: Option<SourceFile>,
+    /// The files of the `--with` sequences read for this frame, and their records.
+    pub with_sources: Vec<(PathBuf, SourceFile)>,
     /// Its number in the source sequence, when known.
     pub number: Option<i64>,
     /// What its file's metadata says of time.
@@ -124,44 +237,61 @@ pub struct FrameFile {
     pub allow_missing: bool,
     /// Its number in the source sequence (`None`: numbered on from the frame before, from 0).
     pub number: Option<i64>,
+    /// The frame's file in each `--with` sequence, in their order (`None`:
+    /// that sequence has none for this frame; its channels are empty there).
+    pub with: Vec<Option<PathBuf>>,
 }
 
 impl FrameFile {
     /// One frame per file, each with the same rule for what is missing, numbered from 0.
     pub fn each(files: Vec<PathBuf>, allow_missing: bool) -> Vec<FrameFile> {
-        files.into_iter().map(|p| FrameFile { path: Some(p), allow_missing, number: None }).collect()
+        files.into_iter().map(|p| FrameFile { path: Some(p), allow_missing, number: None, with: Vec::new() }).collect()
     }
 
     /// [`FrameFile::each`], frame `f` numbered `numbers[f]` when given.
     pub fn numbered(files: Vec<PathBuf>, numbers: Option<Vec<i64>>, allow_missing: bool) -> Vec<FrameFile> {
         let mut numbers = numbers.into_iter().flatten();
-        files.into_iter().map(|p| FrameFile { path: Some(p), allow_missing, number: numbers.next() }).collect()
+        files.into_iter().map(|p| FrameFile { path: Some(p), allow_missing, number: numbers.next(), with: Vec::new() }).collect()
     }
 }
 
-/// Reads one frame; the channels are resolved by the first frame that has a file.
+/// A file's record as an asset keeps it.
+fn source_of(vdb: &VdbFile, path: &str) -> SourceFile {
+    SourceFile { path: path.to_string(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(xxhash_rust::xxh3::xxh3_128(vdb.bytes())) }
+}
+
+/// Reads one frame; the channels are resolved by the first frame that has a
+/// file (a frame with `--with` files needs them resolved beforehand, by
+/// [`resolve_sequences`]).
 pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Channels>) -> Result<Frame> {
-    let FrameFile { path, allow_missing, number } = file;
+    if !file.with.is_empty() {
+        if channels.is_none() {
+            *channels = Some(resolve_sequences(std::slice::from_ref(&file), sel)?);
+        }
+        return read_files(file, channels.as_ref());
+    }
+    let FrameFile { path, allow_missing, number, .. } = file;
     let stated = crate::source_time::Stated::default();
-    let Some(path) = path else { return Ok(Frame { path: PathBuf::new(), grids: None, source: None, number, stated }) };
+    let with_sources = Vec::new();
+    let Some(path) = path else { return Ok(Frame { path: PathBuf::new(), grids: None, source: None, with_sources, number, stated }) };
     let p = path.display().to_string();
     if !path.exists() {
         if allow_missing {
-            return Ok(Frame { path, grids: None, source: None, number, stated });
+            return Ok(Frame { path, grids: None, source: None, with_sources, number, stated });
         }
         return Err(Error::Failed(format!("{p}: no such file (use --allow-missing to cook it as an empty frame)")));
     }
     let vdb = vdbcook_vdb::open(&path).with_context(|| p.clone())?;
     let stated = crate::source_time::stated(&vdb);
-    let source = SourceFile { path: p.clone(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(xxhash_rust::xxh3::xxh3_128(vdb.bytes())) };
+    let source = source_of(&vdb, &p);
     if channels.is_none() {
         match resolve(&vdb, &p, sel) {
             Ok(c) => *channels = Some(c),
-            Err(_) if allow_missing && !matches!(sel, GridSelection::Many(_) | GridSelection::All) => return Ok(Frame { path, grids: None, source: Some(source), number, stated }),
+            Err(_) if allow_missing && !matches!(sel, GridSelection::Many(_) | GridSelection::All) => return Ok(Frame { path, grids: None, source: Some(source), with_sources, number, stated }),
             Err(e) => return Err(e),
         }
     }
-    let Some(ch) = channels.as_ref() else { return Ok(Frame { path, grids: None, source: Some(source), number, stated }) };
+    let Some(ch) = channels.as_ref() else { return Ok(Frame { path, grids: None, source: Some(source), with_sources, number, stated }) };
     let mut grids: Vec<Option<Grid>> = Vec::with_capacity(ch.specs.len());
     // Each source grid once (a vec3 grid gives its three channels in order).
     let mut read: Option<(String, Vec<Grid>)> = None;
@@ -172,7 +302,7 @@ pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Ch
                 continue;
             }
             if allow_missing {
-                return Ok(Frame { path, grids: None, source: Some(source), number, stated });
+                return Ok(Frame { path, grids: None, source: Some(source), with_sources, number, stated });
             }
             return Err(Error::Failed(format!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(&vdb))));
         };
@@ -186,5 +316,79 @@ pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Ch
         };
         grids.push(grid);
     }
-    Ok(Frame { path, grids: Some(grids), source: Some(source), number, stated })
+    Ok(Frame { path, grids: Some(grids), source: Some(source), with_sources, number, stated })
+}
+
+/// Reads a frame from its main file and its `--with` files: each channel
+/// from its sequence's file, all of them one frame for the cooker. A
+/// sequence without its file (or, with `allow_missing`, whose file is not
+/// on disk) leaves its channels empty in this frame.
+fn read_files(file: FrameFile, channels: Option<&Channels>) -> Result<Frame> {
+    let FrameFile { path, allow_missing, number, with } = file;
+    let main = path.clone().unwrap_or_default();
+    let mut opened: Vec<Option<(String, VdbFile)>> = Vec::with_capacity(1 + with.len());
+    let mut with_sources = Vec::new();
+    let (mut source, mut stated) = (None, crate::source_time::Stated::default());
+    for (k, p) in std::iter::once(path).chain(with).enumerate() {
+        let Some(p) = p else {
+            opened.push(None);
+            continue;
+        };
+        let name = p.display().to_string();
+        if !p.exists() {
+            if allow_missing {
+                opened.push(None);
+                continue;
+            }
+            return Err(Error::Failed(format!("{name}: no such file (use --allow-missing to cook its channels empty in that frame)")));
+        }
+        let vdb = vdbcook_vdb::open(&p).with_context(|| name.clone())?;
+        let record = source_of(&vdb, &name);
+        if k == 0 {
+            stated = crate::source_time::stated(&vdb);
+            source = Some(record);
+        } else {
+            with_sources.push((p, record));
+        }
+        opened.push(Some((name, vdb)));
+    }
+    let Some(ch) = channels.filter(|_| opened.iter().any(Option::is_some)) else { return Ok(Frame { path: main, grids: None, source, with_sources, number, stated }) };
+    let mut grids: Vec<Option<Grid>> = Vec::with_capacity(ch.specs.len());
+    // Each source grid once (a vec3 grid gives its three channels in order).
+    let mut read: Option<(usize, String, Vec<Grid>)> = None;
+    for (spec, &k) in ch.specs.iter().zip(&ch.sequences) {
+        let Some((name, vdb)) = opened.get(k).and_then(Option::as_ref) else {
+            grids.push(None);
+            continue;
+        };
+        let Some(i) = vdb.grids.iter().position(|g| g.name == spec.grid) else {
+            grids.push(None);
+            continue;
+        };
+        if read.as_ref().is_none_or(|(s, g, _)| *s != k || g != &spec.grid) {
+            read = Some((k, spec.grid.clone(), vdb.read_channels(i).with_context(|| name.clone())?));
+        }
+        let parts = read.as_mut().map(|(_, _, g)| g).filter(|g| !g.is_empty());
+        grids.push(match spec.component {
+            Some(c) => parts.and_then(|g| g.get(c as usize).cloned()),
+            None => parts.map(|g| g.remove(0)),
+        });
+    }
+    Ok(Frame { path: main, grids: Some(grids), source, with_sources, number, stated })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::split_sequence;
+
+    #[test]
+    fn a_trailing_at_number_picks_a_sequence() {
+        assert_eq!(split_sequence("vel@1"), ("vel", Some(1)));
+        assert_eq!(split_sequence("vel@0"), ("vel", Some(0)));
+        assert_eq!(split_sequence("vel"), ("vel", None));
+        assert_eq!(split_sequence("a@b"), ("a@b", None));
+        assert_eq!(split_sequence("@1"), ("@1", None));
+        assert_eq!(split_sequence("vel@"), ("vel@", None));
+        assert_eq!(split_sequence("x@99999999999999999999999"), ("x", Some(usize::MAX)));
+    }
 }

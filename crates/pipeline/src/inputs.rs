@@ -169,6 +169,103 @@ pub fn frame_numbers(files: &[PathBuf]) -> Option<Vec<i64>> {
     numbers.windows(2).all(|w| w[0] < w[1]).then_some(numbers)
 }
 
+/// Expands one `--with` input (one sequence, in the forms INPUT takes): a
+/// relative path is taken from `base` when one is given (a bake's manifest
+/// directory); `--frames` applies when it is a frame pattern.
+pub fn expand_with(input: &str, base: Option<&Path>, frames: Option<FrameRange>) -> Result<Vec<PathBuf>> {
+    let joined = match base {
+        Some(b) if Path::new(input).is_relative() => b.join(input).to_string_lossy().into_owned(),
+        _ => input.to_string(),
+    };
+    let frames = if is_pattern(&joined) { frames } else { None };
+    expand(&[joined], frames)
+}
+
+/// Expands the main INPUTs of a cook with `--with` inputs: `--frames`
+/// applies to them when one is a frame pattern (it may be for a `--with`
+/// input alone).
+pub fn expand_main(inputs: &[String], with: &[String], frames: Option<FrameRange>) -> Result<Vec<PathBuf>> {
+    if frames.is_some() && !inputs.iter().any(|i| is_pattern(i)) && with.iter().any(|w| is_pattern(w)) {
+        return expand(inputs, None);
+    }
+    expand(inputs, frames)
+}
+
+/// Each frame's file in each `--with` sequence, `[frame][sequence]`: `with`
+/// holds the inputs as written (relative ones taken from `base` when given),
+/// matched to the main input's `files` by [`match_with`]. A frame whose file
+/// a sequence lacks (or names but is not on disk) is an error naming both,
+/// unless `allow_missing`: it then has none there (its channels from that
+/// sequence are empty).
+pub fn with_files(files: &[PathBuf], with: &[String], base: Option<&Path>, frames: Option<FrameRange>, allow_missing: bool) -> Result<Vec<Vec<Option<PathBuf>>>> {
+    let mut out: Vec<Vec<Option<PathBuf>>> = vec![Vec::with_capacity(with.len()); files.len()];
+    if with.is_empty() {
+        return Ok(out);
+    }
+    let main_numbers = distinct_numbers(files);
+    for w in with {
+        let found = match_with(files.len(), main_numbers.as_deref(), w, expand_with(w, base, frames)?)?;
+        for (f, (slot, file)) in out.iter_mut().zip(found).enumerate() {
+            let file = match file {
+                Some(p) if p.exists() => Some(p),
+                _ if allow_missing => None,
+                p => return Err(missing_with(f, main_numbers.as_ref().and_then(|n| n.get(f).copied()), &files[f], w, p.as_deref())),
+            };
+            slot.push(file);
+        }
+    }
+    Ok(out)
+}
+
+/// The numbers in the names of a sequence's files, when every name carries
+/// one and no two are the same (the frames can be matched by number).
+pub fn distinct_numbers(files: &[PathBuf]) -> Option<Vec<i64>> {
+    let numbers: Vec<i64> = files.iter().map(|f| number_in_name(f)).collect::<Option<_>>()?;
+    let mut sorted = numbers.clone();
+    sorted.sort_unstable();
+    sorted.windows(2).all(|w| w[0] != w[1]).then_some(numbers)
+}
+
+/// The file of the `--with` sequence `name` (its files `files`) for each of
+/// the main input's `frames` frames: the one whose name carries the frame's
+/// number (`main_numbers`, when every main file's name has a distinct one),
+/// else, when names carry no numbers, the one at the frame's position (the
+/// counts must then be equal). `None` where the sequence has no file with the
+/// frame's number; what a frame without its file becomes is the caller's to say.
+pub fn match_with(frames: usize, main_numbers: Option<&[i64]>, name: &str, files: Vec<PathBuf>) -> Result<Vec<Option<PathBuf>>> {
+    let numbered = main_numbers.filter(|m| m.len() == frames).and_then(|m| files.iter().map(|f| number_in_name(f)).collect::<Option<Vec<i64>>>().map(|n| (m, n)));
+    let Some((main, numbers)) = numbered else {
+        if files.len() != frames {
+            return Err(Error::Failed(format!(
+                "--with {name}: {} file(s) for the main input's {frames} frame(s) (file names without frame numbers are matched by position, so the counts must be equal)",
+                files.len()
+            )));
+        }
+        return Ok(files.into_iter().map(Some).collect());
+    };
+    let mut by_number: std::collections::BTreeMap<i64, PathBuf> = std::collections::BTreeMap::new();
+    for (f, n) in files.into_iter().zip(numbers) {
+        if let Some(other) = by_number.get(&n) {
+            return Err(Error::Failed(format!("--with {name}: two files carry frame number {n} ({} and {})", other.display(), f.display())));
+        }
+        by_number.insert(n, f);
+    }
+    Ok(main.iter().map(|n| by_number.get(n).cloned()).collect())
+}
+
+/// The error for frame `frame` of the main input (`number`, its file `main`)
+/// whose file in the `--with` sequence `name` is missing (`path`: the file
+/// looked for, when the sequence names one).
+pub fn missing_with(frame: usize, number: Option<i64>, main: &Path, name: &str, path: Option<&Path>) -> Error {
+    let which = format!("frame {} ({})", number.unwrap_or(frame as i64), main.display());
+    let why = match (path, number) {
+        (Some(p), _) => format!("{} does not exist", p.display()),
+        (None, Some(n)) => format!("no file of it carries frame number {n}"),
+        (None, None) => "it has no file there".to_string(),
+    };
+    Error::Failed(format!("--with {name} has no file for {which}: {why}; --allow-missing cooks its channels empty in that frame"))
+}
+
 /// Moves the plain files gathered so far, in natural order, to the frame list.
 fn flush(plain: &mut Vec<PathBuf>, out: &mut Vec<PathBuf>) {
     natural_sort(plain);
@@ -193,6 +290,26 @@ mod tests {
         assert_eq!(frame_numbers(&files(&["f_1001.vdb", "f_1004.vdb", "f_1007.vdb"])), Some(vec![1001, 1004, 1007]));
         assert_eq!(frame_numbers(&files(&["a_1.vdb", "b_1.vdb"])), None, "numbers that do not increase");
         assert_eq!(frame_numbers(&files(&["f_1.vdb", "g.vdb"])), None, "a name without a number");
+    }
+
+    #[test]
+    fn with_sequences_match_by_number_else_by_position() {
+        let files = |v: &[&str]| v.iter().map(PathBuf::from).collect::<Vec<_>>();
+        let main = files(&["n/noise_0001.vdb", "n/noise_0002.vdb", "n/noise_0004.vdb"]);
+        let numbers = distinct_numbers(&main);
+        assert_eq!(numbers, Some(vec![1, 2, 4]));
+        // By number: extra files are not read; a number without a file is None.
+        let m = match_with(3, numbers.as_deref(), "d", files(&["d/data_0004.vdb", "d/data_0001.vdb", "d/data_0003.vdb"])).unwrap();
+        assert_eq!(m, vec![Some(PathBuf::from("d/data_0001.vdb")), None, Some(PathBuf::from("d/data_0004.vdb"))]);
+        let twice = match_with(3, numbers.as_deref(), "d", files(&["d/a_1.vdb", "e/b_1.vdb"])).unwrap_err().to_string();
+        assert!(twice.contains("two files carry frame number 1"), "{twice}");
+        // Names without numbers on either side: by position, counts equal.
+        let m = match_with(3, numbers.as_deref(), "v", files(&["v/x.vdb", "v/y.vdb", "v/z.vdb"])).unwrap();
+        assert_eq!(m[2], Some(PathBuf::from("v/z.vdb")));
+        assert!(match_with(3, None, "v", files(&["v/a_1.vdb", "v/a_2.vdb"])).unwrap_err().to_string().contains("by position"));
+        assert_eq!(distinct_numbers(&files(&["a_1.vdb", "b_1.vdb"])), None);
+        let e = missing_with(1, Some(2), Path::new("n/noise_0002.vdb"), "d/data_####.vdb", Some(Path::new("d/data_0002.vdb"))).to_string();
+        assert_eq!(e, "--with d/data_####.vdb has no file for frame 2 (n/noise_0002.vdb): d/data_0002.vdb does not exist; --allow-missing cooks its channels empty in that frame");
     }
 
     #[test]

@@ -208,11 +208,20 @@ settings_group! {
         /// comma-separated, or "all" (every float, double, half and vec3 grid of the first frame).
         #[cfg_attr(feature = "clap", arg(long, value_name = "A,B,...|all"))]
         pub grids: Option<String> = None;
+        /// Another sequence whose files give each frame more grids (repeatable): a file, directory,
+        /// glob or frame pattern, as INPUT. Its files are matched to INPUT's frames by the number
+        /// in their names (else by position), and each name of --grids is found in whichever
+        /// file of the frame has it; NAME@N picks the file of sequence N when several have it
+        /// (0: INPUT, 1: the first --with, ...). E.g. noise/fluid_noise_####.vdb --with
+        /// data/fluid_data_####.vdb --grids density@0,flame,vel.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "INPUT"))]
+        pub with: Vec<String> = Vec::new();
         /// Pack these channels into shared textures in their own format (repeatable), e.g.
         /// --group temperature,flames=bc7 --group density=bc4; other channels take --format, a texture each.
         #[cfg_attr(feature = "clap", arg(long, value_name = "CHANNELS=FORMAT"))]
         pub group: Vec<ChannelGroup> = Vec::new();
-        /// A frame whose file or grid is missing becomes an empty frame instead of an error.
+        /// A frame whose file or grid is missing becomes an empty frame instead of an error (a
+        /// --with sequence's missing file: its channels are empty in that frame).
         #[cfg_attr(feature = "clap", arg(long))]
         pub allow_missing: bool = false;
         /// Voxel format of the brick atlas.
@@ -389,6 +398,8 @@ impl CookSettings {
             ("variance_threshold".into(), if clustered { self.variance_threshold.text() } else { String::new() }),
             ("max_brick_error".into(), self.max_brick_error.text()),
             ("inputs".into(), inputs.join(" ")),
+            // A JSON list (paths may hold spaces): `validate` expands them again.
+            ("with".into(), if self.with.is_empty() { String::new() } else { serde_json::to_string(&self.with).unwrap_or_default() }),
             // Machines of another class write other BC7 blocks: parts of one asset must agree.
             ("bc7_kernels".into(), if self.may_encode_bc7() { vdbcook_encode::bc7_kernels().to_string() } else { String::new() }),
         ]

@@ -6,7 +6,7 @@
 //! directory when they are below it. A relative path is looked up in the
 //! current directory, then in the asset's directory.
 
-use crate::{Error, Result};
+use crate::{Context, Error, Result};
 use std::path::{Path, PathBuf};
 use vdbcook_vpak::Metadata;
 
@@ -38,6 +38,84 @@ pub fn frame_files(meta: &Metadata, asset: &Path) -> Result<Vec<Option<PathBuf>>
         files.push(Some(path));
     }
     Ok(files)
+}
+
+/// A setting the asset records (empty when it records none).
+pub fn setting<'a>(meta: &'a Metadata, key: &str) -> &'a str {
+    meta.settings.iter().find(|(k, _)| k == key).map_or("", |(_, v)| v.as_str())
+}
+
+/// The `--with` inputs an asset was cooked with, as written (its `with` setting).
+pub fn with_inputs(meta: &Metadata) -> Result<Vec<String>> {
+    match setting(meta, "with") {
+        "" => Ok(Vec::new()),
+        text => serde_json::from_str(text).map_err(|e| Error::Failed(format!("the asset's setting with = {text} is not a list of inputs: {e}"))),
+    }
+}
+
+/// Each frame's `--with` files, `[frame][sequence]`, for an asset whose main
+/// files are `files` ([`frame_files`]): the `with` inputs it records expanded
+/// again from where its main files were found (over its recorded `frames`)
+/// and matched as `cook` matched them, each checked against the record of
+/// it among the asset's sources (every segment's). A file the asset does not
+/// record was missing when it was cooked (`--allow-missing`): `None`.
+pub fn with_files(asset: &vdbcook_vpak::Asset, meta: &Metadata, path: &Path, files: &[Option<PathBuf>]) -> Result<Vec<Vec<Option<PathBuf>>>> {
+    let with = with_inputs(meta)?;
+    let mut out: Vec<Vec<Option<PathBuf>>> = vec![Vec::with_capacity(with.len()); files.len()];
+    if with.is_empty() {
+        return Ok(out);
+    }
+    let name = path.display().to_string();
+    // The directory the recorded paths are relative to: the current one, or the asset's.
+    let base = meta.frames.iter().zip(files).find_map(|(fr, found)| {
+        let recorded = Path::new(&meta.sources.get(fr.source? as usize)?.path);
+        let found = found.as_deref()?;
+        Some((found != recorded && recorded.is_relative()).then(|| path.parent().unwrap_or(Path::new("")).to_path_buf()))
+    });
+    let base = base.flatten();
+    let frames = match setting(meta, "frames") {
+        "" => None,
+        t => Some(t.parse::<crate::FrameRange>().map_err(|e| Error::Failed(format!("{name}: its recorded frames: {e}")))?),
+    };
+    // The frames' numbers as cook matched them: from the main files' names (a frame without a file: its recorded number).
+    let numbers: Option<Vec<i64>> = files.iter().enumerate().map(|(f, p)| p.as_deref().map_or(Some(meta.frame_number(f)), crate::inputs::number_in_name)).collect();
+    let numbers = numbers.filter(|n| {
+        let mut s = n.clone();
+        s.sort_unstable();
+        s.windows(2).all(|w| w[0] != w[1])
+    });
+    let mut recorded = Vec::new();
+    for s in 0..asset.segment_count() {
+        recorded.extend(asset.stored_segment(s).and_then(|a| a.metadata()).with_context(|| name.clone())?.sources);
+    }
+    for w in &with {
+        let found = crate::inputs::match_with(files.len(), numbers.as_deref(), w, crate::inputs::expand_with(w, base.as_deref(), frames).with_context(|| format!("{name}: its recorded --with {w}"))?)?;
+        for (slot, file) in out.iter_mut().zip(found) {
+            let file = match file {
+                Some(p) => {
+                    let as_recorded = base.as_deref().and_then(|b| p.strip_prefix(b).ok()).unwrap_or(&p).display().to_string();
+                    match recorded.iter().find(|s| s.path == as_recorded) {
+                        None => None,
+                        Some(_) if !p.is_file() => {
+                            return Err(Error::Failed(format!(
+                                "{name}: the recorded source {as_recorded} does not exist here (relative paths are looked up where the main files are); give the sources with --source and --with"
+                            )));
+                        }
+                        Some(src) => {
+                            let bytes = std::fs::metadata(&p).map(|m| m.len()).unwrap_or(0);
+                            if bytes != src.bytes || file_hash(&p).map_err(|e| Error::Failed(format!("{}: {e}", p.display())))? != src.xxh3_128 {
+                                return Err(changed(&name, &p));
+                            }
+                            Some(p)
+                        }
+                    }
+                }
+                None => None,
+            };
+            slot.push(file);
+        }
+    }
+    Ok(out)
 }
 
 /// XXH3-128 of a file's bytes, hex (as recorded), read in chunks.

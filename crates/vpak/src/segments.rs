@@ -397,6 +397,12 @@ pub fn merged(metas: &[Metadata]) -> Result<Metadata, Error> {
             };
             m.frames.push(f);
         }
+        // Files no frame names (several files per frame): each once too.
+        for src in &seg.sources {
+            if !m.sources.contains(src) {
+                m.sources.push(src.clone());
+            }
+        }
         m.frame_count = m.frame_count.checked_add(seg.frame_count).ok_or_else(|| Error::Invalid("more than 2^32 frames".into()))?;
     }
     if let Some(t) = &mut m.time {
