@@ -29,7 +29,7 @@ it; a name in several files is a usage error (exit 2) unless NAME@N says which: 
 N, 0 for INPUT, 1 for the first --with, and so on. The channel keeps the grid's name
 (density@1 is the channel density). --grids all takes every grid of every file and
 refuses a name found in two. The frame's grids, from all its files, are cooked as one
-frame (one voxel size). Every file read is recorded in the asset's sources and the
+frame. Every file read is recorded in the asset's sources and the
 --with inputs in its settings: validate finds them again, and --part, --auto and
 --validate read the same files.
 
@@ -50,6 +50,14 @@ channels into shared textures in a format of their own: f32/f16/unorm8 up to fou
 channels in one RG/RGBA texture; bc7 two channels at two z-slices each per texel, or
 four in RGBA, which lowers the error of correlated channels (density and temperature;
 temperature and flames); bc4 stays one texture per channel.
+
+Grids at their own voxel size (Houdini's vel at a velocity voxel scale of 2, Blender's
+data cache beside its finer noise cache): a grid whose voxels are 2, 4 or 8 times the
+finest grid's, offset from them by a whole or half voxel, is stored at the level of
+detail whose voxels are its own (not multiplied up: an eighth of the bytes per factor
+of 2), and --lods N gives it N levels from there. The asset's transform is the finest
+grid's; unpack writes each channel on its own. Other ratios, rotations and offsets are
+a usage error (exit 2) naming both grids and their voxel sizes.
 
 --max-error E chooses the format brick by brick instead of --format: every brick of
 every channel is stored in the cheapest of constant (no texels), bc7, bc4, unorm8,
