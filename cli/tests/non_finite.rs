@@ -138,7 +138,7 @@ fn a_transform_mismatch_names_both_files() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert_eq!(err.matches("frame 1").count(), 1, "{err}");
     let here = format!("{}: frame 1: grid \"density\" has transform UniformScaleMap [[1.0", files[0].display());
-    let there = format!("but the asset's transform, set by grid \"density\" of frame 0 ({}), is UniformScaleMap [[0.5", files[2].display());
+    let there = format!("but the channel's transform, set by grid \"density\" of frame 0 ({}), is UniformScaleMap [[0.5", files[2].display());
     assert!(err.contains(&here) && err.contains(&there), "{err}");
     assert!(!dir.join("x.vpak").exists());
     let _ = std::fs::remove_dir_all(&dir);
