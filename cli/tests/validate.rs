@@ -510,3 +510,19 @@ fn render_of_a_missing_asset_and_unpack_of_one_frame() {
     assert!(!dir.join("four.vdb").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn frames_out_of_range_are_refused_before_the_sources_are_read() {
+    let dir = scratch("frames-first");
+    let asset = cook(&dir, "f16");
+    // The sources do not exist: the frame is refused first, as a usage error.
+    let missing = dir.join("no-such-sources");
+    let r = vdbcook(&["validate", "-q", s(&asset), "--source", s(&missing), "--frames", "99"]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(err.contains("--frames: frame 99 is out of range") && !err.contains("no-such-sources"), "{err}");
+    let r = vdbcook(&["validate", "-q", s(&asset), "--source", s(&missing), "--source-frame", "1234"]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.code() == Some(1) && err.contains("no frame has source number 1234"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

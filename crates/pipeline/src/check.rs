@@ -39,6 +39,8 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
     if let Some(why) = meta.missing_level(lod) {
         return Err(Error::Failed(format!("{name}: {why}")));
     }
+    // Frames out of range are refused before the reference is cooked.
+    vdbcook_validate::check_frames(opts, meta.frame_count)?;
     // One reference, filtered down to the coarsest level checked, serves every level.
     let coarsest = if opts.levels == Levels::Every { meta.stored_levels().end.saturating_sub(1) } else { lod };
     let recorded = matches!(sources, Sources::Recorded);

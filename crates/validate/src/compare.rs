@@ -155,6 +155,16 @@ struct Pair<'a> {
     scene: &'a Scene,
 }
 
+/// Whether the frames `opts` asks for are an asset of `frame_count` frames'
+/// (a usage error naming the first that is not): callers check before the
+/// reference is cooked, and [`compare_assets`] again.
+pub fn check_frames(opts: &CompareOptions, frame_count: u32) -> Result<(), CompareError> {
+    match opts.frames.iter().flatten().find(|&&f| f >= frame_count as usize) {
+        Some(&bad) => Err(CompareError::Usage(format!("--frames: frame {bad} is out of range (the asset has {frame_count} frames, numbered from 0)"))),
+        None => Ok(()),
+    }
+}
+
 /// Renders `asset` (called `name`) and its lossless `reference` with the same
 /// ray-marcher and compares them at the levels `opts` asks for, each against
 /// the reference filtered to it (the reference must hold them). `renderer` is
@@ -179,10 +189,8 @@ pub fn compare_assets<R: std::ops::Deref<Target = Renderer>, E: Into<BoxError>>(
     if ref_meta.channels.len() != meta.channels.len() {
         return Err(CompareError::Failed(format!("{name}: the asset has {} channels, the source gives {}", meta.channels.len(), ref_meta.channels.len())));
     }
+    check_frames(opts, meta.frame_count)?;
     let frames: Vec<usize> = opts.frames.clone().unwrap_or_else(|| (0..meta.frame_count as usize).collect());
-    if let Some(&bad) = frames.iter().find(|&&f| f >= meta.frame_count as usize) {
-        return Err(CompareError::Usage(format!("--frames: frame {bad} is out of range (the asset has {} frames, numbered from 0)", meta.frame_count)));
-    }
     // The scene is the reference's: what the source is decides what is drawn.
     let scene = Scene::for_asset_with(&ref_meta, opts.viewing.extinction.as_deref()).map_err(|e| CompareError::Usage(format!("--extinction: {e}")))?;
     // Every level the drawn channel has (with channels at their own voxel sizes, not every level of the trees).

@@ -18,7 +18,7 @@ pub mod report;
 mod resident;
 mod scene;
 
-pub use compare::{compare_assets, CompareError, CompareOptions, Comparison, LevelFigures, Levels, Shot, Worst};
+pub use compare::{check_frames, compare_assets, CompareError, CompareOptions, Comparison, LevelFigures, Levels, Shot, Worst};
 pub use cpu::{render_cpu, render_cpu_level};
 pub use flip::{flip, FlipMap};
 pub use gpu::{open_adapter, open_device, open_gpu, shader_sources, wanted_features, BcDecode, Gpu, GpuAsset, Renderer};
