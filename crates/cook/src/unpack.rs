@@ -32,26 +32,28 @@ pub fn unpack_frame(asset: &Asset, frame: usize) -> Result<Vec<Grid>, Error> {
 }
 
 /// Each channel of frame `frame` at its stored level nearest `level` (its
-/// first stored level for `None`), on its own transform. One
-/// [`unpack_level`] per level that some channel is taken from.
+/// first stored level for `None`), on its own transform: the frame's body
+/// restored and checked once, one tree walk per level some channel is taken from.
 pub fn unpack_near(asset: &Asset, frame: usize, level: Option<u32>) -> Result<Vec<Grid>, Error> {
-    let meta = asset.metadata()?;
-    if !meta.is_multi_resolution() {
-        return unpack_level(asset, frame, level.unwrap_or(meta.first_level));
-    }
-    let want: Vec<u32> = (0..meta.channels.len()).map(|c| meta.channel_level_near(c, level.unwrap_or(0))).collect();
-    let mut levels = want.clone();
-    levels.sort_unstable();
-    levels.dedup();
-    let mut out: Vec<Option<Grid>> = vec![None; want.len()];
-    for l in levels {
-        for (c, g) in unpack_level(asset, frame, l)?.into_iter().enumerate() {
-            if want.get(c) == Some(&l) {
-                out[c] = Some(g);
+    in_body(asset, frame, &|checked, frame| {
+        let meta = &checked.meta;
+        if !meta.is_multi_resolution() {
+            return level_of(checked, frame, level.unwrap_or(meta.first_level));
+        }
+        let want: Vec<u32> = (0..meta.channels.len()).map(|c| meta.channel_level_near(c, level.unwrap_or(0))).collect();
+        let mut levels = want.clone();
+        levels.sort_unstable();
+        levels.dedup();
+        let mut out: Vec<Option<Grid>> = vec![None; want.len()];
+        for l in levels {
+            for (c, g) in level_of(checked, frame, l)?.into_iter().enumerate() {
+                if want.get(c) == Some(&l) {
+                    out[c] = Some(g);
+                }
             }
         }
-    }
-    out.into_iter().map(|g| g.ok_or_else(|| Error::Corrupt("a channel has no stored level".into()))).collect()
+        out.into_iter().map(|g| g.ok_or_else(|| Error::Corrupt("a channel has no stored level".into()))).collect()
+    })
 }
 
 /// Frame `frame` at level of detail `level` (0: the frame itself): the
@@ -61,19 +63,29 @@ pub fn unpack_near(asset: &Asset, frame: usize, level: Option<u32>) -> Result<Ve
 /// (its own voxels are coarser, or its levels of detail end before) is an
 /// empty grid.
 pub fn unpack_level(asset: &Asset, frame: usize, level: u32) -> Result<Vec<Grid>, Error> {
+    in_body(asset, frame, &|checked, frame| level_of(checked, frame, level))
+}
+
+/// Runs `f` on the checked body that holds frame `frame` (its segment's, of
+/// a segmented asset) and the frame's number there.
+fn in_body<T>(asset: &Asset, frame: usize, f: &dyn Fn(&Checked, usize) -> Result<T, Error>) -> Result<T, Error> {
     if asset.is_segmented() {
         // The frame's segment alone, and the frame within it.
         let Some((s, local)) = asset.locate(frame) else { return Err(Error::NoFrame { frame, count: asset.frame_count()? }) };
         let seg = asset.segment(s)?;
-        let grids = unpack_level(&seg, local, level);
+        let r = in_body(&seg, local, f);
         // A long asset is read a segment at a time: the pages read go again.
         seg.release();
-        return grids.map_err(|e| match e {
+        return r.map_err(|e| match e {
             Error::TooBig { leaves, bytes, budget, .. } => Error::TooBig { frame, leaves, bytes, budget },
             e => e,
         });
     }
-    let checked = Checked::new(asset)?;
+    f(&Checked::new(asset)?, frame)
+}
+
+/// [`unpack_level`] of a checked body.
+fn level_of(checked: &Checked, frame: usize, level: u32) -> Result<Vec<Grid>, Error> {
     let meta = &checked.meta;
     if frame >= meta.frame_count as usize {
         return Err(Error::NoFrame { frame, count: meta.frame_count as usize });
