@@ -7,17 +7,6 @@ use vdbcook_vpak::coding::Coding;
 use vdbcook_vpak::nodes::{l1_records, l3_node_count, L2_WORDS};
 use vdbcook_vpak::{kind, Asset, AtlasLayout, Checked};
 
-/// "0.1", or "0.1×0.1×0.2" for voxels that are not cubes: channel `c`'s own voxel edge
-/// in world units (to six decimals, so 2 × 0.1 reads 0.2).
-fn voxel_size_text(meta: &vdbcook_vpak::Metadata, c: usize) -> String {
-    let v = meta.channel_voxel_size(c).map(|v| format!("{}", (v * 1e6).round() / 1e6));
-    if v[0] == v[1] && v[1] == v[2] {
-        v[0].clone()
-    } else {
-        v.join("×")
-    }
-}
-
 /// "density, temperature, vel": the channels stored at `level`, a vec3 grid's three by its name.
 fn channels_at(meta: &vdbcook_vpak::Metadata, level: u32) -> Vec<String> {
     let mut names: Vec<String> = Vec::new();
@@ -239,7 +228,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             c.name,
             channel_formats(i),
             meta.resolution(i).level,
-            voxel_size_text(meta, i),
+            vdbcook_vpak::resolution::voxel_size_text(meta.channel_voxel_size(i)),
             if c.alternates.is_empty() { format!("{}.{}", c.plane, c.lane) } else { planes },
             channel_bytes(i),
             c.class,

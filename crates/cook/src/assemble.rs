@@ -25,7 +25,6 @@ impl Cooker {
     /// Returns the asset's sections (write them with `vdbcook_vpak::write_file`) and the report.
     /// With `max_bytes`, the finest levels that fit are kept (see [`CookReport::budget`]).
     pub fn finish(mut self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
-        // The level-0 channels keep at least one level: their coarsest.
         let levels = self.opts.levels.get();
         let timings = vec![("build".to_string(), self.build_secs - self.level_secs), ("levels".to_string(), self.level_secs)];
         let built = std::mem::take(&mut self.builder).finish()?;
@@ -75,12 +74,13 @@ impl Cooker {
         // channel in the cheapest format within the maximum error (strays
         // split off their clusters); then deduplication and remapping.
         let max_error = opts.max_error.map(crate::ErrorBound::get);
+        // Each channel's stored levels: elsewhere its bricks hold nothing a reader samples.
+        let stored_levels = self.stored_levels(first);
         let masks = encode::shown_masks(built, &specs, max_error);
         let t0 = Instant::now();
         let encoded = match max_error {
             None => {
-                let stored: Vec<std::ops::Range<u32>> = self.channel_levels().iter().map(|&l| l.max(first)..l + opts.levels.get()).collect();
-                let absent = encode::absent_channels(built, &stored);
+                let absent = encode::absent_channels(built, &stored_levels);
                 encode::in_planes(pool, channels, specs, opts.quality, masks.as_deref(), absent, clustered.as_ref(), progress)
             }
             Some(bound) => {
@@ -103,7 +103,7 @@ impl Cooker {
         // clustering, what they would have been without).
         let t0 = Instant::now();
         let decode_stored = |b: u32| stored.decode(&encoded, b);
-        let own: Vec<u32> = self.channel_levels().iter().map(|&l| l.max(first)).collect();
+        let own: Vec<u32> = stored_levels.iter().map(|r| r.start).collect();
         let measured = errors::measure(built, first, self.levels(), &own, &decode_stored);
         let cluster_report = clustered.as_ref().zip(opts.clustering.as_ref()).map(|(c, co)| {
             let without = cluster::Unclustered { built, first, own: &own, channels, specs: &encoded.specs, quality: opts.quality, max_error, disk: opts.disk, masks: masks.as_deref() };

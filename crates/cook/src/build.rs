@@ -8,6 +8,7 @@ use std::time::Instant;
 use vdbcook_flipbook::Builder;
 use vdbcook_grid::lod::{self, Filter};
 use vdbcook_grid::{Grid, GridClass, Transform};
+use vdbcook_vpak::resolution::voxel_size_text;
 use vdbcook_vpak::{FrameInfo, LevelFigures, Resolution, SourceFile, MAX_LEVELS};
 
 /// Streams frames into an asset: [`Cooker::push`] here, [`Cooker::finish`] in `assemble`.
@@ -197,13 +198,13 @@ impl Cooker {
                 self.transform = Some(FirstTransform { frame, grid: g.name.clone(), transform: g.transform, earlier: None });
             }
         }
-        let Some(asset) = self.transform.clone() else {
+        let Some(asset) = &self.transform else {
             self.tree_levels.get_or_insert(self.opts.levels.get());
             return Ok(());
         };
         for (c, g) in grids.iter().enumerate() {
             let Some(g) = g else { continue };
-            match self.placed.get(c).cloned().flatten() {
+            match self.placed.get(c).and_then(Option::as_ref) {
                 Some(p) if p.first.transform != g.transform => {
                     return Err(Error::Transform {
                         grid: g.name.clone(),
@@ -220,8 +221,14 @@ impl Cooker {
                         None => {
                             return Err(Error::Resolution {
                                 grid: g.name.clone(),
-                                found: format!("voxel size {} ({})", size_text(&g.transform), transform_text(&g.transform)),
-                                first: format!("\"{}\" of {} voxel size {} ({})", asset.grid, self.frame_text(&asset, frame), size_text(&asset.transform), transform_text(&asset.transform)),
+                                found: format!("voxel size {} ({})", voxel_size_text(g.transform.voxel_size()), transform_text(&g.transform)),
+                                first: format!(
+                                    "\"{}\" of {} voxel size {} ({})",
+                                    asset.grid,
+                                    self.frame_text(asset, frame),
+                                    voxel_size_text(asset.transform.voxel_size()),
+                                    transform_text(&asset.transform)
+                                ),
                             })
                         }
                     };
@@ -247,6 +254,13 @@ impl Cooker {
     /// Each channel's level (0 until its first grid is seen).
     pub(crate) fn channel_levels(&self) -> Vec<u32> {
         self.placed.iter().map(|p| p.as_ref().map_or(0, |p| p.resolution.level)).collect()
+    }
+
+    /// The levels at which each channel is stored when the finest stored is
+    /// `first` (as `Metadata::channel_levels` reads them back): from its own
+    /// level, or `first`, to its own plus the levels of detail asked for.
+    pub(crate) fn stored_levels(&self, first: u32) -> Vec<std::ops::Range<u32>> {
+        self.channel_levels().into_iter().map(|l| l.max(first)..l + self.opts.levels.get()).collect()
     }
 
     /// Levels of the trees of every frame (see `tree_levels`).
@@ -358,15 +372,5 @@ impl Cooker {
 
     pub fn frame_count(&self) -> usize {
         self.frames.len()
-    }
-}
-
-/// "0.1" or "0.1 × 0.1 × 0.2": a transform's voxel size.
-fn size_text(t: &Transform) -> String {
-    let [x, y, z] = t.voxel_size().map(|v| format!("{}", (v * 1e6).round() / 1e6));
-    if x == y && y == z {
-        x
-    } else {
-        format!("{x} × {y} × {z}")
     }
 }

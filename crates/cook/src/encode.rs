@@ -31,8 +31,7 @@ pub(crate) fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8]
 /// a level where the channel is stored (`stored[c]`: channel c's levels);
 /// `None` when every channel is stored at every level.
 pub(crate) fn absent_channels(built: &Built, stored: &[std::ops::Range<u32>]) -> Option<Vec<bool>> {
-    let levels: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
-    if levels.iter().all(|l| stored.iter().all(|r| r.contains(l))) {
+    if built.frames.iter().all(|f| stored.iter().all(|r| r.contains(&f.level))) {
         return None;
     }
     let channels = stored.len();

@@ -98,25 +98,17 @@ pub fn summary_text(output: &Path, grid: Option<&str>, r: &CookReport) -> String
 /// "0.1: density, temperature; 0.2 (level 1, offset -0.5 voxels): vel.x, vel.y, vel.z":
 /// the channels by voxel size, where their voxels are in the asset's.
 pub fn voxel_sizes_text(m: &vdbcook_vpak::Metadata) -> String {
-    let mut groups: Vec<(vdbcook_vpak::Resolution, Vec<&str>)> = Vec::new();
+    // (resolution, its first channel, the names of its channels)
+    let mut groups: Vec<(vdbcook_vpak::Resolution, usize, Vec<&str>)> = Vec::new();
     for (c, ch) in m.channels.iter().enumerate() {
-        match groups.iter_mut().find(|(r, _)| *r == m.resolution(c)) {
-            Some((_, names)) => names.push(&ch.name),
-            None => groups.push((m.resolution(c), vec![&ch.name])),
+        match groups.iter_mut().find(|(r, _, _)| *r == m.resolution(c)) {
+            Some((_, _, names)) => names.push(&ch.name),
+            None => groups.push((m.resolution(c), c, vec![&ch.name])),
         }
     }
-    let size = |c: usize| {
-        let v = m.channel_voxel_size(c).map(|v| format!("{}", (v * 1e6).round() / 1e6));
-        if v[0] == v[1] && v[1] == v[2] {
-            v[0].clone()
-        } else {
-            v.join("×")
-        }
-    };
     groups
         .iter()
-        .map(|(r, names)| {
-            let c = m.channels.iter().position(|ch| ch.name == names[0]).unwrap_or(0);
+        .map(|&(r, c, ref names)| {
             let offset = r.offset();
             let place = match (r.level, offset == [0.0; 3]) {
                 (0, true) => String::new(),
@@ -124,7 +116,7 @@ pub fn voxel_sizes_text(m: &vdbcook_vpak::Metadata) -> String {
                 (k, false) if offset[0] == offset[1] && offset[1] == offset[2] => format!(" (level {k}, offset {} voxels)", offset[0]),
                 (k, false) => format!(" (level {k}, offset {:?} voxels)", offset),
             };
-            format!("{}{place}: {}", size(c), names.join(", "))
+            format!("{}{place}: {}", vdbcook_vpak::resolution::voxel_size_text(m.channel_voxel_size(c)), names.join(", "))
         })
         .collect::<Vec<_>>()
         .join("; ")

@@ -30,6 +30,17 @@ impl Resolution {
     }
 }
 
+/// "0.1", or "0.1×0.1×0.2" for voxels that are not cubes: a voxel's edge
+/// along each index axis in world units, to six decimals (so 2 × 0.1 reads 0.2).
+pub fn voxel_size_text(size: [f64; 3]) -> String {
+    let v = size.map(|v| format!("{}", (v * 1e6).round() / 1e6));
+    if v[0] == v[1] && v[1] == v[2] {
+        v[0].clone()
+    } else {
+        v.join("×")
+    }
+}
+
 /// Why `res` cannot be the resolutions of `meta`'s channels, if it cannot.
 pub(crate) fn problem(meta: &Metadata, res: &[Resolution]) -> Option<String> {
     if res.is_empty() {
