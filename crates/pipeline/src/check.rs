@@ -47,7 +47,7 @@ pub fn validate_file<R: std::ops::Deref<Target = Renderer>, E: Into<Box<dyn std:
     let (files, with) = match sources {
         Sources::Recorded => {
             let files = recorded::frame_files(&meta, path)?;
-            let with = recorded::with_files(&asset, &meta, path, &files)?;
+            let with = recorded::with_files(&meta, path, &files)?;
             (files, with)
         }
         Sources::Inputs { inputs, with, frames } => {

@@ -220,7 +220,11 @@ pub fn with_files(files: &[PathBuf], with: &[String], base: Option<&Path>, frame
 /// The numbers in the names of a sequence's files, when every name carries
 /// one and no two are the same (the frames can be matched by number).
 pub fn distinct_numbers(files: &[PathBuf]) -> Option<Vec<i64>> {
-    let numbers: Vec<i64> = files.iter().map(|f| number_in_name(f)).collect::<Option<_>>()?;
+    if_distinct(files.iter().map(|f| number_in_name(f)).collect::<Option<_>>()?)
+}
+
+/// `numbers`, when no two are the same.
+pub fn if_distinct(numbers: Vec<i64>) -> Option<Vec<i64>> {
     let mut sorted = numbers.clone();
     sorted.sort_unstable();
     sorted.windows(2).all(|w| w[0] != w[1]).then_some(numbers)

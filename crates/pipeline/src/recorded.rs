@@ -57,9 +57,9 @@ pub fn with_inputs(meta: &Metadata) -> Result<Vec<String>> {
 /// files are `files` ([`frame_files`]): the `with` inputs it records expanded
 /// again from where its main files were found (over its recorded `frames`)
 /// and matched as `cook` matched them, each checked against the record of
-/// it among the asset's sources (every segment's). A file the asset does not
+/// it among the asset's sources (every segment's: `meta` is the whole asset's). A file the asset does not
 /// record was missing when it was cooked (`--allow-missing`): `None`.
-pub fn with_files(asset: &vdbcook_vpak::Asset, meta: &Metadata, path: &Path, files: &[Option<PathBuf>]) -> Result<Vec<Vec<Option<PathBuf>>>> {
+pub fn with_files(meta: &Metadata, path: &Path, files: &[Option<PathBuf>]) -> Result<Vec<Vec<Option<PathBuf>>>> {
     let with = with_inputs(meta)?;
     let mut out: Vec<Vec<Option<PathBuf>>> = vec![Vec::with_capacity(with.len()); files.len()];
     if with.is_empty() {
@@ -79,15 +79,9 @@ pub fn with_files(asset: &vdbcook_vpak::Asset, meta: &Metadata, path: &Path, fil
     };
     // The frames' numbers as cook matched them: from the main files' names (a frame without a file: its recorded number).
     let numbers: Option<Vec<i64>> = files.iter().enumerate().map(|(f, p)| p.as_deref().map_or(Some(meta.frame_number(f)), crate::inputs::number_in_name)).collect();
-    let numbers = numbers.filter(|n| {
-        let mut s = n.clone();
-        s.sort_unstable();
-        s.windows(2).all(|w| w[0] != w[1])
-    });
-    let mut recorded = Vec::new();
-    for s in 0..asset.segment_count() {
-        recorded.extend(asset.stored_segment(s).and_then(|a| a.metadata()).with_context(|| name.clone())?.sources);
-    }
+    let numbers = numbers.and_then(crate::inputs::if_distinct);
+    // Every segment's sources, those no frame names included.
+    let recorded = &meta.sources;
     for w in &with {
         let found = crate::inputs::match_with(files.len(), numbers.as_deref(), w, crate::inputs::expand_with(w, base.as_deref(), frames).with_context(|| format!("{name}: its recorded --with {w}"))?)?;
         for (slot, file) in out.iter_mut().zip(found) {
