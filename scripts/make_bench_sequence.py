@@ -22,6 +22,24 @@ except ImportError:
     sys.exit("make_bench_sequence.py needs pyopenvdb: run it with /usr/bin/python3")
 
 
+def upsample(noise, n):
+    """Trilinear upsampling of a cube of coarse noise (edge m + 2) to an n³ field
+    spanning its first m + 1 samples."""
+    idx = np.linspace(0, noise.shape[0] - 2, n).astype(np.float32)
+    i0 = np.floor(idx).astype(int)
+    t = idx - i0
+
+    def up(a, axis):
+        a0 = np.take(a, i0, axis=axis)
+        a1 = np.take(a, i0 + 1, axis=axis)
+        sh = [1, 1, 1]
+        sh[axis] = n
+        tt = t.reshape(sh)
+        return a0 * (1 - tt) + a1 * tt
+
+    return up(up(up(noise, 0), 1), 2)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("outdir")
@@ -31,19 +49,7 @@ def main():
     os.makedirs(args.outdir, exist_ok=True)
     n = args.size
     rng = np.random.default_rng(7)
-    noise = rng.random((n // 4 + 2,) * 3).astype(np.float32)
-    # Trilinear upsampling of coarse noise to the full grid.
-    idx = np.linspace(0, n // 4, n).astype(np.float32)
-    i0 = np.floor(idx).astype(int)
-    t = idx - i0
-    def up(a, axis):
-        a0 = np.take(a, i0, axis=axis)
-        a1 = np.take(a, i0 + 1, axis=axis)
-        sh = [1, 1, 1]
-        sh[axis] = n
-        tt = t.reshape(sh)
-        return a0 * (1 - tt) + a1 * tt
-    field = up(up(up(noise, 0), 1), 2)
+    field = upsample(rng.random((n // 4 + 2,) * 3).astype(np.float32), n)
     c = (np.arange(n, dtype=np.float32) - n / 2) / (n / 2)
     r2 = c[:, None, None] ** 2 + c[None, :, None] ** 2 + c[None, None, :] ** 2
     static = np.zeros((16, 16, 16), dtype=np.float32) + 0.35

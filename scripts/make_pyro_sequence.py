@@ -25,21 +25,8 @@ try:
 except ImportError:
     sys.exit("make_pyro_sequence.py needs pyopenvdb: run it with /usr/bin/python3")
 
-
-def upsample(noise, n):
-    idx = np.linspace(0, noise.shape[0] - 2, n).astype(np.float32)
-    i0 = np.floor(idx).astype(int)
-    t = idx - i0
-
-    def up(a, axis):
-        a0 = np.take(a, i0, axis=axis)
-        a1 = np.take(a, i0 + 1, axis=axis)
-        sh = [1, 1, 1]
-        sh[axis] = n
-        tt = t.reshape(sh)
-        return a0 * (1 - tt) + a1 * tt
-
-    return up(up(up(noise, 0), 1), 2)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from make_bench_sequence import upsample  # noqa: E402
 
 
 def main():
