@@ -96,6 +96,21 @@ def delta(data, w, s):
     return shuffle(d.astype({1: "<u1", 2: "<u2", 4: "<u4"}[w]).tobytes(), w)
 
 
+def tiles(data, w, x, y):
+    """Forward tiles: per 8x8x8 tile of the 8x x 8y x 8z texture, the gcd of its elements,
+    then the 3D differences (along i, j and k, mod 2^(8w)) of its elements over the gcd."""
+    dt = {1: "<u1", 2: "<u2"}[w]
+    e = np.frombuffer(data, dt).astype(np.int64)
+    z = len(e) // (512 * x * y)
+    t = e.reshape(z, 8, y, 8, x, 8).transpose(0, 2, 4, 1, 3, 5).reshape(-1, 512)  # tiles (c, b, a), then k, j, i
+    g = np.gcd.reduce(t, axis=1)
+    u = (t // np.maximum(g, 1)[:, None]).reshape(-1, 8, 8, 8)
+    for axis in (1, 2, 3):
+        u = np.diff(u, axis=axis, prepend=0)
+    out = np.concatenate([g, (u % (1 << (8 * w))).ravel()]).astype(dt)
+    return shuffle(out.tobytes(), w)
+
+
 def cook(vdbcook, work, tag, flags):
     path = os.path.join(work, f"{tag}.vpak")
     subprocess.run([vdbcook, "cook", "-q", "--force", "-o", path, FIXTURE, *flags], check=True)
@@ -146,7 +161,11 @@ def check_restores(vdbcook, work, flags):
 def check_every_filter(plain):
     """Sections compressed here with every allowed filter (forward filters written from the
     page) decode as the plain asset does."""
-    variants = [(0, 1, 0)] + [(1, w, 0) for w in (1, 2, 4, 8, 16)] + [(2, w, s) for w in (1, 2, 4) for s in (1, 3, 4096)]
+    # Tiles first: only atlases fit them, and there are few.
+    variants = [(3, 2, 1 | 1 << 16), (3, 1, 1 | 2 << 16), (0, 1, 0)] + [(1, w, 0) for w in (1, 2, 4, 8, 16)] \
+        + [(2, w, s) for w in (1, 2, 4) for s in (1, 3, 4096)]
+    # A section fits a filter when it is whole elements (tiles: whole slabs of X x Y tiles).
+    unit = lambda filt, w, s: w * 512 * (s % 65536) * (s // 65536) if filt == 3 else w
     bodies, used, k = [], set(), 0
     for body in bodies_of(plain):
         secs, recs = sections_of(body), []
@@ -155,16 +174,17 @@ def check_every_filter(plain):
             if kind == v.K_METADATA or not data:
                 continue
             # The first filter not yet used that fits the section (else any that fits).
-            fits = [x for x in variants if len(data) % x[1] == 0]
+            fits = [x for x in variants if len(data) % unit(*x) == 0]
             filt, w, s = next((x for x in fits if x not in used), fits[k % len(fits)])
             k += 1
             used.add((filt, w, s))
-            f = data if filt == 0 else shuffle(data, w) if filt == 1 else delta(data, w, s)
+            f = data if filt == 0 else shuffle(data, w) if filt == 1 else delta(data, w, s) if filt == 2 else \
+                tiles(data, w, s % 65536, s // 65536)
             # Frames with and without their content size in the header.
             sec[2] = zstandard.ZstdCompressor(level=3, write_content_size=k % 2 == 0).compress(f)
             recs.append((kind, index, 1, filt, w, s, len(data), xxh(data)))
         bodies.append(make_body(secs + [[K_CODING, 0, coding_bytes(recs)]]))
-    assert len(used) == len(variants), f"only {len(used)} of {len(variants)} filters used"
+    assert len(used) == len(variants), f"only {len(used)} of {len(variants)} filters used: {sorted(set(variants) - used)} not"
     same_asset(make_file(bodies), plain)
 
 
@@ -220,13 +240,20 @@ def check_refusals(packed, plain, work):
             f(r)
         return edit_record(edit)
     n = recs[atlas][6]
-    w = recs[atlas][4]
-    refused(with_body(packed, rec(lambda r: r.__setitem__(6, n + w))), f"record says {n + w}")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(6, n - w))), f"record says {n - w}")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(6, (1 << 40) * w))), "more than a")
+    filt, w, stride = recs[atlas][3:6]
+    assert filt == 3, f"the f16 atlas has filter {filt}, not tiles"
+    slab = 512 * (stride % 65536) * (stride // 65536) * w
+    for lie in (n + slab, n - slab):
+        # The frame decodes to n + w·T bytes; T follows the lie.
+        refused(with_body(packed, rec(lambda r, lie=lie: r.__setitem__(6, lie))), f"record says {lie + w * lie // (512 * w)}")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(6, n + w))), "not whole slabs")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(4, 4))), "filter 3 with width 4")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(5, stride & ~0xffff))), "filter 3 with width 2 and stride")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(5, stride % 65536))), "filter 3 with width 2 and stride")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(6, (1 << 30) * slab))), "more than a")
     refused(with_body(packed, rec(lambda r: r.__setitem__(7, r[7] ^ 1))), "restored bytes do not match")
     refused(with_body(packed, rec(lambda r: r.__setitem__(2, 2))), "scheme 2")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(3, 3))), "filter 3")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(3, 4))), "filter 4")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [0, 2, 0]))), "filter 0 with width 2")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [1, 3, 0]))), "filter 1 with width 3")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [1, 4, 1]))), "filter 1 with width 4 and stride 1")
@@ -234,6 +261,11 @@ def check_refusals(packed, plain, work):
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [2, 4, 0]))), "stride 0")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [2, 4, 4097]))), "stride 4097")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 7), [1, 16, 0, 16 * (n // 16) + 8]))), "not a multiple of the width 16")
+    # Another geometry of the same texture (half as many tiles along x, twice along y)
+    # decodes to other bytes: the checksum says so.
+    if stride % 65536 % 2 == 0:
+        other = stride % 65536 // 2 | (stride // 65536 * 2) << 16
+        refused(with_body(packed, rec(lambda r: r.__setitem__(5, other))), "restored bytes do not match")
     refused(with_body(packed, rec(lambda r: r.__setitem__(1, 999))), "names a section the body does not hold")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(0, 2), [1, 0]))), "never compressed")
     refused(with_body(packed, edit_record(lambda rs: rs.append(list(rs[0])))), "named before")
@@ -266,8 +298,8 @@ def check_refusals(packed, plain, work):
     refused(bodies_of(packed)[0], "older than version 8")
     # Segment 1 too, and the command line: one line naming the file and the problem.
     segs = len(bodies_of(packed))
-    bad = with_body(packed, rec(lambda r: r.__setitem__(6, n + w)), seg=segs - 1) if segs == 1 else \
-        with_body(packed, edit_record(lambda rs: rs[0].__setitem__(7, rs[0][7] ^ 1)), seg=1)
+    bad = with_body(packed, rec(lambda r: r.__setitem__(6, n + slab)), seg=segs - 1) if segs == 1 else \
+        with_body(packed, edit_record(lambda rs: rs[0].__setitem__(7, rs[0][7] ^ 1)), seg=segs - 1)
     path = os.path.join(work, "bad.vpak")
     with open(path, "wb") as f:
         f.write(bad)
@@ -282,7 +314,7 @@ def main():
     args = ap.parse_args()
     filters = set()
     with tempfile.TemporaryDirectory(prefix="vpak-coding-") as work:
-        for flags in (["--format", "f16", "--segment-frames", "2"], ["--max-error", "0.004", "--lods", "2"],
+        for flags in (["--format", "f16", "--segment-frames", "1"], ["--max-error", "0.004", "--lods", "2"],
                       ["--format", "bc7", "--segment-frames", "3"], ["--format", "unorm8"]):
             packed, plain, used = check_restores(args.vdbcook, work, flags)
             filters |= used

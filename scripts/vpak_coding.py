@@ -2,7 +2,7 @@
 
 Written from docs/format.md ("Supercompression") alone, like the reader: the coding
 section (kind 13) holds one 40-byte record per compressed section; a section is restored
-by decompressing one zstd frame and undoing a shuffle or delta filter, and checked
+by decompressing one zstd frame and undoing a shuffle, delta or tiles filter, and checked
 against the record's XXH3-64 of the restored bytes. Every rule the page states is
 checked; a failure raises `CodingError` with a one-line message.
 
@@ -16,8 +16,8 @@ import numpy as np
 K_CODING = 13
 RECORD_SIZE = 40
 SCHEME_ZSTD = 1
-FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA = 0, 1, 2
-FILTER_NAMES = {FILTER_NONE: "none", FILTER_SHUFFLE: "shuffle", FILTER_DELTA: "delta"}
+FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA, FILTER_TILES = 0, 1, 2, 3
+FILTER_NAMES = {FILTER_NONE: "none", FILTER_SHUFFLE: "shuffle", FILTER_DELTA: "delta", FILTER_TILES: "tiles"}
 # A zstd frame expands at most 2^15 times: a restored size beyond that is a lie.
 MAX_EXPANSION = 1 << 15
 MAX_STRIDE = 4096
@@ -28,6 +28,19 @@ FEED = 1 << 14
 
 class CodingError(Exception):
     """A coding section or a compressed section that breaks the page's rules."""
+
+
+def tiles_of(s):
+    """A tiles record's stride as tiles along x and y."""
+    return s % 65536, s // 65536
+
+
+def filtered_size(filt, w, s, n):
+    """Bytes of the filtered form F of n restored bytes: n, or n + w·T for tiles."""
+    if filt != FILTER_TILES:
+        return n
+    x, y = tiles_of(s)
+    return n + w * (n // (512 * w))
 
 
 def parse_records(data, table):
@@ -54,13 +67,16 @@ def parse_records(data, table):
             FILTER_NONE: w == 1 and s == 0,
             FILTER_SHUFFLE: w in (1, 2, 4, 8, 16) and s == 0,
             FILTER_DELTA: w in (1, 2, 4) and 1 <= s <= MAX_STRIDE,
+            FILTER_TILES: w in (1, 2) and tiles_of(s)[0] >= 1 and tiles_of(s)[1] >= 1,
         }
         if not allowed.get(filt, False):
             raise CodingError(f"{name} has filter {filt} with width {w} and stride {s}, which the page does not allow")
         if n % w:
             raise CodingError(f"{name}: restored size {n} is not a multiple of the width {w}")
+        if filt == FILTER_TILES and n % (512 * tiles_of(s)[0] * tiles_of(s)[1] * w):
+            raise CodingError(f"{name}: restored size {n} is not whole slabs of {tiles_of(s)[0]}x{tiles_of(s)[1]} tiles")
         stored = table[(kind, index)][1]
-        if n > MAX_EXPANSION * stored:
+        if filtered_size(filt, w, s, n) > MAX_EXPANSION * stored:
             raise CodingError(f"{name}: restored size {n} is more than a {stored}-byte zstd frame can hold")
         records[(kind, index)] = (scheme, filt, w, s, n, checksum)
     return records
@@ -105,13 +121,32 @@ def unshuffle(f, w):
     return np.frombuffer(f, dtype=np.uint8).reshape(w, len(f) // w).T
 
 
-def unfilter(f, filt, w, s):
-    """The section from its filtered bytes F (format.md, "Restoring")."""
+def untile(elems, w, s, n):
+    """Tiles: divisors, then each tile's residuals; quotients are running sums of the
+    residuals along i, j and k (modulo 2^(8w), as unsigned numpy integers wrap), times
+    the tile's divisor, placed at the tile's elements of the 8X x 8Y x 8Z texture."""
+    dtype = {1: "<u1", 2: "<u2"}[w]
+    e = elems.view(dtype).ravel()
+    x, y = tiles_of(s)
+    t = n // (512 * w)
+    z = t // (x * y)
+    g = e[:t]
+    r = e[t:].reshape(z, y, x, 8, 8, 8)  # tile (c, b, a), then k, j, i
+    u = np.cumsum(np.cumsum(np.cumsum(r, axis=5, dtype=r.dtype), axis=4, dtype=r.dtype), axis=3, dtype=r.dtype)
+    v = (u * g.reshape(z, y, x, 1, 1, 1)).astype(dtype)
+    # Texture element (8a + i, 8b + j, 8c + k): axes c, k, b, j, a, i, z slowest.
+    return np.ascontiguousarray(v.transpose(0, 3, 1, 4, 2, 5)).tobytes()
+
+
+def unfilter(f, filt, w, s, n=None):
+    """The section (n bytes) from its filtered bytes F (format.md, "Restoring")."""
     if filt == FILTER_NONE or w == 1 and filt == FILTER_SHUFFLE:
         return f
     elems = np.ascontiguousarray(unshuffle(f, w))  # [m, w] bytes, element i byte j
     if filt == FILTER_SHUFFLE:
         return elems.tobytes()
+    if filt == FILTER_TILES:
+        return untile(elems, w, s, n)
     # Delta: x[i] = d[i] + x[i - s] mod 2^(8w): per residue class of i mod s a running
     # sum, which unsigned numpy integers take modulo 2^(8w).
     dtype = {1: "<u1", 2: "<u2", 4: "<u4"}[w]
@@ -127,7 +162,7 @@ def unfilter(f, filt, w, s):
 def restore(stored, record, xxh3_64):
     """A section's bytes from its stored bytes and its coding record."""
     _scheme, filt, w, s, n, checksum = record
-    section = unfilter(decompress(stored, n), filt, w, s)
+    section = unfilter(decompress(stored, filtered_size(filt, w, s, n)), filt, w, s, n)
     if xxh3_64(section) != checksum:
         raise CodingError("restored bytes do not match the coding record's checksum")
     return section

@@ -85,7 +85,11 @@ fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<f32> {
 /// brick) rather than on the GPU.
 pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>) -> Choice {
     let range = range_of(values);
-    let snap = |format: Format, bytes: Vec<u8>| if disk.is_some() { crate::snap::coarsest(format, values, range, mask, max_error).unwrap_or(bytes) } else { bytes };
+    // Texels (and a ranged format's range) moved to the coarsest grid within the bound.
+    let snap = |format: Format, bytes: Vec<u8>, range: [f32; 2]| match disk {
+        Some(_) => crate::snap::coarsest(format, values, range, mask, max_error).unwrap_or((bytes, range)),
+        None => (bytes, range),
+    };
     // Smallest file: every format within the bound, the one of fewest compressed bytes (the first of equals).
     let mut smallest: Option<(usize, Choice)> = None;
     for format in Format::BY_COST.into_iter().filter(|&f| f != Format::F32) {
@@ -98,7 +102,8 @@ pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qualit
         };
         let bytes = encode_one(format, quality, values, range, mask);
         if within(values, &decode_one(format, &bytes, range), mask, max_error) {
-            let choice = Choice { format, range, bytes: snap(format, bytes) };
+            let (bytes, range) = snap(format, bytes, range);
+            let choice = Choice { format, range, bytes };
             if disk != Some(Optimize::Disk) || format == Format::Constant {
                 return choice;
             }
@@ -112,8 +117,8 @@ pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qualit
         return c;
     }
     // Exact, NaN and ±∞ included.
-    let bytes = encode_one(Format::F32, quality, values, range, mask);
-    Choice { format: Format::F32, range, bytes: snap(Format::F32, bytes) }
+    let (bytes, range) = snap(Format::F32, encode_one(Format::F32, quality, values, range, mask), range);
+    Choice { format: Format::F32, range, bytes }
 }
 
 /// [`cheapest`] for every channel of every brick (`channels` [`Brick`]s a

@@ -9,67 +9,59 @@ use crate::choose::{decode_one, single_plane, within};
 use crate::texels::{levels, swap_xz};
 use crate::{Brick, Format};
 
-/// The brick's texels in `format` over `range` on the coarsest grid whose
-/// decoded voxels of `mask` stay within `max_error`; `None` when no grid
-/// coarser than the format's own does (or the format has no texels to move).
-pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32) -> Option<Vec<u8>> {
+/// The brick's texels in `format` and their range, on the coarsest grid
+/// whose decoded voxels of `mask` stay within `max_error` of `values`;
+/// `None` when no grid coarser than the format's own over `range` does (or
+/// the format has no texels to move).
+pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32) -> Option<(Vec<u8>, [f32; 2])> {
     // Non-finite voxels must decode to themselves: leave such bricks as they are.
     if !values.iter().all(|v| v.is_finite()) {
         return None;
     }
-    let passes = |bytes: &[u8]| within(values, &decode_one(format, bytes, range), mask, max_error);
-    // Levels of a ranged format over [0, top] in steps of k (the largest the bound allows first).
-    let stepped = |top: u32, k0_of: fn(u32) -> u32, push: fn(&mut Vec<u8>, u32)| {
-        let l = levels(values, range, top as f32);
-        let span = f64::from(range[1]) - f64::from(range[0]);
-        // Snapping to multiples of k moves a level by at most k/2: k up to 2E/(span/top).
-        let k0 = (2.0 * f64::from(max_error) * f64::from(top) / span).floor().min(f64::from(top)) as u32;
-        largest_step(k0_of(k0), |k| {
-            let mut out = Vec::with_capacity(2 * l.len());
-            swap_xz(&l.map(|x| step_level(x, k, top))).into_iter().for_each(|q| push(&mut out, q));
-            passes(&out).then_some(out)
+    let passes = |bytes: &[u8], range: [f32; 2]| within(values, &decode_one(format, bytes, range), mask, max_error);
+    let floats = |bits: u32, to_bytes: &dyn Fn(u32) -> Vec<u8>| {
+        largest_bits(bits, |bits| {
+            let out = to_bytes(bits);
+            passes(&out, range).then_some(out)
         })
+        .map(|b| (b, range))
     };
     match format {
-        Format::Unorm8 => stepped(255, |k0| k0, |out, q| out.push(q as u8)),
-        // Steps of a power of two: the low byte of every level (and of its difference
-        // from its neighbour) then takes few values, which a byte-wise coder sees.
-        Format::Unorm16 => stepped(65535, |k0| k0.checked_ilog2().map_or(0, |b| 1 << b), |out, q| out.extend_from_slice(&(q as u16).to_le_bytes())),
-        Format::F16 => largest_bits(10, |bits| {
-            let h = values.map(|v| round_bits(u32::from(half::f16::from_f32(v).to_bits()), bits, 0x8000) as u16);
-            let out: Vec<u8> = swap_xz(&h).iter().flat_map(|h| h.to_le_bytes()).collect();
-            passes(&out).then_some(out)
-        }),
-        Format::F32 => largest_bits(23, |bits| {
-            let f = values.map(|v| round_bits(v.to_bits(), bits, 0x8000_0000));
-            let out: Vec<u8> = swap_xz(&f).iter().flat_map(|f| f.to_le_bytes()).collect();
-            passes(&out).then_some(out)
-        }),
+        Format::Unorm8 => stepped(values, range, 255, max_error, |out, q| out.push(q as u8), &passes),
+        Format::Unorm16 => stepped(values, range, 65535, max_error, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
+        Format::F16 => floats(10, &|bits| swap_xz(&values.map(|v| round_bits(u32::from(half::f16::from_f32(v).to_bits()), bits, 0x8000) as u16)).iter().flat_map(|h| h.to_le_bytes()).collect()),
+        Format::F32 => floats(23, &|bits| swap_xz(&values.map(|v| round_bits(v.to_bits(), bits, 0x8000_0000))).iter().flat_map(|f| f.to_le_bytes()).collect()),
         Format::Bc4 | Format::Bc7 | Format::Constant => None,
     }
-    .filter(|b| b.len() == single_plane(format).brick_bytes())
+    .filter(|(b, _)| b.len() == single_plane(format).brick_bytes())
 }
 
-/// Level `x` (in [0, top]) moved to the nearest multiple of `k`, or to `top`
-/// when that is nearer (so a brick's largest voxel keeps its value).
-fn step_level(x: f32, k: u32, top: u32) -> u32 {
-    let kf = k as f32;
-    let below = ((x / kf).floor() * kf) as u32;
-    let above = below + k;
-    [below, above.min(top), top].into_iter().filter(|&c| c <= top).min_by(|&a, &b| (a as f32 - x).abs().total_cmp(&(b as f32 - x).abs())).unwrap_or(0)
-}
-
-/// The texels of the largest step from `k0` down to 2 that `try_step`
-/// accepts: `k0` first (where the bound says it should hold), then smaller
-/// steps by a quarter each time (rounding may cost a step or two), or by
-/// half when `k0` is a power of two (so they stay powers of two).
-fn largest_step(k0: u32, try_step: impl Fn(u32) -> Option<Vec<u8>>) -> Option<Vec<u8>> {
-    let mut k = k0;
-    while k >= 2 {
-        if let Some(b) = try_step(k) {
-            return Some(b);
+/// Levels of a ranged format on a step of value s (2E, or a little less
+/// where rounding asks): the brick's smallest value stays its range's
+/// `min`, and its `max` is moved so that every level is a multiple of an
+/// integer k ≥ 2 (k = top / the number of steps the brick spans). Each
+/// brick's texels are then k times a small integer, which the `tiles`
+/// filter divides out, so every brick's residuals are in steps of about 2E.
+fn stepped(values: &Brick, range: [f32; 2], top: u32, max_error: f32, push: fn(&mut Vec<u8>, u32), passes: &dyn Fn(&[u8], [f32; 2]) -> bool) -> Option<(Vec<u8>, [f32; 2])> {
+    let (lo, span) = (f64::from(range[0]), f64::from(range[1]) - f64::from(range[0]));
+    for shrink in [1.0, 0.99, 0.95, 0.85, 0.7, 0.5] {
+        let s = 2.0 * f64::from(max_error) * shrink;
+        let k = (f64::from(top) / (span / s).ceil().max(1.0)).floor() as u32;
+        if k < 2 {
+            return None;
         }
-        k = if k.is_power_of_two() { k / 2 } else { (k * 3 / 4).min(k - 1) };
+        let hi = (lo + s * f64::from(top) / f64::from(k)) as f32;
+        if !hi.is_finite() || hi <= range[0] {
+            return None;
+        }
+        let moved = [range[0], hi];
+        let last = top / k * k;
+        let l = levels(values, moved, top as f32);
+        let mut out = Vec::with_capacity(2 * l.len());
+        swap_xz(&l.map(|x| ((x / k as f32).round() as u32 * k).min(last) as f32)).into_iter().for_each(|q| push(&mut out, q as u32));
+        if passes(&out, moved) {
+            return Some((out, moved));
+        }
     }
     None
 }
@@ -120,12 +112,24 @@ mod tests {
         for format in [Format::Unorm8, Format::Unorm16, Format::F16, Format::F32] {
             for e in [0.002f32, 0.01, 0.05] {
                 let plain = crate::choose::encode_one(format, crate::Quality::VeryFast, &v, range, &mask);
-                let Some(snapped) = coarsest(format, &v, range, &mask, e) else {
+                let Some((snapped, moved)) = coarsest(format, &v, range, &mask, e) else {
                     // Only where the format's own grid is already as coarse as the bound allows.
                     assert!(format == Format::Unorm8 && e < 0.005, "{format:?} at {e}: nothing coarser");
                     continue;
                 };
-                assert!(within(&v, &decode_one(format, &snapped, range), &mask, e), "{format:?} at {e}");
+                assert!(within(&v, &decode_one(format, &snapped, moved), &mask, e), "{format:?} at {e}");
+                assert_eq!(moved[0], range[0], "{format:?} at {e}: the range starts where it did");
+                if matches!(format, Format::Unorm8 | Format::Unorm16) {
+                    // Every level a multiple of one k ≥ 2, and the step in value no more than 2E.
+                    let w = format.lane_bytes();
+                    let level = |c: &[u8]| c.iter().rev().fold(0u32, |v, &b| v << 8 | u32::from(b));
+                    let k = snapped.chunks(w).map(level).fold(0, gcd);
+                    let top = if w == 1 { 255.0 } else { 65535.0 };
+                    assert!(k >= 2, "{format:?} at {e}: levels share no step");
+                    assert!(f64::from(moved[1] - moved[0]) * f64::from(k) / top <= 2.0 * f64::from(e) * 1.0001, "{format:?} at {e}: step {k}");
+                } else {
+                    assert_eq!(moved, range);
+                }
                 let distinct = |b: &[u8]| {
                     let w = format.lane_bytes();
                     b.chunks(w).collect::<std::collections::HashSet<_>>().len()
@@ -145,11 +149,11 @@ mod tests {
         assert_eq!(round_bits(0x0000_9001, 4, 0x8000_0000), 0x0000_9000); // a tiny f32 has no sign at bit 15
     }
 
-    #[test]
-    fn levels_snap_to_steps_or_the_top() {
-        assert_eq!(step_level(254.6, 10, 255), 255);
-        assert_eq!(step_level(247.0, 10, 255), 250);
-        assert_eq!(step_level(4.9, 10, 255), 0);
-        assert_eq!(step_level(5.1, 10, 255), 10);
+    fn gcd(a: u32, b: u32) -> u32 {
+        if b == 0 {
+            a
+        } else {
+            gcd(b, a % b)
+        }
     }
 }

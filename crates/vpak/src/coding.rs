@@ -77,7 +77,12 @@ pub enum Filter {
     /// Each `width`-byte little-endian element minus the one `stride`
     /// elements before it (wrapping), then shuffled as above.
     Delta { width: u32, stride: u32 },
+    /// An atlas of 8×8×8-texel tiles, tile by tile: each tile's divisor,
+    /// then its elements divided by it, less their 3D prediction ([`Tiles`]).
+    Tiles(Tiles),
 }
+
+pub use crate::tiles::Tiles;
 
 impl Filter {
     fn code(self) -> (u32, u32, u32) {
@@ -85,6 +90,7 @@ impl Filter {
             Filter::None => (0, 1, 0),
             Filter::Shuffle { width } => (1, width, 0),
             Filter::Delta { width, stride } => (2, width, stride),
+            Filter::Tiles(t) => (3, t.width, t.stride()),
         }
     }
 
@@ -93,6 +99,7 @@ impl Filter {
             (0, 1, 0) => Some(Filter::None),
             (1, 1 | 2 | 4 | 8 | 16, 0) => Some(Filter::Shuffle { width }),
             (2, 1 | 2 | 4, 1..=4096) => Some(Filter::Delta { width, stride }),
+            (3, _, _) => Tiles::from_record(width, stride).map(Filter::Tiles),
             _ => None,
         }
     }
@@ -102,6 +109,7 @@ impl Filter {
             Filter::None => "none".into(),
             Filter::Shuffle { width } => format!("shuffle {width}"),
             Filter::Delta { width, stride } => format!("delta {width}/{stride}"),
+            Filter::Tiles(t) => format!("tiles {}/{}x{}", t.width, t.x, t.y),
         }
     }
 
@@ -109,8 +117,20 @@ impl Filter {
         self.code().1 as usize
     }
 
-    /// The filtered bytes (`raw.len()` a multiple of the width).
+    /// Bytes of the filtered form of `raw` restored bytes, if the filter
+    /// applies to that many (a multiple of the width; whole slabs of tiles).
+    fn filtered_len(self, raw: usize) -> Option<usize> {
+        match self {
+            Filter::Tiles(t) => t.filtered_len(raw),
+            _ => raw.is_multiple_of(self.width()).then_some(raw),
+        }
+    }
+
+    /// The filtered bytes (`raw.len()` as [`Filter::filtered_len`] accepts).
     fn apply(self, raw: &[u8]) -> Vec<u8> {
+        if let Filter::Tiles(t) = self {
+            return t.apply(raw);
+        }
         let w = self.width();
         let mut src = raw.to_vec();
         if let Filter::Delta { width, stride } = self {
@@ -134,12 +154,13 @@ impl Filter {
         out
     }
 
-    /// Undoes [`Filter::apply`] on `data` into `out` (same length).
+    /// Undoes [`Filter::apply`] on `data` into `out` (`data` the filtered length of `out`).
     fn undo(self, data: &[u8], out: &mut [u8]) {
         let w = self.width();
         let n = data.len() / w;
         match self {
             Filter::None => out.copy_from_slice(data),
+            Filter::Tiles(t) => t.undo(data, out),
             Filter::Shuffle { .. } => unshuffle(data, out, w),
             Filter::Delta { width, stride } => {
                 unshuffle(data, out, w);
@@ -268,30 +289,35 @@ fn candidates(s: &Section, meta: &Metadata) -> Vec<Filter> {
     let words = vec![Filter::None, Filter::Shuffle { width: 4 }, Filter::Delta { width: 4, stride: 1 }];
     match s.kind {
         kind::METADATA | kind::CODING => Vec::new(),
-        kind::ATLAS => atlas_plane(meta, s.index).map_or(vec![Filter::None], texel_filters),
+        kind::ATLAS => atlas_of(meta, s.index).map_or(vec![Filter::None], |(plane, atlas)| texel_filters(plane, atlas.bricks)),
         _ => words,
     }
 }
 
-/// The filters for texels of `plane`: the plain one first, then the one
-/// that usually wins on smooth volumes (a texel's difference from its
-/// neighbour along x, `lanes` elements back; BC blocks' bytes by weight).
-fn texel_filters(plane: &crate::Plane) -> Vec<Filter> {
+/// The filters for texels of `plane` in an atlas of `bricks`: the plain
+/// one first, then those that usually win on smooth volumes (a texel's
+/// difference from its neighbour along x, `lanes` elements back; a 1-lane
+/// plane's bricks as tiles; BC blocks' bytes by weight).
+fn texel_filters(plane: &crate::Plane, bricks: [u32; 3]) -> Vec<Filter> {
     let lanes = plane.lanes;
-    match plane.format {
+    let width = plane.format.lane_bytes() as u32;
+    let tiles = (lanes == 1 && plane.z_per_texel == 1 && matches!(width, 1 | 2) && bricks[0] < 1 << 16 && bricks[1] < 1 << 16).then(|| Filter::Tiles(Tiles { width, x: bricks[0], y: bricks[1] }));
+    let mut filters = match plane.format {
         Format::Bc4 | Format::Bc7 => vec![Filter::None, Filter::Shuffle { width: plane.format.block_bytes() as u32 }],
         Format::F32 => vec![Filter::Shuffle { width: 4 }, Filter::Delta { width: 4, stride: lanes }],
         Format::F16 | Format::Unorm16 => vec![Filter::Shuffle { width: 2 }, Filter::Delta { width: 2, stride: lanes }],
         Format::Unorm8 => vec![Filter::None, Filter::Delta { width: 1, stride: lanes }],
         Format::Constant => vec![Filter::None],
-    }
+    };
+    filters.extend(tiles);
+    filters
 }
 
-fn atlas_plane(meta: &Metadata, section: u32) -> Option<&crate::Plane> {
+fn atlas_of(meta: &Metadata, section: u32) -> Option<(&crate::Plane, &crate::AtlasInfo)> {
     let mut first = 0usize;
     for p in &meta.planes {
         if (section as usize) < first + p.atlases.len() {
-            return Some(&p.plane);
+            return Some((&p.plane, &p.atlases[section as usize - first]));
         }
         first += p.atlases.len();
     }
@@ -299,12 +325,19 @@ fn atlas_plane(meta: &Metadata, section: u32) -> Option<&crate::Plane> {
 }
 
 /// What one brick's texels (`bytes`, in `plane`) cost in a supercompressed
-/// file, as an estimate for choosing formats: compressed alone at a fast
-/// level after the plane's usual filter ([`texel_filters`]' last), plus its range pair.
+/// file, as an estimate for choosing formats: the order-0 entropy of its
+/// bytes after the plane's last filter ([`texel_filters`]: tiles for a
+/// 1-lane uncompressed plane), what a coder fitted to the brick would spend
+/// (zstd codes a whole section with one table: a brick compressed alone
+/// would be charged a table of its own), plus its range pair.
 pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
-    let filter = texel_filters(plane).pop().unwrap_or(Filter::None);
-    let filtered = if bytes.len().is_multiple_of(filter.width()) { filter.apply(bytes) } else { bytes.to_vec() };
-    zstd::bulk::compress(&filtered, 1).map_or(bytes.len(), |c| c.len()) + 8
+    let filter = texel_filters(plane, [1, 1, 1]).pop().unwrap_or(Filter::None);
+    let filtered = if filter.filtered_len(bytes.len()).is_some() { filter.apply(bytes) } else { bytes.to_vec() };
+    let mut counts = [0u32; 256];
+    filtered.iter().for_each(|&b| counts[usize::from(b)] += 1);
+    let n = filtered.len() as f64;
+    let bits: f64 = counts.iter().filter(|&&c| c > 0).map(|&c| f64::from(c) * (n / f64::from(c)).log2()).sum();
+    (bits / 8.0).ceil() as usize + 8
 }
 
 /// Compresses every section worth it (the smallest of its filters' outputs,
@@ -315,7 +348,7 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
     let coded: Vec<(Section, Option<Coding>)> = sections
         .into_par_iter()
         .map(|s| {
-            let filters: Vec<Filter> = candidates(&s, meta).into_iter().filter(|f| s.data.len().is_multiple_of(f.width())).collect();
+            let filters: Vec<Filter> = candidates(&s, meta).into_iter().filter(|f| f.filtered_len(s.data.len()).is_some()).collect();
             if filters.is_empty() || s.data.is_empty() {
                 return Ok((s, None));
             }
@@ -324,7 +357,11 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
                 _ => {
                     let mut sized = Vec::with_capacity(filters.len());
                     for f in &filters {
-                        let sample: Vec<u8> = sample(&s.data).flat_map(|chunk| f.apply(chunk)).collect();
+                        let sample: Vec<u8> = match f {
+                            // Tiles span the atlas's rows: filtered whole, then sampled.
+                            Filter::Tiles(_) => sample(&f.apply(&s.data)).flatten().copied().collect(),
+                            _ => sample(&s.data).flat_map(|chunk| f.apply(chunk)).collect(),
+                        };
                         sized.push((zstd::bulk::compress(&sample, 1)?.len(), *f));
                     }
                     sized.iter().min_by_key(|x| x.0).map_or(Filter::None, |x| x.1)
@@ -353,12 +390,14 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
 }
 
 /// Checks a record against its stored bytes before anything is allocated:
-/// a restored size no zstd frame of that size can reach is a lie.
-fn plausible(c: &Coding, stored: usize) -> Result<(), Error> {
-    if c.raw_size > (stored as u64).saturating_mul(MAX_RATIO) || !c.raw_size.is_multiple_of(c.filter.width() as u64) || c.raw_size > isize::MAX as u64 {
-        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("claims {} restored bytes from {stored} stored", c.raw_size) });
+/// a restored size its filter cannot have, or that no zstd frame of that
+/// size can reach, is a lie.
+fn plausible(c: &Coding, stored: usize) -> Result<usize, Error> {
+    let filtered = usize::try_from(c.raw_size).ok().filter(|&n| n <= isize::MAX as usize / 2).and_then(|n| c.filter.filtered_len(n));
+    match filtered {
+        Some(f) if f as u64 <= (stored as u64).saturating_mul(MAX_RATIO) => Ok(f),
+        _ => Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("claims {} restored bytes from {stored} stored", c.raw_size) }),
     }
-    Ok(())
 }
 
 /// Restores one section's GPU bytes from its stored bytes into `out` (its
@@ -366,13 +405,13 @@ fn plausible(c: &Coding, stored: usize) -> Result<(), Error> {
 /// `scratch` and unfiltered from there; then checked against its checksum.
 fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>) -> Result<(), Error> {
     let err = |problem: String| Error::Coding { kind: c.kind, index: c.index, problem };
-    let n = out.len();
+    let n = c.filter.filtered_len(out.len()).ok_or_else(|| err(format!("restores {} bytes, which its filter cannot", out.len())))?;
     let mut d = zstd::bulk::Decompressor::new().map_err(|e| err(format!("does not decompress ({e})")))?;
     let got = match c.filter {
         Filter::None => d.decompress_to_buffer(stored, out),
         _ => {
             scratch.clear();
-            scratch.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} restored bytes")))?;
+            scratch.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} filtered bytes")))?;
             d.decompress_to_buffer(stored, scratch)
         }
     }
@@ -470,7 +509,9 @@ pub(crate) fn plan(sections: &[crate::SectionEntry], coding: Option<&[u8]>) -> R
     for c in &coding {
         let stored = sections.iter().find(|e| (e.kind, e.index) == (c.kind, c.index)).map(|e| e.size as usize);
         match stored {
-            Some(len) if !matches!(c.kind, kind::METADATA | kind::CODING) && seen.insert((c.kind, c.index)) => plausible(c, len)?,
+            Some(len) if !matches!(c.kind, kind::METADATA | kind::CODING) && seen.insert((c.kind, c.index)) => {
+                plausible(c, len)?;
+            }
             _ => return Err(Error::Coding { kind: c.kind, index: c.index, problem: "is not a section the coding table may name once".into() }),
         }
     }

@@ -33,6 +33,7 @@ pub mod resolution;
 pub mod runtime;
 pub mod segments;
 pub mod settings;
+mod tiles;
 pub mod time;
 
 pub use asset::Asset;
@@ -59,7 +60,7 @@ pub const MAGIC: [u8; 8] = *b"VPAK\r\n\x1a\n";
 ///    L1 nodes of 4³ to 32³ slots, as many as the tree needs (frame entries are word offsets).
 /// 7: segments: a table of version-6 bodies, each a run of frames ([`segments`]).
 /// 8: supercompressed sections ([`coding`]). 9: time (frame numbers and rate, [`time`]).
-/// 10: channels at their own voxel size ([`resolution`]).
+/// 10: channels at their own voxel size ([`resolution`]); the `tiles` coding filter.
 pub const VERSION: u32 = segments::VERSION;
 /// Levels an asset may have: level 4's bricks span 128³ source voxels, one
 /// L1 slot, and the asset's index offset (a multiple of 128) keeps every
