@@ -96,16 +96,17 @@ def delta(data, w, s):
     return shuffle(d.astype({1: "<u1", 2: "<u2", 4: "<u4"}[w]).tobytes(), w)
 
 
-def tiles(data, w, x, y):
+def tiles(data, w, x, y, predict=True):
     """Forward tiles: per 8x8x8 tile of the 8x x 8y x 8z texture, the gcd of its elements,
-    then the 3D differences (along i, j and k, mod 2^(8w)) of its elements over the gcd."""
+    then its elements over the gcd, and (predict) their 3D differences along i, j and k,
+    mod 2^(8w)."""
     dt = {1: "<u1", 2: "<u2"}[w]
     e = np.frombuffer(data, dt).astype(np.int64)
     z = len(e) // (512 * x * y)
     t = e.reshape(z, 8, y, 8, x, 8).transpose(0, 2, 4, 1, 3, 5).reshape(-1, 512)  # tiles (c, b, a), then k, j, i
     g = np.gcd.reduce(t, axis=1)
     u = (t // np.maximum(g, 1)[:, None]).reshape(-1, 8, 8, 8)
-    for axis in (1, 2, 3):
+    for axis in (1, 2, 3) if predict else ():
         u = np.diff(u, axis=axis, prepend=0)
     out = np.concatenate([g, (u % (1 << (8 * w))).ravel()]).astype(dt)
     return shuffle(out.tobytes(), w)
@@ -162,10 +163,10 @@ def check_every_filter(plain):
     """Sections compressed here with every allowed filter (forward filters written from the
     page) decode as the plain asset does."""
     # Tiles first: only atlases fit them, and there are few.
-    variants = [(3, 2, 1 | 1 << 16), (3, 1, 1 | 2 << 16), (0, 1, 0)] + [(1, w, 0) for w in (1, 2, 4, 8, 16)] \
+    variants = [(3, 2, 1 | 1 << 16), (3, 1, 1 | 2 << 16), (4, 2, 1 | 1 << 16), (0, 1, 0)] + [(1, w, 0) for w in (1, 2, 4, 8, 16)] \
         + [(2, w, s) for w in (1, 2, 4) for s in (1, 3, 4096)]
     # A section fits a filter when it is whole elements (tiles: whole slabs of X x Y tiles).
-    unit = lambda filt, w, s: w * 512 * (s % 65536) * (s // 65536) if filt == 3 else w
+    unit = lambda filt, w, s: w * 512 * (s % 65536) * (s // 65536) if filt in (3, 4) else w
     bodies, used, k = [], set(), 0
     for body in bodies_of(plain):
         secs, recs = sections_of(body), []
@@ -179,7 +180,7 @@ def check_every_filter(plain):
             k += 1
             used.add((filt, w, s))
             f = data if filt == 0 else shuffle(data, w) if filt == 1 else delta(data, w, s) if filt == 2 else \
-                tiles(data, w, s % 65536, s // 65536)
+                tiles(data, w, s % 65536, s // 65536, filt == 3)
             # Frames with and without their content size in the header.
             sec[2] = zstandard.ZstdCompressor(level=3, write_content_size=k % 2 == 0).compress(f)
             recs.append((kind, index, 1, filt, w, s, len(data), xxh(data)))
@@ -241,19 +242,21 @@ def check_refusals(packed, plain, work):
         return edit_record(edit)
     n = recs[atlas][6]
     filt, w, stride = recs[atlas][3:6]
-    assert filt == 3, f"the f16 atlas has filter {filt}, not tiles"
+    assert filt in (3, 4), f"the f16 atlas has filter {filt}, not tiles"
     slab = 512 * (stride % 65536) * (stride // 65536) * w
     for lie in (n + slab, n - slab):
         # The frame decodes to n + w·T bytes; T follows the lie.
         refused(with_body(packed, rec(lambda r, lie=lie: r.__setitem__(6, lie))), f"record says {lie + w * lie // (512 * w)}")
     refused(with_body(packed, rec(lambda r: r.__setitem__(6, n + w))), "not whole slabs")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(4, 4))), "filter 3 with width 4")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(5, stride & ~0xffff))), "filter 3 with width 2 and stride")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(5, stride % 65536))), "filter 3 with width 2 and stride")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(4, 4))), f"filter {filt} with width 4")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(5, stride & ~0xffff))), f"filter {filt} with width 2 and stride")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(5, stride % 65536))), f"filter {filt} with width 2 and stride")
+    # The other tiles filter on the same bytes restores other bytes.
+    refused(with_body(packed, rec(lambda r: r.__setitem__(3, 7 - filt))), "restored bytes do not match")
     refused(with_body(packed, rec(lambda r: r.__setitem__(6, (1 << 30) * slab))), "more than a")
     refused(with_body(packed, rec(lambda r: r.__setitem__(7, r[7] ^ 1))), "restored bytes do not match")
     refused(with_body(packed, rec(lambda r: r.__setitem__(2, 2))), "scheme 2")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(3, 4))), "filter 4")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(3, 5))), "filter 5")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [0, 2, 0]))), "filter 0 with width 2")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [1, 3, 0]))), "filter 1 with width 3")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [1, 4, 1]))), "filter 1 with width 4 and stride 1")

@@ -16,8 +16,10 @@ import numpy as np
 K_CODING = 13
 RECORD_SIZE = 40
 SCHEME_ZSTD = 1
-FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA, FILTER_TILES = 0, 1, 2, 3
-FILTER_NAMES = {FILTER_NONE: "none", FILTER_SHUFFLE: "shuffle", FILTER_DELTA: "delta", FILTER_TILES: "tiles"}
+FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA, FILTER_TILES, FILTER_TILES_UNPREDICTED = 0, 1, 2, 3, 4
+FILTER_NAMES = {FILTER_NONE: "none", FILTER_SHUFFLE: "shuffle", FILTER_DELTA: "delta", FILTER_TILES: "tiles",
+                FILTER_TILES_UNPREDICTED: "tiles unpredicted"}
+TILED = (FILTER_TILES, FILTER_TILES_UNPREDICTED)
 # A zstd frame expands at most 2^15 times: a restored size beyond that is a lie.
 MAX_EXPANSION = 1 << 15
 MAX_STRIDE = 4096
@@ -37,7 +39,7 @@ def tiles_of(s):
 
 def filtered_size(filt, w, s, n):
     """Bytes of the filtered form F of n restored bytes: n, or n + w·T for tiles."""
-    if filt != FILTER_TILES:
+    if filt not in TILED:
         return n
     x, y = tiles_of(s)
     return n + w * (n // (512 * w))
@@ -69,11 +71,12 @@ def parse_records(data, table):
             FILTER_DELTA: w in (1, 2, 4) and 1 <= s <= MAX_STRIDE,
             FILTER_TILES: w in (1, 2) and tiles_of(s)[0] >= 1 and tiles_of(s)[1] >= 1,
         }
+        allowed[FILTER_TILES_UNPREDICTED] = allowed[FILTER_TILES]
         if not allowed.get(filt, False):
             raise CodingError(f"{name} has filter {filt} with width {w} and stride {s}, which the page does not allow")
         if n % w:
             raise CodingError(f"{name}: restored size {n} is not a multiple of the width {w}")
-        if filt == FILTER_TILES and n % (512 * tiles_of(s)[0] * tiles_of(s)[1] * w):
+        if filt in TILED and n % (512 * tiles_of(s)[0] * tiles_of(s)[1] * w):
             raise CodingError(f"{name}: restored size {n} is not whole slabs of {tiles_of(s)[0]}x{tiles_of(s)[1]} tiles")
         stored = table[(kind, index)][1]
         if filtered_size(filt, w, s, n) > MAX_EXPANSION * stored:
@@ -121,10 +124,11 @@ def unshuffle(f, w):
     return np.frombuffer(f, dtype=np.uint8).reshape(w, len(f) // w).T
 
 
-def untile(elems, w, s, n):
-    """Tiles: divisors, then each tile's residuals; quotients are running sums of the
-    residuals along i, j and k (modulo 2^(8w), as unsigned numpy integers wrap), times
-    the tile's divisor, placed at the tile's elements of the 8X x 8Y x 8Z texture."""
+def untile(elems, w, s, n, predicted):
+    """Tiles: divisors, then each tile's residuals; quotients are the residuals, or
+    (predicted) their running sums along i, j and k (modulo 2^(8w), as unsigned numpy
+    integers wrap), times the tile's divisor, placed at the tile's elements of the
+    8X x 8Y x 8Z texture."""
     dtype = {1: "<u1", 2: "<u2"}[w]
     e = elems.view(dtype).ravel()
     x, y = tiles_of(s)
@@ -132,7 +136,7 @@ def untile(elems, w, s, n):
     z = t // (x * y)
     g = e[:t]
     r = e[t:].reshape(z, y, x, 8, 8, 8)  # tile (c, b, a), then k, j, i
-    u = np.cumsum(np.cumsum(np.cumsum(r, axis=5, dtype=r.dtype), axis=4, dtype=r.dtype), axis=3, dtype=r.dtype)
+    u = np.cumsum(np.cumsum(np.cumsum(r, axis=5, dtype=r.dtype), axis=4, dtype=r.dtype), axis=3, dtype=r.dtype) if predicted else r
     v = (u * g.reshape(z, y, x, 1, 1, 1)).astype(dtype)
     # Texture element (8a + i, 8b + j, 8c + k): axes c, k, b, j, a, i, z slowest.
     return np.ascontiguousarray(v.transpose(0, 3, 1, 4, 2, 5)).tobytes()
@@ -145,8 +149,8 @@ def unfilter(f, filt, w, s, n=None):
     elems = np.ascontiguousarray(unshuffle(f, w))  # [m, w] bytes, element i byte j
     if filt == FILTER_SHUFFLE:
         return elems.tobytes()
-    if filt == FILTER_TILES:
-        return untile(elems, w, s, n)
+    if filt in TILED:
+        return untile(elems, w, s, n, filt == FILTER_TILES)
     # Delta: x[i] = d[i] + x[i - s] mod 2^(8w): per residue class of i mod s a running
     # sum, which unsigned numpy integers take modulo 2^(8w).
     dtype = {1: "<u1", 2: "<u2", 4: "<u4"}[w]

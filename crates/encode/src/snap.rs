@@ -27,8 +27,8 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
         .map(|b| (b, range))
     };
     match format {
-        Format::Unorm8 => stepped(values, range, 255, max_error, |out, q| out.push(q as u8), &passes),
-        Format::Unorm16 => stepped(values, range, 65535, max_error, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
+        Format::Unorm8 => stepped(values, range, mask, 255, max_error, |out, q| out.push(q as u8), &passes),
+        Format::Unorm16 => stepped(values, range, mask, 65535, max_error, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
         Format::F16 => floats(10, &|bits| swap_xz(&values.map(|v| round_bits(u32::from(half::f16::from_f32(v).to_bits()), bits, 0x8000) as u16)).iter().flat_map(|h| h.to_le_bytes()).collect()),
         Format::F32 => floats(23, &|bits| swap_xz(&values.map(|v| round_bits(v.to_bits(), bits, 0x8000_0000))).iter().flat_map(|f| f.to_le_bytes()).collect()),
         Format::Bc4 | Format::Bc7 | Format::Constant => None,
@@ -42,7 +42,9 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
 /// integer k ≥ 2 (k = top / the number of steps the brick spans). Each
 /// brick's texels are then k times a small integer, which the `tiles`
 /// filter divides out, so every brick's residuals are in steps of about 2E.
-fn stepped(values: &Brick, range: [f32; 2], top: u32, max_error: f32, push: fn(&mut Vec<u8>, u32), passes: &dyn Fn(&[u8], [f32; 2]) -> bool) -> Option<(Vec<u8>, [f32; 2])> {
+/// Voxels `mask` leaves out take level 0 (the range's `min`): no bound
+/// holds them, and runs of one level cost next to nothing once compressed.
+fn stepped(values: &Brick, range: [f32; 2], mask: &[u64; 8], top: u32, max_error: f32, push: fn(&mut Vec<u8>, u32), passes: &dyn Fn(&[u8], [f32; 2]) -> bool) -> Option<(Vec<u8>, [f32; 2])> {
     let (lo, span) = (f64::from(range[0]), f64::from(range[1]) - f64::from(range[0]));
     for shrink in [1.0, 0.99, 0.95, 0.85, 0.7, 0.5] {
         let s = 2.0 * f64::from(max_error) * shrink;
@@ -56,7 +58,8 @@ fn stepped(values: &Brick, range: [f32; 2], top: u32, max_error: f32, push: fn(&
         }
         let moved = [range[0], hi];
         let last = top / k * k;
-        let l = levels(values, moved, top as f32);
+        let mut l = levels(values, moved, top as f32);
+        (0..l.len()).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 0).for_each(|i| l[i] = 0.0);
         let mut out = Vec::with_capacity(2 * l.len());
         swap_xz(&l.map(|x| ((x / k as f32).round() as u32 * k).min(last) as f32)).into_iter().for_each(|q| push(&mut out, q as u32));
         if passes(&out, moved) {

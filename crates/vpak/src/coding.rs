@@ -78,7 +78,7 @@ pub enum Filter {
     /// elements before it (wrapping), then shuffled as above.
     Delta { width: u32, stride: u32 },
     /// An atlas of 8×8×8-texel tiles, tile by tile: each tile's divisor,
-    /// then its elements divided by it, less their 3D prediction ([`Tiles`]).
+    /// then its elements divided by it, less their 3D prediction or not ([`Tiles`]).
     Tiles(Tiles),
 }
 
@@ -90,7 +90,7 @@ impl Filter {
             Filter::None => (0, 1, 0),
             Filter::Shuffle { width } => (1, width, 0),
             Filter::Delta { width, stride } => (2, width, stride),
-            Filter::Tiles(t) => (3, t.width, t.stride()),
+            Filter::Tiles(t) => (if t.predict { 3 } else { 4 }, t.width, t.stride()),
         }
     }
 
@@ -99,7 +99,7 @@ impl Filter {
             (0, 1, 0) => Some(Filter::None),
             (1, 1 | 2 | 4 | 8 | 16, 0) => Some(Filter::Shuffle { width }),
             (2, 1 | 2 | 4, 1..=4096) => Some(Filter::Delta { width, stride }),
-            (3, _, _) => Tiles::from_record(width, stride).map(Filter::Tiles),
+            (3 | 4, _, _) => Tiles::from_record(filter == 3, width, stride).map(Filter::Tiles),
             _ => None,
         }
     }
@@ -109,7 +109,7 @@ impl Filter {
             Filter::None => "none".into(),
             Filter::Shuffle { width } => format!("shuffle {width}"),
             Filter::Delta { width, stride } => format!("delta {width}/{stride}"),
-            Filter::Tiles(t) => format!("tiles {}/{}x{}", t.width, t.x, t.y),
+            Filter::Tiles(t) => format!("tiles{} {}/{}x{}", if t.predict { "" } else { " unpredicted" }, t.width, t.x, t.y),
         }
     }
 
@@ -301,7 +301,8 @@ fn candidates(s: &Section, meta: &Metadata) -> Vec<Filter> {
 fn texel_filters(plane: &crate::Plane, bricks: [u32; 3]) -> Vec<Filter> {
     let lanes = plane.lanes;
     let width = plane.format.lane_bytes() as u32;
-    let tiles = (lanes == 1 && plane.z_per_texel == 1 && matches!(width, 1 | 2) && bricks[0] < 1 << 16 && bricks[1] < 1 << 16).then(|| Filter::Tiles(Tiles { width, x: bricks[0], y: bricks[1] }));
+    let tiled = lanes == 1 && plane.z_per_texel == 1 && matches!(width, 1 | 2) && bricks[0] < 1 << 16 && bricks[1] < 1 << 16;
+    let tiles = [false, true].into_iter().filter(|_| tiled).map(|predict| Filter::Tiles(Tiles { width, x: bricks[0], y: bricks[1], predict }));
     let mut filters = match plane.format {
         Format::Bc4 | Format::Bc7 => vec![Filter::None, Filter::Shuffle { width: plane.format.block_bytes() as u32 }],
         Format::F32 => vec![Filter::Shuffle { width: 4 }, Filter::Delta { width: 4, stride: lanes }],
@@ -326,18 +327,24 @@ fn atlas_of(meta: &Metadata, section: u32) -> Option<(&crate::Plane, &crate::Atl
 
 /// What one brick's texels (`bytes`, in `plane`) cost in a supercompressed
 /// file, as an estimate for choosing formats: the order-0 entropy of its
-/// bytes after the plane's last filter ([`texel_filters`]: tiles for a
-/// 1-lane uncompressed plane), what a coder fitted to the brick would spend
-/// (zstd codes a whole section with one table: a brick compressed alone
-/// would be charged a table of its own), plus its range pair.
+/// bytes after the plane's own filter (tiles for a 1-lane uncompressed
+/// plane, the cheaper of predicted and not; [`texel_filters`]' last
+/// otherwise), what a coder fitted to the brick would spend (zstd codes a
+/// whole section with one table: a brick compressed alone would be charged
+/// a table of its own), plus its range pair.
 pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
-    let filter = texel_filters(plane, [1, 1, 1]).pop().unwrap_or(Filter::None);
-    let filtered = if filter.filtered_len(bytes.len()).is_some() { filter.apply(bytes) } else { bytes.to_vec() };
-    let mut counts = [0u32; 256];
-    filtered.iter().for_each(|&b| counts[usize::from(b)] += 1);
-    let n = filtered.len() as f64;
-    let bits: f64 = counts.iter().filter(|&&c| c > 0).map(|&c| f64::from(c) * (n / f64::from(c)).log2()).sum();
-    (bits / 8.0).ceil() as usize + 8
+    let filters = texel_filters(plane, [1, 1, 1]);
+    let tiles: Vec<Filter> = filters.iter().copied().filter(|f| matches!(f, Filter::Tiles(_))).collect();
+    let chosen = if tiles.is_empty() { filters.last().copied().into_iter().collect() } else { tiles };
+    let entropy = |filter: Filter| {
+        let filtered = if filter.filtered_len(bytes.len()).is_some() { filter.apply(bytes) } else { bytes.to_vec() };
+        let mut counts = [0u32; 256];
+        filtered.iter().for_each(|&b| counts[usize::from(b)] += 1);
+        let n = filtered.len() as f64;
+        counts.iter().filter(|&&c| c > 0).map(|&c| f64::from(c) * (n / f64::from(c)).log2()).sum::<f64>()
+    };
+    let bits = chosen.into_iter().map(entropy).fold(f64::INFINITY, f64::min);
+    (bits.min(8.0 * bytes.len() as f64) / 8.0).ceil() as usize + 8
 }
 
 /// Compresses every section worth it (the smallest of its filters' outputs,

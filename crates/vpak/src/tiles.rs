@@ -1,8 +1,9 @@
-//! The `tiles` filter (coding filter 3): an atlas of 8×8×8-texel tiles of
-//! one `w`-byte lane (a 1-lane `unorm8`, `unorm16` or `f16` plane, whose
-//! tiles are its bricks) stored tile by tile, each tile's elements divided
-//! by their greatest common divisor and predicted from their 3D neighbours
-//! in the tile (Lorenzo). Texels snapped to a step of the error bound
+//! The `tiles` filters (coding filters 3 and 4): an atlas of 8×8×8-texel
+//! tiles of one `w`-byte lane (a 1-lane `unorm8`, `unorm16` or `f16` plane,
+//! whose tiles are its bricks) stored tile by tile, each tile's elements
+//! divided by their greatest common divisor and (filter 3) predicted from
+//! their 3D neighbours in the tile (Lorenzo). Filter 4 leaves the quotients
+//! unpredicted: sharp, sparse bricks (flames) compress better as they are. Texels snapped to a step of the error bound
 //! (`cook --max-error --supercompress`) are multiples of their brick's step,
 //! so what zstd sees is the same small residuals in every brick, whatever
 //! its range; without the divisor each brick's step scatters them.
@@ -11,19 +12,20 @@
 pub const TILE: usize = 512;
 
 /// The geometry of a tiled section: elements of `width` bytes, `x` × `y`
-/// tiles per slab of 8 texels in z.
+/// tiles per slab of 8 texels in z; and whether quotients are predicted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Tiles {
     pub width: u32,
     pub x: u32,
     pub y: u32,
+    pub predict: bool,
 }
 
 impl Tiles {
     /// From a coding record's width and stride (`x + 65536·y`).
-    pub fn from_record(width: u32, stride: u32) -> Option<Tiles> {
+    pub fn from_record(predict: bool, width: u32, stride: u32) -> Option<Tiles> {
         let (x, y) = (stride & 0xffff, stride >> 16);
-        (matches!(width, 1 | 2) && x > 0 && y > 0).then_some(Tiles { width, x, y })
+        (matches!(width, 1 | 2) && x > 0 && y > 0).then_some(Tiles { width, x, y, predict })
     }
 
     pub fn stride(self) -> u32 {
@@ -70,7 +72,7 @@ impl Tiles {
             for (i, r) in r.iter_mut().enumerate() {
                 let at = padded(i);
                 cube[at] = n[i];
-                *r = n[i].wrapping_sub(predict(&cube, at));
+                *r = if self.predict { n[i].wrapping_sub(predict(&cube, at)) } else { n[i] };
             }
         }
         // Little-endian bytes, shuffled: all low bytes, then all high ones.
@@ -100,7 +102,7 @@ impl Tiles {
             let first = tiles + t * TILE;
             for (i, place) in self.places(t).enumerate() {
                 let at = padded(i);
-                let n = element(first + i).wrapping_add(predict(&cube, at)) & mask;
+                let n = if self.predict { element(first + i).wrapping_add(predict(&cube, at)) & mask } else { element(first + i) };
                 cube[at] = n;
                 let v = n.wrapping_mul(g);
                 if w == 1 {
@@ -144,7 +146,13 @@ mod tests {
 
     #[test]
     fn tiles_undo_what_they_do() {
-        for (t, slabs) in [(Tiles { width: 1, x: 3, y: 2 }, 2), (Tiles { width: 2, x: 1, y: 4 }, 1), (Tiles { width: 2, x: 5, y: 1 }, 3)] {
+        for (t, slabs) in [
+            (Tiles { width: 1, x: 3, y: 2, predict: true }, 2),
+            (Tiles { width: 2, x: 1, y: 4, predict: true }, 1),
+            (Tiles { width: 2, x: 5, y: 1, predict: true }, 3),
+            (Tiles { width: 1, x: 2, y: 3, predict: false }, 2),
+            (Tiles { width: 2, x: 3, y: 1, predict: false }, 1),
+        ] {
             for raw in [atlas(t, slabs, |i| (i * 7 % 251 + i / 64) as u32 * 3), atlas(t, slabs, |i| (i * 2654435761) as u32 >> 7), atlas(t, slabs, |_| 0)] {
                 let f = t.apply(&raw);
                 assert_eq!(Some(f.len()), t.filtered_len(raw.len()));
@@ -158,7 +166,7 @@ mod tests {
     #[test]
     fn a_ramp_on_a_step_leaves_its_divisor_and_little_else() {
         // Every element a multiple of 6 along a linear ramp: divisor 6, residuals 0 past the tile's edges.
-        let t = Tiles { width: 1, x: 2, y: 1 };
+        let t = Tiles { width: 1, x: 2, y: 1, predict: true };
         let w = 16;
         let raw = atlas(t, 1, |i| 6 * ((i % w) % 8 + (i / w % 8) + (i / (w * 8))) as u32);
         let f = t.apply(&raw);
@@ -170,11 +178,11 @@ mod tests {
 
     #[test]
     fn sections_that_are_not_whole_slabs_are_not_tiles() {
-        let t = Tiles { width: 2, x: 2, y: 2 };
+        let t = Tiles { width: 2, x: 2, y: 2, predict: true };
         assert_eq!(t.count(2 * 2 * 512 * 2), Some(4));
         assert_eq!(t.count(2 * 2 * 512 * 2 + 2), None);
-        assert_eq!(Tiles::from_record(1, 3 | 4 << 16), Some(Tiles { width: 1, x: 3, y: 4 }));
-        assert_eq!(Tiles::from_record(4, 3 | 4 << 16), None);
-        assert_eq!(Tiles::from_record(1, 3), None);
+        assert_eq!(Tiles::from_record(false, 1, 3 | 4 << 16), Some(Tiles { width: 1, x: 3, y: 4, predict: false }));
+        assert_eq!(Tiles::from_record(true, 4, 3 | 4 << 16), None);
+        assert_eq!(Tiles::from_record(true, 1, 3), None);
     }
 }
