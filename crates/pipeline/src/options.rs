@@ -268,13 +268,14 @@ settings_group! {
         /// How sections are stored on disk: none, zstd, or zstd:LEVEL (1 to 22; zstd alone is
         /// level 5). Each segment's sections are filtered and zstd-compressed: a smaller file,
         /// the same GPU bytes (a reader restores a segment when it loads it, at zstd's speed).
-        /// With --max-error the texels are also moved to the coarsest grid within E.
+        /// With --max-error the texels are also moved to the coarsest grid within E (ranged
+        /// formats: steps of about 2E; inactive voxels, which no bound holds, at the brick's min).
         #[cfg_attr(feature = "clap", arg(long, value_name = "none|zstd[:LEVEL]", default_value_t = CookSettings::default().supercompress))]
         pub supercompress: Supercompress = Supercompress::None;
         /// With --max-error and --supercompress, what each brick's format choice minimises: gpu
         /// (the cheapest format within E on the GPU, as without --supercompress) or disk (the
-        /// format whose texels, compressed alone, take the fewest bytes: larger GPU formats,
-        /// and a file smaller only where that estimate holds in context; docs/benchmarks.md).
+        /// format whose texels, filtered, have the least entropy: larger GPU formats, e.g.
+        /// unorm8 for BC7, for a smaller file; a longer cook; docs/benchmarks.md).
         #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().optimize))]
         pub optimize: Optimize = Optimize::Gpu;
         /// The sequence's frame rate in frames per second (e.g. 24, 30, 23.976), recorded in the
