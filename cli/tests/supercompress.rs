@@ -64,6 +64,9 @@ fn texels_for_the_disk_stay_within_the_bound_and_compress_further() {
     recompress(&plain, &unsnapped, "zstd");
     let size = |p: &Path| std::fs::metadata(p).unwrap().len();
     assert!(size(&coded) < size(&unsnapped), "{} bytes with texels for the disk, {} without", size(&coded), size(&unsnapped));
+    // The atlases of its 1-lane texels are stored as tiles (each brick over its step).
+    let tiled = inspect(&coded)["sections"].as_array().unwrap().iter().filter(|x| x["coding"]["filter"].as_str().is_some_and(|f| f.starts_with("tiles"))).count();
+    assert!(tiled > 0, "no atlas stored as tiles");
     // Every frame within E of its source, voxel by voxel (`diff`'s largest difference).
     for (frame, src) in vdb_files(&root().join("fixtures/smoke_seq")).iter().enumerate() {
         let vdb = dir.join(format!("z{frame}.vdb"));
