@@ -407,27 +407,47 @@ fn plausible(c: &Coding, stored: usize) -> Result<usize, Error> {
     }
 }
 
+// A thread's buffer for filtered bytes, kept from one restore to the next
+// (up to KEEP_SCRATCH bytes): a reader restoring segment after segment then
+// decompresses into memory it has touched before, not into fresh pages that
+// the kernel must fault in and zero each time.
+thread_local! {
+    static SCRATCH: std::cell::Cell<Vec<u8>> = const { std::cell::Cell::new(Vec::new()) };
+}
+const KEEP_SCRATCH: usize = 256 << 20;
+
 /// Restores one section's GPU bytes from its stored bytes into `out` (its
 /// restored size): decompressed in place when it has no filter, else into
-/// `scratch` and unfiltered from there; then checked against its checksum.
+/// `scratch` (when it has room, else the thread's own buffer) and
+/// unfiltered from there; then checked against its checksum.
 fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>) -> Result<(), Error> {
     let err = |problem: String| Error::Coding { kind: c.kind, index: c.index, problem };
     let n = c.filter.filtered_len(out.len()).ok_or_else(|| err(format!("restores {} bytes, which its filter cannot", out.len())))?;
     let mut d = zstd::bulk::Decompressor::new().map_err(|e| err(format!("does not decompress ({e})")))?;
-    let got = match c.filter {
-        Filter::None => d.decompress_to_buffer(stored, out),
-        _ => {
-            scratch.clear();
-            scratch.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} filtered bytes")))?;
-            d.decompress_to_buffer(stored, scratch)
+    if c.filter == Filter::None {
+        let got = d.decompress_to_buffer(stored, out).map_err(|e| err(format!("does not decompress to the {n} bytes the coding table says ({e})")))?;
+        if got != n {
+            return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
         }
-    }
-    .map_err(|e| err(format!("does not decompress to the {n} bytes the coding table says ({e})")))?;
-    if got != n {
-        return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
-    }
-    if c.filter != Filter::None {
-        c.filter.undo(scratch, out);
+    } else {
+        let own = scratch.capacity() < n;
+        let mut buf = if own { SCRATCH.take() } else { std::mem::take(scratch) };
+        let undone = (|| {
+            buf.clear();
+            buf.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} filtered bytes")))?;
+            let got = d.decompress_to_buffer(stored, &mut buf).map_err(|e| err(format!("does not decompress to the {n} bytes the coding table says ({e})")))?;
+            if got != n {
+                return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
+            }
+            c.filter.undo(&buf, out);
+            Ok(())
+        })();
+        match own {
+            true if buf.capacity() <= KEEP_SCRATCH => SCRATCH.set(buf),
+            true => {}
+            false => *scratch = buf,
+        }
+        undone?;
     }
     let computed = checksum(out);
     if computed != c.raw_checksum {
