@@ -198,7 +198,7 @@ fn reciprocal(g: u32) -> u64 {
 }
 
 fn quotient(v: u32, recip: u64) -> u32 {
-    (u64::from(v) * recip >> 32) as u32
+    ((u64::from(v) * recip) >> 32) as u32
 }
 
 /// Each element divided by `g` (0 when `g` is: every element is then 0).
