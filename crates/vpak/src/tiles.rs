@@ -234,14 +234,11 @@ fn difference(e: &mut Tile) {
 }
 
 /// Undoes [`difference`]: running sums along x (a row as three shifted
-/// adds, which compile to vector shifts), then y, then z.
+/// adds), then y, then z.
 fn running_sums(e: &mut Tile) {
     for row in e.chunks_exact_mut(8) {
-        let mut r: [u16; 8] = row.try_into().unwrap_or_default();
-        r = add(r, shifted::<1>(r));
-        r = add(r, shifted::<2>(r));
-        r = add(r, shifted::<4>(r));
-        row.copy_from_slice(&r);
+        let r: [u16; 8] = row.try_into().unwrap_or_default();
+        row.copy_from_slice(&row_sums(r));
     }
     for layer in e.chunks_exact_mut(64) {
         for j in 1..8 {
@@ -255,11 +252,35 @@ fn running_sums(e: &mut Tile) {
     }
 }
 
+/// A row's running sums, on x86-64 in one SSE2 register (three shifted
+/// adds), which the compiler does not find from the portable form.
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+fn row_sums(r: [u16; 8]) -> [u16; 8] {
+    use std::arch::x86_64::{__m128i, _mm_add_epi16, _mm_slli_si128};
+    let v: __m128i = bytemuck::cast(r);
+    // SAFETY: the target has SSE2 (the cfg above); the intrinsics touch no memory.
+    let v = unsafe {
+        let v = _mm_add_epi16(v, _mm_slli_si128::<2>(v));
+        let v = _mm_add_epi16(v, _mm_slli_si128::<4>(v));
+        _mm_add_epi16(v, _mm_slli_si128::<8>(v))
+    };
+    bytemuck::cast(v)
+}
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+fn row_sums(r: [u16; 8]) -> [u16; 8] {
+    let r = add(r, shifted::<1>(r));
+    let r = add(r, shifted::<2>(r));
+    add(r, shifted::<4>(r))
+}
+
 /// A row moved `S` elements along, zeros coming in.
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
 fn shifted<const S: usize>(r: [u16; 8]) -> [u16; 8] {
     std::array::from_fn(|i| if i >= S { r[i - S] } else { 0 })
 }
 
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
 fn add(a: [u16; 8], b: [u16; 8]) -> [u16; 8] {
     std::array::from_fn(|i| a[i].wrapping_add(b[i]))
 }
