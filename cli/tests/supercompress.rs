@@ -90,6 +90,44 @@ fn texels_for_the_disk_stay_within_the_bound_and_compress_further() {
 }
 
 #[test]
+fn large_sections_compressed_by_workers_are_the_same_on_any_thread_count() {
+    // A 128³ fog's f16 atlas (4 MiB) is above the size that zstd's workers
+    // compress (as many as rayon has threads): one thread or two, the same bytes.
+    let python = std::process::Command::new("/usr/bin/python3").args(["-c", "import numpy, pyopenvdb"]).output().is_ok_and(|o| o.status.success());
+    assert!(python || !in_ci(), "CI=true but /usr/bin/python3 lacks numpy or pyopenvdb");
+    if !python {
+        return;
+    }
+    let dir = scratch_dir("supercompress", "threads");
+    let fog = dir.join("fog.vdb");
+    let made = std::process::Command::new("/usr/bin/python3").args(["scripts/make_bench_volume.py", s(&fog), "--size", "128"]).current_dir(root()).output().unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let cooked: Vec<Vec<u8>> = ["1", "2"]
+        .iter()
+        .map(|threads| {
+            let out = dir.join(format!("z{threads}.vpak"));
+            let r = std::process::Command::new(env!("CARGO_BIN_EXE_vdbcook"))
+                .env("RAYON_NUM_THREADS", threads)
+                .args(["cook", "-q", "--force", "--format", "f16", "--supercompress", "zstd", "-o", s(&out), s(&fog)])
+                .output()
+                .unwrap();
+            assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+            std::fs::read(&out).unwrap()
+        })
+        .collect();
+    let one = dir.join("z1.vpak");
+    let atlas = inspect(&one)["sections"].as_array().unwrap().iter().find(|x| x["name"] == "brick atlas").cloned().unwrap();
+    assert!(!atlas["coding"].is_null() && atlas["bytes"].as_u64() > Some(2 << 20), "not a large supercompressed atlas: {atlas}");
+    assert!(cooked[0] == cooked[1], "one thread and two wrote different assets");
+    // And its frame restores the plain cook's bytes.
+    let plain = cook(&dir, "p.vpak", &[s(&fog)], &["--format", "f16"]);
+    let back = dir.join("b.vpak");
+    recompress(&one, &back, "none");
+    assert!(std::fs::read(&back).unwrap() == std::fs::read(&plain).unwrap(), "restored bytes differ from the plain cook");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn damaged_compressed_sections_are_refused_in_one_line() {
     let dir = scratch_dir("supercompress", "damaged");
     let coded = cook(&dir, "z.vpak", &[&smoke()], &["--format", "unorm8", "--supercompress", "zstd"]);

@@ -205,10 +205,18 @@ fn unshuffle(data: &[u8], out: &mut [u8], w: usize) {
             }
         }
         _ => {
-            // A plane at a time (BC blocks: 8 or 16 planes), each written at its stride.
-            for (j, plane) in data.chunks_exact(n).enumerate() {
-                for (o, &x) in out[j..].iter_mut().step_by(w).zip(plane) {
-                    *o = x;
+            // BC blocks (8 or 16 planes): a block of elements at a time, each
+            // plane's bytes of it written at their stride into output that
+            // stays in the L1 cache, rather than every plane over the whole
+            // output (w passes of write traffic over memory).
+            const BLOCK: usize = 256;
+            for (b, block) in out.chunks_mut(BLOCK * w).enumerate() {
+                let first = b * BLOCK;
+                for j in 0..w {
+                    let plane = &data[j * n + first..j * n + first + block.len() / w];
+                    for (o, &x) in block[j..].iter_mut().step_by(w).zip(plane) {
+                        *o = x;
+                    }
                 }
             }
         }
@@ -347,10 +355,55 @@ pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
     (bits.min(8.0 * bytes.len() as f64) / 8.0).ceil() as usize + 8
 }
 
+/// Sections of more than this many bytes are compressed at most at
+/// [`LARGE_LEVEL`] when the level asked for is one of the fast ones (at most
+/// [`Supercompress::DEFAULT_LEVEL`]): zstd's greedy levels (5 and up) spend
+/// about four times the time of level 1 for a few percent on texels after
+/// their filter, and on a plain `f16` or `f32` atlas of tens of MiB that is
+/// more than the rest of the cook. Slower levels are a choice for size and
+/// are kept.
+pub const LARGE_SECTION: usize = 8 << 20;
+pub const LARGE_LEVEL: i32 = 1;
+
+/// The zstd level a section of `len` bytes is compressed at, given `level`.
+pub fn level_for(level: i32, len: usize) -> i32 {
+    match len > LARGE_SECTION && level <= Supercompress::DEFAULT_LEVEL {
+        true => level.min(LARGE_LEVEL),
+        false => level,
+    }
+}
+
+/// Sections of more than this many bytes are compressed by zstd's worker
+/// threads in jobs of [`JOB`] bytes (each job's window reaching back into
+/// the one before): one frame whose bytes depend on the jobs, which depend
+/// on the size alone, not on how many workers run them (1 or more; 0, no
+/// worker, is another coding), so an asset is the same on any thread count.
+const THREADED_SECTION: usize = 2 << 20;
+const JOB: u32 = 1 << 20;
+
+/// One zstd frame of `data` at `level`; by [`rayon`]'s number of threads
+/// (at least one) of zstd's workers when it is large.
+fn compress(data: &[u8], level: i32) -> std::io::Result<Vec<u8>> {
+    if data.len() <= THREADED_SECTION {
+        return zstd::bulk::compress(data, level);
+    }
+    let workers = rayon::current_num_threads().max(1) as u32;
+    compress_threaded(data, level, workers)
+}
+
+fn compress_threaded(data: &[u8], level: i32, workers: u32) -> std::io::Result<Vec<u8>> {
+    use zstd::zstd_safe::CParameter;
+    let mut c = zstd::bulk::Compressor::new(level)?;
+    c.set_parameter(CParameter::NbWorkers(workers.max(1)))?;
+    c.set_parameter(CParameter::JobSize(JOB))?;
+    c.compress(data)
+}
+
 /// Compresses every section worth it (the smallest of its filters' outputs,
-/// tried at a fast level, then compressed at `level`) and adds the coding
-/// section; sections that do not shrink stay as they are. Deterministic:
-/// each section is one single-threaded zstd frame.
+/// tried at a fast level, then compressed at `level`, or as [`level_for`]
+/// says for a large one) and adds the coding section; sections that do not
+/// shrink stay as they are. Deterministic: each section is one zstd frame,
+/// the same on any number of threads ([`compress`]).
 pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Result<Vec<Section>, Error> {
     let coded: Vec<(Section, Option<Coding>)> = sections
         .into_par_iter()
@@ -359,22 +412,31 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
             if filters.is_empty() || s.data.is_empty() {
                 return Ok((s, None));
             }
-            let best = match filters.as_slice() {
-                [only] => *only,
+            // The first of the smallest, with its filtered bytes when they were made whole.
+            let (best, filtered) = match filters.as_slice() {
+                [only] => (*only, None),
                 _ => {
-                    let mut sized = Vec::with_capacity(filters.len());
+                    let mut best: Option<(usize, Filter, Option<Vec<u8>>)> = None;
                     for f in &filters {
-                        let sample: Vec<u8> = match f {
+                        let (sample, whole) = match f {
                             // Tiles span the atlas's rows: filtered whole, then sampled.
-                            Filter::Tiles(_) => sample(&f.apply(&s.data)).flatten().copied().collect(),
-                            _ => sample(&s.data).flat_map(|chunk| f.apply(chunk)).collect(),
+                            Filter::Tiles(_) => {
+                                let whole = f.apply(&s.data);
+                                (sample(&whole).flatten().copied().collect::<Vec<u8>>(), Some(whole))
+                            }
+                            _ => (sample(&s.data).flat_map(|chunk| f.apply(chunk)).collect(), None),
                         };
-                        sized.push((zstd::bulk::compress(&sample, 1)?.len(), *f));
+                        let size = zstd::bulk::compress(&sample, 1)?.len();
+                        if best.as_ref().is_none_or(|b| size < b.0) {
+                            best = Some((size, *f, whole));
+                        }
                     }
-                    sized.iter().min_by_key(|x| x.0).map_or(Filter::None, |x| x.1)
+                    best.map_or((Filter::None, None), |b| (b.1, b.2))
                 }
             };
-            let data = zstd::bulk::compress(&best.apply(&s.data), level)?;
+            let filtered = filtered.unwrap_or_else(|| best.apply(&s.data));
+            let data = compress(&filtered, level_for(level, filtered.len()))?;
+            drop(filtered);
             if data.len() >= s.data.len() {
                 return Ok((s, None));
             }
@@ -407,27 +469,47 @@ fn plausible(c: &Coding, stored: usize) -> Result<usize, Error> {
     }
 }
 
+// A thread's buffer for filtered bytes, kept from one restore to the next
+// (up to KEEP_SCRATCH bytes): a reader restoring segment after segment then
+// decompresses into memory it has touched before, not into fresh pages that
+// the kernel must fault in and zero each time.
+thread_local! {
+    static SCRATCH: std::cell::Cell<Vec<u8>> = const { std::cell::Cell::new(Vec::new()) };
+}
+const KEEP_SCRATCH: usize = 256 << 20;
+
 /// Restores one section's GPU bytes from its stored bytes into `out` (its
 /// restored size): decompressed in place when it has no filter, else into
-/// `scratch` and unfiltered from there; then checked against its checksum.
+/// `scratch` (when it has room, else the thread's own buffer) and
+/// unfiltered from there; then checked against its checksum.
 fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>) -> Result<(), Error> {
     let err = |problem: String| Error::Coding { kind: c.kind, index: c.index, problem };
     let n = c.filter.filtered_len(out.len()).ok_or_else(|| err(format!("restores {} bytes, which its filter cannot", out.len())))?;
     let mut d = zstd::bulk::Decompressor::new().map_err(|e| err(format!("does not decompress ({e})")))?;
-    let got = match c.filter {
-        Filter::None => d.decompress_to_buffer(stored, out),
-        _ => {
-            scratch.clear();
-            scratch.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} filtered bytes")))?;
-            d.decompress_to_buffer(stored, scratch)
+    if c.filter == Filter::None {
+        let got = d.decompress_to_buffer(stored, out).map_err(|e| err(format!("does not decompress to the {n} bytes the coding table says ({e})")))?;
+        if got != n {
+            return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
         }
-    }
-    .map_err(|e| err(format!("does not decompress to the {n} bytes the coding table says ({e})")))?;
-    if got != n {
-        return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
-    }
-    if c.filter != Filter::None {
-        c.filter.undo(scratch, out);
+    } else {
+        let own = scratch.capacity() < n;
+        let mut buf = if own { SCRATCH.take() } else { std::mem::take(scratch) };
+        let undone = (|| {
+            buf.clear();
+            buf.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} filtered bytes")))?;
+            let got = d.decompress_to_buffer(stored, &mut buf).map_err(|e| err(format!("does not decompress to the {n} bytes the coding table says ({e})")))?;
+            if got != n {
+                return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
+            }
+            c.filter.undo(&buf, out);
+            Ok(())
+        })();
+        match own {
+            true if buf.capacity() <= KEEP_SCRATCH => SCRATCH.set(buf),
+            true => {}
+            false => *scratch = buf,
+        }
+        undone?;
     }
     let computed = checksum(out);
     if computed != c.raw_checksum {
@@ -624,7 +706,7 @@ mod tests {
 
     #[test]
     fn filters_undo_what_they_do() {
-        let raw: Vec<u8> = (0..4096u32).map(|i| (i * 7 % 251 + i / 64) as u8).collect();
+        let raw: Vec<u8> = (0..48_000u32).map(|i| (i * 7 % 251 + i / 64) as u8).collect();
         for f in [
             Filter::None,
             Filter::Shuffle { width: 2 },
@@ -653,6 +735,17 @@ mod tests {
         assert_eq!(f[0], 0);
         assert!(f[1..256].iter().all(|&b| b == 3));
         assert!(f[256..].iter().all(|&b| b == 0));
+    }
+
+    #[test]
+    fn threaded_frames_do_not_depend_on_the_workers() {
+        // Jobs of 1 MiB over 5 MiB of half-predictable bytes: one frame, the same from 1, 2 or 4 workers.
+        let raw: Vec<u8> = (0..5u32 << 20).map(|i| ((i / 3) ^ (i.wrapping_mul(2654435761) >> 29)) as u8).collect();
+        let one = compress_threaded(&raw, 5, 1).unwrap();
+        assert_eq!(zstd::bulk::decompress(&one, raw.len()).unwrap(), raw);
+        for workers in [2, 4] {
+            assert!(compress_threaded(&raw, 5, workers).unwrap() == one, "{workers} workers");
+        }
     }
 
     #[test]

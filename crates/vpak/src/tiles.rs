@@ -7,9 +7,19 @@
 //! (`cook --max-error --supercompress`) are multiples of their brick's step,
 //! so what zstd sees is the same small residuals in every brick, whatever
 //! its range; without the divisor each brick's step scatters them.
+//!
+//! All arithmetic is modulo 2^(8w), which 16-bit wrapping arithmetic keeps
+//! (for w = 1 the low byte of a 16-bit result is the 8-bit one): a tile is
+//! worked on as 512 `u16`s, its Lorenzo residuals being its differences along
+//! x, y and z, and their inverse running sums along each axis.
+
+use rayon::prelude::*;
 
 /// Elements of a tile.
 pub const TILE: usize = 512;
+
+/// One tile's elements, x fastest, then y, then z.
+type Tile = [u16; TILE];
 
 /// The geometry of a tiled section: elements of `width` bytes, `x` × `y`
 /// tiles per slab of 8 texels in z; and whether quotients are predicted.
@@ -46,42 +56,75 @@ impl Tiles {
         self.count(raw).map(|t| raw + t * self.width as usize)
     }
 
-    /// Element index in the section of element (x, y, z) of tile t.
-    fn places(self, t: usize) -> impl Iterator<Item = usize> {
-        let (w, h) = (8 * self.x as usize, 8 * self.y as usize);
-        let per_slab = self.x as usize * self.y as usize;
-        let (tx, ty, tz) = (t % self.x as usize, t / self.x as usize % self.y as usize, t / per_slab);
-        let base = 8 * tx + w * (8 * ty + h * 8 * tz);
-        (0..8).flat_map(move |z| (0..8).flat_map(move |y| (0..8).map(move |x| base + x + w * (y + h * z))))
+    /// Element index in the section of each of tile t's 64 rows of 8
+    /// elements (row j + 8k holds its elements (0..8, j, k)).
+    fn rows(self, t: usize) -> impl Iterator<Item = usize> {
+        let (x, y) = (self.x as usize, self.y as usize);
+        let (row, layer) = (8 * x, 64 * x * y);
+        let base = 8 * (t % x) + row * 8 * (t / x % y) + layer * 8 * (t / (x * y));
+        (0..64).map(move |r| base + row * (r % 8) + layer * (r / 8))
+    }
+
+    /// Tile t's elements from the section `raw`.
+    fn gather(self, raw: &[u8], t: usize) -> Tile {
+        let mut e = [0u16; TILE];
+        for (dst, at) in e.chunks_exact_mut(8).zip(self.rows(t)) {
+            match self.width {
+                1 => dst.iter_mut().zip(&raw[at..at + 8]).for_each(|(d, &b)| *d = u16::from(b)),
+                _ => dst.iter_mut().zip(raw[2 * at..2 * at + 16].chunks_exact(2)).for_each(|(d, b)| *d = u16::from_le_bytes([b[0], b[1]])),
+            }
+        }
+        e
+    }
+
+    /// Tile t's divisor and residuals (as [`Tiles::apply`] stores them).
+    fn filter_tile(self, raw: &[u8], t: usize) -> (u16, Tile) {
+        let mut e = self.gather(raw, t);
+        let g = tile_gcd(&e);
+        divide(&mut e, g);
+        if self.predict {
+            difference(&mut e);
+        }
+        (g, e)
     }
 
     /// The filtered bytes: the tiles' divisors, then each tile's residuals,
     /// the elements byte-shuffled as the shuffle filter does. `raw` must be a
-    /// whole number of slabs ([`Tiles::count`]).
+    /// whole number of slabs ([`Tiles::count`]). Tiles in parallel.
     pub fn apply(self, raw: &[u8]) -> Vec<u8> {
         let w = self.width as usize;
         let tiles = self.count(raw.len()).unwrap_or(0);
-        let get = |i: usize| if w == 1 { u32::from(raw[i]) } else { u32::from(u16::from_le_bytes([raw[2 * i], raw[2 * i + 1]])) };
-        let mut out = vec![0u32; tiles * (TILE + 1)];
-        let (divisors, residuals) = out.split_at_mut(tiles);
-        for (t, (g, r)) in divisors.iter_mut().zip(residuals.chunks_exact_mut(TILE)).enumerate() {
-            let e: Vec<u32> = self.places(t).map(get).collect();
-            *g = e.iter().fold(0, |g, &v| gcd(g, v));
-            let n: Vec<u32> = e.iter().map(|&v| v.checked_div(*g).unwrap_or(0)).collect();
-            let mut cube = [0u32; 729];
-            for (i, r) in r.iter_mut().enumerate() {
-                let at = padded(i);
-                cube[at] = n[i];
-                *r = if self.predict { n[i].wrapping_sub(predict(&cube, at)) } else { n[i] };
-            }
-        }
-        // Little-endian bytes, shuffled: all low bytes, then all high ones.
-        let m = out.len();
+        let m = tiles * (TILE + 1);
         let mut bytes = vec![0u8; m * w];
-        for (i, v) in out.iter().enumerate() {
-            for j in 0..w {
-                bytes[j * m + i] = (v >> (8 * j)) as u8;
-            }
+        let (lo, hi) = bytes.split_at_mut(m);
+        let (lo_div, lo_res) = lo.split_at_mut(tiles);
+        // Little-endian bytes, shuffled: all low bytes, then all high ones.
+        let divisors: Vec<u16> = match w {
+            1 => lo_res
+                .par_chunks_mut(TILE)
+                .enumerate()
+                .map(|(t, lo)| {
+                    let (g, r) = self.filter_tile(raw, t);
+                    lo.iter_mut().zip(&r).for_each(|(b, &v)| *b = v as u8);
+                    g
+                })
+                .collect(),
+            _ => lo_res
+                .par_chunks_mut(TILE)
+                .zip(hi[tiles..].par_chunks_mut(TILE))
+                .enumerate()
+                .map(|(t, (lo, hi))| {
+                    let (g, r) = self.filter_tile(raw, t);
+                    for ((l, h), v) in lo.iter_mut().zip(hi.iter_mut()).zip(r) {
+                        [*l, *h] = v.to_le_bytes();
+                    }
+                    g
+                })
+                .collect(),
+        };
+        lo_div.iter_mut().zip(&divisors).for_each(|(b, &g)| *b = g as u8);
+        if w == 2 {
+            hi[..tiles].iter_mut().zip(&divisors).for_each(|(b, &g)| *b = (g >> 8) as u8);
         }
         bytes
     }
@@ -94,38 +137,152 @@ impl Tiles {
         if data.len() != m * w {
             return;
         }
-        let element = |i: usize| if w == 1 { u32::from(data[i]) } else { u32::from(data[i]) | u32::from(data[m + i]) << 8 };
-        let mask = if w == 1 { 0xff } else { 0xffff };
-        let mut cube = [0u32; 729];
+        let (lo, hi) = data.split_at(m);
+        let mut u = [0u16; TILE];
         for t in 0..tiles {
-            let g = element(t);
             let first = tiles + t * TILE;
-            for (i, place) in self.places(t).enumerate() {
-                let at = padded(i);
-                let n = if self.predict { element(first + i).wrapping_add(predict(&cube, at)) & mask } else { element(first + i) };
-                cube[at] = n;
-                let v = n.wrapping_mul(g);
-                if w == 1 {
-                    out[place] = v as u8;
-                } else {
-                    out[2 * place..2 * place + 2].copy_from_slice(&(v as u16).to_le_bytes());
+            let lo_res = &lo[first..first + TILE];
+            let g = match w {
+                1 => {
+                    u.iter_mut().zip(lo_res).for_each(|(u, &l)| *u = u16::from(l));
+                    u16::from(lo[t])
+                }
+                _ => {
+                    u.iter_mut().zip(lo_res.iter().zip(&hi[first..first + TILE])).for_each(|(u, (&l, &h))| *u = u16::from_le_bytes([l, h]));
+                    u16::from_le_bytes([lo[t], hi[t]])
+                }
+            };
+            if self.predict {
+                running_sums(&mut u);
+            }
+            if g != 1 {
+                u.iter_mut().for_each(|v| *v = v.wrapping_mul(g));
+            }
+            for (src, at) in u.chunks_exact(8).zip(self.rows(t)) {
+                match w {
+                    1 => out[at..at + 8].iter_mut().zip(src).for_each(|(o, &v)| *o = v as u8),
+                    _ => out[2 * at..2 * at + 16].chunks_exact_mut(2).zip(src).for_each(|(o, &v)| o.copy_from_slice(&v.to_le_bytes())),
                 }
             }
         }
     }
 }
 
-/// Index in a 9×9×9 cube (a zero border at 0 on each axis) of tile element i.
-fn padded(i: usize) -> usize {
-    let (x, y, z) = (i % 8 + 1, i / 8 % 8 + 1, i / 64 + 1);
-    x + 9 * (y + 9 * z)
+/// The greatest common divisor of a tile's elements (0 when all are 0):
+/// each element only checked against the divisor so far (a multiply by its
+/// reciprocal), which changes at most 16 times.
+fn tile_gcd(e: &Tile) -> u16 {
+    let mut g = 0u32;
+    let mut recip = 0u64;
+    for &v in e {
+        let v = u32::from(v);
+        if g == 1 {
+            break;
+        }
+        if g == 0 || quotient(v, recip) * g != v {
+            g = gcd(g, v);
+            recip = reciprocal(g);
+        }
+    }
+    g as u16
 }
 
-/// The Lorenzo prediction of the element at `at` from its seven neighbours
-/// before it (0 outside the tile), wrapping.
-fn predict(c: &[u32; 729], at: usize) -> u32 {
-    let (dx, dy, dz) = (1, 9, 81);
-    c[at - dx].wrapping_add(c[at - dy]).wrapping_add(c[at - dz]).wrapping_sub(c[at - dx - dy]).wrapping_sub(c[at - dx - dz]).wrapping_sub(c[at - dy - dz]).wrapping_add(c[at - dx - dy - dz])
+/// ⌈2^32 / g⌉: for v and g below 2^16, `quotient(v, reciprocal(g))` is ⌊v / g⌋
+/// (its error, below g, times v stays below 2^32).
+fn reciprocal(g: u32) -> u64 {
+    if g == 0 {
+        0
+    } else {
+        (1u64 << 32).div_ceil(u64::from(g))
+    }
+}
+
+fn quotient(v: u32, recip: u64) -> u32 {
+    ((u64::from(v) * recip) >> 32) as u32
+}
+
+/// Each element divided by `g` (0 when `g` is: every element is then 0).
+fn divide(e: &mut Tile, g: u16) {
+    match g {
+        1 => {}
+        g if g.is_power_of_two() => e.iter_mut().for_each(|v| *v >>= g.trailing_zeros()),
+        g => {
+            let r = reciprocal(u32::from(g));
+            e.iter_mut().for_each(|v| *v = quotient(u32::from(*v), r) as u16);
+        }
+    }
+}
+
+/// The Lorenzo residuals of a tile: its differences along z, then y, then x
+/// (0 before the tile's first element on each axis), wrapping.
+fn difference(e: &mut Tile) {
+    for k in (1..8).rev() {
+        let (before, here) = e.split_at_mut(64 * k);
+        here[..64].iter_mut().zip(&before[64 * (k - 1)..]).for_each(|(v, &p)| *v = v.wrapping_sub(p));
+    }
+    for layer in e.chunks_exact_mut(64) {
+        for j in (1..8).rev() {
+            let (before, here) = layer.split_at_mut(8 * j);
+            here[..8].iter_mut().zip(&before[8 * (j - 1)..]).for_each(|(v, &p)| *v = v.wrapping_sub(p));
+        }
+    }
+    for row in e.chunks_exact_mut(8) {
+        for i in (1..8).rev() {
+            row[i] = row[i].wrapping_sub(row[i - 1]);
+        }
+    }
+}
+
+/// Undoes [`difference`]: running sums along x (a row as three shifted
+/// adds), then y, then z.
+fn running_sums(e: &mut Tile) {
+    for row in e.chunks_exact_mut(8) {
+        let r: [u16; 8] = row.try_into().unwrap_or_default();
+        row.copy_from_slice(&row_sums(r));
+    }
+    for layer in e.chunks_exact_mut(64) {
+        for j in 1..8 {
+            let (before, here) = layer.split_at_mut(8 * j);
+            here[..8].iter_mut().zip(&before[8 * (j - 1)..]).for_each(|(v, &p)| *v = v.wrapping_add(p));
+        }
+    }
+    for k in 1..8 {
+        let (before, here) = e.split_at_mut(64 * k);
+        here[..64].iter_mut().zip(&before[64 * (k - 1)..]).for_each(|(v, &p)| *v = v.wrapping_add(p));
+    }
+}
+
+/// A row's running sums, on x86-64 in one SSE2 register (three shifted
+/// adds), which the compiler does not find from the portable form.
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+fn row_sums(r: [u16; 8]) -> [u16; 8] {
+    use std::arch::x86_64::{__m128i, _mm_add_epi16, _mm_slli_si128};
+    let v: __m128i = bytemuck::cast(r);
+    // SAFETY: the target has SSE2 (the cfg above); the intrinsics touch no memory.
+    let v = unsafe {
+        let v = _mm_add_epi16(v, _mm_slli_si128::<2>(v));
+        let v = _mm_add_epi16(v, _mm_slli_si128::<4>(v));
+        _mm_add_epi16(v, _mm_slli_si128::<8>(v))
+    };
+    bytemuck::cast(v)
+}
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+fn row_sums(r: [u16; 8]) -> [u16; 8] {
+    let r = add(r, shifted::<1>(r));
+    let r = add(r, shifted::<2>(r));
+    add(r, shifted::<4>(r))
+}
+
+/// A row moved `S` elements along, zeros coming in.
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+fn shifted<const S: usize>(r: [u16; 8]) -> [u16; 8] {
+    std::array::from_fn(|i| if i >= S { r[i - S] } else { 0 })
+}
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+fn add(a: [u16; 8], b: [u16; 8]) -> [u16; 8] {
+    std::array::from_fn(|i| a[i].wrapping_add(b[i]))
 }
 
 fn gcd(mut a: u32, mut b: u32) -> u32 {
@@ -144,6 +301,38 @@ mod tests {
         (0..n).flat_map(|i| f(i).to_le_bytes().into_iter().take(t.width as usize)).collect()
     }
 
+    /// The filter as the format page words it, element by element with the
+    /// 7-term predictor over a zero-bordered cube: what the fast one must match.
+    fn reference(t: Tiles, raw: &[u8]) -> Vec<u8> {
+        let w = t.width as usize;
+        let tiles = t.count(raw.len()).unwrap();
+        let get = |i: usize| if w == 1 { u32::from(raw[i]) } else { u32::from(u16::from_le_bytes([raw[2 * i], raw[2 * i + 1]])) };
+        let (row, h) = (8 * t.x as usize, 8 * t.y as usize);
+        let mut out = vec![0u32; tiles * (TILE + 1)];
+        let (divisors, residuals) = out.split_at_mut(tiles);
+        for (k, (g, r)) in divisors.iter_mut().zip(residuals.chunks_exact_mut(TILE)).enumerate() {
+            let (a, b, c) = (k % t.x as usize, k / t.x as usize % t.y as usize, k / (t.x as usize * t.y as usize));
+            let e: Vec<u32> = (0..TILE).map(|i| get(8 * a + i % 8 + row * (8 * b + i / 8 % 8 + h * (8 * c + i / 64)))).collect();
+            *g = e.iter().fold(0, |g, &v| gcd(g, v));
+            let mut cube = [0u32; 729];
+            for (i, r) in r.iter_mut().enumerate() {
+                let at = i % 8 + 1 + 9 * (i / 8 % 8 + 1 + 9 * (i / 64 + 1));
+                cube[at] = e[i].checked_div(*g).unwrap_or(0);
+                let c = |d: usize| cube[at - d];
+                let p = c(1).wrapping_add(c(9)).wrapping_add(c(81)).wrapping_sub(c(10)).wrapping_sub(c(82)).wrapping_sub(c(90)).wrapping_add(c(91));
+                *r = if t.predict { cube[at].wrapping_sub(p) } else { cube[at] };
+            }
+        }
+        let m = out.len();
+        let mut bytes = vec![0u8; m * w];
+        for (i, v) in out.iter().enumerate() {
+            for j in 0..w {
+                bytes[j * m + i] = (v >> (8 * j)) as u8;
+            }
+        }
+        bytes
+    }
+
     #[test]
     fn tiles_undo_what_they_do() {
         for (t, slabs) in [
@@ -153,13 +342,34 @@ mod tests {
             (Tiles { width: 1, x: 2, y: 3, predict: false }, 2),
             (Tiles { width: 2, x: 3, y: 1, predict: false }, 1),
         ] {
-            for raw in [atlas(t, slabs, |i| (i * 7 % 251 + i / 64) as u32 * 3), atlas(t, slabs, |i| (i * 2654435761) as u32 >> 7), atlas(t, slabs, |_| 0)] {
+            let steps = |i: usize| [1u32, 2, 3, 6, 7, 64, 255, 1000, 4097][i / 512 % 9];
+            for raw in [
+                atlas(t, slabs, |i| (i * 7 % 251 + i / 64) as u32 * 3),
+                atlas(t, slabs, |i| (i * 2654435761) as u32 >> 7),
+                atlas(t, slabs, |i| ((i * 2654435761) as u32 >> 20 & 0xf) * steps(i)),
+                atlas(t, slabs, |i| (i as u32 % 13) * steps(i)),
+                atlas(t, slabs, |_| 0),
+            ] {
                 let f = t.apply(&raw);
                 assert_eq!(Some(f.len()), t.filtered_len(raw.len()));
+                assert!(f == reference(t, &raw), "{t:?}: not the bytes the format page gives");
                 let mut back = vec![0u8; raw.len()];
                 t.undo(&f, &mut back);
                 assert_eq!(back, raw, "{t:?}");
             }
+        }
+    }
+
+    #[test]
+    fn tile_divisors_are_greatest() {
+        let mut e = [0u16; TILE];
+        assert_eq!(tile_gcd(&e), 0);
+        for (vals, g) in [(&[12u16, 18, 30][..], 6), (&[65535, 21845], 21845), (&[4096, 6144, 0], 2048), (&[7, 0, 14, 5], 1), (&[0, 0, 65534], 65534)] {
+            e = [0; TILE];
+            e[TILE - vals.len()..].copy_from_slice(vals);
+            assert_eq!(tile_gcd(&e), g, "{vals:?}");
+            divide(&mut e, g);
+            assert!(e[TILE - vals.len()..].iter().zip(vals).all(|(&q, &v)| u32::from(q) * u32::from(g) == u32::from(v)), "{vals:?}");
         }
     }
 
