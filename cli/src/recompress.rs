@@ -21,7 +21,8 @@ pub struct RecompressArgs {
     /// The asset to write.
     #[arg(short, long, value_name = "OUT.vpak")]
     pub output: PathBuf,
-    /// How the sections are stored: none, zstd, or zstd:LEVEL (1 to 22; zstd alone is level 5).
+    /// How the sections are stored: none, zstd, or zstd:LEVEL (1 to 22; zstd alone is level 5;
+    /// up to level 5, sections over 8 MiB take level 1, for speed).
     #[arg(long, value_name = "none|zstd[:LEVEL]")]
     pub supercompress: Supercompress,
     /// Replace OUT if it exists.

@@ -266,7 +266,7 @@ settings_group! {
         #[cfg_attr(feature = "clap", arg(long, value_name = "N"))]
         pub segment_frames: Option<SegmentFrames> = None;
         /// How sections are stored on disk: none, zstd, or zstd:LEVEL (1 to 22; zstd alone is
-        /// level 5). Each segment's sections are filtered and zstd-compressed: a smaller file,
+        /// level 5; up to level 5, sections over 8 MiB take level 1, for speed). Each segment's sections are filtered and zstd-compressed: a smaller file,
         /// the same GPU bytes (a reader restores a segment when it loads it, at zstd's speed).
         /// With --max-error the texels are also moved to the coarsest grid within E (ranged
         /// formats: steps of about 2E; inactive voxels, which no bound holds, at the brick's min).

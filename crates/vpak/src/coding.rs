@@ -486,24 +486,23 @@ fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>
     let err = |problem: String| Error::Coding { kind: c.kind, index: c.index, problem };
     let n = c.filter.filtered_len(out.len()).ok_or_else(|| err(format!("restores {} bytes, which its filter cannot", out.len())))?;
     let mut d = zstd::bulk::Decompressor::new().map_err(|e| err(format!("does not decompress ({e})")))?;
+    // Exactly the n bytes the record implies.
+    let check = |r: std::io::Result<usize>| match r {
+        Ok(got) if got == n => Ok(()),
+        Ok(got) => Err(err(format!("decompresses to {got} bytes, the coding table says {n}"))),
+        Err(e) => Err(err(format!("does not decompress to the {n} bytes the coding table says ({e})"))),
+    };
     if c.filter == Filter::None {
-        let got = d.decompress_to_buffer(stored, out).map_err(|e| err(format!("does not decompress to the {n} bytes the coding table says ({e})")))?;
-        if got != n {
-            return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
-        }
+        check(d.decompress_to_buffer(stored, out))?;
     } else {
         let own = scratch.capacity() < n;
         let mut buf = if own { SCRATCH.take() } else { std::mem::take(scratch) };
-        let undone = (|| {
-            buf.clear();
-            buf.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} filtered bytes")))?;
-            let got = d.decompress_to_buffer(stored, &mut buf).map_err(|e| err(format!("does not decompress to the {n} bytes the coding table says ({e})")))?;
-            if got != n {
-                return Err(err(format!("decompresses to {got} bytes, the coding table says {n}")));
-            }
+        buf.clear();
+        let undone = buf.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} filtered bytes"))).and_then(|()| {
+            check(d.decompress_to_buffer(stored, &mut buf))?;
             c.filter.undo(&buf, out);
             Ok(())
-        })();
+        });
         match own {
             true if buf.capacity() <= KEEP_SCRATCH => SCRATCH.set(buf),
             true => {}
