@@ -78,11 +78,11 @@ fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<f32> {
 
 /// The cheapest encoding of one brick channel whose voxels of `mask`
 /// decode within `max_error` of `values` (`f32` always does). For a
-/// supercompressed asset (`disk`), texels are moved to the coarsest grid
-/// within the bound (`snap`: fewer distinct values to compress), and with
-/// [`Optimize::Disk`] "cheapest" is the fewest bytes in the file (each
-/// format's texels filtered and compressed as the writer would, brick by
-/// brick) rather than on the GPU.
+/// supercompressed asset (`disk`), texels (and a ranged format's range) are
+/// moved to the coarsest grid within the bound (`snap`: steps of about 2E),
+/// and with [`Optimize::Disk`] "cheapest" is the fewest bytes in the file
+/// (the entropy of each format's filtered texels,
+/// `vdbcook_vpak::coding::brick_cost`) rather than on the GPU.
 pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>) -> Choice {
     let range = range_of(values);
     // Texels (and a ranged format's range) moved to the coarsest grid within the bound.

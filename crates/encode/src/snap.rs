@@ -1,9 +1,10 @@
 //! Texels for the disk (`cook --max-error E --supercompress`): once a
 //! brick's format is chosen, its texels are moved to the coarsest grid of
 //! values that still keeps every shown voxel within E (levels of the ranged
-//! formats in steps of k; floats with their lowest mantissa bits rounded
+//! formats on a step of about 2E, their range's `max` moved up to make it a
+//! whole number of levels; floats with their lowest mantissa bits rounded
 //! off), so that a supercompressed file spends bits on what the bound asks
-//! and no more. The format, the range and the bound are unchanged.
+//! and no more. The format and the bound are unchanged.
 
 use crate::choose::{decode_one, single_plane, within};
 use crate::texels::{levels, swap_xz};

@@ -3,10 +3,11 @@
 //! whose tiles are its bricks) stored tile by tile, each tile's elements
 //! divided by their greatest common divisor and (filter 3) predicted from
 //! their 3D neighbours in the tile (Lorenzo). Filter 4 leaves the quotients
-//! unpredicted: sharp, sparse bricks (flames) compress better as they are. Texels snapped to a step of the error bound
-//! (`cook --max-error --supercompress`) are multiples of their brick's step,
-//! so what zstd sees is the same small residuals in every brick, whatever
-//! its range; without the divisor each brick's step scatters them.
+//! unpredicted: sharp, sparse bricks (flames) compress better as they are.
+//! Texels snapped to a step of the error bound (`cook --max-error
+//! --supercompress`) are multiples of their brick's step, so what zstd sees
+//! is the same small residuals in every brick, whatever its range; without
+//! the divisor each brick's step scatters them.
 //!
 //! All arithmetic is modulo 2^(8w), which 16-bit wrapping arithmetic keeps
 //! (for w = 1 the low byte of a 16-bit result is the 8-bit one): a tile is
