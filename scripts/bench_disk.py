@@ -147,7 +147,6 @@ def sizes(inputs):
         sys.stdout.flush()
 
 
-
 def timings(inputs, fog):
     print("\n## Cook time with and without --supercompress (median of 3, alternating)\n")
     print("| input | flags | plain | zstd | ratio |")

@@ -37,12 +37,9 @@ def tiles_of(s):
     return s % 65536, s // 65536
 
 
-def filtered_size(filt, w, s, n):
-    """Bytes of the filtered form F of n restored bytes: n, or n + w·T for tiles."""
-    if filt not in TILED:
-        return n
-    x, y = tiles_of(s)
-    return n + w * (n // (512 * w))
+def filtered_size(filt, w, n):
+    """Bytes of the filtered form F of n restored bytes: n, or n + w·T for tiles (T = n / (512·w) tiles)."""
+    return n + w * (n // (512 * w)) if filt in TILED else n
 
 
 def parse_records(data, table):
@@ -79,7 +76,7 @@ def parse_records(data, table):
         if filt in TILED and n % (512 * tiles_of(s)[0] * tiles_of(s)[1] * w):
             raise CodingError(f"{name}: restored size {n} is not whole slabs of {tiles_of(s)[0]}x{tiles_of(s)[1]} tiles")
         stored = table[(kind, index)][1]
-        if filtered_size(filt, w, s, n) > MAX_EXPANSION * stored:
+        if filtered_size(filt, w, n) > MAX_EXPANSION * stored:
             raise CodingError(f"{name}: restored size {n} is more than a {stored}-byte zstd frame can hold")
         records[(kind, index)] = (scheme, filt, w, s, n, checksum)
     return records
@@ -166,7 +163,7 @@ def unfilter(f, filt, w, s, n=None):
 def restore(stored, record, xxh3_64):
     """A section's bytes from its stored bytes and its coding record."""
     _scheme, filt, w, s, n, checksum = record
-    section = unfilter(decompress(stored, filtered_size(filt, w, s, n)), filt, w, s, n)
+    section = unfilter(decompress(stored, filtered_size(filt, w, n)), filt, w, s, n)
     if xxh3_64(section) != checksum:
         raise CodingError("restored bytes do not match the coding record's checksum")
     return section

@@ -9,14 +9,7 @@
 
 mod common;
 use common::*;
-use std::path::PathBuf;
 use std::process::Command;
-
-fn scratch() -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vdbcook-spec-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 fn python(args: &[&str]) -> std::process::Output {
     Command::new("/usr/bin/python3").args(args).current_dir(root()).output().expect("run /usr/bin/python3")
@@ -40,7 +33,8 @@ fn the_spec_only_reader_decodes_what_unpack_writes() {
     let smoke = "fixtures/smoke_seq".to_string();
     let tiles = "fixtures/tiles.vdb".to_string();
     // Frames whose trees need L1 nodes of 8³, 16³ and 32³ slots (content out to x = 700, 1600 and 4000).
-    let wide_dir = scratch().join("wide");
+    let dir = scratch_dir("spec", "unpack");
+    let wide_dir = dir.join("wide");
     std::fs::create_dir_all(&wide_dir).unwrap();
     let make = r#"
 import pyopenvdb as vdb, sys
@@ -99,7 +93,6 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
         (e, vec!["--grids", "all", "--max-error", "0.02", "--supercompress", "zstd", "--segment-frames", "2"]),
         (vec![wide], vec!["--format", "bc4", "--lods", "3", "--supercompress", "zstd"]),
     ];
-    let dir = scratch();
     let results = par_map(&cases.iter().enumerate().collect::<Vec<_>>(), |(k, (inputs, flags))| compare_case(&dir, &format!("a{k}"), inputs, flags, None));
     let mut total = 0;
     for r in results {
@@ -193,8 +186,7 @@ fn the_spec_only_reader_decodes_channels_at_their_own_voxels() {
     if !reader_available() {
         return;
     }
-    let dir = std::env::temp_dir().join(format!("vdbcook-spec-multi-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("spec", "multi");
     // vel at twice the voxels of density, sharing its origin; four times, half a
     // density voxel off; twice, a whole density voxel off the other way.
     let (p2, p4, p2o) = (pyro(&dir, "p2", &[]), pyro(&dir, "p4", &["--vel-scale", "4", "--offset", "1"]), pyro(&dir, "p2o", &["--offset", "-2"]));
