@@ -81,11 +81,11 @@ impl Cooker {
         let encoded = match max_error {
             None => {
                 let absent = encode::absent_channels(built, &stored_levels);
-                encode::in_planes(pool, channels, specs, opts.quality, masks.as_deref(), absent, clustered.as_ref(), progress)
+                encode::in_planes(pool, specs, opts.quality, masks.as_deref(), absent, clustered.as_ref(), progress)
             }
             Some(bound) => {
-                let choices = choose::per_brick(pool, channels, masks.as_deref().unwrap_or(&[]), bound, opts, clustered.as_mut(), progress);
-                encode::as_chosen(pool, channels, choices, clustered.as_ref())
+                let choices = choose::per_brick(pool, masks.as_deref().unwrap_or(&[]), bound, opts, clustered.as_mut(), progress);
+                encode::as_chosen(pool, choices, clustered.as_ref())
             }
         };
         encode::check_planes(&encoded)?;
@@ -102,7 +102,7 @@ impl Cooker {
         // Error figures of what is stored, per tree and channel (and, with
         // clustering, what they would have been without).
         let t0 = Instant::now();
-        let decode_stored = |b: u32| stored.decode(&encoded, b);
+        let decode_stored = |b: u32, want: &[bool]| stored.decode(&encoded, b, want);
         let own: Vec<u32> = stored_levels.iter().map(|r| r.start).collect();
         let measured = errors::measure(built, first, self.levels(), &own, &decode_stored);
         let cluster_report = clustered.as_ref().zip(opts.clustering.as_ref()).map(|(c, co)| {

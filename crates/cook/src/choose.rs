@@ -4,7 +4,7 @@
 
 use crate::cluster::Clustered;
 use crate::{channels_named, ChannelSpec, CookOptions, Error, Format, Progress};
-use vdbcook_encode::{Brick, Choice, PlaneSpec};
+use vdbcook_encode::{Bricks, Choice, PlaneSpec};
 
 /// The planes of every channel group, in order: explicit groups first,
 /// then each other channel alone in `format`, in a texture of its own
@@ -56,17 +56,18 @@ pub(crate) fn plan_planes(opts: &CookOptions, specs: &[ChannelSpec]) -> Result<(
 /// order.  Merged bricks are held to the bound too: one that its cluster's
 /// stored brick leaves past it becomes a stray, stored (and chosen for) on
 /// its own, after the centroids.
-pub(crate) fn per_brick(pool: &[Brick], channels: usize, masks: &[[u64; 8]], bound: f32, opts: &CookOptions, clustered: Option<&mut Clustered>, progress: &dyn Progress) -> Vec<Choice> {
-    let choose = |bricks: &[Brick], masks: &[[u64; 8]]| {
-        progress.start("choosing formats", (bricks.len() / channels) as u64);
-        let c = vdbcook_encode::cheapest_all(bricks, channels, masks, bound, opts.quality, opts.disk, &|n| progress.advance(n as u64));
+pub(crate) fn per_brick(pool: Bricks, masks: &[[u64; 8]], bound: f32, opts: &CookOptions, clustered: Option<&mut Clustered>, progress: &dyn Progress) -> Vec<Choice> {
+    let channels = pool.channels();
+    let choose = |bricks: Bricks, masks: &[[u64; 8]]| {
+        progress.start("choosing formats", bricks.len() as u64);
+        let c = vdbcook_encode::cheapest_all(bricks, masks, bound, opts.quality, opts.disk, &|n| progress.advance(n as u64));
         progress.finish();
         c
     };
     let Some(c) = clustered else { return choose(pool, masks) };
-    let mut choices = choose(&c.bricks, &c.work_masks(masks, channels));
+    let mut choices = choose(Bricks::dense(&c.bricks, channels), &c.work_masks(masks, channels));
     let first = c.bricks.len();
     let stray_masks = c.split_strays(pool, channels, masks, &choices, bound);
-    choices.extend(choose(&c.bricks[first..], &stray_masks));
+    choices.extend(choose(Bricks::dense(&c.bricks[first..], channels), &stray_masks));
     choices
 }

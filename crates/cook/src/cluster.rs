@@ -6,7 +6,7 @@ use crate::encode::union_masks;
 use crate::errors::frame_errors;
 use crate::{ClusterReport, Progress};
 use rayon::prelude::*;
-use vdbcook_encode::{Brick, Encoded, ErrorStats, PlaneSpec, Quality};
+use vdbcook_encode::{Brick, Bricks, Encoded, ErrorStats, PlaneSpec, Quality};
 use vdbcook_flipbook::Built;
 
 /// The clustered pool, `channels` [`Brick`]s per brick.
@@ -22,7 +22,7 @@ pub(crate) struct Clustered {
 
 /// Clusters the pool (`channels` bricks per brick), each channel weighing
 /// alike: its values divided by its own value range (`ranges`).
-pub(crate) fn cluster(pool: &[Brick], ranges: &[[f32; 2]], opts: &vdbcook_cluster::Options, progress: &dyn Progress) -> Clustered {
+pub(crate) fn cluster(pool: Bricks, ranges: &[[f32; 2]], opts: &vdbcook_cluster::Options, progress: &dyn Progress) -> Clustered {
     progress.start("clustering", opts.iterations as u64 + 1);
     let scales: Vec<f32> = ranges.iter().map(|r| r[1] - r[0]).map(|s| if s > 0.0 && s.is_finite() { s } else { 1.0 }).collect();
     let c = cluster_channels(pool, &scales, opts, &|_, _| progress.advance(1));
@@ -34,31 +34,34 @@ pub(crate) fn cluster(pool: &[Brick], ranges: &[[f32; 2]], opts: &vdbcook_cluste
 /// is one item of its channels' values, each divided by its channel's
 /// `scale` (so distances weigh every channel alike; `max_brick_error` stays
 /// in the channels' units), and the centroids are scaled back.
-fn cluster_channels(pool: &[Brick], scales: &[f32], opts: &vdbcook_cluster::Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
-    fn run<const N: usize>(pool: &[Brick], scales: &[f32], opts: &vdbcook_cluster::Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
+fn cluster_channels(pool: Bricks, scales: &[f32], opts: &vdbcook_cluster::Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
+    fn run<const N: usize>(pool: Bricks, scales: &[f32], opts: &vdbcook_cluster::Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
         let c = scales.len();
-        let items: Vec<[f32; N]> = pool.par_chunks(c).map(|b| std::array::from_fn(|v| b[v / 512][v % 512] / scales[v / 512])).collect();
+        let items: Vec<[f32; N]> = (0..pool.len()).into_par_iter().map(|b| std::array::from_fn(|v| pool.get(b, v / 512)[v % 512] / scales[v / 512])).collect();
         let out = vdbcook_cluster::cluster_scaled(&items, opts, scales, progress);
         let mut bricks: Vec<Brick> = out.bricks.iter().flat_map(|item| (0..c).map(move |k| std::array::from_fn(|v| item[k * 512 + v] * scales[k]))).collect();
         // A brick not merged keeps its own values exactly (v / s · s need not be v).
         for (i, _) in out.merged.iter().enumerate().filter(|(_, &m)| !m) {
             let w = out.remap[i] as usize;
-            bricks[w * c..(w + 1) * c].copy_from_slice(&pool[i * c..(i + 1) * c]);
+            for (k, b) in pool.channels_of(i).enumerate() {
+                bricks[w * c + k] = *b;
+            }
         }
         Clustered { bricks, remap: out.remap, merged: out.merged, stats: out.stats }
     }
-    match scales.len() {
-        1 => {
+    match (scales.len(), pool.as_dense()) {
+        (1, Some(dense)) => {
             // One channel: the values as they are (same results as before channels existed).
-            let out = vdbcook_cluster::cluster(pool, opts, progress);
+            let out = vdbcook_cluster::cluster(dense, opts, progress);
             Clustered { bricks: out.bricks, remap: out.remap, merged: out.merged, stats: out.stats }
         }
-        2 => run::<1024>(pool, scales, opts, progress),
-        3 => run::<1536>(pool, scales, opts, progress),
-        4 => run::<2048>(pool, scales, opts, progress),
-        5 => run::<2560>(pool, scales, opts, progress),
-        6 => run::<3072>(pool, scales, opts, progress),
-        7 => run::<3584>(pool, scales, opts, progress),
+        (1, None) => run::<512>(pool, scales, opts, progress),
+        (2, _) => run::<1024>(pool, scales, opts, progress),
+        (3, _) => run::<1536>(pool, scales, opts, progress),
+        (4, _) => run::<2048>(pool, scales, opts, progress),
+        (5, _) => run::<2560>(pool, scales, opts, progress),
+        (6, _) => run::<3072>(pool, scales, opts, progress),
+        (7, _) => run::<3584>(pool, scales, opts, progress),
         _ => run::<4096>(pool, scales, opts, progress),
     }
 }
@@ -73,7 +76,7 @@ impl Clustered {
     /// (`choices`, per work brick and channel) leaves past `bound`: each
     /// becomes a work brick of its own, appended; returns their masks.
     /// Centroids all of whose bricks strayed are no longer counted.
-    pub(crate) fn split_strays(&mut self, pool: &[Brick], channels: usize, masks: &[[u64; 8]], choices: &[vdbcook_encode::Choice], bound: f32) -> Vec<[u64; 8]> {
+    pub(crate) fn split_strays(&mut self, pool: Bricks, channels: usize, masks: &[[u64; 8]], choices: &[vdbcook_encode::Choice], bound: f32) -> Vec<[u64; 8]> {
         let strays: Vec<usize> = (0..self.merged.len())
             .into_par_iter()
             .filter(|&i| {
@@ -81,7 +84,7 @@ impl Clustered {
                 self.merged[i]
                     && !(0..channels).all(|ch| {
                         let choice = &choices[w * channels + ch];
-                        vdbcook_encode::within(&pool[i * channels + ch], &vdbcook_encode::decode_one(choice.format, &choice.bytes, choice.range), &masks[i], bound)
+                        vdbcook_encode::within(pool.get(i, ch), &vdbcook_encode::decode_one(choice.format, &choice.bytes, choice.range), &masks[i], bound)
                     })
             })
             .collect();
@@ -89,7 +92,7 @@ impl Clustered {
         for (k, &i) in strays.iter().enumerate() {
             self.remap[i] = (first / channels + k) as u32;
             self.merged[i] = false;
-            self.bricks.extend_from_slice(&pool[i * channels..(i + 1) * channels]);
+            self.bricks.extend(pool.channels_of(i).copied());
         }
         self.stats.over_error += strays.len();
         self.stats.clustered -= strays.len();
@@ -139,22 +142,26 @@ pub(crate) struct Unclustered<'a> {
 /// The thesis's Figure 19 table: the first channel's voxel RMSE as stored
 /// (`rmse_with`) and with every merged brick encoded on its own instead
 /// (other bricks decode as stored, `decode_stored`).
-pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Unclustered, decode_stored: &(dyn Fn(u32) -> Option<Vec<Brick>> + Sync), rmse_with: f64) -> ClusterReport {
+pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Unclustered, decode_stored: &crate::errors::Decode, rmse_with: f64) -> ClusterReport {
     let channels = u.channels;
     let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
-    let own: Vec<Brick> = merged.iter().flat_map(|&i| u.built.pool.brick(i).unwrap_or(&[]).iter().copied()).collect();
+    let pool = u.built.pool.bricks();
+    let own: Vec<Brick> = merged.iter().flat_map(|&i| pool.channels_of(i).copied()).collect();
     let own_masks: Option<Vec<[u64; 8]>> = u.masks.map(|m| merged.iter().map(|&i| m[i]).collect());
     let own_enc = match u.max_error {
         None => Encoded::new(u.specs.to_vec(), u.quality, &own, channels, own_masks.as_deref(), &|_| {}),
-        Some(e) => Encoded::from_choices(&own, channels, vdbcook_encode::cheapest_all(&own, channels, own_masks.as_deref().unwrap_or(&[]), e, u.quality, u.disk, &|_| {}), &vec![true; merged.len()]),
+        Some(e) => {
+            let own = Bricks::dense(&own, channels);
+            Encoded::from_choices(own, vdbcook_encode::cheapest_all(own, own_masks.as_deref().unwrap_or(&[]), e, u.quality, u.disk, &|_| {}), &vec![true; merged.len()])
+        }
     };
     let mut slot = vec![u32::MAX; c.merged.len()];
     for (k, &i) in merged.iter().enumerate() {
         slot[i] = k as u32;
     }
-    let decode_unclustered = |b: u32| match slot.get(b as usize) {
-        Some(&k) if k != u32::MAX => own_enc.decode(k as usize),
-        _ => decode_stored(b),
+    let decode_unclustered = |b: u32, want: &[bool]| match slot.get(b as usize) {
+        Some(&k) if k != u32::MAX => own_enc.decode_wanted(k as usize, want),
+        _ => decode_stored(b, want),
     };
     let mut without = ErrorStats::default();
     for e in frame_errors(u.built, u.first, u.own, &decode_unclustered) {

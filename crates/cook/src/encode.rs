@@ -3,7 +3,7 @@
 
 use crate::cluster::{used_work, Clustered};
 use crate::{Error, Progress};
-use vdbcook_encode::{Brick, Choice, Encoded, PlaneSpec, Quality};
+use vdbcook_encode::{Bricks, Choice, Encoded, PlaneSpec, Quality};
 use vdbcook_flipbook::Built;
 
 /// Which voxels of each pool brick some L3 node shows: block encoders may
@@ -53,8 +53,7 @@ pub(crate) fn absent_channels(built: &Built, stored: &[std::ops::Range<u32>]) ->
 /// `absent`: see [`absent_channels`], for an unclustered pool).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn in_planes<'a>(
-    pool: &'a [Brick],
-    channels: usize,
+    pool: Bricks<'a>,
     specs: Vec<PlaneSpec>,
     quality: Quality,
     masks: Option<&[[u64; 8]]>,
@@ -62,24 +61,25 @@ pub(crate) fn in_planes<'a>(
     clustered: Option<&'a Clustered>,
     progress: &dyn Progress,
 ) -> Encoded<'a> {
-    let work: &[Brick] = clustered.map_or(pool, |c| &c.bricks[..]);
+    let channels = pool.channels();
+    let work = clustered.map_or(pool, |c| Bricks::dense(&c.bricks, channels));
     let work_masks = masks.map(|m| match clustered {
         Some(c) => c.work_masks(m, channels),
         None => m.to_vec(),
     });
-    progress.start("encoding", (work.len() / channels * specs.len()) as u64);
+    progress.start("encoding", (work.len() * specs.len()) as u64);
     // Centroids stand for bricks of several levels: every channel counts.
     let absent = absent.filter(|_| clustered.is_none());
-    let encoded = Encoded::with_absent(specs, quality, work, channels, work_masks.as_deref(), absent, &|n| progress.advance(n as u64));
+    let encoded = Encoded::with_absent(specs, quality, work, work_masks.as_deref(), absent, &|n| progress.advance(n as u64));
     progress.finish();
     encoded
 }
 
 /// The work bricks in the formats chosen for them (`choices`, per work brick
 /// and channel); centroids no pool brick uses any more are in no plane.
-pub(crate) fn as_chosen<'a>(pool: &'a [Brick], channels: usize, choices: Vec<Choice>, clustered: Option<&'a Clustered>) -> Encoded<'a> {
-    let work: &[Brick] = clustered.map_or(pool, |c| &c.bricks[..]);
-    Encoded::from_choices(work, channels, choices, &used_work(clustered, work.len() / channels))
+pub(crate) fn as_chosen<'a>(pool: Bricks<'a>, choices: Vec<Choice>, clustered: Option<&'a Clustered>) -> Encoded<'a> {
+    let work = clustered.map_or(pool, |c| Bricks::dense(&c.bricks, pool.channels()));
+    Encoded::from_choices(work, choices, &used_work(clustered, work.len()))
 }
 
 /// An asset holds at most `vdbcook_vpak::MAX_CHANNELS` planes.

@@ -5,8 +5,10 @@ use rayon::prelude::*;
 use vdbcook_encode::{Brick, ErrorStats};
 use vdbcook_flipbook::Built;
 
-/// A stored brick decoder: pool brick -> one [`Brick`] per channel.
-pub(crate) type Decode<'a> = dyn Fn(u32) -> Option<Vec<Brick>> + Sync + 'a;
+/// A stored brick decoder: pool brick and the channels wanted (`want[c]`;
+/// empty: all) -> one [`Brick`] per channel (those not wanted need not be
+/// decoded).
+pub(crate) type Decode<'a> = dyn Fn(u32, &[bool]) -> Option<Vec<Brick>> + Sync + 'a;
 
 /// The error of an asset's stored levels, per channel.
 pub(crate) struct Measured {
@@ -77,7 +79,7 @@ pub(crate) fn frame_errors(built: &Built, first: u32, own: &[u32], decoded: &Dec
 /// and channel, over each channel's own active voxels.
 fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
     let channels = built.channels;
-    let source = |b: u32| built.pool.brick(b as usize);
+    let pool = built.pool.bricks();
     if channels == 1 {
         // Per L3 node: its error over its own active voxels (the channel's mask).
         let per_l3: Vec<ErrorStats> = built
@@ -85,8 +87,8 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
             .par_iter()
             .map(|l| {
                 let mut e = ErrorStats::default();
-                if let (Some(src), Some(dec)) = (source(l.brick), decoded(l.brick)) {
-                    e.add_masked(&src[0], &dec[0], &l.mask);
+                if let (Some(src), Some(dec)) = (pool.try_get(l.brick as usize, 0), decoded(l.brick, &[])) {
+                    e.add_masked(src, &dec[0], &l.mask);
                 }
                 e
             })
@@ -114,11 +116,14 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
                 .enumerate()
                 .map(|(k, &(_, id))| {
                     let mut e = vec![ErrorStats::default(); channels];
-                    let brick = built.l3[id as usize].brick;
-                    if let (Some(src), Some(dec)) = (source(brick), decoded(brick)) {
+                    let brick = built.l3[id as usize].brick as usize;
+                    // A channel not active in the leaf (one stored at another level) adds nothing: not decoded.
+                    let masks = f.channel_masks.get(k * channels..(k + 1) * channels).unwrap_or(&[]);
+                    let want: Vec<bool> = masks.iter().map(|m| m.iter().any(|&w| w != 0)).collect();
+                    if let (true, Some(dec)) = (want.iter().any(|&w| w), decoded(brick as u32, &want)) {
                         for (c, e) in e.iter_mut().enumerate() {
-                            if let Some(mask) = f.channel_masks.get(k * channels + c) {
-                                e.add_masked(&src[c], &dec[c], mask);
+                            if let (Some(mask), Some(src), true) = (masks.get(c), pool.try_get(brick, c), want.get(c) == Some(&true)) {
+                                e.add_masked(src, &dec[c], mask);
                             }
                         }
                     }
@@ -161,7 +166,8 @@ pub(crate) fn peaks(built: &Built, ranges: &[[f32; 2]]) -> Vec<f64> {
 /// inactive voxels are filled from the active ones, within their range) and
 /// of the frames' tiles; `[0, 0]` when it has none.
 fn finite_range(built: &Built, c: usize) -> [f32; 2] {
-    let bricks = (0..built.pool.len()).filter_map(|b| built.pool.brick(b)).filter_map(|b| b.get(c)).flat_map(|b| b.iter().copied());
+    let pool = built.pool.bricks();
+    let bricks = (0..pool.len()).filter_map(|b| pool.try_get(b, c)).flat_map(|b| b.iter().copied());
     let tiles = built.frames.iter().flat_map(|f| f.tiles.iter().filter_map(|t| t.2.get(c).copied()));
     let [lo, hi] = bricks.chain(tiles).filter(|v| v.is_finite()).fold([f32::INFINITY, f32::NEG_INFINITY], |[lo, hi], v| [lo.min(v), hi.max(v)]);
     if lo <= hi {

@@ -4,7 +4,7 @@
 //! voxels must decode to themselves (only `f16` and `f32` keep them).
 
 use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of};
-use crate::{bc, group_planes, Brick, Format, Optimize, Plane, Quality};
+use crate::{bc, group_planes, Brick, Bricks, Format, Optimize, Plane, Quality};
 use rayon::prelude::*;
 
 /// One brick channel's chosen encoding.
@@ -121,17 +121,15 @@ pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qualit
     Choice { format: Format::F32, range, bytes }
 }
 
-/// [`cheapest`] for every channel of every brick (`channels` [`Brick`]s a
-/// brick, `masks[i]` the voxels brick i shows), in parallel;
+/// [`cheapest`] for every channel of every brick (`masks[i]`: the voxels
+/// brick i shows), in parallel;
 /// `progress(n)` after each `n` bricks.
-pub fn cheapest_all(bricks: &[Brick], channels: usize, masks: &[[u64; 8]], max_error: f32, quality: Quality, disk: Option<Optimize>, progress: &(dyn Fn(usize) + Sync)) -> Vec<Choice> {
-    let channels = channels.max(1);
-    bricks
-        .par_chunks(channels)
-        .enumerate()
-        .flat_map_iter(|(i, brick)| {
+pub fn cheapest_all(bricks: Bricks, masks: &[[u64; 8]], max_error: f32, quality: Quality, disk: Option<Optimize>, progress: &(dyn Fn(usize) + Sync)) -> Vec<Choice> {
+    (0..bricks.len())
+        .into_par_iter()
+        .flat_map_iter(|i| {
             let mask = masks.get(i).copied().unwrap_or([u64::MAX; 8]);
-            let out: Vec<Choice> = brick.iter().map(|v| cheapest(v, &mask, max_error, quality, disk)).collect();
+            let out: Vec<Choice> = bricks.channels_of(i).map(|v| cheapest(v, &mask, max_error, quality, disk)).collect();
             progress(1);
             out
         })

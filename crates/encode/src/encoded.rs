@@ -3,7 +3,7 @@
 //! choices.
 
 use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of, round_trip};
-use crate::{bc, single_plane, Brick, BrickSource, Choice, Format, PlaneSpec, Quality, BRICK_VOXELS, MAX_BRICK_BYTES};
+use crate::{bc, single_plane, Brick, BrickSource, Bricks, Choice, Format, PlaneSpec, Quality, BRICK_VOXELS, MAX_BRICK_BYTES};
 use rayon::prelude::*;
 
 /// The encoded bricks of one plane: kept (block formats, whose encoders are
@@ -21,7 +21,7 @@ enum PlaneData {
 /// with each brick's channel ranges.
 pub struct Encoded<'a> {
     pub specs: Vec<PlaneSpec>,
-    bricks: &'a [Brick],
+    bricks: Bricks<'a>,
     channels: usize,
     /// (min, max) per brick per channel.
     ranges: Vec<[f32; 2]>,
@@ -43,7 +43,7 @@ impl<'a> Encoded<'a> {
     /// the encoders that can use it (BC4): readers take the others from the
     /// background.
     pub fn new(specs: Vec<PlaneSpec>, quality: Quality, bricks: &'a [Brick], channels: usize, masks: Option<&[[u64; 8]]>, progress: &(dyn Fn(usize) + Sync)) -> Encoded<'a> {
-        Self::with_absent(specs, quality, bricks, channels, masks, None, progress)
+        Self::with_absent(specs, quality, Bricks::dense(bricks, channels), masks, None, progress)
     }
 
     /// [`Encoded::new`], told which channels of which bricks no reader
@@ -51,19 +51,18 @@ impl<'a> Encoded<'a> {
     /// of its channels' backgrounds for all the bricks from which every
     /// channel of the plane is absent, and deduplication finds them equal
     /// without hashing their texels.
-    #[allow(clippy::too_many_arguments)]
-    pub fn with_absent(
-        specs: Vec<PlaneSpec>,
-        quality: Quality,
-        bricks: &'a [Brick],
-        channels: usize,
-        masks: Option<&[[u64; 8]]>,
-        absent: Option<Vec<bool>>,
-        progress: &(dyn Fn(usize) + Sync),
-    ) -> Encoded<'a> {
-        let channels = channels.max(1);
-        let ranges: Vec<[f32; 2]> = bricks.par_iter().map(range_of).collect();
-        let n = bricks.len() / channels;
+    pub fn with_absent(specs: Vec<PlaneSpec>, quality: Quality, bricks: Bricks<'a>, masks: Option<&[[u64; 8]]>, absent: Option<Vec<bool>>, progress: &(dyn Fn(usize) + Sync)) -> Encoded<'a> {
+        let channels = bricks.channels();
+        let n = bricks.len();
+        // A constant brick held once has one range, taken once.
+        let constant_ranges: Vec<[f32; 2]> = bricks.constants().iter().map(range_of).collect();
+        let ranges: Vec<[f32; 2]> = (0..n * channels)
+            .into_par_iter()
+            .map(|j| match bricks.constant_of(j / channels, j % channels) {
+                Some(k) => constant_ranges[k],
+                None => range_of(bricks.get(j / channels, j % channels)),
+            })
+            .collect();
         let mut e = Encoded { specs, bricks, channels, ranges, planes: Vec::new(), absent: absent.filter(|a| a.len() == n * channels) };
         for p in 0..e.specs.len() {
             let spec = &e.specs[p];
@@ -109,7 +108,7 @@ impl<'a> Encoded<'a> {
 
     /// Encodes `bricks` in the block plane `spec` into `out`, one after the other.
     fn encode_block(&self, spec: &PlaneSpec, quality: Quality, bricks: &[usize], masks: Option<&[[u64; 8]]>, out: &mut [u8]) {
-        let slot = |b: usize, c: usize| (&self.bricks[b * self.channels + c], self.ranges[b * self.channels + c]);
+        let slot = |b: usize, c: usize| (self.bricks.get(b, c), self.ranges[b * self.channels + c]);
         match spec.plane.format {
             Format::Bc4 => {
                 let c = spec.channels[0];
@@ -134,7 +133,7 @@ impl<'a> Encoded<'a> {
 
     /// Bricks.
     pub fn len(&self) -> usize {
-        self.bricks.len() / self.channels
+        self.bricks.len()
     }
 
     pub fn is_empty(&self) -> bool {
@@ -166,7 +165,7 @@ impl<'a> Encoded<'a> {
                 k => out.copy_from_slice(&bytes[k as usize * bb..(k as usize + 1) * bb]),
             },
             PlaneData::OnDemand => {
-                let slots: Vec<(&Brick, [f32; 2])> = spec.channels.iter().map(|&c| (&self.bricks[i * self.channels + c], self.range(i, c))).collect();
+                let slots: Vec<(&Brick, [f32; 2])> = spec.channels.iter().map(|&c| (self.bricks.get(i, c), self.range(i, c))).collect();
                 encode_texels(&spec.plane, &slots, out);
             }
         }
@@ -185,16 +184,22 @@ impl<'a> Encoded<'a> {
 
     /// Brick `i` decoded back to values, one [`Brick`] per channel.
     pub fn decode(&self, i: usize) -> Option<Vec<Brick>> {
+        self.decode_wanted(i, &[])
+    }
+
+    /// [`Encoded::decode`] of the channels `c` with `want[c]` (every
+    /// channel when `want` is empty); the others are left at 0.
+    pub fn decode_wanted(&self, i: usize, want: &[bool]) -> Option<Vec<Brick>> {
         let mut out = vec![[0.0f32; BRICK_VOXELS]; self.channels];
         let mut buf = Vec::new();
         for (p, spec) in self.specs.iter().enumerate() {
-            if !self.holds(p, i) {
+            if !self.holds(p, i) || !(want.is_empty() || spec.channels.iter().any(|&c| want.get(c).copied().unwrap_or(false))) {
                 continue;
             }
             // Encoded on demand: decoded value by value, without the texels.
             if matches!(self.planes.get(p), Some(PlaneData::OnDemand))
                 && i < self.len()
-                && spec.channels.iter().all(|&c| round_trip(spec.plane.format, &self.bricks[i * self.channels + c], self.range(i, c), &mut out[c]))
+                && spec.channels.iter().all(|&c| round_trip(spec.plane.format, self.bricks.get(i, c), self.range(i, c), &mut out[c]))
             {
                 continue;
             }
@@ -222,9 +227,8 @@ impl<'a> Encoded<'a> {
     /// i ([`cheapest`]); each channel is stored in one plane of its own per
     /// format its bricks chose, in [`Format::BY_COST`] order.  Bricks not
     /// `used` are in no plane.
-    pub fn from_choices(bricks: &'a [Brick], channels: usize, mut choices: Vec<Choice>, used: &[bool]) -> Encoded<'a> {
-        let channels = channels.max(1);
-        let n = bricks.len() / channels;
+    pub fn from_choices(bricks: Bricks<'a>, mut choices: Vec<Choice>, used: &[bool]) -> Encoded<'a> {
+        let (channels, n) = (bricks.channels(), bricks.len());
         let ranges = choices.iter().map(|ch| ch.range).collect();
         let (mut specs, mut planes) = (Vec::new(), Vec::new());
         for c in 0..channels {

@@ -27,7 +27,7 @@ vdbcook_vpak::bounded!(
 );
 
 /// One brick of one channel (index `x·64 + y·8 + z`).
-pub type Brick = [f32; BRICK_VOXELS];
+pub use vdbcook_grid::{Brick, Bricks};
 
 /// Encoder presets of the block formats: for BC7, intel_tex_2's ISPC "alpha"
 /// settings (all four channels carry voxels); for BC4, how far our encoder

@@ -308,7 +308,7 @@ fn per_brick_formats_meet_the_bound_with_the_cheapest_format() {
         let e = 10f32.powf(-6.0 + 6.0 * rng.unit());
         let choice = cheapest(&brick, &mask, e, Quality::VeryFast, None);
         seen.insert(choice.format);
-        let encoded = Encoded::from_choices(std::slice::from_ref(&brick), 1, vec![choice.clone()], &[true]);
+        let encoded = Encoded::from_choices(crate::Bricks::dense(std::slice::from_ref(&brick), 1), vec![choice.clone()], &[true]);
         assert_eq!(encoded.specs.len(), 1);
         assert_eq!(encoded.specs[0].plane, single_plane(choice.format));
         let decoded = encoded.decode(0).unwrap()[0];

@@ -15,14 +15,17 @@
 //! the union bounding box of all frames is known and the caller has
 //! remapped bricks (clustering, encoded-brick deduplication).
 
+use merge::{merge_channels, Merged};
+pub use pool::BrickPool;
+use pool::{constant_bits, Channel};
 use rayon::prelude::*;
-use std::collections::{BTreeMap, HashMap, HashSet};
-use vdbcook_grid::{Bbox, Coord, Grid, Leaf, LeafMask, LEAF_VOXELS};
+use std::collections::{BTreeMap, HashMap};
+use vdbcook_grid::{Bbox, Coord, Grid, LEAF_VOXELS};
 use vdbcook_vpak::nodes::{self, Nodes, L1_CHILD_DIM, L1_DIM, L1_LOG2, L1_SLOTS, L2_LOG2, L2_SLOTS, TILE_FLAG};
 
 /// A brick: the 512 values of one leaf.  Inactive voxels hold fill values
 /// (see [`brick_of_leaf`]): readers take their value from the background.
-pub type Brick = [f32; LEAF_VOXELS];
+pub use vdbcook_grid::Brick;
 
 /// Fill passes before the remaining inactive voxels take the active mean.
 const FILL_PASSES: usize = 4;
@@ -66,18 +69,12 @@ pub enum Error {
     OutOfMemory(#[from] vdbcook_grid::mem::OutOfMemory),
 }
 
-/// Content hash of a brick's channels: the exact bits of every value (so
-/// -0.0 and 0.0, or two NaN payloads, stay distinct).
-pub fn brick_hash(b: &[Brick]) -> u64 {
-    xxhash_rust::xxh3::xxh3_64(bytemuck::cast_slice(b))
-}
-
 fn same_bits(a: &[Brick], b: &[Brick]) -> bool {
     bytemuck::cast_slice::<Brick, u32>(a) == bytemuck::cast_slice::<Brick, u32>(b)
 }
 
 /// Hash maps keyed by data that needs no DoS protection: XXH3, deterministic.
-type Map<K, V> = HashMap<K, V, xxhash_rust::xxh3::Xxh3DefaultBuilder>;
+pub(crate) type Map<K, V> = HashMap<K, V, xxhash_rust::xxh3::Xxh3DefaultBuilder>;
 
 /// Ids of items by content hash, for deduplication: equal hashes are told
 /// apart by comparing the items themselves.
@@ -111,81 +108,6 @@ impl HashIndex {
                 e.insert(id);
             }
         }
-    }
-}
-
-/// Distinct bricks, each stored once: brick `i` is the `channels` consecutive
-/// [`Brick`]s from `i · channels`.
-pub struct BrickPool {
-    channels: usize,
-    bricks: Vec<Brick>,
-    index: HashIndex,
-}
-
-impl Default for BrickPool {
-    fn default() -> Self {
-        BrickPool::new(1)
-    }
-}
-
-impl BrickPool {
-    pub fn new(channels: usize) -> BrickPool {
-        BrickPool { channels: channels.max(1), bricks: Vec::new(), index: HashIndex::default() }
-    }
-
-    /// Returns the id of `brick` (its `channels` bricks), adding it if it is new.
-    pub fn insert(&mut self, brick: &[Brick]) -> Result<u32, Error> {
-        let h = brick_hash(brick);
-        let id = self.len();
-        self.bricks.extend_from_slice(brick);
-        let mut next = id;
-        let found = self.settle(id, &mut next, h);
-        self.bricks.truncate(next * self.channels);
-        found
-    }
-
-    /// Pools the brick at `from`, which was appended past the pool's first
-    /// `next` bricks (all distinct): returns the id of an equal brick among
-    /// them, or moves it to `next`, takes that as its id and advances `next`.
-    fn settle(&mut self, from: usize, next: &mut usize, h: u64) -> Result<u32, Error> {
-        let c = self.channels;
-        let Some(brick) = self.bricks.get(from * c..(from + 1) * c) else { return Err(Error::Overflow { what: "bricks" }) };
-        if let Some(id) = self.index.find(h, |id| self.bricks.get(id as usize * c..(id as usize + 1) * c).is_some_and(|b| same_bits(b, brick))) {
-            return Ok(id);
-        }
-        let id = u32::try_from(*next).ok().filter(|&i| i < TILE_FLAG).ok_or(Error::Overflow { what: "bricks" })?;
-        if from != *next {
-            self.bricks.copy_within(from * c..(from + 1) * c, *next * c);
-        }
-        self.index.add(h, id);
-        *next += 1;
-        Ok(id)
-    }
-
-    pub fn channels(&self) -> usize {
-        self.channels
-    }
-
-    pub fn len(&self) -> usize {
-        self.bricks.len() / self.channels
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.bricks.is_empty()
-    }
-
-    /// Every brick's channels, brick by brick.
-    pub fn bricks(&self) -> &[Brick] {
-        &self.bricks
-    }
-
-    /// Brick `i`'s channels.
-    pub fn brick(&self, i: usize) -> Option<&[Brick]> {
-        self.bricks.get(i * self.channels..(i + 1) * self.channels)
-    }
-
-    pub fn into_bricks(self) -> Vec<Brick> {
-        self.bricks
     }
 }
 
@@ -277,15 +199,6 @@ impl Default for Builder {
     }
 }
 
-/// The union of several grids' leaves, `channels` per position: leaf `i` of
-/// channel `c` is `leaves[i · channels + c]`.
-struct Merged {
-    leaves: Vec<Leaf>,
-    /// Per leaf per channel, the channel's own active mask.
-    channel_masks: Vec<[u64; 8]>,
-    tiles: Vec<(Coord, u32, Vec<f32>)>,
-}
-
 impl Builder {
     pub fn new(channels: usize) -> Builder {
         let channels = channels.max(1);
@@ -328,66 +241,79 @@ impl Builder {
             }
         }
         let backgrounds: Vec<f32> = self.backgrounds.iter().map(|b| b.unwrap_or(0.0)).collect();
-        match grids {
-            [Some(g)] => {
-                let leaves: Vec<&Leaf> = g.leaves.iter().filter(|l| !l.mask.is_empty()).collect();
-                let tiles = g.tiles.iter().filter(|t| t.active).map(|t| (t.origin, t.dim, vec![t.value])).collect();
-                self.push_leaves(&leaves, Vec::new(), tiles)
-            }
-            _ => {
-                let m = merge_channels(grids, &backgrounds);
-                let leaves: Vec<&Leaf> = m.leaves.iter().collect();
-                self.push_leaves(&leaves, m.channel_masks, m.tiles)
-            }
-        }
+        let merged = match grids {
+            [Some(g)] => Merged::single(g),
+            _ => merge_channels(grids, &backgrounds),
+        };
+        self.push_merged(merged, &backgrounds)
     }
 
-    /// Adds a frame's leaves (`channels` per position, sharing a mask) and tiles.
-    fn push_leaves(&mut self, leaves: &[&Leaf], channel_masks: Vec<[u64; 8]>, tiles: Vec<(Coord, u32, Vec<f32>)>) -> Result<FrameStats, Error> {
+    /// Adds a frame's union tree: its positions' bricks (every channel's, in
+    /// channel order) and tiles.
+    fn push_merged(&mut self, m: Merged, backgrounds: &[f32]) -> Result<FrameStats, Error> {
         let c = self.channels;
         let before = self.pool.len();
-        let n = leaves.len() / c;
-        let mut fl = FrameLeaves { channel_masks, level: self.level, ..FrameLeaves::default() };
+        let n = m.positions.len();
+        let mut fl = FrameLeaves { channel_masks: m.channel_masks, level: self.level, ..FrameLeaves::default() };
         // Room for every leaf being new, so the pool never moves while it grows
         // (untouched capacity costs no memory).
-        vdbcook_grid::mem::try_reserve(&mut self.pool.bricks, n * c, "the brick pool")?;
-        self.pool.index.reserve(n);
-        vdbcook_grid::mem::advise_huge_pages(&self.pool.bricks);
+        self.pool.reserve(n)?;
         self.l3.reserve(n);
         self.l3_index.reserve(n);
         fl.leaves.reserve(n);
         let mut ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; c];
-        // A bounded batch at a time (in leaf order): the batch's bricks are
-        // built straight into the pool and hashed in parallel, then pooled in
-        // order, duplicates squeezed out.
-        let order: Vec<usize> = (0..n).collect();
-        for batch in order.chunks(4096) {
-            let start = self.pool.len();
-            let part = &leaves[batch[0] * c..(batch[batch.len() - 1] + 1) * c];
-            self.pool.bricks.par_extend(part.par_iter().map(|l| brick_of_leaf(l)));
-            let added = self.pool.bricks.get(start * c..).unwrap_or(&[]);
-            let hashes: Vec<(u64, Vec<[f32; 2]>)> = part
-                .par_chunks(c)
-                .zip(added.par_chunks(c))
-                .map(|(ls, b)| {
-                    let r = ls
-                        .iter()
-                        .map(|l| {
-                            let s = vdbcook_grid::LeafSummary::of(l);
-                            [s.min, s.max]
+        let bg = |k: usize| backgrounds.get(k).copied().unwrap_or(0.0);
+        // A bounded batch at a time (in position order): the batch's bricks
+        // are built straight into the pool and hashed in parallel, then
+        // pooled in order, duplicates squeezed out.
+        for first in (0..n).step_by(4096) {
+            let end = (first + 4096).min(n);
+            let start = self.pool.stored.len();
+            // The batch's channel bricks: those known to be constant (a
+            // channel with nothing at a position) are not made; the others
+            // are made straight into the pool, past its bricks.
+            let known: Vec<Option<u32>> = (first * c..end * c).map(|j| if c > 1 { m.parts[j].known_constant(m.positions[j / c].1, bg(j % c)) } else { None }).collect();
+            let made: Vec<usize> = (first * c..end * c).filter(|&j| known[j - first * c].is_none()).collect();
+            self.pool.stored.par_extend(made.par_iter().map(|&j| {
+                let (origin, mask) = m.positions[j / c];
+                m.parts[j].brick(origin, mask, bg(j % c))
+            }));
+            let mut at = start;
+            let slots: Vec<Option<usize>> = known
+                .iter()
+                .map(|k| {
+                    at += usize::from(k.is_none());
+                    k.is_none().then(|| at - 1)
+                })
+                .collect();
+            // Per position: its channels, its hash, and per channel its value range.
+            let pool = &self.pool;
+            let hashes: Vec<(u64, Vec<[f32; 2]>, Vec<Channel>)> = (first..end)
+                .into_par_iter()
+                .map(|i| {
+                    let (origin, mask) = m.positions[i];
+                    let j = (i - first) * c;
+                    let channels: Vec<Channel> = (0..c)
+                        .map(|k| match (known[j + k], slots[j + k]) {
+                            (Some(bits), _) => Channel::Constant(bits),
+                            (None, Some(a)) => match pool.stored.get(a).and_then(constant_bits).filter(|_| c > 1) {
+                                Some(bits) => Channel::Constant(bits),
+                                None => Channel::At(a),
+                            },
+                            (None, None) => Channel::At(usize::MAX),
                         })
                         .collect();
-                    (brick_hash(b), r)
+                    let r = (0..c).map(|k| m.parts[i * c + k].range(origin, mask, bg(k))).collect();
+                    (pool.hash(&channels), r, channels)
                 })
                 .collect();
             let mut next = start;
-            for (k, (&i, (h, r))) in batch.iter().zip(&hashes).enumerate() {
-                let leaf = leaves[i * c];
+            for (&(origin, mask), (h, r, channels)) in m.positions[first..end].iter().zip(&hashes) {
                 for (acc, r) in ranges.iter_mut().zip(r) {
                     *acc = [acc[0].min(r[0]), acc[1].max(r[1])];
                 }
-                let brick = self.pool.settle(start + k, &mut next, *h)?;
-                let key = L3 { mask: leaf.mask.0, brick };
+                let brick = self.pool.settle(channels, &mut next, *h)?;
+                let key = L3 { mask: mask.0, brick };
                 if u32::try_from(self.l3.len()).is_err() {
                     return Err(Error::Overflow { what: "L3 nodes" });
                 }
@@ -395,15 +321,15 @@ impl Builder {
                 if new {
                     self.l3.push(key);
                 }
-                fl.leaves.push((leaf.origin, id));
-                fl.active_voxels += u64::from(leaf.mask.count_on());
+                fl.leaves.push((origin, id));
+                fl.active_voxels += u64::from(mask.count_on());
                 if fl.level == 0 {
-                    self.grow(Bbox::new(leaf.origin, leaf.origin.offset(7, 7, 7)));
+                    self.grow(Bbox::new(origin, origin.offset(7, 7, 7)));
                 }
             }
-            self.pool.bricks.truncate(next * c);
+            self.pool.stored.truncate(next);
         }
-        for (origin, dim, values) in tiles {
+        for (origin, dim, values) in m.tiles {
             let t = vdbcook_grid::Tile { origin, dim, value: 0.0, active: true };
             fl.active_voxels += t.voxel_count();
             for (acc, &v) in ranges.iter_mut().zip(&values) {
@@ -464,109 +390,6 @@ impl Builder {
         let backgrounds = self.backgrounds.iter().map(|b| b.unwrap_or(0.0)).collect();
         Ok(Built { channels: self.channels, backgrounds, pool: self.pool, l3: self.l3, frames: self.frames, bbox: self.bbox, offset, leaves_in: self.leaves_in })
     }
-}
-
-/// The union of several channels' grids of one frame: a leaf wherever any
-/// channel has one (each channel's leaf there, with the union's mask and the
-/// channel's background where it is inactive), and tiles that hold a value
-/// per channel.  A tile of one channel over finer content of another (a leaf,
-/// or a smaller tile) is split into its children until none overlaps: an 8³
-/// tile over another channel's leaf becomes that channel's part of the leaf.
-fn merge_channels(grids: &[Option<&Grid>], backgrounds: &[f32]) -> Merged {
-    let c = grids.len();
-    let present = || grids.iter().enumerate().filter_map(|(k, g)| g.map(|g| (k, g)));
-    // Leaf origins of every channel, and the coarser regions that hold finer content.
-    let mut leaf_at: HashMap<Coord, Vec<Option<usize>>> = HashMap::new();
-    for (k, g) in present() {
-        for (i, l) in g.leaves.iter().enumerate().filter(|(_, l)| !l.mask.is_empty()) {
-            leaf_at.entry(l.origin).or_insert_with(|| vec![None; c])[k] = Some(i);
-        }
-    }
-    let align = |o: Coord, d: i32| Coord::new(o.x & !(d - 1), o.y & !(d - 1), o.z & !(d - 1));
-    let mut finer128: HashSet<Coord> = leaf_at.keys().map(|&o| align(o, 128)).collect();
-    let mut finer4096: HashSet<Coord> = leaf_at.keys().map(|&o| align(o, 4096)).collect();
-    for (_, g) in present() {
-        for t in g.tiles.iter().filter(|t| t.active) {
-            if t.dim == 8 {
-                finer128.insert(align(t.origin, 128));
-            }
-            if t.dim <= 128 {
-                finer4096.insert(align(t.origin, 4096));
-            }
-        }
-    }
-    // Tiles by (origin, edge), one value per channel; 8³ tiles that fall on a leaf.
-    let mut tiles: BTreeMap<(Coord, u32), Vec<Option<f32>>> = BTreeMap::new();
-    let mut tile_leaves: HashMap<Coord, Vec<Option<f32>>> = HashMap::new();
-    let mut work: Vec<(usize, Coord, u32, f32)> = present().flat_map(|(k, g)| g.tiles.iter().filter(|t| t.active).map(move |t| (k, t.origin, t.dim, t.value))).collect();
-    while let Some((k, o, dim, v)) = work.pop() {
-        let split = match dim {
-            8 => {
-                if leaf_at.contains_key(&o) {
-                    tile_leaves.entry(o).or_insert_with(|| vec![None; c])[k] = Some(v);
-                    continue;
-                }
-                false
-            }
-            128 => finer128.contains(&o),
-            _ => dim > 128 && finer4096.contains(&align(o, 4096)),
-        };
-        if !split {
-            tiles.entry((o, dim)).or_insert_with(|| vec![None; c])[k] = Some(v);
-            continue;
-        }
-        // Children: 16³ tiles of 8 in a 128 tile, 32³ tiles of 128 in a larger one.
-        let child = if dim == 128 { 8 } else { 128 };
-        let n = (dim / child) as i32;
-        for x in 0..n {
-            for y in 0..n {
-                for z in 0..n {
-                    let d = child as i32;
-                    work.push((k, o.offset(x * d, y * d, z * d), child, v));
-                }
-            }
-        }
-    }
-    let mut origins: Vec<Coord> = leaf_at.keys().copied().collect();
-    origins.sort_unstable();
-    let mut leaves = Vec::with_capacity(origins.len() * c);
-    let mut channel_masks = Vec::with_capacity(origins.len() * c);
-    for o in origins {
-        let own = &leaf_at[&o];
-        let tiled = tile_leaves.get(&o);
-        let mut union = [0u64; 8];
-        let parts: Vec<(LeafMask, Option<&Leaf>, Option<f32>)> = (0..c)
-            .map(|k| {
-                let leaf = own[k].and_then(|i| grids[k].and_then(|g| g.leaves.get(i)));
-                let tile = tiled.and_then(|t| t[k]);
-                let mask = match (leaf, tile) {
-                    (Some(l), _) => l.mask,
-                    (None, Some(_)) => LeafMask([u64::MAX; 8]),
-                    (None, None) => LeafMask::default(),
-                };
-                (mask, leaf, tile)
-            })
-            .collect();
-        for (m, _, _) in &parts {
-            for (u, w) in union.iter_mut().zip(m.0) {
-                *u |= w;
-            }
-        }
-        for (k, (mask, leaf, tile)) in parts.into_iter().enumerate() {
-            let mut values = [backgrounds[k]; LEAF_VOXELS];
-            if let Some(v) = tile {
-                values = [v; LEAF_VOXELS];
-            } else if let Some(l) = leaf {
-                for i in l.mask.iter_on() {
-                    values[i] = l.values[i];
-                }
-            }
-            leaves.push(Leaf { origin: o, mask: LeafMask(union), values });
-            channel_masks.push(mask.0);
-        }
-    }
-    let tiles = tiles.into_iter().map(|((o, dim), v)| (o, dim, v.iter().zip(backgrounds).map(|(v, &bg)| v.unwrap_or(bg)).collect())).collect();
-    Merged { leaves, channel_masks, tiles }
 }
 
 /// Everything the builder kept, ready to be laid out.
@@ -631,7 +454,7 @@ impl Built {
             let node = self.l3[old];
             let b = node.brick as usize;
             if brick_new[b] == u32::MAX {
-                brick_new[b] = pool.insert(self.pool.brick(b).ok_or(Error::Overflow { what: "bricks" })?)?;
+                brick_new[b] = pool.insert(&self.pool.brick(b).ok_or(Error::Overflow { what: "bricks" })?)?;
             }
             *new = l3.len() as u32;
             l3.push(L3 { mask: node.mask, brick: brick_new[b] });
@@ -760,5 +583,7 @@ pub fn thesis_tree_bytes(frames: usize, leaves: u64) -> u64 {
     frames as u64 * (4100 + 32768 * 516) + leaves * 68
 }
 
+mod merge;
+mod pool;
 #[cfg(test)]
 mod tests;

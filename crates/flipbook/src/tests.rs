@@ -39,17 +39,80 @@ fn pool_keeps_bricks_apart_when_their_hashes_collide() {
     let mut p = BrickPool::default();
     let bricks = [[0.25f32; 512], [0.5; 512], [0.75; 512]];
     for (k, b) in bricks.iter().enumerate() {
-        p.bricks.push(*b);
+        p.stored.push(*b);
         let mut next = k;
-        assert_eq!(p.settle(k, &mut next, 42).unwrap(), k as u32);
+        assert_eq!(p.settle(&[pool::Channel::At(k)], &mut next, 42).unwrap(), k as u32);
         assert_eq!(next, k + 1);
     }
     for (k, b) in bricks.iter().enumerate().rev() {
-        p.bricks.push(*b);
+        p.stored.push(*b);
         let mut next = 3;
-        assert_eq!(p.settle(3, &mut next, 42).unwrap(), k as u32);
+        assert_eq!(p.settle(&[pool::Channel::At(3)], &mut next, 42).unwrap(), k as u32);
         assert_eq!(next, 3, "a duplicate takes no slot");
-        p.bricks.truncate(3);
+        p.stored.truncate(3);
+    }
+}
+
+#[test]
+fn constant_channel_bricks_are_held_once_and_compare_by_content() {
+    let mut p = BrickPool::new(2);
+    let a: Brick = std::array::from_fn(|i| i as f32);
+    let zero = [0.0f32; 512];
+    let mut almost = zero;
+    almost[511] = -0.0;
+    assert_eq!(p.insert(&[a, zero]).unwrap(), 0);
+    assert_eq!(p.insert(&[zero, zero]).unwrap(), 1);
+    assert_eq!(p.insert(&[a, almost]).unwrap(), 2, "-0.0 is not 0.0: not constant, not equal");
+    assert_eq!(p.insert(&[a, zero]).unwrap(), 0);
+    assert_eq!(p.insert(&[zero, zero]).unwrap(), 1);
+    // a twice (bricks 0 and 2), almost, and one zero brick held once.
+    assert_eq!(p.held(), 4);
+    let view = p.bricks();
+    assert_eq!((view.get(0, 1), view.get(1, 0), view.get(2, 1)), (&zero, &zero, &almost));
+    assert!(view.constant_of(0, 1).is_some() && view.constant_of(0, 0).is_none());
+    // One channel: every brick stored, one dense slice.
+    let mut one = BrickPool::new(1);
+    one.insert(&[zero]).unwrap();
+    one.insert(&[a]).unwrap();
+    assert_eq!(one.bricks().as_dense(), Some(&[zero, a][..]));
+}
+
+#[test]
+fn a_channel_stored_at_another_level_costs_one_brick() {
+    // Channel 1 has no grid at level 0: each level-0 brick's channel 1 is
+    // its background (known from the second frame on), made as
+    // `brick_of_leaf` makes it under the leaf's mask, and held once when it
+    // is constant (always with +0.0; other backgrounds' neighbour averages
+    // need not be exact).
+    for background in [0.0f32, 0.3, 1.0 / 3.0] {
+        let o: Vec<Coord> = (0..40).map(|k| Coord::new(8 * k, 0, 0)).collect();
+        let density = |seed: u32| named("density", 0.0, o.iter().enumerate().map(|(k, &c)| leaf(c, seed + k as u32, 100)).collect(), vec![]);
+        let (d0, d1) = (density(0), density(100));
+        let v = named("vel", background, vec![leaf(Coord::new(0, 0, 0), 99, 512)], vec![]);
+        let mut builder = Builder::new(2);
+        for d in [&d0, &d1] {
+            builder.push(&[Some(d), None]).unwrap();
+            builder.push_level(1, &[None, Some(&v)]).unwrap();
+        }
+        let built = builder.finish().unwrap();
+        assert_eq!(built.pool.len(), 81);
+        let filled = brick_of_leaf(&Leaf { origin: o[0], mask: d1.leaves[0].mask, values: [background; 512] });
+        let constant = filled.iter().all(|v| v.to_bits() == filled[0].to_bits());
+        // 80 density bricks, the vel brick, the zero brick, and the filled background's.
+        let want = 81
+            + 1
+            + if background == 0.0 {
+                0
+            } else if constant {
+                1
+            } else {
+                40
+            };
+        assert_eq!(built.pool.held(), want, "background {background}");
+        for (k, l) in d1.leaves.iter().enumerate() {
+            let brick = built.pool.brick(41 + k).unwrap();
+            assert!(same_bits(&brick, &[brick_of_leaf(l), filled]), "background {background}");
+        }
     }
 }
 
@@ -75,12 +138,12 @@ fn a_frame_with_repeated_leaves_pools_each_brick_once_in_first_order() {
     let st = g.stats();
     assert_eq!(fs.ranges[0], Some([st.min.unwrap() as f32, st.max.unwrap() as f32]));
     let built = b.finish().unwrap();
-    assert_eq!(built.pool.bricks(), &first[..]);
+    assert_eq!(built.pool.bricks().as_dense(), Some(&first[..]));
     for (origin, l3) in &built.frames[0].leaves {
         let l = leaves.iter().find(|l| l.origin == *origin).unwrap();
         let node = built.l3[*l3 as usize];
         assert_eq!(node.mask, l.mask.0);
-        assert!(same_bits(built.pool.brick(node.brick as usize).unwrap(), &[brick_of_leaf(l)]));
+        assert!(same_bits(&built.pool.brick(node.brick as usize).unwrap(), &[brick_of_leaf(l)]));
     }
 }
 
@@ -122,7 +185,7 @@ fn nodes_give_back_every_leaf_and_tile() {
     assert_eq!(have, want);
     for (o, _, brick) in &got {
         let src = leaves.iter().find(|l| l.origin.to_array() == *o).unwrap();
-        let b = &built.pool.bricks()[*brick as usize];
+        let b = built.pool.bricks().get(*brick as usize, 0);
         for i in src.mask.iter_on() {
             assert_eq!(b[i], src.values[i]);
         }

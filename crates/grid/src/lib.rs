@@ -9,6 +9,7 @@
 //! Index space is integer voxel coordinates; [`Transform`] maps it to world
 //! space.
 
+mod bricks;
 mod coord;
 pub mod lod;
 pub mod mem;
@@ -16,6 +17,7 @@ mod transform;
 
 use rayon::prelude::*;
 
+pub use bricks::{Brick, Bricks, CONSTANT};
 pub use coord::{Bbox, Coord};
 pub use transform::{MapType, Transform};
 
@@ -286,6 +288,23 @@ impl LeafSummary {
         }
         s
     }
+}
+
+/// The `min` and `max` of [`LeafSummary::of`], taken in the same order (so
+/// the same value of ±0), without its sums and box.
+pub fn active_range(leaf: &Leaf) -> [f32; 2] {
+    if leaf.mask.count_on() as usize == LEAF_VOXELS {
+        let mut lo = [f32::INFINITY; 8];
+        let mut hi = [f32::NEG_INFINITY; 8];
+        for chunk in leaf.values.chunks_exact(8) {
+            for k in 0..8 {
+                lo[k] = lo[k].min(chunk[k]);
+                hi[k] = hi[k].max(chunk[k]);
+            }
+        }
+        return [lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max)];
+    }
+    leaf.mask.iter_on().map(|i| leaf.values[i]).fold([f32::INFINITY, f32::NEG_INFINITY], |[lo, hi], v| [lo.min(v), hi.max(v)])
 }
 
 /// One frame of a sparse scalar volume.

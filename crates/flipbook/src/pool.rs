@@ -1,0 +1,180 @@
+//! The brick pool: distinct bricks of several channels, each stored once,
+//! found by content hash then compared; with several channels, a channel's
+//! constant brick is held once for every brick that has it.
+
+use crate::{Brick, Error, HashIndex, Map};
+use vdbcook_grid::{Bricks, CONSTANT, LEAF_VOXELS};
+use vdbcook_vpak::nodes::TILE_FLAG;
+
+/// Distinct bricks, each stored once, `channels` [`Brick`]s each.  With
+/// several channels, a channel's brick whose 512 values are all one value
+/// (a channel stored at another level, where it is its background
+/// everywhere) is held once for every brick, so that a channel costs
+/// memory, and the stages after the build time, only where it has content.
+pub struct BrickPool {
+    channels: usize,
+    /// Per brick per channel: an index into `stored`, or [`CONSTANT`] and an index into `constants`.
+    slots: Vec<u32>,
+    /// The non-constant channel bricks; past the pool's own, those being pooled.
+    pub(crate) stored: Vec<Brick>,
+    constants: Vec<Brick>,
+    /// A constant's value bits -> its index in `constants`.
+    constant_ids: Map<u32, u32>,
+    pub(crate) index: HashIndex,
+}
+
+/// One channel of a brick being pooled.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Channel {
+    /// All 512 values have these bits (with several channels).
+    Constant(u32),
+    /// The brick at this index of `stored`, past the pool's own.
+    At(usize),
+}
+
+/// The bits of the one value of a brick whose values are all bitwise equal.
+pub(crate) fn constant_bits(b: &Brick) -> Option<u32> {
+    let first = b[0].to_bits();
+    b.iter().all(|v| v.to_bits() == first).then_some(first)
+}
+
+impl Default for BrickPool {
+    fn default() -> Self {
+        BrickPool::new(1)
+    }
+}
+
+impl BrickPool {
+    pub fn new(channels: usize) -> BrickPool {
+        BrickPool { channels: channels.max(1), slots: Vec::new(), stored: Vec::new(), constants: Vec::new(), constant_ids: Map::default(), index: HashIndex::default() }
+    }
+
+    /// Returns the id of `brick` (its `channels` bricks), adding it if it is new.
+    pub fn insert(&mut self, brick: &[Brick]) -> Result<u32, Error> {
+        if brick.len() != self.channels {
+            return Err(Error::Channels { found: brick.len(), expected: self.channels });
+        }
+        let from = self.stored.len();
+        self.stored.extend_from_slice(brick);
+        let several = self.channels > 1;
+        let channels: Vec<Channel> = brick
+            .iter()
+            .enumerate()
+            .map(|(k, b)| match constant_bits(b).filter(|_| several) {
+                Some(bits) => Channel::Constant(bits),
+                None => Channel::At(from + k),
+            })
+            .collect();
+        let mut next = from;
+        let h = self.hash(&channels);
+        let found = self.settle(&channels, &mut next, h);
+        self.stored.truncate(next);
+        found
+    }
+
+    /// The content hash of a brick being pooled: the exact bits of every
+    /// value (so -0.0 and 0.0, or two NaN payloads, stay distinct), a
+    /// constant channel by its one value.
+    pub(crate) fn hash(&self, channels: &[Channel]) -> u64 {
+        let mut h = xxhash_rust::xxh3::Xxh3::new();
+        for ch in channels {
+            match *ch {
+                Channel::Constant(bits) => {
+                    h.update(&[0xc5]);
+                    h.update(&bits.to_le_bytes());
+                }
+                Channel::At(a) => h.update(self.stored.get(a).map_or(&[][..], |b| bytemuck::cast_slice(b))),
+            }
+        }
+        h.digest()
+    }
+
+    /// True when pooled brick `id`'s channel `k` is `ch`.
+    fn same_channel(&self, id: usize, k: usize, ch: Channel) -> bool {
+        let Some(&slot) = self.slots.get(id * self.channels + k) else { return false };
+        match ch {
+            Channel::Constant(bits) => slot & CONSTANT != 0 && self.constants.get((slot & !CONSTANT) as usize).is_some_and(|b| b[0].to_bits() == bits),
+            Channel::At(a) => {
+                slot & CONSTANT == 0 && matches!((self.stored.get(slot as usize), self.stored.get(a)), (Some(x), Some(y)) if crate::same_bits(std::slice::from_ref(x), std::slice::from_ref(y)))
+            }
+        }
+    }
+
+    /// Pools a brick whose channels are `channels` (hash `h`; those `At`
+    /// past the pool's first `next` stored bricks): returns the id of an
+    /// equal brick, or adds it, moving its stored channels to `next` onwards.
+    pub(crate) fn settle(&mut self, channels: &[Channel], next: &mut usize, h: u64) -> Result<u32, Error> {
+        let c = self.channels;
+        if channels.len() != c {
+            return Err(Error::Channels { found: channels.len(), expected: c });
+        }
+        if let Some(id) = self.index.find(h, |id| channels.iter().enumerate().all(|(k, &ch)| self.same_channel(id as usize, k, ch))) {
+            return Ok(id);
+        }
+        let id = u32::try_from(self.len()).ok().filter(|&i| i < TILE_FLAG).ok_or(Error::Overflow { what: "bricks" })?;
+        for &ch in channels {
+            let slot = match ch {
+                Channel::Constant(bits) => {
+                    let fresh = u32::try_from(self.constants.len()).ok().filter(|&i| i < CONSTANT).ok_or(Error::Overflow { what: "constant bricks" })?;
+                    let at = *self.constant_ids.entry(bits).or_insert(fresh);
+                    if at == fresh {
+                        self.constants.push([f32::from_bits(bits); LEAF_VOXELS]);
+                    }
+                    at | CONSTANT
+                }
+                Channel::At(a) => {
+                    let to = u32::try_from(*next).ok().filter(|&i| i < CONSTANT && a < self.stored.len()).ok_or(Error::Overflow { what: "stored bricks" })?;
+                    if a != *next {
+                        self.stored.copy_within(a..a + 1, *next);
+                    }
+                    *next += 1;
+                    to
+                }
+            };
+            self.slots.push(slot);
+        }
+        self.index.add(h, id);
+        Ok(id)
+    }
+
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    pub fn len(&self) -> usize {
+        self.slots.len() / self.channels
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.slots.is_empty()
+    }
+
+    /// Reserves room for `n` more bricks made in place, so that the stored
+    /// bricks never move while they grow (untouched capacity costs no memory).
+    pub(crate) fn reserve(&mut self, n: usize) -> Result<(), Error> {
+        vdbcook_grid::mem::try_reserve(&mut self.stored, n * self.channels, "the brick pool")?;
+        vdbcook_grid::mem::try_reserve(&mut self.slots, n * self.channels, "the brick pool")?;
+        self.index.reserve(n);
+        vdbcook_grid::mem::advise_huge_pages(&self.stored);
+        Ok(())
+    }
+
+    /// Every brick's channels (one channel's pool is dense: `Bricks::as_dense`).
+    pub fn bricks(&self) -> Bricks<'_> {
+        match self.channels {
+            1 => Bricks::dense(&self.stored, 1),
+            c => Bricks::sparse(&self.slots, &self.stored, &self.constants, c),
+        }
+    }
+
+    /// Channel bricks held in memory: the stored ones and the constants.
+    pub fn held(&self) -> usize {
+        self.stored.len() + self.constants.len()
+    }
+
+    /// Brick `i`'s channels.
+    pub fn brick(&self, i: usize) -> Option<Vec<Brick>> {
+        let view = self.bricks();
+        (0..self.channels).map(|c| view.try_get(i, c).copied()).collect()
+    }
+}
