@@ -255,24 +255,25 @@ impl Builder {
         let before = self.pool.len();
         let n = m.positions.len();
         let mut fl = FrameLeaves { channel_masks: m.channel_masks, level: self.level, ..FrameLeaves::default() };
-        // Room for every leaf being new, so the pool never moves while it grows
-        // (untouched capacity costs no memory).
-        self.pool.reserve(n)?;
+        let bg = |k: usize| backgrounds.get(k).copied().unwrap_or(0.0);
+        // The channel bricks known to be constant (a channel with nothing at
+        // a position) are not made; room for all the others being new, so
+        // the pool never moves while it grows (untouched capacity costs no memory).
+        let known: Vec<Option<u32>> = (0..n * c).map(|j| if c > 1 { m.parts[j].known_constant(m.positions[j / c].1, bg(j % c)) } else { None }).collect();
+        self.pool.reserve(n, known.iter().filter(|k| k.is_none()).count())?;
         self.l3.reserve(n);
         self.l3_index.reserve(n);
         fl.leaves.reserve(n);
         let mut ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; c];
-        let bg = |k: usize| backgrounds.get(k).copied().unwrap_or(0.0);
         // A bounded batch at a time (in position order): the batch's bricks
         // are built straight into the pool and hashed in parallel, then
         // pooled in order, duplicates squeezed out.
         for first in (0..n).step_by(4096) {
             let end = (first + 4096).min(n);
             let start = self.pool.stored.len();
-            // The batch's channel bricks: those known to be constant (a
-            // channel with nothing at a position) are not made; the others
-            // are made straight into the pool, past its bricks.
-            let known: Vec<Option<u32>> = (first * c..end * c).map(|j| if c > 1 { m.parts[j].known_constant(m.positions[j / c].1, bg(j % c)) } else { None }).collect();
+            // The batch's channel bricks not known to be constant, made
+            // straight into the pool, past its bricks.
+            let known = &known[first * c..end * c];
             let made: Vec<usize> = (first * c..end * c).filter(|&j| known[j - first * c].is_none()).collect();
             self.pool.stored.par_extend(made.par_iter().map(|&j| {
                 let (origin, mask) = m.positions[j / c];

@@ -149,13 +149,14 @@ impl BrickPool {
         self.slots.is_empty()
     }
 
-    /// Reserves room for `n` more bricks made in place, so that the stored
-    /// bricks never move while they grow (untouched capacity costs no memory).
-    pub(crate) fn reserve(&mut self, n: usize) -> Result<(), Error> {
-        vdbcook_grid::mem::try_reserve(&mut self.stored, n * self.channels, "the brick pool")?;
+    /// Reserves room for `n` more bricks, `made` of their channel bricks
+    /// made in place (the others constant).
+    pub(crate) fn reserve(&mut self, n: usize, made: usize) -> Result<(), Error> {
+        // No huge-page advice: the pool grows frame by frame, where huge
+        // pages cost more page clearing than they save (docs/benchmarks.md).
+        vdbcook_grid::mem::try_reserve(&mut self.stored, made, "the brick pool")?;
         vdbcook_grid::mem::try_reserve(&mut self.slots, n * self.channels, "the brick pool")?;
         self.index.reserve(n);
-        vdbcook_grid::mem::advise_huge_pages(&self.stored);
         Ok(())
     }
 

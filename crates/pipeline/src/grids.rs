@@ -255,6 +255,17 @@ impl FrameFile {
     }
 }
 
+/// Grid `i` of a file as channels (a vec3 grid's three components), each to be taken once.
+fn read_parts(vdb: &VdbFile, i: usize) -> Result<Vec<Option<Grid>>, vdbcook_vdb::Error> {
+    Ok(vdb.read_channels(i)?.into_iter().map(Some).collect())
+}
+
+/// The channel `spec` takes from its grid's parts: moved out, not copied
+/// (`--grids` names a grid, so a component, once).
+fn take_part(parts: &mut [Option<Grid>], spec: &ChannelSpec) -> Option<Grid> {
+    parts.get_mut(spec.component.unwrap_or(0) as usize).and_then(Option::take)
+}
+
 /// A file's record as an asset keeps it.
 fn source_of(vdb: &VdbFile, path: &str) -> SourceFile {
     SourceFile { path: path.to_string(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(xxhash_rust::xxh3::xxh3_128(vdb.bytes())) }
@@ -294,7 +305,7 @@ pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Ch
     let Some(ch) = channels.as_ref() else { return Ok(Frame { path, grids: None, source: Some(source), with_sources, number, stated }) };
     let mut grids: Vec<Option<Grid>> = Vec::with_capacity(ch.specs.len());
     // Each source grid once (a vec3 grid gives its three channels in order).
-    let mut read: Option<(String, Vec<Grid>)> = None;
+    let mut read: Option<(String, Vec<Option<Grid>>)> = None;
     for spec in &ch.specs {
         let Some(i) = vdb.grids.iter().position(|g| g.name == spec.grid) else {
             if ch.several {
@@ -307,14 +318,9 @@ pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Ch
             return Err(Error::Failed(format!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(&vdb))));
         };
         if read.as_ref().is_none_or(|(name, _)| name != &spec.grid) {
-            read = Some((spec.grid.clone(), vdb.read_channels(i).with_context(|| p.clone())?));
+            read = Some((spec.grid.clone(), read_parts(&vdb, i).with_context(|| p.clone())?));
         }
-        let parts = read.as_mut().map(|(_, g)| g).filter(|g| !g.is_empty());
-        let grid = match spec.component {
-            Some(k) => parts.and_then(|g| g.get(k as usize).cloned()),
-            None => parts.map(|g| g.remove(0)),
-        };
-        grids.push(grid);
+        grids.push(read.as_mut().and_then(|(_, parts)| take_part(parts, spec)));
     }
     Ok(Frame { path, grids: Some(grids), source: Some(source), with_sources, number, stated })
 }
@@ -355,7 +361,7 @@ fn read_files(file: FrameFile, channels: Option<&Channels>) -> Result<Frame> {
     let Some(ch) = channels.filter(|_| opened.iter().any(Option::is_some)) else { return Ok(Frame { path: main, grids: None, source, with_sources, number, stated }) };
     let mut grids: Vec<Option<Grid>> = Vec::with_capacity(ch.specs.len());
     // Each source grid once (a vec3 grid gives its three channels in order).
-    let mut read: Option<(usize, String, Vec<Grid>)> = None;
+    let mut read: Option<(usize, String, Vec<Option<Grid>>)> = None;
     for (spec, &k) in ch.specs.iter().zip(&ch.sequences) {
         let Some((name, vdb)) = opened.get(k).and_then(Option::as_ref) else {
             grids.push(None);
@@ -366,13 +372,9 @@ fn read_files(file: FrameFile, channels: Option<&Channels>) -> Result<Frame> {
             continue;
         };
         if read.as_ref().is_none_or(|(s, g, _)| *s != k || g != &spec.grid) {
-            read = Some((k, spec.grid.clone(), vdb.read_channels(i).with_context(|| name.clone())?));
+            read = Some((k, spec.grid.clone(), read_parts(vdb, i).with_context(|| name.clone())?));
         }
-        let parts = read.as_mut().map(|(_, _, g)| g).filter(|g| !g.is_empty());
-        grids.push(match spec.component {
-            Some(c) => parts.and_then(|g| g.get(c as usize).cloned()),
-            None => parts.map(|g| g.remove(0)),
-        });
+        grids.push(read.as_mut().and_then(|(_, _, parts)| take_part(parts, spec)));
     }
     Ok(Frame { path: main, grids: Some(grids), source, with_sources, number, stated })
 }
