@@ -122,17 +122,47 @@ pub fn join(parts: &[(PartInfo, crate::Asset)], files: &[std::fs::File], names: 
     if segment != first.segments {
         return Err(Error::Join(format!("the parts hold {segment} segments, the asset has {}", first.segments)));
     }
+    let syncer = out.try_clone()?;
     let mut w = Writer::new(std::io::BufWriter::with_capacity(1 << 20, out), segment)?;
-    for (i, ((_, asset), file)) in parts.iter().zip(files).enumerate() {
-        // A segment at a time: read in, checked, copied, let go.
-        for (s, e) in asset.segments()?.iter().enumerate() {
-            let seg = asset.stored_segment(s).map_err(|err| bad(i, err.to_string()))?;
-            seg.populate();
-            seg.verify().map_err(|err| bad(i, Error::InSegment(s, Box::new(err)).to_string()))?;
-            seg.release();
-            w.copy_file(e, file, PART_HEADER_LEN as u64 + e.offset)?;
-        }
+    let mut order = Vec::new();
+    for (i, (_, asset)) in parts.iter().enumerate() {
+        order.extend(asset.segments()?.into_iter().enumerate().map(|(s, e)| (i, s, e)));
     }
+    // Three steps overlap: a thread checks the next segment (read in,
+    // checked, let go) while this one copies a checked one, and another
+    // sends each copied segment to disk, so the caller's final sync has
+    // little left.
+    let (to_disk, copied) = std::sync::mpsc::channel::<(u64, u64)>();
+    let (to_copy, checked) = std::sync::mpsc::sync_channel::<Result<(), Error>>(0);
+    std::thread::scope(|scope| {
+        scope.spawn(move || copied.into_iter().for_each(|(offset, len)| start_writeback(&syncer, offset, len)));
+        let order = &order;
+        scope.spawn(move || {
+            for &(i, s, _) in order {
+                let asset = &parts[i].1;
+                let check = asset.stored_segment(s).map_err(|err| bad(i, err.to_string())).and_then(|seg| {
+                    seg.populate();
+                    let v = seg.verify().map_err(|err| bad(i, Error::InSegment(s, Box::new(err)).to_string()));
+                    seg.release();
+                    v
+                });
+                let failed = check.is_err();
+                if to_copy.send(check).is_err() || failed {
+                    return;
+                }
+            }
+        });
+        // Owned here, so that an early return lets both threads go: the
+        // checker's next send fails, the writer's channel ends.
+        let (checked, to_disk) = (checked, to_disk);
+        for &(i, _, e) in order {
+            checked.recv().map_err(|_| Error::Join("the segment check stopped".into()))??;
+            let file = files.get(i).ok_or_else(|| bad(i, "has no open file".into()))?;
+            let placed = w.copy_file(&e, file, PART_HEADER_LEN as u64 + e.offset)?;
+            let _ = to_disk.send((w.base() + placed.offset, placed.size));
+        }
+        Ok::<(), Error>(())
+    })?;
     let out = w.finish()?;
     out.into_inner().map_err(|e| Error::Io(e.into_error()))
 }
@@ -277,6 +307,25 @@ impl Writer<std::io::BufWriter<std::fs::File>> {
         }
         Ok(e)
     }
+}
+
+/// Starts writing `len` bytes of `file` from `offset` to disk (Linux;
+/// elsewhere the final sync does it all).
+fn start_writeback(file: &std::fs::File, offset: u64, len: u64) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        if let (Ok(offset), Ok(len)) = (libc::off64_t::try_from(offset), libc::off64_t::try_from(len)) {
+            // SAFETY: the descriptor is the caller's open file; the call only
+            // asks the kernel to begin writeback of that range, and a failure
+            // (a file system without it) leaves the final sync to do the work.
+            unsafe {
+                libc::sync_file_range(file.as_raw_fd(), offset, len, libc::SYNC_FILE_RANGE_WRITE);
+            }
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = (file, offset, len);
 }
 
 /// The header and segment table of a version-7 file.
