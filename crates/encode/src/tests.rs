@@ -381,3 +381,33 @@ fn on_demand_decoding_is_the_readers_decoding() {
         }
     }
 }
+
+#[test]
+fn decoding_wanted_channels_matches_decoding_all_over_a_slotted_pool() {
+    // Three channels in planes of their own (f16, bc7, unorm8) over a
+    // slotted view: channel 2 of brick 1 is a constant brick held once.
+    let a: Brick = std::array::from_fn(|i| (i % 17) as f32 * 0.05);
+    let b: Brick = std::array::from_fn(|i| 1.0 - (i % 5) as f32 * 0.1);
+    let constant = [0.25f32; BRICK_VOXELS];
+    let stored = [a, b, a, b, a];
+    let slots = [0u32, 1, 2, 3, 4, vdbcook_grid::CONSTANT];
+    let bricks = crate::Bricks::sparse(&slots, &stored, std::slice::from_ref(&constant), 3);
+    assert_eq!((bricks.len(), bricks.get(1, 2), bricks.constant_of(1, 2), bricks.constant_of(1, 1)), (2, &constant, Some(0), None));
+    assert!(bricks.try_get(2, 0).is_none() && bricks.try_get(0, 3).is_none());
+    let mut specs = group_planes(Format::F16, &[0]);
+    specs.extend(group_planes(Format::Bc7, &[1]));
+    specs.extend(group_planes(Format::Unorm8, &[2]));
+    let e = Encoded::with_absent(specs, Quality::Fast, bricks, None, None, &|_| {});
+    for i in 0..2 {
+        let all = e.decode(i).unwrap();
+        for want in [[true, false, false], [false, true, true], [false, false, true]] {
+            let some = e.decode_wanted(i, &want).unwrap();
+            for c in 0..3 {
+                let expected = if want[c] { all[c] } else { [0.0; BRICK_VOXELS] };
+                assert_eq!(some[c], expected, "brick {i} channel {c} wanted {want:?}");
+            }
+        }
+    }
+    // The constant brick's range is the range of its values.
+    assert_eq!(e.range(1, 2), [0.25, 0.25]);
+}
