@@ -122,7 +122,8 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
                     let want: Vec<bool> = masks.iter().map(|m| m.iter().any(|&w| w != 0)).collect();
                     if let (true, Some(dec)) = (want.iter().any(|&w| w), decoded(brick as u32, &want)) {
                         for (c, e) in e.iter_mut().enumerate() {
-                            if let (Some(mask), Some(src), true) = (masks.get(c), pool.try_get(brick, c), want.get(c) == Some(&true)) {
+                            // An unwanted channel's mask is empty: it adds nothing.
+                            if let (Some(mask), Some(src)) = (masks.get(c), pool.try_get(brick, c)) {
                                 e.add_masked(src, &dec[c], mask);
                             }
                         }

@@ -17,7 +17,7 @@
 
 use merge::{merge_channels, Merged};
 pub use pool::BrickPool;
-use pool::{constant_bits, Channel};
+use pool::Channel;
 use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 use vdbcook_grid::{Bbox, Coord, Grid, LEAF_VOXELS};
@@ -259,7 +259,8 @@ impl Builder {
         // The channel bricks known to be constant (a channel with nothing at
         // a position) are not made; room for all the others being new, so
         // the pool never moves while it grows (untouched capacity costs no memory).
-        let known: Vec<Option<u32>> = (0..n * c).map(|j| if c > 1 { m.parts[j].known_constant(m.positions[j / c].1, bg(j % c)) } else { None }).collect();
+        let shares = self.pool.shares_constants();
+        let known: Vec<Option<u32>> = (0..n * c).map(|j| m.parts[j].known_constant(m.positions[j / c].1, bg(j % c)).filter(|_| shares)).collect();
         self.pool.reserve(n, known.iter().filter(|k| k.is_none()).count())?;
         self.l3.reserve(n);
         self.l3_index.reserve(n);
@@ -271,22 +272,24 @@ impl Builder {
         for first in (0..n).step_by(4096) {
             let end = (first + 4096).min(n);
             let start = self.pool.stored.len();
-            // The batch's channel bricks not known to be constant, made
-            // straight into the pool, past its bricks.
-            let known = &known[first * c..end * c];
-            let made: Vec<usize> = (first * c..end * c).filter(|&j| known[j - first * c].is_none()).collect();
+            // Each channel brick of the batch: a known constant, or made at
+            // the next place past the pool's bricks (straight into the pool).
+            let mut at = start;
+            let plan: Vec<Channel> = known[first * c..end * c]
+                .iter()
+                .map(|k| match *k {
+                    Some(bits) => Channel::Constant(bits),
+                    None => {
+                        at += 1;
+                        Channel::At(at - 1)
+                    }
+                })
+                .collect();
+            let made: Vec<usize> = (first * c..end * c).filter(|&j| matches!(plan[j - first * c], Channel::At(_))).collect();
             self.pool.stored.par_extend(made.par_iter().map(|&j| {
                 let (origin, mask) = m.positions[j / c];
                 m.parts[j].brick(origin, mask, bg(j % c))
             }));
-            let mut at = start;
-            let slots: Vec<Option<usize>> = known
-                .iter()
-                .map(|k| {
-                    at += usize::from(k.is_none());
-                    k.is_none().then(|| at - 1)
-                })
-                .collect();
             // Per position: its channels, its hash, and per channel its value range.
             let pool = &self.pool;
             let hashes: Vec<(u64, Vec<[f32; 2]>, Vec<Channel>)> = (first..end)
@@ -294,14 +297,11 @@ impl Builder {
                 .map(|i| {
                     let (origin, mask) = m.positions[i];
                     let j = (i - first) * c;
-                    let channels: Vec<Channel> = (0..c)
-                        .map(|k| match (known[j + k], slots[j + k]) {
-                            (Some(bits), _) => Channel::Constant(bits),
-                            (None, Some(a)) => match pool.stored.get(a).and_then(constant_bits).filter(|_| c > 1) {
-                                Some(bits) => Channel::Constant(bits),
-                                None => Channel::At(a),
-                            },
-                            (None, None) => Channel::At(usize::MAX),
+                    let channels: Vec<Channel> = plan[j..j + c]
+                        .iter()
+                        .map(|&p| match p {
+                            Channel::At(a) => pool.made_at(a),
+                            constant => constant,
                         })
                         .collect();
                     let r = (0..c).map(|k| m.parts[i * c + k].range(origin, mask, bg(k))).collect();

@@ -33,7 +33,7 @@ pub(crate) enum Channel {
 }
 
 /// The bits of the one value of a brick whose values are all bitwise equal.
-pub(crate) fn constant_bits(b: &Brick) -> Option<u32> {
+fn constant_bits(b: &Brick) -> Option<u32> {
     let first = b[0].to_bits();
     b.iter().all(|v| v.to_bits() == first).then_some(first)
 }
@@ -56,20 +56,27 @@ impl BrickPool {
         }
         let from = self.stored.len();
         self.stored.extend_from_slice(brick);
-        let several = self.channels > 1;
-        let channels: Vec<Channel> = brick
-            .iter()
-            .enumerate()
-            .map(|(k, b)| match constant_bits(b).filter(|_| several) {
-                Some(bits) => Channel::Constant(bits),
-                None => Channel::At(from + k),
-            })
-            .collect();
+        let channels: Vec<Channel> = (from..from + brick.len()).map(|a| self.made_at(a)).collect();
         let mut next = from;
         let h = self.hash(&channels);
         let found = self.settle(&channels, &mut next, h);
         self.stored.truncate(next);
         found
+    }
+
+    /// True when the pool holds constant channel bricks once (several
+    /// channels; one channel's pool keeps every brick, one dense slice).
+    pub(crate) fn shares_constants(&self) -> bool {
+        self.channels > 1
+    }
+
+    /// The channel of a brick being pooled that was made at `stored[a]`:
+    /// constant when its values are (and the pool shares constants).
+    pub(crate) fn made_at(&self, a: usize) -> Channel {
+        match self.stored.get(a).and_then(constant_bits).filter(|_| self.shares_constants()) {
+            Some(bits) => Channel::Constant(bits),
+            None => Channel::At(a),
+        }
     }
 
     /// The content hash of a brick being pooled: the exact bits of every
