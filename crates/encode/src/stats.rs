@@ -58,29 +58,17 @@ impl ErrorStats {
     }
     /// Adds the voxels of `mask` (512 bits) of a reference brick and its decoding.
     pub fn add_masked(&mut self, reference: &[f32; BRICK_VOXELS], value: &[f32; BRICK_VOXELS], mask: &[u64; 8]) {
-        if mask.iter().all(|&w| w == u64::MAX) {
-            // Every voxel: eight fixed lanes the compiler can vectorise.
-            let (mut sq, mut mx, mut finite) = ([0.0f64; 8], [0.0f64; 8], [0u64; 8]);
-            for (r, v) in reference.chunks_exact(8).zip(value.chunks_exact(8)) {
-                for k in 0..8 {
-                    let ok = r[k].is_finite();
-                    let d = if ok { f64::from(v[k]) - f64::from(r[k]) } else { 0.0 };
-                    sq[k] += d * d;
-                    mx[k] = mx[k].max(d.abs());
-                    finite[k] += u64::from(ok);
-                }
-            }
-            let n: u64 = finite.iter().sum();
-            self.count += n;
-            self.sum_sq += sq.iter().sum::<f64>();
+        // Most bricks: every voxel on (no mask bits to read), every difference
+        // finite (the sum says so: a NaN or ±∞ would carry into it).
+        let (sq, mx) = if mask.iter().all(|&w| w == u64::MAX) { lanes::<true>(reference, value, mask) } else { lanes::<false>(reference, value, mask) };
+        let sum_sq: f64 = sq.iter().sum();
+        if sum_sq.is_finite() {
+            self.count += mask.iter().map(|w| u64::from(w.count_ones())).sum::<u64>();
+            self.sum_sq += sum_sq;
             self.max_abs = mx.iter().copied().fold(self.max_abs, f64::max);
-            if n < BRICK_VOXELS as u64 {
-                for &r in reference {
-                    self.non_finite.tally(r);
-                }
-            }
             return;
         }
+        // A non-finite reference (or decoding) on the mask: voxel by voxel.
         for (w, &word) in mask.iter().enumerate() {
             let mut bits = word;
             while bits != 0 {
@@ -113,4 +101,23 @@ impl ErrorStats {
             20.0 * (peak / r).log10()
         }
     }
+}
+
+/// Per lane, the sum of squared differences and the largest absolute
+/// difference over the voxels of `mask` (voxel 8j + k is bit k of byte j;
+/// `FULL`: every bit is set), in eight fixed lanes the compiler can vectorise.
+#[inline(always)]
+fn lanes<const FULL: bool>(reference: &[f32; BRICK_VOXELS], value: &[f32; BRICK_VOXELS], mask: &[u64; 8]) -> ([f64; 8], [f64; 8]) {
+    let (mut sq, mut mx) = ([0.0f64; 8], [0.0f64; 8]);
+    for (j, (r, v)) in reference.chunks_exact(8).zip(value.chunks_exact(8)).enumerate() {
+        let byte = (mask[j / 8] >> (8 * (j % 8))) as u8;
+        for k in 0..8 {
+            let on = FULL || (byte >> k) & 1 == 1;
+            let d = if on { f64::from(v[k]) - f64::from(r[k]) } else { 0.0 };
+            sq[k] += d * d;
+            let a = d.abs();
+            mx[k] = if a > mx[k] { a } else { mx[k] };
+        }
+    }
+    (sq, mx)
 }

@@ -268,6 +268,45 @@ fn error_figures_leave_non_finite_references_out() {
     assert_eq!(all.non_finite.total(), 6);
 }
 
+#[test]
+fn fast_paths_of_ranges_and_error_figures_agree_with_voxel_by_voxel() {
+    // range_of and add_masked take a fast path when nothing is NaN or ±∞;
+    // both must give what a plain loop over the voxels gives, with and
+    // without non-finite voxels, over full and partial masks.
+    let mut rng = vdbcook_testkit::Rng::new(0x5eed);
+    let specials = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0, f32::MAX, -f32::MAX];
+    for case in 0..200 {
+        let mut b = random_brick(&mut rng, 0.5);
+        for _ in 0..(case % 4) * (case % 3) {
+            b[rng.below(512) as usize] = specials[rng.below(specials.len() as u64) as usize];
+        }
+        let finite: Vec<f32> = b.iter().copied().filter(|v| v.is_finite()).collect();
+        if !finite.is_empty() {
+            let lo = finite.iter().copied().fold(f32::INFINITY, f32::min);
+            let hi = finite.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            assert_eq!(range_of(&b), [lo, hi], "case {case}");
+        }
+        let mut decoded = b;
+        for v in decoded.iter_mut() {
+            *v += rng.unit() * 0.01;
+        }
+        if case % 7 == 0 {
+            decoded[rng.below(512) as usize] = f32::NAN;
+        }
+        let mask: [u64; 8] = if case % 2 == 0 { [u64::MAX; 8] } else { std::array::from_fn(|_| rng.next_u64()) };
+        let mut fast = ErrorStats::default();
+        fast.add_masked(&b, &decoded, &mask);
+        let mut plain = ErrorStats::default();
+        for i in (0..512).filter(|&i| mask[i / 64] >> (i % 64) & 1 == 1) {
+            plain.add(b[i], decoded[i]);
+        }
+        assert_eq!((fast.count, fast.non_finite), (plain.count, plain.non_finite), "case {case}");
+        assert_eq!(fast.max_abs.to_bits(), plain.max_abs.to_bits(), "case {case}");
+        let close = (fast.sum_sq - plain.sum_sq).abs() <= 1e-12 * plain.sum_sq.abs() || (fast.sum_sq.is_nan() && plain.sum_sq.is_nan()) || fast.sum_sq == plain.sum_sq;
+        assert!(close, "case {case}: {} against {}", fast.sum_sq, plain.sum_sq);
+    }
+}
+
 /// A random brick of one of the kinds `--max-error` meets: smooth,
 /// noisy, constant, with extreme values, with non-finite voxels.
 fn kind_of_brick(rng: &mut vdbcook_testkit::Rng, kind: u64) -> Brick {

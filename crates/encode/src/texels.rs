@@ -10,17 +10,14 @@ use half::slice::HalfFloatSliceExt;
 /// values); for a brick without any finite value, `[m, m]` with m = `f32::MAX`
 /// if it holds +∞, else `-f32::MAX` if it holds −∞, else 0 (all NaN).
 pub fn range_of(values: &Brick) -> [f32; 2] {
-    // Eight independent lanes, so the compiler can vectorise.
-    let mut lo = [f32::INFINITY; 8];
-    let mut hi = [f32::NEG_INFINITY; 8];
-    for c in values.chunks_exact(8) {
-        for k in 0..8 {
-            let finite = c[k].is_finite();
-            lo[k] = lo[k].min(if finite { c[k] } else { f32::INFINITY });
-            hi[k] = hi[k].max(if finite { c[k] } else { f32::NEG_INFINITY });
-        }
+    // Most bricks hold no ±∞: the plain min and max (which pass NaN over)
+    // are then the range, and only a brick whose min or max is not finite
+    // takes the slower pass that leaves ±∞ out.
+    let plain = lanes_min_max(values, |v| (v, v));
+    if plain[0].is_finite() && plain[1].is_finite() {
+        return plain;
     }
-    let (lo, hi) = (lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max));
+    let [lo, hi] = lanes_min_max(values, |v| if v.is_finite() { (v, v) } else { (f32::INFINITY, f32::NEG_INFINITY) });
     if lo <= hi {
         return [lo, hi];
     }
@@ -32,6 +29,22 @@ pub fn range_of(values: &Brick) -> [f32; 2] {
         0.0
     };
     [m, m]
+}
+
+/// The min and max of `f(v).0` and `f(v).1` over a brick, in eight
+/// independent lanes so the compiler can vectorise (NaN never wins).
+#[inline(always)]
+fn lanes_min_max(values: &Brick, f: impl Fn(f32) -> (f32, f32)) -> [f32; 2] {
+    let mut lo = [f32::INFINITY; 8];
+    let mut hi = [f32::NEG_INFINITY; 8];
+    for c in values.chunks_exact(8) {
+        for k in 0..8 {
+            let (l, h) = f(c[k]);
+            lo[k] = lo[k].min(l);
+            hi[k] = hi[k].max(h);
+        }
+    }
+    [lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max)]
 }
 
 /// A brick whose NaN and ±∞ voxels are replaced as the ranged formats store
@@ -109,7 +122,13 @@ pub(crate) fn bc7_texels(bricks: &[Vec<[u8; BRICK_VOXELS]>], zpt: usize) -> Vec<
 /// Swaps the x and z axes of a brick: leaf order (`x·64 + y·8 + z`) to texel
 /// order (`z·64 + y·8 + x`) and back.
 pub(crate) fn swap_xz<T: Copy>(a: &[T; BRICK_VOXELS]) -> [T; BRICK_VOXELS] {
-    std::array::from_fn(|i| a[(i & 7) << 6 | (i & 0o70) | i >> 6])
+    // Read in order and scatter (the swap is its own inverse): strided reads
+    // of a brick fresh from memory stall where stores into a local one do not.
+    let mut out = *a;
+    for (j, &v) in a.iter().enumerate() {
+        out[(j & 7) << 6 | (j & 0o70) | j >> 6] = v;
+    }
+    out
 }
 
 /// One uncompressed brick of a plane: its channels' values lane by lane, in
@@ -120,9 +139,10 @@ pub(crate) fn encode_texels(plane: &Plane, slots: &[(&Brick, [f32; 2])], out: &m
         match plane.format {
             Format::F32 => put_lane(out, lanes, l, swap_xz(values).iter().map(|v| v.to_le_bytes())),
             Format::F16 => {
+                // Converted in leaf order, then swapped: half the bytes to move.
                 let mut h = [half::f16::ZERO; BRICK_VOXELS];
-                h.convert_from_f32_slice(&swap_xz(values));
-                put_lane(out, lanes, l, h.iter().map(|v| v.to_le_bytes()));
+                h.convert_from_f32_slice(*values);
+                put_lane(out, lanes, l, swap_xz(&h).iter().map(|v| v.to_le_bytes()));
             }
             Format::Unorm16 => put_lane(out, lanes, l, swap_xz(&quantise16(values, *range)).iter().map(|q| q.to_le_bytes())),
             Format::Unorm8 => put_lane(out, lanes, l, swap_xz(&quantise(values, *range)).iter().map(|&q| [q])),
@@ -143,7 +163,7 @@ pub(crate) fn round_trip(format: Format, values: &Brick, range: [f32; 2], out: &
         Format::F16 => {
             let mut h = [half::f16::ZERO; BRICK_VOXELS];
             h.convert_from_f32_slice(values);
-            out.iter_mut().zip(h).for_each(|(o, x)| *o = x.to_f32());
+            h.convert_to_f32_slice(out);
         }
         Format::Unorm16 => out.iter_mut().zip(quantise16(values, range)).for_each(|(o, q)| *o = ranged(f32::from(q) / 65535.0)),
         Format::Unorm8 => out.iter_mut().zip(quantise(values, range)).for_each(|(o, q)| *o = ranged(f32::from(q) / 255.0)),

@@ -73,8 +73,42 @@ fn same_bits(a: &[Brick], b: &[Brick]) -> bool {
     bytemuck::cast_slice::<Brick, u32>(a) == bytemuck::cast_slice::<Brick, u32>(b)
 }
 
-/// Hash maps keyed by data that needs no DoS protection: XXH3, deterministic.
-pub(crate) type Map<K, V> = HashMap<K, V, xxhash_rust::xxh3::Xxh3DefaultBuilder>;
+/// Hash maps keyed by data that needs no DoS protection (content hashes,
+/// node keys): deterministic, and cheap for their word-sized keys.
+pub(crate) type Map<K, V> = HashMap<K, V, std::hash::BuildHasherDefault<WordHasher>>;
+
+/// Folds each 8-byte word in with a rotate, xor and multiply (the FxHash
+/// scheme; a streaming XXH3 costs more per key than the lookups it serves),
+/// then moves the product's well-mixed high bits down for the table's index.
+#[derive(Default, Clone, Copy)]
+pub(crate) struct WordHasher(u64);
+
+impl std::hash::Hasher for WordHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        let mut words = bytes.chunks_exact(8);
+        for w in words.by_ref() {
+            self.write_u64(u64::from_le_bytes(w.try_into().unwrap_or_default()));
+        }
+        let rest = words.remainder();
+        if !rest.is_empty() {
+            let mut w = [0u8; 8];
+            w[..rest.len()].copy_from_slice(rest);
+            self.write_u64(u64::from_le_bytes(w));
+        }
+    }
+    fn write_u64(&mut self, w: u64) {
+        self.0 = (self.0.rotate_left(5) ^ w).wrapping_mul(0xf135_7aea_2e62_a9c5);
+    }
+    fn write_u32(&mut self, w: u32) {
+        self.write_u64(u64::from(w));
+    }
+    fn write_usize(&mut self, w: usize) {
+        self.write_u64(w as u64);
+    }
+    fn finish(&self) -> u64 {
+        self.0.rotate_left(26)
+    }
+}
 
 /// Ids of items by content hash, for deduplication: equal hashes are told
 /// apart by comparing the items themselves.

@@ -83,17 +83,17 @@ impl BrickPool {
     /// value (so -0.0 and 0.0, or two NaN payloads, stay distinct), a
     /// constant channel by its one value.
     pub(crate) fn hash(&self, channels: &[Channel]) -> u64 {
-        let mut h = xxhash_rust::xxh3::Xxh3::new();
-        for ch in channels {
-            match *ch {
-                Channel::Constant(bits) => {
-                    h.update(&[0xc5]);
-                    h.update(&bits.to_le_bytes());
-                }
-                Channel::At(a) => h.update(self.stored.get(a).map_or(&[][..], |b| bytemuck::cast_slice(b))),
-            }
+        use xxhash_rust::xxh3::{xxh3_64, xxh3_64_with_seed};
+        // One-shot hashes (a streaming hasher copies a 2 kB brick through its
+        // buffer), chained over the channels.
+        let one = |ch: &Channel| match *ch {
+            Channel::Constant(bits) => xxh3_64_with_seed(&bits.to_le_bytes(), 0xc5),
+            Channel::At(a) => xxh3_64(self.stored.get(a).map_or(&[][..], |b| bytemuck::cast_slice(b))),
+        };
+        match channels {
+            [ch] => one(ch),
+            _ => channels.iter().fold(0, |acc, ch| xxh3_64_with_seed(&one(ch).to_le_bytes(), acc)),
         }
-        h.digest()
     }
 
     /// True when pooled brick `id`'s channel `k` is `ch`.
