@@ -20,7 +20,7 @@ pub(crate) struct Stored {
 impl Stored {
     /// Pool brick `b` as stored, decoded (one [`Brick`] per channel; the
     /// channels `want` names, or all: `Encoded::decode_wanted`).
-    pub(crate) fn decode(&self, encoded: &Encoded, b: u32, want: &[bool]) -> Option<Vec<Brick>> {
+    pub(crate) fn decode(&self, encoded: &Encoded, b: u32, want: &[bool]) -> Option<Vec<Option<Brick>>> {
         self.remap.get(b as usize).and_then(|&i| self.keep.get(i as usize)).and_then(|&k| encoded.decode_wanted(k, want))
     }
 }

@@ -6,9 +6,8 @@ use vdbcook_encode::{Brick, ErrorStats};
 use vdbcook_flipbook::Built;
 
 /// A stored brick decoder: pool brick and the channels wanted (`want[c]`;
-/// empty: all) -> one [`Brick`] per channel (those not wanted need not be
-/// decoded).
-pub(crate) type Decode<'a> = dyn Fn(u32, &[bool]) -> Option<Vec<Brick>> + Sync + 'a;
+/// empty: all) -> per channel its [`Brick`] (`None` for one not wanted).
+pub(crate) type Decode<'a> = dyn Fn(u32, &[bool]) -> Option<Vec<Option<Brick>>> + Sync + 'a;
 
 /// The error of an asset's stored levels, per channel.
 pub(crate) struct Measured {
@@ -87,8 +86,8 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
             .par_iter()
             .map(|l| {
                 let mut e = ErrorStats::default();
-                if let (Some(src), Some(dec)) = (pool.try_get(l.brick as usize, 0), decoded(l.brick, &[])) {
-                    e.add_masked(src, &dec[0], &l.mask);
+                if let (Some(src), Some(Some(dec))) = (pool.try_get(l.brick as usize, 0), decoded(l.brick, &[]).and_then(|d| d.into_iter().next())) {
+                    e.add_masked(src, &dec, &l.mask);
                 }
                 e
             })
@@ -123,8 +122,8 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
                     if let (true, Some(dec)) = (want.iter().any(|&w| w), decoded(brick as u32, &want)) {
                         for (c, e) in e.iter_mut().enumerate() {
                             // An unwanted channel's mask is empty: it adds nothing.
-                            if let (Some(mask), Some(src)) = (masks.get(c), pool.try_get(brick, c)) {
-                                e.add_masked(src, &dec[c], mask);
+                            if let (Some(mask), Some(src), Some(Some(d))) = (masks.get(c), pool.try_get(brick, c), dec.get(c)) {
+                                e.add_masked(src, d, mask);
                             }
                         }
                     }

@@ -184,13 +184,14 @@ impl<'a> Encoded<'a> {
 
     /// Brick `i` decoded back to values, one [`Brick`] per channel.
     pub fn decode(&self, i: usize) -> Option<Vec<Brick>> {
-        self.decode_wanted(i, &[])
+        self.decode_wanted(i, &[]).map(|d| d.into_iter().map(|b| b.unwrap_or([0.0; BRICK_VOXELS])).collect())
     }
 
     /// [`Encoded::decode`] of the channels `c` with `want[c]` (every
-    /// channel when `want` is empty); the others are left at 0.
-    pub fn decode_wanted(&self, i: usize, want: &[bool]) -> Option<Vec<Brick>> {
-        let mut out = vec![[0.0f32; BRICK_VOXELS]; self.channels];
+    /// channel when `want` is empty); the others are `None` (not made: a
+    /// channel stored at another level is not wanted in most bricks).
+    pub fn decode_wanted(&self, i: usize, want: &[bool]) -> Option<Vec<Option<Brick>>> {
+        let mut out: Vec<Option<Brick>> = vec![None; self.channels];
         let mut buf = Vec::new();
         for (p, spec) in self.specs.iter().enumerate() {
             if !self.holds(p, i) || !(want.is_empty() || spec.channels.iter().any(|&c| want.get(c).copied().unwrap_or(false))) {
@@ -199,7 +200,7 @@ impl<'a> Encoded<'a> {
             // Encoded on demand: decoded value by value, without the texels.
             if matches!(self.planes.get(p), Some(PlaneData::OnDemand))
                 && i < self.len()
-                && spec.channels.iter().all(|&c| round_trip(spec.plane.format, self.bricks.get(i, c), self.range(i, c), &mut out[c]))
+                && spec.channels.iter().all(|&c| round_trip(spec.plane.format, self.bricks.get(i, c), self.range(i, c), out[c].insert([0.0; BRICK_VOXELS])))
             {
                 continue;
             }
@@ -210,7 +211,7 @@ impl<'a> Encoded<'a> {
             }
             let texels = spec.plane.decode_brick(data);
             for (slot, &c) in spec.channels.iter().enumerate() {
-                out[c] = spec.plane.channel_values(&texels, slot as u32 * spec.plane.z_per_texel, self.range(i, c));
+                out[c] = Some(spec.plane.channel_values(&texels, slot as u32 * spec.plane.z_per_texel, self.range(i, c)));
             }
         }
         Some(out)

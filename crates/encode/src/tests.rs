@@ -442,7 +442,7 @@ fn decoding_wanted_channels_matches_decoding_all_over_a_slotted_pool() {
         for want in [[true, false, false], [false, true, true], [false, false, true]] {
             let some = e.decode_wanted(i, &want).unwrap();
             for c in 0..3 {
-                let expected = if want[c] { all[c] } else { [0.0; BRICK_VOXELS] };
+                let expected = want[c].then_some(all[c]);
                 assert_eq!(some[c], expected, "brick {i} channel {c} wanted {want:?}");
             }
         }
