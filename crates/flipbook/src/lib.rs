@@ -17,7 +17,7 @@
 
 use merge::{merge_channels, Merged};
 pub use pool::BrickPool;
-use pool::Channel;
+use pool::{Channel, Made};
 use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 use vdbcook_grid::{Bbox, Coord, Grid, LEAF_VOXELS};
@@ -320,9 +320,13 @@ impl Builder {
                 })
                 .collect();
             let made: Vec<usize> = (first * c..end * c).filter(|&j| matches!(plan[j - first * c], Channel::At(_))).collect();
-            self.pool.stored.par_extend(made.par_iter().map(|&j| {
+            // Each brick is hashed as it is made (in cache), beside it.
+            let mut seen = vec![Made::default(); made.len()];
+            self.pool.stored.par_extend(made.par_iter().zip(seen.par_iter_mut()).map(|(&j, seen)| {
                 let (origin, mask) = m.positions[j / c];
-                m.parts[j].brick(origin, mask, bg(j % c))
+                let b = m.parts[j].brick(origin, mask, bg(j % c));
+                *seen = Made::of(&b, shares);
+                b
             }));
             // Per position: its channels, its hash, and per channel its value range.
             let pool = &self.pool;
@@ -334,12 +338,12 @@ impl Builder {
                     let channels: Vec<Channel> = plan[j..j + c]
                         .iter()
                         .map(|&p| match p {
-                            Channel::At(a) => pool.made_at(a),
+                            Channel::At(a) => seen[a - start].channel(a),
                             constant => constant,
                         })
                         .collect();
                     let r = (0..c).map(|k| m.parts[i * c + k].range(origin, mask, bg(k))).collect();
-                    (pool.hash(&channels), r, channels)
+                    (pool.hash(&channels, |a| seen[a - start].hash), r, channels)
                 })
                 .collect();
             let mut next = start;

@@ -38,6 +38,36 @@ fn constant_bits(b: &Brick) -> Option<u32> {
     b.iter().all(|v| v.to_bits() == first).then_some(first)
 }
 
+/// A constant channel's hash: by its one value, so that equal content
+/// hashes alike however the brick was made.
+fn constant_hash(bits: u32) -> u64 {
+    xxhash_rust::xxh3::xxh3_64_with_seed(&bits.to_le_bytes(), 0xc5)
+}
+
+/// What pooling needs of a channel brick, taken when it is made (while its
+/// values are in cache): its content hash (the exact bits of every value,
+/// so -0.0 and 0.0, or two NaN payloads, stay distinct), and its value's
+/// bits when all 512 are one and the pool shares constants.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Made {
+    pub(crate) hash: u64,
+    constant: Option<u32>,
+}
+
+impl Made {
+    pub(crate) fn of(b: &Brick, shares_constants: bool) -> Made {
+        match shares_constants.then(|| constant_bits(b)).flatten() {
+            Some(bits) => Made { hash: constant_hash(bits), constant: Some(bits) },
+            None => Made { hash: xxhash_rust::xxh3::xxh3_64(bytemuck::cast_slice(b)), constant: None },
+        }
+    }
+
+    /// The channel of the brick made at `stored[a]`.
+    pub(crate) fn channel(&self, a: usize) -> Channel {
+        self.constant.map_or(Channel::At(a), Channel::Constant)
+    }
+}
+
 impl Default for BrickPool {
     fn default() -> Self {
         BrickPool::new(1)
@@ -56,9 +86,10 @@ impl BrickPool {
         }
         let from = self.stored.len();
         self.stored.extend_from_slice(brick);
-        let channels: Vec<Channel> = (from..from + brick.len()).map(|a| self.made_at(a)).collect();
+        let made: Vec<Made> = brick.iter().map(|b| Made::of(b, self.shares_constants())).collect();
+        let channels: Vec<Channel> = made.iter().enumerate().map(|(k, m)| m.channel(from + k)).collect();
         let mut next = from;
-        let h = self.hash(&channels);
+        let h = self.hash(&channels, |a| made[a - from].hash);
         let found = self.settle(&channels, &mut next, h);
         self.stored.truncate(next);
         found
@@ -70,29 +101,17 @@ impl BrickPool {
         self.channels > 1
     }
 
-    /// The channel of a brick being pooled that was made at `stored[a]`:
-    /// constant when its values are (and the pool shares constants).
-    pub(crate) fn made_at(&self, a: usize) -> Channel {
-        match self.stored.get(a).and_then(constant_bits).filter(|_| self.shares_constants()) {
-            Some(bits) => Channel::Constant(bits),
-            None => Channel::At(a),
-        }
-    }
-
-    /// The content hash of a brick being pooled: the exact bits of every
-    /// value (so -0.0 and 0.0, or two NaN payloads, stay distinct), a
-    /// constant channel by its one value.
-    pub(crate) fn hash(&self, channels: &[Channel]) -> u64 {
-        use xxhash_rust::xxh3::{xxh3_64, xxh3_64_with_seed};
-        // One-shot hashes (a streaming hasher copies a 2 kB brick through its
-        // buffer), chained over the channels.
+    /// The content hash of a brick being pooled, from its channels' hashes
+    /// (`made(a)`: that of `stored[a]`, see [`Made`]): a one-channel brick's
+    /// is its channel's, several are chained.
+    pub(crate) fn hash(&self, channels: &[Channel], made: impl Fn(usize) -> u64) -> u64 {
         let one = |ch: &Channel| match *ch {
-            Channel::Constant(bits) => xxh3_64_with_seed(&bits.to_le_bytes(), 0xc5),
-            Channel::At(a) => xxh3_64(self.stored.get(a).map_or(&[][..], |b| bytemuck::cast_slice(b))),
+            Channel::Constant(bits) => constant_hash(bits),
+            Channel::At(a) => made(a),
         };
         match channels {
             [ch] => one(ch),
-            _ => channels.iter().fold(0, |acc, ch| xxh3_64_with_seed(&one(ch).to_le_bytes(), acc)),
+            _ => channels.iter().fold(0, |acc, ch| xxhash_rust::xxh3::xxh3_64_with_seed(&one(ch).to_le_bytes(), acc)),
         }
     }
 

@@ -236,10 +236,14 @@ impl Plane {
         if self.format == Format::Constant {
             return [lo; BRICK_VOXELS];
         }
+        // Each z's slice and lane (which `locate` gives apart from x and y), once per brick.
+        let at_z: [(usize, usize); 8] = std::array::from_fn(|z| {
+            let ([_, _, s], lane) = self.locate([0, 0, z as u32], first_lane);
+            (s as usize, (lane & 3) as usize)
+        });
         std::array::from_fn(|i| {
-            let v = [(i / 64) as u32, ((i / 8) % 8) as u32, (i % 8) as u32];
-            let ([x, y, s], lane) = self.locate(v, first_lane);
-            let t = texels.get(((s * 8 + y) * 8 + x) as usize).map_or(0.0, |px| px[(lane & 3) as usize]);
+            let (x, y, (s, lane)) = (i / 64, (i / 8) % 8, at_z[i % 8]);
+            let t = texels.get((s * 8 + y) * 8 + x).map_or(0.0, |px| px[lane]);
             if ranged {
                 from_unit(t, [lo, hi])
             } else {
