@@ -269,6 +269,23 @@ fn error_figures_leave_non_finite_references_out() {
 }
 
 #[test]
+fn levels_round_as_round_does() {
+    // quantise's rounding against f32::round over every 8-bit step's
+    // neighbourhood and halves, and random levels up to 65535.
+    let mut rng = vdbcook_testkit::Rng::new(7);
+    let mut probes: Vec<f32> = (0..=65535u32).flat_map(|k| [k as f32, k as f32 + 0.5]).collect();
+    probes.extend((0..100_000).map(|_| rng.unit() * 65535.0));
+    for &l in &probes {
+        for x in [l, f32::from_bits(l.to_bits().saturating_sub(1)), f32::from_bits(l.to_bits() + 1)].into_iter().filter(|x| (0.0..=65535.0).contains(x)) {
+            let mut b = [0.0f32; BRICK_VOXELS];
+            b[1] = 65535.0;
+            b[0] = x;
+            assert_eq!(u32::from(crate::texels::quantise16(&b, [0.0, 65535.0])[0]), x.round() as u32, "{x}");
+        }
+    }
+}
+
+#[test]
 fn fast_paths_of_ranges_and_error_figures_agree_with_voxel_by_voxel() {
     // range_of and add_masked take a fast path when nothing is NaN or ±∞;
     // both must give what a plain loop over the voxels gives, with and
