@@ -269,6 +269,27 @@ fn error_figures_leave_non_finite_references_out() {
 }
 
 #[test]
+fn half_conversions_of_a_brick_match_half_value_by_value() {
+    // The brick-at-once conversion (F16C where the CPU has it) against
+    // `half` one value at a time: random bits (NaN payloads, subnormals,
+    // infinities), ties to even, values past half's range.
+    let mut rng = vdbcook_testkit::Rng::new(16);
+    let edges = [0.0f32, -0.0, 65504.0, 65520.0, -65520.0, 1e-8, 5.96e-8, 2.98e-8, 1.0 + 1.0 / 2048.0, 1.0 + 3.0 / 2048.0, f32::INFINITY, f32::NAN, f32::from_bits(0x7f80_0001)];
+    for round in 0..64 {
+        let b: Brick = std::array::from_fn(|i| if round == 0 && i < edges.len() { edges[i] } else { f32::from_bits(rng.next_u64() as u32) });
+        let h = crate::texels::to_half(&b);
+        for (v, &x) in b.iter().zip(&h) {
+            assert_eq!(x, half::f16::from_f32(*v).to_bits(), "{v:e} ({:#x})", v.to_bits());
+        }
+        let mut back = [0.0f32; BRICK_VOXELS];
+        crate::texels::from_half(&h, &mut back);
+        for (&x, y) in h.iter().zip(back) {
+            assert_eq!(half::f16::from_bits(x).to_f32().to_bits(), y.to_bits(), "{x:#x}");
+        }
+    }
+}
+
+#[test]
 fn levels_round_as_round_does() {
     // quantise's rounding against f32::round over every 8-bit step's
     // neighbourhood and halves, and random levels up to 65535.
