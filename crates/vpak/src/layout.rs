@@ -481,7 +481,7 @@ pub fn pack_atlas(layout: &AtlasLayout, bricks: &dyn BrickSource) -> Vec<u8> {
                         let src = ((ls * rows_per_brick + r) * per_row + c) * run;
                         let dst = r * row + (px * per_row + c) * run;
                         if let (Some(d), Some(v)) = (band.get_mut(dst..dst + run), buf.get(src..src + run)) {
-                            copy_run(d, v);
+                            d.copy_from_slice(v);
                         }
                     }
                 }
@@ -489,19 +489,6 @@ pub fn pack_atlas(layout: &AtlasLayout, bricks: &dyn BrickSource) -> Vec<u8> {
         }
     });
     out
-}
-
-/// `d.copy_from_slice(v)` with the lengths runs have (a block, a row of
-/// texels) known to the compiler: a store or two instead of a call to memcpy.
-#[inline(always)]
-fn copy_run(d: &mut [u8], v: &[u8]) {
-    match (v.len(), d.len()) {
-        (8, 8) => d[..8].copy_from_slice(&v[..8]),
-        (16, 16) => d[..16].copy_from_slice(&v[..16]),
-        (32, 32) => d[..32].copy_from_slice(&v[..32]),
-        (64, 64) => d[..64].copy_from_slice(&v[..64]),
-        _ => d.copy_from_slice(v),
-    }
 }
 
 /// Reads local brick `i` back out of atlas bytes, in the encoding's order.
