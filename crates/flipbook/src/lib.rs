@@ -329,7 +329,6 @@ impl Builder {
                 b
             }));
             // Per position: its channels, its hash, and per channel its value range.
-            let pool = &self.pool;
             let hashes: Vec<(u64, Vec<[f32; 2]>, Vec<Channel>)> = (first..end)
                 .into_par_iter()
                 .map(|i| {
@@ -343,7 +342,7 @@ impl Builder {
                         })
                         .collect();
                     let r = (0..c).map(|k| m.parts[i * c + k].range(origin, mask, bg(k))).collect();
-                    (pool.hash(&channels, |a| seen[a - start].hash), r, channels)
+                    (BrickPool::hash(&channels, |a| seen[a - start].hash), r, channels)
                 })
                 .collect();
             let mut next = start;

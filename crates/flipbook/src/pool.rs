@@ -89,7 +89,7 @@ impl BrickPool {
         let made: Vec<Made> = brick.iter().map(|b| Made::of(b, self.shares_constants())).collect();
         let channels: Vec<Channel> = made.iter().enumerate().map(|(k, m)| m.channel(from + k)).collect();
         let mut next = from;
-        let h = self.hash(&channels, |a| made[a - from].hash);
+        let h = BrickPool::hash(&channels, |a| made[a - from].hash);
         let found = self.settle(&channels, &mut next, h);
         self.stored.truncate(next);
         found
@@ -104,7 +104,7 @@ impl BrickPool {
     /// The content hash of a brick being pooled, from its channels' hashes
     /// (`made(a)`: that of `stored[a]`, see [`Made`]): a one-channel brick's
     /// is its channel's, several are chained.
-    pub(crate) fn hash(&self, channels: &[Channel], made: impl Fn(usize) -> u64) -> u64 {
+    pub(crate) fn hash(channels: &[Channel], made: impl Fn(usize) -> u64) -> u64 {
         let one = |ch: &Channel| match *ch {
             Channel::Constant(bits) => constant_hash(bits),
             Channel::At(a) => made(a),
