@@ -32,7 +32,7 @@ pub fn run(args: JoinArgs, quiet: bool) -> Result<u8> {
     let files = args.parts.iter().zip(&names).map(|(p, n)| std::fs::File::open(p).with_context(|| n.clone())).collect::<Result<Vec<_>>>()?;
     let parts = files.iter().zip(&names).map(|(f, n)| Asset::from_part_file(f).with_context(|| n.clone())).collect::<Result<Vec<_>>>()?;
     let out = args.output.display().to_string();
-    let (meta, bytes) = crate::write_checked(&args.output, args.force, |handle| vdbcook_vpak::segments::join(&parts, &files, &names, handle).with_context(|| out.clone()))?;
+    let (meta, bytes) = crate::write_checked(&args.output, args.force, |handle| vdbcook_vpak::segments::join(&parts, &names, handle).with_context(|| out.clone()))?;
     if !quiet {
         crate::emit_final(&format!(
             "joined {} parts into {out}: {} frames in {} segments, {:.2} MB, {:.2}s\n",

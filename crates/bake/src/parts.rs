@@ -193,7 +193,7 @@ pub fn join(name: &str, files: &[PathBuf], out: &Path, force: bool, thumbnail: &
     // Joined into an unnamed scratch file beside `out` that is never given a name.
     let mut scratch = AtomicFile::create(out, true).with_context(|| oname.clone())?;
     let handle = scratch.file().try_clone().with_context(|| oname.clone())?;
-    let f = vdbcook_vpak::segments::join(&parts, &handles, &names, handle).with_context(|| format!("asset {name}"))?;
+    let f = vdbcook_vpak::segments::join(&parts, &names, handle).with_context(|| format!("asset {name}"))?;
     let joined = Asset::from_file(&f).with_context(|| oname.clone())?;
     // The asset as one cook writes it, before the bake's settings.
     let plain = rewrite_metadata(&joined, |m| m.settings.retain(|(k, _)| k != "cache_key" && k != PART_SETTING)).with_context(|| oname.clone())?;

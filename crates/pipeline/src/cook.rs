@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress};
 use vdbcook_vpak::segments::PartInfo;
-use vdbcook_vpak::{Asset, AtomicFile, SourceFile, Writer};
+use vdbcook_vpak::{Asset, AtomicFile, DirectWriter, SourceFile, Writer};
 
 /// Reads `files` on a thread that stays one frame ahead (at most two source
 /// frames live at once) and pushes each frame into one cooker per entry of
@@ -251,7 +251,7 @@ struct Output {
 enum Sink {
     Memory(Writer<std::io::Cursor<Vec<u8>>>),
     /// The writer, the file it writes and the file's name (for errors).
-    File(Writer<std::io::BufWriter<std::fs::File>>, AtomicFile, String),
+    File(Box<Writer<DirectWriter>>, AtomicFile, String),
 }
 
 impl Output {
@@ -263,20 +263,23 @@ impl Output {
     /// an unnamed file in the system's temporary directory (never given a name,
     /// so it goes with the process), read through a mapping a segment at a time.
     fn scratch(count: u32) -> Result<Output> {
-        Output::file(&std::env::temp_dir().join("vdbcook-scratch.vpak"), true, count, None, Supercompress::None)
+        Output::file(&std::env::temp_dir().join("vdbcook-scratch.vpak"), true, count, None, Supercompress::None, false)
     }
 
-    /// An asset (or, with `part`, a part file) of `count` segments written into an unnamed file for `path`.
-    fn file(path: &Path, overwrite: bool, count: u32, part: Option<&PartInfo>, coding: Supercompress) -> Result<Output> {
+    /// An asset (or, with `part`, a part file) of `count` segments written
+    /// into an unnamed file for `path`; `past_cache` for an output that is
+    /// not read back soon (its whole blocks go to disk with no copy in the page cache).
+    fn file(path: &Path, overwrite: bool, count: u32, part: Option<&PartInfo>, coding: Supercompress, past_cache: bool) -> Result<Output> {
         let ctx = || path.display().to_string();
         let mut file = AtomicFile::create(path, overwrite).with_context(ctx)?;
-        let handle = std::io::BufWriter::with_capacity(1 << 20, file.file().try_clone().with_context(ctx)?);
+        let handle = file.file().try_clone().with_context(ctx)?;
+        let handle = if past_cache { DirectWriter::new(handle) } else { DirectWriter::through_cache(handle) }.with_context(ctx)?;
         let writer = match part {
             Some(info) => vdbcook_vpak::segments::part_writer(handle, info, count),
             None => Writer::new(handle, count),
         }
         .with_context(ctx)?;
-        Ok(Output { sink: Sink::File(writer, file, ctx()), reports: Vec::new(), coding })
+        Ok(Output { sink: Sink::File(Box::new(writer), file, ctx()), reports: Vec::new(), coding })
     }
 
     /// Finishes a segment's cooker and writes the segment.
@@ -317,7 +320,7 @@ impl Output {
             Sink::Memory(w) => (Asset::from_bytes(&w.finish()?.into_inner())?, None),
             Sink::File(w, file, name) => {
                 let part = w.base() > 0;
-                let f = w.finish().with_context(|| name.clone())?.into_inner().map_err(|e| Error::from(e.into_error())).with_context(|| name.clone())?;
+                let f = w.finish().with_context(|| name.clone())?.into_file().map_err(Error::from).with_context(|| name.clone())?;
                 let asset = if part { Asset::from_part_file(&f).map(|p| p.1) } else { Asset::from_file(&f) }.with_context(|| name.clone())?;
                 (asset, Some(file))
             }
@@ -472,7 +475,8 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
     let mut outs = formats
         .iter()
         .map(|_| match job.output {
-            Some((path, overwrite)) => Output::file(path, overwrite, count, part.as_ref(), s.supercompress),
+            // An asset compared with its reference next is read back whole: through the page cache.
+            Some((path, overwrite)) => Output::file(path, overwrite, count, part.as_ref(), s.supercompress, !job.reference),
             None if part.is_some() => Err(Error::Failed("a part is cooked into a file".into())),
             None => Output::memory(count, s.supercompress),
         })

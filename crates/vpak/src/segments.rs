@@ -3,11 +3,11 @@
 //! ranges, tables and atlases, contiguous in the file), behind a segment
 //! table. A reader draws any frame of a segment from that segment's bytes
 //! alone. [`Writer`] writes segments one after the other as a cook finishes
-//! them (or copies them from part files, [`Writer::copy_file`]); [`merged`] is the
+//! them (or copies them from part files, [`Writer::copy_body`]); [`merged`] is the
 //! whole sequence's metadata.
 
 use crate::{body_head, checksum, file_len, header_checksum, write_body, Error, Metadata, Section, ALIGN, HEADER_LEN, MAGIC};
-use std::io::{Read, Seek, SeekFrom, Write};
+use std::io::{Seek, SeekFrom, Write};
 
 /// Version of a file with a segment table whose bodies may hold
 /// supercompressed sections ([`crate::coding`]), record their frames'
@@ -83,11 +83,10 @@ pub fn part_writer<W: Write + Seek>(mut out: W, info: &PartInfo, count: u32) -> 
     Writer::at(out, PART_HEADER_LEN as u64, count)
 }
 
-/// Joins parts (in order: each part's header, its segments as an asset, and
-/// its file) into one asset written to `out`, copying the segments' bytes
-/// file to file (in the kernel where it can) after checking them. `names`
-/// name the parts in errors.
-pub fn join(parts: &[(PartInfo, crate::Asset)], files: &[std::fs::File], names: &[String], out: std::fs::File) -> Result<std::fs::File, Error> {
+/// Joins parts (in order: each part's header and its segments as an asset)
+/// into one asset written to `out`, copying each segment's bytes once they
+/// are checked. `names` name the parts in errors.
+pub fn join(parts: &[(PartInfo, crate::Asset)], names: &[String], out: std::fs::File) -> Result<std::fs::File, Error> {
     let Some((first, _)) = parts.first() else { return Err(Error::Join("no parts to join".into())) };
     let bad = |i: usize, why: String| Error::Join(format!("{}: {why}", names.get(i).map_or("a part", |n| n.as_str())));
     if parts.len() as u32 != first.count {
@@ -122,29 +121,24 @@ pub fn join(parts: &[(PartInfo, crate::Asset)], files: &[std::fs::File], names: 
     if segment != first.segments {
         return Err(Error::Join(format!("the parts hold {segment} segments, the asset has {}", first.segments)));
     }
-    let syncer = out.try_clone()?;
-    let mut w = Writer::new(std::io::BufWriter::with_capacity(1 << 20, out), segment)?;
+    let mut w = Writer::new(crate::DirectWriter::new(out)?, segment)?;
     let mut order = Vec::new();
     for (i, (_, asset)) in parts.iter().enumerate() {
         order.extend(asset.segments()?.into_iter().enumerate().map(|(s, e)| (i, s, e)));
     }
-    // Three steps overlap: a thread checks the next segment (read in,
-    // checked, let go) while this one copies a checked one, and another
-    // sends each copied segment to disk, so the caller's final sync has
-    // little left.
-    let (to_disk, copied) = std::sync::mpsc::channel::<(u64, u64)>();
-    let (to_copy, checked) = std::sync::mpsc::sync_channel::<Result<(), Error>>(0);
+    // A thread checks the next segment (read in and checked) while this one
+    // copies a checked one from its mapping to the output, whose whole
+    // blocks go to disk past the page cache (`DirectWriter`).
+    let (to_copy, checked) = std::sync::mpsc::sync_channel::<Result<crate::Asset, Error>>(0);
     std::thread::scope(|scope| {
-        scope.spawn(move || copied.into_iter().for_each(|(offset, len)| start_writeback(&syncer, offset, len)));
         let order = &order;
         scope.spawn(move || {
             for &(i, s, _) in order {
                 let asset = &parts[i].1;
                 let check = asset.stored_segment(s).map_err(|err| bad(i, err.to_string())).and_then(|seg| {
                     seg.populate();
-                    let v = seg.verify().map_err(|err| bad(i, Error::InSegment(s, Box::new(err)).to_string()));
-                    seg.release();
-                    v
+                    seg.verify().map_err(|err| bad(i, Error::InSegment(s, Box::new(err)).to_string()))?;
+                    Ok(seg)
                 });
                 let failed = check.is_err();
                 if to_copy.send(check).is_err() || failed {
@@ -152,19 +146,16 @@ pub fn join(parts: &[(PartInfo, crate::Asset)], files: &[std::fs::File], names: 
                 }
             }
         });
-        // Owned here, so that an early return lets both threads go: the
-        // checker's next send fails, the writer's channel ends.
-        let (checked, to_disk) = (checked, to_disk);
-        for &(i, _, e) in order {
-            checked.recv().map_err(|_| Error::Join("the segment check stopped".into()))??;
-            let file = files.get(i).ok_or_else(|| bad(i, "has no open file".into()))?;
-            let placed = w.copy_file(&e, file, PART_HEADER_LEN as u64 + e.offset)?;
-            let _ = to_disk.send((w.base() + placed.offset, placed.size));
+        // Owned here, so that an early return lets the checker go: its next send fails.
+        let checked = checked;
+        for &(_, _, e) in order {
+            let seg = checked.recv().map_err(|_| Error::Join("the segment check stopped".into()))??;
+            w.copy_body(&e, seg.bytes())?;
+            seg.release();
         }
         Ok::<(), Error>(())
     })?;
-    let out = w.finish()?;
-    out.into_inner().map_err(|e| Error::Io(e.into_error()))
+    Ok(w.finish()?.into_file()?)
 }
 
 /// One entry of the segment table.
@@ -268,6 +259,16 @@ impl<W: Write + Seek> Writer<W> {
         Ok(e)
     }
 
+    /// Writes the next segment as the body `body` of another file's segment `entry` (checked by the caller).
+    pub fn copy_body(&mut self, entry: &SegmentEntry, body: &[u8]) -> Result<SegmentEntry, Error> {
+        if body.len() as u64 != entry.size {
+            return Err(Error::Invalid(format!("a segment body of {} bytes, its entry says {}", body.len(), entry.size)));
+        }
+        let e = self.place(entry.frame_count, entry.size, entry.head_checksum)?;
+        self.out.write_all(body)?;
+        Ok(e)
+    }
+
     /// Where the file starts in the output (after a part header: not 0).
     pub fn base(&self) -> u64 {
         self.base
@@ -290,42 +291,6 @@ impl<W: Write + Seek> Writer<W> {
         self.out.flush()?;
         Ok(self.out)
     }
-}
-
-impl Writer<std::io::BufWriter<std::fs::File>> {
-    /// Copies the next segment's body, `entry.size` bytes from byte `at` of
-    /// `src` (a part file), file to file.
-    pub fn copy_file(&mut self, entry: &SegmentEntry, src: &std::fs::File, at: u64) -> Result<SegmentEntry, Error> {
-        let e = self.place(entry.frame_count, entry.size, entry.head_checksum)?;
-        self.out.flush()?;
-        let mut src = src;
-        src.seek(SeekFrom::Start(at))?;
-        // std copies a file to a file with copy_file_range where the system has it.
-        let copied = std::io::copy(&mut src.take(entry.size), self.out.get_mut())?;
-        if copied != entry.size {
-            return Err(Error::Io(std::io::ErrorKind::UnexpectedEof.into()));
-        }
-        Ok(e)
-    }
-}
-
-/// Starts writing `len` bytes of `file` from `offset` to disk (Linux;
-/// elsewhere the final sync does it all).
-fn start_writeback(file: &std::fs::File, offset: u64, len: u64) {
-    #[cfg(target_os = "linux")]
-    {
-        use std::os::fd::AsRawFd;
-        if let (Ok(offset), Ok(len)) = (libc::off64_t::try_from(offset), libc::off64_t::try_from(len)) {
-            // SAFETY: the descriptor is the caller's open file; the call only
-            // asks the kernel to begin writeback of that range, and a failure
-            // (a file system without it) leaves the final sync to do the work.
-            unsafe {
-                libc::sync_file_range(file.as_raw_fd(), offset, len, libc::SYNC_FILE_RANGE_WRITE);
-            }
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = (file, offset, len);
 }
 
 /// The header and segment table of a version-7 file.
@@ -708,15 +673,10 @@ pub(crate) mod tests {
         let b = part(1, 2, 2, 2, &[fma.clone(), fma.clone()]);
         let dir = std::env::temp_dir().join(format!("vpak-join-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let file = |name: &str, b: &[u8]| {
-            let p = dir.join(name);
-            std::fs::write(&p, b).unwrap();
-            std::fs::File::open(&p).unwrap()
-        };
         let out = || std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(true).open(dir.join("out")).unwrap();
         let run = |x: &[u8], y: &[u8]| {
             let parts = [Asset::part_from_bytes(x).unwrap(), Asset::part_from_bytes(y).unwrap()];
-            join(&parts, &[file("x", x), file("y", y)], &["a".to_string(), "b".to_string()], out()).map(|_| std::fs::read(dir.join("out")).unwrap())
+            join(&parts, &["a".to_string(), "b".to_string()], out()).map(|_| std::fs::read(dir.join("out")).unwrap())
         };
         let joined = run(&a, &b).unwrap();
         let asset = Asset::from_bytes(&joined).unwrap();
