@@ -106,7 +106,7 @@ impl DirectWriter {
 
     fn with(file: File, past_cache: bool, thread: bool) -> std::io::Result<DirectWriter> {
         let direct = if past_cache { open_direct(&file) } else { None };
-        let mut w = DirectWriter { buf: chunk_buffer()?, base: 0, head: 0, len: 0, jobs: None, done: None, thread: None, free: Vec::new(), out: 0, direct: None, failed: None, file };
+        let mut w = DirectWriter { buf: Vec::new(), base: 0, head: 0, len: 0, jobs: None, done: None, thread: None, free: Vec::new(), out: 0, direct: None, failed: None, file };
         let (jobs, job_rx) = std::sync::mpsc::sync_channel::<Job>(BUFFERS);
         let (done_tx, done) = std::sync::mpsc::channel();
         let (mut direct_there, file_there) = (direct.as_ref().and_then(|d| d.try_clone().ok()), w.file.try_clone()?);
@@ -170,13 +170,17 @@ impl DirectWriter {
         let Some(jobs) = self.jobs.clone() else {
             let job = Job { buf: std::mem::take(&mut self.buf), base: self.base, head: self.head, end };
             let r = write_job(&self.file, &mut self.direct, &job);
-            self.buf = job.buf;
+            self.buf = if all { Vec::new() } else { job.buf };
             let len = self.len;
-            self.bytes().copy_within(end..len, 0);
+            if !all {
+                self.bytes().copy_within(end..len, 0);
+            }
             self.finish_chunk(end, all);
             return r;
         };
         let next = match self.free.pop() {
+            // Everything goes: no buffer follows (until the next write).
+            _ if all => Vec::new(),
             Some(b) => b,
             None if self.out + 1 < BUFFERS => chunk_buffer()?,
             None => self.take_back()?,
@@ -189,9 +193,10 @@ impl DirectWriter {
         self.finish_chunk(end, all);
         if all {
             while self.out > 0 {
-                let b = self.take_back()?;
-                self.free.push(b);
+                self.take_back()?;
             }
+            // Written out: the buffers go until the next write (a cook writes a segment, then builds the next).
+            self.free = Vec::new();
         }
         self.check()
     }
@@ -240,6 +245,9 @@ fn open_direct(_file: &File) -> Option<File> {
 
 impl Write for DirectWriter {
     fn write(&mut self, data: &[u8]) -> std::io::Result<usize> {
+        if self.buf.is_empty() {
+            self.buf = chunk_buffer()?;
+        }
         let n = data.len().min(CHUNK - self.len);
         let len = self.len;
         self.bytes()[len..len + n].copy_from_slice(&data[..n]);

@@ -256,6 +256,8 @@ impl<W: Write + Seek> Writer<W> {
         let head = body_head(sections);
         let e = self.place(frame_count, size, checksum(&head))?;
         write_body(&mut self.out, sections, &head)?;
+        // Written out before the next segment is cooked (a writer's buffers go meanwhile).
+        self.out.flush()?;
         Ok(e)
     }
 
