@@ -24,11 +24,23 @@ impl Cooker {
     /// Encodes, lays out and serialises the asset.
     /// Returns the asset's sections (write them with `vdbcook_vpak::write_file`) and the report.
     /// With `max_bytes`, the finest levels that fit are kept (see [`CookReport::budget`]).
-    pub fn finish(mut self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
+    pub fn finish(self, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
+        self.finish_before(None, progress)
+    }
+
+    /// [`Cooker::finish`], and the memory of its bricks handed to `next`
+    /// (the cooker of the next segment, before its first frame) to hold its own.
+    pub fn finish_before(mut self, next: Option<&mut Cooker>, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
         let levels = self.opts.levels.get();
         let timings = vec![("build".to_string(), self.build_secs - self.level_secs), ("levels".to_string(), self.level_secs)];
-        let built = std::mem::take(&mut self.builder).finish()?;
-        let Some(budget) = self.opts.max_bytes else { return self.assemble(&built, 0, timings, progress) };
+        let mut built = std::mem::take(&mut self.builder).finish()?;
+        let Some(budget) = self.opts.max_bytes else {
+            let done = self.assemble(&built, 0, timings, progress);
+            if let Some(next) = next {
+                next.builder.reuse(built.pool.take_storage());
+            }
+            return done;
+        };
         // Each try leaves out one more of the finest levels (and the bricks
         // only they used); the coarsest level always stays.
         let started = Instant::now();

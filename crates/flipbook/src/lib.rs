@@ -249,6 +249,17 @@ impl Builder {
         Builder { backgrounds: self.backgrounds.clone(), ..Builder::new(self.channels) }
     }
 
+    /// Fills its pool in `storage` (an emptied pool's memory,
+    /// [`BrickPool::take_storage`]) while it has no brick and `storage` has
+    /// more room: memory already the process's, where fresh memory costs the
+    /// system a page clearing per page (a sequence's next segment reuses the
+    /// last one's).
+    pub fn reuse(&mut self, storage: Vec<Brick>) {
+        if self.pool.stored.is_empty() && storage.is_empty() && storage.capacity() > self.pool.stored.capacity() {
+            self.pool.stored = storage;
+        }
+    }
+
     /// Adds one frame: one grid per channel (`None`: the channel is empty in
     /// this frame).  Only active values are kept: inactive voxels take the
     /// background, inactive tiles are dropped, leaves with no active voxel vanish.

@@ -194,6 +194,14 @@ impl BrickPool {
         }
     }
 
+    /// The memory of the stored bricks, emptied, for another pool to fill
+    /// ([`crate::Builder::reuse`]); this pool is left empty.
+    pub fn take_storage(&mut self) -> Vec<Brick> {
+        let mut v = std::mem::take(&mut self.stored);
+        v.clear();
+        v
+    }
+
     /// Channel bricks held in memory: the stored ones and the constants.
     pub fn held(&self) -> usize {
         self.stored.len() + self.constants.len()

@@ -148,6 +148,35 @@ fn a_frame_with_repeated_leaves_pools_each_brick_once_in_first_order() {
 }
 
 #[test]
+fn a_pool_in_the_memory_of_an_earlier_one_holds_what_a_fresh_one_does() {
+    let frame = |seed: u32| grid((0..40).map(|i| leaf(Coord::new(8 * i, 0, 0), seed + i as u32, 100 + i as usize)).collect(), Vec::new());
+    let build = |b: &mut Builder| {
+        for seed in [1, 50, 1] {
+            b.push(&[Some(&frame(seed))]).unwrap();
+        }
+    };
+    // An earlier segment's pool, its memory taken once it is done.
+    let mut earlier = Builder::new(1);
+    for seed in 100..104 {
+        earlier.push(&[Some(&frame(seed))]).unwrap();
+    }
+    let storage = earlier.finish().unwrap().pool.take_storage();
+    assert!(storage.is_empty() && storage.capacity() >= 160);
+    let memory = storage.as_ptr();
+    let mut fresh = Builder::new(1);
+    build(&mut fresh);
+    let mut reusing = Builder::new(1);
+    reusing.reuse(storage);
+    build(&mut reusing);
+    let (fresh, reusing) = (fresh.finish().unwrap(), reusing.finish().unwrap());
+    assert_eq!(reusing.pool.bricks().as_dense(), fresh.pool.bricks().as_dense());
+    assert_eq!(fresh.pool.len(), 80);
+    // Its 80 bricks are in the earlier pool's memory (room for 160: nothing moved).
+    assert_eq!(reusing.pool.bricks().as_dense().map(<[_]>::as_ptr), Some(memory));
+    assert_eq!(reusing.nodes(|id| id).unwrap().frames, fresh.nodes(|id| id).unwrap().frames);
+}
+
+#[test]
 fn unchanging_frames_share_every_node() {
     let g = grid(vec![leaf(Coord::new(-8, 0, 16), 1, 300), leaf(Coord::new(200, 8, 0), 2, 512)], vec![Tile { origin: Coord::new(128, 128, 0), dim: 128, value: 0.25, active: true }]);
     let mut b = Builder::new(1);

@@ -17,7 +17,8 @@ use vdbcook_vpak::{Asset, AtomicFile, DirectWriter, SourceFile, Writer};
 /// `opts` (an asset and its lossless reference share one read), made for the
 /// channels the first frame with a file resolves (frames with `--with`
 /// files: the first file of each sequence). Every `segment` frames (and
-/// after the last frame) the cookers go to `on_segment` with the records of
+/// after the last frame) the cookers go to `on_segment` (with the next
+/// segment's cookers, before their first frame) with the records of
 /// the segment's `--with` files (the cooker records each frame's main file),
 /// and cookers for the next segment take their place, so only one segment's
 /// bricks are held at a time. Source paths are recorded relative to `base` when they
@@ -28,7 +29,7 @@ pub fn feed(
     sel: GridSelection,
     base: Option<PathBuf>,
     segment: Option<usize>,
-    on_segment: &mut dyn FnMut(Vec<Cooker>) -> Result<()>,
+    on_segment: &mut OnSegment,
     bars: &dyn Progress,
 ) -> Result<Fed> {
     // Each frame comes with the channels when they are first resolved.
@@ -146,6 +147,9 @@ pub fn feed(
     Ok(Fed { channels, read_secs, source_time: crate::source_time::summarize(&stated) })
 }
 
+/// Takes a full segment's cookers, and the next segment's (before their first frame).
+pub type OnSegment<'a> = dyn FnMut(Vec<Cooker>, &mut [Cooker]) -> Result<()> + 'a;
+
 /// What [`feed`] read besides the frames it pushed.
 pub struct Fed {
     /// The channels, once a frame resolved them.
@@ -164,7 +168,7 @@ struct Segments<'a> {
     /// Segments handed on.
     emitted: usize,
     segment: usize,
-    on_segment: &'a mut dyn FnMut(Vec<Cooker>) -> Result<()>,
+    on_segment: &'a mut OnSegment<'a>,
 }
 
 impl Segments<'_> {
@@ -184,7 +188,7 @@ impl Segments<'_> {
             let next = self.cookers.iter().map(|c| c.next_segment(self.pushed)).collect();
             let full = std::mem::replace(&mut self.cookers, next);
             self.emitted += 1;
-            (self.on_segment)(full)?;
+            (self.on_segment)(full, &mut self.cookers)?;
             vdbcook_grid::mem::release_free();
         }
         Ok(())
@@ -193,7 +197,7 @@ impl Segments<'_> {
     /// Hands on the last segment (also when it is the only one and has no frames).
     fn flush(&mut self) -> Result<()> {
         if self.emitted == 0 || self.cookers.first().is_some_and(|c| c.frame_count() > 0) {
-            (self.on_segment)(std::mem::take(&mut self.cookers))?;
+            (self.on_segment)(std::mem::take(&mut self.cookers), &mut [])?;
         }
         Ok(())
     }
@@ -220,9 +224,9 @@ pub fn selection_of(meta: &vdbcook_vpak::Metadata) -> GridSelection {
 pub fn cook_lossless_levels(files: Vec<FrameFile>, sel: GridSelection, levels: vdbcook_vpak::LevelCount, segment: Option<usize>, bars: &dyn Progress) -> Result<Asset> {
     let count = segment_count(files.len(), segment);
     let mut out = Output::scratch(count)?;
-    let mut write = |cookers: Vec<Cooker>| -> Result<()> {
-        for c in cookers {
-            out.add(c, &vdbcook_cook::NoProgress)?;
+    let mut write = |cookers: Vec<Cooker>, next: &mut [Cooker]| -> Result<()> {
+        for (i, c) in cookers.into_iter().enumerate() {
+            out.add(c, next.get_mut(i), &vdbcook_cook::NoProgress)?;
         }
         Ok(())
     };
@@ -282,11 +286,12 @@ impl Output {
         Ok(Output { sink: Sink::File(Box::new(writer), file, ctx()), reports: Vec::new(), coding })
     }
 
-    /// Finishes a segment's cooker and writes the segment.
-    fn add(&mut self, cooker: Cooker, bars: &dyn Progress) -> Result<()> {
+    /// Finishes a segment's cooker and writes the segment; `next`, the next
+    /// segment's cooker, takes over its brick pool's memory.
+    fn add(&mut self, cooker: Cooker, next: Option<&mut Cooker>, bars: &dyn Progress) -> Result<()> {
         let frames = cooker.frame_count() as u32;
         let table = vdbcook_vpak::segments::first_offset(1);
-        let (mut sections, mut report) = cooker.finish(bars).map_err(|e| match e {
+        let (mut sections, mut report) = cooker.finish_before(next, bars).map_err(|e| match e {
             // A byte budget is the whole file's: the segment table included.
             vdbcook_cook::Error::OverBudget { budget, smallest, level } => Error::from(vdbcook_cook::Error::OverBudget { budget: budget + table, smallest: smallest + table, level }),
             e => Error::from(e),
@@ -484,13 +489,13 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
     if job.reference {
         outs.push(Output::scratch(count)?);
     }
-    let mut write = |cookers: Vec<Cooker>| -> Result<()> {
+    let mut write = |cookers: Vec<Cooker>, next: &mut [Cooker]| -> Result<()> {
         for (i, (c, out)) in cookers.into_iter().zip(outs.iter_mut()).enumerate() {
             if c.frame_count() == 0 {
                 return Err(Error::Failed("no frames to cook".into()));
             }
             let is_reference = job.reference && i == formats.len();
-            out.add(c, bars).map_err(|e| if is_reference { Error::In("cooking the reference".into(), Box::new(e)) } else { e })?;
+            out.add(c, next.get_mut(i), bars).map_err(|e| if is_reference { Error::In("cooking the reference".into(), Box::new(e)) } else { e })?;
         }
         Ok(())
     };
