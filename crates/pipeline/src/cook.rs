@@ -23,15 +23,7 @@ use vdbcook_vpak::{Asset, AtomicFile, DirectWriter, SourceFile, Writer};
 /// and cookers for the next segment take their place, so only one segment's
 /// bricks are held at a time. Source paths are recorded relative to `base` when they
 /// are below it. Returns the channels and the seconds spent waiting for frames.
-pub fn feed(
-    opts: Vec<CookOptions>,
-    files: Vec<FrameFile>,
-    sel: GridSelection,
-    base: Option<PathBuf>,
-    segment: Option<usize>,
-    on_segment: &mut OnSegment,
-    bars: &dyn Progress,
-) -> Result<Fed> {
+pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, base: Option<PathBuf>, segment: Option<usize>, on_segment: &mut OnSegment, bars: &dyn Progress) -> Result<Fed> {
     // Each frame comes with the channels when they are first resolved.
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
     let total = files.len() as u64;
