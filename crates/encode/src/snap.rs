@@ -7,7 +7,7 @@
 //! and no more. The format and the bound are unchanged.
 
 use crate::choose::{decode_one, single_plane, within};
-use crate::texels::{levels, swap_xz};
+use crate::texels::{levels, swap_xz, to_half};
 use crate::{Brick, Format};
 
 /// The brick's texels in `format` and their range, on the coarsest grid
@@ -30,7 +30,11 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
     match format {
         Format::Unorm8 => stepped(values, range, mask, 255, max_error, |out, q| out.push(q as u8), &passes),
         Format::Unorm16 => stepped(values, range, mask, 65535, max_error, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
-        Format::F16 => floats(10, &|bits| swap_xz(&values.map(|v| round_bits(u32::from(half::f16::from_f32(v).to_bits()), bits, 0x8000) as u16)).iter().flat_map(|h| h.to_le_bytes()).collect()),
+        Format::F16 => {
+            // Converted once (the brick-at-once conversion), rounded off per try.
+            let halves = to_half(values);
+            floats(10, &|bits| swap_xz(&halves.map(|h| round_bits(u32::from(h), bits, 0x8000) as u16)).iter().flat_map(|h| h.to_le_bytes()).collect())
+        }
         Format::F32 => floats(23, &|bits| swap_xz(&values.map(|v| round_bits(v.to_bits(), bits, 0x8000_0000))).iter().flat_map(|f| f.to_le_bytes()).collect()),
         Format::Bc4 | Format::Bc7 | Format::Constant => None,
     }
