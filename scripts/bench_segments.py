@@ -4,7 +4,10 @@ segment against segments, parts on two pinned cores against one, and nanovdb_con
 --fp16 on the same files in the same run. Prints a table with the ratios.
 
     /usr/bin/python3 scripts/make_bench_sequence.py bench-out/seq224 --frames 96 --size 224
-    /usr/bin/python3 scripts/bench_segments.py bench-out/seq224 [--segment 24] [--formats f16,bc7]
+    /usr/bin/python3 scripts/bench_segments.py bench-out/seq224 [--segment 24] [--formats f16,bc7] [--spill-above 512MiB]
+
+The one-segment cook runs twice: with its buffers in memory (`--spill-above never`) and
+spilled to a file past --spill-above (the same asset, checked byte for byte).
 
 Peak RSS is /usr/bin/time's %M (KiB). Every cook writes into a scratch directory that is
 removed at the end.
@@ -35,6 +38,7 @@ def main():
     ap.add_argument("--formats", default="f16,bc7")
     ap.add_argument("--exe", default="target/release/vdbcook")
     ap.add_argument("--no-parts", action="store_true")
+    ap.add_argument("--spill-above", default="512MiB", help="the spilled one-segment cook's --spill-above")
     args = ap.parse_args()
     files = sorted(glob.glob(os.path.join(args.seq, "*.vdb")))
     n, seg = len(files), str(args.segment)
@@ -50,10 +54,14 @@ def main():
                 r = timed([args.exe, "cook", "-q", "--force", "-o", out] + flags + extra + inputs)
                 return r + (os.path.getsize(out),)
             first = cook(f"{fmt}-first", files[: args.segment], ["--segment-frames", seg])
-            whole = cook(f"{fmt}-one", files, [])
+            whole = cook(f"{fmt}-one", files, ["--spill-above", "never"])
+            spilled = cook(f"{fmt}-spilled", files, ["--spill-above", args.spill_above])
+            if open(os.path.join(tmp, f"{fmt}-one.vpak"), "rb").read() != open(os.path.join(tmp, f"{fmt}-spilled.vpak"), "rb").read():
+                raise SystemExit(f"{fmt}: the spilled cook wrote another asset")
+            os.remove(os.path.join(tmp, f"{fmt}-spilled.vpak"))
             segd = cook(f"{fmt}-seg", files, ["--segment-frames", seg])
-            results[fmt] = (first, whole, segd)
-            for label, r in [(f"{fmt}: first {seg} frames", first), (f"{fmt}: {n} frames, one segment", whole), (f"{fmt}: {n} frames, segments of {seg}", segd)]:
+            results[fmt] = (first, whole, segd, spilled)
+            for label, r in [(f"{fmt}: first {seg} frames", first), (f"{fmt}: {n} frames, one segment", whole), (f"{fmt}: {n} frames, one segment, spilled", spilled), (f"{fmt}: {n} frames, segments of {seg}", segd)]:
                 rows.append((label, r))
                 print(f"  {label:<40} {r[0]:7.2f} s wall {r[1]:7.2f} s cpu {r[2] / 1024:8.1f} MB peak {r[3] / 1e6:9.2f} MB file", flush=True)
         nano = os.path.join(tmp, "nano")
@@ -100,8 +108,9 @@ def main():
             dd = timed(["dd", "if=/dev/zero", f"of={os.path.join(tmp, 'dd.bin')}", "bs=8M", f"count={max(1, size >> 23)}", "oflag=direct"])
             print(f"    the disk: {size / 1e6:.0f} MB written with dd oflag=direct in {dd[0]:.2f} s ({dd[0] / single[0]:.3f} of one process)")
         print("ratios:")
-        for fmt, (first, whole, segd) in results.items():
-            print(f"  {fmt}: peak RSS {n} frames in segments / first {seg} frames {segd[2] / first[2]:.3f} (<= 1.25); one segment / first {whole[2] / first[2]:.3f}; segments / nanovdb one frame {segd[2] / one[2]:.2f} (<= 3)")
+        for fmt, (first, whole, segd, spilled) in results.items():
+            print(f"  {fmt}: peak RSS {n} frames in segments / first {seg} frames {segd[2] / first[2]:.3f} (<= 1.25); one segment / first {whole[2] / first[2]:.3f}, spilled past {args.spill_above} {spilled[2] / first[2]:.3f}; segments / nanovdb one frame {segd[2] / one[2]:.2f} (<= 3)")
+            print(f"  {fmt}: one segment spilled / in memory: wall {spilled[0] / whole[0]:.3f}, cpu {spilled[1] / whole[1]:.3f}, peak {spilled[2] / whole[2]:.3f}")
             print(f"  {fmt}: bytes segments / one segment {segd[3] / whole[3]:.3f} (<= 1.1); wall segments / xargs -P2 nanovdb {segd[0] / xargs_wall:.3f}, one segment / xargs -P2 {whole[0] / xargs_wall:.3f} (<= 0.8)")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

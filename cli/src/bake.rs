@@ -26,7 +26,7 @@ The manifest (TOML) has a [defaults] table and [[asset]] entries. Each entry has
 name, an output (relative to --out-dir) and inputs (files, directories, globs or frame
 patterns, relative to the manifest), and any cook setting under its flag's name with
 '_' for '-' (frames, grid, grids, with, allow_missing, format, quality, clusters, iterations,
-variance_threshold, max_brick_error, max_texture_dim, lods, max_bytes, segment_frames, supercompress, optimize, fps),
+variance_threshold, max_brick_error, max_texture_dim, lods, max_bytes, segment_frames, supercompress, optimize, fps, spill_above),
 and a quality gate: validate
 (true/false), max_rmse, min_psnr, max_flip, views, size. An entry's setting overrides
 [defaults], which overrides the built-in default (the same as `vdbcook cook`'s).

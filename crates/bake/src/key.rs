@@ -52,7 +52,8 @@ pub fn cache_key(ctx: &KeyContext, settings: &CookSettings, inputs: &[String], f
     field(&mut h, b"vdbcook-bake-key 1");
     field(&mut h, ctx.tool.as_bytes());
     field(&mut h, &ctx.format_version.to_le_bytes());
-    for (name, value) in settings.pairs() {
+    // Where buffers live changes nothing in the asset (and keeps older keys valid).
+    for (name, value) in settings.pairs().into_iter().filter(|(name, _)| *name != "spill_above") {
         field(&mut h, name.as_bytes());
         field(&mut h, value.as_bytes());
     }
@@ -95,5 +96,7 @@ mod tests {
         assert_ne!(k, cache_key(&ctx, &s, &inputs, &[FileDigest::of("b.vdb".into(), Some(b"abc"))]));
         assert_ne!(k, cache_key(&ctx, &s, &inputs, &[FileDigest::of("a.vdb".into(), None)]));
         assert_ne!(k, cache_key(&ctx, &s, &["a.vd".into()], &files));
+        // Where the cook keeps its buffers is no part of the asset.
+        assert_eq!(k, cache_key(&ctx, &CookSettings { spill_above: "1MiB".parse().unwrap(), ..s.clone() }, &inputs, &files));
     }
 }

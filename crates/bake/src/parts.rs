@@ -113,7 +113,7 @@ pub fn rewrite_part(info: &PartInfo, asset: &Asset, mut edit: impl FnMut(&mut Me
         let meta = sections.iter_mut().find(|x| x.kind == vdbcook_vpak::kind::METADATA).ok_or_else(|| Error::Failed("a segment without metadata".into()))?;
         let mut m = Metadata::from_bytes(&meta.data)?;
         edit(&mut m);
-        meta.data = m.to_bytes()?;
+        meta.data = m.to_bytes()?.into();
         w.add(e.frame_count, &sections)?;
     }
     Ok(w.finish()?.into_inner())

@@ -93,7 +93,7 @@ impl Cooker {
         let encoded = match max_error {
             None => {
                 let absent = encode::absent_channels(built, &stored_levels);
-                encode::in_planes(pool, specs, opts.quality, masks.as_deref(), absent, clustered.as_ref(), progress)
+                encode::in_planes(pool, specs, opts.quality, masks.as_deref(), absent, clustered.as_ref(), opts.spill.as_ref(), progress)?
             }
             Some(bound) => {
                 let choices = choose::per_brick(pool, masks.as_deref().unwrap_or(&[]), bound, opts, clustered.as_mut(), progress);
@@ -126,7 +126,7 @@ impl Cooker {
         // Layout: node arrays, brick ranges and tables, channel tables, atlases.
         let t0 = Instant::now();
         let planes_of = layout::planes_of(&encoded.specs, channels);
-        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(&nodes, &encoded, &stored, &planes_of, opts.max_texture_dim)?;
+        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(&nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref())?;
         let value_ranges = self.value_ranges(built, channels);
         let peaks = errors::peaks(built, &value_ranges);
         let specs = encoded.specs.clone();
@@ -137,7 +137,7 @@ impl Cooker {
         // Metadata, the first section.
         let placement = Placement { specs: &specs, group_of: &group_of, planes_of: &planes_of, planes, bricks: stored.keep.len() };
         let meta = self.metadata(built, first, &nodes, &value_ranges, placement);
-        sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()? });
+        sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()?.into() });
         lap(&mut timings, "layout", t0);
 
         // The report.

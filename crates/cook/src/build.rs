@@ -73,11 +73,13 @@ impl Cooker {
     /// A cooker of the given channels (one grid each per frame).
     pub fn with_channels(opts: CookOptions, channels: Vec<ChannelSpec>) -> Cooker {
         let n = channels.len().max(1);
+        let mut builder = Builder::new(n);
+        builder.spill_to(opts.spill.clone());
         Cooker {
             opts,
             channels,
             infer: false,
-            builder: Builder::new(n),
+            builder,
             transform: None,
             placed: vec![None; n],
             tree_levels: None,

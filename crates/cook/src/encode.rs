@@ -50,7 +50,8 @@ pub(crate) fn absent_channels(built: &Built, stored: &[std::ops::Range<u32>]) ->
 }
 
 /// The work bricks in the planes `specs` (`masks`: the pool's shown voxels;
-/// `absent`: see [`absent_channels`], for an unclustered pool).
+/// `absent`: see [`absent_channels`], for an unclustered pool; block
+/// textures under `spill`).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn in_planes<'a>(
     pool: Bricks<'a>,
@@ -59,8 +60,9 @@ pub(crate) fn in_planes<'a>(
     masks: Option<&[[u64; 8]]>,
     absent: Option<Vec<bool>>,
     clustered: Option<&'a Clustered>,
+    spill: Option<&vdbcook_grid::spill::SpillPolicy>,
     progress: &dyn Progress,
-) -> Encoded<'a> {
+) -> Result<Encoded<'a>, crate::Error> {
     let channels = pool.channels();
     let work = clustered.map_or(pool, |c| Bricks::dense(&c.bricks, channels));
     let work_masks = masks.map(|m| match clustered {
@@ -70,9 +72,9 @@ pub(crate) fn in_planes<'a>(
     progress.start("encoding", (work.len() * specs.len()) as u64);
     // Centroids stand for bricks of several levels: every channel counts.
     let absent = absent.filter(|_| clustered.is_none());
-    let encoded = Encoded::with_absent(specs, quality, work, work_masks.as_deref(), absent, &|n| progress.advance(n as u64));
+    let encoded = Encoded::with_absent(specs, quality, work, work_masks.as_deref(), absent, spill, &|n| progress.advance(n as u64))?;
     progress.finish();
-    encoded
+    Ok(encoded)
 }
 
 /// The work bricks in the formats chosen for them (`choices`, per work brick

@@ -5,7 +5,8 @@
 use crate::dedup::Stored;
 use crate::{Error, Format};
 use vdbcook_encode::{Encoded, PlaneSpec};
-use vdbcook_vpak::layout::{pack_atlas, plan_atlases, AtlasLayout};
+use vdbcook_grid::spill::{SpillPolicy, Store};
+use vdbcook_vpak::layout::{pack_atlas_into, plan_atlases, AtlasLayout};
 use vdbcook_vpak::nodes::Nodes;
 use vdbcook_vpak::{kind, PlaneInfo, Section};
 
@@ -34,8 +35,9 @@ pub(crate) fn planes_of(specs: &[PlaneSpec], channels: usize) -> Vec<Vec<usize>>
 }
 
 /// Lays out the stored bricks of every plane of `encoded` in atlases of at
-/// most `max_texture_dim` texels a side.
-pub(crate) fn lay_out(nodes: &Nodes, encoded: &Encoded, stored: &Stored, planes_of: &[Vec<usize>], max_texture_dim: u32) -> Result<Laid, Error> {
+/// most `max_texture_dim` texels a side (atlases under `spill`: see
+/// `vdbcook_grid::spill`).
+pub(crate) fn lay_out(nodes: &Nodes, encoded: &Encoded, stored: &Stored, planes_of: &[Vec<usize>], max_texture_dim: u32, spill: Option<&SpillPolicy>) -> Result<Laid, Error> {
     let specs = &encoded.specs;
     let mut sections = node_sections(nodes);
     let mut plane_infos = Vec::with_capacity(specs.len());
@@ -51,16 +53,19 @@ pub(crate) fn lay_out(nodes: &Nodes, encoded: &Encoded, stored: &Stored, planes_
         let slots = info.range_slots() as usize;
         let ranges: Vec<u32> = pkeep.iter().flat_map(|&k| (0..slots).flat_map(move |s| spec.channels.get(s).map_or([0.0; 2], |&c| encoded.range(k, c)))).map(f32::to_bits).collect();
         plane_bytes[p] += 4 * ranges.len() as u64;
-        sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: words(&ranges) });
+        sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: words(&ranges).into() });
         if info.bricks as usize != stored.keep.len() && !mixed_plane(p) {
             plane_bytes[p] += 4 * table.len() as u64;
-            sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: words(table) });
+            sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: words(table).into() });
         }
         let bricks = encoded.plane(p, pkeep);
         for atlas in &info.atlases {
-            let data = pack_atlas(&AtlasLayout { plane: spec.plane, atlas: *atlas }, &bricks);
+            let layout = AtlasLayout { plane: spec.plane, atlas: *atlas };
+            let mut data = Store::<u8>::with_policy(spill.cloned());
+            data.extend_zeroed(layout.byte_len(), "an atlas")?;
+            pack_atlas_into(&layout, &bricks, &mut data);
             plane_bytes[p] += data.len() as u64;
-            atlas_sections.push(Section { kind: kind::ATLAS, index: atlas_sections.len() as u32, data });
+            atlas_sections.push(Section { kind: kind::ATLAS, index: atlas_sections.len() as u32, data: vdbcook_vpak::Bytes::Held(Box::new(data)) });
         }
         plane_infos.push(info);
     }
@@ -78,7 +83,7 @@ pub(crate) fn lay_out(nodes: &Nodes, encoded: &Encoded, stored: &Stored, planes_
             }
         }
         channel_table_bytes[c] = 4 * table.len() as u64;
-        sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: words(&table) });
+        sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: words(&table).into() });
     }
     sections.extend(atlas_sections);
     Ok(Laid { sections, planes: plane_infos, plane_bytes, channel_table_bytes })
@@ -104,6 +109,6 @@ fn node_sections(n: &Nodes) -> Vec<Section> {
         (kind::TILES, &n.tiles),
     ]
     .into_iter()
-    .map(|(k, v)| Section { kind: k, index: 0, data: words(v) })
+    .map(|(k, v)| Section { kind: k, index: 0, data: words(v).into() })
     .collect()
 }

@@ -35,6 +35,8 @@ pub enum Error {
     #[error(transparent)]
     Tree(#[from] vdbcook_flipbook::Error),
     #[error(transparent)]
+    Store(#[from] vdbcook_grid::spill::StoreError),
+    #[error(transparent)]
     Asset(#[from] vdbcook_vpak::Error),
     /// Every grid of every frame needs the asset's transform, which the first
     /// grid pushed set (`first`: its frame, and the frame's source path).
@@ -174,6 +176,9 @@ pub struct CookOptions {
     pub levels: LevelCount,
     /// The sequence's frame rate, recorded with the frames' numbers.
     pub fps: vdbcook_vpak::Fps,
+    /// Where the brick pool goes once it passes a size (`None`: it stays in
+    /// memory); the asset is the same either way.
+    pub spill: Option<vdbcook_grid::spill::SpillPolicy>,
 }
 
 impl Default for CookOptions {
@@ -190,6 +195,7 @@ impl Default for CookOptions {
             levels: LevelCount::ONE,
             max_bytes: None,
             fps: vdbcook_vpak::Fps::DEFAULT,
+            spill: None,
         }
     }
 }

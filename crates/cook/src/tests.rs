@@ -238,11 +238,11 @@ fn sealed_fan_out_assets_are_refused_not_expanded() {
     let words = |v: Vec<u32>| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
     for s in sections.iter_mut() {
         match s.kind {
-            vdbcook_vpak::kind::FRAMES => s.data = words(vec![0]),
-            vdbcook_vpak::kind::L1_NODES => s.data = words([vec![L1_LOG2], full(l1_mask_words(L1_LOG2))].concat()),
-            vdbcook_vpak::kind::L1_ENTRIES => s.data = words(vec![0; 32768]),
-            vdbcook_vpak::kind::L2_NODES => s.data = words(full(L2_MASK_WORDS)),
-            vdbcook_vpak::kind::L2_ENTRIES => s.data = words(vec![0; 4096]),
+            vdbcook_vpak::kind::FRAMES => s.data = words(vec![0]).into(),
+            vdbcook_vpak::kind::L1_NODES => s.data = words([vec![L1_LOG2], full(l1_mask_words(L1_LOG2))].concat()).into(),
+            vdbcook_vpak::kind::L1_ENTRIES => s.data = words(vec![0; 32768]).into(),
+            vdbcook_vpak::kind::L2_NODES => s.data = words(full(L2_MASK_WORDS)).into(),
+            vdbcook_vpak::kind::L2_ENTRIES => s.data = words(vec![0; 4096]).into(),
             _ => {}
         }
     }
@@ -254,7 +254,7 @@ fn sealed_fan_out_assets_are_refused_not_expanded() {
     let mut meta = hostile.metadata().unwrap();
     meta.frames[0].leaves = 32 * 32 * 32 * 4096;
     for s in sections.iter_mut().filter(|s| s.kind == vdbcook_vpak::kind::METADATA) {
-        s.data = meta.to_bytes().unwrap();
+        s.data = meta.to_bytes().unwrap().into();
     }
     let honest = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
     match unpack_frame(&honest, 0) {
@@ -272,7 +272,7 @@ fn unpack_refuses_what_the_validator_refuses() {
     let mut meta = asset.metadata().unwrap();
     meta.channels[0].lane = 1;
     let mut sections = asset.to_sections();
-    sections.iter_mut().find(|s| s.kind == kind::METADATA).unwrap().data = meta.to_bytes().unwrap();
+    sections.iter_mut().find(|s| s.kind == kind::METADATA).unwrap().data = meta.to_bytes().unwrap().into();
     let sealed = Asset::from_bytes(&vdbcook_vpak::assemble(&sections)).unwrap();
     sealed.verify().unwrap();
     match unpack_frame(&sealed, 0) {
@@ -915,7 +915,7 @@ fn the_report_carries_the_metadata_it_wrote() {
         c.push_empty(None);
         let (sections, report) = c.finish(&NoProgress).unwrap();
         let written = sections.iter().find(|s| s.kind == kind::METADATA).unwrap();
-        assert_eq!(written.data, report.metadata.to_bytes().unwrap());
+        assert_eq!(written.data[..], report.metadata.to_bytes().unwrap()[..]);
         assert_eq!(report.metadata.frame_count, 2);
     }
 }

@@ -5,6 +5,7 @@
 use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of, round_trip};
 use crate::{bc, single_plane, Brick, BrickSource, Bricks, Choice, Format, PlaneSpec, Quality, BRICK_VOXELS, MAX_BRICK_BYTES};
 use rayon::prelude::*;
+use vdbcook_grid::spill::{SpillPolicy, Store, StoreError};
 
 /// The encoded bricks of one plane: kept (block formats, whose encoders are
 /// slow), made from the pool whenever asked for (uncompressed formats, so
@@ -12,7 +13,7 @@ use rayon::prelude::*;
 /// bricks that chose the plane's format (`at[i]`: brick i's place among
 /// them, or `u32::MAX`).
 enum PlaneData {
-    Kept(Vec<u8>),
+    Kept(Store<u8>),
     OnDemand,
     Chosen { bytes: Vec<u8>, at: Vec<u32> },
 }
@@ -43,7 +44,11 @@ impl<'a> Encoded<'a> {
     /// the encoders that can use it (BC4): readers take the others from the
     /// background.
     pub fn new(specs: Vec<PlaneSpec>, quality: Quality, bricks: &'a [Brick], channels: usize, masks: Option<&[[u64; 8]]>, progress: &(dyn Fn(usize) + Sync)) -> Encoded<'a> {
-        Self::with_absent(specs, quality, Bricks::dense(bricks, channels), masks, None, progress)
+        let in_memory = |len: usize| Ok::<_, std::convert::Infallible>(Store::from(vec![0u8; len]));
+        match Self::encode(specs, quality, Bricks::dense(bricks, channels), masks, None, &in_memory, progress) {
+            Ok(e) => e,
+            Err(never) => match never {},
+        }
     }
 
     /// [`Encoded::new`], told which channels of which bricks no reader
@@ -51,7 +56,37 @@ impl<'a> Encoded<'a> {
     /// of its channels' backgrounds for all the bricks from which every
     /// channel of the plane is absent, and deduplication finds them equal
     /// without hashing their texels.
-    pub fn with_absent(specs: Vec<PlaneSpec>, quality: Quality, bricks: Bricks<'a>, masks: Option<&[[u64; 8]]>, absent: Option<Vec<bool>>, progress: &(dyn Fn(usize) + Sync)) -> Encoded<'a> {
+    /// Block textures go under `spill` (see `vdbcook_grid::spill`); a
+    /// texture that fits neither memory nor the spill file's disk is the error.
+    pub fn with_absent(
+        specs: Vec<PlaneSpec>,
+        quality: Quality,
+        bricks: Bricks<'a>,
+        masks: Option<&[[u64; 8]]>,
+        absent: Option<Vec<bool>>,
+        spill: Option<&SpillPolicy>,
+        progress: &(dyn Fn(usize) + Sync),
+    ) -> Result<Encoded<'a>, StoreError> {
+        let texture = |len: usize| {
+            let mut s = Store::with_policy(spill.cloned());
+            s.extend_zeroed(len, "a block texture")?;
+            s.advise_huge_pages();
+            Ok(s)
+        };
+        Self::encode(specs, quality, bricks, masks, absent, &texture, progress)
+    }
+
+    /// The encoding of [`Encoded::with_absent`], each block texture's
+    /// `len` zeroed bytes from `texture(len)`.
+    fn encode<E>(
+        specs: Vec<PlaneSpec>,
+        quality: Quality,
+        bricks: Bricks<'a>,
+        masks: Option<&[[u64; 8]]>,
+        absent: Option<Vec<bool>>,
+        texture: &dyn Fn(usize) -> Result<Store<u8>, E>,
+        progress: &(dyn Fn(usize) + Sync),
+    ) -> Result<Encoded<'a>, E> {
         let channels = bricks.channels();
         let n = bricks.len();
         // A constant brick held once has one range, taken once.
@@ -72,8 +107,7 @@ impl<'a> Encoded<'a> {
                 continue;
             }
             let bb = spec.plane.brick_bytes();
-            let mut data = vec![0u8; n * bb];
-            vdbcook_grid::mem::advise_huge_pages(&data);
+            let mut data = texture(n * bb)?;
             // The canonical encoding of an absent brick: the first one's, made without a mask.
             let canonical = (0..n).find(|&i| e.plane_absent(p, i)).map(|i| {
                 let mut out = vec![0u8; bb];
@@ -103,7 +137,7 @@ impl<'a> Encoded<'a> {
             });
             e.planes.push(PlaneData::Kept(data));
         }
-        e
+        Ok(e)
     }
 
     /// Encodes `bricks` in the block plane `spec` into `out`, one after the other.

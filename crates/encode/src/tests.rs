@@ -474,7 +474,7 @@ fn decoding_wanted_channels_matches_decoding_all_over_a_slotted_pool() {
     let mut specs = group_planes(Format::F16, &[0]);
     specs.extend(group_planes(Format::Bc7, &[1]));
     specs.extend(group_planes(Format::Unorm8, &[2]));
-    let e = Encoded::with_absent(specs, Quality::Fast, bricks, None, None, &|_| {});
+    let e = Encoded::with_absent(specs, Quality::Fast, bricks, None, None, None, &|_| {}).unwrap();
     for i in 0..2 {
         let all = e.decode(i).unwrap();
         for want in [[true, false, false], [false, true, true], [false, false, true]] {

@@ -20,6 +20,7 @@ pub use pool::BrickPool;
 use pool::{Channel, Made};
 use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
+use vdbcook_grid::spill::{SpillPolicy, Store};
 use vdbcook_grid::{Bbox, Coord, Grid, LEAF_VOXELS};
 use vdbcook_vpak::nodes::{self, Nodes, L1_CHILD_DIM, L1_DIM, L1_LOG2, L1_SLOTS, L2_LOG2, L2_SLOTS, TILE_FLAG};
 
@@ -67,6 +68,8 @@ pub enum Error {
     Channels { found: usize, expected: usize },
     #[error(transparent)]
     OutOfMemory(#[from] vdbcook_grid::mem::OutOfMemory),
+    #[error(transparent)]
+    Spill(#[from] vdbcook_grid::spill::StoreError),
 }
 
 fn same_bits(a: &[Brick], b: &[Brick]) -> bool {
@@ -225,6 +228,8 @@ pub struct Builder {
     leaves_in: u64,
     /// Level of the tree being pushed.
     level: u32,
+    /// Where the pool goes once it passes a size (`None`: it stays in memory).
+    spill: Option<SpillPolicy>,
 }
 
 impl Default for Builder {
@@ -236,7 +241,18 @@ impl Default for Builder {
 impl Builder {
     pub fn new(channels: usize) -> Builder {
         let channels = channels.max(1);
-        Builder { channels, backgrounds: vec![None; channels], pool: BrickPool::new(channels), l3: Vec::new(), l3_index: Interner::default(), frames: Vec::new(), bbox: None, leaves_in: 0, level: 0 }
+        Builder {
+            channels,
+            backgrounds: vec![None; channels],
+            pool: BrickPool::new(channels),
+            l3: Vec::new(),
+            l3_index: Interner::default(),
+            frames: Vec::new(),
+            bbox: None,
+            leaves_in: 0,
+            level: 0,
+            spill: None,
+        }
     }
 
     pub fn channels(&self) -> usize {
@@ -246,7 +262,17 @@ impl Builder {
     /// A builder for the frames after this one's (the next segment of a
     /// sequence): as many channels, held to the backgrounds seen so far.
     pub fn successor(&self) -> Builder {
-        Builder { backgrounds: self.backgrounds.clone(), ..Builder::new(self.channels) }
+        let mut next = Builder { backgrounds: self.backgrounds.clone(), ..Builder::new(self.channels) };
+        next.spill_to(self.spill.clone());
+        next
+    }
+
+    /// Moves the brick pool into a temporary file in `policy.dir` once it
+    /// would pass `policy.above` bytes (`vdbcook_grid::spill`): the cook's
+    /// memory stops growing with the sequence's distinct bricks.
+    pub fn spill_to(&mut self, policy: Option<SpillPolicy>) {
+        self.pool.stored.set_policy(policy.clone());
+        self.spill = policy;
     }
 
     /// Fills its pool in `storage` (an emptied pool's memory,
@@ -254,8 +280,9 @@ impl Builder {
     /// more room: memory already the process's, where fresh memory costs the
     /// system a page clearing per page (a sequence's next segment reuses the
     /// last one's).
-    pub fn reuse(&mut self, storage: Vec<Brick>) {
+    pub fn reuse(&mut self, mut storage: Store<Brick>) {
         if self.pool.stored.is_empty() && storage.is_empty() && storage.capacity() > self.pool.stored.capacity() {
+            storage.set_policy(self.spill.clone());
             self.pool.stored = storage;
         }
     }
@@ -333,12 +360,15 @@ impl Builder {
             let made: Vec<usize> = (first * c..end * c).filter(|&j| matches!(plan[j - first * c], Channel::At(_))).collect();
             // Each brick is hashed as it is made (in cache), beside it.
             let mut seen = vec![Made::default(); made.len()];
-            self.pool.stored.par_extend(made.par_iter().zip(seen.par_iter_mut()).map(|(&j, seen)| {
-                let (origin, mask) = m.positions[j / c];
-                let b = m.parts[j].brick(origin, mask, bg(j % c));
-                *seen = Made::of(&b, shares);
-                b
-            }));
+            self.pool.stored.par_extend(
+                made.par_iter().zip(seen.par_iter_mut()).map(|(&j, seen)| {
+                    let (origin, mask) = m.positions[j / c];
+                    let b = m.parts[j].brick(origin, mask, bg(j % c));
+                    *seen = Made::of(&b, shares);
+                    b
+                }),
+                "the brick pool",
+            )?;
             // Per position: its channels, its hash, and per channel its value range.
             let hashes: Vec<(u64, Vec<[f32; 2]>, Vec<Channel>)> = (first..end)
                 .into_par_iter()

@@ -3,6 +3,7 @@
 //! constant brick is held once for every brick that has it.
 
 use crate::{Brick, Error, HashIndex, Map};
+use vdbcook_grid::spill::Store;
 use vdbcook_grid::{Bricks, CONSTANT, LEAF_VOXELS};
 use vdbcook_vpak::nodes::TILE_FLAG;
 
@@ -16,7 +17,7 @@ pub struct BrickPool {
     /// Per brick per channel: an index into `stored`, or [`CONSTANT`] and an index into `constants`.
     slots: Vec<u32>,
     /// The non-constant channel bricks; past the pool's own, those being pooled.
-    pub(crate) stored: Vec<Brick>,
+    pub(crate) stored: Store<Brick>,
     constants: Vec<Brick>,
     /// A constant's value bits -> its index in `constants`.
     constant_ids: Map<u32, u32>,
@@ -76,7 +77,7 @@ impl Default for BrickPool {
 
 impl BrickPool {
     pub fn new(channels: usize) -> BrickPool {
-        BrickPool { channels: channels.max(1), slots: Vec::new(), stored: Vec::new(), constants: Vec::new(), constant_ids: Map::default(), index: HashIndex::default() }
+        BrickPool { channels: channels.max(1), slots: Vec::new(), stored: Store::default(), constants: Vec::new(), constant_ids: Map::default(), index: HashIndex::default() }
     }
 
     /// Returns the id of `brick` (its `channels` bricks), adding it if it is new.
@@ -85,7 +86,7 @@ impl BrickPool {
             return Err(Error::Channels { found: brick.len(), expected: self.channels });
         }
         let from = self.stored.len();
-        self.stored.extend_from_slice(brick);
+        self.stored.extend_from_slice(brick, "the brick pool")?;
         let made: Vec<Made> = brick.iter().map(|b| Made::of(b, self.shares_constants())).collect();
         let channels: Vec<Channel> = made.iter().enumerate().map(|(k, m)| m.channel(from + k)).collect();
         let mut next = from;
@@ -180,7 +181,7 @@ impl BrickPool {
     pub(crate) fn reserve(&mut self, n: usize, made: usize) -> Result<(), Error> {
         // No huge-page advice: the pool grows frame by frame, where huge
         // pages cost more page clearing than they save (docs/benchmarks.md).
-        vdbcook_grid::mem::try_reserve(&mut self.stored, made, "the brick pool")?;
+        self.stored.try_reserve(made, "the brick pool")?;
         vdbcook_grid::mem::try_reserve(&mut self.slots, n * self.channels, "the brick pool")?;
         self.index.reserve(n);
         Ok(())
@@ -196,7 +197,7 @@ impl BrickPool {
 
     /// The memory of the stored bricks, emptied, for another pool to fill
     /// ([`crate::Builder::reuse`]); this pool is left empty.
-    pub fn take_storage(&mut self) -> Vec<Brick> {
+    pub fn take_storage(&mut self) -> Store<Brick> {
         let mut v = std::mem::take(&mut self.stored);
         v.clear();
         v

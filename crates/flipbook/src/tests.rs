@@ -39,13 +39,13 @@ fn pool_keeps_bricks_apart_when_their_hashes_collide() {
     let mut p = BrickPool::default();
     let bricks = [[0.25f32; 512], [0.5; 512], [0.75; 512]];
     for (k, b) in bricks.iter().enumerate() {
-        p.stored.push(*b);
+        p.stored.extend_from_slice(std::slice::from_ref(b), "test").unwrap();
         let mut next = k;
         assert_eq!(p.settle(&[pool::Channel::At(k)], &mut next, 42).unwrap(), k as u32);
         assert_eq!(next, k + 1);
     }
     for (k, b) in bricks.iter().enumerate().rev() {
-        p.stored.push(*b);
+        p.stored.extend_from_slice(std::slice::from_ref(b), "test").unwrap();
         let mut next = 3;
         assert_eq!(p.settle(&[pool::Channel::At(3)], &mut next, 42).unwrap(), k as u32);
         assert_eq!(next, 3, "a duplicate takes no slot");

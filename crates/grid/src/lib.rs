@@ -13,6 +13,7 @@ mod bricks;
 mod coord;
 pub mod lod;
 pub mod mem;
+pub mod spill;
 mod transform;
 
 use rayon::prelude::*;

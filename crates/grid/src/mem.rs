@@ -111,6 +111,25 @@ impl ReportingAllocator {
     }
 }
 
+/// The memory this process may use: the machine's, or less where its
+/// control group sets a limit (cgroup v2 `memory.max`, v1
+/// `memory.limit_in_bytes`); 4 GiB where the system does not say.
+pub fn usable_memory() -> u64 {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: sysconf only reads system constants.
+        let (pages, page) = unsafe { (libc::sysconf(libc::_SC_PHYS_PAGES), libc::sysconf(libc::_SC_PAGESIZE)) };
+        let machine = if pages > 0 && page > 0 { pages as u64 * page as u64 } else { 4 << 30 };
+        let limit = |path: &str| std::fs::read_to_string(path).ok().and_then(|s| s.trim().parse::<u64>().ok());
+        let group = limit("/sys/fs/cgroup/memory.max").or_else(|| limit("/sys/fs/cgroup/memory/memory.limit_in_bytes"));
+        group.map_or(machine, |g| g.min(machine))
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        4 << 30
+    }
+}
+
 /// Buffers smaller than this are left alone.
 const MIN_BYTES: usize = 8 << 20;
 

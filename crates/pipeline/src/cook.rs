@@ -442,6 +442,14 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         // As many levels as the asset: its validation checks each.
         all.push(CookOptions { levels: s.lods, ..reference_options() });
     }
+    // Pools that pass the size go to a file beside the output (or the system's temporary directory).
+    let spill_dir =
+        job.output.and_then(|(p, _)| p.parent()).filter(|d| !d.as_os_str().is_empty()).map_or_else(|| if job.output.is_some() { PathBuf::from(".") } else { std::env::temp_dir() }, Path::to_path_buf);
+    // One budget for every cooker's buffers.
+    let spill = s.spill_above.bytes().map(|above| vdbcook_grid::spill::SpillPolicy::new(spill_dir, above));
+    for o in &mut all {
+        o.spill = spill.clone();
+    }
     let sel = GridSelection::from_flags(s.grid.as_deref(), s.grids.as_deref());
     let segment = s.segment_frames.map(|n| n.get() as usize);
     let mut files = job.files;

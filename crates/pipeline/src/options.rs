@@ -137,6 +137,68 @@ impl<'de> serde::Deserialize<'de> for ByteBudget {
     }
 }
 
+/// When a cook's large buffers (brick pools, atlases) leave memory
+/// (`--spill-above`, `spill_above`): past a byte size (as [`ByteBudget`]
+/// writes it), past a quarter of the memory the process may use (`auto`),
+/// or `never`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpillAbove {
+    Auto,
+    Bytes(u64),
+    Never,
+}
+
+impl SpillAbove {
+    /// The size in bytes (`None`: never).
+    pub fn bytes(self) -> Option<u64> {
+        match self {
+            SpillAbove::Auto => Some(vdbcook_grid::mem::usable_memory() / 4),
+            SpillAbove::Bytes(b) => Some(b),
+            SpillAbove::Never => None,
+        }
+    }
+}
+
+impl FromStr for SpillAbove {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim() {
+            "auto" => Ok(SpillAbove::Auto),
+            "never" => Ok(SpillAbove::Never),
+            t => t
+                .parse::<ByteBudget>()
+                .map(|b| SpillAbove::Bytes(b.0))
+                .map_err(|_| format!("invalid size \"{t}\" (expected auto, never, bytes, or a number with kB, MB, GB, KiB, MiB or GiB, e.g. 512MiB)")),
+        }
+    }
+}
+
+impl fmt::Display for SpillAbove {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SpillAbove::Auto => f.write_str("auto"),
+            SpillAbove::Never => f.write_str("never"),
+            SpillAbove::Bytes(b) => write!(f, "{b}"),
+        }
+    }
+}
+
+/// A manifest writes it as a number of bytes or as the flag's text.
+impl<'de> serde::Deserialize<'de> for SpillAbove {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(serde::Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Bytes(u64),
+            Text(String),
+        }
+        match Raw::deserialize(d)? {
+            Raw::Bytes(b) => format!("{b}").parse().map_err(serde::de::Error::custom),
+            Raw::Text(t) => t.parse().map_err(serde::de::Error::custom),
+        }
+    }
+}
+
 /// A manifest writes it as the flag's text.
 impl<'de> serde::Deserialize<'de> for FrameRange {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
@@ -145,7 +207,7 @@ impl<'de> serde::Deserialize<'de> for FrameRange {
     }
 }
 
-vdbcook_vpak::setting_text_by_display!(FrameRange, ByteBudget);
+vdbcook_vpak::setting_text_by_display!(FrameRange, ByteBudget, SpillAbove);
 
 bounded!(
     /// k-means clusters (`--clusters`, `clusters`): 1 to 1,000,000.
@@ -283,6 +345,15 @@ settings_group! {
         /// fire_1001.vdb is frame 1001, when every name has an increasing number; else from 0).
         #[cfg_attr(feature = "clap", arg(long, value_name = "FPS", allow_negative_numbers = true, default_value_t = CookSettings::default().fps))]
         pub fps: Fps = Fps::DEFAULT;
+        /// Keep the cook's large buffers (the brick pool: every distinct brick of a segment, 2 kB
+        /// a channel; the atlases) in memory up to SIZE in all (bytes, or e.g. 512MiB, 4GB), then
+        /// move them to unnamed temporary files beside the output, so that memory stops growing
+        /// with the segment's bricks (the system caches what it can and writes the rest to disk;
+        /// the files vanish with the process). auto: a quarter of the memory the process may use
+        /// (the machine's, or its control group's limit); never: keep them in memory. The asset
+        /// is the same either way.
+        #[cfg_attr(feature = "clap", arg(long, value_name = "SIZE|auto|never", default_value_t = CookSettings::default().spill_above))]
+        pub spill_above: SpillAbove = SpillAbove::Auto;
         /// Largest 3D texture edge in texels; bigger brick pools are split into several atlases.
         #[cfg_attr(feature = "clap", arg(long, value_name = "TEXELS", default_value_t = CookSettings::default().max_texture_dim))]
         pub max_texture_dim: TextureDim = TextureDim(cook_defaults().max_texture_dim);
@@ -367,6 +438,8 @@ impl CookSettings {
             fps: self.fps,
             // The cooker budgets the one segment's body; the file adds the segment table.
             max_bytes: self.max_bytes.map(|b| b.0.saturating_sub(vdbcook_vpak::segments::first_offset(1))),
+            // Where: beside the output, which only the job knows (`CookJob::spill_dir`).
+            spill: None,
         }
     }
 

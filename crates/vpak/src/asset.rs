@@ -435,6 +435,6 @@ impl Asset {
     /// Every section of a body, copied: edit them and `assemble` a new asset
     /// (its checksums are computed afresh).
     pub fn to_sections(&self) -> Vec<Section> {
-        self.sections.iter().map(|s| Section { kind: s.kind, index: s.index, data: self.raw(s).to_vec() }).collect()
+        self.sections.iter().map(|s| Section { kind: s.kind, index: s.index, data: self.raw(s).to_vec().into() }).collect()
     }
 }

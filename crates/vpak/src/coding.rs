@@ -441,7 +441,7 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
                 return Ok((s, None));
             }
             let c = Coding { kind: s.kind, index: s.index, scheme: SCHEME_ZSTD, filter: best, raw_size: s.data.len() as u64, raw_checksum: checksum(&s.data) };
-            Ok((Section { kind: s.kind, index: s.index, data }, Some(c)))
+            Ok((Section { kind: s.kind, index: s.index, data: data.into() }, Some(c)))
         })
         .collect::<Result<_, std::io::Error>>()?;
     let mut table = Vec::new();
@@ -453,7 +453,7 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
         out.push(s);
     }
     if !table.is_empty() {
-        out.push(Section { kind: kind::CODING, index: 0, data: table });
+        out.push(Section { kind: kind::CODING, index: 0, data: table.into() });
     }
     Ok(out)
 }
@@ -690,7 +690,7 @@ pub fn recompress<W: std::io::Write + std::io::Seek>(asset: &crate::Asset, to: S
         // An asset older than version 9 records no time: its frames' indices and the default rate, said outright.
         let first = i64::from(e.first_frame);
         m.time.get_or_insert_with(|| crate::Time { fps: crate::DEFAULT_FPS, numbers: (first..first + i64::from(e.frame_count)).collect() });
-        meta.data = m.to_bytes()?;
+        meta.data = m.to_bytes()?.into();
         if let Supercompress::Zstd(level) = to {
             sections = supercompress(sections, &m, level)?;
         }

@@ -445,10 +445,17 @@ pub trait BrickSource: Sync {
 /// `first_brick + i` of `bricks` at local position `i`), in parallel over
 /// rows of bricks; each brick's encoding is fetched once.
 pub fn pack_atlas(layout: &AtlasLayout, bricks: &dyn BrickSource) -> Vec<u8> {
-    use rayon::prelude::*;
     let mut out = vec![0u8; layout.byte_len()];
-    if !layout.is_valid() {
-        return out;
+    pack_atlas_into(layout, bricks, &mut out);
+    out
+}
+
+/// [`pack_atlas`] into `out` (`layout.byte_len()` zeroed bytes, which the
+/// caller allocates: a cook keeps large atlases in a spill file).
+pub fn pack_atlas_into(layout: &AtlasLayout, bricks: &dyn BrickSource, out: &mut [u8]) {
+    use rayon::prelude::*;
+    if !layout.is_valid() || out.len() != layout.byte_len() {
+        return;
     }
     let plane = layout.plane;
     let [bx, by, _] = layout.atlas.bricks.map(|b| b as usize);
@@ -488,7 +495,6 @@ pub fn pack_atlas(layout: &AtlasLayout, bricks: &dyn BrickSource) -> Vec<u8> {
             }
         }
     });
-    out
 }
 
 /// Reads local brick `i` back out of atlas bytes, in the encoding's order.

@@ -540,7 +540,55 @@ pub fn union_names(a: &str, b: &str) -> String {
 pub struct Section {
     pub kind: u32,
     pub index: u32,
-    pub data: Vec<u8>,
+    pub data: Bytes,
+}
+
+/// A section's bytes: owned, or held by another owner (a cook's atlas in a
+/// buffer that may live in a spill file).
+pub enum Bytes {
+    Owned(Vec<u8>),
+    Held(Box<dyn AsRef<[u8]> + Send + Sync>),
+}
+
+impl Bytes {
+    /// The bytes as an owned vector to change (held bytes are copied first).
+    pub fn to_mut(&mut self) -> &mut Vec<u8> {
+        if let Bytes::Held(h) = self {
+            *self = Bytes::Owned((**h).as_ref().to_vec());
+        }
+        match self {
+            Bytes::Owned(v) => v,
+            Bytes::Held(_) => unreachable!("made owned above"),
+        }
+    }
+}
+
+impl Default for Bytes {
+    fn default() -> Self {
+        Bytes::Owned(Vec::new())
+    }
+}
+
+impl From<Vec<u8>> for Bytes {
+    fn from(v: Vec<u8>) -> Self {
+        Bytes::Owned(v)
+    }
+}
+
+impl std::ops::Deref for Bytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            Bytes::Owned(v) => v,
+            Bytes::Held(h) => (**h).as_ref(),
+        }
+    }
+}
+
+impl std::fmt::Debug for Bytes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} bytes", self.len())
+    }
 }
 
 pub(crate) fn checksum(b: &[u8]) -> u64 {
@@ -555,7 +603,7 @@ fn align(n: usize) -> usize {
 /// section at a multiple of [`ALIGN`], but the coding section and the
 /// sections it names at a multiple of [`CODED_ALIGN`].
 fn plan(sections: &[Section]) -> (Vec<usize>, usize, usize) {
-    let coded = coding::coded_sections(sections.iter().map(|s| (s.kind, s.index, s.data.as_slice())));
+    let coded = coding::coded_sections(sections.iter().map(|s| (s.kind, s.index, &s.data[..])));
     plan_lens(sections.iter().map(|s| (s.data.len(), if coded.contains(&(s.kind, s.index)) { CODED_ALIGN } else { ALIGN })))
 }
 
@@ -587,7 +635,7 @@ pub fn write_to<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section]) -> 
 
 /// A body's header and section table (every section's checksum computed once, here).
 pub(crate) fn body_head(sections: &[Section]) -> Vec<u8> {
-    let coded = coding::coded_sections(sections.iter().map(|s| (s.kind, s.index, s.data.as_slice())));
+    let coded = coding::coded_sections(sections.iter().map(|s| (s.kind, s.index, &s.data[..])));
     let entries: Vec<Entry> = sections.iter().map(|s| (s.kind, s.index, s.data.len(), checksum(&s.data), if coded.contains(&(s.kind, s.index)) { CODED_ALIGN } else { ALIGN })).collect();
     head_of(&entries).0
 }
@@ -685,8 +733,8 @@ mod tests {
     fn sample() -> Vec<u8> {
         let meta = sample_meta();
         assemble(&[
-            Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap() },
-            Section { kind: kind::FRAMES, index: 0, data: [7u32, 9].iter().flat_map(|v| v.to_le_bytes()).collect() },
+            Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap().into() },
+            Section { kind: kind::FRAMES, index: 0, data: [7u32, 9].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>().into() },
         ])
     }
 

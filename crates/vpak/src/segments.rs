@@ -340,7 +340,7 @@ pub fn rewrite_metadata(asset: &crate::Asset, mut edit: impl FnMut(&mut Metadata
         let meta = sections.iter_mut().find(|x| x.kind == crate::kind::METADATA).ok_or(Error::Missing { kind: crate::kind::METADATA, index: 0 })?;
         let mut m = Metadata::from_bytes(&meta.data)?;
         edit(&mut m);
-        meta.data = m.to_bytes()?;
+        meta.data = m.to_bytes()?.into();
         w.add(e.frame_count, &sections)?;
     }
     Ok(w.finish()?.into_inner())
@@ -472,8 +472,8 @@ pub(crate) mod tests {
 
     pub(crate) fn body(m: &Metadata, marker: u32) -> Vec<Section> {
         vec![
-            Section { kind: kind::METADATA, index: 0, data: m.to_bytes().unwrap() },
-            Section { kind: kind::FRAMES, index: 0, data: (0..m.frame_count).flat_map(|f| (f + marker).to_le_bytes()).collect() },
+            Section { kind: kind::METADATA, index: 0, data: m.to_bytes().unwrap().into() },
+            Section { kind: kind::FRAMES, index: 0, data: (0..m.frame_count).flat_map(|f| (f + marker).to_le_bytes()).collect::<Vec<u8>>().into() },
         ]
     }
 
@@ -535,7 +535,7 @@ pub(crate) mod tests {
     fn supercompressed_segments_restore_the_bytes_written() {
         let long = |m: &Metadata, marker: u32| {
             let mut b = body(m, marker);
-            b.push(Section { kind: kind::L2_ENTRIES, index: 0, data: (0..5000u32).flat_map(|i| (i / 3 + marker).to_le_bytes()).collect() });
+            b.push(Section { kind: kind::L2_ENTRIES, index: 0, data: (0..5000u32).flat_map(|i| (i / 3 + marker).to_le_bytes()).collect::<Vec<u8>>().into() });
             b
         };
         let (a, b) = (meta(2, &["a.vdb", "b.vdb"], [0.0, 1.0], 0), meta(3, &["c.vdb"], [-1.0, 0.5], -128));
@@ -559,7 +559,7 @@ pub(crate) mod tests {
         assert!(Asset::from_bytes(&bad).unwrap().verify().is_err());
         let mut sections = seg.to_sections();
         let coding = sections.iter_mut().find(|x| x.kind == kind::CODING).unwrap();
-        coding.data[24] ^= 4; // the restored size of the first record
+        coding.data.to_mut()[24] ^= 4; // the restored size of the first record
         let lied = assemble_segments(&[(3, sections)]).unwrap();
         let a = Asset::from_bytes(&lied).unwrap();
         a.verify().unwrap();
@@ -571,7 +571,7 @@ pub(crate) mod tests {
     fn a_version_7_file_holds_no_supercompressed_section() {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
         let mut sections = body(&m, 1);
-        sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096] });
+        sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
         let mut b = assemble_segments(&[(2, crate::coding::supercompress(sections, &m, 3).unwrap())]).unwrap();
         b[8..12].copy_from_slice(&VERSION_7.to_le_bytes());
         let table_end = HEADER_LEN + SEGMENT_ENTRY_LEN;

@@ -68,13 +68,13 @@ fn asset(bricks: u32, channels: Vec<Channel>, planes: Vec<PlaneDef>, max_dim: u3
     let occupied: Vec<usize> = (0..n).collect();
     let leaves: Vec<([u64; 8], u32)> = (0..bricks).map(|b| ([u64::MAX; 8], b)).collect();
     let mut sections = vec![
-        Section { kind: kind::FRAMES, index: 0, data: words(&[0]) },
-        Section { kind: kind::L1_NODES, index: 0, data: words(&l1_node_words(2, &[0], 0)) },
-        Section { kind: kind::L1_ENTRIES, index: 0, data: words(&[0]) },
-        Section { kind: kind::L2_NODES, index: 0, data: words(&node_words(&occupied, L2_SLOTS, 0)) },
-        Section { kind: kind::L2_ENTRIES, index: 0, data: words(&(0..bricks).collect::<Vec<_>>()) },
-        Section { kind: kind::L3_NODES, index: 0, data: words(&l3_words(&leaves).unwrap()) },
-        Section { kind: kind::TILES, index: 0, data: Vec::new() },
+        Section { kind: kind::FRAMES, index: 0, data: words(&[0]).into() },
+        Section { kind: kind::L1_NODES, index: 0, data: words(&l1_node_words(2, &[0], 0)).into() },
+        Section { kind: kind::L1_ENTRIES, index: 0, data: words(&[0]).into() },
+        Section { kind: kind::L2_NODES, index: 0, data: words(&node_words(&occupied, L2_SLOTS, 0)).into() },
+        Section { kind: kind::L2_ENTRIES, index: 0, data: words(&(0..bricks).collect::<Vec<_>>()).into() },
+        Section { kind: kind::L3_NODES, index: 0, data: words(&l3_words(&leaves).unwrap()).into() },
+        Section { kind: kind::TILES, index: 0, data: Vec::new().into() },
     ];
     let mixed = |p: usize| channels.iter().any(|c| !c.alternates.is_empty() && (c.plane as usize == p || c.alternates.contains(&(p as u32))));
     let mut infos = Vec::new();
@@ -85,12 +85,12 @@ fn asset(bricks: u32, channels: Vec<Channel>, planes: Vec<PlaneDef>, max_dim: u3
         // A constant plane's range is its value; the others span [0, 1].
         let range = if def.plane.format == Format::Constant { [0.5f32, 0.5] } else { [0.0, 1.0] };
         let ranges: Vec<u32> = (0..count * info.range_slots()).flat_map(|_| range.map(f32::to_bits)).collect();
-        sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: words(&ranges) });
+        sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: words(&ranges).into() });
         if def.table != (0..bricks).collect::<Vec<_>>() && !mixed(p) {
-            sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: words(&def.table) });
+            sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: words(&def.table).into() });
         }
         for a in &info.atlases {
-            atlases.push(Section { kind: kind::ATLAS, index: atlases.len() as u32, data: pack_atlas(&AtlasLayout { plane: def.plane, atlas: *a }, &Zeros) });
+            atlases.push(Section { kind: kind::ATLAS, index: atlases.len() as u32, data: pack_atlas(&AtlasLayout { plane: def.plane, atlas: *a }, &Zeros).into() });
         }
         infos.push(info);
     }
@@ -102,7 +102,7 @@ fn asset(bricks: u32, channels: Vec<Channel>, planes: Vec<PlaneDef>, max_dim: u3
                 j << vdbcook_vpak::CHOICE_SHIFT | pb
             })
             .collect();
-        sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: words(&table) });
+        sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: words(&table).into() });
     }
     sections.extend(atlases);
     let meta = Metadata {
@@ -124,16 +124,16 @@ fn asset(bricks: u32, channels: Vec<Channel>, planes: Vec<PlaneDef>, max_dim: u3
         time: None,
         resolutions: Vec::new(),
     };
-    sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap() });
+    sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes().unwrap().into() });
     (meta, sections)
 }
 
 fn copy(sections: &[Section]) -> Vec<Section> {
-    sections.iter().map(|s| Section { kind: s.kind, index: s.index, data: s.data.clone() }).collect()
+    sections.iter().map(|s| Section { kind: s.kind, index: s.index, data: s.data.to_vec().into() }).collect()
 }
 
 fn set_metadata(sections: &mut [Section], meta: &Metadata) {
-    sections.iter_mut().find(|s| s.kind == kind::METADATA).unwrap().data = meta.to_bytes().unwrap();
+    sections.iter_mut().find(|s| s.kind == kind::METADATA).unwrap().data = meta.to_bytes().unwrap().into();
 }
 
 /// What the validator says of the resealed `sections`: `Ok(())` when it
@@ -244,7 +244,7 @@ fn absurd_per_brick_format_metadata_is_refused_never_a_panic() {
         (
             "a channel table for a channel in one plane",
             "channel 1 (whole) is in one plane but has a channel table",
-            Box::new(move |m, s| s.push(Section { kind: kind::CHANNEL_TABLE, index: other as u32, data: vec![0; 4 * m.brick_count as usize] })),
+            Box::new(move |m, s| s.push(Section { kind: kind::CHANNEL_TABLE, index: other as u32, data: vec![0; 4 * m.brick_count as usize].into() })),
         ),
         (
             "alternates but no channel table",
@@ -259,7 +259,7 @@ fn absurd_per_brick_format_metadata_is_refused_never_a_panic() {
             "brick 0's entry 0xf0000000 names no plane brick",
             Box::new(move |_, s| {
                 let t = table(s);
-                s[t].data[0..4].copy_from_slice(&(15u32 << 28).to_le_bytes());
+                s[t].data.to_mut()[0..4].copy_from_slice(&(15u32 << 28).to_le_bytes());
             }),
         ),
         (
@@ -267,7 +267,7 @@ fn absurd_per_brick_format_metadata_is_refused_never_a_panic() {
             "brick 0's entry 0x0fffffff names no plane brick",
             Box::new(move |_, s| {
                 let t = table(s);
-                s[t].data[0..4].copy_from_slice(&0x0fff_ffffu32.to_le_bytes());
+                s[t].data.to_mut()[0..4].copy_from_slice(&0x0fff_ffffu32.to_le_bytes());
             }),
         ),
         (
@@ -281,13 +281,13 @@ fn absurd_per_brick_format_metadata_is_refused_never_a_panic() {
             Box::new(move |_, s| {
                 let r = s.iter_mut().find(|s| s.kind == kind::BRICK_RANGES && s.index == constant as u32).unwrap();
                 let hi = f32::from_le_bytes(r.data[4..8].try_into().unwrap()) + 1.0;
-                r.data[4..8].copy_from_slice(&hi.to_le_bytes());
+                r.data.to_mut()[4..8].copy_from_slice(&hi.to_le_bytes());
             }),
         ),
         (
             "a mixed plane with a brick table",
             "plane 0 has a brick table it must not have",
-            Box::new(move |m, s| s.push(Section { kind: kind::BRICK_TABLE, index: m.channels[mixed].plane, data: vec![0; 4 * m.brick_count as usize] })),
+            Box::new(move |m, s| s.push(Section { kind: kind::BRICK_TABLE, index: m.channels[mixed].plane, data: vec![0; 4 * m.brick_count as usize].into() })),
         ),
     ];
     for (what, words, mutate) in mutations {
@@ -310,7 +310,7 @@ fn brick_tables_pointing_past_their_plane_are_refused() {
     for (what, value) in [("past the plane", meta.planes[plane as usize].bricks), ("huge", u32::MAX)] {
         let mut broken = copy(&sections);
         let t = broken.iter_mut().find(|s| s.kind == kind::BRICK_TABLE && s.index == plane).expect("the flat plane has a table");
-        t.data[0..4].copy_from_slice(&value.to_le_bytes());
+        t.data.to_mut()[0..4].copy_from_slice(&value.to_le_bytes());
         let e = verdict(what, &broken).unwrap_err();
         assert!(e.contains("brick 0 maps to plane brick"), "{what}: {e}");
         // Without its table, the plane no longer maps every brick.
@@ -327,7 +327,7 @@ fn what_samplers_would_misread_is_refused() {
     verdict("the asset as made", &sections).unwrap();
     let edit = |kind: u32, f: &dyn Fn(&mut Vec<u8>)| {
         let mut s = copy(&sections);
-        f(&mut s.iter_mut().find(|s| s.kind == kind).unwrap().data);
+        f(s.iter_mut().find(|s| s.kind == kind).unwrap().data.to_mut());
         s
     };
     // An L3 node's brick past the bricks (tables and ranges are indexed by it).
@@ -338,7 +338,7 @@ fn what_samplers_would_misread_is_refused() {
     assert!(e.contains("brick range 0 is"), "{e}");
     // A section listed twice.
     let mut twice = copy(&sections);
-    twice.push(Section { kind: kind::TILES, index: 0, data: vec![] });
+    twice.push(Section { kind: kind::TILES, index: 0, data: vec![].into() });
     let e = verdict("a section twice", &twice).unwrap_err();
     assert!(e.contains("listed twice"), "{e}");
     // A last atlas holding more bricks than the first (samplers find a

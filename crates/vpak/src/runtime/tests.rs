@@ -10,8 +10,8 @@ use std::sync::Arc;
 fn sample(coded: bool) -> Vec<u8> {
     let long = |m: &Metadata, marker: u32| {
         let mut b = body(m, marker);
-        b.push(Section { kind: kind::L2_ENTRIES, index: 0, data: (0..5000u32).flat_map(|i| (i / 3 + marker).to_le_bytes()).collect() });
-        b.push(Section { kind: kind::ATLAS, index: 0, data: (0..3000u32).map(|i| (i % 251) as u8).collect() });
+        b.push(Section { kind: kind::L2_ENTRIES, index: 0, data: (0..5000u32).flat_map(|i| (i / 3 + marker).to_le_bytes()).collect::<Vec<u8>>().into() });
+        b.push(Section { kind: kind::ATLAS, index: 0, data: (0..3000u32).map(|i| (i % 251) as u8).collect::<Vec<u8>>().into() });
         match coded {
             true => coding::supercompress(b, m, 3).unwrap(),
             false => b,
