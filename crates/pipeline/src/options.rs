@@ -120,20 +120,26 @@ impl fmt::Display for ByteBudget {
     }
 }
 
+/// A value a manifest writes as a number or as the flag's text: the number
+/// is read as its decimal text, so both go through the one `FromStr`.
+fn number_or_text<'de, D: serde::Deserializer<'de>, T: FromStr<Err = String>>(d: D) -> Result<T, D::Error> {
+    #[derive(serde::Deserialize)]
+    #[serde(untagged)]
+    enum Raw {
+        Number(u64),
+        Text(String),
+    }
+    let text = match <Raw as serde::Deserialize>::deserialize(d)? {
+        Raw::Number(n) => n.to_string(),
+        Raw::Text(t) => t,
+    };
+    text.parse().map_err(serde::de::Error::custom)
+}
+
 /// A manifest writes it as a number of bytes or as the flag's text.
 impl<'de> serde::Deserialize<'de> for ByteBudget {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        #[derive(serde::Deserialize)]
-        #[serde(untagged)]
-        enum Raw {
-            Bytes(u64),
-            Text(String),
-        }
-        match Raw::deserialize(d)? {
-            Raw::Bytes(0) => Err(serde::de::Error::custom("a byte budget must be at least 1 byte")),
-            Raw::Bytes(b) => Ok(ByteBudget(b)),
-            Raw::Text(t) => t.parse().map_err(serde::de::Error::custom),
-        }
+        number_or_text(d)
     }
 }
 
@@ -186,16 +192,7 @@ impl fmt::Display for SpillAbove {
 /// A manifest writes it as a number of bytes or as the flag's text.
 impl<'de> serde::Deserialize<'de> for SpillAbove {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        #[derive(serde::Deserialize)]
-        #[serde(untagged)]
-        enum Raw {
-            Bytes(u64),
-            Text(String),
-        }
-        match Raw::deserialize(d)? {
-            Raw::Bytes(b) => format!("{b}").parse().map_err(serde::de::Error::custom),
-            Raw::Text(t) => t.parse().map_err(serde::de::Error::custom),
-        }
+        number_or_text(d)
     }
 }
 
