@@ -359,21 +359,32 @@ mod file {
             unsafe { std::slice::from_raw_parts_mut(self.base, self.len) }
         }
 
-        /// Gives the file blocks for `additional` more elements (at least
-        /// doubling, as a Vec does); a full disk is an error here.
+        /// Gives the file blocks for `additional` more elements (doubling, as
+        /// a Vec does, where the disk and the mapping have room; else just
+        /// enough); a full disk is an error here.
         pub fn reserve(&mut self, additional: usize) -> std::io::Result<()> {
             let need = self.len.checked_add(additional).ok_or(std::io::ErrorKind::OutOfMemory)?;
             if need <= self.cap {
                 return Ok(());
             }
             let size = std::mem::size_of::<T>().max(1);
-            let cap = need.max(self.cap.saturating_mul(2)).max((1 << 20) / size);
-            let bytes =
-                cap.checked_mul(size).filter(|&b| b <= self.reserved).ok_or_else(|| std::io::Error::other(format!("more than the {} GiB of address space taken for it", self.reserved >> 30)))?;
-            // Blocks for the new part only.
-            let had = (self.cap * size) as libc::off_t;
-            // SAFETY: fallocate on our own descriptor; it only allocates blocks.
-            let r = unsafe { libc::fallocate(self.file.as_raw_fd(), 0, had, bytes as libc::off_t - had) };
+            let room = self.reserved / size;
+            if need > room {
+                return Err(std::io::Error::other(format!("more than the {} GiB of address space taken for it", self.reserved >> 30)));
+            }
+            let ample = need.max(self.cap.saturating_mul(2)).max((1 << 20) / size).min(room);
+            match self.allocate(ample) {
+                Err(e) if ample > need && e.raw_os_error() == Some(libc::ENOSPC) => self.allocate(need),
+                done => done,
+            }
+        }
+
+        /// File blocks for `cap` elements (more than it has).
+        fn allocate(&mut self, cap: usize) -> std::io::Result<()> {
+            let size = std::mem::size_of::<T>().max(1);
+            let (had, bytes) = (self.cap * size, cap * size);
+            // SAFETY: fallocate on our own descriptor, for the new part only; it only allocates blocks.
+            let r = unsafe { libc::fallocate(self.file.as_raw_fd(), 0, had as libc::off_t, (bytes - had) as libc::off_t) };
             if r != 0 {
                 let e = std::io::Error::last_os_error();
                 // File systems without fallocate: grow the file (blocks come as pages are written).
