@@ -96,7 +96,7 @@ impl Cooker {
                 encode::in_planes(pool, specs, opts.quality, masks.as_deref(), absent, clustered.as_ref(), opts.spill.as_ref(), progress)?
             }
             Some(bound) => {
-                let choices = choose::per_brick(pool, masks.as_deref().unwrap_or(&[]), bound, opts, clustered.as_mut(), progress);
+                let choices = choose::per_brick(pool, masks.as_deref().unwrap_or(&[]), bound, opts, clustered.as_mut(), progress)?;
                 encode::as_chosen(pool, choices, clustered.as_ref())
             }
         };
@@ -117,10 +117,14 @@ impl Cooker {
         let decode_stored = |b: u32, want: &[bool]| stored.decode(&encoded, b, want);
         let own: Vec<u32> = stored_levels.iter().map(|r| r.start).collect();
         let measured = errors::measure(built, first, self.levels(), &own, &decode_stored);
-        let cluster_report = clustered.as_ref().zip(opts.clustering.as_ref()).map(|(c, co)| {
-            let without = cluster::Unclustered { built, first, own: &own, channels, specs: &encoded.specs, quality: opts.quality, max_error, disk: opts.disk, masks: masks.as_deref() };
-            cluster::report(c, co, &without, &decode_stored, measured.totals[0].rmse())
-        });
+        let cluster_report = clustered
+            .as_ref()
+            .zip(opts.clustering.as_ref())
+            .map(|(c, co)| {
+                let without = cluster::Unclustered { built, first, own: &own, channels, specs: &encoded.specs, quality: opts.quality, max_error, disk: opts.disk, masks: masks.as_deref() };
+                cluster::report(c, co, &without, &decode_stored, measured.totals[0].rmse())
+            })
+            .transpose()?;
         lap(&mut timings, "error", t0);
 
         // Layout: node arrays, brick ranges and tables, channel tables, atlases.

@@ -4,7 +4,7 @@
 
 use crate::cluster::Clustered;
 use crate::{channels_named, ChannelSpec, CookOptions, Error, Format, Progress};
-use vdbcook_encode::{Bricks, Choice, PlaneSpec};
+use vdbcook_encode::{Bricks, Choices, PlaneSpec};
 
 /// The planes of every channel group, in order: explicit groups first,
 /// then each other channel alone in `format`, in a texture of its own
@@ -56,18 +56,22 @@ pub(crate) fn plan_planes(opts: &CookOptions, specs: &[ChannelSpec]) -> Result<(
 /// order.  Merged bricks are held to the bound too: one that its cluster's
 /// stored brick leaves past it becomes a stray, stored (and chosen for) on
 /// its own, after the centroids.
-pub(crate) fn per_brick(pool: Bricks, masks: &[[u64; 8]], bound: f32, opts: &CookOptions, clustered: Option<&mut Clustered>, progress: &dyn Progress) -> Vec<Choice> {
+pub(crate) fn per_brick(pool: Bricks, masks: &[[u64; 8]], bound: f32, opts: &CookOptions, clustered: Option<&mut Clustered>, progress: &dyn Progress) -> Result<Choices, Error> {
     let channels = pool.channels();
-    let choose = |bricks: Bricks, masks: &[[u64; 8]]| {
+    let mut choices = Choices::new(channels, opts.spill.clone());
+    let choose = |choices: &mut Choices, bricks: Bricks, masks: &[[u64; 8]]| {
         progress.start("choosing formats", bricks.len() as u64);
-        let c = vdbcook_encode::cheapest_all(bricks, masks, bound, opts.quality, opts.disk, &|n| progress.advance(n as u64));
+        let r = choices.choose(bricks, masks, bound, opts.quality, opts.disk, &|n| progress.advance(n as u64));
         progress.finish();
-        c
+        r
     };
-    let Some(c) = clustered else { return choose(pool, masks) };
-    let mut choices = choose(Bricks::dense(&c.bricks, channels), &c.work_masks(masks, channels));
+    let Some(c) = clustered else {
+        choose(&mut choices, pool, masks)?;
+        return Ok(choices);
+    };
+    choose(&mut choices, Bricks::dense(&c.bricks, channels), &c.work_masks(masks, channels))?;
     let first = c.bricks.len();
     let stray_masks = c.split_strays(pool, channels, masks, &choices, bound);
-    choices.extend(choose(Bricks::dense(&c.bricks[first..], channels), &stray_masks));
-    choices
+    choose(&mut choices, Bricks::dense(&c.bricks[first..], channels), &stray_masks)?;
+    Ok(choices)
 }

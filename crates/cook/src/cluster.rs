@@ -76,15 +76,15 @@ impl Clustered {
     /// (`choices`, per work brick and channel) leaves past `bound`: each
     /// becomes a work brick of its own, appended; returns their masks.
     /// Centroids all of whose bricks strayed are no longer counted.
-    pub(crate) fn split_strays(&mut self, pool: Bricks, channels: usize, masks: &[[u64; 8]], choices: &[vdbcook_encode::Choice], bound: f32) -> Vec<[u64; 8]> {
+    pub(crate) fn split_strays(&mut self, pool: Bricks, channels: usize, masks: &[[u64; 8]], choices: &vdbcook_encode::Choices, bound: f32) -> Vec<[u64; 8]> {
         let strays: Vec<usize> = (0..self.merged.len())
             .into_par_iter()
             .filter(|&i| {
                 let w = self.remap[i] as usize;
                 self.merged[i]
                     && !(0..channels).all(|ch| {
-                        let choice = &choices[w * channels + ch];
-                        vdbcook_encode::within(pool.get(i, ch), &vdbcook_encode::decode_one(choice.format, &choice.bytes, choice.range), &masks[i], bound)
+                        let (j, pick) = (w * channels + ch, choices.picks[w * channels + ch]);
+                        vdbcook_encode::within(pool.get(i, ch), &vdbcook_encode::decode_one(pick.format, choices.bytes(j), pick.range), &masks[i], bound)
                     })
             })
             .collect();
@@ -142,7 +142,7 @@ pub(crate) struct Unclustered<'a> {
 /// The thesis's Figure 19 table: the first channel's voxel RMSE as stored
 /// (`rmse_with`) and with every merged brick encoded on its own instead
 /// (other bricks decode as stored, `decode_stored`).
-pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Unclustered, decode_stored: &crate::errors::Decode, rmse_with: f64) -> ClusterReport {
+pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Unclustered, decode_stored: &crate::errors::Decode, rmse_with: f64) -> Result<ClusterReport, crate::Error> {
     let channels = u.channels;
     let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
     let pool = u.built.pool.bricks();
@@ -152,7 +152,9 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
         None => Encoded::new(u.specs.to_vec(), u.quality, &own, channels, own_masks.as_deref(), &|_| {}),
         Some(e) => {
             let own = Bricks::dense(&own, channels);
-            Encoded::from_choices(own, vdbcook_encode::cheapest_all(own, own_masks.as_deref().unwrap_or(&[]), e, u.quality, u.disk, &|_| {}), &vec![true; merged.len()])
+            let mut choices = vdbcook_encode::Choices::new(channels, None);
+            choices.choose(own, own_masks.as_deref().unwrap_or(&[]), e, u.quality, u.disk, &|_| {})?;
+            Encoded::from_choices(own, choices, &vec![true; merged.len()])
         }
     };
     let mut slot = vec![u32::MAX; c.merged.len()];
@@ -167,7 +169,7 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
     for e in frame_errors(u.built, u.first, u.own, &decode_unclustered) {
         without.merge(&e[0]);
     }
-    ClusterReport {
+    Ok(ClusterReport {
         clusters: co.clusters,
         iterations: co.iterations,
         variance_threshold: co.variance_threshold,
@@ -177,5 +179,5 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
         rmse_without: without.rmse(),
         rmse_with,
         without,
-    }
+    })
 }

@@ -3,7 +3,7 @@
 
 use crate::cluster::{used_work, Clustered};
 use crate::{Error, Progress};
-use vdbcook_encode::{Bricks, Choice, Encoded, PlaneSpec, Quality};
+use vdbcook_encode::{Bricks, Choices, Encoded, PlaneSpec, Quality};
 use vdbcook_flipbook::Built;
 
 /// Which voxels of each pool brick some L3 node shows: block encoders may
@@ -79,7 +79,7 @@ pub(crate) fn in_planes<'a>(
 
 /// The work bricks in the formats chosen for them (`choices`, per work brick
 /// and channel); centroids no pool brick uses any more are in no plane.
-pub(crate) fn as_chosen<'a>(pool: Bricks<'a>, choices: Vec<Choice>, clustered: Option<&'a Clustered>) -> Encoded<'a> {
+pub(crate) fn as_chosen<'a>(pool: Bricks<'a>, choices: Choices, clustered: Option<&'a Clustered>) -> Encoded<'a> {
     let work = clustered.map_or(pool, |c| Bricks::dense(&c.bricks, pool.channels()));
     Encoded::from_choices(work, choices, &used_work(clustered, work.len()))
 }

@@ -6,6 +6,7 @@
 use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of};
 use crate::{bc, group_planes, Brick, Bricks, Format, Optimize, Plane, Quality};
 use rayon::prelude::*;
+use vdbcook_grid::spill::{SpillPolicy, Store, StoreError};
 
 /// One brick channel's chosen encoding.
 #[derive(Clone, Debug, PartialEq)]
@@ -121,17 +122,85 @@ pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qualit
     Choice { format: Format::F32, range, bytes }
 }
 
-/// [`cheapest`] for every channel of every brick (`masks[i]`: the voxels
-/// brick i shows), in parallel;
-/// `progress(n)` after each `n` bricks.
-pub fn cheapest_all(bricks: Bricks, masks: &[[u64; 8]], max_error: f32, quality: Quality, disk: Option<Optimize>, progress: &(dyn Fn(usize) + Sync)) -> Vec<Choice> {
-    (0..bricks.len())
-        .into_par_iter()
-        .flat_map_iter(|i| {
-            let mask = masks.get(i).copied().unwrap_or([u64::MAX; 8]);
-            let out: Vec<Choice> = bricks.channels_of(i).map(|v| cheapest(v, &mask, max_error, quality, disk)).collect();
-            progress(1);
-            out
-        })
-        .collect()
+/// Every brick channel's choice, in order (`picks[i · channels + c]`), its
+/// texels or blocks appended to one store per channel and format as they
+/// are chosen (under a spill policy: see `vdbcook_grid::spill`), so that a
+/// cook holds the chosen bytes once, out of memory past the policy's size.
+pub struct Choices {
+    channels: usize,
+    pub picks: Vec<Pick>,
+    /// Per (channel, format): the chosen bytes, and how many chose it.
+    stores: Vec<(usize, Format, Store<u8>, u32)>,
+    spill: Option<SpillPolicy>,
+}
+
+/// A brick channel's format and range, and its place among the bricks of
+/// its channel that chose that format.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pick {
+    pub format: Format,
+    /// The plane brick's range (`[v, v]` for a constant v).
+    pub range: [f32; 2],
+    pub at: u32,
+}
+
+/// Bricks chosen in parallel before their bytes are stored.
+const CHOICE_CHUNK: usize = 1024;
+
+impl Choices {
+    pub fn new(channels: usize, spill: Option<SpillPolicy>) -> Choices {
+        Choices { channels: channels.max(1), picks: Vec::new(), stores: Vec::new(), spill }
+    }
+
+    /// Appends [`cheapest`] for every channel of every brick of `bricks`
+    /// (`masks[i]`: the voxels brick i shows), chosen in parallel a chunk
+    /// at a time; `progress(n)` after each `n` bricks.
+    #[allow(clippy::too_many_arguments)]
+    pub fn choose(&mut self, bricks: Bricks, masks: &[[u64; 8]], max_error: f32, quality: Quality, disk: Option<Optimize>, progress: &(dyn Fn(usize) + Sync)) -> Result<(), StoreError> {
+        for first in (0..bricks.len()).step_by(CHOICE_CHUNK) {
+            let chunk: Vec<Choice> = (first..(first + CHOICE_CHUNK).min(bricks.len()))
+                .into_par_iter()
+                .flat_map_iter(|i| {
+                    let mask = masks.get(i).copied().unwrap_or([u64::MAX; 8]);
+                    let out: Vec<Choice> = bricks.channels_of(i).map(|v| cheapest(v, &mask, max_error, quality, disk)).collect();
+                    progress(1);
+                    out
+                })
+                .collect();
+            for choice in chunk {
+                self.push(choice)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Appends the next brick channel's choice.
+    pub fn push(&mut self, choice: Choice) -> Result<(), StoreError> {
+        let c = self.picks.len() % self.channels;
+        let k = match self.stores.iter().position(|s| s.0 == c && s.1 == choice.format) {
+            Some(k) => k,
+            None => {
+                self.stores.push((c, choice.format, Store::with_policy(self.spill.clone()), 0));
+                self.stores.len() - 1
+            }
+        };
+        let (_, _, store, count) = &mut self.stores[k];
+        store.extend_from_slice(&choice.bytes, "the chosen bricks")?;
+        self.picks.push(Pick { format: choice.format, range: choice.range, at: *count });
+        *count += 1;
+        Ok(())
+    }
+
+    /// The texels or blocks of pick `j`.
+    pub fn bytes(&self, j: usize) -> &[u8] {
+        let Some(p) = self.picks.get(j) else { return &[] };
+        let bb = single_plane(p.format).brick_bytes();
+        let at = p.at as usize * bb;
+        self.stores.iter().find(|s| s.0 == j % self.channels && s.1 == p.format).and_then(|s| s.2.get(at..at + bb)).unwrap_or(&[])
+    }
+
+    /// The bytes of channel `c`'s bricks that chose `format`, taken out.
+    pub(crate) fn take_store(&mut self, c: usize, format: Format) -> Store<u8> {
+        self.stores.iter_mut().find(|s| s.0 == c && s.1 == format).map(|s| std::mem::take(&mut s.2)).unwrap_or_default()
+    }
 }

@@ -3,7 +3,7 @@
 //! choices.
 
 use crate::texels::{bc7_texels, encode_texels, levels, quantise, range_of, round_trip};
-use crate::{bc, single_plane, Brick, BrickSource, Bricks, Choice, Format, PlaneSpec, Quality, BRICK_VOXELS, MAX_BRICK_BYTES};
+use crate::{bc, single_plane, Brick, BrickSource, Bricks, Choices, Format, PlaneSpec, Quality, BRICK_VOXELS, MAX_BRICK_BYTES};
 use rayon::prelude::*;
 use vdbcook_grid::spill::{SpillPolicy, Store, StoreError};
 
@@ -15,7 +15,7 @@ use vdbcook_grid::spill::{SpillPolicy, Store, StoreError};
 enum PlaneData {
     Kept(Store<u8>),
     OnDemand,
-    Chosen { bytes: Vec<u8>, at: Vec<u32> },
+    Chosen { bytes: Store<u8>, at: Vec<u32> },
 }
 
 /// Every plane of every brick of a pool (`channels` [`Brick`]s per brick),
@@ -262,24 +262,23 @@ impl<'a> Encoded<'a> {
     /// i ([`cheapest`]); each channel is stored in one plane of its own per
     /// format its bricks chose, in [`Format::BY_COST`] order.  Bricks not
     /// `used` are in no plane.
-    pub fn from_choices(bricks: Bricks<'a>, mut choices: Vec<Choice>, used: &[bool]) -> Encoded<'a> {
+    pub fn from_choices(bricks: Bricks<'a>, mut choices: Choices, used: &[bool]) -> Encoded<'a> {
         let (channels, n) = (bricks.channels(), bricks.len());
-        let ranges = choices.iter().map(|ch| ch.range).collect();
+        let ranges = choices.picks.iter().map(|p| p.range).collect();
         let (mut specs, mut planes) = (Vec::new(), Vec::new());
         for c in 0..channels {
             for format in Format::BY_COST {
-                let members: Vec<usize> = (0..n).filter(|&i| used.get(i).copied().unwrap_or(true) && choices[i * channels + c].format == format).collect();
+                let pick = |i: usize| choices.picks[i * channels + c];
+                let members: Vec<usize> = (0..n).filter(|&i| used.get(i).copied().unwrap_or(true) && pick(i).format == format).collect();
                 if members.is_empty() {
                     continue;
                 }
                 let mut at = vec![u32::MAX; n];
-                let mut bytes = Vec::with_capacity(members.len() * single_plane(format).brick_bytes());
-                for (k, &i) in members.iter().enumerate() {
-                    at[i] = k as u32;
-                    bytes.extend_from_slice(&std::mem::take(&mut choices[i * channels + c].bytes));
+                for &i in &members {
+                    at[i] = pick(i).at;
                 }
                 specs.push(PlaneSpec { plane: single_plane(format), channels: vec![c] });
-                planes.push(PlaneData::Chosen { bytes, at });
+                planes.push(PlaneData::Chosen { bytes: choices.take_store(c, format), at });
             }
         }
         Encoded { specs, bricks, channels, ranges, planes, absent: None }

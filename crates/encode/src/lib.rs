@@ -98,7 +98,7 @@ mod snap;
 mod stats;
 mod texels;
 pub use bc::bc7_kernels;
-pub use choose::{cheapest, cheapest_all, decode_one, single_plane, within, Choice};
+pub use choose::{cheapest, decode_one, single_plane, within, Choice, Choices, Pick};
 pub use encoded::{Encoded, PlaneBricks};
 pub use stats::{ErrorStats, NonFinite};
 pub use texels::{fill_non_finite, range_of};

@@ -385,7 +385,9 @@ fn per_brick_formats_meet_the_bound_with_the_cheapest_format() {
         let e = 10f32.powf(-6.0 + 6.0 * rng.unit());
         let choice = cheapest(&brick, &mask, e, Quality::VeryFast, None);
         seen.insert(choice.format);
-        let encoded = Encoded::from_choices(crate::Bricks::dense(std::slice::from_ref(&brick), 1), vec![choice.clone()], &[true]);
+        let mut choices = crate::Choices::new(1, None);
+        choices.push(choice.clone()).unwrap();
+        let encoded = Encoded::from_choices(crate::Bricks::dense(std::slice::from_ref(&brick), 1), choices, &[true]);
         assert_eq!(encoded.specs.len(), 1);
         assert_eq!(encoded.specs[0].plane, single_plane(choice.format));
         let decoded = encoded.decode(0).unwrap()[0];
@@ -487,4 +489,32 @@ fn decoding_wanted_channels_matches_decoding_all_over_a_slotted_pool() {
     }
     // The constant brick's range is the range of its values.
     assert_eq!(e.range(1, 2), [0.25, 0.25]);
+}
+
+#[test]
+fn chosen_bricks_spilled_to_a_file_encode_as_those_in_memory() {
+    // Two channels of bricks of every kind, chosen in memory and with every
+    // store past a 1-byte budget (in spill files where the system has them).
+    let mut rng = vdbcook_testkit::Rng::new(0x5b11);
+    let bricks: Vec<Brick> = (0..40u64).map(|t| kind_of_brick(&mut rng, t % 5)).collect();
+    let view = crate::Bricks::dense(&bricks, 2);
+    let masks = vec![[u64::MAX; 8]; view.len()];
+    let chosen = |spill: Option<vdbcook_grid::spill::SpillPolicy>| {
+        let mut c = crate::Choices::new(2, spill);
+        c.choose(view, &masks, 0.01, Quality::VeryFast, None, &|_| {}).unwrap();
+        c
+    };
+    let (mem, file) = (chosen(None), chosen(Some(vdbcook_grid::spill::SpillPolicy::new(std::env::temp_dir(), 1))));
+    assert_eq!(mem.picks, file.picks);
+    assert!(mem.picks.iter().any(|p| p.format != mem.picks[0].format), "one format only: the stores are not exercised");
+    for j in 0..mem.picks.len() {
+        assert_eq!(mem.bytes(j), file.bytes(j));
+    }
+    let used = vec![true; view.len()];
+    let (a, b) = (Encoded::from_choices(view, mem, &used), Encoded::from_choices(view, file, &used));
+    // Bit for bit (the kinds of bricks hold NaN).
+    let bits = |e: &Encoded, i: usize| e.decode(i).map(|d| d.iter().flatten().map(|v| v.to_bits()).collect::<Vec<u32>>());
+    for i in 0..view.len() {
+        assert_eq!(bits(&a, i), bits(&b, i));
+    }
 }
