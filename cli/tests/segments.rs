@@ -207,6 +207,19 @@ fn memory_follows_the_segment_not_the_sequence() {
     // ... and not once its pool and atlas are in a spill file, which writes the same asset.
     assert!(spilled as f64 <= 1.4 * eight as f64, "one segment of 32 frames spilled took {spilled} KiB, 8 frames {eight} KiB");
     assert!(std::fs::read(&in_memory).unwrap() == std::fs::read(&from_file).unwrap(), "the spilled cook wrote another asset");
+    // The report says how much went to the files, and nothing when nothing did.
+    let spilled = |spill: &str| {
+        let out = dir.join("report.vpak");
+        let mut args = vec!["cook", "--json", "--force", "--format", "f16", "--spill-above", spill, "-o", s(&out)];
+        args.extend(files[..8].iter().map(String::as_str));
+        let v: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&args)).stdout).expect("cook --json");
+        std::fs::remove_file(&out).unwrap();
+        v["spilled_bytes"].as_u64().expect("spilled_bytes")
+    };
+    // 8 frames of 2,744 distinct bricks: a 45 MB pool, most of it past 8 MiB.
+    let (none, some) = (spilled("never"), spilled("8MiB"));
+    assert_eq!(none, 0);
+    assert!(some >= 30_000_000, "{some} bytes spilled");
     // The spill files had no names: nothing is left beside the outputs.
     let mut left: Vec<String> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     left.sort();

@@ -78,6 +78,7 @@ impl CookReport {
                 (a, b) => a.or(b),
             };
             add_by_name(&mut r.timings, &p.timings);
+            r.spilled_bytes = r.spilled_bytes.max(p.spilled_bytes);
             r.segments.extend(p.segments);
             r.sums.add(&p.sums);
         }

@@ -180,6 +180,8 @@ pub struct CookReport {
     pub segments: Vec<SegmentReport>,
     /// What the sources' metadata said of time, when they said anything (set by the caller that read them).
     pub source_time: Option<SourceTime>,
+    /// The most bytes the cook's buffers held in spill files at once (0: none spilled; see `vdbcook_grid::spill`).
+    pub spilled_bytes: u64,
     /// The asset's metadata as written in its first section (typed, so that a
     /// caller adding settings, as bake does, need not read the bytes back);
     /// for an asset of several segments, the whole sequence's (`vdbcook_vpak::segments::merged`).
@@ -410,6 +412,7 @@ impl Cooker {
                 sums: sums.clone(),
             }],
             source_time: None,
+            spilled_bytes: self.opts.spill.as_ref().map_or(0, vdbcook_grid::spill::SpillPolicy::peak_in_files),
             sums,
         }
     }

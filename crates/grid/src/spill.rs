@@ -28,16 +28,24 @@ pub struct SpillPolicy {
     pub above: u64,
     /// Bytes the policy's stores hold in memory now.
     held: Arc<AtomicU64>,
+    /// Bytes of their spill files now, and the most there have been.
+    in_files: Arc<AtomicU64>,
+    peak_in_files: Arc<AtomicU64>,
 }
 
 impl SpillPolicy {
     pub fn new(dir: PathBuf, above: u64) -> SpillPolicy {
-        SpillPolicy { dir, above, held: Arc::default() }
+        SpillPolicy { dir, above, held: Arc::default(), in_files: Arc::default(), peak_in_files: Arc::default() }
     }
 
     /// Bytes its stores hold in memory now.
     pub fn held(&self) -> u64 {
         self.held.load(Ordering::Relaxed)
+    }
+
+    /// The most bytes its stores' spill files have held at once (0: nothing spilled).
+    pub fn peak_in_files(&self) -> u64 {
+        self.peak_in_files.load(Ordering::Relaxed)
     }
 }
 
@@ -60,6 +68,8 @@ pub struct Store<T: bytemuck::Pod> {
     policy: Option<SpillPolicy>,
     /// Bytes of its memory counted in the policy's `held`.
     counted: u64,
+    /// Bytes of its spill file counted in the policy's `in_files`.
+    filed: u64,
 }
 
 enum Data<T: bytemuck::Pod> {
@@ -70,19 +80,20 @@ enum Data<T: bytemuck::Pod> {
 
 impl<T: bytemuck::Pod> Default for Store<T> {
     fn default() -> Self {
-        Store { data: Data::Memory(Vec::new()), policy: None, counted: 0 }
+        Store { data: Data::Memory(Vec::new()), policy: None, counted: 0, filed: 0 }
     }
 }
 
 impl<T: bytemuck::Pod> From<Vec<T>> for Store<T> {
     fn from(v: Vec<T>) -> Self {
-        Store { data: Data::Memory(v), policy: None, counted: 0 }
+        Store { data: Data::Memory(v), policy: None, counted: 0, filed: 0 }
     }
 }
 
 impl<T: bytemuck::Pod> Drop for Store<T> {
     fn drop(&mut self) {
         self.count(0);
+        self.file(0);
     }
 }
 
@@ -122,6 +133,25 @@ impl<T: bytemuck::Pod> Store<T> {
         }
         self.counted = bytes;
     }
+
+    /// Counts `bytes` of spill file in the policy's total instead of what was counted.
+    fn file(&mut self, bytes: u64) {
+        if let Some(p) = &self.policy {
+            let now = p.in_files.fetch_add(bytes, Ordering::Relaxed) + bytes;
+            p.in_files.fetch_sub(self.filed, Ordering::Relaxed);
+            p.peak_in_files.fetch_max(now.saturating_sub(self.filed), Ordering::Relaxed);
+        }
+        self.filed = bytes;
+    }
+
+    /// Bytes of its spill file (0 in memory).
+    fn file_bytes(&self) -> u64 {
+        match &self.data {
+            Data::Memory(_) => 0,
+            #[cfg(target_os = "linux")]
+            Data::File(f) => (f.capacity() * std::mem::size_of::<T>()) as u64,
+        }
+    }
 }
 
 impl<T: bytemuck::Pod + Send + Sync> Store<T> {
@@ -134,10 +164,12 @@ impl<T: bytemuck::Pod + Send + Sync> Store<T> {
 
     /// Spills under `policy` from now on (`None`: never).
     pub fn set_policy(&mut self, policy: Option<SpillPolicy>) {
-        let bytes = self.counted;
+        let (bytes, filed) = (self.counted, self.filed);
         self.count(0);
+        self.file(0);
         self.policy = policy;
         self.count(bytes);
+        self.file(filed);
     }
 
     /// Asks for transparent huge pages where it is in memory (see
@@ -189,6 +221,7 @@ impl<T: bytemuck::Pod + Send + Sync> Store<T> {
                 f.extend_from_slice(v);
                 self.data = Data::File(f);
                 self.count(0);
+                self.file(self.file_bytes());
                 Ok(())
             }
             (Data::Memory(v), _) => {
@@ -200,7 +233,9 @@ impl<T: bytemuck::Pod + Send + Sync> Store<T> {
             #[cfg(target_os = "linux")]
             (Data::File(f), _) => {
                 let dir = self.policy.as_ref().map(|p| p.dir.clone()).unwrap_or_default();
-                f.reserve(additional).map_err(|e| disk(&dir, e))
+                f.reserve(additional).map_err(|e| disk(&dir, e))?;
+                self.file(self.file_bytes());
+                Ok(())
             }
         }
     }
@@ -570,6 +605,8 @@ mod tests {
         assert!(b[..100].iter().all(|&x| x == 5) && b[100..].iter().all(|&x| x == 0));
         drop(a);
         assert_eq!(p.as_ref().unwrap().held(), 0);
+        let filed = p.as_ref().unwrap().peak_in_files();
+        assert!(cfg!(not(target_os = "linux")) || filed >= 600, "{filed} bytes filed");
     }
 
     #[cfg(target_os = "linux")]

@@ -90,6 +90,9 @@ pub fn summary_text(output: &Path, grid: Option<&str>, r: &CookReport) -> String
             c.stats.bricks_in, c.stats.bricks_out, c.ratio, c.stats.constant, c.stats.high_variance, c.stats.over_error, c.rmse_without, c.rmse_with
         );
     }
+    if r.spilled_bytes > 0 {
+        let _ = writeln!(s, "  spilled         {} at most in temporary files beside the output (past --spill-above)", mb(r.spilled_bytes));
+    }
     let t: Vec<String> = r.timings.iter().map(|(k, v)| format!("{k} {v:.2}s")).collect();
     let _ = writeln!(s, "  time            {}", t.join(", "));
     s
@@ -156,6 +159,7 @@ pub fn summary_json(output: &Path, grid: Option<&str>, r: &CookReport, validatio
         let restored = r.sections.iter().map(|(n, b)| serde_json::json!({"name": n, "bytes": b, "disk_bytes": disk(n)}));
         let disk_only = r.disk_sections.iter().filter(|(n, _)| !r.sections.iter().any(|(m, _)| m == n)).map(|(n, b)| serde_json::json!({"name": n, "bytes": 0, "disk_bytes": b}));
         o.insert("sections".into(), serde_json::json!(restored.chain(disk_only).collect::<Vec<_>>()));
+        o.insert("spilled_bytes".into(), serde_json::json!(r.spilled_bytes));
         o.insert("timings".into(), serde_json::json!(r.timings.iter().map(|(n, s)| (n.clone(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>()));
         o.insert(
             "frame_errors".into(),
