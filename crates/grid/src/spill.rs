@@ -324,9 +324,10 @@ mod file {
     use std::sync::Mutex;
 
     /// Address space taken for one spill file's mapping (not memory: pages
-    /// are only backed once the file has them); smaller halves are tried
+    /// are only backed once the file has them; a cook may hold a few dozen
+    /// stores, in 128 TiB of user address space); smaller halves are tried
     /// where the system refuses.
-    const RESERVE: usize = 1 << 40;
+    const RESERVE: usize = 1 << 38;
     const MIN_RESERVE: usize = 1 << 30;
 
     /// A vector of `T` in an unnamed temporary file, mapped shared.
