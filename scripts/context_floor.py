@@ -396,6 +396,8 @@ FEATURE_SETS = [
 
 def main():
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    if len(args) < 2:
+        sys.exit("usage: context_floor.py FILE.vdb E [GRID] [--json]")
     path, e = args[0], float(args[1])
     name = args[2] if len(args) > 2 else vdb.readAllGridMetadata(path)[0].name
     b, m, keep = load(path, name)
