@@ -56,83 +56,19 @@ bounding box as arrays (the 256^3 fog: ~3 GB, ~5 minutes on one core). A double 
 import json
 import math
 import os
-import subprocess
 import sys
-import tempfile
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 import pyopenvdb as vdb  # noqa: E402
-import zstandard  # noqa: E402
+from disk_floor import load, nano_bytes, zstd19, zstd_floor  # noqa: E402  (the grid and the zstd floor, as disk_floor.py measures them)
 
 T = 16  # zigzag values below T are symbols of their own; larger ones escape
 LN2 = math.log(2)
 PREDICTORS = ("lorenzo", "lmean", "prev")
 LGAMMA = np.vectorize(math.lgamma, otypes=[np.float64])
-
-
-def zstd19(a):
-    return len(zstandard.ZstdCompressor(level=19).compress(np.ascontiguousarray(a).tobytes()))
-
-
-# ---- the grid, as disk_floor.py reads it ---------------------------------------------
-
-def load(path, name):
-    try:
-        g = vdb.read(path, name)
-    except TypeError:  # a double grid, which pyopenvdb 10 cannot load: OpenVDB's vdb_tool reads it
-        from vdb_values import active_values
-        ijk, v, _ = active_values(path, name)
-        lo = ijk.min(0)
-        shape = tuple(int(n + 7) // 8 * 8 for n in ijk.max(0) - lo + 1)
-        values, active = np.zeros(shape, np.float64), np.zeros(shape, bool)
-        values[tuple((ijk - lo).T)], active[tuple((ijk - lo).T)] = v, True
-    else:
-        lo, hi = g.evalActiveVoxelBoundingBox()
-        shape = tuple((int(h - l + 1) + 7) // 8 * 8 for l, h in zip(lo, hi))
-        values = np.zeros(shape, np.float32)
-        g.copyToArray(values, ijk=lo)
-        ones = g.deepCopy()
-        for it in ones.iterOnValues():
-            it.value = 1.0
-        active = np.zeros(shape, np.float32)
-        ones.copyToArray(active, ijk=lo)
-        active = active > 0.5
-    nb = tuple(s // 8 for s in shape)
-    bricks = lambda a: a.reshape(nb[0], 8, nb[1], 8, nb[2], 8).transpose(0, 2, 4, 1, 3, 5).reshape(-1, 8, 8, 8)
-    b, m = bricks(values), bricks(active)
-    keep = m.reshape(len(m), -1).any(1)
-    return b[keep], m[keep], keep.reshape(nb)
-
-
-def nano_bytes(path, name, e):
-    with tempfile.TemporaryDirectory() as work:
-        out = os.path.join(work, "g.nvdb")
-        subprocess.run(["nanovdb_convert", "-g", name, "--fpN", "-a", str(e), "-z", "-f", path, out],
-                       check=True, capture_output=True)
-        return os.path.getsize(out)
-
-
-def residual_bytes(r):
-    """disk_floor.py's bytes: int8 when they fit, else zigzag u16 with its byte planes apart."""
-    if np.abs(r).max() < 128:
-        return r.astype(np.int8)
-    z = ((r.astype(np.int64) << 1) ^ (r.astype(np.int64) >> 63)).astype("<u2")
-    return np.frombuffer(z.tobytes(), np.uint8).reshape(-1, 2).T
-
-
-def zstd_floor(b, m, e):
-    """disk_floor.py's numbers: (levels, Lorenzo residuals, minima and masks) in bytes."""
-    mins = np.where(m, b, np.inf).reshape(len(b), -1).min(1)
-    q = np.rint((b - mins[:, None, None, None]) / (2 * e)).astype(np.int64)
-    q[~m] = 0
-    p = np.pad(q, ((0, 0), (1, 0), (1, 0), (1, 0)))
-    lorenzo = p[:, 1:, 1:, 1:] - (p[:, :-1, 1:, 1:] + p[:, 1:, :-1, 1:] + p[:, 1:, 1:, :-1] - p[:, :-1, :-1, 1:]
-                                  - p[:, :-1, 1:, :-1] - p[:, 1:, :-1, :-1] + p[:, :-1, :-1, :-1])
-    side = zstd19(mins.astype(np.float32)) + zstd19(np.packbits(m.reshape(len(m), -1), axis=1))
-    return zstd19(residual_bytes(q)), zstd19(residual_bytes(lorenzo)), side
 
 
 # ---- code lengths ----------------------------------------------------------------------

@@ -228,8 +228,6 @@ pub struct Builder {
     leaves_in: u64,
     /// Level of the tree being pushed.
     level: u32,
-    /// Where the pool goes once it passes a size (`None`: it stays in memory).
-    spill: Option<SpillPolicy>,
 }
 
 impl Default for Builder {
@@ -241,18 +239,7 @@ impl Default for Builder {
 impl Builder {
     pub fn new(channels: usize) -> Builder {
         let channels = channels.max(1);
-        Builder {
-            channels,
-            backgrounds: vec![None; channels],
-            pool: BrickPool::new(channels),
-            l3: Vec::new(),
-            l3_index: Interner::default(),
-            frames: Vec::new(),
-            bbox: None,
-            leaves_in: 0,
-            level: 0,
-            spill: None,
-        }
+        Builder { channels, backgrounds: vec![None; channels], pool: BrickPool::new(channels), l3: Vec::new(), l3_index: Interner::default(), frames: Vec::new(), bbox: None, leaves_in: 0, level: 0 }
     }
 
     pub fn channels(&self) -> usize {
@@ -263,7 +250,7 @@ impl Builder {
     /// sequence): as many channels, held to the backgrounds seen so far.
     pub fn successor(&self) -> Builder {
         let mut next = Builder { backgrounds: self.backgrounds.clone(), ..Builder::new(self.channels) };
-        next.spill_to(self.spill.clone());
+        next.spill_to(self.pool.stored.policy().cloned());
         next
     }
 
@@ -271,8 +258,7 @@ impl Builder {
     /// would pass `policy.above` bytes (`vdbcook_grid::spill`): the cook's
     /// memory stops growing with the sequence's distinct bricks.
     pub fn spill_to(&mut self, policy: Option<SpillPolicy>) {
-        self.pool.stored.set_policy(policy.clone());
-        self.spill = policy;
+        self.pool.stored.set_policy(policy);
     }
 
     /// Fills its pool in `storage` (an emptied pool's memory,
@@ -282,7 +268,7 @@ impl Builder {
     /// last one's).
     pub fn reuse(&mut self, mut storage: Store<Brick>) {
         if self.pool.stored.is_empty() && storage.is_empty() && storage.capacity() > self.pool.stored.capacity() {
-            storage.set_policy(self.spill.clone());
+            storage.set_policy(self.pool.stored.policy().cloned());
             self.pool.stored = storage;
         }
     }

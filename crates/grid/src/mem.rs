@@ -40,7 +40,8 @@ pub struct OutOfMemory {
     pub bytes: u64,
 }
 
-fn mib(bytes: u64) -> String {
+/// Bytes as MiB with one decimal, as the out-of-memory and spill errors write them.
+pub(crate) fn mib(bytes: u64) -> String {
     format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
 }
 

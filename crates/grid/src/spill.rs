@@ -15,7 +15,7 @@
 //! what it can and reads back the rest. Elsewhere than Linux a store never
 //! leaves memory.
 
-use crate::mem::OutOfMemory;
+use crate::mem::{mib, OutOfMemory};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -58,8 +58,11 @@ pub enum StoreError {
     Disk { what: &'static str, bytes: u64, dir: PathBuf, error: std::io::Error },
 }
 
-fn mib(bytes: u64) -> String {
-    format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
+/// Replaces `was` by `now` in a shared total; returns the total with `now`.
+fn recount(total: &AtomicU64, was: u64, now: u64) -> u64 {
+    let with = total.fetch_add(now, Ordering::Relaxed).wrapping_add(now);
+    total.fetch_sub(was, Ordering::Relaxed);
+    with.wrapping_sub(was)
 }
 
 /// A vector in memory, or spilled to a file (see the module's text).
@@ -128,8 +131,7 @@ impl<T: bytemuck::Pod> Store<T> {
     /// Counts `bytes` of memory in the policy's total instead of what was counted.
     fn count(&mut self, bytes: u64) {
         if let Some(p) = &self.policy {
-            p.held.fetch_add(bytes, Ordering::Relaxed);
-            p.held.fetch_sub(self.counted, Ordering::Relaxed);
+            recount(&p.held, self.counted, bytes);
         }
         self.counted = bytes;
     }
@@ -137,9 +139,7 @@ impl<T: bytemuck::Pod> Store<T> {
     /// Counts `bytes` of spill file in the policy's total instead of what was counted.
     fn file(&mut self, bytes: u64) {
         if let Some(p) = &self.policy {
-            let now = p.in_files.fetch_add(bytes, Ordering::Relaxed) + bytes;
-            p.in_files.fetch_sub(self.filed, Ordering::Relaxed);
-            p.peak_in_files.fetch_max(now.saturating_sub(self.filed), Ordering::Relaxed);
+            p.peak_in_files.fetch_max(recount(&p.in_files, self.filed, bytes), Ordering::Relaxed);
         }
         self.filed = bytes;
     }
@@ -170,6 +170,11 @@ impl<T: bytemuck::Pod + Send + Sync> Store<T> {
         self.policy = policy;
         self.count(bytes);
         self.file(filed);
+    }
+
+    /// The policy it spills under.
+    pub fn policy(&self) -> Option<&SpillPolicy> {
+        self.policy.as_ref()
     }
 
     /// Asks for transparent huge pages where it is in memory (see
@@ -502,11 +507,13 @@ mod file {
         REGIONS.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// The process's file-backed and shared resident bytes (`/proc/self/statm`).
+    /// The process's file-backed and shared resident bytes (`/proc/self/statm`, in pages).
     fn shared_resident() -> Option<u64> {
         let s = std::fs::read_to_string("/proc/self/statm").ok()?;
         let pages: u64 = s.split_whitespace().nth(2)?.parse().ok()?;
-        Some(pages * 4096)
+        // SAFETY: sysconf only reads a system constant.
+        let page = u64::try_from(unsafe { libc::sysconf(libc::_SC_PAGESIZE) }).ok().filter(|&p| p > 0)?;
+        Some(pages * page)
     }
 
     /// Starts the thread that keeps the spill files' mapped pages out of the

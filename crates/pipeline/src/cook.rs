@@ -443,8 +443,7 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         all.push(CookOptions { levels: s.lods, ..reference_options() });
     }
     // Pools that pass the size go to a file beside the output (or the system's temporary directory).
-    let spill_dir =
-        job.output.and_then(|(p, _)| p.parent()).filter(|d| !d.as_os_str().is_empty()).map_or_else(|| if job.output.is_some() { PathBuf::from(".") } else { std::env::temp_dir() }, Path::to_path_buf);
+    let spill_dir = job.output.map_or_else(std::env::temp_dir, |(p, _)| vdbcook_vpak::directory_of(p));
     // One budget for every cooker's buffers.
     let spill = s.spill_above.bytes().map(|above| vdbcook_grid::spill::SpillPolicy::new(spill_dir, above));
     for o in &mut all {

@@ -46,7 +46,7 @@ impl AtomicFile {
         if !overwrite && path.exists() {
             return Err(Error::Exists(path.display().to_string()));
         }
-        let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf();
+        let dir = directory_of(path);
         let (file, named) = match unnamed::create(&dir) {
             Some(f) => (f, None),
             None => {
@@ -104,6 +104,12 @@ impl Drop for AtomicFile {
             let _ = std::fs::remove_file(tmp);
         }
     }
+}
+
+/// The directory a file at `path` goes in (`.` for a bare name): where its
+/// temporary files go too.
+pub fn directory_of(path: &Path) -> PathBuf {
+    path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf()
 }
 
 /// A fresh hidden name beside `path` (never an existing file or symlink): pid, time and a counter.

@@ -38,7 +38,7 @@ mod tiles;
 pub mod time;
 
 pub use asset::Asset;
-pub use atomic::{write_atomic, write_atomic_with, write_file, AtomicFile};
+pub use atomic::{directory_of, write_atomic, write_atomic_with, write_file, AtomicFile};
 pub use check::{Checked, GpuChannel, GPU_CHANNEL_WORDS, MAX_CHANNELS};
 pub use direct::DirectWriter;
 pub use layout::{AtlasInfo, AtlasLayout, BrickSource, Format, Plane, PlaneInfo, BRICK_VOXELS, MAX_BRICK_BYTES};
