@@ -8,7 +8,7 @@
 
 use crate::layout::Laid;
 use crate::metadata::Placement;
-use crate::report::Parts;
+use crate::report::{Parts, TreeFigures};
 use crate::{choose, cluster, dedup, encode, errors, layout};
 use crate::{BudgetReport, BudgetTry, CookReport, Cooker, Error, Progress, MAX_CLUSTER_CHANNELS};
 use std::time::Instant;
@@ -130,7 +130,9 @@ impl Cooker {
         // Layout: node arrays, brick ranges and tables, channel tables, atlases.
         let t0 = Instant::now();
         let planes_of = layout::planes_of(&encoded.specs, channels);
-        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(&nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref())?;
+        // The node arrays move into their sections: what else needs of them, first.
+        let (tree, index_offset) = (TreeFigures::of(&nodes), nodes.offset);
+        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref())?;
         let value_ranges = self.value_ranges(built, channels);
         let peaks = errors::peaks(built, &value_ranges);
         let specs = encoded.specs.clone();
@@ -140,7 +142,7 @@ impl Cooker {
 
         // Metadata, the first section.
         let placement = Placement { specs: &specs, group_of: &group_of, planes_of: &planes_of, planes, bricks: stored.keep.len() };
-        let meta = self.metadata(built, first, &nodes, &value_ranges, placement);
+        let meta = self.metadata(built, first, index_offset, &value_ranges, placement);
         sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()?.into() });
         lap(&mut timings, "layout", t0);
 
@@ -148,7 +150,7 @@ impl Cooker {
         let parts = Parts {
             built,
             first,
-            nodes: &nodes,
+            tree,
             meta: &meta,
             sections: &sections,
             stored_bricks: stored.keep.len(),

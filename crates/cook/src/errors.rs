@@ -2,7 +2,7 @@
 //! source (each coarser level against the level filtered from the source).
 
 use rayon::prelude::*;
-use vdbcook_encode::{Brick, ErrorStats};
+use vdbcook_encode::{Brick, ErrorStats, NonFinite};
 use vdbcook_flipbook::Built;
 
 /// A stored brick decoder: pool brick and the channels wanted (`want[c]`;
@@ -73,6 +73,30 @@ pub(crate) fn frame_errors(built: &Built, first: u32, own: &[u32], decoded: &Dec
     by_frame(voxel_errors(built, decoded), &tree_level, first, own)
 }
 
+/// One leaf's [`ErrorStats`] in half the bytes (its counts are at most
+/// 512), for a table over every L3 node of a segment.
+#[derive(Clone, Copy)]
+struct LeafError {
+    sum_sq: f64,
+    max_abs: f64,
+    /// Measured voxels, then NaN, +∞ and −∞ references.
+    counts: [u16; 4],
+}
+
+impl From<ErrorStats> for LeafError {
+    fn from(e: ErrorStats) -> LeafError {
+        let n = |v: u64| u16::try_from(v).unwrap_or(u16::MAX);
+        LeafError { sum_sq: e.sum_sq, max_abs: e.max_abs, counts: [n(e.count), n(e.non_finite.nan), n(e.non_finite.pos_inf), n(e.non_finite.neg_inf)] }
+    }
+}
+
+impl LeafError {
+    fn stats(&self) -> ErrorStats {
+        let [count, nan, pos_inf, neg_inf] = self.counts.map(u64::from);
+        ErrorStats { count, sum_sq: self.sum_sq, max_abs: self.max_abs, non_finite: NonFinite { nan, pos_inf, neg_inf } }
+    }
+}
+
 /// Error of decoded bricks (`decoded(pool brick)`, one [`Brick`] per
 /// channel) against the source, per tree (frames and levels, in push order)
 /// and channel, over each channel's own active voxels.
@@ -81,7 +105,7 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
     let pool = built.pool.bricks();
     if channels == 1 {
         // Per L3 node: its error over its own active voxels (the channel's mask).
-        let per_l3: Vec<ErrorStats> = built
+        let per_l3: Vec<LeafError> = built
             .l3
             .par_iter()
             .map(|l| {
@@ -89,7 +113,7 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
                 if let (Some(src), Some(Some(dec))) = (pool.try_get(l.brick as usize, 0), decoded(l.brick, &[]).and_then(|d| d.into_iter().next())) {
                     e.add_masked(src, &dec, &l.mask);
                 }
-                e
+                LeafError::from(e)
             })
             .collect();
         return built
@@ -98,7 +122,7 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
             .map(|f| {
                 let mut e = ErrorStats::default();
                 for &(_, id) in &f.leaves {
-                    e.merge(&per_l3[id as usize]);
+                    e.merge(&per_l3[id as usize].stats());
                 }
                 vec![e]
             })

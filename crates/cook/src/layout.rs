@@ -8,7 +8,7 @@ use vdbcook_encode::{Encoded, PlaneSpec};
 use vdbcook_grid::spill::{SpillPolicy, Store};
 use vdbcook_vpak::layout::{pack_atlas_into, plan_atlases, AtlasLayout};
 use vdbcook_vpak::nodes::Nodes;
-use vdbcook_vpak::{kind, PlaneInfo, Section};
+use vdbcook_vpak::{kind, Bytes, PlaneInfo, Section};
 
 /// The sections of an asset but its metadata, and what they cost.
 pub(crate) struct Laid {
@@ -37,7 +37,7 @@ pub(crate) fn planes_of(specs: &[PlaneSpec], channels: usize) -> Vec<Vec<usize>>
 /// Lays out the stored bricks of every plane of `encoded` in atlases of at
 /// most `max_texture_dim` texels a side (atlases under `spill`: see
 /// `vdbcook_grid::spill`).
-pub(crate) fn lay_out(nodes: &Nodes, encoded: &Encoded, stored: &Stored, planes_of: &[Vec<usize>], max_texture_dim: u32, spill: Option<&SpillPolicy>) -> Result<Laid, Error> {
+pub(crate) fn lay_out(nodes: Nodes, encoded: &Encoded, stored: &Stored, planes_of: &[Vec<usize>], max_texture_dim: u32, spill: Option<&SpillPolicy>) -> Result<Laid, Error> {
     let specs = &encoded.specs;
     let mut sections = node_sections(nodes);
     let mut plane_infos = Vec::with_capacity(specs.len());
@@ -53,10 +53,10 @@ pub(crate) fn lay_out(nodes: &Nodes, encoded: &Encoded, stored: &Stored, planes_
         let slots = info.range_slots() as usize;
         let ranges: Vec<u32> = pkeep.iter().flat_map(|&k| (0..slots).flat_map(move |s| spec.channels.get(s).map_or([0.0; 2], |&c| encoded.range(k, c)))).map(f32::to_bits).collect();
         plane_bytes[p] += 4 * ranges.len() as u64;
-        sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: words(&ranges).into() });
+        sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: Bytes::from_words(ranges) });
         if info.bricks as usize != stored.keep.len() && !mixed_plane(p) {
             plane_bytes[p] += 4 * table.len() as u64;
-            sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: words(table).into() });
+            sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: Bytes::from_words(table.clone()) });
         }
         let bricks = encoded.plane(p, pkeep);
         for atlas in &info.atlases {
@@ -65,7 +65,7 @@ pub(crate) fn lay_out(nodes: &Nodes, encoded: &Encoded, stored: &Stored, planes_
             data.extend_zeroed(layout.byte_len(), "an atlas")?;
             pack_atlas_into(&layout, &bricks, &mut data);
             plane_bytes[p] += data.len() as u64;
-            atlas_sections.push(Section { kind: kind::ATLAS, index: atlas_sections.len() as u32, data: vdbcook_vpak::Bytes::Held(Box::new(data)) });
+            atlas_sections.push(Section { kind: kind::ATLAS, index: atlas_sections.len() as u32, data: Bytes::Held(Box::new(data)) });
         }
         plane_infos.push(info);
     }
@@ -83,32 +83,16 @@ pub(crate) fn lay_out(nodes: &Nodes, encoded: &Encoded, stored: &Stored, planes_
             }
         }
         channel_table_bytes[c] = 4 * table.len() as u64;
-        sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: words(&table).into() });
+        sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: Bytes::from_words(table) });
     }
     sections.extend(atlas_sections);
     Ok(Laid { sections, planes: plane_infos, plane_bytes, channel_table_bytes })
 }
 
-/// Little-endian bytes of `u32`s (a plain copy on little-endian machines).
-fn words(v: &[u32]) -> Vec<u8> {
-    if cfg!(target_endian = "little") {
-        bytemuck::cast_slice(v).to_vec()
-    } else {
-        v.iter().flat_map(|w| w.to_le_bytes()).collect()
-    }
-}
-
-fn node_sections(n: &Nodes) -> Vec<Section> {
-    [
-        (kind::FRAMES, &n.frames),
-        (kind::L1_NODES, &n.l1),
-        (kind::L1_ENTRIES, &n.l1_entries),
-        (kind::L2_NODES, &n.l2),
-        (kind::L2_ENTRIES, &n.l2_entries),
-        (kind::L3_NODES, &n.l3),
-        (kind::TILES, &n.tiles),
-    ]
-    .into_iter()
-    .map(|(k, v)| Section { kind: k, index: 0, data: words(v).into() })
-    .collect()
+/// The node arrays' sections, holding the arrays themselves (no copy).
+fn node_sections(n: Nodes) -> Vec<Section> {
+    [(kind::FRAMES, n.frames), (kind::L1_NODES, n.l1), (kind::L1_ENTRIES, n.l1_entries), (kind::L2_NODES, n.l2), (kind::L2_ENTRIES, n.l2_entries), (kind::L3_NODES, n.l3), (kind::TILES, n.tiles)]
+        .into_iter()
+        .map(|(k, v)| Section { kind: k, index: 0, data: Bytes::from_words(v) })
+        .collect()
 }

@@ -6,7 +6,6 @@ use vdbcook_encode::PlaneSpec;
 use vdbcook_flipbook::Built;
 use vdbcook_grid::lod::Filter;
 use vdbcook_grid::Transform;
-use vdbcook_vpak::nodes::Nodes;
 use vdbcook_vpak::{Channel, LevelFilter, Metadata, PlaneInfo};
 
 /// Where the channels are stored.
@@ -23,7 +22,7 @@ pub(crate) struct Placement<'a> {
 impl Cooker {
     /// The metadata of the trees of `built` (finest level `first`), whose
     /// channels hold `value_ranges`.
-    pub(crate) fn metadata(&self, built: &Built, first: u32, nodes: &Nodes, value_ranges: &[[f32; 2]], at: Placement) -> Metadata {
+    pub(crate) fn metadata(&self, built: &Built, first: u32, index_offset: [i32; 3], value_ranges: &[[f32; 2]], at: Placement) -> Metadata {
         let transform = self.transform.as_ref().map_or_else(Transform::identity, |f| f.transform);
         // Each channel's place: its (first) plane and first lane there.
         let place: Vec<(u32, u32)> = at
@@ -41,7 +40,7 @@ impl Cooker {
             frame_count: self.frames.len() as u32,
             map_type: transform.map_type.vdb_name().to_string(),
             transform: transform.matrix,
-            index_offset: nodes.offset,
+            index_offset,
             index_bbox: built.bbox.map(|b| (b.min.to_array(), b.max.to_array())),
             channels: self
                 .channels

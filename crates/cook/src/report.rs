@@ -302,11 +302,26 @@ macro_rules! figures_deref {
 }
 figures_deref!(ChannelReport, CookReport, LevelReport);
 
+/// What the report says of the node arrays.
+pub(crate) struct TreeFigures {
+    bytes: u64,
+    l1: usize,
+    l2: usize,
+    l3: usize,
+    tiles: usize,
+}
+
+impl TreeFigures {
+    pub(crate) fn of(n: &Nodes) -> TreeFigures {
+        TreeFigures { bytes: n.byte_sizes().iter().map(|(_, b)| *b as u64).sum(), l1: n.l1_count(), l2: n.l2_count(), l3: n.l3_count(), tiles: n.tile_count() }
+    }
+}
+
 /// What the report is made of.
 pub(crate) struct Parts<'a> {
     pub(crate) built: &'a Built,
     pub(crate) first: u32,
-    pub(crate) nodes: &'a Nodes,
+    pub(crate) tree: TreeFigures,
     pub(crate) meta: &'a Metadata,
     /// Every section, the metadata first.
     pub(crate) sections: &'a [Section],
@@ -322,13 +337,12 @@ pub(crate) struct Parts<'a> {
 impl Cooker {
     /// The report of an asset made of `parts`.
     pub(crate) fn report(&self, parts: Parts, clustering: Option<ClusterReport>, timings: Vec<(String, f64)>) -> CookReport {
-        let Parts { built, first, nodes, meta, sections, stored_bricks, specs, planes_of, plane_bytes, channel_table_bytes, measured, peaks } = parts;
+        let Parts { built, first, tree, meta, sections, stored_bricks, specs, planes_of, plane_bytes, channel_table_bytes, measured, peaks } = parts;
         let channels = peaks.len();
         let totals = &measured.totals;
         let file_bytes = vdbcook_vpak::file_len(sections);
         // What a renderer uploads (the sections are not supercompressed yet).
         let gpu_bytes = sections.iter().filter(|s| kind::uploaded(s.kind)).map(|s| s.data.len() as u64).sum();
-        let tree_bytes: u64 = nodes.byte_sizes().iter().map(|(_, b)| *b as u64).sum();
         let active: u64 = self.frames.iter().map(|f| f.active_voxels).sum();
         let psnr = |c: usize| totals[c].psnr(peaks[c]);
         let channel_reports: Vec<ChannelReport> = meta
@@ -363,16 +377,16 @@ impl Cooker {
             bricks: built.leaves_in,
             unique_bricks: built.pool.len(),
             stored_bricks,
-            l1_nodes: nodes.l1_count(),
-            l2_nodes: nodes.l2_count(),
-            l3_nodes: nodes.l3_count(),
-            tiles: nodes.tile_count(),
+            l1_nodes: tree.l1,
+            l2_nodes: tree.l2,
+            l3_nodes: tree.l3,
+            tiles: tree.tiles,
             textures: meta.texture_count(),
             sections: sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect(),
             disk_sections: sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect(),
             file_bytes,
             gpu_bytes,
-            tree_bytes,
+            tree_bytes: tree.bytes,
             thesis_tree_bytes: vdbcook_flipbook::thesis_tree_bytes(self.frames.len(), built.leaves_in),
             bits_per_active_voxel: if active > 0 { file_bytes as f64 * 8.0 / active as f64 } else { 0.0 },
             value_range: self.value_ranges(built, 1)[0],

@@ -15,6 +15,7 @@
 //! the union bounding box of all frames is known and the caller has
 //! remapped bricks (clustering, encoded-brick deduplication).
 
+use ids::IdTable;
 use merge::{merge_channels, Merged};
 pub use pool::BrickPool;
 use pool::{Channel, Made};
@@ -114,60 +115,51 @@ impl std::hash::Hasher for WordHasher {
 }
 
 /// Ids of items by content hash, for deduplication: equal hashes are told
-/// apart by comparing the items themselves.
+/// apart by comparing the items themselves.  Each item's hash is held once,
+/// beside a table of ids: 8 bytes an item and 5 a table slot, where a map
+/// from hash to id took 16 bytes a slot.
 #[derive(Default)]
 pub struct HashIndex {
-    /// Hash -> the first item with it.
-    first: Map<u64, u32>,
-    /// Further items whose hash equals an earlier, different item's.
-    more: Map<u64, Vec<u32>>,
+    /// Per id, its item's hash.
+    hashes: Vec<u64>,
+    ids: IdTable,
 }
 
 impl HashIndex {
     pub fn reserve(&mut self, n: usize) {
-        self.first.reserve(n);
+        self.hashes.reserve(n);
+        let hashes = &self.hashes;
+        self.ids.reserve_or_abort(n, |id| hashes.get(id as usize).copied().unwrap_or(0));
     }
 
     /// The id of an item with hash `h` for which `same(id)` holds, if any.
     pub fn find(&self, h: u64, same: impl Fn(u32) -> bool) -> Option<u32> {
-        let first = *self.first.get(&h)?;
-        if same(first) {
-            return Some(first);
-        }
-        self.more.get(&h).and_then(|ids| ids.iter().copied().find(|&id| same(id)))
+        self.ids.find(h, |id| self.hashes.get(id as usize) == Some(&h) && same(id))
     }
 
     /// Records item `id`, with hash `h`, as new.
     pub fn add(&mut self, h: u64, id: u32) {
-        match self.first.entry(h) {
-            std::collections::hash_map::Entry::Occupied(_) => self.more.entry(h).or_default().push(id),
-            std::collections::hash_map::Entry::Vacant(e) => {
-                e.insert(id);
-            }
+        let i = id as usize;
+        if i >= self.hashes.len() {
+            self.hashes.resize(i + 1, 0);
         }
+        self.hashes[i] = h;
+        let hashes = &self.hashes;
+        self.ids.insert(h, id, |id| hashes.get(id as usize).copied().unwrap_or(0));
     }
 }
 
-/// Hash-consing table: ids in first-seen order (node keys are variable-length
-/// `u32` words; L3 nodes are their own keys).
-struct Interner<K = Vec<u32>> {
-    ids: Map<K, u32>,
+/// Hash-consing table of L1, L2 and tile nodes: ids in first-seen order
+/// (their keys are variable-length `u32` words).
+#[derive(Default)]
+struct Interner {
+    ids: Map<Vec<u32>, u32>,
     count: u32,
 }
 
-impl<K> Default for Interner<K> {
-    fn default() -> Self {
-        Interner { ids: Map::default(), count: 0 }
-    }
-}
-
-impl<K: std::hash::Hash + Eq> Interner<K> {
-    fn reserve(&mut self, n: usize) {
-        self.ids.reserve(n);
-    }
-
+impl Interner {
     /// Returns `(id, new)`.
-    fn intern(&mut self, key: K) -> (u32, bool) {
+    fn intern(&mut self, key: Vec<u32>) -> (u32, bool) {
         let next = self.count;
         let id = *self.ids.entry(key).or_insert(next);
         if id == next {
@@ -180,10 +172,30 @@ impl<K: std::hash::Hash + Eq> Interner<K> {
 }
 
 /// A distinct L3 node: active mask (the union over channels) and brick id.
+/// Plain bytes (its padding spelled out), so that the nodes of a long
+/// segment can spill to a file with the bricks ([`Store`]).
+#[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct L3 {
     pub mask: [u64; 8],
     pub brick: u32,
+    pad: u32,
+}
+
+// SAFETY: `repr(C)` of integer fields with no implicit padding (64 + 4 + 4 bytes).
+unsafe impl bytemuck::Zeroable for L3 {}
+// SAFETY: as above; every bit pattern is a valid `L3`.
+unsafe impl bytemuck::Pod for L3 {}
+
+impl L3 {
+    pub fn new(mask: [u64; 8], brick: u32) -> L3 {
+        L3 { mask, brick, pad: 0 }
+    }
+
+    /// Its content hash, for hash-consing.
+    fn hash(mask: &[u64; 8], brick: u32) -> u64 {
+        xxhash_rust::xxh3::xxh3_64_with_seed(bytemuck::cast_slice(mask), u64::from(brick))
+    }
 }
 
 /// What one frame holds, in source index space.
@@ -221,8 +233,9 @@ pub struct Builder {
     channels: usize,
     backgrounds: Vec<Option<f32>>,
     pool: BrickPool,
-    l3: Vec<L3>,
-    l3_index: Interner<L3>,
+    l3: Store<L3>,
+    /// `l3`'s ids by content.
+    l3_index: IdTable,
     frames: Vec<FrameLeaves>,
     bbox: Option<Bbox>,
     leaves_in: u64,
@@ -239,7 +252,17 @@ impl Default for Builder {
 impl Builder {
     pub fn new(channels: usize) -> Builder {
         let channels = channels.max(1);
-        Builder { channels, backgrounds: vec![None; channels], pool: BrickPool::new(channels), l3: Vec::new(), l3_index: Interner::default(), frames: Vec::new(), bbox: None, leaves_in: 0, level: 0 }
+        Builder {
+            channels,
+            backgrounds: vec![None; channels],
+            pool: BrickPool::new(channels),
+            l3: Store::default(),
+            l3_index: IdTable::default(),
+            frames: Vec::new(),
+            bbox: None,
+            leaves_in: 0,
+            level: 0,
+        }
     }
 
     pub fn channels(&self) -> usize {
@@ -254,10 +277,12 @@ impl Builder {
         next
     }
 
-    /// Moves the brick pool into a temporary file in `policy.dir` once it
-    /// would pass `policy.above` bytes (`vdbcook_grid::spill`): the cook's
-    /// memory stops growing with the sequence's distinct bricks.
+    /// Moves the brick pool and the L3 nodes into temporary files in
+    /// `policy.dir` once they would pass `policy.above` bytes
+    /// (`vdbcook_grid::spill`): the cook's memory stops growing with the
+    /// sequence's distinct bricks.
     pub fn spill_to(&mut self, policy: Option<SpillPolicy>) {
+        self.l3.set_policy(policy.clone());
         self.pool.stored.set_policy(policy);
     }
 
@@ -320,8 +345,9 @@ impl Builder {
         let shares = self.pool.shares_constants();
         let known: Vec<Option<u32>> = (0..n * c).map(|j| m.parts[j].known_constant(m.positions[j / c].1, bg(j % c)).filter(|_| shares)).collect();
         self.pool.reserve(n, known.iter().filter(|k| k.is_none()).count())?;
-        self.l3.reserve(n);
-        self.l3_index.reserve(n);
+        self.l3.try_reserve(n, "the L3 nodes")?;
+        let l3 = &self.l3;
+        self.l3_index.reserve(n, "the L3 nodes' index", |id| l3.get(id as usize).map_or(0, |l| L3::hash(&l.mask, l.brick)))?;
         fl.leaves.reserve(n);
         let mut ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; c];
         // A bounded batch at a time (in position order): the batch's bricks
@@ -378,13 +404,14 @@ impl Builder {
                     *acc = [acc[0].min(r[0]), acc[1].max(r[1])];
                 }
                 let brick = self.pool.settle(channels, &mut next, *h)?;
-                let key = L3 { mask: mask.0, brick };
-                if u32::try_from(self.l3.len()).is_err() {
+                let key = L3::new(mask.0, brick);
+                let Ok(next_id) = u32::try_from(self.l3.len()) else {
                     return Err(Error::Overflow { what: "L3 nodes" });
-                }
-                let (id, new) = self.l3_index.intern(key);
+                };
+                let l3 = &self.l3;
+                let (id, new) = self.l3_index.intern(L3::hash(&key.mask, brick), next_id, |id| l3.get(id as usize) == Some(&key), |id| l3.get(id as usize).map_or(0, |l| L3::hash(&l.mask, l.brick)));
                 if new {
-                    self.l3.push(key);
+                    self.l3.push(key, "the L3 nodes")?;
                 }
                 fl.leaves.push((origin, id));
                 fl.active_voxels += u64::from(mask.count_on());
@@ -438,7 +465,7 @@ impl Builder {
     }
 
     /// Ends the stream.  Fails when the frames do not fit one L1 node.
-    pub fn finish(self) -> Result<Built, Error> {
+    pub fn finish(mut self) -> Result<Built, Error> {
         let offset = match self.bbox {
             None => Coord::new(0, 0, 0),
             Some(b) => {
@@ -453,6 +480,8 @@ impl Builder {
             }
         };
         let backgrounds = self.backgrounds.iter().map(|b| b.unwrap_or(0.0)).collect();
+        // Deduplication is over: its indexes (the L3 nodes' goes with `self`) are not kept.
+        self.pool.index = HashIndex::default();
         Ok(Built { channels: self.channels, backgrounds, pool: self.pool, l3: self.l3, frames: self.frames, bbox: self.bbox, offset, leaves_in: self.leaves_in })
     }
 }
@@ -462,8 +491,10 @@ pub struct Built {
     pub channels: usize,
     /// Per channel, the background of its grids (0 when it never had one).
     pub backgrounds: Vec<f32>,
+    /// The distinct bricks (without their hash index: a brick inserted
+    /// now is added, not matched against those before).
     pub pool: BrickPool,
-    pub l3: Vec<L3>,
+    pub l3: Store<L3>,
     pub frames: Vec<FrameLeaves>,
     /// Union of every frame's active bbox (leaf- and tile-granular), in source index space.
     pub bbox: Option<Bbox>,
@@ -514,7 +545,7 @@ impl Built {
         let mut l3_new = vec![u32::MAX; self.l3.len()];
         let mut brick_new = vec![u32::MAX; self.pool.len()];
         let mut pool = BrickPool::new(self.channels);
-        let mut l3 = Vec::new();
+        let mut l3 = Store::with_policy(self.l3.policy().cloned());
         for (old, new) in l3_new.iter_mut().enumerate().filter(|&(old, _)| used[old]) {
             let node = self.l3[old];
             let b = node.brick as usize;
@@ -522,7 +553,7 @@ impl Built {
                 brick_new[b] = pool.insert(&self.pool.brick(b).ok_or(Error::Overflow { what: "bricks" })?)?;
             }
             *new = l3.len() as u32;
-            l3.push(L3 { mask: node.mask, brick: brick_new[b] });
+            l3.push(L3::new(node.mask, brick_new[b]), "the L3 nodes")?;
         }
         let frames = frames
             .into_iter()
@@ -539,20 +570,26 @@ impl Built {
     pub fn nodes(&self, brick_of: impl Fn(u32) -> u32) -> Result<Nodes, Error> {
         let off = self.offset;
         let mut n = Nodes { offset: off.to_array(), channels: self.channels, ..Nodes::default() };
-        // L3 nodes, re-interned after the brick remap (two L3s may now be equal).
-        let mut l3_table = Interner::<L3>::default();
-        l3_table.reserve(self.l3.len());
+        // L3 nodes, re-interned after the brick remap (two L3s may now be
+        // equal): each distinct one by the index of its first in `self.l3`.
+        let remapped = |i: u32| self.l3.get(i as usize).map(|l| (l.mask, brick_of(l.brick)));
+        let hash_of = |i: u32| remapped(i).map_or(0, |(m, b)| L3::hash(&m, b));
+        let mut l3_table = IdTable::default();
+        l3_table.reserve(self.l3.len(), "the L3 nodes' index", hash_of)?;
         let mut l3_id = Vec::with_capacity(self.l3.len());
-        let mut distinct = Vec::with_capacity(self.l3.len());
-        for l in &self.l3 {
-            let key = L3 { mask: l.mask, brick: brick_of(l.brick) };
-            let (id, new) = l3_table.intern(key);
-            if new {
-                distinct.push((key.mask, key.brick));
+        let mut distinct: Vec<u32> = Vec::new();
+        for i in 0..self.l3.len() as u32 {
+            let Some(key) = remapped(i) else { break };
+            let (first, _) = l3_table.intern(L3::hash(&key.0, key.1), i, |j| remapped(j) == Some(key), hash_of);
+            if first == i {
+                l3_id.push(distinct.len() as u32);
+                distinct.push(i);
+            } else {
+                l3_id.push(l3_id[first as usize]);
             }
-            l3_id.push(id);
         }
-        n.l3 = nodes::l3_words(&distinct).ok_or(Error::Overflow { what: "L3 words" })?;
+        drop(l3_table);
+        n.l3 = nodes::l3_words(distinct.len(), distinct.iter().filter_map(|&i| remapped(i))).ok_or(Error::Overflow { what: "L3 words" })?;
         let mut tile_table = Interner::default();
         let mut tile = |values: &[f32], n: &mut Nodes| -> u32 {
             let key: Vec<u32> = values.iter().map(|v| v.to_bits()).collect();
@@ -648,6 +685,7 @@ pub fn thesis_tree_bytes(frames: usize, leaves: u64) -> u64 {
     frames as u64 * (4100 + 32768 * 516) + leaves * 68
 }
 
+mod ids;
 mod merge;
 mod pool;
 #[cfg(test)]

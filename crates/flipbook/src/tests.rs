@@ -587,3 +587,47 @@ fn a_brick_is_shared_only_when_every_channel_matches() {
     builder.push(&[None, Some(&t)]).unwrap();
     assert!(matches!(builder.push(&[Some(&d)]), Err(Error::Channels { found: 1, expected: 2 })));
 }
+
+#[test]
+fn hash_index_tells_apart_items_of_one_hash_and_ignores_other_hashes() {
+    let mut index = HashIndex::default();
+    index.reserve(3);
+    for (h, id) in [(7, 0), (7, 1), (9, 2)] {
+        index.add(h, id);
+    }
+    // Items of one hash are told apart by `same` ...
+    assert_eq!(index.find(7, |id| id == 1), Some(1));
+    assert_eq!(index.find(7, |id| id == 0), Some(0));
+    // ... and an item of another hash is never one of them, whatever `same` says.
+    assert_eq!(index.find(7, |id| id == 2), None);
+    assert_eq!(index.find(9, |_| true), Some(2));
+    assert_eq!(index.find(8, |_| true), None);
+    // Past its reservation it grows and still finds every item.
+    let hash = |id: u32| xxhash_rust::xxh3::xxh3_64(&id.to_le_bytes()) & 0xffff;
+    for id in 3..20_000 {
+        index.add(hash(id), id);
+    }
+    assert!((3..20_000).all(|id| index.find(hash(id), |k| k == id) == Some(id)));
+}
+
+#[test]
+fn l3_nodes_spill_with_the_bricks_and_give_the_same_nodes() {
+    let frame = |seed: u32| grid((0..60).map(|i| leaf(Coord::new(8 * (i % 10), 8 * (i / 10), 0), seed + i as u32 % 7, 64 + i as usize)).collect(), Vec::new());
+    let build = |spill: Option<SpillPolicy>| {
+        let mut b = Builder::new(1);
+        b.spill_to(spill);
+        for seed in [1, 2, 1, 30] {
+            b.push(&[Some(&frame(seed))]).unwrap();
+        }
+        b.finish().unwrap()
+    };
+    let (memory, spilled) = (build(None), build(Some(SpillPolicy::new(std::env::temp_dir(), 1))));
+    assert!(!memory.l3.is_spilled() && spilled.l3.is_spilled());
+    assert_eq!(&spilled.l3[..], &memory.l3[..]);
+    assert_eq!(spilled.nodes(|id| id).unwrap(), memory.nodes(|id| id).unwrap());
+    // Leaves whose bricks become one (as clustering makes them) become one L3 node.
+    let n = memory.nodes(|_| 0).unwrap();
+    let distinct_masks: std::collections::HashSet<[u64; 8]> = memory.l3.iter().map(|l| l.mask).collect();
+    assert!(memory.l3.len() > distinct_masks.len());
+    assert_eq!(n.l3_count(), distinct_masks.len());
+}

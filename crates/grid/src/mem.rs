@@ -29,6 +29,11 @@ pub fn try_reserve<T>(v: &mut Vec<T>, additional: usize, what: &'static str) -> 
     fallible(|| v.try_reserve(additional)).map_err(|_| OutOfMemory { what, bytes: additional.saturating_add(v.len()).saturating_mul(std::mem::size_of::<T>()) as u64 })
 }
 
+/// `Vec::try_reserve_exact` under [`fallible`], as [`try_reserve`].
+pub fn try_reserve_exact<T>(v: &mut Vec<T>, additional: usize, what: &'static str) -> Result<(), OutOfMemory> {
+    fallible(|| v.try_reserve_exact(additional)).map_err(|_| OutOfMemory { what, bytes: additional.saturating_add(v.len()).saturating_mul(std::mem::size_of::<T>()) as u64 })
+}
+
 /// What to do when memory runs out, in both messages.
 const ADVICE: &str = "cut the sequence into shorter segments (--segment-frames), cook fewer grids at once, or give it more memory";
 

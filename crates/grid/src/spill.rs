@@ -223,14 +223,26 @@ impl<T: bytemuck::Pod + Send + Sync> Store<T> {
             (Data::Memory(v), Some(dir)) => {
                 let mut f = SpillVec::new(&dir).map_err(|e| disk(&dir, e))?;
                 f.reserve(v.len() + additional).map_err(|e| disk(&dir, e))?;
-                f.extend_from_slice(v);
+                // A chunk at a time, each chunk's pages out of the process
+                // as soon as it is copied (the file keeps them): the move
+                // holds little more than the memory it empties.
+                for chunk in v.chunks((MOVE_CHUNK / size).max(1) as usize) {
+                    f.extend_from_slice(chunk);
+                    file::trim();
+                }
                 self.data = Data::File(f);
                 self.count(0);
                 self.file(self.file_bytes());
                 Ok(())
             }
             (Data::Memory(v), _) => {
-                crate::mem::try_reserve(v, additional, what)?;
+                // Room for what is asked, and no more where doubling would
+                // pass the budget (untouched room costs no memory, but counts).
+                let doubled = (v.capacity() as u64).saturating_mul(2 * size);
+                match self.policy.as_ref().is_some_and(|p| p.held().saturating_sub(self.counted).saturating_add(doubled) > p.above) {
+                    true => crate::mem::try_reserve_exact(v, additional, what)?,
+                    false => crate::mem::try_reserve(v, additional, what)?,
+                }
                 let bytes = v.capacity() as u64 * size;
                 self.count(bytes);
                 Ok(())
@@ -254,6 +266,18 @@ impl<T: bytemuck::Pod + Send + Sync> Store<T> {
             Data::File(f) => f.extend_from_slice(items),
         }
         Ok(())
+    }
+
+    /// Appends one item (reserving room first when it has none: reserve
+    /// ahead for many pushes).
+    pub fn push(&mut self, item: T, what: &'static str) -> Result<(), StoreError> {
+        match &mut self.data {
+            Data::Memory(v) if v.len() < v.capacity() => {
+                v.push(item);
+                Ok(())
+            }
+            _ => self.extend_from_slice(std::slice::from_ref(&item), what),
+        }
     }
 
     /// Bytes it holds with `additional` more elements.
@@ -316,6 +340,9 @@ impl<T: bytemuck::Pod + Send + Sync> Store<T> {
 /// MiB, 84 MB every 2 ms with 16 MiB (its 8-frame segments: 93 MB), at the
 /// same time.
 pub const TRIM_BYTES: u64 = 16 << 20;
+/// Bytes a store moving into its file copies between two trims.
+#[cfg(target_os = "linux")]
+const MOVE_CHUNK: u64 = TRIM_BYTES;
 #[cfg(target_os = "linux")]
 const POLL: std::time::Duration = std::time::Duration::from_millis(2);
 

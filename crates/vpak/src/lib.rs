@@ -575,6 +575,24 @@ impl From<Vec<u8>> for Bytes {
     }
 }
 
+/// Words held as their little-endian bytes, without a copy.
+struct Words(Vec<u32>);
+
+impl AsRef<[u8]> for Words {
+    fn as_ref(&self) -> &[u8] {
+        bytemuck::cast_slice(&self.0)
+    }
+}
+
+impl Bytes {
+    /// A section of `u32` words (node arrays, ranges, tables): their bytes
+    /// are the vector's own on a little-endian machine, not a copy.
+    pub fn from_words(mut v: Vec<u32>) -> Bytes {
+        v.iter_mut().for_each(|w| *w = w.to_le());
+        Bytes::Held(Box::new(Words(v)))
+    }
+}
+
 impl std::ops::Deref for Bytes {
     type Target = [u8];
     fn deref(&self) -> &[u8] {

@@ -135,21 +135,21 @@ pub fn l3_node_count(words: &[u32]) -> Option<usize> {
     (n.saturating_mul(L3_WORDS).saturating_add(1) <= words.len()).then_some(n)
 }
 
-/// The L3 array of the given nodes (leaf mask, brick), or `None` when it
-/// would need more than 2^32 words.
-pub fn l3_words(nodes: &[([u64; 8], u32)]) -> Option<Vec<u32>> {
-    let count = u32::try_from(nodes.len()).ok()?;
-    let mut head = Vec::with_capacity(1 + nodes.len() * L3_WORDS);
-    head.push(count);
+/// The L3 array of the first `count` of `nodes` (leaf mask, brick), or
+/// `None` when `nodes` has fewer or the array would need more than 2^32 words.
+pub fn l3_words(count: usize, nodes: impl IntoIterator<Item = ([u64; 8], u32)>) -> Option<Vec<u32>> {
+    let mut head = Vec::with_capacity(1 + count * L3_WORDS);
+    head.push(u32::try_from(count).ok()?);
     let mut masks = Vec::new();
-    let start = 1 + nodes.len() * L3_WORDS;
-    for (mask, brick) in nodes {
-        let (states, partial) = encode_l3_mask(mask);
+    let start = 1 + count * L3_WORDS;
+    for (mask, brick) in nodes.into_iter().take(count) {
+        let (states, partial) = encode_l3_mask(&mask);
         let first = u32::try_from(start + masks.len()).ok()?;
-        head.extend([*brick, states, first]);
+        head.extend([brick, states, first]);
         masks.extend(partial.iter().flat_map(|m| [*m as u32, (*m >> 32) as u32]));
     }
     u32::try_from(start + masks.len()).ok()?;
+    (head.len() == start).then_some(())?;
     head.extend(masks);
     Some(head)
 }

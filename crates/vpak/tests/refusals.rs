@@ -73,7 +73,7 @@ fn asset(bricks: u32, channels: Vec<Channel>, planes: Vec<PlaneDef>, max_dim: u3
         Section { kind: kind::L1_ENTRIES, index: 0, data: words(&[0]).into() },
         Section { kind: kind::L2_NODES, index: 0, data: words(&node_words(&occupied, L2_SLOTS, 0)).into() },
         Section { kind: kind::L2_ENTRIES, index: 0, data: words(&(0..bricks).collect::<Vec<_>>()).into() },
-        Section { kind: kind::L3_NODES, index: 0, data: words(&l3_words(&leaves).unwrap()).into() },
+        Section { kind: kind::L3_NODES, index: 0, data: words(&l3_words(leaves.len(), leaves.iter().copied()).unwrap()).into() },
         Section { kind: kind::TILES, index: 0, data: Vec::new().into() },
     ];
     let mixed = |p: usize| channels.iter().any(|c| !c.alternates.is_empty() && (c.plane as usize == p || c.alternates.contains(&(p as u32))));
