@@ -4,10 +4,13 @@ segment against segments, parts on two pinned cores against one, and nanovdb_con
 --fp16 on the same files in the same run. Prints a table with the ratios.
 
     /usr/bin/python3 scripts/make_bench_sequence.py bench-out/seq224 --frames 96 --size 224
-    /usr/bin/python3 scripts/bench_segments.py bench-out/seq224 [--segment 24] [--formats f16,bc7] [--spill-above 512MiB]
+    /usr/bin/python3 scripts/bench_segments.py bench-out/seq224 [--segment 24] [--formats f16,bc7] [--spill-above 512MiB] [--small-budget 64MiB]
 
 The one-segment cook runs twice: with its buffers in memory (`--spill-above never`) and
-spilled to a file past --spill-above (the same asset, checked byte for byte).
+spilled to a file past --spill-above (the same asset, checked byte for byte). Then the
+memory a cook needs beyond its buffers: the first frames, one segment and segments, each
+spilled past --small-budget, the median peak of --runs runs each (peaks on two busy cores
+move by tens of MB with the spill trimmer's timing), against nanovdb_convert's one frame.
 
 Peak RSS is /usr/bin/time's %M (KiB). Every cook writes into a scratch directory that is
 removed at the end.
@@ -39,6 +42,8 @@ def main():
     ap.add_argument("--exe", default="target/release/vdbcook")
     ap.add_argument("--no-parts", action="store_true")
     ap.add_argument("--spill-above", default="512MiB", help="the spilled one-segment cook's --spill-above")
+    ap.add_argument("--small-budget", default="64MiB", help="--spill-above of the memory-floor cooks ('none': skip them)")
+    ap.add_argument("--runs", type=int, default=3, help="runs of each memory-floor cook (median peak)")
     args = ap.parse_args()
     files = sorted(glob.glob(os.path.join(args.seq, "*.vdb")))
     n, seg = len(files), str(args.segment)
@@ -46,7 +51,7 @@ def main():
     rows = []
     try:
         print(f"{n} frames of {args.seq}; segments of {seg}; load {os.getloadavg()[0]:.2f}", flush=True)
-        results = {}
+        results, small = {}, {}
         for fmt in args.formats.split(","):
             flags = ["--max-error", fmt.split(":", 1)[1]] if fmt.startswith("max-error:") else ["--format", fmt]
             def cook(name, inputs, extra):
@@ -61,6 +66,13 @@ def main():
             os.remove(os.path.join(tmp, f"{fmt}-spilled.vpak"))
             segd = cook(f"{fmt}-seg", files, ["--segment-frames", seg])
             results[fmt] = (first, whole, segd, spilled)
+            if args.small_budget != "none":
+                def floor(name, inputs, extra):
+                    runs = sorted((cook(name, inputs, extra + ["--spill-above", args.small_budget]) for _ in range(args.runs)), key=lambda r: r[2])
+                    return runs[len(runs) // 2]
+                small[fmt] = (floor(f"{fmt}-small-first", files[: args.segment], ["--segment-frames", seg]), floor(f"{fmt}-small-one", files, []), floor(f"{fmt}-small-seg", files, ["--segment-frames", seg]))
+                for label, r in zip([f"first {seg} frames", "one segment", f"segments of {seg}"], small[fmt]):
+                    print(f"  {fmt}: {label}, spilled past {args.small_budget}: {r[2] / 1024:.1f} MB peak (median of {args.runs}), {r[0]:.2f} s wall", flush=True)
             for label, r in [(f"{fmt}: first {seg} frames", first), (f"{fmt}: {n} frames, one segment", whole), (f"{fmt}: {n} frames, one segment, spilled", spilled), (f"{fmt}: {n} frames, segments of {seg}", segd)]:
                 rows.append((label, r))
                 print(f"  {label:<40} {r[0]:7.2f} s wall {r[1]:7.2f} s cpu {r[2] / 1024:8.1f} MB peak {r[3] / 1e6:9.2f} MB file", flush=True)
@@ -112,6 +124,9 @@ def main():
             print(f"  {fmt}: peak RSS {n} frames in segments / first {seg} frames {segd[2] / first[2]:.3f} (<= 1.25); one segment / first {whole[2] / first[2]:.3f}, spilled past {args.spill_above} {spilled[2] / first[2]:.3f}; segments / nanovdb one frame {segd[2] / one[2]:.2f} (<= 3)")
             print(f"  {fmt}: one segment spilled / in memory: wall {spilled[0] / whole[0]:.3f}, cpu {spilled[1] / whole[1]:.3f}, peak {spilled[2] / whole[2]:.3f}")
             print(f"  {fmt}: bytes segments / one segment {segd[3] / whole[3]:.3f} (<= 1.1); wall segments / xargs -P2 nanovdb {segd[0] / xargs_wall:.3f}, one segment / xargs -P2 {whole[0] / xargs_wall:.3f} (<= 0.8)")
+            if fmt in small:
+                f, o, g = (r[2] for r in small[fmt])
+                print(f"  {fmt}: spilled past {args.small_budget}: peak one segment / first {seg} frames {o / f:.3f} (<= 1.25), segments / first {g / f:.3f}; segments / nanovdb one frame {g / one[2]:.2f} (<= 3), first {seg} frames / nanovdb {f / one[2]:.2f}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -26,12 +26,17 @@ pub fn fallible<R>(f: impl FnOnce() -> R) -> R {
 
 /// `Vec::try_reserve` under [`fallible`]; the error says how many bytes `what` needed.
 pub fn try_reserve<T>(v: &mut Vec<T>, additional: usize, what: &'static str) -> Result<(), OutOfMemory> {
-    fallible(|| v.try_reserve(additional)).map_err(|_| OutOfMemory { what, bytes: additional.saturating_add(v.len()).saturating_mul(std::mem::size_of::<T>()) as u64 })
+    fallible(|| v.try_reserve(additional)).map_err(|_| short(v, additional, what))
 }
 
 /// `Vec::try_reserve_exact` under [`fallible`], as [`try_reserve`].
 pub fn try_reserve_exact<T>(v: &mut Vec<T>, additional: usize, what: &'static str) -> Result<(), OutOfMemory> {
-    fallible(|| v.try_reserve_exact(additional)).map_err(|_| OutOfMemory { what, bytes: additional.saturating_add(v.len()).saturating_mul(std::mem::size_of::<T>()) as u64 })
+    fallible(|| v.try_reserve_exact(additional)).map_err(|_| short(v, additional, what))
+}
+
+/// The error of `v` failing to take `additional` more elements.
+fn short<T>(v: &[T], additional: usize, what: &'static str) -> OutOfMemory {
+    OutOfMemory { what, bytes: additional.saturating_add(v.len()).saturating_mul(std::mem::size_of::<T>()) as u64 }
 }
 
 /// What to do when memory runs out, in both messages.

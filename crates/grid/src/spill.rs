@@ -239,9 +239,10 @@ impl<T: bytemuck::Pod + Send + Sync> Store<T> {
                 // Room for what is asked, and no more where doubling would
                 // pass the budget (untouched room costs no memory, but counts).
                 let doubled = (v.capacity() as u64).saturating_mul(2 * size);
-                match self.policy.as_ref().is_some_and(|p| p.held().saturating_sub(self.counted).saturating_add(doubled) > p.above) {
-                    true => crate::mem::try_reserve_exact(v, additional, what)?,
-                    false => crate::mem::try_reserve(v, additional, what)?,
+                if self.policy.as_ref().is_some_and(|p| p.held().saturating_sub(self.counted).saturating_add(doubled) > p.above) {
+                    crate::mem::try_reserve_exact(v, additional, what)?;
+                } else {
+                    crate::mem::try_reserve(v, additional, what)?;
                 }
                 let bytes = v.capacity() as u64 * size;
                 self.count(bytes);
