@@ -60,15 +60,39 @@ pub struct Stats {
     pub bricks_out: usize,
 }
 
-/// The clustered pool.
+/// The clustered pool: its output bricks are the unclustered input bricks
+/// in input order (`kept`), then the used centroids.  The kept bricks are
+/// named, not copied, so that the caller decides where the output lives (a
+/// cook's may spill to a file).
 pub struct Clustered<const N: usize = BRICK> {
-    /// Output bricks: unclustered input bricks in input order, then the used centroids.
-    pub bricks: Vec<[f32; N]>,
-    /// For every input brick, its index in `bricks`.
+    /// The input bricks kept as they are, in order: output bricks `0..kept.len()`.
+    pub kept: Vec<u32>,
+    /// The centroids in use, in order: the output bricks after the kept ones.
+    pub centroids: Vec<[f32; N]>,
+    /// For every input brick, its output brick.
     pub remap: Vec<u32>,
     /// For every input brick, whether it was replaced by a centroid.
     pub merged: Vec<bool>,
     pub stats: Stats,
+}
+
+impl<const N: usize> Clustered<N> {
+    /// Output bricks.
+    pub fn len(&self) -> usize {
+        self.kept.len() + self.centroids.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Output brick `w` (`None` past the end), the kept ones read from `input`.
+    pub fn brick<'a>(&'a self, input: &'a [&'a [f32; N]], w: usize) -> Option<&'a [f32; N]> {
+        match self.kept.get(w) {
+            Some(&i) => input.get(i as usize).copied(),
+            None => self.centroids.get(w - self.kept.len()),
+        }
+    }
 }
 
 /// Mean absolute difference, accumulated in eight fixed lanes (the result
@@ -262,7 +286,7 @@ pub fn update<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroi
 }
 
 /// Runs the whole procedure; `progress(step, steps)` after each k-means round.
-pub fn cluster(bricks: &[Brick], opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
+pub fn cluster(bricks: &[&Brick], opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
     cluster_scaled(bricks, opts, &[1.0], progress)
 }
 
@@ -271,7 +295,7 @@ pub fn cluster(bricks: &[Brick], opts: &Options, progress: &(dyn Fn(usize, usize
 /// weigh every channel alike): part `p`'s differences are multiplied by
 /// `scale[p]` (1 past the end) before `max_brick_error` is applied, so the
 /// bound stays in the channels' own units.
-pub fn cluster_scaled<const N: usize>(bricks: &[[f32; N]], opts: &Options, scale: &[f32], progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered<N> {
+pub fn cluster_scaled<const N: usize>(bricks: &[&[f32; N]], opts: &Options, scale: &[f32], progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered<N> {
     let n = bricks.len();
     let mut stats = Stats { bricks_in: n, ..Stats::default() };
     let kind: Vec<u8> = bricks
@@ -304,7 +328,7 @@ pub fn cluster_scaled<const N: usize>(bricks: &[[f32; N]], opts: &Options, scale
     let mut label: Vec<Option<u32>> = vec![None; n];
     let mut centroids = Vec::new();
     if opts.clusters > 0 && cand.len() > opts.clusters {
-        let data: Vec<&[f32; N]> = cand.iter().map(|&i| &bricks[i]).collect();
+        let data: Vec<&[f32; N]> = cand.iter().map(|&i| bricks[i]).collect();
         centroids = seed_centroids(&data, opts.clusters, opts.seed);
         let steps = opts.iterations + 1;
         let mut labels = assign(&data, &centroids, None);
@@ -333,30 +357,31 @@ pub fn cluster_scaled<const N: usize>(bricks: &[[f32; N]], opts: &Options, scale
     }
 
     // Output: unclustered bricks in input order, then the centroids in use.
-    let mut out: Vec<[f32; N]> = Vec::new();
+    let mut kept: Vec<u32> = Vec::new();
+    let mut used: Vec<[f32; N]> = Vec::new();
     let mut remap = vec![0u32; n];
     let mut merged = vec![false; n];
     for i in 0..n {
         if label[i].is_none() {
-            remap[i] = out.len() as u32;
-            out.push(bricks[i]);
+            remap[i] = kept.len() as u32;
+            kept.push(i as u32);
         }
     }
     let mut centroid_slot: Vec<Option<u32>> = vec![None; centroids.len()];
     for i in 0..n {
         if let Some(l) = label[i] {
             let slot = *centroid_slot[l as usize].get_or_insert_with(|| {
-                out.push(centroids[l as usize]);
-                (out.len() - 1) as u32
+                used.push(centroids[l as usize]);
+                (kept.len() + used.len() - 1) as u32
             });
             remap[i] = slot;
             merged[i] = true;
             stats.clustered += 1;
         }
     }
-    stats.centroids = centroid_slot.iter().filter(|s| s.is_some()).count();
-    stats.bricks_out = out.len();
-    Clustered { bricks: out, remap, merged, stats }
+    stats.centroids = used.len();
+    stats.bricks_out = kept.len() + used.len();
+    Clustered { kept, centroids: used, remap, merged, stats }
 }
 
 #[cfg(test)]

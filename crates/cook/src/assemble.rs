@@ -75,12 +75,13 @@ impl Cooker {
         }
 
         // Clustering: similar bricks merged into work bricks.
-        let mut clustered = opts.clustering.as_ref().map(|co| {
+        let clustered = opts.clustering.as_ref().map(|co| {
             let t0 = Instant::now();
-            let c = cluster::cluster(pool, &self.ranges, co, progress);
+            let c = cluster::cluster(pool, &self.ranges, co, opts.spill.as_ref(), progress);
             lap(&mut timings, "cluster", t0);
             c
         });
+        let mut clustered = clustered.transpose()?;
 
         // Encoding: the work bricks in their planes' formats, or each brick
         // channel in the cheapest format within the maximum error (strays
@@ -121,7 +122,18 @@ impl Cooker {
             .as_ref()
             .zip(opts.clustering.as_ref())
             .map(|(c, co)| {
-                let without = cluster::Unclustered { built, first, own: &own, channels, specs: &encoded.specs, quality: opts.quality, max_error, disk: opts.disk, masks: masks.as_deref() };
+                let without = cluster::Unclustered {
+                    built,
+                    first,
+                    own: &own,
+                    channels,
+                    specs: &encoded.specs,
+                    quality: opts.quality,
+                    max_error,
+                    disk: opts.disk,
+                    masks: masks.as_deref(),
+                    spill: opts.spill.as_ref(),
+                };
                 cluster::report(c, co, &without, &decode_stored, measured.totals[0].rmse())
             })
             .transpose()?;

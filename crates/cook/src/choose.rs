@@ -71,7 +71,7 @@ pub(crate) fn per_brick(pool: Bricks, masks: &[[u64; 8]], bound: f32, opts: &Coo
     };
     choose(&mut choices, Bricks::dense(&c.bricks, channels), &c.work_masks(masks, channels))?;
     let first = c.bricks.len();
-    let stray_masks = c.split_strays(pool, channels, masks, &choices, bound);
+    let stray_masks = c.split_strays(pool, channels, masks, &choices, bound)?;
     choose(&mut choices, Bricks::dense(&c.bricks[first..], channels), &stray_masks)?;
     Ok(choices)
 }

@@ -8,11 +8,13 @@ use crate::{ClusterReport, Progress};
 use rayon::prelude::*;
 use vdbcook_encode::{Brick, Bricks, Encoded, ErrorStats, PlaneSpec, Quality};
 use vdbcook_flipbook::Built;
+use vdbcook_grid::spill::{SpillPolicy, Store, StoreError};
 
 /// The clustered pool, `channels` [`Brick`]s per brick.
 pub(crate) struct Clustered {
-    /// The work bricks: centroids and bricks kept as they are (then strays).
-    pub(crate) bricks: Vec<Brick>,
+    /// The work bricks: centroids and bricks kept as they are (then strays),
+    /// under the cook's spill policy (they are nearly as many as the pool's).
+    pub(crate) bricks: Store<Brick>,
     /// Pool brick -> work brick.
     pub(crate) remap: Vec<u32>,
     /// Per pool brick: merged into a centroid.
@@ -21,11 +23,12 @@ pub(crate) struct Clustered {
 }
 
 /// Clusters the pool (`channels` bricks per brick), each channel weighing
-/// alike: its values divided by its own value range (`ranges`).
-pub(crate) fn cluster(pool: Bricks, ranges: &[[f32; 2]], opts: &vdbcook_cluster::Options, progress: &dyn Progress) -> Clustered {
+/// alike: its values divided by its own value range (`ranges`); the work
+/// bricks and the copy k-means reads are stores under `spill`.
+pub(crate) fn cluster(pool: Bricks, ranges: &[[f32; 2]], opts: &vdbcook_cluster::Options, spill: Option<&SpillPolicy>, progress: &dyn Progress) -> Result<Clustered, StoreError> {
     progress.start("clustering", opts.iterations as u64 + 1);
     let scales: Vec<f32> = ranges.iter().map(|r| r[1] - r[0]).map(|s| if s > 0.0 && s.is_finite() { s } else { 1.0 }).collect();
-    let c = cluster_channels(pool, &scales, opts, &|_, _| progress.advance(1));
+    let c = cluster_channels(pool, &scales, opts, spill, &|_, _| progress.advance(1));
     progress.finish();
     c
 }
@@ -34,36 +37,44 @@ pub(crate) fn cluster(pool: Bricks, ranges: &[[f32; 2]], opts: &vdbcook_cluster:
 /// is one item of its channels' values, each divided by its channel's
 /// `scale` (so distances weigh every channel alike; `max_brick_error` stays
 /// in the channels' units), and the centroids are scaled back.
-fn cluster_channels(pool: Bricks, scales: &[f32], opts: &vdbcook_cluster::Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
-    fn run<const N: usize>(pool: Bricks, scales: &[f32], opts: &vdbcook_cluster::Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
-        let c = scales.len();
-        let items: Vec<[f32; N]> = (0..pool.len()).into_par_iter().map(|b| std::array::from_fn(|v| pool.get(b, v / 512)[v % 512] / scales[v / 512])).collect();
+fn cluster_channels(pool: Bricks, scales: &[f32], opts: &vdbcook_cluster::Options, spill: Option<&SpillPolicy>, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<Clustered, StoreError> {
+    fn run<const N: usize>(pool: Bricks, scales: &[f32], opts: &vdbcook_cluster::Options, spill: Option<&SpillPolicy>, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<Clustered, StoreError> {
+        let mut flat = Store::<f32>::with_policy(spill.cloned());
+        flat.par_extend((0..pool.len() * N).into_par_iter().map(|j| pool.get(j / N, j % N / 512)[j % 512] / scales[j % N / 512]), "the bricks to cluster")?;
+        let items: Vec<&[f32; N]> = flat.chunks_exact(N).filter_map(|item| item.try_into().ok()).collect();
         let out = vdbcook_cluster::cluster_scaled(&items, opts, scales, progress);
-        let mut bricks: Vec<Brick> = out.bricks.iter().flat_map(|item| (0..c).map(move |k| std::array::from_fn(|v| item[k * 512 + v] * scales[k]))).collect();
-        // A brick not merged keeps its own values exactly (v / s · s need not be v).
-        for (i, _) in out.merged.iter().enumerate().filter(|(_, &m)| !m) {
-            let w = out.remap[i] as usize;
-            for (k, b) in pool.channels_of(i).enumerate() {
-                bricks[w * c + k] = *b;
-            }
-        }
-        Clustered { bricks, remap: out.remap, merged: out.merged, stats: out.stats }
+        work_bricks(out, pool, |centroid, k| std::array::from_fn(|v| centroid[k * 512 + v] * scales[k]), spill)
     }
     match (scales.len(), pool.as_dense()) {
         (1, Some(dense)) => {
             // One channel: the values as they are (same results as before channels existed).
-            let out = vdbcook_cluster::cluster(dense, opts, progress);
-            Clustered { bricks: out.bricks, remap: out.remap, merged: out.merged, stats: out.stats }
+            let items: Vec<&Brick> = dense.iter().collect();
+            let out = vdbcook_cluster::cluster(&items, opts, progress);
+            work_bricks(out, pool, |centroid, _| *centroid, spill)
         }
-        (1, None) => run::<512>(pool, scales, opts, progress),
-        (2, _) => run::<1024>(pool, scales, opts, progress),
-        (3, _) => run::<1536>(pool, scales, opts, progress),
-        (4, _) => run::<2048>(pool, scales, opts, progress),
-        (5, _) => run::<2560>(pool, scales, opts, progress),
-        (6, _) => run::<3072>(pool, scales, opts, progress),
-        (7, _) => run::<3584>(pool, scales, opts, progress),
-        _ => run::<4096>(pool, scales, opts, progress),
+        (1, None) => run::<512>(pool, scales, opts, spill, progress),
+        (2, _) => run::<1024>(pool, scales, opts, spill, progress),
+        (3, _) => run::<1536>(pool, scales, opts, spill, progress),
+        (4, _) => run::<2048>(pool, scales, opts, spill, progress),
+        (5, _) => run::<2560>(pool, scales, opts, spill, progress),
+        (6, _) => run::<3072>(pool, scales, opts, spill, progress),
+        (7, _) => run::<3584>(pool, scales, opts, spill, progress),
+        _ => run::<4096>(pool, scales, opts, spill, progress),
     }
+}
+
+/// The work bricks of `out`: a kept brick's channels as the pool holds them
+/// (exactly: v / s · s need not be v), a centroid's channel `k` as
+/// `centroid(values, k)` makes it.
+fn work_bricks<const N: usize>(out: vdbcook_cluster::Clustered<N>, pool: Bricks, centroid: impl Fn(&[f32; N], usize) -> Brick + Sync, spill: Option<&SpillPolicy>) -> Result<Clustered, StoreError> {
+    let c = pool.channels();
+    let mut bricks = Store::with_policy(spill.cloned());
+    let made = (0..out.len() * c).into_par_iter().map(|j| match out.kept.get(j / c) {
+        Some(&i) => *pool.get(i as usize, j % c),
+        None => centroid(&out.centroids[j / c - out.kept.len()], j % c),
+    });
+    bricks.par_extend(made, "the clustered bricks")?;
+    Ok(Clustered { bricks, remap: out.remap, merged: out.merged, stats: out.stats })
 }
 
 impl Clustered {
@@ -76,7 +87,7 @@ impl Clustered {
     /// (`choices`, per work brick and channel) leaves past `bound`: each
     /// becomes a work brick of its own, appended; returns their masks.
     /// Centroids all of whose bricks strayed are no longer counted.
-    pub(crate) fn split_strays(&mut self, pool: Bricks, channels: usize, masks: &[[u64; 8]], choices: &vdbcook_encode::Choices, bound: f32) -> Vec<[u64; 8]> {
+    pub(crate) fn split_strays(&mut self, pool: Bricks, channels: usize, masks: &[[u64; 8]], choices: &vdbcook_encode::Choices, bound: f32) -> Result<Vec<[u64; 8]>, StoreError> {
         let strays: Vec<usize> = (0..self.merged.len())
             .into_par_iter()
             .filter(|&i| {
@@ -92,7 +103,8 @@ impl Clustered {
         for (k, &i) in strays.iter().enumerate() {
             self.remap[i] = (first / channels + k) as u32;
             self.merged[i] = false;
-            self.bricks.extend(pool.channels_of(i).copied());
+            let own: Vec<Brick> = pool.channels_of(i).copied().collect();
+            self.bricks.extend_from_slice(&own, "the clustered bricks")?;
         }
         self.stats.over_error += strays.len();
         self.stats.clustered -= strays.len();
@@ -100,7 +112,7 @@ impl Clustered {
         let merged_into: std::collections::BTreeSet<u32> = self.remap.iter().zip(&self.merged).filter(|(_, &m)| m).map(|(&w, _)| w).collect();
         self.stats.centroids = merged_into.len();
         self.stats.bricks_out = self.merged.iter().filter(|&&m| !m).count() + merged_into.len();
-        strays.iter().map(|&i| masks[i]).collect()
+        Ok(strays.iter().map(|&i| masks[i]).collect())
     }
 }
 
@@ -137,6 +149,8 @@ pub(crate) struct Unclustered<'a> {
     pub(crate) disk: Option<vdbcook_encode::Optimize>,
     /// The pool's shown voxels, when encoding used them.
     pub(crate) masks: Option<&'a [[u64; 8]]>,
+    /// The cook's spill policy, for the merged bricks and their encoding.
+    pub(crate) spill: Option<&'a SpillPolicy>,
 }
 
 /// The thesis's Figure 19 table: the first channel's voxel RMSE as stored
@@ -146,13 +160,14 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
     let channels = u.channels;
     let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
     let pool = u.built.pool.bricks();
-    let own: Vec<Brick> = merged.iter().flat_map(|&i| pool.channels_of(i).copied()).collect();
+    let mut own = Store::<Brick>::with_policy(u.spill.cloned());
+    own.par_extend((0..merged.len() * channels).into_par_iter().map(|j| *pool.get(merged[j / channels], j % channels)), "the merged bricks")?;
     let own_masks: Option<Vec<[u64; 8]>> = u.masks.map(|m| merged.iter().map(|&i| m[i]).collect());
+    let own = Bricks::dense(&own, channels);
     let own_enc = match u.max_error {
-        None => Encoded::new(u.specs.to_vec(), u.quality, &own, channels, own_masks.as_deref(), &|_| {}),
+        None => Encoded::with_absent(u.specs.to_vec(), u.quality, own, own_masks.as_deref(), None, u.spill, &|_| {})?,
         Some(e) => {
-            let own = Bricks::dense(&own, channels);
-            let mut choices = vdbcook_encode::Choices::new(channels, None);
+            let mut choices = vdbcook_encode::Choices::new(channels, u.spill.cloned());
             choices.choose(own, own_masks.as_deref().unwrap_or(&[]), e, u.quality, u.disk, &|_| {})?;
             Encoded::from_choices(own, choices, &vec![true; merged.len()])
         }

@@ -919,3 +919,34 @@ fn the_report_carries_the_metadata_it_wrote() {
         assert_eq!(report.metadata.frame_count, 2);
     }
 }
+
+#[test]
+fn clustered_cooks_spilled_write_what_they_write_in_memory() {
+    // Near-duplicate fires: clustering merges bricks, so the work bricks mix
+    // kept pool bricks and centroids (with --max-error, strays too).
+    let frames: Vec<[Grid; 3]> = (0..4)
+        .map(|k| {
+            let mut f = fire(0);
+            f.iter_mut().flat_map(|g| g.leaves.iter_mut()).flat_map(|l| l.values.iter_mut()).for_each(|v| *v += 0.0003 * k as f32);
+            f
+        })
+        .collect();
+    let co = vdbcook_cluster::Options { clusters: 6, iterations: 3, variance_threshold: 10.0, max_brick_error: Some(0.05), seed: 2 };
+    let spilled = || Some(vdbcook_grid::spill::SpillPolicy::new(std::env::temp_dir(), 1));
+    for opts in [CookOptions { format: Format::Unorm8, clustering: Some(co.clone()), ..CookOptions::default() }, CookOptions { clustering: Some(co.clone()), ..max_error_options(0.02) }] {
+        let (memory, report) = cook_fire(opts.clone(), &frames);
+        assert!(report.clustering.as_ref().is_some_and(|c| c.stats.clustered > 0), "{:?}", report.clustering);
+        let policy = spilled();
+        let (from_files, _) = cook_fire(CookOptions { spill: policy.clone(), ..opts.clone() }, &frames);
+        assert!(memory == from_files, "{:?}: the spilled cook wrote another asset", opts.max_error);
+        assert!(policy.is_some_and(|p| p.peak_in_files() > 0));
+        // One channel: the pool is dense, its kept bricks read in place.
+        let one: Vec<Grid> = frames.iter().map(|f| f[0].clone()).collect();
+        let cook_one = |spill| {
+            let mut c = Cooker::new(CookOptions { spill, ..opts.clone() });
+            one.iter().for_each(|f| c.push(f, None).unwrap());
+            vdbcook_vpak::assemble(&c.finish(&NoProgress).unwrap().0)
+        };
+        assert!(cook_one(None) == cook_one(spilled()), "{:?}: one channel spilled wrote another asset", opts.max_error);
+    }
+}
