@@ -208,6 +208,12 @@ pub fn seed_centroids<const N: usize>(data: &[&[f32; N]], k: usize, seed: u64) -
         idx.sort_unstable();
         idx.into_iter().map(|i| data[i]).collect()
     };
+    // Seeding passes over the sample once per centroid: a copy of its own
+    // (at most `want` bricks), so that those passes read memory, not bricks
+    // scattered over a caller's spilled pool, whose pages the system would
+    // map in and around each one again on every pass.
+    let copy: Vec<[f32; N]> = sample.iter().map(|&b| *b).collect();
+    let sample: Vec<&[f32; N]> = copy.iter().collect();
     kmeans_pp(&sample, k, &mut rng)
 }
 
