@@ -89,7 +89,7 @@ impl Cooker {
         let max_error = opts.max_error.map(crate::ErrorBound::get);
         // Each channel's stored levels: elsewhere its bricks hold nothing a reader samples.
         let stored_levels = self.stored_levels(first);
-        let masks = encode::shown_masks(built, &specs, max_error);
+        let masks = encode::shown_masks(built, &specs, max_error, opts.spill.as_ref())?;
         let t0 = Instant::now();
         let encoded = match max_error {
             None => {

@@ -69,7 +69,7 @@ pub(crate) fn per_brick(pool: Bricks, masks: &[[u64; 8]], bound: f32, opts: &Coo
         choose(&mut choices, pool, masks)?;
         return Ok(choices);
     };
-    choose(&mut choices, Bricks::dense(&c.bricks, channels), &c.work_masks(masks, channels))?;
+    choose(&mut choices, Bricks::dense(&c.bricks, channels), &c.work_masks(masks, channels, opts.spill.as_ref())?)?;
     let first = c.bricks.len();
     let stray_masks = c.split_strays(pool, channels, masks, &choices, bound)?;
     choose(&mut choices, Bricks::dense(&c.bricks[first..], channels), &stray_masks)?;

@@ -79,8 +79,8 @@ fn work_bricks<const N: usize>(out: vdbcook_cluster::Clustered<N>, pool: Bricks,
 
 impl Clustered {
     /// Per work brick, the union of its pool bricks' masks.
-    pub(crate) fn work_masks(&self, pool_masks: &[[u64; 8]], channels: usize) -> Vec<[u64; 8]> {
-        union_masks(self.bricks.len() / channels, self.remap.iter().zip(pool_masks).map(|(&w, &mask)| (w as usize, mask)))
+    pub(crate) fn work_masks(&self, pool_masks: &[[u64; 8]], channels: usize, spill: Option<&SpillPolicy>) -> Result<Store<[u64; 8]>, StoreError> {
+        union_masks(self.bricks.len() / channels, self.remap.iter().zip(pool_masks).map(|(&w, &mask)| (w as usize, mask)), spill)
     }
 
     /// Splits off the merged bricks that their work brick's choice

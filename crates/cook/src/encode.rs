@@ -5,18 +5,21 @@ use crate::cluster::{used_work, Clustered};
 use crate::{Error, Progress};
 use vdbcook_encode::{Bricks, Choices, Encoded, PlaneSpec, Quality};
 use vdbcook_flipbook::Built;
+use vdbcook_grid::spill::{SpillPolicy, Store, StoreError};
 
 /// Which voxels of each pool brick some L3 node shows: block encoders may
 /// spend nothing on the others, and per-brick formats bound only these.
 /// `None` when neither is at work.
-pub(crate) fn shown_masks(built: &Built, specs: &[PlaneSpec], max_error: Option<f32>) -> Option<Vec<[u64; 8]>> {
+pub(crate) fn shown_masks(built: &Built, specs: &[PlaneSpec], max_error: Option<f32>, spill: Option<&SpillPolicy>) -> Result<Option<Store<[u64; 8]>>, StoreError> {
     let any_block = specs.iter().any(|s| s.plane.format.is_block());
-    (any_block || max_error.is_some()).then(|| union_masks(built.pool.len(), built.l3.iter().map(|l| (l.brick as usize, l.mask))))
+    (any_block || max_error.is_some()).then(|| union_masks(built.pool.len(), built.l3.iter().map(|l| (l.brick as usize, l.mask)), spill)).transpose()
 }
 
-/// Per item `0..n`, the union of the masks given for it.
-pub(crate) fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8])>) -> Vec<[u64; 8]> {
-    let mut out = vec![[0u64; 8]; n];
+/// Per item `0..n`, the union of the masks given for it (a store under
+/// `spill`: 64 bytes a brick).
+pub(crate) fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8])>, spill: Option<&SpillPolicy>) -> Result<Store<[u64; 8]>, StoreError> {
+    let mut out = Store::<[u64; 8]>::with_policy(spill.cloned());
+    out.extend_zeroed(n, "the bricks' masks")?;
     for (i, m) in masks {
         if let Some(o) = out.get_mut(i) {
             for (o, m) in o.iter_mut().zip(m) {
@@ -24,7 +27,7 @@ pub(crate) fn union_masks(n: usize, masks: impl Iterator<Item = (usize, [u64; 8]
             }
         }
     }
-    out
+    Ok(out)
 }
 
 /// Per pool brick per channel, true when no tree that uses the brick is at
@@ -60,19 +63,21 @@ pub(crate) fn in_planes<'a>(
     masks: Option<&[[u64; 8]]>,
     absent: Option<Vec<bool>>,
     clustered: Option<&'a Clustered>,
-    spill: Option<&vdbcook_grid::spill::SpillPolicy>,
+    spill: Option<&SpillPolicy>,
     progress: &dyn Progress,
 ) -> Result<Encoded<'a>, crate::Error> {
     let channels = pool.channels();
     let work = clustered.map_or(pool, |c| Bricks::dense(&c.bricks, channels));
-    let work_masks = masks.map(|m| match clustered {
-        Some(c) => c.work_masks(m, channels),
-        None => m.to_vec(),
-    });
+    // Clustered, the work bricks' own masks; else the pool's, as they are.
+    let clustered_masks = match (masks, clustered) {
+        (Some(m), Some(c)) => Some(c.work_masks(m, channels, spill)?),
+        _ => None,
+    };
+    let work_masks = clustered_masks.as_deref().or(masks);
     progress.start("encoding", (work.len() * specs.len()) as u64);
     // Centroids stand for bricks of several levels: every channel counts.
     let absent = absent.filter(|_| clustered.is_none());
-    let encoded = Encoded::with_absent(specs, quality, work, work_masks.as_deref(), absent, spill, &|n| progress.advance(n as u64))?;
+    let encoded = Encoded::with_absent(specs, quality, work, work_masks, absent, spill, &|n| progress.advance(n as u64))?;
     progress.finish();
     Ok(encoded)
 }
