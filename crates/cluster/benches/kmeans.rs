@@ -62,7 +62,7 @@ fn main() {
     let opts = Options { clusters: k, iterations: iters, variance_threshold: f64::INFINITY, max_brick_error: None, seed: 7 };
     let t0 = Instant::now();
     let refs: Vec<&Brick> = all.iter().collect();
-    let c = cluster(&refs, &opts, &|_, _| {});
+    let c = cluster(&refs, &opts, &|_, _| {}, &|| {});
     let ours_full = t0.elapsed().as_secs_f64();
     println!("vdbcook  {n:>9} bricks: {ours_full:7.2} s  ({} -> {} bricks)", c.stats.bricks_in, c.stats.bricks_out);
 

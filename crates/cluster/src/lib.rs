@@ -26,6 +26,26 @@ pub type Brick = [f32; BRICK];
 /// Bricks per chunk in reductions (fixed, so results do not depend on threads).
 const CHUNK: usize = 1024;
 
+/// Items of N values a pass over the bricks reads between two calls of the
+/// caller's `scanned` (about 16 MiB; a whole number of [`CHUNK`]s, so that
+/// reductions chunk alike): a caller whose bricks live in a mapped file
+/// drops their pages there, where a thread of its own would lag a scan.
+fn scan_items<const N: usize>() -> usize {
+    ((16 << 20) / (N * 4) / CHUNK).max(1) * CHUNK
+}
+
+/// `f(i, &items[i])` for every item, in parallel, [`scan_items`] at a time,
+/// `scanned()` after each group.
+fn map_scanned<const N: usize, T: Sync, R: Send>(items: &[T], scanned: &(dyn Fn() + Sync), f: impl Fn(usize, &T) -> R + Sync + Send) -> Vec<R> {
+    let scan = scan_items::<N>();
+    let mut out = Vec::with_capacity(items.len());
+    for (g, group) in items.chunks(scan).enumerate() {
+        out.par_extend(group.par_iter().enumerate().map(|(j, item)| f(g * scan + j, item)));
+        scanned();
+    }
+    out
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Options {
     /// Number of centroids (k).
@@ -190,6 +210,11 @@ pub const SEED_SAMPLE_PER_CLUSTER: usize = 64;
 /// one with probability proportional to the squared distance to the nearest
 /// chosen centroid.
 pub fn seed_centroids<const N: usize>(data: &[&[f32; N]], k: usize, seed: u64) -> Vec<[f32; N]> {
+    seed_centroids_scanned(data, k, seed, &|| {})
+}
+
+/// [`seed_centroids`], calling `scanned` as it copies its sample (see [`scan_items`]).
+fn seed_centroids_scanned<const N: usize>(data: &[&[f32; N]], k: usize, seed: u64, scanned: &(dyn Fn() + Sync)) -> Vec<[f32; N]> {
     let mut rng = Rng(seed);
     if data.is_empty() || k == 0 {
         return Vec::new();
@@ -212,7 +237,13 @@ pub fn seed_centroids<const N: usize>(data: &[&[f32; N]], k: usize, seed: u64) -
     // (at most `want` bricks), so that those passes read memory, not bricks
     // scattered over a caller's spilled pool, whose pages the system would
     // map in and around each one again on every pass.
-    let copy: Vec<[f32; N]> = sample.iter().map(|&b| *b).collect();
+    // Scattered reads map the pages around each brick too: a smaller group
+    // between two calls of `scanned` than a pass in order takes.
+    let mut copy: Vec<[f32; N]> = Vec::with_capacity(sample.len());
+    for group in sample.chunks((scan_items::<N>() / 16).max(1)) {
+        copy.extend(group.iter().map(|&b| *b));
+        scanned();
+    }
     let sample: Vec<&[f32; N]> = copy.iter().collect();
     kmeans_pp(&sample, k, &mut rng)
 }
@@ -253,19 +284,26 @@ fn kmeans_pp<const N: usize>(data: &[&[f32; N]], k: usize, rng: &mut Rng) -> Vec
 /// Labels every brick with its nearest centroid; `previous` labels, when
 /// given, only speed the search up.
 pub fn assign<const N: usize>(data: &[&[f32; N]], centroids: &[[f32; N]], previous: Option<&[(u32, f32)]>) -> Vec<(u32, f32)> {
-    match previous {
-        Some(p) => data.par_iter().zip(p.par_iter()).map(|(b, &(h, _))| nearest(b, centroids, h)).collect(),
-        None => data.par_iter().map(|b| nearest(b, centroids, 0)).collect(),
-    }
+    assign_scanned(data, centroids, previous, &|| {})
+}
+
+/// [`assign`], calling `scanned` as it goes (see [`scan_items`]).
+fn assign_scanned<const N: usize>(data: &[&[f32; N]], centroids: &[[f32; N]], previous: Option<&[(u32, f32)]>, scanned: &(dyn Fn() + Sync)) -> Vec<(u32, f32)> {
+    map_scanned::<N, _, _>(data, scanned, |i, b| nearest(b, centroids, previous.and_then(|p| p.get(i)).map_or(0, |&(h, _)| h)))
 }
 
 /// New centroids: the mean of each cluster's bricks (an empty cluster keeps its centroid).
 pub fn update<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroids: &[[f32; N]]) -> Vec<[f32; N]> {
+    update_scanned(data, labels, centroids, &|| {})
+}
+
+/// [`update`], calling `scanned` as it goes (see [`scan_items`]).
+fn update_scanned<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroids: &[[f32; N]], scanned: &(dyn Fn() + Sync)) -> Vec<[f32; N]> {
     let k = centroids.len();
-    let partial: Vec<(Vec<f64>, Vec<u64>)> = data
-        .par_chunks(CHUNK)
-        .zip(labels.par_chunks(CHUNK))
-        .map(|(bs, ls)| {
+    let scan = scan_items::<N>();
+    let mut partial: Vec<(Vec<f64>, Vec<u64>)> = Vec::new();
+    for (data, labels) in data.chunks(scan).zip(labels.chunks(scan)) {
+        partial.par_extend(data.par_chunks(CHUNK).zip(labels.par_chunks(CHUNK)).map(|(bs, ls)| {
             let mut sums = vec![0.0f64; k * N];
             let mut counts = vec![0u64; k];
             for (b, &(l, _)) in bs.iter().zip(ls) {
@@ -276,8 +314,9 @@ pub fn update<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroi
                 }
             }
             (sums, counts)
-        })
-        .collect();
+        }));
+        scanned();
+    }
     let mut sums = vec![0.0f64; k * N];
     let mut counts = vec![0u64; k];
     for (s, c) in &partial {
@@ -292,8 +331,8 @@ pub fn update<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroi
 }
 
 /// Runs the whole procedure; `progress(step, steps)` after each k-means round.
-pub fn cluster(bricks: &[&Brick], opts: &Options, progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered {
-    cluster_scaled(bricks, opts, &[1.0], progress)
+pub fn cluster(bricks: &[&Brick], opts: &Options, progress: &(dyn Fn(usize, usize) + Sync), scanned: &(dyn Fn() + Sync)) -> Clustered {
+    cluster_scaled(bricks, opts, &[1.0], progress, scanned)
 }
 
 /// [`cluster`] over items of N values made of 512-value parts (several
@@ -301,31 +340,28 @@ pub fn cluster(bricks: &[&Brick], opts: &Options, progress: &(dyn Fn(usize, usiz
 /// weigh every channel alike): part `p`'s differences are multiplied by
 /// `scale[p]` (1 past the end) before `max_brick_error` is applied, so the
 /// bound stays in the channels' own units.
-pub fn cluster_scaled<const N: usize>(bricks: &[&[f32; N]], opts: &Options, scale: &[f32], progress: &(dyn Fn(usize, usize) + Sync)) -> Clustered<N> {
+pub fn cluster_scaled<const N: usize>(bricks: &[&[f32; N]], opts: &Options, scale: &[f32], progress: &(dyn Fn(usize, usize) + Sync), scanned: &(dyn Fn() + Sync)) -> Clustered<N> {
     let n = bricks.len();
     let mut stats = Stats { bricks_in: n, ..Stats::default() };
-    let kind: Vec<u8> = bricks
-        .par_iter()
-        .map(|b| {
-            let (mean, var, constant) = moments(b);
-            let nv = if var == 0.0 {
-                0.0
-            } else if mean > 0.0 {
-                var / mean
-            } else {
-                f64::INFINITY
-            };
-            // A brick with a non-finite value has a NaN variance: kept as it
-            // is, like high-variance bricks (no centroid can stand for it).
-            if constant {
-                0
-            } else if nv.is_nan() || nv > opts.variance_threshold {
-                1
-            } else {
-                2
-            }
-        })
-        .collect();
+    let kind: Vec<u8> = map_scanned::<N, _, _>(bricks, scanned, |_, b| {
+        let (mean, var, constant) = moments(b);
+        let nv = if var == 0.0 {
+            0.0
+        } else if mean > 0.0 {
+            var / mean
+        } else {
+            f64::INFINITY
+        };
+        // A brick with a non-finite value has a NaN variance: kept as it
+        // is, like high-variance bricks (no centroid can stand for it).
+        if constant {
+            0
+        } else if nv.is_nan() || nv > opts.variance_threshold {
+            1
+        } else {
+            2
+        }
+    });
     stats.constant = kind.iter().filter(|&&k| k == 0).count();
     stats.high_variance = kind.iter().filter(|&&k| k == 1).count();
     let cand: Vec<usize> = (0..n).filter(|&i| kind[i] == 2).collect();
@@ -335,23 +371,22 @@ pub fn cluster_scaled<const N: usize>(bricks: &[&[f32; N]], opts: &Options, scal
     let mut centroids = Vec::new();
     if opts.clusters > 0 && cand.len() > opts.clusters {
         let data: Vec<&[f32; N]> = cand.iter().map(|&i| bricks[i]).collect();
-        centroids = seed_centroids(&data, opts.clusters, opts.seed);
+        centroids = seed_centroids_scanned(&data, opts.clusters, opts.seed, scanned);
         let steps = opts.iterations + 1;
-        let mut labels = assign(&data, &centroids, None);
+        let mut labels = assign_scanned(&data, &centroids, None, scanned);
         progress(1, steps);
         for it in 0..opts.iterations {
-            centroids = update(&data, &labels, &centroids);
-            labels = assign(&data, &centroids, Some(&labels));
+            centroids = update_scanned(&data, &labels, &centroids, scanned);
+            labels = assign_scanned(&data, &centroids, Some(&labels), scanned);
             progress(it + 2, steps);
         }
         // The error bound, brick by brick: the largest voxel difference.
         let over: Vec<bool> = match opts.max_brick_error {
             None => vec![false; data.len()],
-            Some(e) => data
-                .par_iter()
-                .zip(labels.par_iter())
-                .map(|(b, &(l, _))| b.iter().zip(centroids[l as usize].iter()).enumerate().any(|(v, (x, c))| (x - c).abs() * scale.get(v / BRICK).copied().unwrap_or(1.0) > e))
-                .collect(),
+            Some(e) => map_scanned::<N, _, _>(&data, scanned, |j, b| {
+                let centroid = &centroids[labels[j].0 as usize];
+                b.iter().zip(centroid.iter()).enumerate().any(|(v, (x, c))| (x - c).abs() * scale.get(v / BRICK).copied().unwrap_or(1.0) > e)
+            }),
         };
         for (j, &i) in cand.iter().enumerate() {
             if over[j] {

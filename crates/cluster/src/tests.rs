@@ -16,7 +16,7 @@ fn jitter(b: &Brick, seed: u64, amp: f32) -> Brick {
 /// Clusters `bricks`: the result and its output bricks, copied.
 fn clustered(bricks: &[Brick], opts: &Options) -> (Clustered, Vec<Brick>) {
     let refs: Vec<&Brick> = bricks.iter().collect();
-    let c = cluster(&refs, opts, &|_, _| {});
+    let c = cluster(&refs, opts, &|_, _| {}, &|| {});
     let out = (0..c.len()).map(|w| *c.brick(&refs, w).unwrap()).collect();
     (c, out)
 }
@@ -157,4 +157,21 @@ fn bricks_with_non_finite_values_are_kept_as_they_are() {
             assert!(out[c.remap[i] as usize].iter().all(|v| v.is_finite()), "centroid of brick {i}");
         }
     }
+}
+
+#[test]
+fn every_pass_over_the_bricks_calls_the_scan_hook_and_changes_nothing() {
+    let (bricks, _) = planted();
+    let refs: Vec<&Brick> = bricks.iter().collect();
+    let opts = Options { clusters: 6, iterations: 3, variance_threshold: 0.05, max_brick_error: Some(0.01), seed: 4 };
+    let calls = std::sync::atomic::AtomicUsize::new(0);
+    let plain = cluster(&refs, &opts, &|_, _| {}, &|| {});
+    let hooked = cluster(&refs, &opts, &|_, _| {}, &|| {
+        calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    });
+    assert_eq!((plain.remap, plain.kept), (hooked.remap, hooked.kept));
+    assert!(plain.centroids == hooked.centroids);
+    // The variance gate, the seeding's copy, the first assignment, three
+    // updates and assignments, and the error bound: at least once each.
+    assert!(calls.into_inner() >= 10);
 }

@@ -8,7 +8,7 @@ use crate::{ClusterReport, Progress};
 use rayon::prelude::*;
 use vdbcook_encode::{Brick, Bricks, Encoded, ErrorStats, PlaneSpec, Quality};
 use vdbcook_flipbook::Built;
-use vdbcook_grid::spill::{SpillPolicy, Store, StoreError};
+use vdbcook_grid::spill::{trim_now, SpillPolicy, Store, StoreError};
 
 /// The clustered pool, `channels` [`Brick`]s per brick.
 pub(crate) struct Clustered {
@@ -42,14 +42,14 @@ fn cluster_channels(pool: Bricks, scales: &[f32], opts: &vdbcook_cluster::Option
         let mut flat = Store::<f32>::with_policy(spill.cloned());
         flat.par_extend((0..pool.len() * N).into_par_iter().map(|j| pool.get(j / N, j % N / 512)[j % 512] / scales[j % N / 512]), "the bricks to cluster")?;
         let items: Vec<&[f32; N]> = flat.chunks_exact(N).filter_map(|item| item.try_into().ok()).collect();
-        let out = vdbcook_cluster::cluster_scaled(&items, opts, scales, progress);
+        let out = vdbcook_cluster::cluster_scaled(&items, opts, scales, progress, &trim_now);
         work_bricks(out, pool, |centroid, k| std::array::from_fn(|v| centroid[k * 512 + v] * scales[k]), spill)
     }
     match (scales.len(), pool.as_dense()) {
         (1, Some(dense)) => {
             // One channel: the values as they are (same results as before channels existed).
             let items: Vec<&Brick> = dense.iter().collect();
-            let out = vdbcook_cluster::cluster(&items, opts, progress);
+            let out = vdbcook_cluster::cluster(&items, opts, progress, &trim_now);
             work_bricks(out, pool, |centroid, _| *centroid, spill)
         }
         (1, None) => run::<512>(pool, scales, opts, spill, progress),
