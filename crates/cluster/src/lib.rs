@@ -236,9 +236,9 @@ fn seed_centroids_scanned<const N: usize>(data: &[&[f32; N]], k: usize, seed: u6
     // Seeding passes over the sample once per centroid: a copy of its own
     // (at most `want` bricks), so that those passes read memory, not bricks
     // scattered over a caller's spilled pool, whose pages the system would
-    // map in and around each one again on every pass.
-    // Scattered reads map the pages around each brick too: a smaller group
-    // between two calls of `scanned` than a pass in order takes.
+    // map in and around each one again on every pass. The copy reads them
+    // scattered too, so it calls `scanned` after smaller groups than a pass
+    // in order does.
     let mut copy: Vec<[f32; N]> = Vec::with_capacity(sample.len());
     for group in sample.chunks((scan_items::<N>() / 16).max(1)) {
         copy.extend(group.iter().map(|&b| *b));

@@ -196,6 +196,11 @@ impl L3 {
     fn hash(mask: &[u64; 8], brick: u32) -> u64 {
         xxhash_rust::xxh3::xxh3_64_with_seed(bytemuck::cast_slice(mask), u64::from(brick))
     }
+
+    /// The hash of node `id` of `nodes` (0 past the end), as the id table rehashes it.
+    fn hash_of(nodes: &[L3], id: u32) -> u64 {
+        nodes.get(id as usize).map_or(0, |l| L3::hash(&l.mask, l.brick))
+    }
 }
 
 /// What one frame holds, in source index space.
@@ -347,7 +352,7 @@ impl Builder {
         self.pool.reserve(n, known.iter().filter(|k| k.is_none()).count())?;
         self.l3.try_reserve(n, "the L3 nodes")?;
         let l3 = &self.l3;
-        self.l3_index.reserve(n, "the L3 nodes' index", |id| l3.get(id as usize).map_or(0, |l| L3::hash(&l.mask, l.brick)))?;
+        self.l3_index.reserve(n, "the L3 nodes' index", |id| L3::hash_of(l3, id))?;
         fl.leaves.reserve(n);
         let mut ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; c];
         // A bounded batch at a time (in position order): the batch's bricks
@@ -409,7 +414,7 @@ impl Builder {
                     return Err(Error::Overflow { what: "L3 nodes" });
                 };
                 let l3 = &self.l3;
-                let (id, new) = self.l3_index.intern(L3::hash(&key.mask, brick), next_id, |id| l3.get(id as usize) == Some(&key), |id| l3.get(id as usize).map_or(0, |l| L3::hash(&l.mask, l.brick)));
+                let (id, new) = self.l3_index.intern(L3::hash(&key.mask, brick), next_id, |id| l3.get(id as usize) == Some(&key), |id| L3::hash_of(l3, id));
                 if new {
                     self.l3.push(key, "the L3 nodes")?;
                 }
