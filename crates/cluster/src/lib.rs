@@ -34,13 +34,39 @@ fn scan_items<const N: usize>() -> usize {
     ((16 << 20) / (N * 4) / CHUNK).max(1) * CHUNK
 }
 
-/// `f(i, &items[i])` for every item, in parallel, [`scan_items`] at a time,
-/// `scanned()` after each group.
-fn map_scanned<const N: usize, T: Sync, R: Send>(items: &[T], scanned: &(dyn Fn() + Sync), f: impl Fn(usize, &T) -> R + Sync + Send) -> Vec<R> {
-    let scan = scan_items::<N>();
+/// The groups a pass over `items` reads between two calls of `scanned`:
+/// whole [`CHUNK`]s, at most [`scan_items`] items, and spanning at most
+/// about as many bytes of the caller's memory, so that items scattered over
+/// a larger pool (the k-means candidates among all bricks) make smaller
+/// groups, since the system maps a file's pages around each one read.
+fn scan_groups<const N: usize>(items: &[&[f32; N]]) -> Vec<std::ops::Range<usize>> {
+    let (scan, bytes) = (scan_items::<N>(), scan_items::<N>() * N * 4);
+    let span = |c: &[&[f32; N]]| c.iter().fold((usize::MAX, 0), |(lo, hi), &b| (lo.min(b.as_ptr() as usize), hi.max(b.as_ptr() as usize + N * 4)));
+    let mut groups: Vec<std::ops::Range<usize>> = Vec::new();
+    let mut current: Option<(std::ops::Range<usize>, usize, usize)> = None;
+    for (k, chunk) in items.chunks(CHUNK).enumerate() {
+        let (lo, hi) = span(chunk);
+        let range = k * CHUNK..k * CHUNK + chunk.len();
+        current = match current {
+            Some((r, glo, ghi)) if r.len() + chunk.len() <= scan && ghi.max(hi) - glo.min(lo) <= bytes => Some((r.start..range.end, glo.min(lo), ghi.max(hi))),
+            Some((r, _, _)) => {
+                groups.push(r);
+                Some((range, lo, hi))
+            }
+            None => Some((range, lo, hi)),
+        };
+    }
+    groups.extend(current.map(|(r, _, _)| r));
+    groups
+}
+
+/// `f(i, &items[i])` for every item, in parallel, a group of
+/// [`scan_groups`] at a time, `scanned()` after each group.
+fn map_scanned<const N: usize, R: Send>(items: &[&[f32; N]], scanned: &(dyn Fn() + Sync), f: impl Fn(usize, &[f32; N]) -> R + Sync + Send) -> Vec<R> {
     let mut out = Vec::with_capacity(items.len());
-    for (g, group) in items.chunks(scan).enumerate() {
-        out.par_extend(group.par_iter().enumerate().map(|(j, item)| f(g * scan + j, item)));
+    for g in scan_groups(items) {
+        let first = g.start;
+        out.par_extend(items[g].par_iter().enumerate().map(|(j, item)| f(first + j, item)));
         scanned();
     }
     out
@@ -289,7 +315,7 @@ pub fn assign<const N: usize>(data: &[&[f32; N]], centroids: &[[f32; N]], previo
 
 /// [`assign`], calling `scanned` as it goes (see [`scan_items`]).
 fn assign_scanned<const N: usize>(data: &[&[f32; N]], centroids: &[[f32; N]], previous: Option<&[(u32, f32)]>, scanned: &(dyn Fn() + Sync)) -> Vec<(u32, f32)> {
-    map_scanned::<N, _, _>(data, scanned, |i, b| nearest(b, centroids, previous.and_then(|p| p.get(i)).map_or(0, |&(h, _)| h)))
+    map_scanned(data, scanned, |i, b| nearest(b, centroids, previous.and_then(|p| p.get(i)).map_or(0, |&(h, _)| h)))
 }
 
 /// New centroids: the mean of each cluster's bricks (an empty cluster keeps its centroid).
@@ -300,9 +326,9 @@ pub fn update<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroi
 /// [`update`], calling `scanned` as it goes (see [`scan_items`]).
 fn update_scanned<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroids: &[[f32; N]], scanned: &(dyn Fn() + Sync)) -> Vec<[f32; N]> {
     let k = centroids.len();
-    let scan = scan_items::<N>();
     let mut partial: Vec<(Vec<f64>, Vec<u64>)> = Vec::new();
-    for (data, labels) in data.chunks(scan).zip(labels.chunks(scan)) {
+    for g in scan_groups(data) {
+        let (data, labels) = (&data[g.clone()], &labels[g]);
         partial.par_extend(data.par_chunks(CHUNK).zip(labels.par_chunks(CHUNK)).map(|(bs, ls)| {
             let mut sums = vec![0.0f64; k * N];
             let mut counts = vec![0u64; k];
@@ -343,7 +369,7 @@ pub fn cluster(bricks: &[&Brick], opts: &Options, progress: &(dyn Fn(usize, usiz
 pub fn cluster_scaled<const N: usize>(bricks: &[&[f32; N]], opts: &Options, scale: &[f32], progress: &(dyn Fn(usize, usize) + Sync), scanned: &(dyn Fn() + Sync)) -> Clustered<N> {
     let n = bricks.len();
     let mut stats = Stats { bricks_in: n, ..Stats::default() };
-    let kind: Vec<u8> = map_scanned::<N, _, _>(bricks, scanned, |_, b| {
+    let kind: Vec<u8> = map_scanned(bricks, scanned, |_, b| {
         let (mean, var, constant) = moments(b);
         let nv = if var == 0.0 {
             0.0
@@ -383,7 +409,7 @@ pub fn cluster_scaled<const N: usize>(bricks: &[&[f32; N]], opts: &Options, scal
         // The error bound, brick by brick: the largest voxel difference.
         let over: Vec<bool> = match opts.max_brick_error {
             None => vec![false; data.len()],
-            Some(e) => map_scanned::<N, _, _>(&data, scanned, |j, b| {
+            Some(e) => map_scanned(&data, scanned, |j, b| {
                 let centroid = &centroids[labels[j].0 as usize];
                 b.iter().zip(centroid.iter()).enumerate().any(|(v, (x, c))| (x - c).abs() * scale.get(v / BRICK).copied().unwrap_or(1.0) > e)
             }),

@@ -175,3 +175,23 @@ fn every_pass_over_the_bricks_calls_the_scan_hook_and_changes_nothing() {
     // updates and assignments, and the error bound: at least once each.
     assert!(calls.into_inner() >= 10);
 }
+
+#[test]
+fn passes_over_scattered_bricks_read_them_in_smaller_groups() {
+    // Zeroed and never touched: only where the items lie matters.
+    let pool = vec![[0f32; BRICK]; 8 * 8192];
+    let dense: Vec<&Brick> = pool[..3 * 8192 + 100].iter().collect();
+    let sparse: Vec<&Brick> = pool.iter().step_by(8).collect();
+    let lens = |items: &[&Brick]| {
+        let groups = super::scan_groups(items);
+        // In order, every item once, whole chunks but the last.
+        assert_eq!(groups.first().map(|g| g.start), Some(0));
+        assert!(groups.windows(2).all(|w| w[0].end == w[1].start && w[0].len() % super::CHUNK == 0));
+        assert_eq!(groups.last().map(|g| g.end), Some(items.len()));
+        groups.iter().map(|g| g.len()).collect::<Vec<_>>()
+    };
+    // In order: 16 MiB of bricks a group.
+    assert_eq!(lens(&dense), vec![8192, 8192, 8192, 100]);
+    // Every 8th brick: one chunk of 1024 spans 16 MiB of the pool already.
+    assert_eq!(lens(&sparse), vec![1024; 8]);
+}

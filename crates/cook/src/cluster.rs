@@ -69,9 +69,12 @@ fn cluster_channels(pool: Bricks, scales: &[f32], opts: &vdbcook_cluster::Option
 fn work_bricks<const N: usize>(out: vdbcook_cluster::Clustered<N>, pool: Bricks, centroid: impl Fn(&[f32; N], usize) -> Brick + Sync, spill: Option<&SpillPolicy>) -> Result<Clustered, StoreError> {
     let c = pool.channels();
     let mut bricks = Store::with_policy(spill.cloned());
-    let made = (0..out.len() * c).into_par_iter().map(|j| match out.kept.get(j / c) {
-        Some(&i) => *pool.get(i as usize, j % c),
-        None => centroid(&out.centroids[j / c - out.kept.len()], j % c),
+    let made = (0..out.len() * c).into_par_iter().map(|j| {
+        vdbcook_grid::spill::scanned(2 * std::mem::size_of::<Brick>());
+        match out.kept.get(j / c) {
+            Some(&i) => *pool.get(i as usize, j % c),
+            None => centroid(&out.centroids[j / c - out.kept.len()], j % c),
+        }
     });
     bricks.par_extend(made, "the clustered bricks")?;
     Ok(Clustered { bricks, remap: out.remap, merged: out.merged, stats: out.stats })
@@ -161,7 +164,11 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
     let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
     let pool = u.built.pool.bricks();
     let mut own = Store::<Brick>::with_policy(u.spill.cloned());
-    own.par_extend((0..merged.len() * channels).into_par_iter().map(|j| *pool.get(merged[j / channels], j % channels)), "the merged bricks")?;
+    let copy = |j: usize| {
+        vdbcook_grid::spill::scanned(2 * std::mem::size_of::<Brick>());
+        *pool.get(merged[j / channels], j % channels)
+    };
+    own.par_extend((0..merged.len() * channels).into_par_iter().map(copy), "the merged bricks")?;
     let own_masks: Option<Vec<[u64; 8]>> = u.masks.map(|m| merged.iter().map(|&i| m[i]).collect());
     let own = Bricks::dense(&own, channels);
     let own_enc = match u.max_error {

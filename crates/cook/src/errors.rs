@@ -97,6 +97,16 @@ impl LeafError {
     }
 }
 
+/// Leaves whose bricks a parallel pass reads between two reports to
+/// [`vdbcook_grid::spill::scanned`].
+const SCAN_GROUP: usize = 64;
+
+/// Reports reading `bricks` channel bricks and their decodings through a
+/// spilled pool.
+fn scanned(bricks: usize) {
+    vdbcook_grid::spill::scanned(bricks * 2 * std::mem::size_of::<Brick>());
+}
+
 /// Error of decoded bricks (`decoded(pool brick)`, one [`Brick`] per
 /// channel) against the source, per tree (frames and levels, in push order)
 /// and channel, over each channel's own active voxels.
@@ -107,7 +117,11 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
         // Per L3 node: its error over its own active voxels (the channel's mask).
         let per_l3: Vec<LeafError> = built
             .l3
-            .par_iter()
+            .par_chunks(SCAN_GROUP)
+            .flat_map_iter(|nodes| {
+                scanned(nodes.len());
+                nodes.iter()
+            })
             .map(|l| {
                 let mut e = ErrorStats::default();
                 if let (Some(src), Some(Some(dec))) = (pool.try_get(l.brick as usize, 0), decoded(l.brick, &[]).and_then(|d| d.into_iter().next())) {
@@ -135,8 +149,12 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
         .map(|f| {
             let per_leaf: Vec<Vec<ErrorStats>> = f
                 .leaves
-                .par_iter()
+                .par_chunks(SCAN_GROUP)
                 .enumerate()
+                .flat_map_iter(|(g, leaves)| {
+                    scanned(leaves.len() * channels);
+                    leaves.iter().enumerate().map(move |(k, leaf)| (g * SCAN_GROUP + k, leaf))
+                })
                 .map(|(k, &(_, id))| {
                     let mut e = vec![ErrorStats::default(); channels];
                     let brick = built.l3[id as usize].brick as usize;

@@ -294,6 +294,9 @@ pub struct PlaneBricks<'s> {
 
 impl BrickSource for PlaneBricks<'_> {
     fn write_brick(&self, i: usize, out: &mut [u8]) -> bool {
+        // The brick's channels (or its kept encoding) read, the atlas written: both may be spilled.
+        let channels = self.encoded.specs.get(self.plane).map_or(0, |s| s.channels.len());
+        vdbcook_grid::spill::scanned(2 * out.len() + channels * std::mem::size_of::<Brick>());
         self.keep.get(i).is_some_and(|&k| self.encoded.write(self.plane, k, out))
     }
 }

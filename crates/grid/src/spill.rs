@@ -403,6 +403,7 @@ mod file {
             };
             start_trimmer();
             lock().push((base as usize, 0));
+            LIVE.fetch_add(1, Ordering::Relaxed);
             Ok(SpillVec { file, base, reserved, cap: 0, len: 0, touched: 0 })
         }
 
@@ -502,6 +503,7 @@ mod file {
             // Out of the trimmer's list before the mapping goes.
             let mut regions = lock();
             regions.retain(|r| r.0 != self.base as usize);
+            LIVE.fetch_sub(1, Ordering::Relaxed);
             // SAFETY: unmaps exactly the mapping made in `new`; no slice of it outlives &self.
             unsafe {
                 libc::munmap(self.base.cast(), self.reserved);
@@ -570,6 +572,24 @@ mod file {
         });
     }
 
+    /// Bytes reported to [`super::scanned`] (see there).
+    static SCANNED: AtomicU64 = AtomicU64::new(0);
+    /// Live spill files: while there are none, reports cost one load.
+    static LIVE: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+    /// True when this report trimmed.
+    pub(super) fn scanned(bytes: u64) -> bool {
+        if LIVE.load(Ordering::Relaxed) == 0 {
+            return false;
+        }
+        let before = SCANNED.fetch_add(bytes, Ordering::Relaxed);
+        let trims = (before + bytes) / TRIM_BYTES != before / TRIM_BYTES;
+        if trims {
+            trim();
+        }
+        trims
+    }
+
     /// Drops every spill file's mapped pages from the process.
     pub(super) fn trim() {
         for &(start, bytes) in lock().iter() {
@@ -590,6 +610,17 @@ mod file {
 pub fn trim_now() {
     #[cfg(target_os = "linux")]
     file::trim();
+}
+
+/// Reports `bytes` read or written through spilled stores by a stage that
+/// scans them: the kernel maps a cached file's pages many at a time, faster
+/// than the trimming thread looks, so every [`TRIM_BYTES`] reported the
+/// caller drops the mapped pages itself. Free while nothing is spilled.
+pub fn scanned(bytes: usize) {
+    #[cfg(target_os = "linux")]
+    file::scanned(bytes as u64);
+    #[cfg(not(target_os = "linux"))]
+    let _ = bytes;
 }
 
 #[cfg(test)]
@@ -643,6 +674,21 @@ mod tests {
         assert_eq!(p.as_ref().unwrap().held(), 0);
         let filed = p.as_ref().unwrap().peak_in_files();
         assert!(cfg!(not(target_os = "linux")) || filed >= 600, "{filed} bytes filed");
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn scanned_bytes_trim_every_trim_bytes_while_a_store_is_spilled() {
+        let mut s = Store::<u8>::with_policy(policy(0));
+        s.extend_from_slice(&[7; 4096], "test").unwrap();
+        assert!(s.is_spilled());
+        // Every TRIM_BYTES reported cross one multiple of it, wherever the count was.
+        assert!(file::scanned(TRIM_BYTES));
+        assert!(!file::scanned(0));
+        let trims = (0..64).filter(|_| file::scanned(TRIM_BYTES / 4)).count();
+        assert!((16..=17).contains(&trims), "{trims} trims for 16 × TRIM_BYTES");
+        // Trimming keeps the data.
+        assert!(s.iter().all(|&b| b == 7));
     }
 
     #[cfg(target_os = "linux")]
