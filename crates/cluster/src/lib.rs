@@ -313,7 +313,7 @@ pub fn assign<const N: usize>(data: &[&[f32; N]], centroids: &[[f32; N]], previo
     assign_scanned(data, centroids, previous, &|| {})
 }
 
-/// [`assign`], calling `scanned` as it goes (see [`scan_items`]).
+/// [`assign`], calling `scanned` as it goes (see [`scan_groups`]).
 fn assign_scanned<const N: usize>(data: &[&[f32; N]], centroids: &[[f32; N]], previous: Option<&[(u32, f32)]>, scanned: &(dyn Fn() + Sync)) -> Vec<(u32, f32)> {
     map_scanned(data, scanned, |i, b| nearest(b, centroids, previous.and_then(|p| p.get(i)).map_or(0, |&(h, _)| h)))
 }
@@ -323,7 +323,7 @@ pub fn update<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroi
     update_scanned(data, labels, centroids, &|| {})
 }
 
-/// [`update`], calling `scanned` as it goes (see [`scan_items`]).
+/// [`update`], calling `scanned` as it goes (see [`scan_groups`]).
 fn update_scanned<const N: usize>(data: &[&[f32; N]], labels: &[(u32, f32)], centroids: &[[f32; N]], scanned: &(dyn Fn() + Sync)) -> Vec<[f32; N]> {
     let k = centroids.len();
     let mut partial: Vec<(Vec<f64>, Vec<u64>)> = Vec::new();

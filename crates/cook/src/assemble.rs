@@ -117,7 +117,7 @@ impl Cooker {
         let t0 = Instant::now();
         let decode_stored = |b: u32, want: &[bool]| stored.decode(&encoded, b, want);
         let own: Vec<u32> = stored_levels.iter().map(|r| r.start).collect();
-        let measured = errors::measure(built, first, self.levels(), &own, &decode_stored);
+        let measured = errors::measure(built, first, self.levels(), &own, &decode_stored)?;
         let cluster_report = clustered
             .as_ref()
             .zip(opts.clustering.as_ref())

@@ -188,7 +188,7 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
         _ => decode_stored(b, want),
     };
     let mut without = ErrorStats::default();
-    for e in frame_errors(u.built, u.first, u.own, &decode_unclustered) {
+    for e in frame_errors(u.built, u.first, u.own, &decode_unclustered)? {
         without.merge(&e[0]);
     }
     Ok(ClusterReport {

@@ -4,6 +4,7 @@
 use rayon::prelude::*;
 use vdbcook_encode::{Brick, ErrorStats, NonFinite};
 use vdbcook_flipbook::Built;
+use vdbcook_grid::spill::{Store, StoreError};
 
 /// A stored brick decoder: pool brick and the channels wanted (`want[c]`;
 /// empty: all) -> per channel its [`Brick`] (`None` for one not wanted).
@@ -21,9 +22,9 @@ pub(crate) struct Measured {
 
 /// Measures every tree of `built` (levels `first` … `levels` − 1); `own`:
 /// each channel's first stored level, where its per-frame figures are taken.
-pub(crate) fn measure(built: &Built, first: u32, levels: u32, own: &[u32], decoded: &Decode) -> Measured {
+pub(crate) fn measure(built: &Built, first: u32, levels: u32, own: &[u32], decoded: &Decode) -> Result<Measured, StoreError> {
     let channels = own.len();
-    let tree_err = voxel_errors(built, decoded);
+    let tree_err = voxel_errors(built, decoded)?;
     let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
     // A coarser level's figure holds the channels for which it is coarser
     // than their first level (a coarse channel's own level is in `frames`).
@@ -46,7 +47,7 @@ pub(crate) fn measure(built: &Built, first: u32, levels: u32, own: &[u32], decod
             t
         })
         .collect();
-    Measured { frames, levels: level_err, totals }
+    Ok(Measured { frames, levels: level_err, totals })
 }
 
 /// Per frame, each channel's error at its first stored level (`own`); a
@@ -68,20 +69,26 @@ fn by_frame(tree_err: Vec<Vec<ErrorStats>>, tree_level: &[u32], first: u32, own:
 
 /// Per frame of level `first` (the first stored), its error per channel at
 /// the channel's first stored level (`own`).
-pub(crate) fn frame_errors(built: &Built, first: u32, own: &[u32], decoded: &Decode) -> Vec<Vec<ErrorStats>> {
+pub(crate) fn frame_errors(built: &Built, first: u32, own: &[u32], decoded: &Decode) -> Result<Vec<Vec<ErrorStats>>, StoreError> {
     let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
-    by_frame(voxel_errors(built, decoded), &tree_level, first, own)
+    Ok(by_frame(voxel_errors(built, decoded)?, &tree_level, first, own))
 }
 
 /// One leaf's [`ErrorStats`] in half the bytes (its counts are at most
 /// 512), for a table over every L3 node of a segment.
 #[derive(Clone, Copy)]
+#[repr(C)]
 struct LeafError {
     sum_sq: f64,
     max_abs: f64,
     /// Measured voxels, then NaN, +∞ and −∞ references.
     counts: [u16; 4],
 }
+
+// SAFETY: `repr(C)` of two f64 and four u16, no implicit padding (24 bytes).
+unsafe impl bytemuck::Zeroable for LeafError {}
+// SAFETY: as above; every bit pattern is a valid `LeafError`.
+unsafe impl bytemuck::Pod for LeafError {}
 
 impl From<ErrorStats> for LeafError {
     fn from(e: ErrorStats) -> LeafError {
@@ -98,8 +105,8 @@ impl LeafError {
 }
 
 /// Leaves whose bricks a parallel pass reads between two reports to
-/// [`vdbcook_grid::spill::scanned`].
-const SCAN_GROUP: usize = 64;
+/// [`vdbcook_grid::spill::scanned`] (about 16 MiB of source and decoded bricks).
+const SCAN_GROUP: usize = 4096;
 
 /// Reports reading `bricks` channel bricks and their decodings through a
 /// spilled pool.
@@ -110,27 +117,25 @@ fn scanned(bricks: usize) {
 /// Error of decoded bricks (`decoded(pool brick)`, one [`Brick`] per
 /// channel) against the source, per tree (frames and levels, in push order)
 /// and channel, over each channel's own active voxels.
-fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
+fn voxel_errors(built: &Built, decoded: &Decode) -> Result<Vec<Vec<ErrorStats>>, StoreError> {
     let channels = built.channels;
     let pool = built.pool.bricks();
     if channels == 1 {
-        // Per L3 node: its error over its own active voxels (the channel's mask).
-        let per_l3: Vec<LeafError> = built
-            .l3
-            .par_chunks(SCAN_GROUP)
-            .flat_map_iter(|nodes| {
-                scanned(nodes.len());
-                nodes.iter()
-            })
-            .map(|l| {
+        // Per L3 node: its error over its own active voxels (the channel's
+        // mask), a table as long as the nodes and under their spill policy.
+        let mut per_l3 = Store::<LeafError>::with_policy(built.l3.policy().cloned());
+        for nodes in built.l3.chunks(SCAN_GROUP) {
+            let errors = nodes.par_iter().map(|l| {
                 let mut e = ErrorStats::default();
                 if let (Some(src), Some(Some(dec))) = (pool.try_get(l.brick as usize, 0), decoded(l.brick, &[]).and_then(|d| d.into_iter().next())) {
                     e.add_masked(src, &dec, &l.mask);
                 }
                 LeafError::from(e)
-            })
-            .collect();
-        return built
+            });
+            per_l3.par_extend(errors, "the error figures")?;
+            scanned(nodes.len());
+        }
+        return Ok(built
             .frames
             .iter()
             .map(|f| {
@@ -140,47 +145,44 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Vec<Vec<ErrorStats>> {
                 }
                 vec![e]
             })
-            .collect();
+            .collect());
     }
-    // Several channels: each leaf over each channel's own mask.
-    built
+    // Several channels: each leaf over each channel's own mask, in groups
+    // of leaves whose figures are merged in leaf order.
+    let leaf_errors = |f: &vdbcook_flipbook::FrameLeaves, k: usize, id: u32| {
+        let mut e = vec![ErrorStats::default(); channels];
+        let brick = built.l3[id as usize].brick as usize;
+        // A channel not active in the leaf (one stored at another level) adds nothing: not decoded.
+        let masks = f.channel_masks.get(k * channels..(k + 1) * channels).unwrap_or(&[]);
+        let want: Vec<bool> = masks.iter().map(|m| m.iter().any(|&w| w != 0)).collect();
+        if let (true, Some(dec)) = (want.iter().any(|&w| w), decoded(brick as u32, &want)) {
+            for (c, e) in e.iter_mut().enumerate() {
+                // An unwanted channel's mask is empty: it adds nothing.
+                if let (Some(mask), Some(src), Some(Some(d))) = (masks.get(c), pool.try_get(brick, c), dec.get(c)) {
+                    e.add_masked(src, d, mask);
+                }
+            }
+        }
+        e
+    };
+    let group = (SCAN_GROUP / channels).max(1);
+    Ok(built
         .frames
         .iter()
         .map(|f| {
-            let per_leaf: Vec<Vec<ErrorStats>> = f
-                .leaves
-                .par_chunks(SCAN_GROUP)
-                .enumerate()
-                .flat_map_iter(|(g, leaves)| {
-                    scanned(leaves.len() * channels);
-                    leaves.iter().enumerate().map(move |(k, leaf)| (g * SCAN_GROUP + k, leaf))
-                })
-                .map(|(k, &(_, id))| {
-                    let mut e = vec![ErrorStats::default(); channels];
-                    let brick = built.l3[id as usize].brick as usize;
-                    // A channel not active in the leaf (one stored at another level) adds nothing: not decoded.
-                    let masks = f.channel_masks.get(k * channels..(k + 1) * channels).unwrap_or(&[]);
-                    let want: Vec<bool> = masks.iter().map(|m| m.iter().any(|&w| w != 0)).collect();
-                    if let (true, Some(dec)) = (want.iter().any(|&w| w), decoded(brick as u32, &want)) {
-                        for (c, e) in e.iter_mut().enumerate() {
-                            // An unwanted channel's mask is empty: it adds nothing.
-                            if let (Some(mask), Some(src), Some(Some(d))) = (masks.get(c), pool.try_get(brick, c), dec.get(c)) {
-                                e.add_masked(src, d, mask);
-                            }
-                        }
-                    }
-                    e
-                })
-                .collect();
             let mut total = vec![ErrorStats::default(); channels];
-            for leaf in &per_leaf {
-                for (t, e) in total.iter_mut().zip(leaf) {
-                    t.merge(e);
+            for (g, leaves) in f.leaves.chunks(group).enumerate() {
+                let per_leaf: Vec<Vec<ErrorStats>> = leaves.par_iter().enumerate().map(|(k, &(_, id))| leaf_errors(f, g * group + k, id)).collect();
+                for leaf in &per_leaf {
+                    for (t, e) in total.iter_mut().zip(leaf) {
+                        t.merge(e);
+                    }
                 }
+                scanned(leaves.len() * channels);
             }
             total
         })
-        .collect()
+        .collect())
 }
 
 /// Each channel's PSNR peak: its value range (`ranges`) over its finite

@@ -937,16 +937,21 @@ fn clustered_cooks_spilled_write_what_they_write_in_memory() {
         let (memory, report) = cook_fire(opts.clone(), &frames);
         assert!(report.clustering.as_ref().is_some_and(|c| c.stats.clustered > 0), "{:?}", report.clustering);
         let policy = spilled();
-        let (from_files, _) = cook_fire(CookOptions { spill: policy.clone(), ..opts.clone() }, &frames);
+        let (from_files, spilled_report) = cook_fire(CookOptions { spill: policy.clone(), ..opts.clone() }, &frames);
         assert!(memory == from_files, "{:?}: the spilled cook wrote another asset", opts.max_error);
+        // The error figures, read from the spilled pool in groups, are the same too.
+        assert_eq!(report.frame_errors, spilled_report.frame_errors);
+        let without = |r: &CookReport| r.clustering.as_ref().map(|c| c.rmse_without.to_bits());
+        assert_eq!(without(&report), without(&spilled_report));
         assert!(policy.is_some_and(|p| p.peak_in_files() > 0));
         // One channel: the pool is dense, its kept bricks read in place.
         let one: Vec<Grid> = frames.iter().map(|f| f[0].clone()).collect();
         let cook_one = |spill| {
             let mut c = Cooker::new(CookOptions { spill, ..opts.clone() });
             one.iter().for_each(|f| c.push(f, None).unwrap());
-            vdbcook_vpak::assemble(&c.finish(&NoProgress).unwrap().0)
+            let (sections, report) = c.finish(&NoProgress).unwrap();
+            (vdbcook_vpak::assemble(&sections), report.frame_errors)
         };
-        assert!(cook_one(None) == cook_one(spilled()), "{:?}: one channel spilled wrote another asset", opts.max_error);
+        assert!(cook_one(None) == cook_one(spilled()), "{:?}: one channel spilled wrote another asset or error figures", opts.max_error);
     }
 }
