@@ -109,6 +109,7 @@ impl Cooker {
         let t0 = Instant::now();
         progress.start("building nodes", built.frames.len() as u64);
         let nodes = built.nodes(|b| stored.remap.get(b as usize).copied().unwrap_or(0))?;
+        progress.advance(built.frames.len() as u64);
         progress.finish();
         lap(&mut timings, "nodes", t0);
 
@@ -117,7 +118,10 @@ impl Cooker {
         let t0 = Instant::now();
         let decode_stored = |b: u32, want: &[bool]| stored.decode(&encoded, b, want);
         let own: Vec<u32> = stored_levels.iter().map(|r| r.start).collect();
-        let measured = errors::measure(built, first, self.levels(), &own, &decode_stored)?;
+        // One pass, and with clustering one more for the figures without it.
+        progress.start("measuring error", (errors::work(built) * (1 + usize::from(clustered.is_some()))) as u64);
+        let advance = |n: usize| progress.advance(n as u64);
+        let measured = errors::measure(built, first, self.levels(), &own, &decode_stored, &advance)?;
         let cluster_report = clustered
             .as_ref()
             .zip(opts.clustering.as_ref())
@@ -134,9 +138,10 @@ impl Cooker {
                     masks: masks.as_deref(),
                     spill: opts.spill.as_ref(),
                 };
-                cluster::report(c, co, &without, &decode_stored, measured.totals[0].rmse())
+                cluster::report(c, co, &without, &decode_stored, measured.totals[0].rmse(), &advance)
             })
             .transpose()?;
+        progress.finish();
         lap(&mut timings, "error", t0);
 
         // Layout: node arrays, brick ranges and tables, channel tables, atlases.
@@ -144,7 +149,7 @@ impl Cooker {
         let planes_of = layout::planes_of(&encoded.specs, channels);
         // The node arrays move into their sections: what else needs of them, first.
         let (tree, index_offset) = (TreeFigures::of(&nodes), nodes.offset);
-        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref())?;
+        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref(), progress)?;
         let value_ranges = self.value_ranges(built, channels);
         let peaks = errors::peaks(built, &value_ranges);
         let specs = encoded.specs.clone();

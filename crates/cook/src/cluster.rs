@@ -159,7 +159,14 @@ pub(crate) struct Unclustered<'a> {
 /// The thesis's Figure 19 table: the first channel's voxel RMSE as stored
 /// (`rmse_with`) and with every merged brick encoded on its own instead
 /// (other bricks decode as stored, `decode_stored`).
-pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Unclustered, decode_stored: &crate::errors::Decode, rmse_with: f64) -> Result<ClusterReport, crate::Error> {
+pub(crate) fn report(
+    c: &Clustered,
+    co: &vdbcook_cluster::Options,
+    u: &Unclustered,
+    decode_stored: &crate::errors::Decode,
+    rmse_with: f64,
+    advance: &crate::errors::Advance,
+) -> Result<ClusterReport, crate::Error> {
     let channels = u.channels;
     let merged: Vec<usize> = (0..c.merged.len()).filter(|&i| c.merged[i]).collect();
     let pool = u.built.pool.bricks();
@@ -188,7 +195,7 @@ pub(crate) fn report(c: &Clustered, co: &vdbcook_cluster::Options, u: &Uncluster
         _ => decode_stored(b, want),
     };
     let mut without = ErrorStats::default();
-    for e in frame_errors(u.built, u.first, u.own, &decode_unclustered)? {
+    for e in frame_errors(u.built, u.first, u.own, &decode_unclustered, advance)? {
         without.merge(&e[0]);
     }
     Ok(ClusterReport {

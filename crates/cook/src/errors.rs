@@ -10,6 +10,18 @@ use vdbcook_grid::spill::{Store, StoreError};
 /// empty: all) -> per channel its [`Brick`] (`None` for one not wanted).
 pub(crate) type Decode<'a> = dyn Fn(u32, &[bool]) -> Option<Vec<Option<Brick>>> + Sync + 'a;
 
+/// Told how many more of [`work`]'s leaves a pass has measured.
+pub(crate) type Advance<'a> = dyn Fn(usize) + Sync + 'a;
+
+/// The leaves one pass of the error figures measures: each L3 node once
+/// with one channel, each frame's leaves with several.
+pub(crate) fn work(built: &Built) -> usize {
+    match built.channels {
+        1 => built.l3.len(),
+        _ => built.frames.iter().map(|f| f.leaves.len()).sum(),
+    }
+}
+
 /// The error of an asset's stored levels, per channel.
 pub(crate) struct Measured {
     /// Per frame of the first stored level.
@@ -22,9 +34,9 @@ pub(crate) struct Measured {
 
 /// Measures every tree of `built` (levels `first` … `levels` − 1); `own`:
 /// each channel's first stored level, where its per-frame figures are taken.
-pub(crate) fn measure(built: &Built, first: u32, levels: u32, own: &[u32], decoded: &Decode) -> Result<Measured, StoreError> {
+pub(crate) fn measure(built: &Built, first: u32, levels: u32, own: &[u32], decoded: &Decode, advance: &Advance) -> Result<Measured, StoreError> {
     let channels = own.len();
-    let tree_err = voxel_errors(built, decoded)?;
+    let tree_err = voxel_errors(built, decoded, advance)?;
     let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
     // A coarser level's figure holds the channels for which it is coarser
     // than their first level (a coarse channel's own level is in `frames`).
@@ -69,9 +81,9 @@ fn by_frame(tree_err: Vec<Vec<ErrorStats>>, tree_level: &[u32], first: u32, own:
 
 /// Per frame of level `first` (the first stored), its error per channel at
 /// the channel's first stored level (`own`).
-pub(crate) fn frame_errors(built: &Built, first: u32, own: &[u32], decoded: &Decode) -> Result<Vec<Vec<ErrorStats>>, StoreError> {
+pub(crate) fn frame_errors(built: &Built, first: u32, own: &[u32], decoded: &Decode, advance: &Advance) -> Result<Vec<Vec<ErrorStats>>, StoreError> {
     let tree_level: Vec<u32> = built.frames.iter().map(|f| f.level).collect();
-    Ok(by_frame(voxel_errors(built, decoded)?, &tree_level, first, own))
+    Ok(by_frame(voxel_errors(built, decoded, advance)?, &tree_level, first, own))
 }
 
 /// One leaf's [`ErrorStats`] in half the bytes (its counts are at most
@@ -117,7 +129,7 @@ fn scanned(bricks: usize) {
 /// Error of decoded bricks (`decoded(pool brick)`, one [`Brick`] per
 /// channel) against the source, per tree (frames and levels, in push order)
 /// and channel, over each channel's own active voxels.
-fn voxel_errors(built: &Built, decoded: &Decode) -> Result<Vec<Vec<ErrorStats>>, StoreError> {
+fn voxel_errors(built: &Built, decoded: &Decode, advance: &Advance) -> Result<Vec<Vec<ErrorStats>>, StoreError> {
     let channels = built.channels;
     let pool = built.pool.bricks();
     if channels == 1 {
@@ -134,6 +146,7 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Result<Vec<Vec<ErrorStats>>,
             });
             per_l3.par_extend(errors, "the error figures")?;
             scanned(nodes.len());
+            advance(nodes.len());
         }
         return Ok(built
             .frames
@@ -179,6 +192,7 @@ fn voxel_errors(built: &Built, decoded: &Decode) -> Result<Vec<Vec<ErrorStats>>,
                     }
                 }
                 scanned(leaves.len() * channels);
+                advance(leaves.len());
             }
             total
         })

@@ -3,7 +3,7 @@
 //! stored in several planes, as sections.
 
 use crate::dedup::Stored;
-use crate::{Error, Format};
+use crate::{Error, Format, Progress};
 use vdbcook_encode::{Encoded, PlaneSpec};
 use vdbcook_grid::spill::{SpillPolicy, Store};
 use vdbcook_vpak::layout::{pack_atlas_into, plan_atlases, AtlasLayout};
@@ -37,8 +37,11 @@ pub(crate) fn planes_of(specs: &[PlaneSpec], channels: usize) -> Vec<Vec<usize>>
 /// Lays out the stored bricks of every plane of `encoded` in atlases of at
 /// most `max_texture_dim` texels a side (atlases under `spill`: see
 /// `vdbcook_grid::spill`).
-pub(crate) fn lay_out(nodes: Nodes, encoded: &Encoded, stored: &Stored, planes_of: &[Vec<usize>], max_texture_dim: u32, spill: Option<&SpillPolicy>) -> Result<Laid, Error> {
+pub(crate) fn lay_out(nodes: Nodes, encoded: &Encoded, stored: &Stored, planes_of: &[Vec<usize>], max_texture_dim: u32, spill: Option<&SpillPolicy>, progress: &dyn Progress) -> Result<Laid, Error> {
     let specs = &encoded.specs;
+    // The atlases' bricks: a constant plane has none.
+    let atlas_bricks = specs.iter().zip(&stored.planes).filter(|(s, _)| s.plane.format != Format::Constant).map(|(_, (keep, _))| keep.len() as u64);
+    progress.start("laying out", atlas_bricks.sum());
     let mut sections = node_sections(nodes);
     let mut plane_infos = Vec::with_capacity(specs.len());
     let mut plane_bytes = vec![0u64; specs.len()];
@@ -64,6 +67,7 @@ pub(crate) fn lay_out(nodes: Nodes, encoded: &Encoded, stored: &Stored, planes_o
             let mut data = Store::<u8>::with_policy(spill.cloned());
             data.extend_zeroed(layout.byte_len(), "an atlas")?;
             pack_atlas_into(&layout, &bricks, &mut data);
+            progress.advance(u64::from(atlas.count));
             plane_bytes[p] += data.len() as u64;
             atlas_sections.push(Section { kind: kind::ATLAS, index: atlas_sections.len() as u32, data: Bytes::Held(Box::new(data)) });
         }
@@ -86,6 +90,7 @@ pub(crate) fn lay_out(nodes: Nodes, encoded: &Encoded, stored: &Stored, planes_o
         sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: Bytes::from_words(table) });
     }
     sections.extend(atlas_sections);
+    progress.finish();
     Ok(Laid { sections, planes: plane_infos, plane_bytes, channel_table_bytes })
 }
 

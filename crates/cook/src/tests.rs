@@ -955,3 +955,48 @@ fn clustered_cooks_spilled_write_what_they_write_in_memory() {
         assert!(cook_one(None) == cook_one(spilled()), "{:?}: one channel spilled wrote another asset or error figures", opts.max_error);
     }
 }
+
+/// Records each stage's total and what was advanced in it.
+#[derive(Default)]
+struct Stages(std::sync::Mutex<Vec<(String, u64, u64)>>);
+
+impl Progress for Stages {
+    fn start(&self, stage: &str, total: u64) {
+        self.0.lock().unwrap().push((stage.to_string(), total, 0));
+    }
+    fn advance(&self, n: u64) {
+        if let Some(s) = self.0.lock().unwrap().last_mut() {
+            s.2 += n;
+        }
+    }
+}
+
+#[test]
+fn every_stage_of_the_finish_reports_progress_up_to_its_total() {
+    let frames: Vec<[Grid; 3]> = (0..3).map(|k| fire(k % 2)).collect();
+    let co = vdbcook_cluster::Options { clusters: 4, iterations: 2, variance_threshold: 10.0, max_brick_error: None, seed: 1 };
+    let one = |o: CookOptions| {
+        let mut c = Cooker::new(o);
+        frames.iter().for_each(|f| c.push(&f[0], None).unwrap());
+        c
+    };
+    let three = |o: CookOptions| {
+        let mut c = Cooker::with_channels(o, specs(&["density", "temperature", "flames"]));
+        frames.iter().for_each(|f| c.push_channels(&[Some(&f[0]), Some(&f[1]), Some(&f[2])], None).unwrap());
+        c
+    };
+    let clustered = CookOptions { format: Format::Unorm8, clustering: Some(co), ..CookOptions::default() };
+    for (cooker, expect) in [
+        (one(clustered.clone()), vec!["clustering", "encoding", "building nodes", "measuring error", "laying out"]),
+        (three(CookOptions { format: Format::Bc7, ..CookOptions::default() }), vec!["encoding", "building nodes", "measuring error", "laying out"]),
+        (one(max_error_options(0.01)), vec!["choosing formats", "building nodes", "measuring error", "laying out"]),
+    ] {
+        let stages = Stages::default();
+        cooker.finish(&stages).unwrap();
+        let stages = stages.0.into_inner().unwrap();
+        assert_eq!(stages.iter().map(|s| s.0.as_str()).collect::<Vec<_>>(), expect);
+        for (stage, total, done) in &stages {
+            assert!(*total > 0 && done == total, "{stage}: {done} of {total}");
+        }
+    }
+}
