@@ -4,7 +4,7 @@ segment against segments, parts on two pinned cores against one, and nanovdb_con
 --fp16 on the same files in the same run. Prints a table with the ratios.
 
     /usr/bin/python3 scripts/make_bench_sequence.py bench-out/seq224 --frames 96 --size 224
-    /usr/bin/python3 scripts/bench_segments.py bench-out/seq224 [--segment 24] [--formats f16,bc7] [--spill-above 512MiB] [--small-budget 64MiB]
+    /usr/bin/python3 scripts/bench_segments.py bench-out/seq224 [--segment 24] [--formats f16,bc7,max-error:0.01,clusters:64] [--spill-above 512MiB] [--small-budget 64MiB]
 
 The one-segment cook runs twice: with its buffers in memory (`--spill-above never`) and
 spilled to a file past --spill-above (the same asset, checked byte for byte). Then the
@@ -34,6 +34,16 @@ def timed(cmd, **kw):
     return float(wall), float(user) + float(sys_), int(peak)
 
 
+def cook_flags(fmt):
+    """A --formats entry as cook flags: a format, `max-error:E`, or `clusters:K` (unorm8)."""
+    kind, _, arg = fmt.partition(":")
+    if kind == "max-error":
+        return ["--max-error", arg]
+    if kind == "clusters":
+        return ["--format", "unorm8", "--clusters", arg]
+    return ["--format", fmt]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("seq")
@@ -53,7 +63,7 @@ def main():
         print(f"{n} frames of {args.seq}; segments of {seg}; load {os.getloadavg()[0]:.2f}", flush=True)
         results, small = {}, {}
         for fmt in args.formats.split(","):
-            flags = ["--max-error", fmt.split(":", 1)[1]] if fmt.startswith("max-error:") else ["--format", fmt]
+            flags = cook_flags(fmt)
             def cook(name, inputs, extra):
                 out = os.path.join(tmp, name + ".vpak")
                 r = timed([args.exe, "cook", "-q", "--force", "-o", out] + flags + extra + inputs)
@@ -87,7 +97,7 @@ def main():
         print(f"  nanovdb_convert --fp16 one frame: {one[2] / 1024:.1f} MB peak; xargs -P2 over {n} files: {xargs_wall:.2f} s", flush=True)
         if not args.no_parts:
             fmt = args.formats.split(",")[0]
-            flags = ["--format", fmt, "--segment-frames", seg]
+            flags = cook_flags(fmt) + ["--segment-frames", seg]
             single = timed(["taskset", "-c", "0", args.exe, "cook", "-q", "--force", "-o", os.path.join(tmp, "single.vpak")] + flags + files)
             procs = []
             t0 = time.time()
