@@ -13,7 +13,8 @@ use vdbcook_vpak::segments::PartInfo;
 use vdbcook_vpak::{Asset, AtomicFile, DirectWriter, SourceFile, Writer};
 
 /// Reads `files` on a thread that stays one frame ahead (at most two source
-/// frames live at once) and pushes each frame into one cooker per entry of
+/// frames live at once; none ahead while a segment finishes once the cook
+/// has spilled) and pushes each frame into one cooker per entry of
 /// `opts` (an asset and its lossless reference share one read), made for the
 /// channels the first frame with a file resolves (frames with `--with`
 /// files: the first file of each sequence). Every `segment` frames (and
@@ -26,6 +27,8 @@ use vdbcook_vpak::{Asset, AtomicFile, DirectWriter, SourceFile, Writer};
 pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, base: Option<PathBuf>, segment: Option<usize>, on_segment: &mut OnSegment, bars: &dyn Progress) -> Result<Fed> {
     // Each frame comes with the channels when they are first resolved.
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
+    // The reader reads each frame after the first once it is let (see `credit` below).
+    let (credit, credits) = std::sync::mpsc::channel::<()>();
     let total = files.len() as u64;
     // A thread that cannot start (no memory for its stack) is an error, not a panic.
     let reader = std::thread::Builder::new()
@@ -43,7 +46,10 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
                     }
                 }
             }
-            for f in files {
+            for (i, f) in files.into_iter().enumerate() {
+                if i > 0 && credits.recv().is_err() {
+                    break;
+                }
                 let r = read_frame(f, &sel, &mut channels).map(|mut frame| {
                     if let Some(b) = base.as_deref() {
                         let relative = |s: &mut SourceFile, p: &Path| {
@@ -94,8 +100,17 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
         Ok(())
     };
     let mut stated = Vec::new();
+    // A cook that has spilled is held to its memory budget: there the next
+    // frame is not read while a segment finishes (a decoded frame beside the
+    // segment's last stages); elsewhere the reader stays a frame ahead.
+    let spilled = || opts.iter().any(|o| o.spill.as_ref().is_some_and(|p| p.peak_in_files() > 0));
     for (r, ch) in rx {
         read_secs += wait.elapsed().as_secs_f64();
+        let ends_segment = segments.cookers.first().is_some_and(|c| c.frame_count() + 1 >= segments.segment);
+        let held = ends_segment && spilled();
+        if !held {
+            let _ = credit.send(());
+        }
         let pushed = r.and_then(|frame| {
             stated.push(frame.stated);
             if let Some(ch) = ch {
@@ -124,10 +139,15 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
             failure = Some(e);
             break;
         }
+        if held {
+            let _ = credit.send(());
+        }
         bars.advance(1);
         wait = Instant::now();
     }
     bars.finish();
+    // A reader waiting to be let read stops.
+    drop(credit);
     reader.join().map_err(|_| Error::Failed("the frame reader thread panicked".into()))?;
     if let Some(e) = failure {
         return Err(e);
