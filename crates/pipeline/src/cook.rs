@@ -27,8 +27,10 @@ use vdbcook_vpak::{Asset, AtomicFile, DirectWriter, SourceFile, Writer};
 pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, base: Option<PathBuf>, segment: Option<usize>, on_segment: &mut OnSegment, bars: &dyn Progress) -> Result<Fed> {
     // Each frame comes with the channels when they are first resolved.
     let (tx, rx) = std::sync::mpsc::sync_channel::<(Result<Frame>, Option<Channels>)>(0);
-    // The reader reads each frame after the first once it is let (see `credit` below).
+    // The reader reads the first frame of each segment after the first once
+    // it is let (see `credit` below).
     let (credit, credits) = std::sync::mpsc::channel::<()>();
+    let segment_frames = segment.unwrap_or(usize::MAX).max(1);
     let total = files.len() as u64;
     // A thread that cannot start (no memory for its stack) is an error, not a panic.
     let reader = std::thread::Builder::new()
@@ -47,7 +49,7 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
                 }
             }
             for (i, f) in files.into_iter().enumerate() {
-                if i > 0 && credits.recv().is_err() {
+                if i > 0 && i % segment_frames == 0 && credits.recv().is_err() {
                     break;
                 }
                 let r = read_frame(f, &sel, &mut channels).map(|mut frame| {
@@ -79,7 +81,7 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
     let mut read_secs = 0.0;
     let mut wait = Instant::now();
     let mut failure = None;
-    let mut segments = Segments { cookers: Vec::new(), pushed: 0, emitted: 0, segment: segment.unwrap_or(usize::MAX).max(1), on_segment };
+    let mut segments = Segments { cookers: Vec::new(), pushed: 0, emitted: 0, segment: segment_frames, on_segment };
     let mut channels: Option<Channels> = None;
     // Frames before the first one whose file resolves the channels: empty.
     let mut leading: Vec<(Option<SourceFile>, Option<i64>)> = Vec::new();
@@ -104,11 +106,12 @@ pub fn feed(opts: Vec<CookOptions>, files: Vec<FrameFile>, sel: GridSelection, b
     // frame is not read while a segment finishes (a decoded frame beside the
     // segment's last stages); elsewhere the reader stays a frame ahead.
     let spilled = || opts.iter().any(|o| o.spill.as_ref().is_some_and(|p| p.peak_in_files() > 0));
-    for (r, ch) in rx {
+    for (received, (r, ch)) in rx.into_iter().enumerate() {
         read_secs += wait.elapsed().as_secs_f64();
-        let ends_segment = segments.cookers.first().is_some_and(|c| c.frame_count() + 1 >= segments.segment);
-        let held = ends_segment && spilled();
-        if !held {
+        // Frame `received` of the reader's; the last of a segment lets it read on.
+        let ends_segment = (received + 1) % segment_frames == 0;
+        let held = ends_segment && !segments.cookers.is_empty() && spilled();
+        if ends_segment && !held {
             let _ = credit.send(());
         }
         let pushed = r.and_then(|frame| {
