@@ -40,7 +40,8 @@ fn scan_items<const N: usize>() -> usize {
 /// a larger pool (the k-means candidates among all bricks) make smaller
 /// groups, since the system maps a file's pages around each one read.
 fn scan_groups<const N: usize>(items: &[&[f32; N]]) -> Vec<std::ops::Range<usize>> {
-    let (scan, bytes) = (scan_items::<N>(), scan_items::<N>() * N * 4);
+    let scan = scan_items::<N>();
+    let bytes = scan * N * 4;
     let span = |c: &[&[f32; N]]| c.iter().fold((usize::MAX, 0), |(lo, hi), &b| (lo.min(b.as_ptr() as usize), hi.max(b.as_ptr() as usize + N * 4)));
     let mut groups: Vec<std::ops::Range<usize>> = Vec::new();
     let mut current: Option<(std::ops::Range<usize>, usize, usize)> = None;

@@ -3,7 +3,7 @@
 //! clustering cost in error.
 
 use crate::encode::union_masks;
-use crate::errors::frame_errors;
+use crate::errors::{frame_errors, scanned_bricks};
 use crate::{ClusterReport, Progress};
 use rayon::prelude::*;
 use vdbcook_encode::{Brick, Bricks, Encoded, ErrorStats, PlaneSpec, Quality};
@@ -70,7 +70,7 @@ fn work_bricks<const N: usize>(out: vdbcook_cluster::Clustered<N>, pool: Bricks,
     let c = pool.channels();
     let mut bricks = Store::with_policy(spill.cloned());
     let made = (0..out.len() * c).into_par_iter().map(|j| {
-        vdbcook_grid::spill::scanned(2 * std::mem::size_of::<Brick>());
+        scanned_bricks(1);
         match out.kept.get(j / c) {
             Some(&i) => *pool.get(i as usize, j % c),
             None => centroid(&out.centroids[j / c - out.kept.len()], j % c),
@@ -172,7 +172,7 @@ pub(crate) fn report(
     let pool = u.built.pool.bricks();
     let mut own = Store::<Brick>::with_policy(u.spill.cloned());
     let copy = |j: usize| {
-        vdbcook_grid::spill::scanned(2 * std::mem::size_of::<Brick>());
+        scanned_bricks(1);
         *pool.get(merged[j / channels], j % channels)
     };
     own.par_extend((0..merged.len() * channels).into_par_iter().map(copy), "the merged bricks")?;

@@ -120,9 +120,9 @@ impl LeafError {
 /// [`vdbcook_grid::spill::scanned`] (about 16 MiB of source and decoded bricks).
 const SCAN_GROUP: usize = 4096;
 
-/// Reports reading `bricks` channel bricks and their decodings through a
-/// spilled pool.
-fn scanned(bricks: usize) {
+/// Reports reading `bricks` channel bricks through a spilled pool, each with
+/// one more brick made from it (decoded, or copied into another store).
+pub(crate) fn scanned_bricks(bricks: usize) {
     vdbcook_grid::spill::scanned(bricks * 2 * std::mem::size_of::<Brick>());
 }
 
@@ -145,7 +145,7 @@ fn voxel_errors(built: &Built, decoded: &Decode, advance: &Advance) -> Result<Ve
                 LeafError::from(e)
             });
             per_l3.par_extend(errors, "the error figures")?;
-            scanned(nodes.len());
+            scanned_bricks(nodes.len());
             advance(nodes.len());
         }
         return Ok(built
@@ -191,7 +191,7 @@ fn voxel_errors(built: &Built, decoded: &Decode, advance: &Advance) -> Result<Ve
                         t.merge(e);
                     }
                 }
-                scanned(leaves.len() * channels);
+                scanned_bricks(leaves.len() * channels);
                 advance(leaves.len());
             }
             total
