@@ -294,15 +294,21 @@ pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Ch
     }
     let vdb = vdbcook_vdb::open(&path).with_context(|| p.clone())?;
     let stated = crate::source_time::stated(&vdb);
-    let source = source_of(&vdb, &p);
+    let (mut records, grids) = recorded_beside(&[(&vdb, &p)], || grids_of(&vdb, &p, sel, channels, allow_missing));
+    Ok(Frame { path, grids: grids?, source: records.pop(), with_sources, number, stated })
+}
+
+/// The channels of one file's frame (`None`: an empty frame), resolving
+/// `channels` when this is the first file that has them.
+fn grids_of(vdb: &VdbFile, p: &str, sel: &GridSelection, channels: &mut Option<Channels>, allow_missing: bool) -> Result<Option<Vec<Option<Grid>>>> {
     if channels.is_none() {
-        match resolve(&vdb, &p, sel) {
+        match resolve(vdb, p, sel) {
             Ok(c) => *channels = Some(c),
-            Err(_) if allow_missing && !matches!(sel, GridSelection::Many(_) | GridSelection::All) => return Ok(Frame { path, grids: None, source: Some(source), with_sources, number, stated }),
+            Err(_) if allow_missing && !matches!(sel, GridSelection::Many(_) | GridSelection::All) => return Ok(None),
             Err(e) => return Err(e),
         }
     }
-    let Some(ch) = channels.as_ref() else { return Ok(Frame { path, grids: None, source: Some(source), with_sources, number, stated }) };
+    let Some(ch) = channels.as_ref() else { return Ok(None) };
     let mut grids: Vec<Option<Grid>> = Vec::with_capacity(ch.specs.len());
     // Each source grid once (a vec3 grid gives its three channels in order).
     let mut read: Option<(String, Vec<Option<Grid>>)> = None;
@@ -313,16 +319,31 @@ pub fn read_frame(file: FrameFile, sel: &GridSelection, channels: &mut Option<Ch
                 continue;
             }
             if allow_missing {
-                return Ok(Frame { path, grids: None, source: Some(source), with_sources, number, stated });
+                return Ok(None);
             }
-            return Err(Error::Failed(format!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(&vdb))));
+            return Err(Error::Failed(format!("{p}: no grid named \"{}\" (the file has: {}; use --allow-missing to cook it as an empty frame)", spec.grid, describe_grids(vdb))));
         };
         if read.as_ref().is_none_or(|(name, _)| name != &spec.grid) {
-            read = Some((spec.grid.clone(), read_parts(&vdb, i).with_context(|| p.clone())?));
+            read = Some((spec.grid.clone(), read_parts(vdb, i).with_context(|| p.to_string())?));
         }
         grids.push(read.as_mut().and_then(|(_, parts)| take_part(parts, spec)));
     }
-    Ok(Frame { path, grids: Some(grids), source: Some(source), with_sources, number, stated })
+    Ok(Some(grids))
+}
+
+/// Runs `read` while the files' records are made on a thread beside it:
+/// the record's hash is one serial pass over every byte of a file, which
+/// overlaps with the serial scan of its trees (a third of a large frame's
+/// read). Without a thread, the records are made first.
+fn recorded_beside<T>(files: &[(&VdbFile, &str)], read: impl FnOnce() -> T) -> (Vec<SourceFile>, T) {
+    let records = || files.iter().map(|&(vdb, name)| source_of(vdb, name)).collect::<Vec<_>>();
+    std::thread::scope(|s| match std::thread::Builder::new().name("source hash".into()).spawn_scoped(s, records) {
+        Ok(hashing) => {
+            let out = read();
+            (hashing.join().unwrap_or_else(|p| std::panic::resume_unwind(p)), out)
+        }
+        Err(_) => (records(), read()),
+    })
 }
 
 /// Reads a frame from its main file and its `--with` files: each channel
@@ -333,8 +354,9 @@ fn read_files(file: FrameFile, channels: Option<&Channels>) -> Result<Frame> {
     let FrameFile { path, allow_missing, number, with } = file;
     let main = path.clone().unwrap_or_default();
     let mut opened: Vec<Option<(String, VdbFile)>> = Vec::with_capacity(1 + with.len());
-    let mut with_sources = Vec::new();
-    let (mut source, mut stated) = (None, crate::source_time::Stated::default());
+    // Each opened file's path and whether it is the main one, in order.
+    let mut paths = Vec::new();
+    let mut stated = crate::source_time::Stated::default();
     for (k, p) in std::iter::once(path).chain(with).enumerate() {
         let Some(p) = p else {
             opened.push(None);
@@ -349,16 +371,28 @@ fn read_files(file: FrameFile, channels: Option<&Channels>) -> Result<Frame> {
             return Err(Error::Failed(format!("{name}: no such file (use --allow-missing to cook its channels empty in that frame)")));
         }
         let vdb = vdbcook_vdb::open(&p).with_context(|| name.clone())?;
-        let record = source_of(&vdb, &name);
         if k == 0 {
             stated = crate::source_time::stated(&vdb);
+        }
+        paths.push((k == 0, p));
+        opened.push(Some((name, vdb)));
+    }
+    let files: Vec<(&VdbFile, &str)> = opened.iter().flatten().map(|(name, vdb)| (vdb, name.as_str())).collect();
+    let (records, grids) = recorded_beside(&files, || with_grids(&opened, channels));
+    let (mut source, mut with_sources) = (None, Vec::new());
+    for ((main, p), record) in paths.into_iter().zip(records) {
+        if main {
             source = Some(record);
         } else {
             with_sources.push((p, record));
         }
-        opened.push(Some((name, vdb)));
     }
-    let Some(ch) = channels.filter(|_| opened.iter().any(Option::is_some)) else { return Ok(Frame { path: main, grids: None, source, with_sources, number, stated }) };
+    Ok(Frame { path: main, grids: grids?, source, with_sources, number, stated })
+}
+
+/// The channels of a frame from its opened files (`None`: an empty frame).
+fn with_grids(opened: &[Option<(String, VdbFile)>], channels: Option<&Channels>) -> Result<Option<Vec<Option<Grid>>>> {
+    let Some(ch) = channels.filter(|_| opened.iter().any(Option::is_some)) else { return Ok(None) };
     let mut grids: Vec<Option<Grid>> = Vec::with_capacity(ch.specs.len());
     // Each source grid once (a vec3 grid gives its three channels in order).
     let mut read: Option<(usize, String, Vec<Option<Grid>>)> = None;
@@ -376,7 +410,7 @@ fn read_files(file: FrameFile, channels: Option<&Channels>) -> Result<Frame> {
         }
         grids.push(read.as_mut().and_then(|(_, _, parts)| take_part(parts, spec)));
     }
-    Ok(Frame { path: main, grids: Some(grids), source, with_sources, number, stated })
+    Ok(Some(grids))
 }
 
 #[cfg(test)]

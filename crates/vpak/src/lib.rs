@@ -685,8 +685,19 @@ pub(crate) fn head_of(entries: &[Entry]) -> (Vec<u8>, Vec<usize>, usize) {
 
 /// Writes a body: its `head` ([`body_head`]), then its sections.
 pub(crate) fn write_body<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section], head: &[u8]) -> std::io::Result<()> {
-    let (offsets, table_end, _) = plan(sections);
     w.write_all(head)?;
+    write_sections(w, sections)
+}
+
+/// Bytes of a body's header and section table.
+pub(crate) fn body_head_len(sections: &[Section]) -> usize {
+    HEADER_LEN + ENTRY_LEN * sections.len()
+}
+
+/// Writes a body's sections (and the zeros between them) after its header and
+/// section table, which the caller has written or left room for.
+pub(crate) fn write_sections<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section]) -> std::io::Result<()> {
+    let (offsets, table_end, _) = plan(sections);
     let mut pos = table_end;
     let zeros = [0u8; ALIGN];
     for (s, &off) in sections.iter().zip(&offsets) {

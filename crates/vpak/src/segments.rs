@@ -6,7 +6,7 @@
 //! them (or copies them from part files, [`Writer::copy_body`]); [`merged`] is the
 //! whole sequence's metadata.
 
-use crate::{body_head, checksum, file_len, header_checksum, write_body, Error, Metadata, Section, ALIGN, HEADER_LEN, MAGIC};
+use crate::{body_head, checksum, file_len, header_checksum, write_sections, Error, Metadata, Section, ALIGN, HEADER_LEN, MAGIC};
 use std::io::{Seek, SeekFrom, Write};
 
 /// Version of a file with a segment table whose bodies may hold
@@ -253,9 +253,27 @@ impl<W: Write + Seek> Writer<W> {
     /// Writes the next segment, of `frame_count` frames, from its sections (as a version-6 body).
     pub fn add(&mut self, frame_count: u32, sections: &[Section]) -> Result<SegmentEntry, Error> {
         let size = file_len(sections);
-        let head = body_head(sections);
-        let e = self.place(frame_count, size, checksum(&head))?;
-        write_body(&mut self.out, sections, &head)?;
+        let mut e = self.place(frame_count, size, 0)?;
+        let start = self.base + e.offset;
+        // The body's head holds every section's checksum: they are computed on
+        // a thread beside the copy of the sections (each a pass over a
+        // segment's bytes), and the head is written last, in its place.
+        let head = std::thread::scope(|s| -> Result<Vec<u8>, Error> {
+            let summing = std::thread::Builder::new().name("checksums".into()).spawn_scoped(s, || body_head(sections));
+            write_zeros(&mut self.out, crate::body_head_len(sections) as u64)?;
+            write_sections(&mut self.out, sections)?;
+            Ok(match summing {
+                Ok(t) => t.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
+                Err(_) => body_head(sections),
+            })
+        })?;
+        self.out.seek(SeekFrom::Start(start))?;
+        self.out.write_all(&head)?;
+        self.out.seek(SeekFrom::Start(start + size))?;
+        e.head_checksum = checksum(&head);
+        if let Some(last) = self.entries.last_mut() {
+            last.head_checksum = e.head_checksum;
+        }
         // Written out before the next segment is cooked (a writer's buffers go meanwhile).
         self.out.flush()?;
         Ok(e)
