@@ -269,3 +269,27 @@ fn a_full_disk_under_the_spill_file_is_one_line_and_leaves_nothing() {
     ok(vdbcook(&["cook", "-q", "--format", "f16", "--spill-above", "1MiB", "-o", s(&out), &seq]));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A segment is written while the next one cooks: a write that fails there
+/// (a file-size limit, as a full disk would) is still one line naming the
+/// output, exit 1, and nothing left in the output's directory.
+#[test]
+fn a_segment_written_beside_the_next_that_fails_is_one_line_and_leaves_nothing() {
+    if !python_ok() || !cfg!(unix) {
+        return;
+    }
+    let dir = scratch_dir("segments", "write-fails");
+    // 8 frames of 64 distinct bricks: about 64 KiB of f16 texels a frame.
+    let seq = moving_sequence(&dir.join("src").tap_mkdir(), 8, 32, 0);
+    let out_dir = dir.join("out").tap_mkdir();
+    let out = out_dir.join("out.vpak");
+    let o = Command::new("sh").args(["-c", "ulimit -f 96 && exec \"$0\" cook \"$1\" --format f16 --segment-frames 2 -o \"$2\" -q", env!("CARGO_BIN_EXE_vdbcook"), &seq, s(&out)]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("out.vpak") && err.contains("too large"), "{err}");
+    assert_eq!(std::fs::read_dir(&out_dir).unwrap().count(), 0, "left behind");
+    // Without the limit, the same cook succeeds.
+    ok(vdbcook(&["cook", "-q", "--format", "f16", "--segment-frames", "2", "-o", s(&out), &seq]));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -265,17 +265,41 @@ struct Output {
     reports: Vec<CookReport>,
     /// How each segment's sections are stored.
     coding: Supercompress,
+    /// The segment being written into the file, while the next one cooks.
+    writing: Option<Writing>,
 }
 
 enum Sink {
     Memory(Writer<std::io::Cursor<Vec<u8>>>),
-    /// The writer, the file it writes and the file's name (for errors).
-    File(Box<Writer<DirectWriter>>, AtomicFile, String),
+    /// The writer (away while a segment is written), the file it writes and
+    /// the file's name (for errors).
+    File(Option<Box<Writer<DirectWriter>>>, AtomicFile, String),
+}
+
+/// What a segment's write gives back: the writer, and the segment's entry
+/// and seconds, or the error.
+type Written = (Box<Writer<DirectWriter>>, std::result::Result<(vdbcook_vpak::SegmentEntry, f64), vdbcook_vpak::Error>);
+
+/// A segment written on a thread of its own (its copy into the file's
+/// buffers, bound by the disk, overlaps the next segment's frames), and the
+/// index of its report. Dropped unfinished (a cook that fails), it waits
+/// for the thread, so nothing writes the file after.
+struct Writing {
+    thread: Option<std::thread::JoinHandle<Written>>,
+    report: usize,
+}
+
+impl Drop for Writing {
+    fn drop(&mut self) {
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
 }
 
 impl Output {
     fn memory(count: u32, coding: Supercompress) -> Result<Output> {
-        Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new(), coding })
+        Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new(), coding, writing: None })
     }
 
     /// An asset of `count` segments that is read back and let go: written into
@@ -298,7 +322,7 @@ impl Output {
             None => Writer::new(handle, count),
         }
         .with_context(ctx)?;
-        Ok(Output { sink: Sink::File(Box::new(writer), file, ctx()), reports: Vec::new(), coding })
+        Ok(Output { sink: Sink::File(Some(Box::new(writer)), file, ctx()), reports: Vec::new(), coding, writing: None })
     }
 
     /// Finishes a segment's cooker and writes the segment; `next`, the next
@@ -321,24 +345,58 @@ impl Output {
             report.timings.push(("supercompress".into(), t0.elapsed().as_secs_f64()));
             report.disk_sections = sections.iter().map(|s| (vdbcook_vpak::kind::label(s.kind, s.index), s.data.len() as u64)).collect();
         }
-        let t0 = Instant::now();
-        let entry = match &mut self.sink {
-            Sink::Memory(w) => w.add(frames, &sections)?,
-            Sink::File(w, _, name) => w.add(frames, &sections).with_context(|| name.clone())?,
-        };
-        report.timings.push(("write".into(), t0.elapsed().as_secs_f64()));
-        if let Some(seg) = report.segments.first_mut() {
-            seg.bytes = entry.size;
-        }
+        self.wait()?;
         self.reports.push(report);
+        let index = self.reports.len() - 1;
+        match &mut self.sink {
+            Sink::Memory(w) => {
+                let t0 = Instant::now();
+                let entry = w.add(frames, &sections)?;
+                self.written(index, &entry, t0.elapsed().as_secs_f64());
+            }
+            Sink::File(slot, _, name) => {
+                let mut w = slot.take().ok_or_else(|| Error::Failed(format!("{name}: no writer")))?;
+                let write = move || {
+                    let t0 = Instant::now();
+                    let r = w.add(frames, &sections).map(|e| (e, t0.elapsed().as_secs_f64()));
+                    (w, r)
+                };
+                let thread = std::thread::Builder::new().name("segment writer".into()).spawn(write).map_err(|e| Error::Failed(format!("cannot start the segment writer thread: {e}")))?;
+                self.writing = Some(Writing { thread: Some(thread), report: index });
+            }
+        }
         Ok(())
     }
 
+    /// Waits for the segment being written, if any; its writer comes back.
+    fn wait(&mut self) -> Result<()> {
+        let Some(thread) = self.writing.as_mut().and_then(|w| w.thread.take()) else { return Ok(()) };
+        let index = self.writing.take().map_or(0, |w| w.report);
+        let (w, r) = thread.join().map_err(|_| Error::Failed("the segment writer thread panicked".into()))?;
+        let Sink::File(slot, _, name) = &mut self.sink else { return Ok(()) };
+        *slot = Some(w);
+        let (entry, secs) = r.with_context(|| name.clone())?;
+        self.written(index, &entry, secs);
+        Ok(())
+    }
+
+    /// Records segment `index`'s bytes and write time in its report.
+    fn written(&mut self, index: usize, entry: &vdbcook_vpak::SegmentEntry, secs: f64) {
+        if let Some(report) = self.reports.get_mut(index) {
+            report.timings.push(("write".into(), secs));
+            if let Some(seg) = report.segments.first_mut() {
+                seg.bytes = entry.size;
+            }
+        }
+    }
+
     /// The asset written, its file (to commit) and its report.
-    fn finish(self) -> Result<(Asset, Option<AtomicFile>, Option<CookReport>)> {
+    fn finish(mut self) -> Result<(Asset, Option<AtomicFile>, Option<CookReport>)> {
+        self.wait()?;
         let (asset, file) = match self.sink {
             Sink::Memory(w) => (Asset::from_bytes(&w.finish()?.into_inner())?, None),
             Sink::File(w, file, name) => {
+                let w = w.ok_or_else(|| Error::Failed(format!("{name}: no writer")))?;
                 let part = w.base() > 0;
                 let f = w.finish().with_context(|| name.clone())?.into_file().map_err(Error::from).with_context(|| name.clone())?;
                 let asset = if part { Asset::from_part_file(&f).map(|p| p.1) } else { Asset::from_file(&f) }.with_context(|| name.clone())?;
@@ -518,6 +576,11 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
             }
             let is_reference = job.reference && i == formats.len();
             out.add(c, next.get_mut(i), bars).map_err(|e| if is_reference { Error::In("cooking the reference".into(), Box::new(e)) } else { e })?;
+        }
+        // A cook that has spilled is held to its memory budget: its segments
+        // are written before the next frame is read (see `feed`).
+        if spill.as_ref().is_some_and(|p| p.peak_in_files() > 0) {
+            outs.iter_mut().try_for_each(Output::wait)?;
         }
         Ok(())
     };
