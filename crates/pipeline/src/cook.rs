@@ -261,12 +261,13 @@ pub fn segment_count(frames: usize, segment: Option<usize>) -> u32 {
 /// One asset being written, segment after segment: in memory, or into a
 /// file that gets its name only when [`Cooked::commit`] is called.
 struct Output {
+    /// The segment being written into the file, while the next one cooks
+    /// (first, so that it is dropped, and waited for, before the file).
+    writing: Option<Writing>,
     sink: Sink,
     reports: Vec<CookReport>,
     /// How each segment's sections are stored.
     coding: Supercompress,
-    /// The segment being written into the file, while the next one cooks.
-    writing: Option<Writing>,
 }
 
 enum Sink {
