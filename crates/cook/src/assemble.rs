@@ -3,21 +3,34 @@
 //! `IndexGridBuilder::getHandle` → `processLeafs/Lower/Upper/Root/Grid` is
 //! the model): format choice (`choose`), clustering (`cluster`), encoding
 //! (`encode`), deduplication and remapping (`dedup`), node arrays (the
-//! flip-book), error figures (`errors`), atlases and tables (`layout`),
-//! metadata (`metadata`) and the report (`report`).
+//! flip-book), atlases and tables (`layout`), metadata (`metadata`), then,
+//! while the caller writes the sections, error figures (`errors`) and the
+//! report (`report`).
 
 use crate::layout::Laid;
 use crate::metadata::Placement;
-use crate::report::{Parts, TreeFigures};
+use crate::report::{Parts, SectionSizes, TreeFigures};
 use crate::{choose, cluster, dedup, encode, errors, layout};
 use crate::{BudgetReport, BudgetTry, CookReport, Cooker, Error, Progress, MAX_CLUSTER_CHANNELS};
 use std::time::Instant;
 use vdbcook_flipbook::Built;
-use vdbcook_vpak::{kind, Section};
+use vdbcook_vpak::{kind, Metadata, Section};
 
 /// Records how long stage `stage` took, since `t0`.
 fn lap(timings: &mut Vec<(String, f64)>, stage: &str, t0: Instant) {
     timings.push((stage.into(), t0.elapsed().as_secs_f64()));
+}
+
+/// Where a cooker's sections go as soon as they are laid out, with their
+/// metadata: the caller can write them while the error figures, which only
+/// the report needs, are measured.
+pub type Deliver<'a> = dyn FnMut(&Metadata, Vec<Section>) + 'a;
+
+/// One assembly of the trees: larger than the byte budget (its file's
+/// bytes; nothing delivered), or delivered and reported.
+enum Assembled {
+    Over(u64),
+    Done(Box<CookReport>),
 }
 
 impl Cooker {
@@ -30,16 +43,28 @@ impl Cooker {
 
     /// [`Cooker::finish`], and the memory of its bricks handed to `next`
     /// (the cooker of the next segment, before its first frame) to hold its own.
-    pub fn finish_before(mut self, next: Option<&mut Cooker>, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
+    pub fn finish_before(self, next: Option<&mut Cooker>, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
+        let mut sections = Vec::new();
+        let report = self.finish_into(next, progress, &mut |_, s| sections = s)?;
+        Ok((sections, report))
+    }
+
+    /// [`Cooker::finish_before`], the sections given to `deliver` (once)
+    /// before the error figures are measured.
+    pub fn finish_into(mut self, next: Option<&mut Cooker>, progress: &dyn Progress, deliver: &mut Deliver) -> Result<CookReport, Error> {
         let levels = self.opts.levels.get();
         let timings = vec![("build".to_string(), self.build_secs - self.level_secs), ("levels".to_string(), self.level_secs)];
         let mut built = std::mem::take(&mut self.builder).finish()?;
         let Some(budget) = self.opts.max_bytes else {
-            let done = self.assemble(&built, 0, timings, progress);
+            let done = self.assemble(&built, 0, timings, progress, u64::MAX, deliver);
             if let Some(next) = next {
                 next.builder.reuse(built.pool.take_storage());
             }
-            return done;
+            return match done? {
+                Assembled::Done(report) => Ok(*report),
+                // No file has more bytes than u64::MAX.
+                Assembled::Over(bytes) => Err(Error::OverBudget { budget: u64::MAX, smallest: bytes, level: 0 }),
+            };
         };
         // Each try leaves out one more of the finest levels (and the bricks
         // only they used); the coarsest level always stays.
@@ -51,19 +76,22 @@ impl Cooker {
                 candidate = candidate.from_level(first)?;
             }
             let t0 = Instant::now();
-            let (sections, mut report) = self.assemble(&candidate, first, timings.clone(), progress)?;
-            tries.push(BudgetTry { first_level: first, bytes: report.file_bytes });
-            if report.file_bytes <= budget {
-                report.timings.push(("earlier tries".into(), (t0 - started).as_secs_f64()));
-                report.budget = Some(BudgetReport { max_bytes: budget, dropped: (0..first).collect(), tries });
-                return Ok((sections, report));
+            match self.assemble(&candidate, first, timings.clone(), progress, budget, deliver)? {
+                Assembled::Over(bytes) => tries.push(BudgetTry { first_level: first, bytes }),
+                Assembled::Done(mut report) => {
+                    tries.push(BudgetTry { first_level: first, bytes: report.file_bytes });
+                    report.timings.push(("earlier tries".into(), (t0 - started).as_secs_f64()));
+                    report.budget = Some(BudgetReport { max_bytes: budget, dropped: (0..first).collect(), tries });
+                    return Ok(*report);
+                }
             }
         }
         Err(Error::OverBudget { budget, smallest: tries.last().map_or(0, |t| t.bytes), level: levels - 1 })
     }
 
     /// Encodes, lays out and serialises the trees of `built`, whose finest level is `first`.
-    fn assemble(&self, built: &Built, first: u32, mut timings: Vec<(String, f64)>, progress: &dyn Progress) -> Result<(Vec<Section>, CookReport), Error> {
+    /// Its sections go to `deliver` when the file is at most `budget` bytes.
+    fn assemble(&self, built: &Built, first: u32, mut timings: Vec<(String, f64)>, progress: &dyn Progress, budget: u64, deliver: &mut Deliver) -> Result<Assembled, Error> {
         let opts = &self.opts;
         let channels = self.channels.len().max(1);
         let pool = built.pool.bricks();
@@ -113,6 +141,28 @@ impl Cooker {
         progress.finish();
         lap(&mut timings, "nodes", t0);
 
+        // Layout: node arrays, brick ranges and tables, channel tables, atlases.
+        let t0 = Instant::now();
+        let planes_of = layout::planes_of(&encoded.specs, channels);
+        // The node arrays move into their sections: what else needs of them, first.
+        let (tree, index_offset) = (TreeFigures::of(&nodes), nodes.offset);
+        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref(), progress)?;
+        let value_ranges = self.value_ranges(built, channels);
+        let peaks = errors::peaks(built, &value_ranges);
+        let specs = encoded.specs.clone();
+
+        // Metadata, the first section.
+        let placement = Placement { specs: &specs, group_of: &group_of, planes_of: &planes_of, planes, bricks: stored.keep.len() };
+        let meta = self.metadata(built, first, index_offset, &value_ranges, placement);
+        sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()?.into() });
+        lap(&mut timings, "layout", t0);
+        let sizes = SectionSizes::of(&sections);
+        if sizes.file_bytes > budget {
+            return Ok(Assembled::Over(sizes.file_bytes));
+        }
+        // Written by the caller meanwhile: the error figures are the report's alone.
+        deliver(&meta, sections);
+
         // Error figures of what is stored, per tree and channel (and, with
         // clustering, what they would have been without).
         let t0 = Instant::now();
@@ -144,24 +194,9 @@ impl Cooker {
         progress.finish();
         lap(&mut timings, "error", t0);
 
-        // Layout: node arrays, brick ranges and tables, channel tables, atlases.
-        let t0 = Instant::now();
-        let planes_of = layout::planes_of(&encoded.specs, channels);
-        // The node arrays move into their sections: what else needs of them, first.
-        let (tree, index_offset) = (TreeFigures::of(&nodes), nodes.offset);
-        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref(), progress)?;
-        let value_ranges = self.value_ranges(built, channels);
-        let peaks = errors::peaks(built, &value_ranges);
-        let specs = encoded.specs.clone();
         // The source-precision bricks are not needed any more.
         drop(encoded);
         drop(clustered);
-
-        // Metadata, the first section.
-        let placement = Placement { specs: &specs, group_of: &group_of, planes_of: &planes_of, planes, bricks: stored.keep.len() };
-        let meta = self.metadata(built, first, index_offset, &value_ranges, placement);
-        sections.insert(0, Section { kind: kind::METADATA, index: 0, data: meta.to_bytes()?.into() });
-        lap(&mut timings, "layout", t0);
 
         // The report.
         let parts = Parts {
@@ -169,7 +204,7 @@ impl Cooker {
             first,
             tree,
             meta: &meta,
-            sections: &sections,
+            sections: sizes,
             stored_bricks: stored.keep.len(),
             specs: &specs,
             planes_of: &planes_of,
@@ -178,7 +213,6 @@ impl Cooker {
             measured: &measured,
             peaks: &peaks,
         };
-        let report = self.report(parts, cluster_report, timings);
-        Ok((sections, report))
+        Ok(Assembled::Done(Box::new(self.report(parts, cluster_report, timings))))
     }
 }

@@ -23,6 +23,7 @@ mod metadata;
 mod report;
 mod unpack;
 
+pub use assemble::Deliver;
 pub use build::Cooker;
 pub use report::{figure, BudgetReport, BudgetTry, ChannelReport, ClusterReport, CookReport, ErrorFigures, Figure, FormatShare, LevelReport, SegmentReport, SourceTime, Sums};
 pub use unpack::{unpack_frame, unpack_level, unpack_near};

@@ -318,13 +318,32 @@ impl TreeFigures {
 }
 
 /// What the report is made of.
+/// What the report gives of an asset's sections.
+pub(crate) struct SectionSizes {
+    pub(crate) file_bytes: u64,
+    /// What a renderer uploads (the sections are not supercompressed yet).
+    pub(crate) gpu_bytes: u64,
+    /// Each section's name and bytes.
+    pub(crate) sizes: Vec<(String, u64)>,
+}
+
+impl SectionSizes {
+    pub(crate) fn of(sections: &[Section]) -> SectionSizes {
+        SectionSizes {
+            file_bytes: vdbcook_vpak::file_len(sections),
+            gpu_bytes: sections.iter().filter(|s| kind::uploaded(s.kind)).map(|s| s.data.len() as u64).sum(),
+            sizes: sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect(),
+        }
+    }
+}
+
 pub(crate) struct Parts<'a> {
     pub(crate) built: &'a Built,
     pub(crate) first: u32,
     pub(crate) tree: TreeFigures,
     pub(crate) meta: &'a Metadata,
-    /// Every section, the metadata first.
-    pub(crate) sections: &'a [Section],
+    /// Every section's size, the metadata's first.
+    pub(crate) sections: SectionSizes,
     pub(crate) stored_bricks: usize,
     pub(crate) specs: &'a [PlaneSpec],
     pub(crate) planes_of: &'a [Vec<usize>],
@@ -340,9 +359,7 @@ impl Cooker {
         let Parts { built, first, tree, meta, sections, stored_bricks, specs, planes_of, plane_bytes, channel_table_bytes, measured, peaks } = parts;
         let channels = peaks.len();
         let totals = &measured.totals;
-        let file_bytes = vdbcook_vpak::file_len(sections);
-        // What a renderer uploads (the sections are not supercompressed yet).
-        let gpu_bytes = sections.iter().filter(|s| kind::uploaded(s.kind)).map(|s| s.data.len() as u64).sum();
+        let SectionSizes { file_bytes, gpu_bytes, sizes } = sections;
         let active: u64 = self.frames.iter().map(|f| f.active_voxels).sum();
         let psnr = |c: usize| totals[c].psnr(peaks[c]);
         let channel_reports: Vec<ChannelReport> = meta
@@ -382,8 +399,8 @@ impl Cooker {
             l3_nodes: tree.l3,
             tiles: tree.tiles,
             textures: meta.texture_count(),
-            sections: sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect(),
-            disk_sections: sections.iter().map(|s| (kind::label(s.kind, s.index), s.data.len() as u64)).collect(),
+            disk_sections: sizes.clone(),
+            sections: sizes,
             file_bytes,
             gpu_bytes,
             tree_bytes: tree.bytes,

@@ -281,9 +281,18 @@ enum Sink {
 /// and seconds, or the error.
 type Written = (Box<Writer<DirectWriter>>, std::result::Result<(vdbcook_vpak::SegmentEntry, f64), vdbcook_vpak::Error>);
 
+/// What became of a segment's sections when the cooker gave them: the
+/// seconds and section sizes of their supercompression, and (written into
+/// memory) the segment's entry and seconds.
+#[derive(Default)]
+struct Delivered {
+    coded: Option<(f64, Vec<(String, u64)>)>,
+    written: Option<(vdbcook_vpak::SegmentEntry, f64)>,
+}
+
 /// A segment written on a thread of its own (its copy into the file's
-/// buffers, bound by the disk, overlaps the next segment's frames), and the
-/// index of its report. Dropped unfinished (a cook that fails), it waits
+/// buffers, bound by the disk, overlaps the segment's error figures and the
+/// next segment's frames), and the index of its report. Dropped unfinished (a cook that fails), it waits
 /// for the thread, so nothing writes the file after.
 struct Writing {
     thread: Option<std::thread::JoinHandle<Written>>,
@@ -326,34 +335,51 @@ impl Output {
         Ok(Output { sink: Sink::File(Some(Box::new(writer)), file, ctx()), reports: Vec::new(), coding, writing: None })
     }
 
-    /// Finishes a segment's cooker and writes the segment; `next`, the next
-    /// segment's cooker, takes over its brick pool's memory.
+    /// Finishes a segment's cooker and writes the segment (beside the
+    /// cooker's error figures, and into a file beside the next segment's
+    /// frames); `next`, the next segment's cooker, takes over its brick
+    /// pool's memory.
     fn add(&mut self, cooker: Cooker, next: Option<&mut Cooker>, bars: &dyn Progress) -> Result<()> {
         let frames = cooker.frame_count() as u32;
         let table = vdbcook_vpak::segments::first_offset(1);
-        let (mut sections, mut report) = cooker.finish_before(next, bars).map_err(|e| match e {
+        let mut delivered = None;
+        let mut report = cooker.finish_into(next, bars, &mut |meta, sections| delivered = Some(self.deliver(frames, meta, sections))).map_err(|e| match e {
             // A byte budget is the whole file's: the segment table included.
             vdbcook_cook::Error::OverBudget { budget, smallest, level } => Error::from(vdbcook_cook::Error::OverBudget { budget: budget + table, smallest: smallest + table, level }),
             e => Error::from(e),
         })?;
+        let Delivered { coded, written } = delivered.ok_or_else(|| Error::Failed("the cooker gave no sections".into()))??;
         if let Some(b) = report.budget.as_mut() {
             b.max_bytes += table;
             b.tries.iter_mut().for_each(|t| t.bytes += table);
         }
+        if let Some((secs, disk)) = coded {
+            report.timings.push(("supercompress".into(), secs));
+            report.disk_sections = disk;
+        }
+        self.reports.push(report);
+        if let Some((entry, secs)) = written {
+            self.written(self.reports.len() - 1, &entry, secs);
+        }
+        Ok(())
+    }
+
+    /// Supercompresses a segment's sections when asked, and writes them:
+    /// into memory at once, into a file on a thread of its own once the
+    /// segment before is written. Its report comes next.
+    fn deliver(&mut self, frames: u32, meta: &vdbcook_vpak::Metadata, mut sections: Vec<vdbcook_vpak::Section>) -> Result<Delivered> {
+        let mut out = Delivered::default();
         if let Supercompress::Zstd(level) = self.coding {
             let t0 = Instant::now();
-            sections = vdbcook_vpak::coding::supercompress(sections, &report.metadata, level)?;
-            report.timings.push(("supercompress".into(), t0.elapsed().as_secs_f64()));
-            report.disk_sections = sections.iter().map(|s| (vdbcook_vpak::kind::label(s.kind, s.index), s.data.len() as u64)).collect();
+            sections = vdbcook_vpak::coding::supercompress(sections, meta, level)?;
+            out.coded = Some((t0.elapsed().as_secs_f64(), sections.iter().map(|s| (vdbcook_vpak::kind::label(s.kind, s.index), s.data.len() as u64)).collect()));
         }
         self.wait()?;
-        self.reports.push(report);
-        let index = self.reports.len() - 1;
+        let index = self.reports.len();
         match &mut self.sink {
             Sink::Memory(w) => {
                 let t0 = Instant::now();
-                let entry = w.add(frames, &sections)?;
-                self.written(index, &entry, t0.elapsed().as_secs_f64());
+                out.written = Some((w.add(frames, &sections)?, t0.elapsed().as_secs_f64()));
             }
             Sink::File(slot, _, name) => {
                 let mut w = slot.take().ok_or_else(|| Error::Failed(format!("{name}: no writer")))?;
@@ -366,7 +392,7 @@ impl Output {
                 self.writing = Some(Writing { thread: Some(thread), report: index });
             }
         }
-        Ok(())
+        Ok(out)
     }
 
     /// Waits for the segment being written, if any; its writer comes back.
