@@ -292,8 +292,9 @@ struct Delivered {
 
 /// A segment written on a thread of its own (its copy into the file's
 /// buffers, bound by the disk, overlaps the segment's error figures and the
-/// next segment's frames), and the index of its report. Dropped unfinished (a cook that fails), it waits
-/// for the thread, so nothing writes the file after.
+/// next segment's frames), and the index of its report. Dropped unfinished
+/// (a cook that fails), it waits for the thread, so nothing writes the file
+/// after.
 struct Writing {
     thread: Option<std::thread::JoinHandle<Written>>,
     report: usize,
@@ -397,8 +398,7 @@ impl Output {
 
     /// Waits for the segment being written, if any; its writer comes back.
     fn wait(&mut self) -> Result<()> {
-        let Some(thread) = self.writing.as_mut().and_then(|w| w.thread.take()) else { return Ok(()) };
-        let index = self.writing.take().map_or(0, |w| w.report);
+        let Some((thread, index)) = self.writing.take().and_then(|mut w| Some((w.thread.take()?, w.report))) else { return Ok(()) };
         let (w, r) = thread.join().map_err(|_| Error::Failed("the segment writer thread panicked".into()))?;
         let Sink::File(slot, _, name) = &mut self.sink else { return Ok(()) };
         *slot = Some(w);
