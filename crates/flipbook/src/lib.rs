@@ -375,13 +375,14 @@ impl Builder {
                 })
                 .collect();
             let made: Vec<usize> = (first * c..end * c).filter(|&j| matches!(plan[j - first * c], Channel::At(_))).collect();
-            // Each brick is hashed as it is made (in cache), beside it.
-            let mut seen = vec![Made::default(); made.len()];
+            // Each brick is hashed as it is made (in cache), beside it, and
+            // its value range taken there where it is its leaf's.
+            let mut seen = vec![(Made::default(), None); made.len()];
             self.pool.stored.par_extend(
                 made.par_iter().zip(seen.par_iter_mut()).map(|(&j, seen)| {
                     let (origin, mask) = m.positions[j / c];
                     let b = m.parts[j].brick(origin, mask, bg(j % c));
-                    *seen = Made::of(&b, shares);
+                    *seen = (Made::of(&b, shares), m.parts[j].range_of_brick(mask, &b));
                     b
                 }),
                 "the brick pool",
@@ -395,12 +396,16 @@ impl Builder {
                     let channels: Vec<Channel> = plan[j..j + c]
                         .iter()
                         .map(|&p| match p {
-                            Channel::At(a) => seen[a - start].channel(a),
+                            Channel::At(a) => seen[a - start].0.channel(a),
                             constant => constant,
                         })
                         .collect();
-                    let r = (0..c).map(|k| m.parts[i * c + k].range(origin, mask, bg(k))).collect();
-                    (BrickPool::hash(&channels, |a| seen[a - start].hash), r, channels)
+                    let made_range = |k: usize| match plan[j + k] {
+                        Channel::At(a) => seen[a - start].1,
+                        Channel::Constant(_) => None,
+                    };
+                    let r = (0..c).map(|k| made_range(k).unwrap_or_else(|| m.parts[i * c + k].range(origin, mask, bg(k)))).collect();
+                    (BrickPool::hash(&channels, |a| seen[a - start].0.hash), r, channels)
                 })
                 .collect();
             let mut next = start;

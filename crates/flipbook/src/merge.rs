@@ -83,6 +83,17 @@ impl Part<'_> {
         }
     }
 
+    /// [`Part::range`] from the part's brick `b` ([`Part::brick`]) where
+    /// that brick is its own leaf's: its active voxels are the leaf's, taken
+    /// in the same order (so the same bits, ±0 included), while the brick is
+    /// in cache. `None` for other parts.
+    pub(crate) fn range_of_brick(&self, mask: LeafMask, b: &Brick) -> Option<[f32; 2]> {
+        match self {
+            Part::Leaf(l) if l.mask == mask => Some(vdbcook_grid::active_range_of(&mask, b)),
+            _ => None,
+        }
+    }
+
     /// The minimum and maximum of [`Part::leaf`]'s active values (`mask` is not empty).
     pub(crate) fn range(&self, origin: Coord, mask: LeafMask, background: f32) -> [f32; 2] {
         match self {

@@ -294,10 +294,15 @@ impl LeafSummary {
 /// The `min` and `max` of [`LeafSummary::of`], taken in the same order (so
 /// the same value of ±0), without its sums and box.
 pub fn active_range(leaf: &Leaf) -> [f32; 2] {
-    if leaf.mask.count_on() as usize == LEAF_VOXELS {
+    active_range_of(&leaf.mask, &leaf.values)
+}
+
+/// [`active_range`] of the voxels of `mask` in `values`.
+pub fn active_range_of(mask: &LeafMask, values: &[f32; LEAF_VOXELS]) -> [f32; 2] {
+    if mask.count_on() as usize == LEAF_VOXELS {
         let mut lo = [f32::INFINITY; 8];
         let mut hi = [f32::NEG_INFINITY; 8];
-        for chunk in leaf.values.chunks_exact(8) {
+        for chunk in values.chunks_exact(8) {
             for k in 0..8 {
                 lo[k] = lo[k].min(chunk[k]);
                 hi[k] = hi[k].max(chunk[k]);
@@ -305,7 +310,7 @@ pub fn active_range(leaf: &Leaf) -> [f32; 2] {
         }
         return [lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max)];
     }
-    leaf.mask.iter_on().map(|i| leaf.values[i]).fold([f32::INFINITY, f32::NEG_INFINITY], |[lo, hi], v| [lo.min(v), hi.max(v)])
+    mask.iter_on().map(|i| values[i]).fold([f32::INFINITY, f32::NEG_INFINITY], |[lo, hi], v| [lo.min(v), hi.max(v)])
 }
 
 /// One frame of a sparse scalar volume.
