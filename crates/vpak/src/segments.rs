@@ -237,6 +237,8 @@ impl<W: Write + Seek> Writer<W> {
         Ok(Writer { out, base, count, entries: Vec::new(), end: start })
     }
 
+    /// The entry of the next segment (of `size` bytes), the output moved
+    /// to where its body starts; [`Writer::record`] adds it once written.
     fn place(&mut self, frame_count: u32, size: u64, head_checksum: u64) -> Result<SegmentEntry, Error> {
         if self.entries.len() as u32 >= self.count {
             return Err(Error::Invalid(format!("more than the {} segments announced", self.count)));
@@ -244,10 +246,14 @@ impl<W: Write + Seek> Writer<W> {
         let first_frame = self.entries.last().map_or(0, |e| e.first_frame + e.frame_count);
         let offset = align(self.end);
         write_zeros(&mut self.out, offset - self.end)?;
-        let e = SegmentEntry { first_frame, frame_count, offset, size, head_checksum };
+        Ok(SegmentEntry { first_frame, frame_count, offset, size, head_checksum })
+    }
+
+    /// Adds a written segment's entry to the table.
+    fn record(&mut self, e: SegmentEntry) -> SegmentEntry {
         self.entries.push(e);
-        self.end = offset + size;
-        Ok(e)
+        self.end = e.offset + e.size;
+        e
     }
 
     /// Writes the next segment, of `frame_count` frames, from its sections (as a version-6 body).
@@ -271,12 +277,9 @@ impl<W: Write + Seek> Writer<W> {
         self.out.write_all(&head)?;
         self.out.seek(SeekFrom::Start(start + size))?;
         e.head_checksum = checksum(&head);
-        if let Some(last) = self.entries.last_mut() {
-            last.head_checksum = e.head_checksum;
-        }
         // Written out before the next segment is cooked (a writer's buffers go meanwhile).
         self.out.flush()?;
-        Ok(e)
+        Ok(self.record(e))
     }
 
     /// Writes the next segment as the body `body` of another file's segment `entry` (checked by the caller).
@@ -286,7 +289,7 @@ impl<W: Write + Seek> Writer<W> {
         }
         let e = self.place(entry.frame_count, entry.size, entry.head_checksum)?;
         self.out.write_all(body)?;
-        Ok(e)
+        Ok(self.record(e))
     }
 
     /// Where the file starts in the output (after a part header: not 0).
