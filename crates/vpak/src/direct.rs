@@ -8,6 +8,7 @@
 //! cache. Where the system or the file system has no `O_DIRECT`, it is a
 //! plain buffered writer.
 
+use memmap2::MmapMut;
 use std::fs::File;
 use std::io::{Seek, SeekFrom, Write};
 
@@ -17,14 +18,6 @@ const BLOCK: usize = 4096;
 /// Bytes gathered before they are written.
 const CHUNK: usize = 8 << 20;
 
-#[derive(Clone, Copy)]
-#[repr(C, align(4096))]
-struct Block([u8; BLOCK]);
-
-// SAFETY: a block is 4096 bytes at an alignment of 4096: no padding, and any bits are a value.
-unsafe impl bytemuck::Zeroable for Block {}
-unsafe impl bytemuck::Pod for Block {}
-
 /// A [`Write`] + [`Seek`] over a file that writes aligned blocks directly
 /// to the disk where it can (see the module's text), on a thread of its
 /// own while the next chunk is gathered. Every byte written reaches the
@@ -32,8 +25,8 @@ unsafe impl bytemuck::Pod for Block {}
 /// dropped before loses what it holds (an output given up on).
 pub struct DirectWriter {
     file: File,
-    /// The chunk being gathered.
-    buf: Vec<Block>,
+    /// The chunk being gathered (`None`: none yet, or since everything was written).
+    buf: Option<MmapMut>,
     /// The file offset of the buffer's first byte (a multiple of [`BLOCK`]).
     base: u64,
     /// The buffer's bytes before this are not data (the start of the block the data starts in).
@@ -43,10 +36,10 @@ pub struct DirectWriter {
     /// Chunks to write, to the writing thread (`None`: written here).
     jobs: Option<std::sync::mpsc::SyncSender<Job>>,
     /// Chunks written, back from the writing thread, with how it went.
-    done: Option<std::sync::mpsc::Receiver<(Vec<Block>, std::io::Result<()>)>>,
+    done: Option<std::sync::mpsc::Receiver<(MmapMut, std::io::Result<()>)>>,
     thread: Option<std::thread::JoinHandle<()>>,
     /// Chunk buffers free, and out at the writing thread.
-    free: Vec<Vec<Block>>,
+    free: Vec<MmapMut>,
     out: usize,
     /// Where blocks are written without the thread: the same file with `O_DIRECT`.
     direct: Option<File>,
@@ -56,7 +49,7 @@ pub struct DirectWriter {
 
 /// Bytes `[head, end)` of `buf`, which starts at file offset `base`.
 struct Job {
-    buf: Vec<Block>,
+    buf: MmapMut,
     base: u64,
     head: usize,
     end: usize,
@@ -65,17 +58,19 @@ struct Job {
 /// Chunk buffers at most (one gathered while the other is written).
 const BUFFERS: usize = 2;
 
-/// A chunk buffer, zeroed by the system as its pages are first touched (a
-/// small output touches few of them).
-fn chunk_buffer() -> std::io::Result<Vec<Block>> {
-    bytemuck::allocation::try_zeroed_vec(CHUNK / BLOCK).map_err(|()| std::io::Error::new(std::io::ErrorKind::OutOfMemory, "no memory for a write buffer"))
+/// A chunk buffer: anonymous memory, page-aligned (as `O_DIRECT` asks) and
+/// zeroed by the system as its pages are first touched, so a small write
+/// touches few of them. (An over-aligned heap allocation would be cleared
+/// whole by hand: 8 MiB for every write after a seek.)
+fn chunk_buffer() -> std::io::Result<MmapMut> {
+    MmapMut::map_anon(CHUNK).map_err(|_| std::io::Error::new(std::io::ErrorKind::OutOfMemory, "no memory for a write buffer"))
 }
 
 /// Writes a job: its whole blocks through `direct` where it is given (and
 /// takes them; else, and for the ragged ends, through `file`).
 fn write_job(file: &File, direct: &mut Option<File>, job: &Job) -> std::io::Result<()> {
     use std::os::unix::fs::FileExt;
-    let data: &[u8] = bytemuck::cast_slice(&job.buf);
+    let data: &[u8] = &job.buf;
     let (from, to) = (job.head.next_multiple_of(BLOCK), job.end / BLOCK * BLOCK);
     if from >= to || direct.is_none() {
         return file.write_all_at(&data[job.head..job.end], job.base + job.head as u64);
@@ -106,7 +101,7 @@ impl DirectWriter {
 
     fn with(file: File, past_cache: bool, thread: bool) -> std::io::Result<DirectWriter> {
         let direct = if past_cache { open_direct(&file) } else { None };
-        let mut w = DirectWriter { buf: Vec::new(), base: 0, head: 0, len: 0, jobs: None, done: None, thread: None, free: Vec::new(), out: 0, direct: None, failed: None, file };
+        let mut w = DirectWriter { buf: None, base: 0, head: 0, len: 0, jobs: None, done: None, thread: None, free: Vec::new(), out: 0, direct: None, failed: None, file };
         let (jobs, job_rx) = std::sync::mpsc::sync_channel::<Job>(BUFFERS);
         let (done_tx, done) = std::sync::mpsc::channel();
         let (mut direct_there, file_there) = (direct.as_ref().and_then(|d| d.try_clone().ok()), w.file.try_clone()?);
@@ -136,7 +131,7 @@ impl DirectWriter {
     }
 
     fn bytes(&mut self) -> &mut [u8] {
-        bytemuck::cast_slice_mut(&mut self.buf)
+        self.buf.as_deref_mut().unwrap_or_default()
     }
 
     fn position(&self) -> u64 {
@@ -144,7 +139,7 @@ impl DirectWriter {
     }
 
     /// A chunk buffer back from the writing thread (its write's error kept for the caller).
-    fn take_back(&mut self) -> std::io::Result<Vec<Block>> {
+    fn take_back(&mut self) -> std::io::Result<MmapMut> {
         let back = self.done.as_ref().and_then(|d| d.recv().ok());
         let (buf, r) = back.ok_or_else(|| std::io::Error::other("the writing thread stopped"))?;
         self.out -= 1;
@@ -167,10 +162,17 @@ impl DirectWriter {
         if end == self.head && self.out == 0 {
             return self.check();
         }
+        let Some(full) = self.buf.take() else {
+            // Nothing gathered since everything went: only writes out to wait for.
+            while all && self.out > 0 {
+                self.take_back()?;
+            }
+            return self.check();
+        };
         let Some(jobs) = self.jobs.clone() else {
-            let job = Job { buf: std::mem::take(&mut self.buf), base: self.base, head: self.head, end };
+            let job = Job { buf: full, base: self.base, head: self.head, end };
             let r = write_job(&self.file, &mut self.direct, &job);
-            self.buf = if all { Vec::new() } else { job.buf };
+            self.buf = (!all).then_some(job.buf);
             let len = self.len;
             if !all {
                 self.bytes().copy_within(end..len, 0);
@@ -178,16 +180,15 @@ impl DirectWriter {
             self.finish_chunk(end, all);
             return r;
         };
-        let next = match self.free.pop() {
+        self.buf = match self.free.pop() {
             // Everything goes: no buffer follows (until the next write).
-            _ if all => Vec::new(),
-            Some(b) => b,
-            None if self.out + 1 < BUFFERS => chunk_buffer()?,
-            None => self.take_back()?,
+            _ if all => None,
+            Some(b) => Some(b),
+            None if self.out + 1 < BUFFERS => Some(chunk_buffer()?),
+            None => Some(self.take_back()?),
         };
-        let full = std::mem::replace(&mut self.buf, next);
         let tail = self.len - end;
-        self.bytes()[..tail].copy_from_slice(&bytemuck::cast_slice::<Block, u8>(&full)[end..end + tail]);
+        self.bytes()[..tail].copy_from_slice(&full[end..end + tail]);
         jobs.send(Job { buf: full, base: self.base, head: self.head, end }).map_err(|_| std::io::Error::other("the writing thread stopped"))?;
         self.out += 1;
         self.finish_chunk(end, all);
@@ -245,8 +246,8 @@ fn open_direct(_file: &File) -> Option<File> {
 
 impl Write for DirectWriter {
     fn write(&mut self, data: &[u8]) -> std::io::Result<usize> {
-        if self.buf.is_empty() {
-            self.buf = chunk_buffer()?;
+        if self.buf.is_none() {
+            self.buf = Some(chunk_buffer()?);
         }
         let n = data.len().min(CHUNK - self.len);
         let len = self.len;
