@@ -95,7 +95,7 @@ impl<'a> Encoded<'a> {
             .into_par_iter()
             .map(|j| match bricks.constant_of(j / channels, j % channels) {
                 Some(k) => constant_ranges[k],
-                None => range_of(bricks.get(j / channels, j % channels)),
+                None => bricks.range(j / channels, j % channels),
             })
             .collect();
         let mut e = Encoded { specs, bricks, channels, ranges, planes: Vec::new(), absent: absent.filter(|a| a.len() == n * channels) };

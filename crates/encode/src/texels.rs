@@ -4,48 +4,7 @@
 
 use crate::{Brick, Format, Plane, BRICK_VOXELS};
 use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
-
-/// The smallest and largest of a brick's finite values (NaN and ±∞ left
-/// out, so that the ranged formats keep their precision and decode to finite
-/// values); for a brick without any finite value, `[m, m]` with m = `f32::MAX`
-/// if it holds +∞, else `-f32::MAX` if it holds −∞, else 0 (all NaN).
-pub fn range_of(values: &Brick) -> [f32; 2] {
-    // Most bricks hold no ±∞: the plain min and max (which pass NaN over)
-    // are then the range, and only a brick whose min or max is not finite
-    // takes the slower pass that leaves ±∞ out.
-    let plain = lanes_min_max(values, |v| (v, v));
-    if plain[0].is_finite() && plain[1].is_finite() {
-        return plain;
-    }
-    let [lo, hi] = lanes_min_max(values, |v| if v.is_finite() { (v, v) } else { (f32::INFINITY, f32::NEG_INFINITY) });
-    if lo <= hi {
-        return [lo, hi];
-    }
-    let m = if values.contains(&f32::INFINITY) {
-        f32::MAX
-    } else if values.contains(&f32::NEG_INFINITY) {
-        -f32::MAX
-    } else {
-        0.0
-    };
-    [m, m]
-}
-
-/// The min and max of `f(v).0` and `f(v).1` over a brick, in eight
-/// independent lanes so the compiler can vectorise (NaN never wins).
-#[inline(always)]
-fn lanes_min_max(values: &Brick, f: impl Fn(f32) -> (f32, f32)) -> [f32; 2] {
-    let mut lo = [f32::INFINITY; 8];
-    let mut hi = [f32::NEG_INFINITY; 8];
-    for c in values.chunks_exact(8) {
-        for k in 0..8 {
-            let (l, h) = f(c[k]);
-            lo[k] = lo[k].min(l);
-            hi[k] = hi[k].max(h);
-        }
-    }
-    [lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max)]
-}
+pub use vdbcook_grid::range_of;
 
 /// A brick whose NaN and ±∞ voxels are replaced as the ranged formats store
 /// them: like inactive voxels, each takes the mean of its finite 6-neighbours

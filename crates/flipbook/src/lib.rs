@@ -288,7 +288,7 @@ impl Builder {
     /// sequence's distinct bricks.
     pub fn spill_to(&mut self, policy: Option<SpillPolicy>) {
         self.l3.set_policy(policy.clone());
-        self.pool.stored.set_policy(policy);
+        self.pool.set_policy(policy);
     }
 
     /// Fills its pool in `storage` (an emptied pool's memory,
@@ -387,6 +387,7 @@ impl Builder {
                 }),
                 "the brick pool",
             )?;
+            self.pool.staged(&seen.iter().map(|s| s.0).collect::<Vec<_>>())?;
             // Per position: its channels, its hash, and per channel its value range.
             let hashes: Vec<(u64, Vec<[f32; 2]>, Vec<Channel>)> = (first..end)
                 .into_par_iter()
@@ -429,7 +430,7 @@ impl Builder {
                     self.grow(Bbox::new(origin, origin.offset(7, 7, 7)));
                 }
             }
-            self.pool.stored.truncate(next);
+            self.pool.truncate_stored(next);
         }
         for (origin, dim, values) in m.tiles {
             let t = vdbcook_grid::Tile { origin, dim, value: 0.0, active: true };

@@ -3,8 +3,8 @@
 //! constant brick is held once for every brick that has it.
 
 use crate::{Brick, Error, HashIndex, Map};
-use vdbcook_grid::spill::Store;
-use vdbcook_grid::{Bricks, CONSTANT, LEAF_VOXELS};
+use vdbcook_grid::spill::{SpillPolicy, Store};
+use vdbcook_grid::{range_of, Bricks, CONSTANT, LEAF_VOXELS};
 use vdbcook_vpak::nodes::TILE_FLAG;
 
 /// Distinct bricks, each stored once, `channels` [`Brick`]s each.  With
@@ -18,6 +18,8 @@ pub struct BrickPool {
     slots: Vec<u32>,
     /// The non-constant channel bricks; past the pool's own, those being pooled.
     pub(crate) stored: Store<Brick>,
+    /// Per stored brick, its `range_of`, taken as it was made (see [`Bricks::with_ranges`]).
+    ranges: Store<[f32; 2]>,
     constants: Vec<Brick>,
     /// A constant's value bits -> its index in `constants`.
     constant_ids: Map<u32, u32>,
@@ -47,19 +49,20 @@ fn constant_hash(bits: u32) -> u64 {
 
 /// What pooling needs of a channel brick, taken when it is made (while its
 /// values are in cache): its content hash (the exact bits of every value,
-/// so -0.0 and 0.0, or two NaN payloads, stay distinct), and its value's
-/// bits when all 512 are one and the pool shares constants.
+/// so -0.0 and 0.0, or two NaN payloads, stay distinct), its value's
+/// bits when all 512 are one and the pool shares constants, and else its range.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Made {
     pub(crate) hash: u64,
     constant: Option<u32>,
+    range: [f32; 2],
 }
 
 impl Made {
     pub(crate) fn of(b: &Brick, shares_constants: bool) -> Made {
         match shares_constants.then(|| constant_bits(b)).flatten() {
-            Some(bits) => Made { hash: constant_hash(bits), constant: Some(bits) },
-            None => Made { hash: xxhash_rust::xxh3::xxh3_64(bytemuck::cast_slice(b)), constant: None },
+            Some(bits) => Made { hash: constant_hash(bits), constant: Some(bits), range: [0.0; 2] },
+            None => Made { hash: xxhash_rust::xxh3::xxh3_64(bytemuck::cast_slice(b)), constant: None, range: range_of(b) },
         }
     }
 
@@ -77,7 +80,7 @@ impl Default for BrickPool {
 
 impl BrickPool {
     pub fn new(channels: usize) -> BrickPool {
-        BrickPool { channels: channels.max(1), slots: Vec::new(), stored: Store::default(), constants: Vec::new(), constant_ids: Map::default(), index: HashIndex::default() }
+        BrickPool { channels: channels.max(1), slots: Vec::new(), stored: Store::default(), ranges: Store::default(), constants: Vec::new(), constant_ids: Map::default(), index: HashIndex::default() }
     }
 
     /// Returns the id of `brick` (its `channels` bricks), adding it if it is new.
@@ -86,14 +89,34 @@ impl BrickPool {
             return Err(Error::Channels { found: brick.len(), expected: self.channels });
         }
         let from = self.stored.len();
-        self.stored.extend_from_slice(brick, "the brick pool")?;
         let made: Vec<Made> = brick.iter().map(|b| Made::of(b, self.shares_constants())).collect();
+        self.stage(brick, &made)?;
         let channels: Vec<Channel> = made.iter().enumerate().map(|(k, m)| m.channel(from + k)).collect();
         let mut next = from;
         let h = BrickPool::hash(&channels, |a| made[a - from].hash);
         let found = self.settle(&channels, &mut next, h);
-        self.stored.truncate(next);
+        self.truncate_stored(next);
         found
+    }
+
+    /// Stores channel bricks to be pooled, `made` taken of each.
+    pub(crate) fn stage(&mut self, bricks: &[Brick], made: &[Made]) -> Result<(), Error> {
+        self.stored.extend_from_slice(bricks, "the brick pool")?;
+        self.staged(made)
+    }
+
+    /// Records what was taken of the channel bricks just stored past the
+    /// ones recorded (straight into `stored`), in order.
+    pub(crate) fn staged(&mut self, made: &[Made]) -> Result<(), Error> {
+        let ranges: Vec<[f32; 2]> = made.iter().map(|m| m.range).collect();
+        self.ranges.extend_from_slice(&ranges, "the bricks' ranges")?;
+        Ok(())
+    }
+
+    /// Keeps the first `n` stored bricks (those being pooled past them go).
+    pub(crate) fn truncate_stored(&mut self, n: usize) {
+        self.stored.truncate(n);
+        self.ranges.truncate(n);
     }
 
     /// True when the pool holds constant channel bricks once (several
@@ -153,6 +176,9 @@ impl BrickPool {
                     let to = u32::try_from(*next).ok().filter(|&i| i < CONSTANT && a < self.stored.len()).ok_or(Error::Overflow { what: "stored bricks" })?;
                     if a != *next {
                         self.stored.copy_within(a..a + 1, *next);
+                        if a < self.ranges.len() {
+                            self.ranges.copy_within(a..a + 1, *next);
+                        }
                     }
                     *next += 1;
                     to
@@ -182,6 +208,7 @@ impl BrickPool {
         // No huge-page advice: the pool grows frame by frame, where huge
         // pages cost more page clearing than they save (docs/benchmarks.md).
         self.stored.try_reserve(made, "the brick pool")?;
+        self.ranges.try_reserve(made, "the bricks' ranges")?;
         vdbcook_grid::mem::try_reserve(&mut self.slots, n * self.channels, "the brick pool")?;
         self.index.reserve(n);
         Ok(())
@@ -189,10 +216,11 @@ impl BrickPool {
 
     /// Every brick's channels (one channel's pool is dense: `Bricks::as_dense`).
     pub fn bricks(&self) -> Bricks<'_> {
-        match self.channels {
+        let view = match self.channels {
             1 => Bricks::dense(&self.stored, 1),
             c => Bricks::sparse(&self.slots, &self.stored, &self.constants, c),
-        }
+        };
+        view.with_ranges(&self.ranges)
     }
 
     /// The memory of the stored bricks, emptied, for another pool to fill
@@ -200,7 +228,14 @@ impl BrickPool {
     pub fn take_storage(&mut self) -> Store<Brick> {
         let mut v = std::mem::take(&mut self.stored);
         v.clear();
+        self.ranges.clear();
         v
+    }
+
+    /// Stores the bricks (and their ranges) under `policy` (see `Builder::spill_to`).
+    pub(crate) fn set_policy(&mut self, policy: Option<SpillPolicy>) {
+        self.ranges.set_policy(policy.clone());
+        self.stored.set_policy(policy);
     }
 
     /// Channel bricks held in memory: the stored ones and the constants.

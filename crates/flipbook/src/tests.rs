@@ -39,17 +39,17 @@ fn pool_keeps_bricks_apart_when_their_hashes_collide() {
     let mut p = BrickPool::default();
     let bricks = [[0.25f32; 512], [0.5; 512], [0.75; 512]];
     for (k, b) in bricks.iter().enumerate() {
-        p.stored.extend_from_slice(std::slice::from_ref(b), "test").unwrap();
+        p.stage(std::slice::from_ref(b), &[pool::Made::of(b, false)]).unwrap();
         let mut next = k;
         assert_eq!(p.settle(&[pool::Channel::At(k)], &mut next, 42).unwrap(), k as u32);
         assert_eq!(next, k + 1);
     }
     for (k, b) in bricks.iter().enumerate().rev() {
-        p.stored.extend_from_slice(std::slice::from_ref(b), "test").unwrap();
+        p.stage(std::slice::from_ref(b), &[pool::Made::of(b, false)]).unwrap();
         let mut next = 3;
         assert_eq!(p.settle(&[pool::Channel::At(3)], &mut next, 42).unwrap(), k as u32);
         assert_eq!(next, 3, "a duplicate takes no slot");
-        p.stored.truncate(3);
+        p.truncate_stored(3);
     }
 }
 
@@ -630,4 +630,36 @@ fn l3_nodes_spill_with_the_bricks_and_give_the_same_nodes() {
     let distinct_masks: std::collections::HashSet<[u64; 8]> = memory.l3.iter().map(|l| l.mask).collect();
     assert!(memory.l3.len() > distinct_masks.len());
     assert_eq!(n.l3_count(), distinct_masks.len());
+}
+
+#[test]
+fn the_pool_records_each_stored_bricks_range_as_it_is_made() {
+    // Duplicates inside a batch and across frames move the bricks being
+    // pooled; a second channel is constant at some positions, and some
+    // values are not finite.
+    let frame = |seed: u32| {
+        let mut leaves: Vec<Leaf> =
+            (0..300).map(|i| leaf(Coord::new(8 * (i % 30), 8 * (i / 30), 0), if i % 4 == 0 { seed } else { seed * 1000 + i as u32 }, if i % 3 == 0 { 512 } else { 200 })).collect();
+        leaves[7].values[3] = f32::INFINITY;
+        leaves[9].values[0] = f32::NAN;
+        grid(leaves, Vec::new())
+    };
+    let other = |seed: u32| grid((0..150).map(|i| leaf(Coord::new(8 * (i % 30), 8 * (i / 30), 0), seed + i as u32, 300)).collect(), Vec::new());
+    for channels in [1, 2] {
+        let mut b = Builder::new(channels);
+        for seed in [3, 4, 3] {
+            let (g, o) = (frame(seed), other(seed));
+            let grids: Vec<Option<&Grid>> = [Some(&g), Some(&o)].into_iter().take(channels).collect();
+            b.push(&grids).unwrap();
+        }
+        let built = b.finish().unwrap();
+        let view = built.pool.bricks();
+        assert!(view.len() > 300);
+        for i in 0..view.len() {
+            for c in 0..channels {
+                let (r, taken) = (view.range(i, c), vdbcook_grid::range_of(view.get(i, c)));
+                assert_eq!(r.map(f32::to_bits), taken.map(f32::to_bits), "brick {i} channel {c} of {channels}");
+            }
+        }
+    }
 }

@@ -18,7 +18,7 @@ mod transform;
 
 use rayon::prelude::*;
 
-pub use bricks::{Brick, Bricks, CONSTANT};
+pub use bricks::{range_of, Brick, Bricks, CONSTANT};
 pub use coord::{Bbox, Coord};
 pub use transform::{MapType, Transform};
 
