@@ -170,6 +170,19 @@ impl<'a> Scanner<'_, 'a> {
     }
 }
 
+/// The leaves of the root children `roots` (each its origin and its leaves'
+/// range of `leaves`, in file order) in the root's coordinate order, the
+/// order OpenVDB writes (and reads) leaf buffers in. Files list root
+/// children in that order too: then nothing moves.
+fn in_root_order<'a>(leaves: Vec<LeafTopo<'a>>, roots: &mut [(Coord, std::ops::Range<usize>)]) -> Vec<LeafTopo<'a>> {
+    if roots.is_sorted_by_key(|(o, _)| *o) {
+        return leaves;
+    }
+    roots.sort_by_key(|(o, _)| *o);
+    let mut topo: Vec<Option<LeafTopo<'a>>> = leaves.into_iter().map(Some).collect();
+    roots.iter().flat_map(|(_, r)| r.clone()).filter_map(|i| topo.get_mut(i).and_then(Option::take)).collect()
+}
+
 /// Reads topology and locates every leaf buffer, leaving the cursor at the
 /// end of the tree.  `ctx.background` is filled in from the root.
 pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<'a>, Error> {
@@ -182,7 +195,9 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<
     cur.check_count("root child count", u64::from(num_children), 12 + MIN_INTERNAL32_BYTES)?;
 
     let mut sc = Scanner { cur, ctx, tiles: Vec::new() };
-    let mut roots: Vec<(Coord, Vec<LeafTopo<'a>>)> = Vec::with_capacity(num_children as usize);
+    // Every root child's leaves in one vector, in file order; per child its origin and its leaves' range.
+    let mut leaves: Vec<LeafTopo<'a>> = Vec::new();
+    let mut roots: Vec<(Coord, std::ops::Range<usize>)> = Vec::with_capacity(num_children as usize);
     let mut origins = Vec::with_capacity((num_tiles + num_children) as usize);
     for _ in 0..num_tiles {
         let at = sc.cur.pos();
@@ -202,9 +217,9 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<
             return Err(Error::invalid("root child", at, format!("origin {:?} is not a multiple of 4096", origin.to_array())));
         }
         origins.push((origin, at));
-        let mut leaves = Vec::new();
+        let first = leaves.len();
         sc.internal32(origin, &mut leaves)?;
-        roots.push((origin, leaves));
+        roots.push((origin, first..leaves.len()));
     }
     origins.sort();
     if let Some(w) = origins.windows(2).find(|w| w[0].0 == w[1].0) {
@@ -212,9 +227,7 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<
     }
     let tiles = sc.tiles;
 
-    // OpenVDB writes (and reads) leaf buffers in the root's coordinate order.
-    roots.sort_by_key(|(o, _)| *o);
-    let mut leaves: Vec<LeafTopo<'a>> = roots.into_iter().flat_map(|(_, l)| l).collect();
+    let mut leaves = in_root_order(leaves, &mut roots);
     for leaf in leaves.iter_mut() {
         cur.take(64, "leaf buffer mask")?;
         let mut num_buffers = 1i8;
@@ -330,6 +343,19 @@ mod tests {
         assert_eq!(slot_origin(o, 32, 5, 128), Coord::new(-4096, 128, 4096));
         assert_eq!(slot_origin(o, 1024, 5, 128), Coord::new(-4096 + 128, 0, 4096));
         assert_eq!(slot_origin(Coord::new(0, 0, 0), (3 << 8) | (2 << 4) | 1, 4, 8), Coord::new(24, 16, 8));
+    }
+
+    #[test]
+    fn leaves_of_root_children_listed_out_of_order_are_put_in_coordinate_order() {
+        let topo = |x: i32| LeafTopo { origin: Coord::new(x, 0, 0), mask: LeafMask::default(), values: None };
+        let origins = |v: &[LeafTopo]| v.iter().map(|l| l.origin.x).collect::<Vec<_>>();
+        // Children at x = 4096 (two leaves), 0 (one) and -4096 (two), in that order.
+        let leaves = vec![topo(4096), topo(4104), topo(8), topo(-4096), topo(-4088)];
+        let mut roots = [(Coord::new(4096, 0, 0), 0..2), (Coord::new(0, 0, 0), 2..3), (Coord::new(-4096, 0, 0), 3..5)];
+        assert_eq!(origins(&in_root_order(leaves, &mut roots)), [-4096, -4088, 8, 4096, 4104]);
+        let sorted = vec![topo(-8), topo(16)];
+        let mut in_order = [(Coord::new(-4096, 0, 0), 0..1), (Coord::new(0, 0, 0), 1..2)];
+        assert_eq!(origins(&in_root_order(sorted, &mut in_order)), [-8, 16]);
     }
 
     #[test]
