@@ -387,7 +387,7 @@ impl Builder {
                 }),
                 "the brick pool",
             )?;
-            self.pool.staged(&seen.iter().map(|s| s.0).collect::<Vec<_>>())?;
+            self.pool.staged(seen.par_iter().map(|s| s.0.range))?;
             // Per position: its channels, its hash, and per channel its value range.
             let hashes: Vec<(u64, Vec<[f32; 2]>, Vec<Channel>)> = (first..end)
                 .into_par_iter()

@@ -3,6 +3,7 @@
 //! constant brick is held once for every brick that has it.
 
 use crate::{Brick, Error, HashIndex, Map};
+use rayon::prelude::*;
 use vdbcook_grid::spill::{SpillPolicy, Store};
 use vdbcook_grid::{range_of, Bricks, CONSTANT, LEAF_VOXELS};
 use vdbcook_vpak::nodes::TILE_FLAG;
@@ -18,8 +19,10 @@ pub struct BrickPool {
     slots: Vec<u32>,
     /// The non-constant channel bricks; past the pool's own, those being pooled.
     pub(crate) stored: Store<Brick>,
-    /// Per stored brick, its `range_of`, taken as it was made (see [`Bricks::with_ranges`]).
-    ranges: Store<[f32; 2]>,
+    /// Per stored brick, its `range_of`, taken as it was made (see
+    /// [`Bricks::with_ranges`]); in step with `stored`, under the same spill
+    /// policy (a store, and a spill file, of its own).
+    pub(crate) ranges: Store<[f32; 2]>,
     constants: Vec<Brick>,
     /// A constant's value bits -> its index in `constants`.
     constant_ids: Map<u32, u32>,
@@ -55,7 +58,7 @@ fn constant_hash(bits: u32) -> u64 {
 pub(crate) struct Made {
     pub(crate) hash: u64,
     constant: Option<u32>,
-    range: [f32; 2],
+    pub(crate) range: [f32; 2],
 }
 
 impl Made {
@@ -102,14 +105,14 @@ impl BrickPool {
     /// Stores channel bricks to be pooled, `made` taken of each.
     pub(crate) fn stage(&mut self, bricks: &[Brick], made: &[Made]) -> Result<(), Error> {
         self.stored.extend_from_slice(bricks, "the brick pool")?;
-        self.staged(made)
+        self.staged(made.par_iter().map(|m| m.range))
     }
 
-    /// Records what was taken of the channel bricks just stored past the
-    /// ones recorded (straight into `stored`), in order.
-    pub(crate) fn staged(&mut self, made: &[Made]) -> Result<(), Error> {
-        let ranges: Vec<[f32; 2]> = made.iter().map(|m| m.range).collect();
-        self.ranges.extend_from_slice(&ranges, "the bricks' ranges")?;
+    /// Records the ranges ([`Made::range`]) of the channel bricks just
+    /// stored (straight into `stored`) past the ones recorded, in order.
+    pub(crate) fn staged(&mut self, ranges: impl IndexedParallelIterator<Item = [f32; 2]>) -> Result<(), Error> {
+        self.ranges.par_extend(ranges, "the bricks' ranges")?;
+        debug_assert_eq!(self.ranges.len(), self.stored.len(), "a stored brick without its range");
         Ok(())
     }
 
@@ -176,9 +179,7 @@ impl BrickPool {
                     let to = u32::try_from(*next).ok().filter(|&i| i < CONSTANT && a < self.stored.len()).ok_or(Error::Overflow { what: "stored bricks" })?;
                     if a != *next {
                         self.stored.copy_within(a..a + 1, *next);
-                        if a < self.ranges.len() {
-                            self.ranges.copy_within(a..a + 1, *next);
-                        }
+                        self.ranges.copy_within(a..a + 1, *next);
                     }
                     *next += 1;
                     to

@@ -645,14 +645,19 @@ fn the_pool_records_each_stored_bricks_range_as_it_is_made() {
         grid(leaves, Vec::new())
     };
     let other = |seed: u32| grid((0..150).map(|i| leaf(Coord::new(8 * (i % 30), 8 * (i / 30), 0), seed + i as u32, 300)).collect(), Vec::new());
-    for channels in [1, 2] {
+    for (channels, spill) in [(1, None), (2, None), (1, Some(SpillPolicy::new(std::env::temp_dir(), 1)))] {
+        let spilled = spill.is_some();
         let mut b = Builder::new(channels);
+        b.spill_to(spill);
         for seed in [3, 4, 3] {
             let (g, o) = (frame(seed), other(seed));
             let grids: Vec<Option<&Grid>> = [Some(&g), Some(&o)].into_iter().take(channels).collect();
             b.push(&grids).unwrap();
         }
         let built = b.finish().unwrap();
+        // Recorded, one per stored brick (else the view takes them anew).
+        assert_eq!(built.pool.ranges.len(), built.pool.stored.len());
+        assert_eq!(built.pool.stored.is_spilled(), spilled);
         let view = built.pool.bricks();
         assert!(view.len() > 300);
         for i in 0..view.len() {

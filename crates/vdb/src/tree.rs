@@ -174,13 +174,17 @@ impl<'a> Scanner<'_, 'a> {
 /// range of `leaves`, in file order) in the root's coordinate order, the
 /// order OpenVDB writes (and reads) leaf buffers in. Files list root
 /// children in that order too: then nothing moves.
-fn in_root_order<'a>(leaves: Vec<LeafTopo<'a>>, roots: &mut [(Coord, std::ops::Range<usize>)]) -> Vec<LeafTopo<'a>> {
+fn in_root_order<'a>(leaves: Vec<LeafTopo<'a>>, mut roots: Vec<(Coord, std::ops::Range<usize>)>) -> Vec<LeafTopo<'a>> {
     if roots.is_sorted_by_key(|(o, _)| *o) {
         return leaves;
     }
     roots.sort_by_key(|(o, _)| *o);
+    let n = leaves.len();
     let mut topo: Vec<Option<LeafTopo<'a>>> = leaves.into_iter().map(Some).collect();
-    roots.iter().flat_map(|(_, r)| r.clone()).filter_map(|i| topo.get_mut(i).and_then(Option::take)).collect()
+    let sorted: Vec<LeafTopo<'a>> = roots.into_iter().flat_map(|(_, r)| r).filter_map(|i| topo.get_mut(i).and_then(Option::take)).collect();
+    // The ranges cut the leaves into the children's, each leaf in one.
+    debug_assert_eq!(sorted.len(), n);
+    sorted
 }
 
 /// Reads topology and locates every leaf buffer, leaving the cursor at the
@@ -227,7 +231,7 @@ pub(crate) fn scan<'a>(cur: &mut Cursor<'a>, mut ctx: Ctx) -> Result<TreeLayout<
     }
     let tiles = sc.tiles;
 
-    let mut leaves = in_root_order(leaves, &mut roots);
+    let mut leaves = in_root_order(leaves, roots);
     for leaf in leaves.iter_mut() {
         cur.take(64, "leaf buffer mask")?;
         let mut num_buffers = 1i8;
@@ -351,11 +355,11 @@ mod tests {
         let origins = |v: &[LeafTopo]| v.iter().map(|l| l.origin.x).collect::<Vec<_>>();
         // Children at x = 4096 (two leaves), 0 (one) and -4096 (two), in that order.
         let leaves = vec![topo(4096), topo(4104), topo(8), topo(-4096), topo(-4088)];
-        let mut roots = [(Coord::new(4096, 0, 0), 0..2), (Coord::new(0, 0, 0), 2..3), (Coord::new(-4096, 0, 0), 3..5)];
-        assert_eq!(origins(&in_root_order(leaves, &mut roots)), [-4096, -4088, 8, 4096, 4104]);
+        let roots = vec![(Coord::new(4096, 0, 0), 0..2), (Coord::new(0, 0, 0), 2..3), (Coord::new(-4096, 0, 0), 3..5)];
+        assert_eq!(origins(&in_root_order(leaves, roots)), [-4096, -4088, 8, 4096, 4104]);
         let sorted = vec![topo(-8), topo(16)];
-        let mut in_order = [(Coord::new(-4096, 0, 0), 0..1), (Coord::new(0, 0, 0), 1..2)];
-        assert_eq!(origins(&in_root_order(sorted, &mut in_order)), [-8, 16]);
+        let in_order = vec![(Coord::new(-4096, 0, 0), 0..1), (Coord::new(0, 0, 0), 1..2)];
+        assert_eq!(origins(&in_root_order(sorted, in_order)), [-8, 16]);
     }
 
     #[test]

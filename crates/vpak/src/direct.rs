@@ -63,7 +63,11 @@ const BUFFERS: usize = 2;
 /// touches few of them. (An over-aligned heap allocation would be cleared
 /// whole by hand: 8 MiB for every write after a seek.)
 fn chunk_buffer() -> std::io::Result<MmapMut> {
-    MmapMut::map_anon(CHUNK).map_err(|_| std::io::Error::new(std::io::ErrorKind::OutOfMemory, "no memory for a write buffer"))
+    let buf = MmapMut::map_anon(CHUNK).map_err(|_| std::io::Error::new(std::io::ErrorKind::OutOfMemory, "no memory for a write buffer"))?;
+    // Where huge pages are the default, a first touch would clear 2 MiB.
+    #[cfg(target_os = "linux")]
+    let _ = buf.advise(memmap2::Advice::NoHugePage);
+    Ok(buf)
 }
 
 /// Writes a job: its whole blocks through `direct` where it is given (and
@@ -162,14 +166,12 @@ impl DirectWriter {
         if end == self.head && self.out == 0 {
             return self.check();
         }
-        let Some(full) = self.buf.take() else {
-            // Nothing gathered since everything went: only writes out to wait for.
-            while all && self.out > 0 {
-                self.take_back()?;
-            }
-            return self.check();
-        };
+        // No buffer means nothing gathered since everything went (`len` is
+        // `head`), which the return above covers: another state is a bug,
+        // refused rather than losing bytes.
+        let missing = || std::io::Error::other("the write buffer is missing");
         let Some(jobs) = self.jobs.clone() else {
+            let full = self.buf.take().ok_or_else(missing)?;
             let job = Job { buf: full, base: self.base, head: self.head, end };
             let r = write_job(&self.file, &mut self.direct, &job);
             self.buf = (!all).then_some(job.buf);
@@ -180,13 +182,18 @@ impl DirectWriter {
             self.finish_chunk(end, all);
             return r;
         };
-        self.buf = match self.free.pop() {
+        if self.buf.is_none() {
+            return Err(missing());
+        }
+        // The next buffer first: if there is none to be had, the chunk stays.
+        let next = match self.free.pop() {
             // Everything goes: no buffer follows (until the next write).
             _ if all => None,
             Some(b) => Some(b),
             None if self.out + 1 < BUFFERS => Some(chunk_buffer()?),
             None => Some(self.take_back()?),
         };
+        let full = std::mem::replace(&mut self.buf, next).ok_or_else(missing)?;
         let tail = self.len - end;
         self.bytes()[..tail].copy_from_slice(&full[end..end + tail]);
         jobs.send(Job { buf: full, base: self.base, head: self.head, end }).map_err(|_| std::io::Error::other("the writing thread stopped"))?;
