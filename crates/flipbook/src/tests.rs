@@ -171,6 +171,9 @@ fn a_pool_in_the_memory_of_an_earlier_one_holds_what_a_fresh_one_does() {
     let (fresh, reusing) = (fresh.finish().unwrap(), reusing.finish().unwrap());
     assert_eq!(reusing.pool.bricks().as_dense(), fresh.pool.bricks().as_dense());
     assert_eq!(fresh.pool.len(), 80);
+    // The ranges are recorded in step in the reused memory too.
+    assert_eq!(reusing.pool.ranges.len(), reusing.pool.stored.len());
+    assert_eq!(&reusing.pool.ranges[..], &fresh.pool.ranges[..]);
     // Its 80 bricks are in the earlier pool's memory (room for 160: nothing moved).
     assert_eq!(reusing.pool.bricks().as_dense().map(<[_]>::as_ptr), Some(memory));
     assert_eq!(reusing.nodes(|id| id).unwrap().frames, fresh.nodes(|id| id).unwrap().frames);
