@@ -317,7 +317,6 @@ impl TreeFigures {
     }
 }
 
-/// What the report is made of.
 /// What the report gives of an asset's sections.
 pub(crate) struct SectionSizes {
     pub(crate) file_bytes: u64,
@@ -337,6 +336,7 @@ impl SectionSizes {
     }
 }
 
+/// What the report is made of.
 pub(crate) struct Parts<'a> {
     pub(crate) built: &'a Built,
     pub(crate) first: u32,
