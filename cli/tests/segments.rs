@@ -232,6 +232,51 @@ fn memory_follows_the_segment_not_the_sequence() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+#[test]
+fn a_multi_channel_segment_holds_a_few_bytes_per_leaf_of_each_frame() {
+    if !python_ok() || !Path::new("/usr/bin/time").exists() {
+        assert!(!in_ci(), "CI=true but /usr/bin/time is missing (Debian package time)");
+        return;
+    }
+    let dir = scratch_dir("segments", "channel-masks");
+    // One fire frame, three grids of 8,192 leaves with one active voxel each
+    // (one brick, one L3 node), as every frame: all that grows with the
+    // frames is what is kept per leaf of each frame. Each channel's own mask
+    // there used to be kept whole, 64 bytes a channel: 8 frames to 64 then
+    // took 1.5 times the memory.
+    let make = r#"
+import sys, os, pyopenvdb as vdb
+d, n = sys.argv[1], int(sys.argv[2])
+grids = []
+for name, v in (('density', 0.5), ('temperature', 2.0), ('flame', 0.25)):
+    g = vdb.FloatGrid(); g.name = name
+    acc = g.getAccessor()
+    for i in range(32):
+        for j in range(16):
+            for k in range(16):
+                acc.setValueOn((i * 8 + 3, j * 8 + 3, k * 8 + 3), v)
+    grids.append(g)
+vdb.write('%s/fire_0001.vdb' % d, grids=grids)
+for f in range(2, n + 1):
+    os.link('%s/fire_0001.vdb' % d, '%s/fire_%04d.vdb' % (d, f))
+"#;
+    let src = dir.join("src").tap_mkdir();
+    let out = Command::new("/usr/bin/python3").args(["-c", make, s(&src), "64"]).output().expect("python3");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let pattern = format!("{}/fire_####.vdb", s(&src));
+    let asset = dir.join("fire.vpak");
+    let peak = |frames: &str| peak_kib(&["cook", "-q", "--force", "--format", "f16", "--grids", "density,temperature,flame", "--frames", frames, "-o", s(&asset), &pattern]);
+    let (eight, sixty_four) = (peak("1-8"), peak("1-64"));
+    eprintln!("peak RSS: 8 frames {eight} KiB, 64 frames {sixty_four} KiB");
+    assert!(sixty_four as f64 <= 1.25 * eight as f64, "64 frames took {sixty_four} KiB, 8 frames {eight} KiB");
+    // Each channel is still measured over its own voxels: one voxel a leaf.
+    let report: serde_json::Value =
+        serde_json::from_slice(&ok(vdbcook(&["cook", "--json", "--force", "--format", "f16", "--grids", "density,temperature,flame", "--frames", "1-2", "-o", s(&asset), &pattern])).stdout)
+            .expect("cook --json");
+    assert_eq!(report["active_voxels"].as_u64(), Some(2 * 8192), "{report}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Unmounts a scratch file system when the test ends, however it ends.
 struct Mounted(PathBuf);
 

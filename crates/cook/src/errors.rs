@@ -164,9 +164,10 @@ fn voxel_errors(built: &Built, decoded: &Decode, advance: &Advance) -> Result<Ve
     // of leaves whose figures are merged in leaf order.
     let leaf_errors = |f: &vdbcook_flipbook::FrameLeaves, k: usize, id: u32| {
         let mut e = vec![ErrorStats::default(); channels];
-        let brick = built.l3[id as usize].brick as usize;
+        let node = &built.l3[id as usize];
+        let brick = node.brick as usize;
         // A channel not active in the leaf (one stored at another level) adds nothing: not decoded.
-        let masks = f.channel_masks.get(k * channels..(k + 1) * channels).unwrap_or(&[]);
+        let masks: Vec<[u64; 8]> = (0..channels).map_while(|c| f.channel_masks.get(k, c, &node.mask)).collect();
         let want: Vec<bool> = masks.iter().map(|m| m.iter().any(|&w| w != 0)).collect();
         if let (true, Some(dec)) = (want.iter().any(|&w| w), decoded(brick as u32, &want)) {
             for (c, e) in e.iter_mut().enumerate() {

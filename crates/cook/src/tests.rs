@@ -401,6 +401,32 @@ fn worst_error(src: &[Grid; 3], back: &[Grid]) -> [f32; 3] {
 }
 
 #[test]
+fn each_channel_is_measured_over_its_own_active_voxels() {
+    // The fire's channels have leaves the others lack, a leaf whose mask is
+    // part of the union's, and a tile over another channel's leaf.
+    let frames = [fire(0), fire(2)];
+    let mut b = vdbcook_flipbook::Builder::new(3);
+    for f in &frames {
+        b.push(&[Some(&f[0]), Some(&f[1]), Some(&f[2])]).unwrap();
+    }
+    let built = b.finish().unwrap();
+    let decoded = |brick: u32, want: &[bool]| -> Option<Vec<Option<vdbcook_encode::Brick>>> {
+        let channels = built.pool.brick(brick as usize)?;
+        Some(channels.into_iter().zip(want).map(|(b, &w)| w.then_some(b)).collect())
+    };
+    let m = errors::measure(&built, 0, 1, &[0, 0, 0], &decoded, &|_| {}).unwrap();
+    for (k, f) in frames.iter().enumerate() {
+        for (c, g) in f.iter().enumerate() {
+            let leaves: u64 = g.leaves.iter().map(|l| u64::from(l.mask.count_on())).sum();
+            // An 8³ tile over a leaf of another channel is that channel's part of the leaf.
+            let tiles_on_leaves = g.tiles.iter().filter(|t| t.dim == 8 && f.iter().any(|o| o.leaves.iter().any(|l| l.origin == t.origin))).count() as u64;
+            assert_eq!(m.frames[k][c].count, leaves + 512 * tiles_on_leaves, "frame {k} channel {c}");
+            assert_eq!(m.frames[k][c].max_abs, 0.0);
+        }
+    }
+}
+
+#[test]
 fn several_channels_round_trip_in_every_format() {
     let frames = [fire(0), fire(2)];
     for format in Format::ALL {

@@ -16,6 +16,7 @@
 //! remapped bricks (clustering, encoded-brick deduplication).
 
 use ids::IdTable;
+pub use masks::ChannelMasks;
 use merge::{merge_channels, Merged};
 pub use pool::BrickPool;
 use pool::{Channel, Made};
@@ -209,9 +210,8 @@ pub struct FrameLeaves {
     /// (leaf origin, L3 id), sorted by origin.
     pub leaves: Vec<(Coord, u32)>,
     /// With several channels, each leaf's active mask in each channel's own
-    /// grid (`channels` per leaf, in leaf order; empty with one channel,
-    /// whose mask is the L3 node's).
-    pub channel_masks: Vec<[u64; 8]>,
+    /// grid (none with one channel, whose mask is the L3 node's).
+    pub channel_masks: ChannelMasks,
     /// Active tiles: origin, edge (8, 128 or 4096), one value per channel.
     pub tiles: Vec<(Coord, u32, Vec<f32>)>,
     pub active_voxels: u64,
@@ -331,7 +331,7 @@ impl Builder {
         let backgrounds: Vec<f32> = self.backgrounds.iter().map(|b| b.unwrap_or(0.0)).collect();
         let merged = match grids {
             [Some(g)] => Merged::single(g),
-            _ => merge_channels(grids, &backgrounds),
+            _ => merge_channels(grids, &backgrounds)?,
         };
         self.push_merged(merged, &backgrounds)
     }
@@ -697,6 +697,7 @@ pub fn thesis_tree_bytes(frames: usize, leaves: u64) -> u64 {
 }
 
 mod ids;
+mod masks;
 mod merge;
 mod pool;
 #[cfg(test)]

@@ -7,7 +7,7 @@
 //! union, and a channel with nothing at a position (one stored at another
 //! level, or empty there) costs a constant brick.
 
-use crate::{brick_of_leaf, Brick};
+use crate::{brick_of_leaf, Brick, ChannelMasks, Error};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use vdbcook_grid::{Coord, Grid, Leaf, LeafMask, LEAF_VOXELS};
 
@@ -27,8 +27,8 @@ pub(crate) enum Part<'g> {
 pub(crate) struct Merged<'g> {
     pub(crate) positions: Vec<(Coord, LeafMask)>,
     pub(crate) parts: Vec<Part<'g>>,
-    /// Per position per channel, the channel's own active mask (empty with one channel).
-    pub(crate) channel_masks: Vec<[u64; 8]>,
+    /// Per position per channel, the channel's own active mask (none with one channel).
+    pub(crate) channel_masks: ChannelMasks,
     pub(crate) tiles: Vec<(Coord, u32, Vec<f32>)>,
 }
 
@@ -39,7 +39,7 @@ impl<'g> Merged<'g> {
         Merged {
             positions: leaves.iter().map(|l| (l.origin, l.mask)).collect(),
             parts: leaves.into_iter().map(Part::Leaf).collect(),
-            channel_masks: Vec::new(),
+            channel_masks: ChannelMasks::default(),
             tiles: g.tiles.iter().filter(|t| t.active).map(|t| (t.origin, t.dim, vec![t.value])).collect(),
         }
     }
@@ -111,7 +111,7 @@ impl Part<'_> {
 /// over finer content of another (a leaf, or a smaller tile) is split into
 /// its children until none overlaps: an 8³ tile over another channel's leaf
 /// becomes that channel's part of the position.
-pub(crate) fn merge_channels<'g>(grids: &[Option<&'g Grid>], backgrounds: &[f32]) -> Merged<'g> {
+pub(crate) fn merge_channels<'g>(grids: &[Option<&'g Grid>], backgrounds: &[f32]) -> Result<Merged<'g>, Error> {
     let c = grids.len();
     let present = || grids.iter().enumerate().filter_map(|(k, g)| g.map(|g| (k, g)));
     // Leaf origins of every channel, and the coarser regions that hold finer content.
@@ -168,11 +168,14 @@ pub(crate) fn merge_channels<'g>(grids: &[Option<&'g Grid>], backgrounds: &[f32]
     }
     let mut origins: Vec<Coord> = leaf_at.keys().copied().collect();
     origins.sort_unstable();
-    let mut m = Merged { positions: Vec::with_capacity(origins.len()), parts: Vec::with_capacity(origins.len() * c), channel_masks: Vec::with_capacity(origins.len() * c), tiles: Vec::new() };
+    let mut m = Merged { positions: Vec::with_capacity(origins.len()), parts: Vec::with_capacity(origins.len() * c), channel_masks: ChannelMasks::new(c), tiles: Vec::new() };
+    m.channel_masks.reserve(origins.len());
+    let mut masks = Vec::with_capacity(c);
     for o in origins {
         let own = &leaf_at[&o];
         let tiled = tile_leaves.get(&o);
         let mut union = [0u64; 8];
+        masks.clear();
         for k in 0..c {
             let leaf = own[k].and_then(|i| grids[k].and_then(|g| g.leaves.get(i)));
             // A tile's value wins over a leaf's values; the leaf's mask over the tile's.
@@ -186,10 +189,11 @@ pub(crate) fn merge_channels<'g>(grids: &[Option<&'g Grid>], backgrounds: &[f32]
                 *u |= w;
             }
             m.parts.push(part);
-            m.channel_masks.push(mask.0);
+            masks.push(mask.0);
         }
+        m.channel_masks.push(&masks, &union)?;
         m.positions.push((o, LeafMask(union)));
     }
     m.tiles = tiles.into_iter().map(|((o, dim), v)| (o, dim, v.iter().zip(backgrounds).map(|(v, &bg)| v.unwrap_or(bg)).collect())).collect();
-    m
+    Ok(m)
 }

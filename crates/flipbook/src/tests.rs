@@ -526,7 +526,7 @@ fn channels_share_one_tree_over_the_union_of_their_leaves() {
     assert_eq!(fs.leaves, 3);
     let built = builder.finish().unwrap();
     let n = built.nodes(|id| id).unwrap();
-    assert_eq!(built.frames[0].channel_masks.len(), 6, "two masks per leaf");
+    assert_eq!(built.frames[0].channel_masks.leaves(), 3, "two masks per leaf");
     let src = [[Some(leaf(a, 1, 512)), Some(leaf(b, 2, 100)), None], [None, Some(tb), Some(leaf(c, 4, 512))]];
     for (k, o) in [a, b, c].iter().enumerate() {
         for (ch, per_leaf) in src.iter().enumerate() {
