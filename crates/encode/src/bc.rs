@@ -115,6 +115,59 @@ pub fn encode_bc7(quality: Quality, slices: usize, texels: &[[u8; 4]], out: &mut
     }
 }
 
+/// The block of a BC7 brick that no reader loads: mode 6 with every
+/// endpoint and index 0 (it decodes to 0 in every lane).
+pub const HIDDEN_BC7: [u8; 16] = [0x40, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0];
+
+/// Whether block `j` of a BC7 brick (in the order (slice, block row, block
+/// column), `zpt` z-slices per texel) holds a voxel of `mask` (index
+/// `x·64 + y·8 + z`: word x, bit `y·8 + z`).
+fn block_shown(mask: &[u64; 8], zpt: usize, j: usize) -> bool {
+    let (s, br, bc) = (j / 4, (j / 2) % 2, j % 2);
+    let zs = ((1u64 << zpt) - 1) << (s * zpt);
+    let yz = (4 * br..4 * br + 4).fold(0u64, |acc, y| acc | zs << (8 * y));
+    mask[4 * bc..4 * bc + 4].iter().any(|&w| w & yz != 0)
+}
+
+/// [`encode_bc7`] (with `zpt` z-slices per texel) of the blocks that hold a
+/// voxel of their brick's `masks` entry (every block without masks, or past
+/// them). The others, which no reader loads (a reader takes a voxel no L3
+/// node shows from the background), are [`HIDDEN_BC7`], not encoded: a
+/// sparse fire's bricks have many.
+pub fn encode_bc7_shown(quality: Quality, zpt: usize, texels: &[[u8; 4]], masks: Option<&[[u64; 8]]>, out: &mut [u8]) {
+    let slices = 8 / zpt.max(1);
+    let Some(masks) = masks else { return encode_bc7(quality, slices, texels, out) };
+    const BB: usize = 16;
+    let per_brick = slices * 4;
+    let n = texels.len() / (64 * slices).max(1);
+    let shown: Vec<(usize, usize)> = (0..n).flat_map(|k| (0..per_brick).map(move |j| (k, j))).filter(|&(k, j)| masks.get(k).is_none_or(|m| block_shown(m, zpt, j))).collect();
+    // The shown blocks side by side in one row of blocks.
+    let w = 4 * shown.len();
+    let mut surface = vec![0u8; w * 4 * 4];
+    for (v, &(k, j)) in shown.iter().enumerate() {
+        let (s, br, bc) = (j / 4, (j / 2) % 2, j % 2);
+        for r in 0..4 {
+            let src = (k * slices + s) * 64 + (4 * br + r) * 8 + 4 * bc;
+            for c in 0..4 {
+                let px = (r * w + 4 * v + c) * 4;
+                surface[px..px + 4].copy_from_slice(&texels[src + c]);
+            }
+        }
+    }
+    let blocks = match shown.len() {
+        0 => Vec::new(),
+        _ => intel_tex_2::bc7::compress_blocks(&bc7_settings(quality), &intel_tex_2::RgbaSurface { data: &surface, width: w as u32, height: 4, stride: (w * 4) as u32 }),
+    };
+    for block in out.chunks_exact_mut(BB).take(n * per_brick) {
+        block.copy_from_slice(&HIDDEN_BC7);
+    }
+    for (v, &(k, j)) in shown.iter().enumerate() {
+        if let (Some(dst), Some(src)) = (out.get_mut((k * per_brick + j) * BB..(k * per_brick + j + 1) * BB), blocks.get(v * BB..(v + 1) * BB)) {
+            dst.copy_from_slice(src);
+        }
+    }
+}
+
 /// How far around its least-squares endpoints [`bc4_block`] looks.
 fn bc4_radius(q: Quality) -> i32 {
     match q {
@@ -521,8 +574,47 @@ mod tests {
         // BC7 mode 6 block (bit 6 set) with all-zero endpoints and indices decodes to 0.
         let mut b7 = [0u8; BC7_BRICK_BYTES];
         for blk in b7.chunks_exact_mut(16) {
-            blk[0] = 0x40;
+            blk.copy_from_slice(&HIDDEN_BC7);
         }
+        assert_eq!(HIDDEN_BC7[0], 0x40);
         assert!(decode(Format::Bc7, &b7).iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn a_voxel_shows_the_one_block_its_texel_is_in() {
+        for zpt in [1, 2, 4] {
+            let slices = 8 / zpt;
+            for i in 0..BRICK_VOXELS {
+                let (x, y, z) = (i / 64, (i / 8) % 8, i % 8);
+                let mut mask = [0u64; 8];
+                mask[i >> 6] |= 1 << (i & 63);
+                // Texel (x, y) of slice z / zpt; block (slice, block row, block column).
+                let want = (z / zpt) * 4 + (y / 4) * 2 + x / 4;
+                let shown: Vec<usize> = (0..slices * 4).filter(|&j| block_shown(&mask, zpt, j)).collect();
+                assert_eq!(shown, [want], "zpt {zpt} voxel {i}");
+            }
+        }
+    }
+
+    #[test]
+    fn shown_blocks_are_encoded_as_before_and_hidden_ones_are_one_block() {
+        let lv = [ramp(), std::array::from_fn(|i| (i * 37 % 251) as u8), [90; BRICK_VOXELS]];
+        let texels = crate::texels::bc7_texels(&lv.iter().map(|l| vec![*l]).collect::<Vec<_>>(), 4);
+        let mut all = [0u8; 3 * BC7_BRICK_BYTES];
+        encode_bc7(Quality::Fast, 2, &texels, &mut all);
+        // Brick 0: one voxel in the block (slice 1, row 0, column 1); brick 1 every
+        // voxel; brick 2 none (past the masks given: every block).
+        let mut one = [0u64; 8];
+        one[5] = 1 << (2 * 8 + 6);
+        let masks = [one, [u64::MAX; 8]];
+        let mut out = [0xffu8; 3 * BC7_BRICK_BYTES];
+        encode_bc7_shown(Quality::Fast, 4, &texels, Some(&masks), &mut out);
+        for (j, (got, want)) in out.chunks_exact(16).zip(all.chunks_exact(16)).enumerate() {
+            let shown = j == 4 + 1 || j >= 8;
+            assert_eq!(got, if shown { want } else { &HIDDEN_BC7[..] }, "block {j}");
+        }
+        let mut none = [0u8; 3 * BC7_BRICK_BYTES];
+        encode_bc7_shown(Quality::Fast, 4, &texels, None, &mut none);
+        assert_eq!(none, all);
     }
 }

@@ -31,7 +31,7 @@ pub(crate) fn encode_one(format: Format, quality: Quality, values: &Brick, range
     let mut out = vec![0u8; plane.brick_bytes()];
     match format {
         Format::Bc4 => bc::encode_bc4(quality, &[levels(values, range, 255.0)], Some(std::slice::from_ref(mask)), &mut out),
-        Format::Bc7 => bc::encode_bc7(quality, 2, &bc7_texels(&[vec![quantise(values, range)]], 4), &mut out),
+        Format::Bc7 => bc::encode_bc7_shown(quality, 4, &bc7_texels(&[vec![quantise(values, range)]], 4), Some(std::slice::from_ref(mask)), &mut out),
         _ => encode_texels(&plane, &[(values, range)], &mut out),
     }
     out

@@ -152,7 +152,7 @@ impl<'a> Encoded<'a> {
             _ => {
                 let lv: Vec<Vec<[u8; BRICK_VOXELS]>> = bricks.iter().map(|&b| spec.channels.iter().map(|&c| quantise(slot(b, c).0, slot(b, c).1)).collect()).collect();
                 let zpt = spec.plane.z_per_texel as usize;
-                bc::encode_bc7(quality, 8 / zpt, &bc7_texels(&lv, zpt), out);
+                bc::encode_bc7_shown(quality, zpt, &bc7_texels(&lv, zpt), masks, out);
             }
         }
     }
