@@ -122,10 +122,12 @@ fn play_streams_segments_and_draws_what_render_draws() {
     let peak = summary["peak_resident_bytes"].as_u64().unwrap();
     assert_eq!(one["summary"]["segments_loaded"].as_u64(), Some(1));
     assert!(single > 0 && peak >= single && peak <= 2 * single, "peak {peak} with segments of {single} bytes");
-    // Streamed, not loaded whole: playing one segment of four reads about a quarter of the file.
+    // Streamed, not loaded whole: playing one segment of four reads that
+    // segment and every segment's head (checked at open: header, section
+    // table, metadata: about a kilobyte each here), under half the file.
     let file = std::fs::metadata(&asset).unwrap().len();
     let (all_read, one_read) = (summary["bytes_read"].as_u64().unwrap(), one["summary"]["bytes_read"].as_u64().unwrap());
-    assert!(one_read < file * 2 / 5 && all_read > file * 9 / 10 && all_read < file * 3 / 2, "read {one_read} and {all_read} of a {file}-byte file");
+    assert!(one_read < file / 2 && all_read > file * 9 / 10 && all_read < file * 3 / 2, "read {one_read} and {all_read} of a {file}-byte file");
     // Each frame's PNG is what `render` draws of it.
     for f in [0, 3, 7] {
         let png = dir.join(format!("render_{f}.png"));
