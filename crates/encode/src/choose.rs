@@ -85,6 +85,23 @@ fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<f32> {
 /// (the entropy of each format's filtered texels,
 /// `vdbcook_vpak::coding::brick_cost`) rather than on the GPU.
 pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>) -> Choice {
+    constant_within(values, mask, max_error).unwrap_or_else(|| cheapest_ranged(values, mask, max_error, quality, disk, None))
+}
+
+/// The constant choice (the first of [`Format::BY_COST`]) when it holds
+/// every voxel of `mask` within `max_error`.
+fn constant_within(values: &Brick, mask: &[u64; 8], max_error: f32) -> Option<Choice> {
+    let v = constant_of(values, mask)?;
+    let (format, range) = (Format::Constant, [v, v]);
+    // A constant's bytes do not depend on the quality.
+    let bytes = encode_one(format, Quality::Fast, values, range, mask);
+    within(values, &decode_one(format, &bytes, range), mask, max_error).then_some(Choice { format, range, bytes })
+}
+
+/// [`cheapest`] among the ranged formats (the constant does not hold);
+/// `bc7`: the brick channel's BC7 candidate, when it was encoded with others
+/// ([`bc7_candidates`]).
+fn cheapest_ranged(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>, mut bc7: Option<Vec<u8>>) -> Choice {
     let range = range_of(values);
     // Texels (and a ranged format's range) moved to the coarsest grid within the bound.
     let snap = |format: Format, bytes: Vec<u8>, range: [f32; 2]| match disk {
@@ -93,19 +110,15 @@ pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qualit
     };
     // Smallest file: every format within the bound, the one of fewest compressed bytes (the first of equals).
     let mut smallest: Option<(usize, Choice)> = None;
-    for format in Format::BY_COST.into_iter().filter(|&f| f != Format::F32) {
-        let range = match format {
-            Format::Constant => match constant_of(values, mask) {
-                Some(v) => [v, v],
-                None => continue,
-            },
-            _ => range,
+    for format in Format::BY_COST.into_iter().filter(|&f| f != Format::F32 && f != Format::Constant) {
+        let bytes = match (format, bc7.take()) {
+            (Format::Bc7, Some(b)) => b,
+            _ => encode_one(format, quality, values, range, mask),
         };
-        let bytes = encode_one(format, quality, values, range, mask);
         if within(values, &decode_one(format, &bytes, range), mask, max_error) {
             let (bytes, range) = snap(format, bytes, range);
             let choice = Choice { format, range, bytes };
-            if disk != Some(Optimize::Disk) || format == Format::Constant {
+            if disk != Some(Optimize::Disk) {
                 return choice;
             }
             let cost = vdbcook_vpak::coding::brick_cost(&single_plane(format), &choice.bytes);
@@ -120,6 +133,21 @@ pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qualit
     // Exact, NaN and ±∞ included.
     let (bytes, range) = snap(Format::F32, encode_one(Format::F32, quality, values, range, mask), range);
     Choice { format: Format::F32, range, bytes }
+}
+
+/// Brick channels whose BC7 candidates go to intel_tex_2 in one call: its
+/// kernels work across the blocks of a row (16 lanes with AVX-512), which a
+/// brick's eight blocks at most half fill.
+const BC7_BATCH: usize = 16;
+
+/// The BC7 candidates ([`encode_one`]) of `items` (values and shown mask),
+/// one after the other.
+fn bc7_candidates(quality: Quality, items: &[(&Brick, [u64; 8])]) -> Vec<u8> {
+    let lv: Vec<Vec<[u8; crate::BRICK_VOXELS]>> = items.iter().map(|(v, _)| vec![quantise(v, range_of(v))]).collect();
+    let masks: Vec<[u64; 8]> = items.iter().map(|i| i.1).collect();
+    let mut out = vec![0u8; items.len() * single_plane(Format::Bc7).brick_bytes()];
+    bc::encode_bc7_shown(quality, 4, &bc7_texels(&lv, 4), Some(&masks), &mut out);
+    out
 }
 
 /// Every brick channel's choice, in order (`picks[i · channels + c]`), its
@@ -158,15 +186,23 @@ impl Choices {
     #[allow(clippy::too_many_arguments)]
     pub fn choose(&mut self, bricks: Bricks, masks: &[[u64; 8]], max_error: f32, quality: Quality, disk: Option<Optimize>, progress: &(dyn Fn(usize) + Sync)) -> Result<(), StoreError> {
         for first in (0..bricks.len()).step_by(CHOICE_CHUNK) {
-            let chunk: Vec<Choice> = (first..(first + CHOICE_CHUNK).min(bricks.len()))
-                .into_par_iter()
-                .flat_map_iter(|i| {
-                    let mask = masks.get(i).copied().unwrap_or([u64::MAX; 8]);
-                    let out: Vec<Choice> = bricks.channels_of(i).map(|v| cheapest(v, &mask, max_error, quality, disk)).collect();
-                    progress(1);
-                    out
-                })
-                .collect();
+            let ids = first..(first + CHOICE_CHUNK).min(bricks.len());
+            let items: Vec<(&Brick, [u64; 8])> = ids.clone().flat_map(|i| bricks.channels_of(i).map(move |v| (v, masks.get(i).copied().unwrap_or([u64::MAX; 8])))).collect();
+            // Constants first; the others' BC7 candidates (the next format
+            // tried) encoded a batch at a time, then the rest brick by brick.
+            let constant: Vec<Option<Choice>> = items.par_iter().map(|&(v, m)| constant_within(v, &m, max_error)).collect();
+            let ranged: Vec<usize> = (0..items.len()).filter(|&j| constant[j].is_none()).collect();
+            let bb = single_plane(Format::Bc7).brick_bytes();
+            let encoded: Vec<Vec<u8>> = ranged.par_chunks(BC7_BATCH).map(|js| bc7_candidates(quality, &js.iter().map(|&j| items[j]).collect::<Vec<_>>())).collect();
+            let mut bc7: Vec<Option<Vec<u8>>> = vec![None; items.len()];
+            for (js, blocks) in ranged.chunks(BC7_BATCH).zip(&encoded) {
+                for (&j, b) in js.iter().zip(blocks.chunks_exact(bb)) {
+                    bc7[j] = Some(b.to_vec());
+                }
+            }
+            let chunk: Vec<Choice> =
+                items.par_iter().zip(constant).zip(bc7).map(|((&(v, m), constant), bc7)| constant.unwrap_or_else(|| cheapest_ranged(v, &m, max_error, quality, disk, bc7))).collect();
+            progress(ids.len());
             for choice in chunk {
                 self.push(choice)?;
             }

@@ -492,6 +492,36 @@ fn decoding_wanted_channels_matches_decoding_all_over_a_slotted_pool() {
 }
 
 #[test]
+fn choosing_in_batches_picks_what_each_brick_alone_picks() {
+    // More brick channels than a BC7 batch, of every kind, fully, partly and
+    // not shown: the batched BC7 candidates are the lone brick's.
+    let mut rng = vdbcook_testkit::Rng::new(0xba7c);
+    // Every kind, and smooth ramps, which BC7 holds within a loose bound.
+    let ramp = |t: u64| -> Brick { std::array::from_fn(|i| ((i / 64) as f32 * 0.1 + ((i / 8) % 8) as f32 * 0.03 + (i % 8) as f32 * 0.01) * (1.0 + t as f32 * 0.01)) };
+    let bricks: Vec<Brick> = (0..90u64).map(|t| if t % 6 == 5 { ramp(t) } else { kind_of_brick(&mut rng, t % 6) }).collect();
+    let view = crate::Bricks::dense(&bricks, 2);
+    let masks: Vec<[u64; 8]> = (0..view.len())
+        .map(|i| match i % 3 {
+            0 => [u64::MAX; 8],
+            1 => std::array::from_fn(|_| rng.next_u64() & rng.next_u64() & rng.next_u64()),
+            _ => [0, 0, 0, 0, 0, 0xff00, 0, 0],
+        })
+        .collect();
+    let mut formats = std::collections::BTreeSet::new();
+    for (e, disk) in [(0.02, None), (0.3, None), (0.3, Some(crate::Optimize::Disk))] {
+        let mut c = crate::Choices::new(2, None);
+        c.choose(view, &masks, e, Quality::VeryFast, disk, &|_| {}).unwrap();
+        for (j, pick) in c.picks.iter().enumerate() {
+            let alone = cheapest(&bricks[j], &masks[j / 2], e, Quality::VeryFast, disk);
+            assert_eq!((pick.format, pick.range), (alone.format, alone.range), "brick channel {j} (E {e}, {disk:?})");
+            assert_eq!(c.bytes(j), &alone.bytes[..], "brick channel {j} (E {e}, {disk:?})");
+            formats.insert(pick.format);
+        }
+    }
+    assert!(formats.contains(&Format::Bc7) && formats.len() >= 4, "{formats:?}");
+}
+
+#[test]
 fn chosen_bricks_spilled_to_a_file_encode_as_those_in_memory() {
     // Two channels of bricks of every kind, chosen in memory and with every
     // store past a 1-byte budget (in spill files where the system has them).
