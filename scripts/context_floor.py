@@ -73,6 +73,20 @@ LGAMMA = np.vectorize(math.lgamma, otypes=[np.float64])
 
 # ---- code lengths ----------------------------------------------------------------------
 
+def lattice_levels(b, m, e):
+    """Each brick's levels in steps of 2E relative to 2E floor(min / 2E), its minimum on
+    the lattice (inactive voxels level 0): (the bricks' minima, their lattice minima k,
+    the levels, the largest error of an active voxel decoded as (k + level) 2E in f32)."""
+    step = 2 * e
+    mins = np.where(m, b, np.inf).reshape(len(b), -1).min(1).astype(np.float64)
+    kmin = np.floor(mins / step).astype(np.int64)
+    q = np.rint((b - (kmin * step)[:, None, None, None]) / step).astype(np.int64)
+    q[~m] = 0
+    dec = (kmin[:, None, None, None] + q) * step
+    worst = float(np.abs(dec.astype(np.float32).astype(np.float64) - b.astype(np.float64))[m].max())
+    return mins, kmin, q, worst
+
+
 def unsigned_tokens(z):
     """Integers >= 0 -> (symbol, raw bits): z below T, else bucket T + floor(log2(z - T + 1))
     followed by that many raw bits."""
@@ -346,14 +360,7 @@ def main():
     print(f"  zstd floor (disk_floor.py) {zfloor} B = {zfloor / nano:.3f}x "
           f"(levels {zp}, Lorenzo {zl}, minima and masks {zside})")
 
-    # lattice minima: levels relative to 2E floor(min / 2E)
-    step = 2 * e
-    mins = np.where(m, b, np.inf).reshape(len(b), -1).min(1).astype(np.float64)
-    kmin = np.floor(mins / step).astype(np.int64)
-    q = np.rint((b - (kmin * step)[:, None, None, None]) / step).astype(np.int64)
-    q[~m] = 0
-    dec = (kmin[:, None, None, None] + q) * step
-    worst = float(np.abs(dec.astype(np.float32).astype(np.float64) - b.astype(np.float64))[m].max())
+    mins, kmin, q, worst = lattice_levels(b, m, e)
     out["largest_error"] = worst
     print(f"  lattice minima: largest error {worst:.6g} (bound {e}), largest level {int(q[m].max())}")
 

@@ -25,19 +25,15 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+import context_floor as cf  # noqa: E402
+from context_floor import lattice_levels  # noqa: E402
 from disk_floor import load  # noqa: E402
 
 
 def main():
     path, e, grid, out = sys.argv[1], float(sys.argv[2]), sys.argv[3], sys.argv[4]
     b, m, keep = load(path, grid)
-    step = 2 * e
-    mins = np.where(m, b, np.inf).reshape(len(b), -1).min(1).astype(np.float64)
-    kmin = np.floor(mins / step).astype(np.int64)
-    q = np.rint((b - (kmin * step)[:, None, None, None]) / step).astype(np.int64)
-    q[~m] = 0
-    dec = (kmin[:, None, None, None] + q) * step
-    worst = float(np.abs(dec.astype(np.float32).astype(np.float64) - b.astype(np.float64))[m].max())
+    _, kmin, q, worst = lattice_levels(b, m, e)
     qmax = int(q.max())
     bpl = 1 if qmax < 256 else 2
     n = len(b)
@@ -52,7 +48,6 @@ def main():
         fh.write(b"BRK1" + struct.pack("<IdI", n, e, bpl))
         fh.write(arr.tobytes())
     if "--ideal" in sys.argv:
-        import context_floor as cf
         r, f = cf.predict(q, m, "lmean", True)
         feats = cf.features(r, f, m, np.zeros(n, np.int64), np.zeros(n, np.int64))
         ctx = cf.context(feats, ("err", "pos"))[m]
