@@ -269,11 +269,6 @@ for f in range(2, n + 1):
     let (eight, sixty_four) = (peak("1-8"), peak("1-64"));
     eprintln!("peak RSS: 8 frames {eight} KiB, 64 frames {sixty_four} KiB");
     assert!(sixty_four as f64 <= 1.25 * eight as f64, "64 frames took {sixty_four} KiB, 8 frames {eight} KiB");
-    // Each channel is still measured over its own voxels: one voxel a leaf.
-    let report: serde_json::Value =
-        serde_json::from_slice(&ok(vdbcook(&["cook", "--json", "--force", "--format", "f16", "--grids", "density,temperature,flame", "--frames", "1-2", "-o", s(&asset), &pattern])).stdout)
-            .expect("cook --json");
-    assert_eq!(report["active_voxels"].as_u64(), Some(2 * 8192), "{report}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

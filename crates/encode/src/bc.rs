@@ -115,8 +115,8 @@ pub fn encode_bc7(quality: Quality, slices: usize, texels: &[[u8; 4]], out: &mut
     }
 }
 
-/// The block of a BC7 brick that no reader loads: mode 6 with every
-/// endpoint and index 0 (it decodes to 0 in every lane).
+/// A BC7 block whose voxels no reader uses (no L3 node shows them): mode 6
+/// with every endpoint and index 0 (it decodes to 0 in every lane).
 pub const HIDDEN_BC7: [u8; 16] = [0x40, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0];
 
 /// Whether block `j` of a BC7 brick (in the order (slice, block row, block
@@ -131,11 +131,12 @@ fn block_shown(mask: &[u64; 8], zpt: usize, j: usize) -> bool {
 
 /// [`encode_bc7`] (with `zpt` z-slices per texel) of the blocks that hold a
 /// voxel of their brick's `masks` entry (every block without masks, or past
-/// them). The others, which no reader loads (a reader takes a voxel no L3
-/// node shows from the background), are [`HIDDEN_BC7`], not encoded: a
-/// sparse fire's bricks have many.
+/// them). The others, whose voxels no reader uses (a reader takes a voxel
+/// no L3 node shows from the background), are [`HIDDEN_BC7`], not encoded:
+/// a sparse fire's bricks have many.
 pub fn encode_bc7_shown(quality: Quality, zpt: usize, texels: &[[u8; 4]], masks: Option<&[[u64; 8]]>, out: &mut [u8]) {
-    let slices = 8 / zpt.max(1);
+    let zpt = zpt.clamp(1, 8);
+    let slices = 8 / zpt;
     let Some(masks) = masks else { return encode_bc7(quality, slices, texels, out) };
     const BB: usize = 16;
     let per_brick = slices * 4;
@@ -599,22 +600,28 @@ mod tests {
     #[test]
     fn shown_blocks_are_encoded_as_before_and_hidden_ones_are_one_block() {
         let lv = [ramp(), std::array::from_fn(|i| (i * 37 % 251) as u8), [90; BRICK_VOXELS]];
-        let texels = crate::texels::bc7_texels(&lv.iter().map(|l| vec![*l]).collect::<Vec<_>>(), 4);
-        let mut all = [0u8; 3 * BC7_BRICK_BYTES];
-        encode_bc7(Quality::Fast, 2, &texels, &mut all);
-        // Brick 0: one voxel in the block (slice 1, row 0, column 1); brick 1 every
-        // voxel; brick 2 none (past the masks given: every block).
-        let mut one = [0u64; 8];
-        one[5] = 1 << (2 * 8 + 6);
-        let masks = [one, [u64::MAX; 8]];
-        let mut out = [0xffu8; 3 * BC7_BRICK_BYTES];
-        encode_bc7_shown(Quality::Fast, 4, &texels, Some(&masks), &mut out);
-        for (j, (got, want)) in out.chunks_exact(16).zip(all.chunks_exact(16)).enumerate() {
-            let shown = j == 4 + 1 || j >= 8;
-            assert_eq!(got, if shown { want } else { &HIDDEN_BC7[..] }, "block {j}");
+        // One channel in four lanes, two in two, four in one.
+        for zpt in [4, 2, 1] {
+            let slots: Vec<Vec<[u8; BRICK_VOXELS]>> = (0..3).map(|k| (0..4 / zpt).map(|c| lv[(k + c) % 3]).collect()).collect();
+            let texels = crate::texels::bc7_texels(&slots, zpt);
+            let (slices, bytes) = (8 / zpt, 3 * (8 / zpt) * 4 * 16);
+            let mut all = vec![0u8; bytes];
+            encode_bc7(Quality::Fast, slices, &texels, &mut all);
+            // Brick 0: one voxel, (x, y, z) = (5, 2, 6); brick 1 every voxel;
+            // brick 2 none (past the masks given: every block).
+            let mut one = [0u64; 8];
+            one[5] = 1 << (2 * 8 + 6);
+            let masks = [one, [u64::MAX; 8]];
+            let mut out = vec![0xffu8; bytes];
+            encode_bc7_shown(Quality::Fast, zpt, &texels, Some(&masks), &mut out);
+            let per_brick = slices * 4;
+            for (j, (got, want)) in out.chunks_exact(16).zip(all.chunks_exact(16)).enumerate() {
+                let shown = j == (6 / zpt) * 4 + 1 || j >= per_brick;
+                assert_eq!(got, if shown { want } else { &HIDDEN_BC7[..] }, "zpt {zpt} block {j}");
+            }
+            let mut none = vec![0u8; bytes];
+            encode_bc7_shown(Quality::Fast, zpt, &texels, None, &mut none);
+            assert_eq!(none, all);
         }
-        let mut none = [0u8; 3 * BC7_BRICK_BYTES];
-        encode_bc7_shown(Quality::Fast, 4, &texels, None, &mut none);
-        assert_eq!(none, all);
     }
 }

@@ -111,8 +111,8 @@ fn cheapest_ranged(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qua
     // Smallest file: every format within the bound, the one of fewest compressed bytes (the first of equals).
     let mut smallest: Option<(usize, Choice)> = None;
     for format in Format::BY_COST.into_iter().filter(|&f| f != Format::F32 && f != Format::Constant) {
-        let bytes = match (format, bc7.take()) {
-            (Format::Bc7, Some(b)) => b,
+        let bytes = match format {
+            Format::Bc7 => bc7.take().unwrap_or_else(|| encode_one(format, quality, values, range, mask)),
             _ => encode_one(format, quality, values, range, mask),
         };
         if within(values, &decode_one(format, &bytes, range), mask, max_error) {
