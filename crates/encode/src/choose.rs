@@ -61,8 +61,8 @@ pub fn within(values: &Brick, decoded: &Brick, mask: &[u64; 8], max_error: f32) 
 }
 
 /// The constant nearest every shown voxel (the middle of their range), if
-/// they are all finite.
-fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<f32> {
+/// they are all finite, and their range (`None`: no voxel is shown).
+fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<(f32, Option<[f32; 2]>)> {
     let mut lo_hi: Option<[f32; 2]> = None;
     for i in vdbcook_grid::set_bits(mask) {
         let v = values[i];
@@ -74,7 +74,7 @@ fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<f32> {
     // No voxel shown: any value will do; the brick's smallest keeps it in range.
     let [lo, hi] = lo_hi.unwrap_or_else(|| range_of(values));
     // Halves first: the difference of two large values may overflow.
-    Some(lo / 2.0 + hi / 2.0)
+    Some((lo / 2.0 + hi / 2.0, lo_hi))
 }
 
 /// The cheapest encoding of one brick channel whose voxels of `mask`
@@ -91,11 +91,12 @@ pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qualit
 /// The constant choice (the first of [`Format::BY_COST`]) when it holds
 /// every voxel of `mask` within `max_error`.
 fn constant_within(values: &Brick, mask: &[u64; 8], max_error: f32) -> Option<Choice> {
-    let v = constant_of(values, mask)?;
-    let (format, range) = (Format::Constant, [v, v]);
-    // A constant's bytes do not depend on the quality.
-    let bytes = encode_one(format, Quality::Fast, values, range, mask);
-    within(values, &decode_one(format, &bytes, range), mask, max_error).then_some(Choice { format, range, bytes })
+    let (v, shown) = constant_of(values, mask)?;
+    // It decodes to v everywhere, and the shown voxels (all finite) farthest
+    // from v are their smallest and largest ([`within`]'s test, there).
+    let e = f64::from(max_error);
+    let holds = shown.is_none_or(|[lo, hi]| (f64::from(v) - f64::from(lo)).abs() <= e && (f64::from(hi) - f64::from(v)).abs() <= e);
+    holds.then_some(Choice { format: Format::Constant, range: [v, v], bytes: Vec::new() })
 }
 
 /// [`cheapest`] among the ranged formats (the constant does not hold);
