@@ -76,45 +76,6 @@ pub fn encode_bc4(quality: Quality, levels: &[[f32; BRICK_VOXELS]], masks: Optio
     }
 }
 
-/// Encodes bricks of RGBA texels of 8-bit levels (per brick `64 · slices`
-/// texels in the order (slice, y, x)) as BC7 with intel_tex_2, side by side
-/// in one surface per call (`8·n` texels wide, `8 · slices` tall), into
-/// `out` (`slices · 4 · 16` bytes per brick, blocks in the order (slice,
-/// block row, block column)).
-pub fn encode_bc7(quality: Quality, slices: usize, texels: &[[u8; 4]], out: &mut [u8]) {
-    let n = texels.len() / (64 * slices).max(1);
-    if n == 0 {
-        return;
-    }
-    let (w, h) = (8 * n, 8 * slices);
-    let mut surface = vec![0u8; w * h * 4];
-    for k in 0..n {
-        for s in 0..slices {
-            for y in 0..8 {
-                let px = ((s * 8 + y) * w + k * 8) * 4;
-                let src = (k * slices + s) * 64 + y * 8;
-                for x in 0..8 {
-                    surface[px + 4 * x..px + 4 * x + 4].copy_from_slice(&texels[src + x]);
-                }
-            }
-        }
-    }
-    const BB: usize = 16;
-    let surf = intel_tex_2::RgbaSurface { data: &surface, width: w as u32, height: h as u32, stride: (w * 4) as u32 };
-    let blocks = intel_tex_2::bc7::compress_blocks(&bc7_settings(quality), &surf);
-    // Blocks come out row-major over the surface: row r = 2s + block row, column 2k + block column.
-    let cols = w / 4;
-    for (k, brick) in out.chunks_exact_mut(slices * 4 * BB).take(n).enumerate() {
-        for (j, dst) in brick.chunks_exact_mut(BB).enumerate() {
-            let (s, br, bc) = (j / 4, (j / 2) % 2, j % 2);
-            let i = ((2 * s + br) * cols + 2 * k + bc) * BB;
-            if let Some(src) = blocks.get(i..i + BB) {
-                dst.copy_from_slice(src);
-            }
-        }
-    }
-}
-
 /// A BC7 block whose voxels no reader uses (no L3 node shows them): mode 6
 /// with every endpoint and index 0 (it decodes to 0 in every lane).
 pub const HIDDEN_BC7: [u8; 16] = [0x40, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0];
@@ -129,20 +90,22 @@ fn block_shown(mask: &[u64; 8], zpt: usize, j: usize) -> bool {
     mask[4 * bc..4 * bc + 4].iter().any(|&w| w & yz != 0)
 }
 
-/// [`encode_bc7`] (with `zpt` z-slices per texel) of the blocks that hold a
-/// voxel of their brick's `masks` entry (every block without masks, or past
-/// them). The others, whose voxels no reader uses (a reader takes a voxel
-/// no L3 node shows from the background), are [`HIDDEN_BC7`], not encoded:
-/// a sparse fire's bricks have many.
+/// Encodes bricks of RGBA texels of 8-bit levels (per brick `64 · slices`
+/// texels in the order (slice, y, x), `zpt` z-slices per texel, slices =
+/// 8 / zpt) as BC7 with intel_tex_2 into `out` (`slices · 4 · 16` bytes per
+/// brick, blocks in the order (slice, block row, block column)): the blocks
+/// that hold a voxel of their brick's `masks` entry (every block without
+/// masks, or past them), side by side in one row of blocks, since the
+/// kernels work across a row's blocks. The others, whose voxels no reader
+/// uses (a reader takes a voxel no L3 node shows from the background), are
+/// [`HIDDEN_BC7`], not encoded: a sparse fire's bricks have many.
 pub fn encode_bc7_shown(quality: Quality, zpt: usize, texels: &[[u8; 4]], masks: Option<&[[u64; 8]]>, out: &mut [u8]) {
     let zpt = zpt.clamp(1, 8);
     let slices = 8 / zpt;
-    let Some(masks) = masks else { return encode_bc7(quality, slices, texels, out) };
     const BB: usize = 16;
     let per_brick = slices * 4;
-    let n = texels.len() / (64 * slices).max(1);
-    let shown: Vec<(usize, usize)> = (0..n).flat_map(|k| (0..per_brick).map(move |j| (k, j))).filter(|&(k, j)| masks.get(k).is_none_or(|m| block_shown(m, zpt, j))).collect();
-    // The shown blocks side by side in one row of blocks.
+    let n = texels.len() / (64 * slices);
+    let shown: Vec<(usize, usize)> = (0..n).flat_map(|k| (0..per_brick).map(move |j| (k, j))).filter(|&(k, j)| masks.and_then(|m| m.get(k)).is_none_or(|m| block_shown(m, zpt, j))).collect();
     let w = 4 * shown.len();
     let mut surface = vec![0u8; w * 4 * 4];
     for (v, &(k, j)) in shown.iter().enumerate() {
@@ -373,7 +336,44 @@ mod tests {
     /// One-channel bricks of levels as BC7 texels (four z-slices in RGBA).
     fn encode_bc7_levels(q: Quality, levels: &[[u8; BRICK_VOXELS]], out: &mut [u8]) {
         let texels = crate::texels::bc7_texels(&levels.iter().map(|l| vec![*l]).collect::<Vec<_>>(), 4);
-        encode_bc7(q, 2, &texels, out);
+        encode_bc7_shown(q, 4, &texels, None, out);
+    }
+
+    /// The reference for [`encode_bc7_shown`]: every block, the bricks side by
+    /// side in one surface (`8·n` texels wide, `8 · slices` tall), as the
+    /// encoder did before it took masks.
+    fn encode_bc7(quality: Quality, slices: usize, texels: &[[u8; 4]], out: &mut [u8]) {
+        let n = texels.len() / (64 * slices).max(1);
+        if n == 0 {
+            return;
+        }
+        let (w, h) = (8 * n, 8 * slices);
+        let mut surface = vec![0u8; w * h * 4];
+        for k in 0..n {
+            for s in 0..slices {
+                for y in 0..8 {
+                    let px = ((s * 8 + y) * w + k * 8) * 4;
+                    let src = (k * slices + s) * 64 + y * 8;
+                    for x in 0..8 {
+                        surface[px + 4 * x..px + 4 * x + 4].copy_from_slice(&texels[src + x]);
+                    }
+                }
+            }
+        }
+        const BB: usize = 16;
+        let surf = intel_tex_2::RgbaSurface { data: &surface, width: w as u32, height: h as u32, stride: (w * 4) as u32 };
+        let blocks = intel_tex_2::bc7::compress_blocks(&bc7_settings(quality), &surf);
+        // Blocks come out row-major over the surface: row r = 2s + block row, column 2k + block column.
+        let cols = w / 4;
+        for (k, brick) in out.chunks_exact_mut(slices * 4 * BB).take(n).enumerate() {
+            for (j, dst) in brick.chunks_exact_mut(BB).enumerate() {
+                let (s, br, bc) = (j / 4, (j / 2) % 2, j % 2);
+                let i = ((2 * s + br) * cols + 2 * k + bc) * BB;
+                if let Some(src) = blocks.get(i..i + BB) {
+                    dst.copy_from_slice(src);
+                }
+            }
+        }
     }
 
     /// A smooth field with one distinct value per (x, y, z) direction.

@@ -85,7 +85,7 @@ fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<(f32, Option<[f32; 2]>
 /// (the entropy of each format's filtered texels,
 /// `vdbcook_vpak::coding::brick_cost`) rather than on the GPU.
 pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>) -> Choice {
-    constant_within(values, mask, max_error).unwrap_or_else(|| cheapest_ranged(values, mask, max_error, quality, disk, None))
+    constant_within(values, mask, max_error).unwrap_or_else(|| cheapest_ranged(values, range_of(values), mask, max_error, quality, disk, None))
 }
 
 /// The constant choice (the first of [`Format::BY_COST`]) when it holds
@@ -99,11 +99,11 @@ fn constant_within(values: &Brick, mask: &[u64; 8], max_error: f32) -> Option<Ch
     holds.then_some(Choice { format: Format::Constant, range: [v, v], bytes: Vec::new() })
 }
 
-/// [`cheapest`] among the ranged formats (the constant does not hold);
-/// `bc7`: the brick channel's BC7 candidate, when it was encoded with others
-/// ([`bc7_candidates`]).
-fn cheapest_ranged(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>, mut bc7: Option<Vec<u8>>) -> Choice {
-    let range = range_of(values);
+/// [`cheapest`] among the ranged formats (the constant does not hold), of
+/// `values` whose [`range_of`] is `range`; `bc7`: the brick channel's BC7
+/// candidate, when it was encoded with others ([`bc7_candidates`]).
+#[allow(clippy::too_many_arguments)]
+fn cheapest_ranged(values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>, mut bc7: Option<Vec<u8>>) -> Choice {
     // Texels (and a ranged format's range) moved to the coarsest grid within the bound.
     let snap = |format: Format, bytes: Vec<u8>, range: [f32; 2]| match disk {
         Some(_) => crate::snap::coarsest(format, values, range, mask, max_error).unwrap_or((bytes, range)),
@@ -141,11 +141,18 @@ fn cheapest_ranged(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Qua
 /// brick's eight blocks at most half fill.
 const BC7_BATCH: usize = 16;
 
-/// The BC7 candidates ([`encode_one`]) of `items` (values and shown mask),
-/// one after the other.
-fn bc7_candidates(quality: Quality, items: &[(&Brick, [u64; 8])]) -> Vec<u8> {
-    let lv: Vec<Vec<[u8; crate::BRICK_VOXELS]>> = items.iter().map(|(v, _)| vec![quantise(v, range_of(v))]).collect();
-    let masks: Vec<[u64; 8]> = items.iter().map(|i| i.1).collect();
+/// A brick channel being chosen for: its values, their [`range_of`] and the voxels shown.
+#[derive(Clone, Copy)]
+struct Item<'b> {
+    values: &'b Brick,
+    range: [f32; 2],
+    mask: [u64; 8],
+}
+
+/// The BC7 candidates ([`encode_one`]) of `items`, one after the other.
+fn bc7_candidates(quality: Quality, items: &[Item]) -> Vec<u8> {
+    let lv: Vec<Vec<[u8; crate::BRICK_VOXELS]>> = items.iter().map(|i| vec![quantise(i.values, i.range)]).collect();
+    let masks: Vec<[u64; 8]> = items.iter().map(|i| i.mask).collect();
     let mut out = vec![0u8; items.len() * single_plane(Format::Bc7).brick_bytes()];
     bc::encode_bc7_shown(quality, 4, &bc7_texels(&lv, 4), Some(&masks), &mut out);
     out
@@ -188,10 +195,17 @@ impl Choices {
     pub fn choose(&mut self, bricks: Bricks, masks: &[[u64; 8]], max_error: f32, quality: Quality, disk: Option<Optimize>, progress: &(dyn Fn(usize) + Sync)) -> Result<(), StoreError> {
         for first in (0..bricks.len()).step_by(CHOICE_CHUNK) {
             let ids = first..(first + CHOICE_CHUNK).min(bricks.len());
-            let items: Vec<(&Brick, [u64; 8])> = ids.clone().flat_map(|i| bricks.channels_of(i).map(move |v| (v, masks.get(i).copied().unwrap_or([u64::MAX; 8])))).collect();
+            // Each brick channel with the range the pool recorded as it was made.
+            let items: Vec<Item> = ids
+                .clone()
+                .flat_map(|i| {
+                    let mask = masks.get(i).copied().unwrap_or([u64::MAX; 8]);
+                    (0..bricks.channels()).filter_map(move |c| Some(Item { values: bricks.try_get(i, c)?, range: bricks.range(i, c), mask }))
+                })
+                .collect();
             // Constants first; the others' BC7 candidates (the next format
             // tried) encoded a batch at a time, then the rest brick by brick.
-            let constant: Vec<Option<Choice>> = items.par_iter().map(|&(v, m)| constant_within(v, &m, max_error)).collect();
+            let constant: Vec<Option<Choice>> = items.par_iter().map(|i| constant_within(i.values, &i.mask, max_error)).collect();
             let ranged: Vec<usize> = (0..items.len()).filter(|&j| constant[j].is_none()).collect();
             let bb = single_plane(Format::Bc7).brick_bytes();
             let encoded: Vec<Vec<u8>> = ranged.par_chunks(BC7_BATCH).map(|js| bc7_candidates(quality, &js.iter().map(|&j| items[j]).collect::<Vec<_>>())).collect();
@@ -202,7 +216,7 @@ impl Choices {
                 }
             }
             let chunk: Vec<Choice> =
-                items.par_iter().zip(constant).zip(bc7).map(|((&(v, m), constant), bc7)| constant.unwrap_or_else(|| cheapest_ranged(v, &m, max_error, quality, disk, bc7))).collect();
+                items.par_iter().zip(constant).zip(bc7).map(|((i, constant), bc7)| constant.unwrap_or_else(|| cheapest_ranged(i.values, i.range, &i.mask, max_error, quality, disk, bc7))).collect();
             progress(ids.len());
             for choice in chunk {
                 self.push(choice)?;
