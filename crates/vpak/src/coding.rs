@@ -342,16 +342,20 @@ fn atlas_of(meta: &Metadata, section: u32) -> Option<(&crate::Plane, &crate::Atl
 /// a table of its own), plus its range pair.
 pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
     let filters = texel_filters(plane, [1, 1, 1]);
-    let tiles: Vec<Filter> = filters.iter().copied().filter(|f| matches!(f, Filter::Tiles(_))).collect();
-    let chosen = if tiles.is_empty() { filters.last().copied().into_iter().collect() } else { tiles };
-    let entropy = |filter: Filter| {
-        let filtered = if filter.filtered_len(bytes.len()).is_some() { filter.apply(bytes) } else { bytes.to_vec() };
+    let tiles: Vec<Tiles> = filters.iter().filter_map(|f| if let Filter::Tiles(t) = f { Some(*t) } else { None }).collect();
+    let predicts: Vec<bool> = tiles.iter().map(|t| t.predict).collect();
+    let filtered: Vec<Vec<u8>> = match (tiles.first(), filters.last()) {
+        (Some(t), _) if t.count(bytes.len()).is_some() => t.apply_each(bytes, &predicts),
+        (None, Some(f)) if f.filtered_len(bytes.len()).is_some() => vec![f.apply(bytes)],
+        _ => vec![bytes.to_vec()],
+    };
+    let entropy = |filtered: &Vec<u8>| {
         let mut counts = [0u32; 256];
         filtered.iter().for_each(|&b| counts[usize::from(b)] += 1);
         let n = filtered.len() as f64;
         counts.iter().filter(|&&c| c > 0).map(|&c| f64::from(c) * (n / f64::from(c)).log2()).sum::<f64>()
     };
-    let bits = chosen.into_iter().map(entropy).fold(f64::INFINITY, f64::min);
+    let bits = filtered.iter().map(entropy).fold(f64::INFINITY, f64::min);
     (bits.min(8.0 * bytes.len() as f64) / 8.0).ceil() as usize + 8
 }
 
@@ -416,22 +420,26 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
             let (best, filtered) = match filters.as_slice() {
                 [only] => (*only, None),
                 _ => {
-                    let mut best: Option<(usize, Filter, Option<Vec<u8>>)> = None;
-                    for f in &filters {
-                        let (sample, whole) = match f {
-                            // Tiles span the atlas's rows: filtered whole, then sampled.
+                    // Tiles span the atlas's rows: every tiles filter made whole in one pass, then sampled.
+                    let tiles: Vec<Tiles> = filters.iter().filter_map(|f| if let Filter::Tiles(t) = f { Some(*t) } else { None }).collect();
+                    let predicts: Vec<bool> = tiles.iter().map(|t| t.predict).collect();
+                    let mut tiled: Vec<Vec<u8>> = tiles.first().map(|t| t.apply_each(&s.data, &predicts)).unwrap_or_default();
+                    let mut next_tiled = 0..tiled.len();
+                    // Each filter's sample, and where its whole output is kept.
+                    let samples: Vec<(Vec<u8>, Option<usize>)> = filters
+                        .iter()
+                        .map(|f| match f {
                             Filter::Tiles(_) => {
-                                let whole = f.apply(&s.data);
-                                (sample(&whole).flatten().copied().collect::<Vec<u8>>(), Some(whole))
+                                let j = next_tiled.next().unwrap_or(0);
+                                (sample(tiled.get(j).map_or(&[][..], |w| w)).flatten().copied().collect(), Some(j))
                             }
                             _ => (sample(&s.data).flat_map(|chunk| f.apply(chunk)).collect(), None),
-                        };
-                        let size = zstd::bulk::compress(&sample, 1)?.len();
-                        if best.as_ref().is_none_or(|b| size < b.0) {
-                            best = Some((size, *f, whole));
-                        }
-                    }
-                    best.map_or((Filter::None, None), |b| (b.1, b.2))
+                        })
+                        .collect();
+                    let sizes: Vec<usize> = samples.par_iter().map(|(x, _)| zstd::bulk::compress(x, 1).map(|c| c.len())).collect::<Result<_, _>>()?;
+                    let first_smallest = (0..sizes.len()).min_by_key(|&i| (sizes[i], i)).unwrap_or(0);
+                    let whole = samples[first_smallest].1.and_then(|j| tiled.get_mut(j).map(std::mem::take));
+                    (filters[first_smallest], whole)
                 }
             };
             let filtered = filtered.unwrap_or_else(|| best.apply(&s.data));

@@ -57,112 +57,162 @@ impl Tiles {
         self.count(raw).map(|t| raw + t * self.width as usize)
     }
 
-    /// Element index in the section of each of tile t's 64 rows of 8
-    /// elements (row j + 8k holds its elements (0..8, j, k)).
-    fn rows(self, t: usize) -> impl Iterator<Item = usize> {
+    /// Where the 64 rows of the `x` tiles of tile row `r` start in the
+    /// section, in elements: row q = j + 8k (8·x elements, y = j and z = k
+    /// within the tiles) is the section's row 8·(r mod y) + j of layer
+    /// 8·⌊r / y⌋ + k.
+    fn row_starts(self, r: usize) -> impl Iterator<Item = usize> {
         let (x, y) = (self.x as usize, self.y as usize);
         let (row, layer) = (8 * x, 64 * x * y);
-        let base = 8 * (t % x) + row * 8 * (t / x % y) + layer * 8 * (t / (x * y));
-        (0..64).map(move |r| base + row * (r % 8) + layer * (r / 8))
-    }
-
-    /// Tile t's elements from the section `raw`.
-    fn gather(self, raw: &[u8], t: usize) -> Tile {
-        let mut e = [0u16; TILE];
-        for (dst, at) in e.chunks_exact_mut(8).zip(self.rows(t)) {
-            match self.width {
-                1 => dst.iter_mut().zip(&raw[at..at + 8]).for_each(|(d, &b)| *d = u16::from(b)),
-                _ => dst.iter_mut().zip(raw[2 * at..2 * at + 16].chunks_exact(2)).for_each(|(d, b)| *d = u16::from_le_bytes([b[0], b[1]])),
-            }
-        }
-        e
-    }
-
-    /// Tile t's divisor and residuals (as [`Tiles::apply`] stores them).
-    fn filter_tile(self, raw: &[u8], t: usize) -> (u16, Tile) {
-        let mut e = self.gather(raw, t);
-        let g = tile_gcd(&e);
-        divide(&mut e, g);
-        if self.predict {
-            difference(&mut e);
-        }
-        (g, e)
+        let base = row * 8 * (r % y) + layer * 8 * (r / y);
+        (0..64).map(move |q| base + row * (q % 8) + layer * (q / 8))
     }
 
     /// The filtered bytes: the tiles' divisors, then each tile's residuals,
     /// the elements byte-shuffled as the shuffle filter does. `raw` must be a
-    /// whole number of slabs ([`Tiles::count`]). Tiles in parallel.
+    /// whole number of slabs ([`Tiles::count`]).
     pub fn apply(self, raw: &[u8]) -> Vec<u8> {
+        self.apply_each(raw, &[self.predict]).pop().unwrap_or_default()
+    }
+
+    /// [`Tiles::apply`] with each of `predicts` in turn, in one pass: the
+    /// tiles gathered, their divisors found and their elements divided once.
+    /// A row of tiles along x at a time (its 64 rows of the section read
+    /// whole, not 16 bytes from each per tile), the rows in parallel.
+    pub fn apply_each(self, raw: &[u8], predicts: &[bool]) -> Vec<Vec<u8>> {
         let w = self.width as usize;
         let tiles = self.count(raw.len()).unwrap_or(0);
         let m = tiles * (TILE + 1);
-        let mut bytes = vec![0u8; m * w];
-        let (lo, hi) = bytes.split_at_mut(m);
-        let (lo_div, lo_res) = lo.split_at_mut(tiles);
-        // Little-endian bytes, shuffled: all low bytes, then all high ones.
-        let divisors: Vec<u16> = match w {
-            1 => lo_res
-                .par_chunks_mut(TILE)
-                .enumerate()
-                .map(|(t, lo)| {
-                    let (g, r) = self.filter_tile(raw, t);
-                    lo.iter_mut().zip(&r).for_each(|(b, &v)| *b = v as u8);
-                    g
-                })
-                .collect(),
-            _ => lo_res
-                .par_chunks_mut(TILE)
-                .zip(hi[tiles..].par_chunks_mut(TILE))
-                .enumerate()
-                .map(|(t, (lo, hi))| {
-                    let (g, r) = self.filter_tile(raw, t);
-                    for ((l, h), v) in lo.iter_mut().zip(hi.iter_mut()).zip(r) {
-                        [*l, *h] = v.to_le_bytes();
-                    }
-                    g
-                })
-                .collect(),
-        };
-        lo_div.iter_mut().zip(&divisors).for_each(|(b, &g)| *b = g as u8);
-        if w == 2 {
-            hi[..tiles].iter_mut().zip(&divisors).for_each(|(b, &g)| *b = (g >> 8) as u8);
+        let mut outs: Vec<Vec<u8>> = predicts.iter().map(|_| vec![0u8; m * w]).collect();
+        let x = self.x as usize;
+        if tiles == 0 {
+            return outs;
         }
-        bytes
+        // Per tile row, per output: its tiles' low residual bytes and high ones (empty for w = 1).
+        let mut rows: Vec<Vec<(&mut [u8], &mut [u8])>> = (0..tiles / x).map(|_| Vec::with_capacity(predicts.len())).collect();
+        for out in outs.iter_mut() {
+            let (lo, hi) = out.split_at_mut(m);
+            let hi_res: Vec<&mut [u8]> = match w {
+                1 => (0..rows.len()).map(|_| <&mut [u8]>::default()).collect(),
+                _ => hi[tiles..].chunks_mut(x * TILE).collect(),
+            };
+            for ((row, l), h) in rows.iter_mut().zip(lo[tiles..].chunks_mut(x * TILE)).zip(hi_res) {
+                row.push((l, h));
+            }
+        }
+        let len = 8 * x;
+        let divisors: Vec<u16> = rows
+            .into_par_iter()
+            .enumerate()
+            .map_init(
+                || vec![0u16; 64 * len],
+                |block, (r, mut slots)| {
+                    for (q, at) in self.row_starts(r).enumerate() {
+                        let dst = &mut block[q * len..(q + 1) * len];
+                        match w {
+                            1 => dst.iter_mut().zip(&raw[at..at + len]).for_each(|(d, &b)| *d = u16::from(b)),
+                            _ => dst.iter_mut().zip(raw[2 * at..2 * (at + len)].chunks_exact(2)).for_each(|(d, b)| *d = u16::from_le_bytes([b[0], b[1]])),
+                        }
+                    }
+                    (0..x)
+                        .map(|tx| {
+                            let mut e = [0u16; TILE];
+                            for (q, dst) in e.chunks_exact_mut(8).enumerate() {
+                                dst.copy_from_slice(&block[q * len + 8 * tx..q * len + 8 * tx + 8]);
+                            }
+                            let g = tile_gcd(&e);
+                            divide(&mut e, g);
+                            let mut residuals: Option<Tile> = None;
+                            for ((lo, hi), &predict) in slots.iter_mut().zip(predicts) {
+                                let v: &Tile = match predict {
+                                    true => residuals.get_or_insert_with(|| {
+                                        let mut d = e;
+                                        difference(&mut d);
+                                        d
+                                    }),
+                                    false => &e,
+                                };
+                                let lo = &mut lo[tx * TILE..(tx + 1) * TILE];
+                                lo.iter_mut().zip(v).for_each(|(b, &v)| *b = v as u8);
+                                if w == 2 {
+                                    hi[tx * TILE..(tx + 1) * TILE].iter_mut().zip(v).for_each(|(b, &v)| *b = (v >> 8) as u8);
+                                }
+                            }
+                            g
+                        })
+                        .collect::<Vec<u16>>()
+                },
+            )
+            .flatten_iter()
+            .collect();
+        for out in outs.iter_mut() {
+            let (lo, hi) = out.split_at_mut(m);
+            lo[..tiles].iter_mut().zip(&divisors).for_each(|(b, &g)| *b = g as u8);
+            if w == 2 {
+                hi[..tiles].iter_mut().zip(&divisors).for_each(|(b, &g)| *b = (g >> 8) as u8);
+            }
+        }
+        outs
     }
 
     /// Undoes [`Tiles::apply`]: `data` is the filtered form of `out`.
+    ///
+    /// A row of tiles along x at a time, in a buffer laid out as `out` is (8
+    /// layers of 8 rows of `8·x` elements): each tile's residuals multiplied
+    /// by its divisor (which commutes with the sums, modulo 2^16) and summed
+    /// along x, then the running sums along y and z over whole rows and
+    /// layers, then 64 contiguous rows written to `out`. Writing tile by tile
+    /// would scatter 64 rows of 16 bytes each across the atlas.
     pub fn undo(self, data: &[u8], out: &mut [u8]) {
         let w = self.width as usize;
         let tiles = self.count(out.len()).unwrap_or(0);
         let m = tiles * (TILE + 1);
-        if data.len() != m * w {
+        if data.len() != m * w || tiles == 0 {
             return;
         }
         let (lo, hi) = data.split_at(m);
+        let x = self.x as usize;
+        let len = 8 * x;
+        let mut block = vec![0u16; 64 * len];
         let mut u = [0u16; TILE];
-        for t in 0..tiles {
-            let first = tiles + t * TILE;
-            let lo_res = &lo[first..first + TILE];
-            let g = match w {
-                1 => {
-                    u.iter_mut().zip(lo_res).for_each(|(u, &l)| *u = u16::from(l));
-                    u16::from(lo[t])
+        for r in 0..tiles / x {
+            for tx in 0..x {
+                let t = r * x + tx;
+                let first = tiles + t * TILE;
+                let lo_res: &[u8; TILE] = lo[first..first + TILE].try_into().unwrap_or(&[0; TILE]);
+                let g = match w {
+                    1 => {
+                        u.iter_mut().zip(lo_res).for_each(|(u, &l)| *u = u16::from(l));
+                        u16::from(lo[t])
+                    }
+                    _ => {
+                        let hi_res: &[u8; TILE] = hi[first..first + TILE].try_into().unwrap_or(&[0; TILE]);
+                        u.iter_mut().zip(lo_res.iter().zip(hi_res)).for_each(|(u, (&l, &h))| *u = u16::from_le_bytes([l, h]));
+                        u16::from_le_bytes([lo[t], hi[t]])
+                    }
+                };
+                if g != 1 {
+                    u.iter_mut().for_each(|v| *v = v.wrapping_mul(g));
                 }
-                _ => {
-                    u.iter_mut().zip(lo_res.iter().zip(&hi[first..first + TILE])).for_each(|(u, (&l, &h))| *u = u16::from_le_bytes([l, h]));
-                    u16::from_le_bytes([lo[t], hi[t]])
+                for (q, src) in u.chunks_exact(8).enumerate() {
+                    let r: [u16; 8] = src.try_into().unwrap_or_default();
+                    let dst = &mut block[q * len + 8 * tx..q * len + 8 * tx + 8];
+                    dst.copy_from_slice(&if self.predict { row_sums(r) } else { r });
                 }
-            };
+            }
             if self.predict {
-                running_sums(&mut u);
+                // Along y within each layer, then along z.
+                let rows_y = (1..64).filter(|q| q % 8 != 0).map(|q| (q, q - 1));
+                for (q, from) in rows_y.chain((8..64).map(|q| (q, q - 8))) {
+                    let (before, here) = block.split_at_mut(q * len);
+                    let prev = &before[from * len..from * len + len];
+                    here[..len].iter_mut().zip(prev).for_each(|(v, &p)| *v = v.wrapping_add(p));
+                }
             }
-            if g != 1 {
-                u.iter_mut().for_each(|v| *v = v.wrapping_mul(g));
-            }
-            for (src, at) in u.chunks_exact(8).zip(self.rows(t)) {
+            for (src, at) in block.chunks_exact(len).zip(self.row_starts(r)) {
                 match w {
-                    1 => out[at..at + 8].iter_mut().zip(src).for_each(|(o, &v)| *o = v as u8),
-                    _ => out[2 * at..2 * at + 16].chunks_exact_mut(2).zip(src).for_each(|(o, &v)| o.copy_from_slice(&v.to_le_bytes())),
+                    1 => out[at..at + len].iter_mut().zip(src).for_each(|(o, &v)| *o = v as u8),
+                    _ => out[2 * at..2 * (at + len)].chunks_exact_mut(2).zip(src).for_each(|(o, &v)| o.copy_from_slice(&v.to_le_bytes())),
                 }
             }
         }
@@ -231,25 +281,6 @@ fn difference(e: &mut Tile) {
         for i in (1..8).rev() {
             row[i] = row[i].wrapping_sub(row[i - 1]);
         }
-    }
-}
-
-/// Undoes [`difference`]: running sums along x (a row as three shifted
-/// adds), then y, then z.
-fn running_sums(e: &mut Tile) {
-    for row in e.chunks_exact_mut(8) {
-        let r: [u16; 8] = row.try_into().unwrap_or_default();
-        row.copy_from_slice(&row_sums(r));
-    }
-    for layer in e.chunks_exact_mut(64) {
-        for j in 1..8 {
-            let (before, here) = layer.split_at_mut(8 * j);
-            here[..8].iter_mut().zip(&before[8 * (j - 1)..]).for_each(|(v, &p)| *v = v.wrapping_add(p));
-        }
-    }
-    for k in 1..8 {
-        let (before, here) = e.split_at_mut(64 * k);
-        here[..64].iter_mut().zip(&before[64 * (k - 1)..]).for_each(|(v, &p)| *v = v.wrapping_add(p));
     }
 }
 
@@ -354,6 +385,10 @@ mod tests {
                 let f = t.apply(&raw);
                 assert_eq!(Some(f.len()), t.filtered_len(raw.len()));
                 assert!(f == reference(t, &raw), "{t:?}: not the bytes the format page gives");
+                let each = t.apply_each(&raw, &[false, true]);
+                for (f, predict) in each.iter().zip([false, true]) {
+                    assert!(*f == reference(Tiles { predict, ..t }, &raw), "{t:?}: one pass for both differs (predict {predict})");
+                }
                 let mut back = vec![0u8; raw.len()];
                 t.undo(&f, &mut back);
                 assert_eq!(back, raw, "{t:?}");
