@@ -204,7 +204,24 @@ fn ignore_file_size_signal() {
 #[cfg(not(unix))]
 fn ignore_file_size_signal() {}
 
+/// Large blocks straight from the system, past a fixed size. glibc's
+/// threshold otherwise rises to each large block freed (up to 32 MiB), after
+/// which blocks that size come from its arenas and, freed, stay in the
+/// process: a long segment's cook held tens of MB it no longer used
+/// (`docs/benchmarks.md`, "memory freed but kept").
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn fix_mmap_threshold() {
+    // SAFETY: an allocator setting, made before any thread exists.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 4 << 20);
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn fix_mmap_threshold() {}
+
 fn main() -> ExitCode {
+    fix_mmap_threshold();
     ensure_runtime_dir();
     ignore_file_size_signal();
     let cli = match Cli::try_parse() {

@@ -14,6 +14,7 @@ use crate::{choose, cluster, dedup, encode, errors, layout};
 use crate::{BudgetReport, BudgetTry, CookReport, Cooker, Error, Progress, MAX_CLUSTER_CHANNELS};
 use std::time::Instant;
 use vdbcook_flipbook::Built;
+use vdbcook_grid::spill::Charge;
 use vdbcook_vpak::{kind, Metadata, Section};
 
 /// Records how long stage `stage` took, since `t0`.
@@ -132,6 +133,11 @@ impl Cooker {
         encode::check_planes(&encoded)?;
         let stored = dedup::store(&encoded, clustered.as_ref());
         lap(&mut timings, "encode", t0);
+        // What the stages from here hold per brick and node beside their
+        // stores, counted against the spill budget so that the stores spill
+        // sooner and memory stays near it however long the segment.
+        let mut charge = Charge::new(opts.spill.clone());
+        charge.set(stored.heap_bytes());
 
         // Node arrays over the stored bricks.
         let t0 = Instant::now();
@@ -140,6 +146,7 @@ impl Cooker {
         progress.advance(built.frames.len() as u64);
         progress.finish();
         lap(&mut timings, "nodes", t0);
+        charge.set(stored.heap_bytes() + nodes.heap_bytes());
 
         // Layout: node arrays, brick ranges and tables, channel tables, atlases.
         let t0 = Instant::now();
@@ -147,6 +154,7 @@ impl Cooker {
         // The node arrays move into their sections: what else needs of them, first.
         let (tree, index_offset) = (TreeFigures::of(&nodes), nodes.offset);
         let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref(), progress)?;
+        charge.set(stored.heap_bytes());
         let value_ranges = self.value_ranges(built, channels);
         let peaks = errors::peaks(built, &value_ranges);
         let specs = encoded.specs.clone();

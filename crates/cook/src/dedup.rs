@@ -18,6 +18,13 @@ pub(crate) struct Stored {
 }
 
 impl Stored {
+    /// Bytes of its tables.
+    pub(crate) fn heap_bytes(&self) -> u64 {
+        let usizes = self.keep.capacity() + self.planes.iter().map(|(k, _)| k.capacity()).sum::<usize>();
+        let u32s = self.remap.capacity() + self.planes.iter().map(|(_, t)| t.capacity()).sum::<usize>();
+        (usizes * std::mem::size_of::<usize>() + u32s * std::mem::size_of::<u32>()) as u64
+    }
+
     /// Pool brick `b` as stored, decoded (one [`Brick`] per channel; the
     /// channels `want` names, or all: `Encoded::decode_wanted`).
     pub(crate) fn decode(&self, encoded: &Encoded, b: u32, want: &[bool]) -> Option<Vec<Option<Brick>>> {
@@ -88,35 +95,42 @@ fn plane_brick_bytes(encoded: &Encoded, p: usize, i: usize, buf: &mut Vec<u8>) {
 /// Finds the distinct items `0..n` by their bytes (`bytes_of`; the first of
 /// equal ones, in order): returns their indices and, per item, its distinct index.
 fn distinct(n: usize, bytes_of: &(dyn Fn(usize, &mut Vec<u8>) + Sync)) -> (Vec<usize>, Vec<u32>) {
-    let hashes: Vec<u64> = (0..n)
-        .into_par_iter()
-        .map_init(Vec::new, |buf, i| {
-            bytes_of(i, buf);
-            xxhash_rust::xxh3::xxh3_64(buf)
-        })
-        .collect();
+    // Hashed a chunk at a time in parallel, then looked up in order: no
+    // hash per item held beside the index's own.
+    const CHUNK: usize = 1 << 16;
     let mut index = HashIndex::default();
     index.reserve(n);
     let mut keep: Vec<usize> = Vec::new();
     let mut remap = Vec::with_capacity(n);
-    for (i, &h) in hashes.iter().enumerate() {
-        let same = |k: u32| {
-            // Equal hashes are rare: make both again to compare.
-            let (mut x, mut y) = (Vec::new(), Vec::new());
-            bytes_of(keep[k as usize], &mut x);
-            bytes_of(i, &mut y);
-            x == y
-        };
-        let id = match index.find(h, same) {
-            Some(k) => k,
-            None => {
-                let k = keep.len() as u32;
-                index.add(h, k);
-                keep.push(i);
-                k
-            }
-        };
-        remap.push(id);
+    for first in (0..n).step_by(CHUNK) {
+        let hashes: Vec<u64> = (first..(first + CHUNK).min(n))
+            .into_par_iter()
+            .map_init(Vec::new, |buf, i| {
+                bytes_of(i, buf);
+                xxhash_rust::xxh3::xxh3_64(buf)
+            })
+            .collect();
+        for (i, &h) in (first..).zip(&hashes) {
+            let same = |k: u32| {
+                // Equal hashes are rare: make both again to compare.
+                let (mut x, mut y) = (Vec::new(), Vec::new());
+                bytes_of(keep[k as usize], &mut x);
+                bytes_of(i, &mut y);
+                x == y
+            };
+            let id = match index.find(h, same) {
+                Some(k) => k,
+                None => {
+                    let k = keep.len() as u32;
+                    index.add(h, k);
+                    keep.push(i);
+                    k
+                }
+            };
+            remap.push(id);
+        }
     }
+    // Held to the segment's end: no room left from growing.
+    keep.shrink_to_fit();
     (keep, remap)
 }

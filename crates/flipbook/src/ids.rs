@@ -16,6 +16,12 @@ impl IdTable {
         fallible(|| self.0.try_reserve(n, |&id| hash_of(id))).map_err(|_| OutOfMemory { what, bytes })
     }
 
+    /// About the bytes of its table: a bucket per 7/8 of an id's room, each
+    /// an id and a control byte.
+    pub(crate) fn heap_bytes(&self) -> u64 {
+        (self.0.capacity() as u64).saturating_mul(8) / 7 * (std::mem::size_of::<u32>() as u64 + 1)
+    }
+
     /// Room for `n` more ids, as [`IdTable::reserve`] but aborting when memory runs out (as `Vec` does).
     pub(crate) fn reserve_or_abort(&mut self, n: usize, hash_of: impl Fn(u32) -> u64) {
         self.0.reserve(n, |&id| hash_of(id));

@@ -22,7 +22,7 @@ pub use pool::BrickPool;
 use pool::{Channel, Made};
 use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
-use vdbcook_grid::spill::{SpillPolicy, Store};
+use vdbcook_grid::spill::{Charge, SpillPolicy, Store};
 use vdbcook_grid::{Bbox, Coord, Grid, LEAF_VOXELS};
 use vdbcook_vpak::nodes::{self, Nodes, L1_CHILD_DIM, L1_DIM, L1_LOG2, L1_SLOTS, L2_LOG2, L2_SLOTS, TILE_FLAG};
 
@@ -133,9 +133,21 @@ impl HashIndex {
         self.ids.reserve_or_abort(n, |id| hashes.get(id as usize).copied().unwrap_or(0));
     }
 
+    /// Room for `n` more items, or the error naming `what` when memory runs out.
+    pub fn try_reserve(&mut self, n: usize, what: &'static str) -> Result<(), vdbcook_grid::mem::OutOfMemory> {
+        vdbcook_grid::mem::try_reserve(&mut self.hashes, n, what)?;
+        let hashes = &self.hashes;
+        self.ids.reserve(n, what, |id| hashes.get(id as usize).copied().unwrap_or(0))
+    }
+
     /// The id of an item with hash `h` for which `same(id)` holds, if any.
     pub fn find(&self, h: u64, same: impl Fn(u32) -> bool) -> Option<u32> {
         self.ids.find(h, |id| self.hashes.get(id as usize) == Some(&h) && same(id))
+    }
+
+    /// About the bytes it holds.
+    pub fn heap_bytes(&self) -> u64 {
+        (self.hashes.capacity() * std::mem::size_of::<u64>()) as u64 + self.ids.heap_bytes()
     }
 
     /// Records item `id`, with hash `h`, as new.
@@ -197,11 +209,6 @@ impl L3 {
     fn hash(mask: &[u64; 8], brick: u32) -> u64 {
         xxhash_rust::xxh3::xxh3_64_with_seed(bytemuck::cast_slice(mask), u64::from(brick))
     }
-
-    /// The hash of node `id` of `nodes` (0 past the end), as the id table rehashes it.
-    fn hash_of(nodes: &[L3], id: u32) -> u64 {
-        nodes.get(id as usize).map_or(0, |l| L3::hash(&l.mask, l.brick))
-    }
 }
 
 /// What one frame holds, in source index space.
@@ -218,6 +225,14 @@ pub struct FrameLeaves {
     /// Level of detail: coordinates are in level `level`'s index space
     /// (source index >> level, see `vdbcook_grid::lod`).
     pub level: u32,
+}
+
+impl FrameLeaves {
+    /// About the bytes of its lists.
+    fn heap_bytes(&self) -> u64 {
+        let tiles: usize = self.tiles.iter().map(|t| std::mem::size_of_val(t) + t.2.capacity() * std::mem::size_of::<f32>()).sum();
+        (self.leaves.capacity() * std::mem::size_of::<(Coord, u32)>() + tiles) as u64 + self.channel_masks.heap_bytes()
+    }
 }
 
 /// Per-frame figures reported by [`Builder::push`].
@@ -239,13 +254,18 @@ pub struct Builder {
     backgrounds: Vec<Option<f32>>,
     pool: BrickPool,
     l3: Store<L3>,
-    /// `l3`'s ids by content.
-    l3_index: IdTable,
+    /// `l3`'s ids by content, with each node's hash beside it: growing the
+    /// table rehashes without reading the nodes (spilled, they are a file).
+    l3_index: HashIndex,
     frames: Vec<FrameLeaves>,
     bbox: Option<Bbox>,
     leaves_in: u64,
     /// Level of the tree being pushed.
     level: u32,
+    /// Its indexes and frames' lists, counted against the spill policy.
+    charge: Charge,
+    /// Bytes of `frames`' lists.
+    frame_bytes: u64,
 }
 
 impl Default for Builder {
@@ -262,11 +282,13 @@ impl Builder {
             backgrounds: vec![None; channels],
             pool: BrickPool::new(channels),
             l3: Store::default(),
-            l3_index: IdTable::default(),
+            l3_index: HashIndex::default(),
             frames: Vec::new(),
             bbox: None,
             leaves_in: 0,
             level: 0,
+            charge: Charge::default(),
+            frame_bytes: 0,
         }
     }
 
@@ -288,7 +310,18 @@ impl Builder {
     /// sequence's distinct bricks.
     pub fn spill_to(&mut self, policy: Option<SpillPolicy>) {
         self.l3.set_policy(policy.clone());
-        self.pool.set_policy(policy);
+        self.pool.set_policy(policy.clone());
+        self.charge = Charge::new(policy);
+        self.recharge();
+    }
+
+    /// Counts what grows with the segment but cannot spill (the hash
+    /// indexes, a few bytes per distinct brick and L3 node, and the frames'
+    /// leaf lists, 16 bytes per leaf of every frame) against the spill
+    /// policy: its stores then spill sooner, and memory stays near the
+    /// budget however long the segment.
+    fn recharge(&mut self) {
+        self.charge.set(self.pool.index_bytes() + self.l3_index.heap_bytes() + self.frame_bytes);
     }
 
     /// Fills its pool in `storage` (an emptied pool's memory,
@@ -351,8 +384,7 @@ impl Builder {
         let known: Vec<Option<u32>> = (0..n * c).map(|j| m.parts[j].known_constant(m.positions[j / c].1, bg(j % c)).filter(|_| shares)).collect();
         self.pool.reserve(n, known.iter().filter(|k| k.is_none()).count())?;
         self.l3.try_reserve(n, "the L3 nodes")?;
-        let l3 = &self.l3;
-        self.l3_index.reserve(n, "the L3 nodes' index", |id| L3::hash_of(l3, id))?;
+        self.l3_index.try_reserve(n, "the L3 nodes' index")?;
         fl.leaves.reserve(n);
         let mut ranges = vec![[f32::INFINITY, f32::NEG_INFINITY]; c];
         // A bounded batch at a time (in position order): the batch's bricks
@@ -420,10 +452,15 @@ impl Builder {
                     return Err(Error::Overflow { what: "L3 nodes" });
                 };
                 let l3 = &self.l3;
-                let (id, new) = self.l3_index.intern(L3::hash(&key.mask, brick), next_id, |id| l3.get(id as usize) == Some(&key), |id| L3::hash_of(l3, id));
-                if new {
-                    self.l3.push(key, "the L3 nodes")?;
-                }
+                let h = L3::hash(&key.mask, brick);
+                let id = match self.l3_index.find(h, |id| l3.get(id as usize) == Some(&key)) {
+                    Some(id) => id,
+                    None => {
+                        self.l3_index.add(h, next_id);
+                        self.l3.push(key, "the L3 nodes")?;
+                        next_id
+                    }
+                };
                 fl.leaves.push((origin, id));
                 fl.active_voxels += u64::from(mask.count_on());
                 if fl.level == 0 {
@@ -446,7 +483,9 @@ impl Builder {
         self.leaves_in += fl.leaves.len() as u64;
         let ranges = ranges.into_iter().map(|r| (fl.active_voxels > 0 && r[0] <= r[1]).then_some(r)).collect();
         let stats = FrameStats { leaves: fl.leaves.len(), tiles: fl.tiles.len(), active_voxels: fl.active_voxels, new_bricks: self.pool.len() - before, ranges };
+        self.frame_bytes += fl.heap_bytes();
         self.frames.push(fl);
+        self.recharge();
         Ok(stats)
     }
 
@@ -493,7 +532,10 @@ impl Builder {
         let backgrounds = self.backgrounds.iter().map(|b| b.unwrap_or(0.0)).collect();
         // Deduplication is over: its indexes (the L3 nodes' goes with `self`) are not kept.
         self.pool.index = HashIndex::default();
-        Ok(Built { channels: self.channels, backgrounds, pool: self.pool, l3: self.l3, frames: self.frames, bbox: self.bbox, offset, leaves_in: self.leaves_in })
+        self.pool.settled();
+        self.l3_index = HashIndex::default();
+        self.recharge();
+        Ok(Built { channels: self.channels, backgrounds, pool: self.pool, l3: self.l3, frames: self.frames, bbox: self.bbox, offset, leaves_in: self.leaves_in, _charge: self.charge })
     }
 }
 
@@ -513,6 +555,9 @@ pub struct Built {
     pub offset: Coord,
     /// Leaves pushed over all frames (before deduplication).
     pub leaves_in: u64,
+    /// Its frames' lists and brick slots, still counted against the spill
+    /// policy (the stages after the build hold them).
+    _charge: Charge,
 }
 
 /// Interns a node given its occupied slots (ascending) and their entries
@@ -574,7 +619,7 @@ impl Built {
             })
             .collect::<Vec<_>>();
         let leaves_in = frames.iter().map(|f| f.leaves.len() as u64).sum();
-        Ok(Built { channels: self.channels, backgrounds: self.backgrounds.clone(), pool, l3, frames, bbox: self.bbox, offset: self.offset, leaves_in })
+        Ok(Built { channels: self.channels, backgrounds: self.backgrounds.clone(), pool, l3, frames, bbox: self.bbox, offset: self.offset, leaves_in, _charge: Charge::default() })
     }
 
     /// Lays out the node arrays; `brick_of(l3.brick)` gives each brick's final id.

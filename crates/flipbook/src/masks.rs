@@ -48,6 +48,11 @@ impl ChannelMasks {
         Ok(())
     }
 
+    /// About the bytes it holds.
+    pub(crate) fn heap_bytes(&self) -> u64 {
+        (self.codes.capacity() * std::mem::size_of::<u32>() + self.other.capacity() * std::mem::size_of::<[u64; 8]>()) as u64
+    }
+
     /// Leaves recorded.
     pub fn leaves(&self) -> usize {
         self.codes.len().checked_div(self.channels).unwrap_or(0)

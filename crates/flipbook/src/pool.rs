@@ -116,6 +116,18 @@ impl BrickPool {
         Ok(())
     }
 
+    /// Gives back the room its slots grew into: no brick comes now, and the
+    /// stages after the build hold them to the segment's end.
+    pub(crate) fn settled(&mut self) {
+        self.slots.shrink_to_fit();
+    }
+
+    /// About the bytes of its hash index and brick slots (what it holds
+    /// beside its stores).
+    pub(crate) fn index_bytes(&self) -> u64 {
+        self.index.heap_bytes() + (self.slots.capacity() * std::mem::size_of::<u32>()) as u64
+    }
+
     /// Keeps the first `n` stored bricks (those being pooled past them go).
     pub(crate) fn truncate_stored(&mut self, n: usize) {
         self.stored.truncate(n);

@@ -636,6 +636,28 @@ fn l3_nodes_spill_with_the_bricks_and_give_the_same_nodes() {
 }
 
 #[test]
+fn the_builders_indexes_and_lists_count_against_the_spill_budget_while_held() {
+    let frame = |seed: u32| grid((0..200).map(|i| leaf(Coord::new(8 * (i % 20), 8 * (i / 20), 0), seed * 1000 + i as u32, 100)).collect(), Vec::new());
+    // A budget no store reaches: what it holds is the stores and the charges.
+    let policy = SpillPolicy::new(std::env::temp_dir(), u64::MAX / 4);
+    let mut b = Builder::new(1);
+    b.spill_to(Some(policy.clone()));
+    for seed in 1..=6 {
+        b.push(&[Some(&frame(seed))]).unwrap();
+    }
+    let stores = |pool: &BrickPool, l3: &Store<L3>| (pool.stored.capacity() * std::mem::size_of::<Brick>() + pool.ranges.capacity() * 8 + l3.capacity() * std::mem::size_of::<L3>()) as u64;
+    // 1,200 distinct bricks and L3 nodes: their hashes alone are 19 kB, the leaf lists 19 kB.
+    let building = policy.held() - stores(&b.pool, &b.l3);
+    assert!(building >= 40_000, "{building} bytes charged while building");
+    let built = b.finish().unwrap();
+    // The indexes go with the build; the leaf lists and brick slots stay charged with what holds them.
+    let kept = policy.held() - stores(&built.pool, &built.l3);
+    assert!((19_200..building).contains(&kept), "{kept} bytes charged after the build ({building} while building)");
+    drop(built);
+    assert_eq!(policy.held(), 0);
+}
+
+#[test]
 fn the_pool_records_each_stored_bricks_range_as_it_is_made() {
     // Duplicates inside a batch and across frames move the bricks being
     // pooled; a second channel is constant at some positions, and some

@@ -137,21 +137,49 @@ pub fn l3_node_count(words: &[u32]) -> Option<usize> {
 
 /// The L3 array of the first `count` of `nodes` (leaf mask, brick), or
 /// `None` when `nodes` has fewer or the array would need more than 2^32 words.
-pub fn l3_words(count: usize, nodes: impl IntoIterator<Item = ([u64; 8], u32)>) -> Option<Vec<u32>> {
-    let mut head = Vec::with_capacity(1 + count * L3_WORDS);
-    head.push(u32::try_from(count).ok()?);
-    let mut masks = Vec::new();
+/// Made in its exact size (a long segment's array is tens of MB): the node
+/// records first, counting the partly active sub-blocks, then their masks
+/// from a second pass over `nodes`.
+pub fn l3_words<I>(count: usize, nodes: I) -> Option<Vec<u32>>
+where
+    I: IntoIterator<Item = ([u64; 8], u32)>,
+    I::IntoIter: Clone,
+{
+    let nodes = nodes.into_iter().take(count);
     let start = 1 + count * L3_WORDS;
-    for (mask, brick) in nodes.into_iter().take(count) {
-        let (states, partial) = encode_l3_mask(&mask);
-        let first = u32::try_from(start + masks.len()).ok()?;
+    let mut head = Vec::with_capacity(start);
+    head.push(u32::try_from(count).ok()?);
+    let mut partial = 0usize;
+    for (mask, brick) in nodes.clone() {
+        let states = l3_states(&mask);
+        let first = u32::try_from(start + 2 * partial).ok()?;
         head.extend([brick, states, first]);
-        masks.extend(partial.iter().flat_map(|m| [*m as u32, (*m >> 32) as u32]));
+        partial += (0..8).filter(|b| states >> (2 * b) & 3 == SUB_PARTIAL).count();
     }
-    u32::try_from(start + masks.len()).ok()?;
     (head.len() == start).then_some(())?;
-    head.extend(masks);
-    Some(head)
+    u32::try_from(start + 2 * partial).ok()?;
+    let mut words = head;
+    words.reserve_exact(2 * partial);
+    for (i, (mask, _)) in nodes.enumerate() {
+        let states = words[2 + L3_WORDS * i];
+        for b in (0..8).filter(|b| states >> (2 * b) & 3 == SUB_PARTIAL) {
+            let m = sub_mask(&mask, b);
+            words.extend([m as u32, (m >> 32) as u32]);
+        }
+    }
+    Some(words)
+}
+
+/// The states word of a leaf mask ([`encode_l3_mask`]'s first).
+fn l3_states(mask: &[u64; 8]) -> u32 {
+    (0..8).fold(0, |states, b| {
+        let state = match sub_mask(mask, b) {
+            0 => SUB_EMPTY,
+            u64::MAX => SUB_FULL,
+            _ => SUB_PARTIAL,
+        };
+        states | state << (2 * b)
+    })
 }
 
 /// The 64 bits of 4³ sub-block `b` of a leaf mask (bit `j` = (x%4)·16 + (y%4)·4 + z%4).
@@ -245,6 +273,14 @@ pub struct Nodes {
     pub l3: Vec<u32>,
     /// `channels` f32 bit patterns per tile.
     pub tiles: Vec<u32>,
+}
+
+impl Nodes {
+    /// Bytes of its arrays.
+    pub fn heap_bytes(&self) -> u64 {
+        let words = [&self.frames, &self.l1, &self.l1_entries, &self.l2, &self.l2_entries, &self.l3, &self.tiles].iter().map(|v| v.capacity()).sum::<usize>();
+        (words * std::mem::size_of::<u32>()) as u64
+    }
 }
 
 /// What some trees of a flip-book use ([`Nodes::usage`]).
