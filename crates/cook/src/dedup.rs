@@ -9,10 +9,10 @@ use vdbcook_flipbook::HashIndex;
 /// The bricks an asset stores.
 pub(crate) struct Stored {
     /// Per stored brick, the encoded brick it is.
-    pub(crate) keep: Vec<usize>,
+    pub(crate) keep: Vec<u32>,
     /// Per plane: its distinct encoded bricks, and per stored brick its
     /// plane brick (`u32::MAX`: none, with per-brick formats).
-    pub(crate) planes: Vec<(Vec<usize>, Vec<u32>)>,
+    pub(crate) planes: Vec<(Vec<u32>, Vec<u32>)>,
     /// Pool brick -> stored brick.
     pub(crate) remap: Vec<u32>,
 }
@@ -20,15 +20,14 @@ pub(crate) struct Stored {
 impl Stored {
     /// Bytes of its tables.
     pub(crate) fn heap_bytes(&self) -> u64 {
-        let usizes = self.keep.capacity() + self.planes.iter().map(|(k, _)| k.capacity()).sum::<usize>();
-        let u32s = self.remap.capacity() + self.planes.iter().map(|(_, t)| t.capacity()).sum::<usize>();
-        (usizes * std::mem::size_of::<usize>() + u32s * std::mem::size_of::<u32>()) as u64
+        let words = self.keep.capacity() + self.remap.capacity() + self.planes.iter().map(|(k, t)| k.capacity() + t.capacity()).sum::<usize>();
+        (words * std::mem::size_of::<u32>()) as u64
     }
 
     /// Pool brick `b` as stored, decoded (one [`Brick`] per channel; the
     /// channels `want` names, or all: `Encoded::decode_wanted`).
     pub(crate) fn decode(&self, encoded: &Encoded, b: u32, want: &[bool]) -> Option<Vec<Option<Brick>>> {
-        self.remap.get(b as usize).and_then(|&i| self.keep.get(i as usize)).and_then(|&k| encoded.decode_wanted(k, want))
+        self.remap.get(b as usize).and_then(|&i| self.keep.get(i as usize)).and_then(|&k| encoded.decode_wanted(k as usize, want))
     }
 }
 
@@ -40,7 +39,7 @@ impl Stored {
 /// distinct combinations.
 pub(crate) fn store(encoded: &Encoded, clustered: Option<&Clustered>) -> Stored {
     let used = used_work(clustered, encoded.len());
-    let plane_ids: Vec<(Vec<usize>, Vec<u32>)> = (0..encoded.specs.len())
+    let plane_ids: Vec<(Vec<u32>, Vec<u32>)> = (0..encoded.specs.len())
         .map(|p| {
             let members: Vec<usize> = (0..encoded.len()).filter(|&i| used[i] && encoded.holds(p, i)).collect();
             let (keep, ids) = distinct(members.len(), &|j, buf| plane_brick_bytes(encoded, p, members[j], buf));
@@ -48,7 +47,7 @@ pub(crate) fn store(encoded: &Encoded, clustered: Option<&Clustered>) -> Stored 
             for (&i, id) in members.iter().zip(ids) {
                 all[i] = id;
             }
-            (keep.into_iter().map(|j| members[j]).collect(), all)
+            (keep.into_iter().map(|j| members[j] as u32).collect(), all)
         })
         .collect();
     // Plane bricks, numbered by first use, are then numbered by first use
@@ -59,12 +58,12 @@ pub(crate) fn store(encoded: &Encoded, clustered: Option<&Clustered>) -> Stored 
         buf.clear();
         buf.extend(plane_ids.iter().flat_map(|(_, ids)| ids[used_bricks[j]].to_le_bytes()));
     });
-    let keep: Vec<usize> = keep.into_iter().map(|j| used_bricks[j]).collect();
+    let keep: Vec<u32> = keep.into_iter().map(|j| used_bricks[j] as u32).collect();
     let mut enc_remap = vec![u32::MAX; encoded.len()];
     for (&i, id) in used_bricks.iter().zip(used_remap) {
         enc_remap[i] = id;
     }
-    let planes = plane_ids.into_iter().map(|(k, ids)| (k, keep.iter().map(|&i| ids[i]).collect())).collect();
+    let planes = plane_ids.into_iter().map(|(k, ids)| (k, keep.iter().map(|&i| ids[i as usize]).collect())).collect();
     let remap = match clustered {
         Some(c) => c.remap.iter().map(|&w| enc_remap[w as usize]).collect(),
         None => enc_remap,

@@ -54,7 +54,7 @@ pub(crate) fn lay_out(nodes: Nodes, encoded: &Encoded, stored: &Stored, planes_o
         };
         let info = PlaneInfo { plane: spec.plane, bricks: pkeep.len() as u32, atlases };
         let slots = info.range_slots() as usize;
-        let ranges: Vec<u32> = pkeep.iter().flat_map(|&k| (0..slots).flat_map(move |s| spec.channels.get(s).map_or([0.0; 2], |&c| encoded.range(k, c)))).map(f32::to_bits).collect();
+        let ranges: Vec<u32> = pkeep.iter().flat_map(|&k| (0..slots).flat_map(move |s| spec.channels.get(s).map_or([0.0; 2], |&c| encoded.range(k as usize, c)))).map(f32::to_bits).collect();
         plane_bytes[p] += 4 * ranges.len() as u64;
         sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: Bytes::from_words(ranges) });
         if info.bricks as usize != stored.keep.len() && !mixed_plane(p) {

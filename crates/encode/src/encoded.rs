@@ -252,7 +252,7 @@ impl<'a> Encoded<'a> {
     }
 
     /// Plane `p` of the bricks `keep[0]`, `keep[1]`, …, renumbered from 0, for `vdbcook_vpak::layout::pack_atlas`.
-    pub fn plane<'s>(&'s self, p: usize, keep: &'s [usize]) -> PlaneBricks<'s> {
+    pub fn plane<'s>(&'s self, p: usize, keep: &'s [u32]) -> PlaneBricks<'s> {
         PlaneBricks { encoded: self, plane: p, keep }
     }
 }
@@ -289,7 +289,7 @@ impl<'a> Encoded<'a> {
 pub struct PlaneBricks<'s> {
     encoded: &'s Encoded<'s>,
     plane: usize,
-    keep: &'s [usize],
+    keep: &'s [u32],
 }
 
 impl BrickSource for PlaneBricks<'_> {
@@ -297,6 +297,6 @@ impl BrickSource for PlaneBricks<'_> {
         // The brick's channels (or its kept encoding) read, the atlas written: both may be spilled.
         let channels = self.encoded.specs.get(self.plane).map_or(0, |s| s.channels.len());
         vdbcook_grid::spill::scanned(2 * out.len() + channels * std::mem::size_of::<Brick>());
-        self.keep.get(i).is_some_and(|&k| self.encoded.write(self.plane, k, out))
+        self.keep.get(i).is_some_and(|&k| self.encoded.write(self.plane, k as usize, out))
     }
 }

@@ -104,7 +104,7 @@ fn made_on_demand_planes_land_in_their_atlas() {
     for (count, max_dim) in [(1usize, 2048u32), (7, 16), (37, 32)] {
         let bricks: Vec<Brick> = (0..count * channels).map(|k| std::array::from_fn(|v| (k * 1000 + v) as f32)).collect();
         let e = Encoded::new(group_planes(Format::F32, &[0, 1, 2, 3]), Quality::Fast, &bricks, channels, None, &|_| {});
-        let keep: Vec<usize> = (0..count).collect();
+        let keep: Vec<u32> = (0..count as u32).collect();
         let plane = e.specs[0].plane;
         for atlas in plan_atlases(8, count as u32, max_dim) {
             let layout = AtlasLayout { plane, atlas };
