@@ -137,7 +137,8 @@ impl Cooker {
         // stores, counted against the spill budget so that the stores spill
         // sooner and memory stays near it however long the segment.
         let mut charge = Charge::new(opts.spill.clone());
-        charge.set(stored.heap_bytes());
+        let tables = encoded.table_bytes() + stored.heap_bytes();
+        charge.set(tables);
 
         // Node arrays over the stored bricks.
         let t0 = Instant::now();
@@ -146,7 +147,7 @@ impl Cooker {
         progress.advance(built.frames.len() as u64);
         progress.finish();
         lap(&mut timings, "nodes", t0);
-        charge.set(stored.heap_bytes() + nodes.heap_bytes());
+        charge.set(tables + nodes.heap_bytes());
 
         // Layout: node arrays, brick ranges and tables, channel tables, atlases.
         let t0 = Instant::now();
@@ -154,7 +155,7 @@ impl Cooker {
         // The node arrays move into their sections: what else needs of them, first.
         let (tree, index_offset) = (TreeFigures::of(&nodes), nodes.offset);
         let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref(), progress)?;
-        charge.set(stored.heap_bytes());
+        charge.set(tables);
         let value_ranges = self.value_ranges(built, channels);
         let peaks = errors::peaks(built, &value_ranges);
         let specs = encoded.specs.clone();

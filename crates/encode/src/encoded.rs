@@ -37,6 +37,13 @@ pub struct Encoded<'a> {
 /// Bricks per parallel work item of the block encoders.
 const CHUNK: usize = 256;
 
+impl Encoded<'_> {
+    /// Bytes of its per-brick tables (ranges, absent channels), beside its planes' stores.
+    pub fn table_bytes(&self) -> u64 {
+        (self.ranges.capacity() * std::mem::size_of::<[f32; 2]>() + self.absent.as_ref().map_or(0, Vec::capacity)) as u64
+    }
+}
+
 impl<'a> Encoded<'a> {
     /// Encodes the block planes now, in parallel (`progress(n)` after each
     /// chunk of `n` bricks of a plane); uncompressed planes are made when
