@@ -17,7 +17,7 @@ Then `--format bc7` with and without `--supercompress zstd` against the asset's 
 and the restore throughput on one core (crates/vpak/examples/restore.rs: decompress and
 unfilter every supercompressed section, each segment into the memory of the one before as
 the runtime's reader does, and into fresh memory) against `zstd -d -T1` on the same zstd
-frames.
+frames, three alternating rounds, the best of each.
 """
 
 import argparse
@@ -169,12 +169,19 @@ def timings(inputs, fog):
         asset = os.path.join(OUT, "r.vpak")
         cook(fog, "density", asset, flags + ["--supercompress", "zstd"])
         frames = os.path.join(OUT, "r.frames.zst")
-        r = json.loads(run([RESTORE, asset, frames], env=env))
-        best = float("inf")
-        for _ in range(5):
-            t = time.perf_counter()
-            subprocess.run(["zstd", "-d", "-T1", "-q", "-c", frames], check=True, stdout=subprocess.DEVNULL)
-            best = min(best, time.perf_counter() - t)
+        # Three rounds, each the restore's best of five passes then five runs of zstd,
+        # alternating so that a busy spell weighs on both; the best of each.
+        r, best = None, float("inf")
+        for _ in range(3):
+            got = json.loads(run([RESTORE, asset, frames], env=env))
+            if r is None or got["seconds"] < r["seconds"]:
+                r = dict(got, seconds_fresh=min(got["seconds_fresh"], r["seconds_fresh"]) if r else got["seconds_fresh"])
+            else:
+                r["seconds_fresh"] = min(r["seconds_fresh"], got["seconds_fresh"])
+            for _ in range(5):
+                t = time.perf_counter()
+                subprocess.run(["zstd", "-d", "-T1", "-q", "-c", frames], check=True, stdout=subprocess.DEVNULL)
+                best = min(best, time.perf_counter() - t)
         mb = r["restored_bytes"] / 1e6
         ours, theirs, fresh = mb / r["seconds"], mb / best, mb / r["seconds_fresh"]
         print("| fog 256 %s | %.1f | %.0f | %.0f | %.2f | %.0f | %.2f |" % (" ".join(flags), mb, ours, theirs, ours / theirs, fresh, fresh / theirs))
