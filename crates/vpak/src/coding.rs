@@ -333,6 +333,13 @@ fn atlas_of(meta: &Metadata, section: u32) -> Option<(&crate::Plane, &crate::Atl
     None
 }
 
+/// The tiles filters among `filters` (they share their geometry): the first,
+/// and in order whether each predicts; `None` when there are none.
+fn tiles_among(filters: &[Filter]) -> Option<(Tiles, Vec<bool>)> {
+    let tiles: Vec<Tiles> = filters.iter().filter_map(|f| if let Filter::Tiles(t) = f { Some(*t) } else { None }).collect();
+    tiles.first().map(|&t| (t, tiles.iter().map(|t| t.predict).collect()))
+}
+
 /// What one brick's texels (`bytes`, in `plane`) cost in a supercompressed
 /// file, as an estimate for choosing formats: the order-0 entropy of its
 /// bytes after the plane's own filter (tiles for a 1-lane uncompressed
@@ -342,10 +349,8 @@ fn atlas_of(meta: &Metadata, section: u32) -> Option<(&crate::Plane, &crate::Atl
 /// a table of its own), plus its range pair.
 pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
     let filters = texel_filters(plane, [1, 1, 1]);
-    let tiles: Vec<Tiles> = filters.iter().filter_map(|f| if let Filter::Tiles(t) = f { Some(*t) } else { None }).collect();
-    let predicts: Vec<bool> = tiles.iter().map(|t| t.predict).collect();
-    let filtered: Vec<Vec<u8>> = match (tiles.first(), filters.last()) {
-        (Some(t), _) if t.count(bytes.len()).is_some() => t.apply_each(bytes, &predicts),
+    let filtered: Vec<Vec<u8>> = match (tiles_among(&filters), filters.last()) {
+        (Some((t, predicts)), _) if t.count(bytes.len()).is_some() => t.apply_each(bytes, &predicts),
         (None, Some(f)) if f.filtered_len(bytes.len()).is_some() => vec![f.apply(bytes)],
         _ => vec![bytes.to_vec()],
     };
@@ -421,9 +426,7 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
                 [only] => (*only, None),
                 _ => {
                     // Tiles span the atlas's rows: every tiles filter made whole in one pass, then sampled.
-                    let tiles: Vec<Tiles> = filters.iter().filter_map(|f| if let Filter::Tiles(t) = f { Some(*t) } else { None }).collect();
-                    let predicts: Vec<bool> = tiles.iter().map(|t| t.predict).collect();
-                    let mut tiled: Vec<Vec<u8>> = tiles.first().map(|t| t.apply_each(&s.data, &predicts)).unwrap_or_default();
+                    let mut tiled: Vec<Vec<u8>> = tiles_among(&filters).map(|(t, predicts)| t.apply_each(&s.data, &predicts)).unwrap_or_default();
                     let mut next_tiled = 0..tiled.len();
                     // Each filter's sample, and where its whole output is kept.
                     let samples: Vec<(Vec<u8>, Option<usize>)> = filters

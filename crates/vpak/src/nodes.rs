@@ -154,7 +154,7 @@ where
         let states = l3_states(&mask);
         let first = u32::try_from(start + 2 * partial).ok()?;
         head.extend([brick, states, first]);
-        partial += (0..8).filter(|b| states >> (2 * b) & 3 == SUB_PARTIAL).count();
+        partial += partial_sub_blocks(states).count();
     }
     (head.len() == start).then_some(())?;
     u32::try_from(start + 2 * partial).ok()?;
@@ -162,12 +162,17 @@ where
     words.reserve_exact(2 * partial);
     for (i, (mask, _)) in nodes.enumerate() {
         let states = words[2 + L3_WORDS * i];
-        for b in (0..8).filter(|b| states >> (2 * b) & 3 == SUB_PARTIAL) {
+        for b in partial_sub_blocks(states) {
             let m = sub_mask(&mask, b);
             words.extend([m as u32, (m >> 32) as u32]);
         }
     }
     Some(words)
+}
+
+/// The sub-blocks a states word calls partly active, in order.
+fn partial_sub_blocks(states: u32) -> impl Iterator<Item = usize> {
+    (0..8).filter(move |b| states >> (2 * b) & 3 == SUB_PARTIAL)
 }
 
 /// The states word of a leaf mask ([`encode_l3_mask`]'s first).
@@ -207,21 +212,8 @@ fn put_sub_mask(mask: &mut [u64; 8], b: usize, bits: u64) {
 
 /// The states word of a leaf mask, and its partly active sub-blocks' masks in order.
 pub fn encode_l3_mask(mask: &[u64; 8]) -> (u32, Vec<u64>) {
-    let mut states = 0u32;
-    let mut partial = Vec::new();
-    for b in 0..8 {
-        let m = sub_mask(mask, b);
-        let state = match m {
-            0 => SUB_EMPTY,
-            u64::MAX => SUB_FULL,
-            _ => {
-                partial.push(m);
-                SUB_PARTIAL
-            }
-        };
-        states |= state << (2 * b);
-    }
-    (states, partial)
+    let states = l3_states(mask);
+    (states, partial_sub_blocks(states).map(|b| sub_mask(mask, b)).collect())
 }
 
 /// A leaf mask back from its states word and the words of its sub-masks
