@@ -15,6 +15,10 @@ need python3-openvdb python3-numpy python3-pil python3-xxhash python3-zstandard 
 
 # Mesa's Vulkan loader wants a runtime directory; the GPU tests run on its
 # CPU driver (lavapipe) when there is no GPU.
-export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
+if [ -z "${XDG_RUNTIME_DIR:-}" ]; then
+    XDG_RUNTIME_DIR="$(mktemp -d)"
+    trap 'rm -rf "$XDG_RUNTIME_DIR"' EXIT
+    export XDG_RUNTIME_DIR
+fi
 
 cargo test --workspace --locked "$@"

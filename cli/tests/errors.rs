@@ -8,12 +8,12 @@ fn stderr_of(out: &std::process::Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
-fn scratch(name: &str, bytes: &[u8]) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("vdbcook-errors-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// A scratch directory holding `bytes` as the file `name`, and that file.
+fn scratch(name: &str, bytes: &[u8]) -> (Scratch, std::path::PathBuf) {
+    let dir = scratch_dir("errors", name);
     let p = dir.join(name);
     std::fs::write(&p, bytes).unwrap();
-    p
+    (dir, p)
 }
 
 fn assert_one_line_error(out: &std::process::Output, needles: &[&str]) {
@@ -35,7 +35,7 @@ fn missing_file_is_a_failure_naming_it() {
 
 #[test]
 fn not_a_vdb_file() {
-    let p = scratch("notes.vdb", b"this is not a volume at all, just text\n");
+    let (_dir, p) = scratch("notes.vdb", b"this is not a volume at all, just text\n");
     let out = vdbcook(&["inspect", p.to_str().unwrap()]);
     assert_one_line_error(&out, &["notes.vdb", "not an OpenVDB file"]);
 }
@@ -43,7 +43,7 @@ fn not_a_vdb_file() {
 #[test]
 fn truncated_file_names_file_and_grid() {
     let full = std::fs::read(root().join("fixtures/fog_blosc.vdb")).unwrap();
-    let p = scratch("cut.vdb", &full[..full.len() * 2 / 3]);
+    let (_dir, p) = scratch("cut.vdb", &full[..full.len() * 2 / 3]);
     let out = vdbcook(&["inspect", p.to_str().unwrap()]);
     assert_one_line_error(&out, &["cut.vdb", "grid \"density\"", "truncated"]);
 }
@@ -53,7 +53,7 @@ fn flipped_count_is_refused_without_a_huge_allocation() {
     // The file metadata count sits right after the 8+4+8+1+36-byte header.
     let mut bytes = std::fs::read(root().join("fixtures/fog_blosc.vdb")).unwrap();
     bytes[57 + 3] ^= 0x40;
-    let p = scratch("flipped.vdb", &bytes);
+    let (_dir, p) = scratch("flipped.vdb", &bytes);
     let out = vdbcook(&["inspect", p.to_str().unwrap()]);
     assert_one_line_error(&out, &["flipped.vdb", "implausible metadata count"]);
 }

@@ -10,7 +10,7 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 use vdbcook_grid::{Coord, Grid, GridClass, Leaf, LeafMask, Transform};
 
-fn scratch(name: &str) -> PathBuf {
+fn scratch(name: &str) -> Scratch {
     scratch_dir("non-finite", name)
 }
 

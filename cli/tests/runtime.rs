@@ -102,7 +102,9 @@ fn same_as_validator(path: &Path) {
 fn programs() -> &'static (PathBuf, PathBuf) {
     static BUILT: std::sync::OnceLock<(PathBuf, PathBuf)> = std::sync::OnceLock::new();
     BUILT.get_or_init(|| {
-        let dir = scratch_dir("runtime", "programs");
+        // Built where cargo keeps test artefacts: the statics are never dropped.
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("runtime-programs");
+        std::fs::create_dir_all(&dir).unwrap();
         let c = vdbcook_testkit::c_example("vpak_dump", &dir).unwrap();
         let rust = vdbcook_testkit::cargo_build(&["-p", "vdbcook-vpak", "--example", "stream"], "stream", "/stream").unwrap();
         (c, rust)

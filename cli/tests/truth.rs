@@ -35,7 +35,7 @@ write(f"{d}/seq_0002.vdb", "density", fog)
     ok.then_some(())
 }
 
-fn setup(tag: &str) -> Option<PathBuf> {
+fn setup(tag: &str) -> Option<Scratch> {
     if !gpu_available() {
         return None;
     }

@@ -5,7 +5,7 @@ mod common;
 use common::*;
 use std::path::{Path, PathBuf};
 
-fn scratch(tag: &str) -> PathBuf {
+fn scratch(tag: &str) -> Scratch {
     scratch_dir("validate", tag)
 }
 

@@ -6,14 +6,14 @@
 mod common;
 use common::*;
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 const NOISE: &str = "noise/fluid_noise_####.vdb";
 const DATA: &str = "data/fluid_data_####.vdb";
 
 /// A scratch directory holding the sequence, written by OpenVDB (`None` without pyopenvdb).
-fn sequence(tag: &str) -> Option<PathBuf> {
+fn sequence(tag: &str) -> Option<Scratch> {
     if !oracle_available() {
         return None;
     }

@@ -157,12 +157,42 @@ pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// A fresh scratch directory for test `tag` of the suite `suite`, unique to this run.
-pub fn scratch_dir(suite: &str, tag: &str) -> PathBuf {
+/// A fresh scratch directory for test `tag` of the suite `suite`, unique to
+/// this run, removed with everything in it when dropped (a failing test's
+/// too: runs must not fill the disk).
+pub fn scratch_dir(suite: &str, tag: &str) -> Scratch {
     let d = std::env::temp_dir().join(format!("vdbcook-{suite}-{}-{tag}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
-    d
+    Scratch(d)
+}
+
+/// See [`scratch_dir`].
+pub struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for Scratch {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// The output of a run that must succeed (its stderr is the failure message).
