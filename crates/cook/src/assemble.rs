@@ -131,7 +131,7 @@ impl Cooker {
             }
         };
         encode::check_planes(&encoded)?;
-        let stored = dedup::store(&encoded, clustered.as_ref());
+        let mut stored = dedup::store(&encoded, clustered.as_ref())?;
         lap(&mut timings, "encode", t0);
         // What the stages from here hold per brick and node beside their
         // stores, counted against the spill budget so that the stores spill
@@ -154,7 +154,8 @@ impl Cooker {
         let planes_of = layout::planes_of(&encoded.specs, channels);
         // The node arrays move into their sections: what else needs of them, first.
         let (tree, index_offset) = (TreeFigures::of(&nodes), nodes.offset);
-        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, &planes_of, opts.max_texture_dim, opts.spill.as_ref(), progress)?;
+        let brick_tables = std::mem::take(&mut stored.tables);
+        let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, brick_tables, opts.max_texture_dim, opts.spill.as_ref(), progress)?;
         charge.set(tables);
         let value_ranges = self.value_ranges(built, channels);
         let peaks = errors::peaks(built, &value_ranges);

@@ -97,8 +97,8 @@ impl Clustered {
                 let w = self.remap[i] as usize;
                 self.merged[i]
                     && !(0..channels).all(|ch| {
-                        let (j, pick) = (w * channels + ch, choices.picks[w * channels + ch]);
-                        vdbcook_encode::within(pool.get(i, ch), &vdbcook_encode::decode_one(pick.format, choices.bytes(j), pick.range), &masks[i], bound)
+                        let j = w * channels + ch;
+                        choices.pick(j).is_some_and(|pick| vdbcook_encode::within(pool.get(i, ch), &vdbcook_encode::decode_one(pick.format, choices.bytes(j), pick.range), &masks[i], bound))
                     })
             })
             .collect();

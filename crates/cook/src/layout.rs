@@ -36,18 +36,26 @@ pub(crate) fn planes_of(specs: &[PlaneSpec], channels: usize) -> Vec<Vec<usize>>
 
 /// Lays out the stored bricks of every plane of `encoded` in atlases of at
 /// most `max_texture_dim` texels a side (atlases under `spill`: see
-/// `vdbcook_grid::spill`).
-pub(crate) fn lay_out(nodes: Nodes, encoded: &Encoded, stored: &Stored, planes_of: &[Vec<usize>], max_texture_dim: u32, spill: Option<&SpillPolicy>, progress: &dyn Progress) -> Result<Laid, Error> {
+/// `vdbcook_grid::spill`); `tables`, [`Stored::tables`] taken out, become
+/// the brick and channel tables.
+pub(crate) fn lay_out(
+    nodes: Nodes,
+    encoded: &Encoded,
+    stored: &Stored,
+    mut tables: Vec<(Vec<usize>, Vec<u32>)>,
+    max_texture_dim: u32,
+    spill: Option<&SpillPolicy>,
+    progress: &dyn Progress,
+) -> Result<Laid, Error> {
     let specs = &encoded.specs;
     // The atlases' bricks: a constant plane has none.
-    let atlas_bricks = specs.iter().zip(&stored.planes).filter(|(s, _)| s.plane.format != Format::Constant).map(|(_, (keep, _))| keep.len() as u64);
+    let atlas_bricks = specs.iter().zip(&stored.planes).filter(|(s, _)| s.plane.format != Format::Constant).map(|(_, keep)| keep.len() as u64);
     progress.start("laying out", atlas_bricks.sum());
     let mut sections = node_sections(nodes);
     let mut plane_infos = Vec::with_capacity(specs.len());
     let mut plane_bytes = vec![0u64; specs.len()];
     let mut atlas_sections = Vec::new();
-    let mixed_plane = |p: usize| specs[p].channels.first().is_some_and(|&c| planes_of[c].len() > 1);
-    for (p, (spec, (pkeep, table))) in specs.iter().zip(&stored.planes).enumerate() {
+    for (p, (spec, pkeep)) in specs.iter().zip(&stored.planes).enumerate() {
         let atlases = match spec.plane.format {
             Format::Constant => Vec::new(),
             _ => plan_atlases(spec.plane.slices_per_brick(), pkeep.len() as u32, max_texture_dim),
@@ -57,9 +65,11 @@ pub(crate) fn lay_out(nodes: Nodes, encoded: &Encoded, stored: &Stored, planes_o
         let ranges: Vec<u32> = pkeep.iter().flat_map(|&k| (0..slots).flat_map(move |s| spec.channels.get(s).map_or([0.0; 2], |&c| encoded.range(k as usize, c)))).map(f32::to_bits).collect();
         plane_bytes[p] += 4 * ranges.len() as u64;
         sections.push(Section { kind: kind::BRICK_RANGES, index: p as u32, data: Bytes::from_words(ranges) });
-        if info.bricks as usize != stored.keep.len() && !mixed_plane(p) {
+        // A plane alone in its family has a brick table where it stores fewer bricks than the asset.
+        let own = tables.iter_mut().find(|(f, _)| f[..] == [p]).map(|(_, t)| t);
+        if let (true, Some(table)) = (info.bricks as usize != stored.keep.len(), own) {
             plane_bytes[p] += 4 * table.len() as u64;
-            sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: Bytes::from_words(table.clone()) });
+            sections.push(Section { kind: kind::BRICK_TABLE, index: p as u32, data: Bytes::from_words(std::mem::take(table)) });
         }
         let bricks = encoded.plane(p, pkeep);
         for atlas in &info.atlases {
@@ -73,19 +83,11 @@ pub(crate) fn lay_out(nodes: Nodes, encoded: &Encoded, stored: &Stored, planes_o
         }
         plane_infos.push(info);
     }
-    let mut channel_table_bytes = vec![0u64; planes_of.len()];
-    for (c, planes) in planes_of.iter().enumerate().filter(|(_, planes)| planes.len() > 1) {
-        let mut table = vec![0u32; stored.keep.len()];
-        for (j, &p) in planes.iter().enumerate() {
-            if plane_infos[p].bricks > vdbcook_vpak::PLANE_BRICK_MASK {
-                return Err(Error::TooManyPlaneBricks(plane_infos[p].bricks));
-            }
-            for (entry, &pb) in table.iter_mut().zip(&stored.planes[p].1) {
-                if pb != u32::MAX {
-                    *entry = (j as u32) << vdbcook_vpak::CHOICE_SHIFT | pb;
-                }
-            }
-        }
+    // A family of several planes (a channel's formats) has a channel table; a brick in none of them reads entry 0.
+    let mut channel_table_bytes = vec![0u64; encoded.channels()];
+    for (family, mut table) in tables.into_iter().filter(|(f, _)| f.len() > 1) {
+        let Some(&c) = specs[family[0]].channels.first() else { continue };
+        table.iter_mut().filter(|e| **e == u32::MAX).for_each(|e| *e = 0);
         channel_table_bytes[c] = 4 * table.len() as u64;
         sections.push(Section { kind: kind::CHANNEL_TABLE, index: c as u32, data: Bytes::from_words(table) });
     }

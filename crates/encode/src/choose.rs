@@ -158,13 +158,19 @@ fn bc7_candidates(quality: Quality, items: &[Item]) -> Vec<u8> {
     out
 }
 
-/// Every brick channel's choice, in order (`picks[i · channels + c]`), its
-/// texels or blocks appended to one store per channel and format as they
+/// Every brick channel's choice, in order (brick channel `i · channels + c`),
+/// its texels or blocks appended to one store per channel and format as they
 /// are chosen (under a spill policy: see `vdbcook_grid::spill`), so that a
 /// cook holds the chosen bytes once, out of memory past the policy's size.
+/// The per-brick tables (13 bytes a brick channel) are stores too: they
+/// grow with the segment.
 pub struct Choices {
     channels: usize,
-    pub picks: Vec<Pick>,
+    /// Per brick channel: its format's code, its range, and its place among
+    /// the bricks of its channel that chose that format.
+    pub(crate) formats: Store<u8>,
+    pub(crate) ranges: Store<[f32; 2]>,
+    pub(crate) at: Store<u32>,
     /// Per (channel, format): the chosen bytes, and how many chose it.
     stores: Vec<(usize, Format, Store<u8>, u32)>,
     spill: Option<SpillPolicy>,
@@ -185,7 +191,27 @@ const CHOICE_CHUNK: usize = 1024;
 
 impl Choices {
     pub fn new(channels: usize, spill: Option<SpillPolicy>) -> Choices {
-        Choices { channels: channels.max(1), picks: Vec::new(), stores: Vec::new(), spill }
+        let (formats, ranges, at) = (Store::with_policy(spill.clone()), Store::with_policy(spill.clone()), Store::with_policy(spill.clone()));
+        Choices { channels: channels.max(1), formats, ranges, at, stores: Vec::new(), spill }
+    }
+
+    /// Brick channels chosen for.
+    pub fn len(&self) -> usize {
+        self.formats.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.formats.is_empty()
+    }
+
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// Brick channel `j`'s choice.
+    pub fn pick(&self, j: usize) -> Option<Pick> {
+        let format = Format::from_code(u32::from(*self.formats.get(j)?))?;
+        Some(Pick { format, range: *self.ranges.get(j)?, at: *self.at.get(j)? })
     }
 
     /// Appends [`cheapest`] for every channel of every brick of `bricks`
@@ -227,7 +253,7 @@ impl Choices {
 
     /// Appends the next brick channel's choice.
     pub fn push(&mut self, choice: Choice) -> Result<(), StoreError> {
-        let c = self.picks.len() % self.channels;
+        let c = self.len() % self.channels;
         let k = match self.stores.iter().position(|s| s.0 == c && s.1 == choice.format) {
             Some(k) => k,
             None => {
@@ -237,14 +263,16 @@ impl Choices {
         };
         let (_, _, store, count) = &mut self.stores[k];
         store.extend_from_slice(&choice.bytes, "the chosen bricks")?;
-        self.picks.push(Pick { format: choice.format, range: choice.range, at: *count });
+        self.formats.push(choice.format.code() as u8, "the chosen formats")?;
+        self.ranges.push(choice.range, "the chosen ranges")?;
+        self.at.push(*count, "the chosen formats")?;
         *count += 1;
         Ok(())
     }
 
-    /// The texels or blocks of pick `j`.
+    /// The texels or blocks of brick channel `j`.
     pub fn bytes(&self, j: usize) -> &[u8] {
-        let Some(p) = self.picks.get(j) else { return &[] };
+        let Some(p) = self.pick(j) else { return &[] };
         let bb = single_plane(p.format).brick_bytes();
         let at = p.at as usize * bb;
         self.stores.iter().find(|s| s.0 == j % self.channels && s.1 == p.format).and_then(|s| s.2.get(at..at + bb)).unwrap_or(&[])

@@ -10,13 +10,24 @@ use vdbcook_grid::spill::{SpillPolicy, Store, StoreError};
 /// The encoded bricks of one plane: kept (block formats, whose encoders are
 /// slow), made from the pool whenever asked for (uncompressed formats, so
 /// no copy of the pool is kept), or, with per-brick formats, kept for the
-/// bricks that chose the plane's format (`at[i]`: brick i's place among
-/// them, or `u32::MAX`).
+/// bricks that chose the plane's format (in [`Chosen`]'s order).
 enum PlaneData {
     Kept(Store<u8>),
     OnDemand,
-    Chosen { bytes: Store<u8>, at: Vec<u32> },
+    Chosen(Store<u8>),
 }
+
+/// With per-brick formats, per brick channel (`i · channels + c`): the code
+/// of the format chosen ([`NOT_STORED`]: the brick is in no plane), and its
+/// place among the bricks of its channel that chose it. One table for all
+/// the planes, in stores: it grows with the segment.
+struct Chosen {
+    formats: Store<u8>,
+    at: Store<u32>,
+}
+
+/// [`Chosen`]'s format code of a brick no plane holds.
+const NOT_STORED: u8 = u8::MAX;
 
 /// Every plane of every brick of a pool (`channels` [`Brick`]s per brick),
 /// with each brick's channel ranges.
@@ -25,8 +36,9 @@ pub struct Encoded<'a> {
     bricks: Bricks<'a>,
     channels: usize,
     /// (min, max) per brick per channel.
-    ranges: Vec<[f32; 2]>,
+    ranges: Store<[f32; 2]>,
     planes: Vec<PlaneData>,
+    chosen: Option<Chosen>,
     /// Per brick per channel, true when no reader samples the channel in the
     /// brick (a channel at its own voxel size is absent from the levels of
     /// other channels): a plane whose channels are all absent from a brick
@@ -38,9 +50,14 @@ pub struct Encoded<'a> {
 const CHUNK: usize = 256;
 
 impl Encoded<'_> {
-    /// Bytes of its per-brick tables (ranges, absent channels), beside its planes' stores.
+    /// Bytes of its per-brick tables (ranges, absent channels) beside its
+    /// stores, which a spill policy counts itself.
     pub fn table_bytes(&self) -> u64 {
-        (self.ranges.capacity() * std::mem::size_of::<[f32; 2]>() + self.absent.as_ref().map_or(0, Vec::capacity)) as u64
+        let ranges = match self.ranges.policy() {
+            Some(_) => 0,
+            None => self.ranges.capacity() * std::mem::size_of::<[f32; 2]>(),
+        };
+        (ranges + self.absent.as_ref().map_or(0, Vec::capacity)) as u64
     }
 }
 
@@ -105,7 +122,7 @@ impl<'a> Encoded<'a> {
                 None => bricks.range(j / channels, j % channels),
             })
             .collect();
-        let mut e = Encoded { specs, bricks, channels, ranges, planes: Vec::new(), absent: absent.filter(|a| a.len() == n * channels) };
+        let mut e = Encoded { specs, bricks, channels, ranges: ranges.into(), planes: Vec::new(), chosen: None, absent: absent.filter(|a| a.len() == n * channels) };
         for p in 0..e.specs.len() {
             let spec = &e.specs[p];
             if !spec.plane.format.is_block() {
@@ -201,10 +218,10 @@ impl<'a> Encoded<'a> {
         }
         match data {
             PlaneData::Kept(d) => out.copy_from_slice(&d[i * bb..(i + 1) * bb]),
-            PlaneData::Chosen { bytes, at } => match at[i] {
-                u32::MAX => return false,
-                k => out.copy_from_slice(&bytes[k as usize * bb..(k as usize + 1) * bb]),
-            },
+            PlaneData::Chosen(bytes) => {
+                let Some(k) = self.chosen_at(p, i) else { return false };
+                out.copy_from_slice(&bytes[k * bb..(k + 1) * bb]);
+            }
             PlaneData::OnDemand => {
                 let slots: Vec<(&Brick, [f32; 2])> = spec.channels.iter().map(|&c| (self.bricks.get(i, c), self.range(i, c))).collect();
                 encode_texels(&spec.plane, &slots, out);
@@ -217,9 +234,27 @@ impl<'a> Encoded<'a> {
     /// planes of the formats it did not choose do not).
     pub fn holds(&self, p: usize, i: usize) -> bool {
         match self.planes.get(p) {
-            Some(PlaneData::Chosen { at, .. }) => at.get(i).is_some_and(|&k| k != u32::MAX),
+            Some(PlaneData::Chosen(_)) => self.chosen_at(p, i).is_some(),
             Some(_) => i < self.len(),
             None => false,
+        }
+    }
+
+    /// With per-brick formats, brick `i`'s place among the bricks of plane
+    /// `p` (one channel, one format), if it chose that plane.
+    fn chosen_at(&self, p: usize, i: usize) -> Option<usize> {
+        let (chosen, spec) = (self.chosen.as_ref()?, self.specs.get(p)?);
+        let j = i * self.channels + *spec.channels.first()?;
+        (*chosen.formats.get(j)? == spec.plane.format.code() as u8).then(|| chosen.at.get(j).map(|&k| k as usize)).flatten()
+    }
+
+    /// The families of planes: each brick is in at most one plane of a
+    /// family.  With per-brick formats, a channel's planes (one per format
+    /// its bricks chose, in spec order); otherwise each plane alone.
+    pub fn families(&self) -> Vec<Vec<usize>> {
+        match self.chosen {
+            Some(_) => (0..self.channels).map(|c| (0..self.specs.len()).filter(|&p| self.specs[p].channels == [c]).collect()).filter(|f: &Vec<usize>| !f.is_empty()).collect(),
+            None => (0..self.specs.len()).map(|p| vec![p]).collect(),
         }
     }
 
@@ -265,30 +300,30 @@ impl<'a> Encoded<'a> {
 }
 
 impl<'a> Encoded<'a> {
-    /// Per-brick formats: `choices[i · channels + c]` is channel c of brick
-    /// i ([`cheapest`]); each channel is stored in one plane of its own per
-    /// format its bricks chose, in [`Format::BY_COST`] order.  Bricks not
-    /// `used` are in no plane.
+    /// Per-brick formats: `choices` holds channel c of brick i at
+    /// `i · channels + c` ([`cheapest`]); each channel is stored in one plane
+    /// of its own per format its bricks chose, in [`Format::BY_COST`] order.
+    /// Bricks not `used` are in no plane.
     pub fn from_choices(bricks: Bricks<'a>, mut choices: Choices, used: &[bool]) -> Encoded<'a> {
         let (channels, n) = (bricks.channels(), bricks.len());
-        let ranges = choices.picks.iter().map(|p| p.range).collect();
-        let (mut specs, mut planes) = (Vec::new(), Vec::new());
-        for c in 0..channels {
-            for format in Format::BY_COST {
-                let pick = |i: usize| choices.picks[i * channels + c];
-                let members: Vec<usize> = (0..n).filter(|&i| used.get(i).copied().unwrap_or(true) && pick(i).format == format).collect();
-                if members.is_empty() {
-                    continue;
-                }
-                let mut at = vec![u32::MAX; n];
-                for &i in &members {
-                    at[i] = pick(i).at;
-                }
-                specs.push(PlaneSpec { plane: single_plane(format), channels: vec![c] });
-                planes.push(PlaneData::Chosen { bytes: choices.take_store(c, format), at });
+        // Which formats each channel's used bricks chose.
+        let mut chose = vec![[false; Format::CODES.len()]; channels];
+        for (j, f) in choices.formats.iter_mut().enumerate().take(n * channels) {
+            if !used.get(j / channels).copied().unwrap_or(true) {
+                *f = NOT_STORED;
+            } else if let Some(c) = chose[j % channels].get_mut(usize::from(*f)) {
+                *c = true;
             }
         }
-        Encoded { specs, bricks, channels, ranges, planes, absent: None }
+        let (mut specs, mut planes) = (Vec::new(), Vec::new());
+        for (c, chose) in chose.iter().enumerate() {
+            for format in Format::BY_COST.into_iter().filter(|f| chose[f.code() as usize]) {
+                specs.push(PlaneSpec { plane: single_plane(format), channels: vec![c] });
+                planes.push(PlaneData::Chosen(choices.take_store(c, format)));
+            }
+        }
+        let chosen = Chosen { formats: std::mem::take(&mut choices.formats), at: std::mem::take(&mut choices.at) };
+        Encoded { specs, bricks, channels, ranges: std::mem::take(&mut choices.ranges), planes, chosen: Some(chosen), absent: None }
     }
 }
 

@@ -511,7 +511,8 @@ fn choosing_in_batches_picks_what_each_brick_alone_picks() {
     for (e, disk) in [(0.02, None), (0.3, None), (0.3, Some(crate::Optimize::Disk))] {
         let mut c = crate::Choices::new(2, None);
         c.choose(view, &masks, e, Quality::VeryFast, disk, &|_| {}).unwrap();
-        for (j, pick) in c.picks.iter().enumerate() {
+        assert_eq!(c.len(), bricks.len());
+        for (j, pick) in (0..c.len()).map(|j| (j, c.pick(j).unwrap())) {
             let alone = cheapest(&bricks[j], &masks[j / 2], e, Quality::VeryFast, disk);
             assert_eq!((pick.format, pick.range), (alone.format, alone.range), "brick channel {j} (E {e}, {disk:?})");
             assert_eq!(c.bytes(j), &alone.bytes[..], "brick channel {j} (E {e}, {disk:?})");
@@ -535,9 +536,12 @@ fn chosen_bricks_spilled_to_a_file_encode_as_those_in_memory() {
         c
     };
     let (mem, file) = (chosen(None), chosen(Some(vdbcook_grid::spill::SpillPolicy::new(std::env::temp_dir(), 1))));
-    assert_eq!(mem.picks, file.picks);
-    assert!(mem.picks.iter().any(|p| p.format != mem.picks[0].format), "one format only: the stores are not exercised");
-    for j in 0..mem.picks.len() {
+    let picks = |c: &crate::Choices| (0..c.len()).map(|j| c.pick(j).unwrap()).collect::<Vec<_>>();
+    let (mem_picks, file_picks) = (picks(&mem), picks(&file));
+    assert_eq!(mem_picks.len(), bricks.len());
+    assert_eq!(mem_picks, file_picks);
+    assert!(mem_picks.iter().any(|p| p.format != mem_picks[0].format), "one format only: the stores are not exercised");
+    for j in 0..mem.len() {
         assert_eq!(mem.bytes(j), file.bytes(j));
     }
     let used = vec![true; view.len()];
