@@ -241,6 +241,9 @@ pub fn seed_centroids<const N: usize>(data: &[&[f32; N]], k: usize, seed: u64) -
 }
 
 /// [`seed_centroids`], calling `scanned` as it copies its sample (see [`scan_items`]).
+/// Items read scattered over a caller's memory between two calls of its `scanned`.
+const SCATTERED_PER_SCAN: usize = 8;
+
 fn seed_centroids_scanned<const N: usize>(data: &[&[f32; N]], k: usize, seed: u64, scanned: &(dyn Fn() + Sync)) -> Vec<[f32; N]> {
     let mut rng = Rng(seed);
     if data.is_empty() || k == 0 {
@@ -264,10 +267,11 @@ fn seed_centroids_scanned<const N: usize>(data: &[&[f32; N]], k: usize, seed: u6
     // (at most `want` bricks), so that those passes read memory, not bricks
     // scattered over a caller's spilled pool, whose pages the system would
     // map in and around each one again on every pass. The copy reads them
-    // scattered too, so it calls `scanned` after smaller groups than a pass
-    // in order does.
+    // scattered too, so it calls `scanned` after a few of them: the system
+    // may map a large folio of the file around each one read (512 kB and
+    // more seen on ext4), so a group of 512 mapped 240 MB.
     let mut copy: Vec<[f32; N]> = Vec::with_capacity(sample.len());
-    for group in sample.chunks((scan_items::<N>() / 16).max(1)) {
+    for group in sample.chunks(SCATTERED_PER_SCAN) {
         copy.extend(group.iter().map(|&b| *b));
         scanned();
     }
