@@ -343,7 +343,8 @@ settings_group! {
         #[cfg_attr(feature = "clap", arg(long, value_name = "FPS", allow_negative_numbers = true, default_value_t = CookSettings::default().fps))]
         pub fps: Fps = Fps::DEFAULT;
         /// Keep the cook's large buffers (the brick pool: every distinct brick of a segment, 2 kB
-        /// a channel; its L3 nodes, 72 bytes each; the atlases) in memory up to SIZE in all (bytes, or e.g. 512MiB, 4GB), then
+        /// a channel; its L3 nodes, 72 bytes each; the per-brick tables, node arrays and atlases
+        /// of its last stages) in memory up to SIZE in all (bytes, or e.g. 512MiB, 4GB), then
         /// move them to unnamed temporary files beside the output, so that memory stops growing
         /// with the segment's bricks (the system caches what it can and writes the rest to disk;
         /// the files vanish with the process). auto: a quarter of the memory the process may use
