@@ -53,7 +53,7 @@ pub(crate) fn store(encoded: &Encoded, clustered: Option<&Clustered>) -> Result<
         let mut all = vec![u32::MAX; encoded.len()];
         for (j, &p) in family.iter().enumerate() {
             let members: Vec<u32> = (0..encoded.len() as u32).filter(|&i| used[i as usize] && encoded.holds(p, i as usize)).collect();
-            let (keep, ids) = distinct(members.len(), &|k, buf| plane_brick_bytes(encoded, p, members[k] as usize, buf));
+            let (keep, ids) = distinct(members.len(), &|k, buf| plane_brick_bytes(encoded, p, members[k] as usize, buf))?;
             if family.len() > 1 && keep.len() > vdbcook_vpak::PLANE_BRICK_MASK as usize {
                 return Err(Error::TooManyPlaneBricks(keep.len() as u32));
             }
@@ -71,7 +71,7 @@ pub(crate) fn store(encoded: &Encoded, clustered: Option<&Clustered>) -> Result<
     let (keep, used_remap) = distinct(used_bricks.len(), &|k, buf| {
         buf.clear();
         buf.extend(entries.iter().flat_map(|e| e[used_bricks[k] as usize].to_le_bytes()));
-    });
+    })?;
     let keep: Vec<u32> = keep.into_iter().map(|k| used_bricks[k as usize]).collect();
     let mut enc_remap = vec![u32::MAX; encoded.len()];
     for (&i, id) in used_bricks.iter().zip(used_remap) {
@@ -108,12 +108,12 @@ fn plane_brick_bytes(encoded: &Encoded, p: usize, i: usize, buf: &mut Vec<u8>) {
 
 /// Finds the distinct items `0..n` by their bytes (`bytes_of`; the first of
 /// equal ones, in order): returns their indices and, per item, its distinct index.
-fn distinct(n: usize, bytes_of: &(dyn Fn(usize, &mut Vec<u8>) + Sync)) -> (Vec<u32>, Vec<u32>) {
+fn distinct(n: usize, bytes_of: &(dyn Fn(usize, &mut Vec<u8>) + Sync)) -> Result<(Vec<u32>, Vec<u32>), Error> {
     // Hashed a chunk at a time in parallel, then looked up in order: no
     // hash per item held beside the index's own.
     const CHUNK: usize = 1 << 16;
     let mut index = HashIndex::default();
-    index.reserve(n);
+    index.try_reserve(n, "the deduplication's index").map_err(vdbcook_grid::spill::StoreError::from)?;
     let mut keep: Vec<u32> = Vec::new();
     let mut remap = Vec::with_capacity(n);
     for first in (0..n).step_by(CHUNK) {
@@ -146,5 +146,5 @@ fn distinct(n: usize, bytes_of: &(dyn Fn(usize, &mut Vec<u8>) + Sync)) -> (Vec<u
     }
     // Held to the segment's end: no room left from growing.
     keep.shrink_to_fit();
-    (keep, remap)
+    Ok((keep, remap))
 }

@@ -22,11 +22,6 @@ impl IdTable {
         (self.0.capacity() as u64).saturating_mul(8) / 7 * (std::mem::size_of::<u32>() as u64 + 1)
     }
 
-    /// Room for `n` more ids, as [`IdTable::reserve`] but aborting when memory runs out (as `Vec` does).
-    pub(crate) fn reserve_or_abort(&mut self, n: usize, hash_of: impl Fn(u32) -> u64) {
-        self.0.reserve(n, |&id| hash_of(id));
-    }
-
     /// An id with hash `h` for which `same(id)` holds.
     pub(crate) fn find(&self, h: u64, same: impl Fn(u32) -> bool) -> Option<u32> {
         self.0.find(h, |&id| same(id)).copied()

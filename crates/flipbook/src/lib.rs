@@ -127,12 +127,6 @@ pub struct HashIndex {
 }
 
 impl HashIndex {
-    pub fn reserve(&mut self, n: usize) {
-        self.hashes.reserve(n);
-        let hashes = &self.hashes;
-        self.ids.reserve_or_abort(n, |id| hashes.get(id as usize).copied().unwrap_or(0));
-    }
-
     /// Room for `n` more items, or the error naming `what` when memory runs out.
     pub fn try_reserve(&mut self, n: usize, what: &'static str) -> Result<(), vdbcook_grid::mem::OutOfMemory> {
         vdbcook_grid::mem::try_reserve(&mut self.hashes, n, what)?;

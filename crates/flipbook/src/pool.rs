@@ -223,7 +223,7 @@ impl BrickPool {
         self.stored.try_reserve(made, "the brick pool")?;
         self.ranges.try_reserve(made, "the bricks' ranges")?;
         vdbcook_grid::mem::try_reserve(&mut self.slots, n * self.channels, "the brick pool")?;
-        self.index.reserve(n);
+        self.index.try_reserve(n, "the brick index")?;
         Ok(())
     }
 

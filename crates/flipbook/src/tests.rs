@@ -594,7 +594,7 @@ fn a_brick_is_shared_only_when_every_channel_matches() {
 #[test]
 fn hash_index_tells_apart_items_of_one_hash_and_ignores_other_hashes() {
     let mut index = HashIndex::default();
-    index.reserve(3);
+    index.try_reserve(3, "a test index").unwrap();
     for (h, id) in [(7, 0), (7, 1), (9, 2)] {
         index.add(h, id);
     }
