@@ -240,10 +240,10 @@ pub fn seed_centroids<const N: usize>(data: &[&[f32; N]], k: usize, seed: u64) -
     seed_centroids_scanned(data, k, seed, &|| {})
 }
 
-/// [`seed_centroids`], calling `scanned` as it copies its sample (see [`scan_items`]).
 /// Items read scattered over a caller's memory between two calls of its `scanned`.
 const SCATTERED_PER_SCAN: usize = 8;
 
+/// [`seed_centroids`], calling `scanned` as it copies its sample (see [`scan_items`]).
 fn seed_centroids_scanned<const N: usize>(data: &[&[f32; N]], k: usize, seed: u64, scanned: &(dyn Fn() + Sync)) -> Vec<[f32; N]> {
     let mut rng = Rng(seed);
     if data.is_empty() || k == 0 {

@@ -204,10 +204,6 @@ impl Choices {
         self.formats.is_empty()
     }
 
-    pub fn channels(&self) -> usize {
-        self.channels
-    }
-
     /// Brick channel `j`'s choice.
     pub fn pick(&self, j: usize) -> Option<Pick> {
         let format = Format::from_code(u32::from(*self.formats.get(j)?))?;
@@ -265,7 +261,7 @@ impl Choices {
         store.extend_from_slice(&choice.bytes, "the chosen bricks")?;
         self.formats.push(choice.format.code() as u8, "the chosen formats")?;
         self.ranges.push(choice.range, "the chosen ranges")?;
-        self.at.push(*count, "the chosen formats")?;
+        self.at.push(*count, "the chosen bricks' places")?;
         *count += 1;
         Ok(())
     }
