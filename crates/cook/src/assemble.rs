@@ -137,8 +137,7 @@ impl Cooker {
         // stores, counted against the spill budget so that the stores spill
         // sooner and memory stays near it however long the segment.
         let mut charge = Charge::new(opts.spill.clone());
-        let tables = encoded.table_bytes() + stored.heap_bytes();
-        charge.set(tables);
+        charge.set(encoded.table_bytes() + stored.heap_bytes());
 
         // Node arrays over the stored bricks.
         let t0 = Instant::now();
@@ -147,7 +146,7 @@ impl Cooker {
         progress.advance(built.frames.len() as u64);
         progress.finish();
         lap(&mut timings, "nodes", t0);
-        charge.set(tables + nodes.heap_bytes());
+        charge.set(encoded.table_bytes() + stored.heap_bytes() + nodes.heap_bytes());
 
         // Layout: node arrays, brick ranges and tables, channel tables, atlases.
         let t0 = Instant::now();
@@ -156,7 +155,8 @@ impl Cooker {
         let (tree, index_offset) = (TreeFigures::of(&nodes), nodes.offset);
         let brick_tables = std::mem::take(&mut stored.tables);
         let Laid { mut sections, planes, plane_bytes, channel_table_bytes } = layout::lay_out(nodes, &encoded, &stored, brick_tables, opts.max_texture_dim, opts.spill.as_ref(), progress)?;
-        charge.set(tables);
+        // The brick tables and node arrays are sections now (stores under a spill policy, which count themselves).
+        charge.set(encoded.table_bytes() + stored.heap_bytes());
         let value_ranges = self.value_ranges(built, channels);
         let peaks = errors::peaks(built, &value_ranges);
         let specs = encoded.specs.clone();
