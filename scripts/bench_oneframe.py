@@ -44,6 +44,7 @@ def main():
         print(f"{args.input}; {args.runs} alternating runs; load {os.getloadavg()[0]:.2f}")
         print("| format | binary | wall | CPU | wall / first |")
         print("|---|---|---:|---:|---:|")
+        targets = []
         for fmt in args.formats.split(","):
             names = list(exes) + (["nanovdb_convert --fp16"] if fmt == "f16" else [])
             res = {k: [] for k in names}
@@ -53,10 +54,14 @@ def main():
                         res[k].append(run(["nanovdb_convert", "--fp16", "-f", args.input, os.path.join(tmp, "one.nvdb")]))
                     else:
                         res[k].append(run([exes[k], "cook", args.input, "--format", fmt, "-o", os.path.join(tmp, "one.vpak"), "--force", "-q"]))
-            base = statistics.median(w for w, _ in res[names[0]])
+            wall = {k: statistics.median(x for x, _ in v) for k, v in res.items()}
             for k, v in res.items():
-                w, c = statistics.median(x for x, _ in v), statistics.median(y for _, y in v)
-                print(f"| {fmt} | {k} | {w:.2f} s | {c:.2f} s | {w / base:.2f} |", flush=True)
+                c = statistics.median(y for _, y in v)
+                print(f"| {fmt} | {k} | {wall[k]:.3f} s | {c:.3f} s | {wall[k] / wall[names[0]]:.3f} |", flush=True)
+            if "nanovdb_convert --fp16" in wall:
+                targets.append(f"{fmt}: this binary / nanovdb_convert --fp16 = {wall['now'] / wall['nanovdb_convert --fp16']:.3f} (target <= 0.7)")
+        for t in targets:
+            print(t)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -13,9 +13,13 @@
 //! Static per-context frequency tables quantised to 2^P; 32-bit rANS state, 16-bit
 //! renormalisation, N states interleaved across N bricks decoded side by side (bricks are
 //! independent, so each lane's context chain stays within its own brick); all lanes share
-//! one word stream; raw escape bits in a separate bit stream.
+//! one word stream; raw escape bits in a separate bit stream. `simd.rs` (AVX-512) and
+//! `avx2.rs` decode the same streams with the lanes in vectors.
 
 use std::time::Instant;
+
+mod avx2;
+mod simd;
 
 const T: u32 = 16;
 const NSYM: usize = 48;
@@ -24,6 +28,8 @@ const NERR: usize = 16;
 const NCTX: usize = NERR * NPOS;
 const RANS_L: u32 = 1 << 16;
 const FAST: bool = true;
+/// Zero words after the rANS stream (the AVX2 decoder loads 8 words at a time).
+const PAD_WORDS: usize = 8;
 
 struct Input {
     n: usize,
@@ -195,8 +201,12 @@ fn cums(f: &[[u32; NSYM]]) -> Vec<[u32; NSYM]> {
 /// Decode table: entry = sym | freq << 6 | cum << 19 for every slot of every used context.
 fn build_lut(f: &[[u32; NSYM]], p: u32, lut: &mut Vec<u32>) {
     let tot = 1usize << p;
-    lut.clear();
-    lut.resize(NCTX * tot, 0);
+    // Rows of contexts no symbol was coded in are never read (the decoder meets only the
+    // contexts the encoder did): they are left as they are, not zeroed on every decode.
+    if lut.len() != NCTX * tot {
+        lut.clear();
+        lut.resize(NCTX * tot, 0);
+    }
     for ctx in 0..NCTX {
         let mut cum = 0usize;
         let row = &mut lut[ctx * tot..(ctx + 1) * tot];
@@ -215,7 +225,8 @@ fn build_lut(f: &[[u32; NSYM]], p: u32, lut: &mut Vec<u32>) {
 // ---- encoder ------------------------------------------------------------------------------
 
 struct Coded {
-    words: Vec<u16>, // rANS stream (states first), decode order
+    words: Vec<u16>, // rANS streams (each: states first, decode order, padding), one after the other
+    starts: Vec<usize>, // where each stream starts in `words`
     bits: Vec<u8>,   // raw escape bits, LSB first, padded with 8 bytes
     tables_z: Vec<u8>,
     masks_z: Vec<u8>,
@@ -224,7 +235,7 @@ struct Coded {
     ideal_bits: f64,
 }
 
-fn encode(inp: &Input, toks: &[Vec<Tok>], n_lanes: usize, p: u32) -> Coded {
+fn encode(inp: &Input, toks: &[Vec<Tok>], n_lanes: usize, streams: usize, p: u32) -> Coded {
     let mut counts = vec![[0u64; NSYM]; NCTX];
     let mut nsym = 0;
     for bt in toks {
@@ -276,9 +287,14 @@ fn encode(inp: &Input, toks: &[Vec<Tok>], n_lanes: usize, p: u32) -> Coded {
     }
     bits.extend_from_slice(&[0u8; 8]);
     // rANS, backwards
+    // rANS, backwards; the lanes in `streams` contiguous groups, each with a word stream of
+    // its own (its states first, then its words in decode order, then padding).
+    let per = n_lanes / streams;
+    assert_eq!(per * streams, n_lanes);
     let mut st = vec![RANS_L; n_lanes];
-    let mut w: Vec<u16> = Vec::new();
+    let mut ws: Vec<Vec<u16>> = vec![Vec::new(); streams];
     for (l, t) in order.iter().rev() {
+        let w = &mut ws[*l as usize / per];
         let fr = f[t.ctx as usize][t.sym as usize];
         let cu = c[t.ctx as usize][t.sym as usize];
         let mut x = st[*l as usize];
@@ -290,12 +306,18 @@ fn encode(inp: &Input, toks: &[Vec<Tok>], n_lanes: usize, p: u32) -> Coded {
         x = ((x / fr) << p) + (x % fr) + cu;
         st[*l as usize] = x;
     }
-    for l in (0..n_lanes).rev() {
-        w.push(st[l] as u16);
-        w.push((st[l] >> 16) as u16);
+    let mut words = Vec::new();
+    let mut starts = Vec::new();
+    for (sidx, mut w) in ws.into_iter().enumerate() {
+        for l in (sidx * per..(sidx + 1) * per).rev() {
+            w.push(st[l] as u16);
+            w.push((st[l] >> 16) as u16);
+        }
+        w.reverse();
+        w.extend_from_slice(&[0u16; PAD_WORDS]); // the decoders may read past the end (AVX2: 8 words)
+        starts.push(words.len());
+        words.extend_from_slice(&w);
     }
-    w.reverse();
-    w.extend_from_slice(&[0u16; 4]); // padding: the decoder may peek one word past the end
     // side information
     let mut tb = Vec::new();
     for ctx in 0..NCTX {
@@ -314,7 +336,8 @@ fn encode(inp: &Input, toks: &[Vec<Tok>], n_lanes: usize, p: u32) -> Coded {
         prev = k;
     }
     Coded {
-        words: w,
+        words,
+        starts,
         bits,
         tables_z: zstd::bulk::compress(&tb, 19).unwrap(),
         masks_z: zstd::bulk::compress(&mb, 19).unwrap(),
@@ -359,7 +382,20 @@ struct Scratch {
 /// Everything a reader does: side information (zstd), tables, then the voxels.
 /// Returns the seconds of the voxel loop alone.
 fn decode_all<O: Texel, const N: usize, const P: u32>(cd: &Coded, n: usize, sc: &mut Scratch, out: &mut [O], bl: &[u8; 256]) -> f64 {
-    sc.masks.resize(n.div_ceil(N) * N * 64, 0);
+    prepare(cd, n, N, P, sc);
+    let t0 = Instant::now();
+    if FAST {
+        decode_voxels_fast::<O, N, P, true>(cd, n, &sc.masks, &sc.lut, out, bl);
+    } else {
+        decode_voxels::<O, N, P>(cd, n, &sc.masks, &sc.lut, out, bl);
+    }
+    t0.elapsed().as_secs_f64()
+}
+
+/// The side information (zstd) and the decode table.
+fn prepare(cd: &Coded, n: usize, lanes: usize, p: u32, sc: &mut Scratch) {
+    sc.masks.clear();
+    sc.masks.resize(n.div_ceil(lanes) * lanes * 64, 0);
     let mm = zstd::bulk::decompress_to_buffer(&cd.masks_z, &mut sc.masks[..n * 64]).unwrap();
     assert_eq!(mm, n * 64);
     sc.kmin.resize(n * 4, 0);
@@ -373,14 +409,7 @@ fn decode_all<O: Texel, const N: usize, const P: u32>(cd: &Coded, n: usize, sc: 
             f[ctx][s] = u16::from_le_bytes([sc.tables[o], sc.tables[o + 1]]) as u32;
         }
     }
-    build_lut(&f, P, &mut sc.lut);
-    let t0 = Instant::now();
-    if FAST {
-        decode_voxels_fast::<O, N, P, true>(cd, n, &sc.masks, &sc.lut, out, bl);
-    } else {
-        decode_voxels::<O, N, P>(cd, n, &sc.masks, &sc.lut, out, bl);
-    }
-    t0.elapsed().as_secs_f64()
+    build_lut(&f, p, &mut sc.lut);
 }
 
 #[inline(never)]
@@ -524,8 +553,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn run_proto<O: Texel, const N: usize, const P: u32>(inp: &Input, toks: &[Vec<Tok>], refout: &[u16], runs: usize, bl: &[u8; 256]) -> (usize, f64, f64, f64) {
-    let cd = encode(inp, toks, N, P);
-    let bytes = cd.words.len() * 2 - 8 + cd.bits.len() - 8 + cd.tables_z.len() + cd.masks_z.len() + cd.kmin_z.len();
+    let cd = encode(inp, toks, N, 1, P);
+    let bytes = (cd.words.len() - PAD_WORDS * cd.starts.len()) * 2 + cd.bits.len() - 8 + cd.tables_z.len() + cd.masks_z.len() + cd.kmin_z.len();
     let mut sc = Scratch { lut: Vec::new(), masks: Vec::new(), kmin: Vec::new(), tables: Vec::new() };
     let mut out = vec![O::default(); inp.n.div_ceil(N) * N * 512];
     let mut tv = Vec::new();
@@ -554,10 +583,10 @@ fn run_proto<O: Texel, const N: usize, const P: u32>(inp: &Input, toks: &[Vec<To
     let te = median(te);
     eprintln!("    N={N} P={P}: entropy decode alone (no prediction) {:.1} Mvox/s ({:.2} ns/voxel) against {:.2} ns/voxel with it",
         (inp.n * 512) as f64 / te / 1e6, te * 1e9 / (inp.n * 512) as f64, median(tv.clone()) * 1e9 / (inp.n * 512) as f64);
-    let code_bytes = cd.words.len() * 2 - 8 + cd.bits.len() - 8;
+    let code_bytes = (cd.words.len() - PAD_WORDS * cd.starts.len()) * 2 + cd.bits.len() - 8;
     eprintln!(
         "    N={N} P={P}: rANS words {} B + raw bits {} B (ideal static {:.0} B) + tables {} B + masks {} B + kmin {} B",
-        cd.words.len() * 2 - 8,
+        (cd.words.len() - PAD_WORDS) * 2,
         cd.bits.len() - 8,
         cd.ideal_bits / 8.0,
         cd.tables_z.len(),
@@ -566,6 +595,32 @@ fn run_proto<O: Texel, const N: usize, const P: u32>(inp: &Input, toks: &[Vec<To
     );
     let _ = code_bytes;
     (bytes, median(tv), median(tt), (cd.masks_z.len() + cd.kmin_z.len()) as f64)
+}
+
+/// A vector decoder over `lanes` lanes: bytes, and the medians of the voxel loop and of
+/// everything (side information, tables, voxels); checked texel for texel first.
+fn run_vector<O: Texel>(inp: &Input, toks: &[Vec<Tok>], refout: &[u16], runs: usize, lanes: usize, streams: usize, p: u32, decode: impl Fn(&Coded, &Scratch, &mut [O])) -> (usize, f64, f64) {
+    let cd = encode(inp, toks, lanes, streams, p);
+    let bytes = (cd.words.len() - PAD_WORDS * cd.starts.len()) * 2 + cd.bits.len() - 8 + cd.tables_z.len() + cd.masks_z.len() + cd.kmin_z.len();
+    let mut sc = Scratch { lut: Vec::new(), masks: Vec::new(), kmin: Vec::new(), tables: Vec::new() };
+    let mut out = vec![O::default(); inp.n * 512];
+    let (mut tv, mut tt) = (Vec::new(), Vec::new());
+    for r in 0..runs + 1 {
+        let t0 = Instant::now();
+        prepare(&cd, inp.n, lanes, p, &mut sc);
+        let t1 = Instant::now();
+        decode(&cd, &sc, &mut out);
+        let (tvox, tall) = (t1.elapsed().as_secs_f64(), t0.elapsed().as_secs_f64());
+        if r == 0 {
+            for i in 0..inp.n * 512 {
+                assert_eq!(out[i].level(), refout[i], "vector decode ({lanes} lanes) mismatch at brick {} voxel {}", i / 512, i % 512);
+            }
+        } else {
+            tv.push(tvox);
+            tt.push(tall);
+        }
+    }
+    (bytes, median(tv), median(tt))
 }
 
 fn main() {
@@ -650,6 +705,57 @@ fn main() {
             );
             let _ = side;
         }};
+    }
+    macro_rules! vector {
+        ($name:expr, $o:ty, $lanes:expr, $streams:expr, $p:expr, $dec:expr) => {{
+            let (bytes, tv, tt) = run_vector::<$o>(&inp, &toks, &refout, runs, $lanes, $streams, $p, $dec);
+            println!(
+                "  {} rANS N={:<2} streams={} P={}: {} B ({:.3}x zstd's) voxel loop {:.1} MB/s = {:.1} Mvox/s ({:.2} ns/voxel); with side info + tables {:.1} MB/s; loop / zstd crate {:.3}, all / zstd crate {:.3} (MB/s)",
+                $name,
+                $lanes,
+                $streams,
+                $p,
+                bytes,
+                bytes as f64 / z.len() as f64,
+                out_bytes as f64 / tv / 1e6,
+                vox as f64 / tv / 1e6,
+                tv * 1e9 / vox as f64,
+                out_bytes as f64 / tt / 1e6,
+                (out_bytes as f64 / tv) / (raw.len() as f64 / tz),
+                (out_bytes as f64 / tt) / (raw.len() as f64 / tz)
+            );
+        }};
+    }
+    macro_rules! vectors {
+        ($o:ty) => {{
+            let n = inp.n;
+            if std::is_x86_feature_detected!("avx512f")
+                && std::is_x86_feature_detected!("avx512vl")
+                && std::is_x86_feature_detected!("avx512bw")
+                && std::is_x86_feature_detected!("avx512cd")
+                && std::is_x86_feature_detected!("avx512vbmi")
+                && std::is_x86_feature_detected!("avx512vbmi2")
+            {
+                // SAFETY: the features are checked just above.
+                vector!("AVX-512", $o, 16, 1, 11, |cd: &Coded, sc: &Scratch, out: &mut [$o]| unsafe { simd::decode::<$o, 1, 11>(cd, n, &sc.masks, &sc.lut, out) });
+                vector!("AVX-512", $o, 32, 1, 11, |cd: &Coded, sc: &Scratch, out: &mut [$o]| unsafe { simd::decode::<$o, 2, 11>(cd, n, &sc.masks, &sc.lut, out) });
+                vector!("AVX-512", $o, 64, 1, 11, |cd: &Coded, sc: &Scratch, out: &mut [$o]| unsafe { simd::decode::<$o, 4, 11>(cd, n, &sc.masks, &sc.lut, out) });
+                vector!("AVX-512", $o, 64, 4, 11, |cd: &Coded, sc: &Scratch, out: &mut [$o]| unsafe { simd::decode::<$o, 4, 11>(cd, n, &sc.masks, &sc.lut, out) });
+                vector!("AVX-512", $o, 64, 1, 9, |cd: &Coded, sc: &Scratch, out: &mut [$o]| unsafe { simd::decode::<$o, 4, 9>(cd, n, &sc.masks, &sc.lut, out) });
+            }
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: as above.
+                vector!("AVX2", $o, 16, 1, 11, |cd: &Coded, sc: &Scratch, out: &mut [$o]| unsafe { avx2::decode::<$o, 2, 11>(cd, n, &sc.masks, &sc.lut, out) });
+                vector!("AVX2", $o, 32, 1, 11, |cd: &Coded, sc: &Scratch, out: &mut [$o]| unsafe { avx2::decode::<$o, 4, 11>(cd, n, &sc.masks, &sc.lut, out) });
+                vector!("AVX2", $o, 32, 4, 11, |cd: &Coded, sc: &Scratch, out: &mut [$o]| unsafe { avx2::decode::<$o, 4, 11>(cd, n, &sc.masks, &sc.lut, out) });
+                vector!("AVX2", $o, 16, 1, 9, |cd: &Coded, sc: &Scratch, out: &mut [$o]| unsafe { avx2::decode::<$o, 2, 9>(cd, n, &sc.masks, &sc.lut, out) });
+            }
+        }};
+    }
+    if inp.bpl == 1 {
+        vectors!(u8);
+    } else {
+        vectors!(u16);
     }
     let only: Option<String> = get("--only");
     macro_rules! all {
