@@ -54,7 +54,14 @@ unsafe fn ld8(v: &U8x8) -> __m256i {
 
 #[inline(always)]
 unsafe fn floor_div3(t: __m256i) -> __m256i {
-    unsafe { _mm256_cvttps_epi32(_mm256_floor_ps(_mm256_div_ps(_mm256_cvtepi32_ps(t), _mm256_set1_ps(3.0)))) }
+    unsafe {
+        // A multiply instead of the divider, then one step of correction either way
+        // (a comparison's all-ones lanes are −1).
+        let q = _mm256_cvttps_epi32(_mm256_floor_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(t), _mm256_set1_ps(1.0 / 3.0))));
+        let r = _mm256_sub_epi32(t, _mm256_add_epi32(_mm256_add_epi32(q, q), q));
+        let q = _mm256_sub_epi32(q, _mm256_cmpgt_epi32(r, _mm256_set1_epi32(2)));
+        _mm256_add_epi32(q, _mm256_cmpgt_epi32(_mm256_setzero_si256(), r))
+    }
 }
 
 #[inline(always)]

@@ -36,8 +36,11 @@ unsafe fn ld8(v: &U8x16) -> __m512i {
 #[inline(always)]
 unsafe fn floor_div3(t: __m512i) -> __m512i {
     unsafe {
-        let q = _mm512_div_ps(_mm512_cvtepi32_ps(t), _mm512_set1_ps(3.0));
-        _mm512_cvttps_epi32(_mm512_roundscale_ps::<0x09>(q))
+        // A multiply instead of the divider, then one step of correction either way.
+        let q = _mm512_cvttps_epi32(_mm512_roundscale_ps::<0x09>(_mm512_mul_ps(_mm512_cvtepi32_ps(t), _mm512_set1_ps(1.0 / 3.0))));
+        let r = _mm512_sub_epi32(t, _mm512_add_epi32(_mm512_add_epi32(q, q), q));
+        let q = _mm512_mask_add_epi32(q, _mm512_cmpge_epi32_mask(r, _mm512_set1_epi32(3)), q, _mm512_set1_epi32(1));
+        _mm512_mask_sub_epi32(q, _mm512_cmplt_epi32_mask(r, _mm512_setzero_si512()), q, _mm512_set1_epi32(1))
     }
 }
 
