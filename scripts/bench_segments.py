@@ -129,7 +129,7 @@ def main():
             size = os.path.getsize(os.path.join(tmp, "joined.vpak"))
             dd = timed(["dd", "if=/dev/zero", f"of={os.path.join(tmp, 'dd.bin')}", "bs=8M", f"count={max(1, size >> 23)}", "oflag=direct"])
             print(f"    the disk: {size / 1e6:.0f} MB written with dd oflag=direct in {dd[0]:.2f} s ({dd[0] / single[0]:.3f} of one process)", flush=True)
-            for f in part_files + [os.path.join(tmp, n) for n in ("single.vpak", "joined.vpak", "dd.bin")]:
+            for f in part_files + [os.path.join(tmp, name) for name in ("single.vpak", "joined.vpak", "dd.bin")]:
                 os.remove(f)
         print("ratios:")
         for fmt, (first, whole, segd, spilled) in results.items():
