@@ -379,19 +379,6 @@ struct Scratch {
     tables: Vec<u8>,
 }
 
-/// Everything a reader does: side information (zstd), tables, then the voxels.
-/// Returns the seconds of the voxel loop alone.
-fn decode_all<O: Texel, const N: usize, const P: u32>(cd: &Coded, n: usize, sc: &mut Scratch, out: &mut [O], bl: &[u8; 256]) -> f64 {
-    prepare(cd, n, N, P, sc);
-    let t0 = Instant::now();
-    if FAST {
-        decode_voxels_fast::<O, N, P, true>(cd, n, &sc.masks, &sc.lut, out, bl);
-    } else {
-        decode_voxels::<O, N, P>(cd, n, &sc.masks, &sc.lut, out, bl);
-    }
-    t0.elapsed().as_secs_f64()
-}
-
 /// The side information (zstd) and the decode table.
 fn prepare(cd: &Coded, n: usize, lanes: usize, p: u32, sc: &mut Scratch) {
     sc.masks.clear();
@@ -552,38 +539,58 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-fn run_proto<O: Texel, const N: usize, const P: u32>(inp: &Input, toks: &[Vec<Tok>], refout: &[u16], runs: usize, bl: &[u8; 256]) -> (usize, f64, f64, f64) {
-    let cd = encode(inp, toks, N, 1, P);
-    let bytes = (cd.words.len() - PAD_WORDS * cd.starts.len()) * 2 + cd.bits.len() - 8 + cd.tables_z.len() + cd.masks_z.len() + cd.kmin_z.len();
+/// The file's bytes: the rANS words, escape bits, tables, masks and minima (no padding).
+fn coded_bytes(cd: &Coded) -> usize {
+    (cd.words.len() - PAD_WORDS * cd.starts.len()) * 2 + cd.bits.len() - 8 + cd.tables_z.len() + cd.masks_z.len() + cd.kmin_z.len()
+}
+
+/// Times `decode` over `runs` runs after a first one checked texel for texel: the medians
+/// of the voxel loop and of everything (side information, tables, voxels), and the
+/// scratch (side information and decode table) of the last run.
+#[allow(clippy::too_many_arguments)]
+fn time_decoder<O: Texel>(cd: &Coded, n: usize, lanes: usize, p: u32, refout: &[u16], runs: usize, out: &mut [O], decode: impl Fn(&Coded, &Scratch, &mut [O])) -> (f64, f64, Scratch) {
     let mut sc = Scratch { lut: Vec::new(), masks: Vec::new(), kmin: Vec::new(), tables: Vec::new() };
-    let mut out = vec![O::default(); inp.n.div_ceil(N) * N * 512];
-    let mut tv = Vec::new();
-    let mut tt = Vec::new();
+    let (mut tv, mut tt) = (Vec::new(), Vec::new());
     for r in 0..runs + 1 {
         let t0 = Instant::now();
-        let tvox = decode_all::<O, N, P>(&cd, inp.n, &mut sc, &mut out, bl);
-        let tall = t0.elapsed().as_secs_f64();
+        prepare(cd, n, lanes, p, &mut sc);
+        let t1 = Instant::now();
+        decode(cd, &sc, out);
+        let (tvox, tall) = (t1.elapsed().as_secs_f64(), t0.elapsed().as_secs_f64());
         if r == 0 {
-            for i in 0..inp.n * 512 {
-                assert_eq!(out[i].level(), refout[i], "decode mismatch at brick {} voxel {}", i / 512, i % 512);
+            for i in 0..n * 512 {
+                assert_eq!(out[i].level(), refout[i], "decode ({lanes} lanes) mismatch at brick {} voxel {}", i / 512, i % 512);
             }
         } else {
             tv.push(tvox);
             tt.push(tall);
         }
     }
+    (median(tv), median(tt), sc)
+}
+
+fn run_proto<O: Texel, const N: usize, const P: u32>(inp: &Input, toks: &[Vec<Tok>], refout: &[u16], runs: usize, bl: &[u8; 256]) -> (usize, f64, f64) {
+    let n = inp.n;
+    let cd = encode(inp, toks, N, 1, P);
+    let mut out = vec![O::default(); n.div_ceil(N) * N * 512];
+    let (tv, tt, sc) = time_decoder(&cd, n, N, P, refout, runs, &mut out, |cd, sc, out| {
+        if FAST {
+            decode_voxels_fast::<O, N, P, true>(cd, n, &sc.masks, &sc.lut, out, bl);
+        } else {
+            decode_voxels::<O, N, P>(cd, n, &sc.masks, &sc.lut, out, bl);
+        }
+    });
     let mut te = Vec::new();
     for r in 0..runs + 1 {
         let t0 = Instant::now();
-        decode_voxels_fast::<O, N, P, false>(&cd, inp.n, &sc.masks, &sc.lut, &mut out, bl);
+        decode_voxels_fast::<O, N, P, false>(&cd, n, &sc.masks, &sc.lut, &mut out, bl);
         if r > 0 {
             te.push(t0.elapsed().as_secs_f64());
         }
     }
     let te = median(te);
     eprintln!("    N={N} P={P}: entropy decode alone (no prediction) {:.1} Mvox/s ({:.2} ns/voxel) against {:.2} ns/voxel with it",
-        (inp.n * 512) as f64 / te / 1e6, te * 1e9 / (inp.n * 512) as f64, median(tv.clone()) * 1e9 / (inp.n * 512) as f64);
-    let code_bytes = (cd.words.len() - PAD_WORDS * cd.starts.len()) * 2 + cd.bits.len() - 8;
+        (n * 512) as f64 / te / 1e6, te * 1e9 / (n * 512) as f64, tv * 1e9 / (n * 512) as f64);
     eprintln!(
         "    N={N} P={P}: rANS words {} B + raw bits {} B (ideal static {:.0} B) + tables {} B + masks {} B + kmin {} B",
         (cd.words.len() - PAD_WORDS) * 2,
@@ -593,34 +600,17 @@ fn run_proto<O: Texel, const N: usize, const P: u32>(inp: &Input, toks: &[Vec<To
         cd.masks_z.len(),
         cd.kmin_z.len()
     );
-    let _ = code_bytes;
-    (bytes, median(tv), median(tt), (cd.masks_z.len() + cd.kmin_z.len()) as f64)
+    (coded_bytes(&cd), tv, tt)
 }
 
-/// A vector decoder over `lanes` lanes: bytes, and the medians of the voxel loop and of
-/// everything (side information, tables, voxels); checked texel for texel first.
+/// A vector decoder over `lanes` lanes (`streams` word streams): bytes, and the medians
+/// of the voxel loop and of everything.
+#[allow(clippy::too_many_arguments)]
 fn run_vector<O: Texel>(inp: &Input, toks: &[Vec<Tok>], refout: &[u16], runs: usize, lanes: usize, streams: usize, p: u32, decode: impl Fn(&Coded, &Scratch, &mut [O])) -> (usize, f64, f64) {
     let cd = encode(inp, toks, lanes, streams, p);
-    let bytes = (cd.words.len() - PAD_WORDS * cd.starts.len()) * 2 + cd.bits.len() - 8 + cd.tables_z.len() + cd.masks_z.len() + cd.kmin_z.len();
-    let mut sc = Scratch { lut: Vec::new(), masks: Vec::new(), kmin: Vec::new(), tables: Vec::new() };
     let mut out = vec![O::default(); inp.n * 512];
-    let (mut tv, mut tt) = (Vec::new(), Vec::new());
-    for r in 0..runs + 1 {
-        let t0 = Instant::now();
-        prepare(&cd, inp.n, lanes, p, &mut sc);
-        let t1 = Instant::now();
-        decode(&cd, &sc, &mut out);
-        let (tvox, tall) = (t1.elapsed().as_secs_f64(), t0.elapsed().as_secs_f64());
-        if r == 0 {
-            for i in 0..inp.n * 512 {
-                assert_eq!(out[i].level(), refout[i], "vector decode ({lanes} lanes) mismatch at brick {} voxel {}", i / 512, i % 512);
-            }
-        } else {
-            tv.push(tvox);
-            tt.push(tall);
-        }
-    }
-    (bytes, median(tv), median(tt))
+    let (tv, tt, _) = time_decoder(&cd, inp.n, lanes, p, refout, runs, &mut out, decode);
+    (coded_bytes(&cd), tv, tt)
 }
 
 fn main() {
@@ -686,7 +676,7 @@ fn main() {
 
     macro_rules! one {
         ($o:ty, $n:expr, $p:expr) => {{
-            let (bytes, tv, tt, side) = run_proto::<$o, $n, $p>(&inp, &toks, &refout, runs, &bl);
+            let (bytes, tv, tt) = run_proto::<$o, $n, $p>(&inp, &toks, &refout, runs, &bl);
             println!(
                 "  rANS N={:<2} P={}: {} B ({:.3} bits/voxel, {:.3} per active; {:.3}x zstd's) voxel loop {:.1} MB/s = {:.1} Mvox/s ({:.2} ns/voxel, {:.2} ns/active); with side info + tables {:.1} MB/s; loop / zstd crate {:.3} (MB/s) {:.3} (vox/s)",
                 $n,
@@ -703,7 +693,6 @@ fn main() {
                 (out_bytes as f64 / tv) / (raw.len() as f64 / tz),
                 tz / tv
             );
-            let _ = side;
         }};
     }
     macro_rules! vector {
