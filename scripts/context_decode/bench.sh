@@ -20,5 +20,7 @@ for row in "${ROWS[@]}"; do
   IFS='|' read -r tag vdb e grid <<< "$row"
   [ -f data/$tag.bin ] || /usr/bin/python3 export_bricks.py "$vdb" "$e" "$grid" data/$tag.bin --ideal
   ./target/release/context_decode data/$tag.bin --runs ${RUNS:-7} --zst data/$tag.zst
+  # Every voxel coded (no masks): the vector decoders only.
+  ./target/release/context_decode data/$tag.bin --runs ${RUNS:-7} --only x --no-masks | grep -E 'no-masks|AVX'
   /usr/bin/python3 cli_zstd.py data/$tag.zst ${RUNS:-7}
 done

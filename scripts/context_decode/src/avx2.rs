@@ -96,9 +96,7 @@ struct Streams<const G: usize> {
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-unsafe fn step<const POS: usize, const G: usize, const P: u32>(
-    w: &mut Work, st: &mut [__m256i; G], mb: &[__m256i; G], k: u32, p: usize, s: &mut Streams<G>, lut: *const u32, expand: &[[u8; 16]],
-) {
+unsafe fn step<const POS: usize, const G: usize, const P: u32>(w: &mut Work, st: &mut [__m256i; G], mb: &[__m256i; G], k: u32, p: usize, s: &mut Streams<G>, lut: *const u32, expand: &[[u8; 16]]) {
     unsafe {
         let one = _mm256_set1_epi32(1);
         for gi in 0..G {

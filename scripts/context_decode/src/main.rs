@@ -1,7 +1,7 @@
 //! Prototype: static-context rANS coder of quantised 8^3 bricks (issue 24 question), and
 //! its single-thread decode throughput against zstd's.
 //!
-//!     context_decode BRICKS.bin [--runs R] [--zst OUT.zst] [--level 19]
+//!     context_decode BRICKS.bin [--runs R] [--zst OUT.zst] [--level 19] [--only x] [--no-masks]
 //!
 //! Model (the one context_floor.py measures as `lmean`, inactive `fill`, contexts `err+pos`):
 //! raster order in each brick (x slowest, z fastest); prediction = mean of the three 2D
@@ -225,9 +225,9 @@ fn build_lut(f: &[[u32; NSYM]], p: u32, lut: &mut Vec<u32>) {
 // ---- encoder ------------------------------------------------------------------------------
 
 struct Coded {
-    words: Vec<u16>, // rANS streams (each: states first, decode order, padding), one after the other
+    words: Vec<u16>,    // rANS streams (each: states first, decode order, padding), one after the other
     starts: Vec<usize>, // where each stream starts in `words`
-    bits: Vec<u8>,   // raw escape bits, LSB first, padded with 8 bytes
+    bits: Vec<u8>,      // raw escape bits, LSB first, padded with 8 bytes
     tables_z: Vec<u8>,
     masks_z: Vec<u8>,
     kmin_z: Vec<u8>,
@@ -404,7 +404,13 @@ fn decode_voxels<O: Texel, const N: usize, const P: u32>(cd: &Coded, n: usize, m
     let mut base = [0u32; 64];
     let mut nbt = [0u32; 64];
     for s in 0..64u32 {
-        base[s as usize] = if s < T { s } else if s < 48 { T - 1 + (1 << (s - T)) } else { 0 };
+        base[s as usize] = if s < T {
+            s
+        } else if s < 48 {
+            T - 1 + (1 << (s - T))
+        } else {
+            0
+        };
         nbt[s as usize] = if s < T { 0 } else { s - T };
     }
     let words = &cd.words[..];
@@ -419,7 +425,13 @@ fn decode_voxels<O: Texel, const N: usize, const P: u32>(cd: &Coded, n: usize, m
     let mut f = [[0i32; 729]; N];
     let mut ra = [[0u32; 729]; N];
     let zero = [0u8; 64];
-    let mask_of = |b: usize| -> &[u8] { if b < n { &masks[b * 64..b * 64 + 64] } else { &zero[..] } };
+    let mask_of = |b: usize| -> &[u8] {
+        if b < n {
+            &masks[b * 64..b * 64 + 64]
+        } else {
+            &zero[..]
+        }
+    };
     let groups = n.div_ceil(N);
     let tmask = (1u32 << P) - 1;
     for g in 0..groups {
@@ -589,8 +601,12 @@ fn run_proto<O: Texel, const N: usize, const P: u32>(inp: &Input, toks: &[Vec<To
         }
     }
     let te = median(te);
-    eprintln!("    N={N} P={P}: entropy decode alone (no prediction) {:.1} Mvox/s ({:.2} ns/voxel) against {:.2} ns/voxel with it",
-        (n * 512) as f64 / te / 1e6, te * 1e9 / (n * 512) as f64, tv * 1e9 / (n * 512) as f64);
+    eprintln!(
+        "    N={N} P={P}: entropy decode alone (no prediction) {:.1} Mvox/s ({:.2} ns/voxel) against {:.2} ns/voxel with it",
+        (n * 512) as f64 / te / 1e6,
+        te * 1e9 / (n * 512) as f64,
+        tv * 1e9 / (n * 512) as f64
+    );
     eprintln!(
         "    N={N} P={P}: rANS words {} B + raw bits {} B (ideal static {:.0} B) + tables {} B + masks {} B + kmin {} B",
         (cd.words.len() - PAD_WORDS) * 2,
@@ -619,7 +635,7 @@ fn main() {
     let get = |k: &str| args.iter().position(|a| a == k).map(|i| args[i + 1].clone());
     let runs: usize = get("--runs").map(|s| s.parse().unwrap()).unwrap_or(7);
     let level: i32 = get("--level").map(|s| s.parse().unwrap()).unwrap_or(19);
-    let inp = read_input(path);
+    let mut inp = read_input(path);
     let bl = bucket_lut();
     let maxv = if inp.bpl == 1 { 255 } else { 65535 };
     let mut toks = Vec::with_capacity(inp.n);
@@ -674,6 +690,22 @@ fn main() {
         vox as f64 / tzu / 1e6
     );
 
+    if args.iter().any(|a| a == "--no-masks") {
+        // Every voxel coded: the inactive ones take the level they decode to with masks
+        // (their prediction), so the stream needs no masks and restores alone. After the
+        // zstd comparison, which keeps the bricks as they are (masks, inactive voxels 0).
+        inp.levels.copy_from_slice(&refout);
+        for m in inp.masks.iter_mut() {
+            *m = [0xff; 64];
+        }
+        toks.clear();
+        for b in 0..inp.n {
+            let mut t = Vec::new();
+            model_brick(&inp.levels[b * 512..(b + 1) * 512], &inp.masks[b], &bl, maxv, &mut t, &mut refout[b * 512..(b + 1) * 512]);
+            toks.push(t);
+        }
+        println!("  --no-masks: every voxel coded, masks all set ({} B through zstd)", zstd::bulk::compress(&vec![0xffu8; inp.n * 64], 19).unwrap().len());
+    }
     macro_rules! one {
         ($o:ty, $n:expr, $p:expr) => {{
             let (bytes, tv, tt) = run_proto::<$o, $n, $p>(&inp, &toks, &refout, runs, &bl);
@@ -793,8 +825,18 @@ unsafe fn predict_raw<const POS: usize>(f: *const i32, p: usize) -> i32 {
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 unsafe fn step<O: Texel, const P: u32, const POS: usize, const PRED: bool>(
-    act: u32, f: *mut i32, ra: *mut u32, p: usize, st: &mut u32, wp: &mut *const u16, bits: *const u8, bp: &mut usize,
-    lut: *const u32, bl: *const u8, sy: &Syms, out: *mut O,
+    act: u32,
+    f: *mut i32,
+    ra: *mut u32,
+    p: usize,
+    st: &mut u32,
+    wp: &mut *const u16,
+    bits: *const u8,
+    bp: &mut usize,
+    lut: *const u32,
+    bl: *const u8,
+    sy: &Syms,
+    out: *mut O,
 ) {
     unsafe {
         let e = (*ra.add(p - 81) + *ra.add(p - 9) + *ra.add(p - 1)).min(255);
@@ -831,7 +873,13 @@ unsafe fn step<O: Texel, const P: u32, const POS: usize, const PRED: bool>(
 fn decode_voxels_fast<O: Texel, const N: usize, const P: u32, const PRED: bool>(cd: &Coded, n: usize, masks: &[u8], lut: &[u32], out: &mut [O], bl: &[u8; 256]) {
     let mut sy = Syms { base: [0; 64], nbt: [0; 64] };
     for s in 0..64u32 {
-        sy.base[s as usize] = if s < T { s } else if s < 48 { T - 1 + (1 << (s - T)) } else { 0 };
+        sy.base[s as usize] = if s < T {
+            s
+        } else if s < 48 {
+            T - 1 + (1 << (s - T))
+        } else {
+            0
+        };
         sy.nbt[s as usize] = if s < T { 0 } else { s - T };
     }
     let groups = n.div_ceil(N);
@@ -860,8 +908,18 @@ fn decode_voxels_fast<O: Texel, const N: usize, const P: u32, const PRED: bool>(
                             let v = i * 64 + j * 8 + $k;
                             unsafe {
                                 step::<O, P, { $pos }, PRED>(
-                                    (mb[l] >> $k) & 1, f[l].as_mut_ptr(), ra[l].as_mut_ptr(), pidx(i, j, $k), &mut st[l], &mut wp, bits, &mut bp,
-                                    lut, blp, &sy, outp.add((g * N + l) * 512 + v),
+                                    (mb[l] >> $k) & 1,
+                                    f[l].as_mut_ptr(),
+                                    ra[l].as_mut_ptr(),
+                                    pidx(i, j, $k),
+                                    &mut st[l],
+                                    &mut wp,
+                                    bits,
+                                    &mut bp,
+                                    lut,
+                                    blp,
+                                    &sy,
+                                    outp.add((g * N + l) * 512 + v),
                                 )
                             }
                         }

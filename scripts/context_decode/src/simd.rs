@@ -76,9 +76,7 @@ struct Streams<const G: usize> {
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-unsafe fn step<const POS: usize, const G: usize, const P: u32>(
-    w: &mut Work, st: &mut [__m512i; G], mb: &[__m512i; G], k: u32, p: usize, s: &mut Streams<G>, lut: *const u32,
-) {
+unsafe fn step<const POS: usize, const G: usize, const P: u32>(w: &mut Work, st: &mut [__m512i; G], mb: &[__m512i; G], k: u32, p: usize, s: &mut Streams<G>, lut: *const u32) {
     unsafe {
         for gi in 0..G {
             let act: __mmask16 = _mm512_test_epi32_mask(mb[gi], _mm512_set1_epi32(1 << k));
