@@ -41,13 +41,17 @@ def shown_masks(m, secs):
     out = {}
     for c, ch in enumerate(m["channels"]):
         planes = vr.channel_planes(ch)
-        table = secs.u32(vr.K_CHANNEL_TABLE, c).astype(np.int64) if ch["alternates"] else None
+        # Brick b's plane and plane brick: through the channel table, or the plane's brick table, or b.
+        if ch["alternates"]:
+            entries = secs.u32(vr.K_CHANNEL_TABLE, c).astype(np.int64)
+            where = lambda b: (planes[int(entries[b]) >> vr.CHOICE_SHIFT], int(entries[b]) & vr.PLANE_BRICK_MASK)  # noqa: E731
+        elif m["planes"][ch["plane"]]["bricks"] != m["brick_count"]:
+            table = secs.u32(vr.K_TABLE, ch["plane"])
+            where = lambda b: (ch["plane"], int(table[b]))  # noqa: E731
+        else:
+            where = lambda b: (ch["plane"], b)  # noqa: E731
         for b, mask in by_brick.items():
-            if table is not None:
-                p, k = planes[int(table[b]) >> vr.CHOICE_SHIFT], int(table[b]) & vr.PLANE_BRICK_MASK
-            else:
-                p = ch["plane"]
-                k = int(secs.u32(vr.K_TABLE, p)[b]) if m["planes"][p]["bricks"] != m["brick_count"] else b
+            p, k = where(b)
             for a, at in enumerate(m["planes"][p]["atlases"]):
                 if at["first_brick"] <= k < at["first_brick"] + at["count"]:
                     key = (vr.atlas_section(m, p, a), k - at["first_brick"])
@@ -58,7 +62,8 @@ def shown_masks(m, secs):
 def main():
     path, out = sys.argv[1], sys.argv[2]
     m, secs = vr.open_asset(path)
-    shown = {} if "--all-texels" in sys.argv else shown_masks(m, secs)
+    all_texels = "--all-texels" in sys.argv
+    shown = {} if all_texels else shown_masks(m, secs)
     by_width = {}  # w: (bricks, divisors, stored bytes)
     for (kind, index), (_, filt, w, s, n, _) in sorted(secs.coding.items()):
         if kind != vr.K_ATLAS or filt not in TILED:
@@ -75,8 +80,7 @@ def main():
                     g = int(np.gcd.reduce(t.ravel()))
                     divisors.append(g)
                     # The tile is [z][y][x]; a mask is in leaf order, x slowest.
-                    mask = shown.get((index, a + tx * (b + ty * c)))
-                    mask = np.ones(512, bool) if mask is None and not shown else mask if mask is not None else np.zeros(512, bool)
+                    mask = np.ones(512, bool) if all_texels else shown.get((index, a + tx * (b + ty * c)), np.zeros(512, bool))
                     bricks.append((t // g if g else t, np.packbits(mask.reshape(8, 8, 8).transpose(2, 1, 0).ravel(), bitorder="little")))
     if not by_width:
         raise SystemExit(f"{path}: no tiled atlas")

@@ -147,6 +147,21 @@ fn model_brick(lv: &[u16], mask: &[u8; 64], bl: &[u8; 256], maxv: i32, toks: &mu
     }
 }
 
+/// Every brick of `inp` through the model: its tokens, and the reference output of all.
+fn model_all(inp: &Input, bl: &[u8; 256]) -> (Vec<Vec<Tok>>, Vec<u16>) {
+    let maxv = if inp.bpl == 1 { 255 } else { 65535 };
+    let mut refout = vec![0u16; inp.n * 512];
+    let toks = (0..inp.n)
+        .zip(refout.chunks_exact_mut(512))
+        .map(|(b, out)| {
+            let mut t = Vec::new();
+            model_brick(&inp.levels[b * 512..(b + 1) * 512], &inp.masks[b], bl, maxv, &mut t, out);
+            t
+        })
+        .collect();
+    (toks, refout)
+}
+
 // ---- tables ---------------------------------------------------------------------------------
 
 /// Frequencies of every context quantised to a total of 2^p, every seen symbol at least 1.
@@ -637,14 +652,7 @@ fn main() {
     let level: i32 = get("--level").map(|s| s.parse().unwrap()).unwrap_or(19);
     let mut inp = read_input(path);
     let bl = bucket_lut();
-    let maxv = if inp.bpl == 1 { 255 } else { 65535 };
-    let mut toks = Vec::with_capacity(inp.n);
-    let mut refout = vec![0u16; inp.n * 512];
-    for b in 0..inp.n {
-        let mut t = Vec::new();
-        model_brick(&inp.levels[b * 512..(b + 1) * 512], &inp.masks[b], &bl, maxv, &mut t, &mut refout[b * 512..(b + 1) * 512]);
-        toks.push(t);
-    }
+    let (mut toks, mut refout) = model_all(&inp, &bl);
     let active: usize = toks.iter().map(|t| t.len()).sum();
     let vox = inp.n * 512;
     let out_bytes = vox * inp.bpl;
@@ -698,12 +706,7 @@ fn main() {
         for m in inp.masks.iter_mut() {
             *m = [0xff; 64];
         }
-        toks.clear();
-        for b in 0..inp.n {
-            let mut t = Vec::new();
-            model_brick(&inp.levels[b * 512..(b + 1) * 512], &inp.masks[b], &bl, maxv, &mut t, &mut refout[b * 512..(b + 1) * 512]);
-            toks.push(t);
-        }
+        (toks, refout) = model_all(&inp, &bl);
         println!("  --no-masks: every voxel coded, masks all set ({} B through zstd)", zstd::bulk::compress(&vec![0xffu8; inp.n * 64], 19).unwrap().len());
     }
     macro_rules! one {
