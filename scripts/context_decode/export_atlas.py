@@ -61,7 +61,10 @@ def shown_masks(m, secs):
 
 def main():
     path, out = sys.argv[1], sys.argv[2]
-    m, secs = vr.open_asset(path)
+    try:
+        m, secs = vr.open_asset(path)
+    except vr.VpakError as e:
+        raise SystemExit(f"error: {path}: {e}") from None
     all_texels = "--all-texels" in sys.argv
     shown = {} if all_texels else shown_masks(m, secs)
     by_width = {}  # w: (bricks, divisors, stored bytes)

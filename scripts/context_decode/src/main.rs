@@ -40,25 +40,34 @@ struct Input {
     levels: Vec<u16>, // n * 512
 }
 
-fn read_input(path: &str) -> Input {
-    let d = std::fs::read(path).expect("read input");
-    assert_eq!(&d[0..4], b"BRK1");
+/// The bricks of a BRK1 file (`export_bricks.py`, `export_atlas.py`), or what is wrong
+/// with it; the sizes it states are checked against its length before anything is sized by them.
+fn read_input(path: &str) -> Result<Input, String> {
+    let d = std::fs::read(path).map_err(|e| e.to_string())?;
+    if d.len() < 20 || &d[0..4] != b"BRK1" {
+        return Err("not a BRK1 brick file".into());
+    }
     let n = u32::from_le_bytes(d[4..8].try_into().unwrap()) as usize;
     let e = f64::from_le_bytes(d[8..16].try_into().unwrap());
     let bpl = u32::from_le_bytes(d[16..20].try_into().unwrap()) as usize;
+    if !(bpl == 1 || bpl == 2) {
+        return Err(format!("{bpl} bytes per level (1 or 2 expected)"));
+    }
     let rec = 64 + 4 + 512 * bpl;
+    if (d.len() - 20) / rec != n || (d.len() - 20) % rec != 0 {
+        return Err(format!("{} bytes, not the {n} bricks of {rec} bytes its header states", d.len()));
+    }
     let mut masks = Vec::with_capacity(n);
     let mut kmin = Vec::with_capacity(n);
     let mut levels = Vec::with_capacity(n * 512);
-    for b in 0..n {
-        let r = &d[20 + b * rec..20 + (b + 1) * rec];
+    for r in d[20..].chunks_exact(rec) {
         masks.push(r[0..64].try_into().unwrap());
         kmin.push(i32::from_le_bytes(r[64..68].try_into().unwrap()));
         for v in 0..512 {
             levels.push(if bpl == 1 { r[68 + v] as u16 } else { u16::from_le_bytes([r[68 + 2 * v], r[69 + 2 * v]]) });
         }
     }
-    Input { n, e, bpl, masks, kmin, levels }
+    Ok(Input { n, e, bpl, masks, kmin, levels })
 }
 
 // ---- model (shared by encoder and decoder) ------------------------------------------------
@@ -650,7 +659,10 @@ fn main() {
     let get = |k: &str| args.iter().position(|a| a == k).map(|i| args[i + 1].clone());
     let runs: usize = get("--runs").map(|s| s.parse().unwrap()).unwrap_or(7);
     let level: i32 = get("--level").map(|s| s.parse().unwrap()).unwrap_or(19);
-    let mut inp = read_input(path);
+    let mut inp = read_input(path).unwrap_or_else(|e| {
+        eprintln!("error: {path}: {e}");
+        std::process::exit(1)
+    });
     let bl = bucket_lut();
     let (mut toks, mut refout) = model_all(&inp, &bl);
     let active: usize = toks.iter().map(|t| t.len()).sum();
