@@ -67,7 +67,7 @@ def make_file(bodies, version=8):
 
 def bodies_of(data):
     """The bodies of a segmented file, as the segment table places them (not validated)."""
-    _, table = v.read_table(memoryview(data), (7, 8, 9, 10), "file")
+    _, table = v.read_table(memoryview(data), (7, 8, 9, 10, 11), "file")
     return [bytes(data[e[2]:e[2] + e[3]]) for e in table]
 
 
@@ -142,7 +142,7 @@ def check_restores(vdbcook, work, flags):
     """A vdbcook zstd asset restores exactly the sections of the same asset uncompressed."""
     packed = cook(vdbcook, work, "z", ["--supercompress", "zstd", *flags])
     plain = recompress(vdbcook, work, packed, "none")
-    assert struct.unpack_from("<I", packed, 8)[0] == 10
+    assert struct.unpack_from("<I", packed, 8)[0] == 11
     z, p = same_asset(packed, plain)
     filters = set()
     for (mz, sz), (_, sp), body in zip(z.bodies, p.bodies, bodies_of(packed)):
@@ -255,7 +255,8 @@ def check_refusals(packed, plain, work):
     refused(with_body(packed, rec(lambda r: r.__setitem__(3, 7 - filt))), "restored bytes do not match")
     refused(with_body(packed, rec(lambda r: r.__setitem__(6, (1 << 30) * slab))), "more than a")
     refused(with_body(packed, rec(lambda r: r.__setitem__(7, r[7] ^ 1))), "restored bytes do not match")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(2, 2))), "scheme 2")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(2, 3))), "scheme 3")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(2, 2))), "(scheme 2) in a file older than version 11")
     refused(with_body(packed, rec(lambda r: r.__setitem__(3, 5))), "filter 5")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [0, 2, 0]))), "filter 0 with width 2")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [1, 3, 0]))), "filter 1 with width 3")
@@ -311,6 +312,44 @@ def check_refusals(packed, plain, work):
     return flipped
 
 
+def check_context(vdbcook, work):
+    """Atlases context-coded by `--optimize disk` (scheme 2, version 11) restore the
+    uncompressed asset's sections; damaged streams, and such a stream in a file older than
+    version 11, are refused. Returns how many context-coded sections were read."""
+    packed, plain, _ = check_restores(vdbcook, work, ["--max-error", "0.004", "--optimize", "disk", "--segment-frames", "2"])
+    coded = [(s, k) for s, body in enumerate(bodies_of(packed)) for k, r in records_of(sections_of(body)).items() if r[2] == 2]
+    assert coded, "no section context-coded"
+    seg, atlas = coded[0]
+
+    def edit(fn, version=11):
+        bodies = bodies_of(packed)
+        secs = sections_of(bodies[seg])
+        sec = next(x for x in secs if (x[0], x[1]) == atlas)
+        sec[2] = fn(sec[2])
+        bodies[seg] = make_body(secs)
+        return make_file(bodies, version)
+
+    same_asset(edit(lambda d: d), plain)
+    refused(edit(lambda d: d, version=10), "older than version 11")
+    bodies = bodies_of(packed)
+    secs = sections_of(bodies[seg])
+    recs = [r if (r[0], r[1]) != atlas else r[:3] + [3] + r[4:] for r in records_of(secs).values()]
+    next(x for x in secs if x[0] == K_CODING)[2] = coding_bytes(recs)
+    bodies[seg] = make_body(secs)
+    refused(make_file(bodies, 11), "context-coded with filter 3")
+    where = f"section kind 10 index {atlas[1]}"
+    stored = next(x for x in sections_of(bodies_of(packed)[seg]) if (x[0], x[1]) == atlas)[2]
+    for cut in (0, 12, 24, len(stored) // 2, len(stored) - 1):
+        refused(edit(lambda d, cut=cut: d[:cut]), where)
+    for i in range(0, len(stored), len(stored) // 40 + 1):
+        def flip(d, i=i):
+            d = bytearray(d)
+            d[i] ^= 0x10
+            return bytes(d)
+        refused(edit(flip), where)
+    return len(coded)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vdbcook", default=os.environ.get("VDBCOOK", os.path.join(ROOT, "target", "release", "vdbcook")))
@@ -325,9 +364,11 @@ def main():
                 kept = packed, plain
         check_every_filter(kept[1])
         flips = check_refusals(*kept, work)
+        contexts = check_context(args.vdbcook, work)
     names = sorted(f"{FILTER_NAMES[f]}/{w}" for f, w in filters)
     print(f"ok: 4 supercompressed cooks restore the uncompressed sections (filter/width used: {', '.join(names)}); "
-          f"every allowed filter decodes; corrupt coding refused ({flips} flipped compressed bytes)")
+          f"every allowed filter decodes; corrupt coding refused ({flips} flipped compressed bytes); "
+          f"{contexts} context-coded sections restore, damaged ones refused")
 
 
 if __name__ == "__main__":

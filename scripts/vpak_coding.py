@@ -1,9 +1,10 @@
 """Supercompressed sections of a `.vpak` body (format version 8), for scripts/vpak_read.py.
 
-Written from docs/format.md ("Supercompression") alone, like the reader: the coding
-section (kind 13) holds one 40-byte record per compressed section; a section is restored
-by decompressing one zstd frame and undoing a shuffle, delta or tiles filter, and checked
-against the record's XXH3-64 of the restored bytes. Every rule the page states is
+Written from docs/format.md ("Supercompression", "Context coding") alone, like the reader:
+the coding section (kind 13) holds one 40-byte record per compressed section; a section is
+restored by decompressing one zstd frame (or, version 11, decoding a context-coded stream)
+and undoing a shuffle, delta or tiles filter, and checked against the record's XXH3-64 of
+the restored bytes. Every rule the page states is
 checked; a failure raises `CodingError` with a one-line message.
 
 Dependencies (Debian): python3-numpy, python3-zstandard.
@@ -15,7 +16,7 @@ import numpy as np
 
 K_CODING = 13
 RECORD_SIZE = 40
-SCHEME_ZSTD = 1
+SCHEME_ZSTD, SCHEME_CONTEXT = 1, 2
 FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA, FILTER_TILES, FILTER_TILES_UNPREDICTED = 0, 1, 2, 3, 4
 FILTER_NAMES = {FILTER_NONE: "none", FILTER_SHUFFLE: "shuffle", FILTER_DELTA: "delta", FILTER_TILES: "tiles",
                 FILTER_TILES_UNPREDICTED: "tiles unpredicted"}
@@ -42,10 +43,11 @@ def filtered_size(filt, w, n):
     return n + w * (n // (512 * w)) if filt in TILED else n
 
 
-def parse_records(data, table):
+def parse_records(data, table, context=True):
     """The coding section's records as {(kind, index): (scheme, filter, w, s, n, checksum)},
     each checked against the page's rules; `table` is the body's section table as stored
-    {(kind, index): (offset, size, checksum)}."""
+    {(kind, index): (offset, size, checksum)}; `context`: whether scheme 2 may appear
+    (a version-11 file)."""
     if len(data) % RECORD_SIZE:
         raise CodingError(f"coding section of {len(data)} bytes is not whole {RECORD_SIZE}-byte records")
     if not data:
@@ -60,8 +62,12 @@ def parse_records(data, table):
             raise CodingError(f"{name} names a section the body does not hold")
         if kind in (1, K_CODING):
             raise CodingError(f"{name}: the metadata and the coding section are never compressed")
-        if scheme != SCHEME_ZSTD:
-            raise CodingError(f"{name} has scheme {scheme} (1, zstd, is the only one)")
+        if scheme not in (SCHEME_ZSTD, SCHEME_CONTEXT):
+            raise CodingError(f"{name} has scheme {scheme} (1, zstd, or 2, context coding)")
+        if scheme == SCHEME_CONTEXT and not context:
+            raise CodingError(f"{name} is context-coded (scheme 2) in a file older than version 11")
+        if scheme == SCHEME_CONTEXT and filt != FILTER_TILES_UNPREDICTED:
+            raise CodingError(f"{name} is context-coded with filter {filt} (tiles unpredicted only)")
         allowed = {
             FILTER_NONE: w == 1 and s == 0,
             FILTER_SHUFFLE: w in (1, 2, 4, 8, 16) and s == 0,
@@ -160,10 +166,110 @@ def unfilter(f, filt, w, s, n=None):
     return x.astype(dtype).tobytes()
 
 
+def context_decode(stored, w, size):
+    """A context-coded stream (format.md, "Context coding") decoded into the filtered bytes
+    F of `size` bytes: T divisors and 512·T quotients of w bytes, shuffled by byte."""
+    stored = bytes(stored)
+    m = size // w
+    t_count = m // 513
+    if len(stored) < 24:
+        raise CodingError(f"its context stream is {len(stored)} bytes, shorter than its header")
+    lanes, prec, nsym, a_len, b_len, words_len = struct.unpack_from("<6I", stored, 0)
+    if not (1 <= lanes <= 256 and 9 <= prec <= 12 and 1 <= nsym <= 48):
+        raise CodingError(f"its context stream has N={lanes}, P={prec}, S={nsym}")
+    if 24 + a_len + b_len + 2 * words_len != len(stored) or words_len < 2 * lanes:
+        raise CodingError("its context stream's parts do not add up to its size")
+    side = decompress(stored[24:24 + a_len], w * t_count + 256 * nsym)
+    bits = stored[24 + a_len:24 + a_len + b_len]
+    words = struct.unpack_from(f"<{words_len}H", stored, 24 + a_len + b_len)
+    divisors = [int.from_bytes(side[w * t:w * t + w], "little") for t in range(t_count)]
+    table = struct.unpack_from(f"<{128 * nsym}H", side, w * t_count)
+    total = 1 << prec
+    # Per context, the symbol of each slot, and each symbol's cum.
+    slots, cums, freqs = {}, {}, {}
+    for c in range(128):
+        f = table[c * nsym:(c + 1) * nsym]
+        if sum(f) == 0:
+            continue
+        if sum(f) != total:
+            raise CodingError(f"its context {c}'s frequencies sum to {sum(f)}, not 0 or {total}")
+        cum, acc = [], 0
+        for x in f:
+            cum.append(acc)
+            acc += x
+        slots[c] = [s for s in range(nsym) for _ in range(f[s])]
+        cums[c], freqs[c] = cum, f
+    elems = divisors + [0] * (512 * t_count)
+    states = [words[2 * l] * 65536 + words[2 * l + 1] for l in range(lanes)]
+    wp, bp = 2 * lanes, 0
+    limit = 1 << (8 * w)
+
+    def bit(b):
+        return (bits[b >> 3] >> (b & 7)) & 1 if b >> 3 < len(bits) else None
+
+    u = {}  # (tile, i, j, k): (value, |r|)
+    for g in range(-(-t_count // lanes)):
+        for v in range(512):
+            i, j, k = v % 8, (v // 8) % 8, v // 64
+            cls = 4 * (k > 0) + 2 * (j > 0) + (i > 0)
+            for lane in range(lanes):
+                t = g * lanes + lane
+                if t >= t_count:
+                    break
+                def val(di, dj, dk):
+                    return u.get((t, i - di, j - dj, k - dk), (0, 0))
+                a, b, c = val(0, 0, 1)[0], val(0, 1, 0)[0], val(1, 0, 0)[0]
+                pred = {0: 0, 1: c, 2: b, 4: a, 3: b + c - val(1, 1, 0)[0], 5: a + c - val(1, 0, 1)[0],
+                        6: a + b - val(0, 1, 1)[0]}.get(cls)
+                if pred is None:
+                    pred = (2 * (a + b + c) - val(0, 1, 1)[0] - val(1, 0, 1)[0] - val(1, 1, 0)[0] + 1) // 3
+                e = min(255, val(1, 0, 0)[1] + val(0, 1, 0)[1] + val(0, 0, 1)[1])
+                bucket = e if e < 4 else min(15, (e * e).bit_length() - 1)
+                ctx = 8 * bucket + cls
+                if ctx not in slots:
+                    raise CodingError(f"its context stream codes in unused context {ctx}")
+                x = states[lane]
+                slot = x % total
+                sym = slots[ctx][slot]
+                x = freqs[ctx][sym] * (x >> prec) + slot - cums[ctx][sym]
+                if x < 65536:
+                    if wp >= words_len:
+                        raise CodingError("its context stream runs past its words")
+                    x = x * 65536 + words[wp]
+                    wp += 1
+                states[lane] = x
+                if sym < 16:
+                    z = sym
+                else:
+                    kk = sym - 16
+                    raw = 0
+                    for n_ in range(kk):
+                        got = bit(bp + n_)
+                        if got is None:
+                            raise CodingError("its context stream runs past its escape bits")
+                        raw |= got << n_
+                    bp += kk
+                    z = 15 + (1 << kk) + raw
+                r = z // 2 if z % 2 == 0 else -(z + 1) // 2
+                q = pred + r
+                if not 0 <= q < limit:
+                    raise CodingError(f"its context stream decodes to {q}, outside the {w}-byte element")
+                u[(t, i, j, k)] = (q, abs(r))
+                elems[t_count + 512 * t + v] = q
+        u.clear()
+    if wp != words_len or any(x != 65536 for x in states) or bp > 8 * b_len:
+        raise CodingError("its context stream does not end where its coder does")
+    e = np.array(elems, dtype="<u2")
+    planes = [(e & 0xFF).astype(np.uint8)] + ([(e >> 8).astype(np.uint8)] if w == 2 else [])
+    return b"".join(p.tobytes() for p in planes)
+
+
 def restore(stored, record, xxh3_64):
     """A section's bytes from its stored bytes and its coding record."""
-    _scheme, filt, w, s, n, checksum = record
-    section = unfilter(decompress(stored, filtered_size(filt, w, n)), filt, w, s, n)
+    scheme, filt, w, s, n, checksum = record
+    size = filtered_size(filt, w, n)
+    f = context_decode(stored, w, size) if scheme == SCHEME_CONTEXT else decompress(stored, size)
+    section = unfilter(f, filt, w, s, n)
     if xxh3_64(section) != checksum:
         raise CodingError("restored bytes do not match the coding record's checksum")
     return section

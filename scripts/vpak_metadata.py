@@ -13,7 +13,7 @@ import struct
 
 import numpy as np
 
-BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION = 6, 7, 8, 9, 10
+BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION = 6, 7, 8, 9, 10, 11
 DEFAULT_FPS = 24.0  # the frame rate of an asset that records none
 MAX_LEVELS = 5
 # Channel resolutions (version 10): a channel's level at most 3 (voxels 8 times the
@@ -124,7 +124,7 @@ def decode_metadata(data, version=RESOLVED_VERSION):
     if r.pos != len(r.data):
         # Version 9: the Time record follows (format.md, "Time").
         t = {"fps": r.f64(), "numbers": r.vec(r.int)}
-        if r.pos != len(r.data) and version in (BODY_VERSION, RESOLVED_VERSION):
+        if r.pos != len(r.data) and (version == BODY_VERSION or version >= RESOLVED_VERSION):
             # Version 10 (and a body of one on its own, a version-6 file): the channel
             # resolutions record follows ("Channel resolutions").
             m["resolutions"] = r.vec(lambda: {"level": r.uint(), "half_offset": r.array(r.int, 3)})

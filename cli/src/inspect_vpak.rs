@@ -138,7 +138,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
             .iter()
             .map(|(s, restored, c)| {
                 json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": b.offset + s.offset, "bytes": restored, "disk_bytes": s.size, "checksum": format!("{:016x}", s.checksum),
-                    "coding": c.map(|c| json!({"scheme": "zstd", "filter": c.filter.name(), "checksum": format!("{:016x}", c.raw_checksum)}))})
+                    "coding": c.map(|c| json!({"scheme": c.scheme_name(), "filter": c.filter.name(), "checksum": format!("{:016x}", c.raw_checksum)}))})
             })
             .collect::<Vec<_>>()
     };
@@ -276,7 +276,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         let _ = writeln!(s, "  sections{}:", if table.len() > 1 { format!(" of segment {k}") } else { String::new() });
         for (e, restored, c) in &b.sections {
             let label = kind::label(e.kind, e.index);
-            let coding = c.map_or(String::new(), |c| format!("  zstd, {}: {restored} bytes restored", c.filter.name()));
+            let coding = c.map_or(String::new(), |c| format!("  {}, {}: {restored} bytes restored", c.scheme_name(), c.filter.name()));
             let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}{coding}", e.size, b.offset + e.offset, e.checksum);
         }
     }

@@ -89,6 +89,48 @@ fn texels_for_the_disk_stay_within_the_bound_and_compress_further() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--optimize disk` context-codes the atlases of level planes where that is smaller
+/// (scheme 2, version 11): the texels stay within the bound, the asset restores the bytes
+/// the cooker chose (rewritten plainly and supercompressed again, it is the same file),
+/// any thread count writes it alike, and a damaged stream is refused in one line.
+#[test]
+fn context_coded_atlases_restore_the_cookers_texels() {
+    let dir = scratch_dir("supercompress", "context");
+    let smoke = smoke();
+    let flags = ["--max-error", "0.004", "--supercompress", "zstd", "--optimize", "disk", "--segment-frames", "2"];
+    let coded = cook(&dir, "c.vpak", &[&smoke], &flags);
+    let sections = inspect(&coded)["sections"].as_array().unwrap().clone();
+    let context: Vec<&serde_json::Value> = sections.iter().filter(|x| x["coding"]["scheme"] == "context").collect();
+    assert!(!context.is_empty() && context.iter().all(|x| x["coding"]["filter"].as_str().is_some_and(|f| f.starts_with("tiles unpredicted"))), "{sections:?}");
+    let (plain, again) = (dir.join("p.vpak"), dir.join("a.vpak"));
+    recompress(&coded, &plain, "none");
+    recompress(&plain, &again, "zstd");
+    assert!(std::fs::read(&again).unwrap() == std::fs::read(&coded).unwrap(), "supercompressed again, the asset differs");
+    assert!(std::fs::metadata(&coded).unwrap().len() * 2 < std::fs::metadata(&plain).unwrap().len());
+    for (frame, src) in vdb_files(&root().join("fixtures/smoke_seq")).iter().enumerate().step_by(3) {
+        let vdb = dir.join(format!("c{frame}.vdb"));
+        ok(vdbcook(&["unpack", "-q", "--force", s(&coded), "--frame", &frame.to_string(), "-o", s(&vdb)]));
+        let d: serde_json::Value = serde_json::from_slice(&ok(vdbcook(&["diff", "--json", s(src), s(&vdb)])).stdout).unwrap();
+        assert!(d["max_error"].as_f64().unwrap_or(f64::MAX) <= 0.004, "frame {frame}: {d}");
+        assert_eq!(d["inactive_in_b"].as_u64(), Some(0), "{d}");
+    }
+    let one = dir.join("c1.vpak");
+    let r = std::process::Command::new(env!("CARGO_BIN_EXE_vdbcook")).env("RAYON_NUM_THREADS", "1").args([&["cook", "-q", "--force", "-o", s(&one), &smoke][..], &flags].concat()).output().unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(std::fs::read(&one).unwrap() == std::fs::read(&coded).unwrap(), "one thread wrote another asset");
+    // A byte of a context-coded stream flipped: the file is refused as it is opened.
+    let mut bytes = std::fs::read(&coded).unwrap();
+    bytes[context[0]["offset"].as_u64().unwrap() as usize + 40] ^= 0x08;
+    let p = dir.join("flipped.vpak");
+    std::fs::write(&p, bytes).unwrap();
+    let r = vdbcook(&["unpack", "-q", "--force", s(&p), "-o", s(&dir.join("x.vdb"))]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!((r.status.code(), err.trim_end().lines().count()), (Some(1), 1), "{err}");
+    assert!(err.contains("flipped.vpak") && err.contains("brick atlas"), "{err}");
+    assert!(!dir.join("x.vdb").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn large_sections_compressed_by_workers_are_the_same_on_any_thread_count() {
     // A 128³ fog's f16 atlas (4 MiB) is above the size that zstd's workers

@@ -47,9 +47,9 @@ fn seed() -> &'static Vec<vdbcook_vpak::Section> {
 fuzz_target!(|data: &[u8]| {
     match data.split_first() {
         Some((0xA5, metadata)) => {
-            let mut sections: Vec<vdbcook_vpak::Section> = seed().iter().map(|s| vdbcook_vpak::Section { kind: s.kind, index: s.index, data: s.data.clone() }).collect();
+            let mut sections: Vec<vdbcook_vpak::Section> = seed().iter().map(|s| vdbcook_vpak::Section { kind: s.kind, index: s.index, data: s.data.to_vec().into() }).collect();
             for s in sections.iter_mut().filter(|s| s.kind == vdbcook_vpak::kind::METADATA) {
-                s.data = metadata.to_vec();
+                s.data = metadata.to_vec().into();
             }
             if let Ok(asset) = vdbcook_vpak::Asset::from_bytes(&vdbcook_vpak::assemble(&sections)) {
                 exercise(&asset);

@@ -4,11 +4,12 @@
 //! as soon as its last frame is in.
 
 use crate::grids::{read_frame, Channels, Frame, FrameFile, GridSelection};
-use crate::options::{CookSettings, Supercompress};
+use crate::options::{CookSettings, Optimize};
 use crate::{Context, Error, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use vdbcook_cook::{CookOptions, CookReport, Cooker, Format, Progress};
+use vdbcook_vpak::coding::Schemes;
 use vdbcook_vpak::segments::PartInfo;
 use vdbcook_vpak::{Asset, AtomicFile, DirectWriter, SourceFile, Writer};
 
@@ -266,8 +267,8 @@ struct Output {
     writing: Option<Writing>,
     sink: Sink,
     reports: Vec<CookReport>,
-    /// How each segment's sections are stored.
-    coding: Supercompress,
+    /// How each segment's sections are stored (`None`: as they are).
+    coding: Option<Schemes>,
 }
 
 enum Sink {
@@ -309,7 +310,7 @@ impl Drop for Writing {
 }
 
 impl Output {
-    fn memory(count: u32, coding: Supercompress) -> Result<Output> {
+    fn memory(count: u32, coding: Option<Schemes>) -> Result<Output> {
         Ok(Output { sink: Sink::Memory(Writer::new(std::io::Cursor::new(Vec::new()), count)?), reports: Vec::new(), coding, writing: None })
     }
 
@@ -317,13 +318,13 @@ impl Output {
     /// an unnamed file in the system's temporary directory (never given a name,
     /// so it goes with the process), read through a mapping a segment at a time.
     fn scratch(count: u32) -> Result<Output> {
-        Output::file(&std::env::temp_dir().join("vdbcook-scratch.vpak"), true, count, None, Supercompress::None, false)
+        Output::file(&std::env::temp_dir().join("vdbcook-scratch.vpak"), true, count, None, None, false)
     }
 
     /// An asset (or, with `part`, a part file) of `count` segments written
     /// into an unnamed file for `path`; `past_cache` for an output that is
     /// not read back soon (its whole blocks go to disk with no copy in the page cache).
-    fn file(path: &Path, overwrite: bool, count: u32, part: Option<&PartInfo>, coding: Supercompress, past_cache: bool) -> Result<Output> {
+    fn file(path: &Path, overwrite: bool, count: u32, part: Option<&PartInfo>, coding: Option<Schemes>, past_cache: bool) -> Result<Output> {
         let ctx = || path.display().to_string();
         let mut file = AtomicFile::create(path, overwrite).with_context(ctx)?;
         let handle = file.file().try_clone().with_context(ctx)?;
@@ -370,9 +371,9 @@ impl Output {
     /// segment before is written. Its report comes next.
     fn deliver(&mut self, frames: u32, meta: &vdbcook_vpak::Metadata, mut sections: Vec<vdbcook_vpak::Section>) -> Result<Delivered> {
         let mut out = Delivered::default();
-        if let Supercompress::Zstd(level) = self.coding {
+        if let Some(schemes) = self.coding {
             let t0 = Instant::now();
-            sections = vdbcook_vpak::coding::supercompress(sections, meta, level)?;
+            sections = vdbcook_vpak::coding::supercompress(sections, meta, schemes)?;
             out.coded = Some((t0.elapsed().as_secs_f64(), sections.iter().map(|s| (vdbcook_vpak::kind::label(s.kind, s.index), s.data.len() as u64)).collect()));
         }
         self.wait()?;
@@ -584,13 +585,14 @@ pub fn cook_formats(job: CookJob, formats: &[Format], bars: &dyn Progress) -> Re
         }
         None => None,
     };
+    let schemes = Schemes::of(s.supercompress, s.optimize == Optimize::Disk);
     let mut outs = formats
         .iter()
         .map(|_| match job.output {
             // An asset compared with its reference next is read back whole: through the page cache.
-            Some((path, overwrite)) => Output::file(path, overwrite, count, part.as_ref(), s.supercompress, !job.reference),
+            Some((path, overwrite)) => Output::file(path, overwrite, count, part.as_ref(), schemes, !job.reference),
             None if part.is_some() => Err(Error::Failed("a part is cooked into a file".into())),
-            None => Output::memory(count, s.supercompress),
+            None => Output::memory(count, schemes),
         })
         .collect::<Result<Vec<_>>>()?;
     if job.reference {

@@ -8,10 +8,11 @@
 //! restored into the memory of the one before as the runtime's reader does
 //! (`seconds`) or into fresh memory (`seconds_fresh`). With FRAMES_OUT,
 //! also writes the compressed sections' zstd frames one after the other (what
-//! `zstd -d` is timed on, the same bytes). Run with `RAYON_NUM_THREADS=1` for one core.
+//! `zstd -d` is timed on, the same bytes; a context-coded section as the
+//! zstd frame of the same filtered bytes at level 19). Run with `RAYON_NUM_THREADS=1` for one core.
 
 use std::io::Write;
-use vdbcook_vpak::coding::Coding;
+use vdbcook_vpak::coding::{self, Coding};
 use vdbcook_vpak::{kind, Asset};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -26,7 +27,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             raw += c.raw_size;
             let b = seg.section(c.kind, c.index)?;
             stored += b.len() as u64;
-            frames.extend_from_slice(b);
+            match c.scheme {
+                // A context-coded section as zstd would store it (level 19, the same filter).
+                coding::SCHEME_CONTEXT => frames.extend_from_slice(&coding::zstd_frame(&c, &coding::restore(&c, b)?, 19)?),
+                _ => frames.extend_from_slice(b),
+            }
         }
     }
     if let Some(out) = args.get(2) {

@@ -96,7 +96,7 @@ impl Asset {
         whole.version = whole.version_field()?;
         match whole.version {
             segments::BODY_VERSION => whole.body(),
-            segments::VERSION | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => whole.container(),
+            segments::VERSION | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => whole.container(),
             v => Err(Error::Version(v)),
         }
     }
@@ -125,7 +125,7 @@ impl Asset {
     /// the file's version allows one.
     fn body(mut self) -> Result<Asset, Error> {
         let table = self.table_bytes(ENTRY_LEN, MAX_SECTIONS, Error::SectionCount)?;
-        self.sections = crate::head::sections(table, self.len as u64, self.version >= segments::VERSION_8, |e| Ok(std::borrow::Cow::Borrowed(self.raw(e))))?;
+        self.sections = crate::head::sections(table, self.len as u64, self.version, |e| Ok(std::borrow::Cow::Borrowed(self.raw(e))))?;
         Ok(self)
     }
 

@@ -9,8 +9,11 @@ use rayon::prelude::*;
 
 /// Bytes of one coding record.
 pub const RECORD_LEN: usize = 40;
-/// The only compression scheme: a zstd frame.
+/// Compression scheme 1: a zstd frame.
 pub const SCHEME_ZSTD: u32 = 1;
+/// Compression scheme 2 (version 11): a `tiles unpredicted` atlas coded
+/// with a context model and rANS ([`crate::context`]).
+pub const SCHEME_CONTEXT: u32 = 2;
 /// A zstd frame decodes to at most this many times its own size (an RLE
 /// block of 4 bytes stands for up to 128 KiB): a larger claimed size is a lie.
 const MAX_RATIO: u64 = 1 << 15;
@@ -50,6 +53,27 @@ impl std::str::FromStr for Supercompress {
     }
 }
 
+/// How a writer stores sections: each as one zstd frame at `level` (after
+/// the filter that makes it smallest) and, with `context`, the atlases of
+/// level planes (`unorm8`, `unorm16`) context-coded (scheme 2) where that
+/// is smaller still: what `--optimize disk` asks for, the smallest file at
+/// the cost of some cook time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Schemes {
+    pub level: i32,
+    pub context: bool,
+}
+
+impl Schemes {
+    /// The schemes of a setting (`None`: sections stored as they are).
+    pub fn of(s: Supercompress, context: bool) -> Option<Schemes> {
+        match s {
+            Supercompress::None => None,
+            Supercompress::Zstd(level) => Some(Schemes { level, context }),
+        }
+    }
+}
+
 /// A manifest writes it as the flag does: "zstd:19".
 impl<'de> serde::Deserialize<'de> for Supercompress {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
@@ -85,7 +109,7 @@ pub enum Filter {
 pub use crate::tiles::Tiles;
 
 impl Filter {
-    fn code(self) -> (u32, u32, u32) {
+    pub(crate) fn code(self) -> (u32, u32, u32) {
         match self {
             Filter::None => (0, 1, 0),
             Filter::Shuffle { width } => (1, width, 0),
@@ -246,7 +270,15 @@ pub struct Coding {
 }
 
 impl Coding {
-    fn bytes(&self) -> [u8; RECORD_LEN] {
+    /// The scheme's name, as `inspect` shows it.
+    pub fn scheme_name(&self) -> &'static str {
+        match self.scheme {
+            SCHEME_CONTEXT => "context",
+            _ => "zstd",
+        }
+    }
+
+    pub(crate) fn bytes(&self) -> [u8; RECORD_LEN] {
         let (f, w, s) = self.filter.code();
         let mut b = [0u8; RECORD_LEN];
         for (i, v) in [self.kind, self.index, self.scheme, f, w, s].into_iter().enumerate() {
@@ -266,10 +298,13 @@ impl Coding {
             .map(|r| {
                 let u = |i: usize| u32::from_le_bytes(r[i * 4..i * 4 + 4].try_into().unwrap_or([0; 4]));
                 let (kind, index, scheme) = (u(0), u(1), u(2));
-                if scheme != SCHEME_ZSTD {
+                if !matches!(scheme, SCHEME_ZSTD | SCHEME_CONTEXT) {
                     return Err(Error::Coding { kind, index, problem: format!("unknown scheme {scheme}") });
                 }
                 let filter = Filter::from_code(u(3), u(4), u(5)).ok_or_else(|| Error::Coding { kind, index, problem: format!("unknown filter {} (width {}, stride {})", u(3), u(4), u(5)) })?;
+                if scheme == SCHEME_CONTEXT && !matches!(filter, Filter::Tiles(Tiles { predict: false, .. })) {
+                    return Err(Error::Coding { kind, index, problem: format!("codes filter {} with context coding, which takes tiles unpredicted only", filter.name()) });
+                }
                 let raw_size = u64::from_le_bytes(r[24..32].try_into().unwrap_or([0; 8]));
                 let raw_checksum = u64::from_le_bytes(r[32..40].try_into().unwrap_or([0; 8]));
                 Ok(Coding { kind, index, scheme, filter, raw_size, raw_checksum })
@@ -320,6 +355,26 @@ fn texel_filters(plane: &crate::Plane, bricks: [u32; 3]) -> Vec<Filter> {
     };
     filters.extend(tiles);
     filters
+}
+
+/// A context-coded atlas is kept when it takes at most this share of its
+/// zstd frame's bytes. Its decoder runs at about zstd's speed on 8-bit
+/// levels with AVX-512, at about 0.6 times on 16-bit levels and at a fifth
+/// to a quarter without AVX-512 (docs/benchmarks.md): a few percent of bytes
+/// are not worth that.
+const CONTEXT_GAIN: f64 = 0.92;
+
+/// The `tiles unpredicted` filter among `filters` when section `s` is the
+/// atlas of a plane of levels (`unorm8`, `unorm16`), which context coding
+/// (scheme 2) is tried on beside zstd: its model predicts levels from their
+/// neighbours, which `f16` bit patterns are not.
+fn contextual(s: &Section, meta: &Metadata, filters: &[Filter]) -> Option<Tiles> {
+    let (plane, _) = atlas_of(meta, s.index).filter(|_| s.kind == kind::ATLAS)?;
+    let unpredicted = filters.iter().find_map(|f| match f {
+        Filter::Tiles(t) if !t.predict => Some(*t),
+        _ => None,
+    })?;
+    matches!(plane.format, Format::Unorm8 | Format::Unorm16).then_some(unpredicted)
 }
 
 fn atlas_of(meta: &Metadata, section: u32) -> Option<(&crate::Plane, &crate::AtlasInfo)> {
@@ -410,10 +465,12 @@ fn compress_threaded(data: &[u8], level: i32, workers: u32) -> std::io::Result<V
 
 /// Compresses every section worth it (the smallest of its filters' outputs,
 /// tried at a fast level, then compressed at `level`, or as [`level_for`]
-/// says for a large one) and adds the coding section; sections that do not
-/// shrink stay as they are. Deterministic: each section is one zstd frame,
-/// the same on any number of threads ([`compress`]).
-pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Result<Vec<Section>, Error> {
+/// says for a large one; or context-coded when `schemes` allows and that is
+/// smaller) and adds the coding section; sections that do not shrink stay
+/// as they are. Deterministic: each section is one zstd frame or context
+/// stream, the same on any number of threads ([`compress`]).
+pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) -> Result<Vec<Section>, Error> {
+    let level = schemes.level;
     let coded: Vec<(Section, Option<Coding>)> = sections
         .into_par_iter()
         .map(|s| {
@@ -421,9 +478,11 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
             if filters.is_empty() || s.data.is_empty() {
                 return Ok((s, None));
             }
-            // The first of the smallest, with its filtered bytes when they were made whole.
-            let (best, filtered) = match filters.as_slice() {
-                [only] => (*only, None),
+            let contextual = contextual(&s, meta, &filters).filter(|_| schemes.context);
+            // The first of the smallest, with its filtered bytes when they were made whole,
+            // and the unpredicted tiles' when context coding is tried on them.
+            let (best, filtered, mut unpredicted) = match filters.as_slice() {
+                [only] => (*only, None, None),
                 _ => {
                     // Tiles span the atlas's rows: every tiles filter made whole in one pass, then sampled.
                     let mut tiled: Vec<Vec<u8>> = tiles_among(&filters).map(|(t, predicts)| t.apply_each(&s.data, &predicts)).unwrap_or_default();
@@ -442,16 +501,28 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, level: i32) -> Res
                     let sizes: Vec<usize> = samples.par_iter().map(|(x, _)| zstd::bulk::compress(x, 1).map(|c| c.len())).collect::<Result<_, _>>()?;
                     let first_smallest = (0..sizes.len()).min_by_key(|&i| (sizes[i], i)).unwrap_or(0);
                     let whole = samples[first_smallest].1.and_then(|j| tiled.get_mut(j).map(std::mem::take));
-                    (filters[first_smallest], whole)
+                    let unpredicted = contextual.and_then(|t| filters.iter().filter(|f| matches!(f, Filter::Tiles(_))).position(|&f| f == Filter::Tiles(t)));
+                    let unpredicted = unpredicted.and_then(|j| tiled.get_mut(j).map(std::mem::take)).filter(|u| !u.is_empty());
+                    (filters[first_smallest], whole, unpredicted)
                 }
             };
             let filtered = filtered.unwrap_or_else(|| best.apply(&s.data));
-            let data = compress(&filtered, level_for(level, filtered.len()))?;
-            drop(filtered);
+            let mut data = compress(&filtered, level_for(level, filtered.len()))?;
+            let (mut scheme, mut filter) = (SCHEME_ZSTD, best);
+            if let Some(t) = contextual {
+                let input = match best == Filter::Tiles(t) {
+                    true => &filtered,
+                    false => unpredicted.get_or_insert_with(|| Filter::Tiles(t).apply(&s.data)),
+                };
+                if let Some(coded) = crate::context::encode(input, t.width, level)?.filter(|c| (c.len() as f64) <= CONTEXT_GAIN * data.len() as f64) {
+                    (data, scheme, filter) = (coded, SCHEME_CONTEXT, Filter::Tiles(t));
+                }
+            }
+            drop((filtered, unpredicted));
             if data.len() >= s.data.len() {
                 return Ok((s, None));
             }
-            let c = Coding { kind: s.kind, index: s.index, scheme: SCHEME_ZSTD, filter: best, raw_size: s.data.len() as u64, raw_checksum: checksum(&s.data) };
+            let c = Coding { kind: s.kind, index: s.index, scheme, filter, raw_size: s.data.len() as u64, raw_checksum: checksum(&s.data) };
             Ok((Section { kind: s.kind, index: s.index, data: data.into() }, Some(c)))
         })
         .collect::<Result<_, std::io::Error>>()?;
@@ -503,14 +574,20 @@ fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>
         Ok(got) => Err(err(format!("decompresses to {got} bytes, the coding table says {n}"))),
         Err(e) => Err(err(format!("does not decompress to the {n} bytes the coding table says ({e})"))),
     };
-    if c.filter == Filter::None {
+    if c.filter == Filter::None && c.scheme == SCHEME_ZSTD {
         check(d.decompress_to_buffer(stored, out))?;
     } else {
         let own = scratch.capacity() < n;
         let mut buf = if own { SCRATCH.take() } else { std::mem::take(scratch) };
         buf.clear();
         let undone = buf.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} filtered bytes"))).and_then(|()| {
-            check(d.decompress_to_buffer(stored, &mut buf))?;
+            match c.scheme {
+                SCHEME_CONTEXT => {
+                    buf.resize(n, 0);
+                    crate::context::decode(stored, c.filter.width() as u32, &mut buf).map_err(err)?;
+                }
+                _ => check(d.decompress_to_buffer(stored, &mut buf))?,
+            }
             c.filter.undo(&buf, out);
             Ok(())
         });
@@ -526,6 +603,13 @@ fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>
         return Err(err(format!("restored checksum mismatch (stored {:#018x}, computed {computed:#018x})", c.raw_checksum)));
     }
     Ok(())
+}
+
+/// Section `c`'s restored bytes as one zstd frame at `level` after the
+/// record's filter: what scheme 1 would store in place of a context-coded
+/// section (benchmarks time `zstd -d` on it).
+pub fn zstd_frame(c: &Coding, restored: &[u8], level: i32) -> std::io::Result<Vec<u8>> {
+    compress(&c.filter.apply(restored), level)
 }
 
 /// What a filter is judged on: a section of up to 1 MiB whole, a larger one
@@ -702,8 +786,10 @@ pub fn recompress<W: std::io::Write + std::io::Seek>(asset: &crate::Asset, to: S
         let first = i64::from(e.first_frame);
         m.time.get_or_insert_with(|| crate::Time { fps: crate::DEFAULT_FPS, numbers: (first..first + i64::from(e.frame_count)).collect() });
         meta.data = m.to_bytes()?.into();
-        if let Supercompress::Zstd(level) = to {
-            sections = supercompress(sections, &m, level)?;
+        // An asset cooked for the smallest file stays so: context coding where it is smaller.
+        let disk = m.settings.iter().any(|(k, v)| k == "optimize" && v == "disk");
+        if let Some(schemes) = Schemes::of(to, disk) {
+            sections = supercompress(sections, &m, schemes)?;
         }
         w.add(e.frame_count, &sections)?;
     }

@@ -51,7 +51,7 @@ pub(crate) fn check_checksum(header: &[u8], table: &[u8]) -> Result<(), Error> {
 /// coding section and those it names: of 8), none listed twice, and a coding
 /// section only where `coded` allows one. `coding` gives a coding section's
 /// bytes (which say which sections it names).
-pub(crate) fn sections<'a>(table: &[u8], len: u64, coded: bool, mut coding: impl FnMut(&SectionEntry) -> Result<Cow<'a, [u8]>, Error>) -> Result<Vec<SectionEntry>, Error> {
+pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: impl FnMut(&SectionEntry) -> Result<Cow<'a, [u8]>, Error>) -> Result<Vec<SectionEntry>, Error> {
     let table_end = (HEADER_LEN + table.len()) as u64;
     let mut sections = Vec::with_capacity(table.len() / crate::ENTRY_LEN);
     for e in table.chunks_exact(crate::ENTRY_LEN) {
@@ -77,8 +77,12 @@ pub(crate) fn sections<'a>(table: &[u8], len: u64, coded: bool, mut coding: impl
     if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
         return Err(Error::DuplicateSection { kind: w[0].0, index: w[0].1 });
     }
-    if !coded && sections.iter().any(|s| s.kind == crate::kind::CODING) {
+    if version < segments::VERSION_8 && sections.iter().any(|s| s.kind == crate::kind::CODING) {
         return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION_8)));
+    }
+    let context = codings.iter().flat_map(|(_, _, b)| crate::coding::Coding::parse_all(b).unwrap_or_default()).find(|c| c.scheme == crate::coding::SCHEME_CONTEXT);
+    if let Some(c) = context.filter(|_| version < segments::VERSION) {
+        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is context-coded in a version-{version} file (context coding is version {})", segments::VERSION) });
     }
     Ok(sections)
 }

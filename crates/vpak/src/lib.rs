@@ -26,6 +26,7 @@ mod asset;
 mod atomic;
 mod check;
 pub mod coding;
+mod context;
 mod direct;
 mod head;
 pub mod layout;
@@ -374,8 +375,8 @@ impl Metadata {
     /// read on its own, as a version-6 file, keeps its record).
     pub fn from_bytes_of(b: &[u8], version: u32) -> Result<Metadata, Error> {
         let m = Metadata::from_bytes(b)?;
-        match (segments::VERSION_7..segments::VERSION).contains(&version) && !m.resolutions.is_empty() {
-            true => Err(Error::Metadata(format!("channel resolutions in a version-{version} file (they are version {})", segments::VERSION))),
+        match (segments::VERSION_7..segments::VERSION_10).contains(&version) && !m.resolutions.is_empty() {
+            true => Err(Error::Metadata(format!("channel resolutions in a version-{version} file (they are version {} and later)", segments::VERSION_10))),
             false => Ok(m),
         }
     }

@@ -10,9 +10,12 @@ use crate::{body_head, checksum, file_len, header_checksum, write_sections, Erro
 use std::io::{Seek, SeekFrom, Write};
 
 /// Version of a file with a segment table whose bodies may hold
-/// supercompressed sections ([`crate::coding`]), record their frames'
-/// time ([`crate::Time`]) and their channels' voxel sizes ([`crate::Resolution`]).
-pub const VERSION: u32 = 10;
+/// supercompressed sections ([`crate::coding`], context-coded ones
+/// included), record their frames' time ([`crate::Time`]) and their
+/// channels' voxel sizes ([`crate::Resolution`]).
+pub const VERSION: u32 = 11;
+/// Version of a file whose sections are zstd-compressed only (still read).
+pub const VERSION_10: u32 = 10;
 /// Version of a file whose channels all have the asset's voxels (still read).
 pub const VERSION_9: u32 = 9;
 /// Version of a file with a segment table and supercompression, without time (still read).
@@ -561,7 +564,10 @@ pub(crate) mod tests {
         };
         let (a, b) = (meta(2, &["a.vdb", "b.vdb"], [0.0, 1.0], 0), meta(3, &["c.vdb"], [-1.0, 0.5], -128));
         let plain = [(2, long(&a, 100)), (3, long(&b, 200))];
-        let coded = [(2, crate::coding::supercompress(long(&a, 100), &a, 3).unwrap()), (3, crate::coding::supercompress(long(&b, 200), &b, 3).unwrap())];
+        let coded = [
+            (2, crate::coding::supercompress(long(&a, 100), &a, crate::coding::Schemes { level: 3, context: false }).unwrap()),
+            (3, crate::coding::supercompress(long(&b, 200), &b, crate::coding::Schemes { level: 3, context: false }).unwrap()),
+        ];
         let (plain, coded) = (assemble_segments(&plain).unwrap(), assemble_segments(&coded).unwrap());
         assert!(coded.len() < plain.len(), "{} vs {} bytes", coded.len(), plain.len());
         let (p, c) = (Asset::from_bytes(&plain).unwrap(), Asset::from_bytes(&coded).unwrap());
@@ -593,13 +599,35 @@ pub(crate) mod tests {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
         let mut sections = body(&m, 1);
         sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
-        let mut b = assemble_segments(&[(2, crate::coding::supercompress(sections, &m, 3).unwrap())]).unwrap();
+        let mut b = assemble_segments(&[(2, crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap())]).unwrap();
         b[8..12].copy_from_slice(&VERSION_7.to_le_bytes());
         let table_end = HEADER_LEN + SEGMENT_ENTRY_LEN;
         let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..table_end]);
         b[32..40].copy_from_slice(&sum.to_le_bytes());
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("older than version 8"), "{err}");
+    }
+
+    #[test]
+    fn context_coding_is_version_11() {
+        use crate::coding::{Coding, Filter, Tiles, SCHEME_CONTEXT};
+        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        let mut sections = body(&m, 1);
+        // Eight tiles of zeros: their divisors and quotients (the tiles filters' output) are zeros too.
+        let raw = vec![0u8; 4096];
+        let stored = crate::context::encode(&[0u8; 8 + 4096], 1, 3).unwrap().unwrap();
+        let tiles = Filter::Tiles(Tiles { width: 1, x: 8, y: 1, predict: false });
+        let record = Coding { kind: kind::L2_ENTRIES, index: 0, scheme: SCHEME_CONTEXT, filter: tiles, raw_size: 4096, raw_checksum: crate::checksum(&raw) };
+        sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: stored.into() });
+        sections.push(Section { kind: kind::CODING, index: 0, data: record.bytes().to_vec().into() });
+        let mut b = assemble_segments(&[(2, sections)]).unwrap();
+        let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
+        assert_eq!(restored.section(kind::L2_ENTRIES, 0).unwrap(), &raw[..]);
+        b[8..12].copy_from_slice(&VERSION_10.to_le_bytes());
+        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
+        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
+        assert!(err.contains("context-coded in a version-10 file"), "{err}");
     }
 
     #[test]

@@ -82,7 +82,7 @@ impl Reader {
         let version = head::version(&header, len)?;
         let bodies = match version {
             segments::BODY_VERSION => vec![io.body(version, 0, len, None)?],
-            segments::VERSION | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
+            segments::VERSION | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
                 let n = head::table_len(&header, segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount, len)?;
                 let table = io.read_vec(HEADER_LEN as u64, n as u64)?;
                 head::check_checksum(&header, &table)?;
@@ -332,7 +332,7 @@ impl Io {
         }
         // The coding section is read once: the table's check needs it, and the restore plan.
         let mut coding_bytes = None;
-        let stored = head::sections(&table, size, version >= segments::VERSION_8, |e| {
+        let stored = head::sections(&table, size, version, |e| {
             let b = self.read_section(offset, e)?;
             if e.index == 0 {
                 coding_bytes = Some(b.clone());

@@ -13,7 +13,7 @@ fn sample(coded: bool) -> Vec<u8> {
         b.push(Section { kind: kind::L2_ENTRIES, index: 0, data: (0..5000u32).flat_map(|i| (i / 3 + marker).to_le_bytes()).collect::<Vec<u8>>().into() });
         b.push(Section { kind: kind::ATLAS, index: 0, data: (0..3000u32).map(|i| (i % 251) as u8).collect::<Vec<u8>>().into() });
         match coded {
-            true => coding::supercompress(b, m, 3).unwrap(),
+            true => coding::supercompress(b, m, crate::coding::Schemes { level: 3, context: false }).unwrap(),
             false => b,
         }
     };

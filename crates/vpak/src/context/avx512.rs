@@ -1,0 +1,276 @@
+//! The scheme-2 decoder with its lanes in AVX-512 vectors: G vectors of 16
+//! tiles (a stream of 16·G lanes), every lane at the same element, so a
+//! neighbour is one vector load, the context's bucket arithmetic (a
+//! leading-zero count), the table lookup one gather, the renormalising
+//! lanes' words one expand-load from the shared stream, and each row of 8
+//! elements leaves the lanes through a byte permute and a scatter. Escape
+//! bits are read lane by lane (rare). Same output as `decode_scalar`, which
+//! the tests hold it to, damaged streams included.
+
+use super::{finish, padded, Stream, ESCAPE, MAX_SYMBOLS, RANS_LOW, TILE};
+use std::arch::x86_64::*;
+
+#[repr(C, align(64))]
+#[derive(Clone, Copy)]
+struct I32x16([i32; 16]);
+
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct U8x16([u8; 16]);
+
+/// Per lane vector and padded element: the decoded quotients and the
+/// residual magnitudes (saturated at 255: the context sums three of them
+/// and saturates there too).
+struct Work {
+    f: Vec<I32x16>,
+    mag: Vec<U8x16>,
+}
+
+/// Whether this CPU runs the vector decoder on a stream of `lanes` lanes.
+pub(super) fn usable(lanes: usize) -> bool {
+    matches!(lanes, 16 | 32 | 64)
+        && is_x86_feature_detected!("avx512f")
+        && is_x86_feature_detected!("avx512vl")
+        && is_x86_feature_detected!("avx512bw")
+        && is_x86_feature_detected!("avx512cd")
+        && is_x86_feature_detected!("avx512vbmi")
+        && is_x86_feature_detected!("avx512vbmi2")
+}
+
+#[inline(always)]
+unsafe fn ld(v: &I32x16) -> __m512i {
+    unsafe { _mm512_load_si512(v.0.as_ptr() as *const __m512i) }
+}
+
+#[inline(always)]
+unsafe fn ld8(v: &U8x16) -> __m512i {
+    unsafe { _mm512_cvtepu8_epi32(_mm_load_si128(v.0.as_ptr() as *const __m128i)) }
+}
+
+/// Floor division by 3 of |t| < 2^22: a float multiply (a correctly rounded
+/// quotient is never on the wrong side of an integer that close), then one
+/// step of correction either way.
+#[inline(always)]
+unsafe fn floor_div3(t: __m512i) -> __m512i {
+    unsafe {
+        let q = _mm512_cvttps_epi32(_mm512_roundscale_ps::<0x09>(_mm512_mul_ps(_mm512_cvtepi32_ps(t), _mm512_set1_ps(1.0 / 3.0))));
+        let r = _mm512_sub_epi32(t, _mm512_add_epi32(_mm512_add_epi32(q, q), q));
+        let q = _mm512_mask_add_epi32(q, _mm512_cmpge_epi32_mask(r, _mm512_set1_epi32(3)), q, _mm512_set1_epi32(1));
+        _mm512_mask_sub_epi32(q, _mm512_cmplt_epi32_mask(r, _mm512_setzero_si512()), q, _mm512_set1_epi32(1))
+    }
+}
+
+#[inline(always)]
+unsafe fn predict<const POS: usize, const G: usize>(w: &Work, p: usize, gi: usize) -> __m512i {
+    unsafe {
+        let at = |q: usize| ld(w.f.get_unchecked(q * G + gi));
+        let (a, b, c) = (at(p - 81), at(p - 9), at(p - 1));
+        match POS {
+            7 => {
+                let s = _mm512_add_epi32(_mm512_add_epi32(a, b), c);
+                let t = _mm512_sub_epi32(_mm512_slli_epi32::<1>(s), _mm512_add_epi32(_mm512_add_epi32(at(p - 90), at(p - 82)), at(p - 10)));
+                floor_div3(_mm512_add_epi32(t, _mm512_set1_epi32(1)))
+            }
+            3 => _mm512_sub_epi32(_mm512_add_epi32(b, c), at(p - 10)),
+            5 => _mm512_sub_epi32(_mm512_add_epi32(a, c), at(p - 82)),
+            6 => _mm512_sub_epi32(_mm512_add_epi32(a, b), at(p - 90)),
+            1 => c,
+            2 => b,
+            _ => a,
+        }
+    }
+}
+
+/// Where the shared streams stand, and what went wrong so far.
+struct Reader<'a> {
+    words: *const u16,
+    bits: &'a [u8],
+    bits_len: usize,
+    bp: usize,
+    /// Lanes that met an empty context or decoded outside the element.
+    bad: u16,
+    /// An escape ran past the end of the bits.
+    overrun: bool,
+}
+
+/// One element of every lane: context, table entry, state update, escape
+/// bits, prediction undone.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+unsafe fn step<const POS: usize, const G: usize, const P: u32>(w: &mut Work, st: &mut [__m512i; G], act: &[__mmask16; G], p: usize, r: &mut Reader, table: *const u32, max: __m512i) {
+    unsafe {
+        for gi in 0..G {
+            let act = act[gi];
+            let e = _mm512_add_epi32(_mm512_add_epi32(ld8(w.mag.get_unchecked((p - 81) * G + gi)), ld8(w.mag.get_unchecked((p - 9) * G + gi))), ld8(w.mag.get_unchecked((p - 1) * G + gi)));
+            let e = _mm512_min_epu32(e, _mm512_set1_epi32(255));
+            // e below 4 is its own bucket, else ilog2(e²), at most 15.
+            let lg = _mm512_sub_epi32(_mm512_set1_epi32(31), _mm512_lzcnt_epi32(_mm512_mullo_epi32(e, e)));
+            let bucket = _mm512_mask_mov_epi32(_mm512_min_epi32(lg, _mm512_set1_epi32(15)), _mm512_cmplt_epu32_mask(e, _mm512_set1_epi32(4)), e);
+            let ctx = _mm512_add_epi32(_mm512_slli_epi32::<3>(bucket), _mm512_set1_epi32(POS as i32));
+            let x = st[gi];
+            let slot = _mm512_and_si512(x, _mm512_set1_epi32((1 << P) - 1));
+            let ent = _mm512_i32gather_epi32::<4>(_mm512_or_si512(_mm512_slli_epi32::<P>(ctx), slot), table as *const i32);
+            let sym = _mm512_and_si512(ent, _mm512_set1_epi32(63));
+            r.bad |= _mm512_mask_cmpge_epu32_mask(act, sym, _mm512_set1_epi32(MAX_SYMBOLS as i32));
+            let fr = _mm512_and_si512(_mm512_srli_epi32::<6>(ent), _mm512_set1_epi32(0x1fff));
+            let xn = _mm512_sub_epi32(_mm512_add_epi32(_mm512_mullo_epi32(fr, _mm512_srli_epi32::<P>(x)), slot), _mm512_srli_epi32::<19>(ent));
+            let xs = _mm512_mask_blend_epi32(act, x, xn);
+            let need = _mm512_cmplt_epu32_mask(xs, _mm512_set1_epi32(RANS_LOW as i32));
+            let words = _mm512_cvtepu16_epi32(_mm256_maskz_expandloadu_epi16(need, r.words as *const i16));
+            r.words = r.words.add(need.count_ones() as usize);
+            st[gi] = _mm512_mask_blend_epi32(need, xs, _mm512_or_si512(_mm512_slli_epi32::<16>(xs), words));
+            // z: the symbol, or for an escape symbol 16 + k its base 15 + 2^k plus k raw bits.
+            let esc = _mm512_mask_cmpge_epi32_mask(act, sym, _mm512_set1_epi32(ESCAPE as i32));
+            let kk = _mm512_sub_epi32(sym, _mm512_set1_epi32(ESCAPE as i32));
+            let mut z = _mm512_mask_mov_epi32(sym, esc, _mm512_add_epi32(_mm512_set1_epi32(ESCAPE as i32 - 1), _mm512_sllv_epi32(_mm512_set1_epi32(1), kk)));
+            if esc != 0 {
+                // Rare: the raw bits, lane by lane in lane order (the stream's order).
+                let mut zs = I32x16([0; 16]);
+                let mut ks = I32x16([0; 16]);
+                _mm512_store_si512(zs.0.as_mut_ptr() as *mut __m512i, z);
+                _mm512_store_si512(ks.0.as_mut_ptr() as *mut __m512i, kk);
+                let mut m = esc;
+                while m != 0 {
+                    let l = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let at = r.bp >> 3;
+                    if at > r.bits_len {
+                        r.overrun = true;
+                        break;
+                    }
+                    // At most 47 bits (no valid symbol has more than 31): within the 64-bit window.
+                    let nb = (ks.0[l] as u32).min(47);
+                    let peek = u64::from_le_bytes(r.bits[at..at + 8].try_into().unwrap_or_default()) >> (r.bp & 7);
+                    zs.0[l] = zs.0[l].wrapping_add((peek & ((1u64 << nb) - 1)) as i32);
+                    r.bp += nb as usize;
+                }
+                z = _mm512_load_si512(zs.0.as_ptr() as *const __m512i);
+            }
+            let z = _mm512_maskz_mov_epi32(act, z);
+            let res = _mm512_xor_si512(_mm512_srli_epi32::<1>(z), _mm512_sub_epi32(_mm512_setzero_si512(), _mm512_and_si512(z, _mm512_set1_epi32(1))));
+            let mag = _mm512_srli_epi32::<1>(_mm512_add_epi32(z, _mm512_set1_epi32(1)));
+            _mm_store_si128(w.mag.get_unchecked_mut(p * G + gi).0.as_mut_ptr() as *mut __m128i, _mm512_cvtusepi32_epi8(mag));
+            let q = _mm512_add_epi32(predict::<POS, G>(w, p, gi), res);
+            r.bad |= _mm512_mask_cmpgt_epu32_mask(act, q, max);
+            _mm512_store_si512(w.f.get_unchecked_mut(p * G + gi).0.as_mut_ptr() as *mut __m512i, q);
+        }
+    }
+}
+
+/// Byte `SHIFT / 8` of row (z, y)'s eight elements of the first `lanes`
+/// lanes of vector `gi`, to `out + l·512` for lane l (tiles are 512 bytes
+/// apart in each byte plane).
+#[inline(always)]
+unsafe fn put_row<const G: usize, const SHIFT: u32>(w: &Work, row: usize, gi: usize, lanes: usize, out: *mut u8) {
+    unsafe {
+        let r = |x: usize| _mm512_cvtepi32_epi8(_mm512_srli_epi32::<SHIFT>(ld(w.f.get_unchecked(padded(row * 8 + x) * G + gi))));
+        // Elements x = 0..3 in a, 4..7 in b (16 lanes' bytes each); byte 8l + x of the result is lane l's element x.
+        let a = _mm512_inserti64x4::<1>(_mm512_castsi256_si512(_mm256_set_m128i(r(1), r(0))), _mm256_set_m128i(r(3), r(2)));
+        let b = _mm512_inserti64x4::<1>(_mm512_castsi256_si512(_mm256_set_m128i(r(5), r(4))), _mm256_set_m128i(r(7), r(6)));
+        let keep = (1u32 << lanes) - 1;
+        for half in 0..2 {
+            let mut idx = [0u8; 64];
+            for (t, v) in idx.iter_mut().enumerate() {
+                let (l, x) = (half * 8 + t / 8, t % 8);
+                *v = if x < 4 { (16 * x + l) as u8 } else { (64 + 16 * (x - 4) + l) as u8 };
+            }
+            let c = _mm512_permutex2var_epi8(a, _mm512_loadu_si512(idx.as_ptr() as *const __m512i), b);
+            let offs = _mm512_setr_epi64(0, 512, 1024, 1536, 2048, 2560, 3072, 3584);
+            let m = ((keep >> (half * 8)) & 0xff) as __mmask8;
+            _mm512_mask_i64scatter_epi64::<1>(out.add(half * 8 * 512) as *mut i64, m, offs, c);
+        }
+    }
+}
+
+/// Decodes `s` into `out` as `decode_scalar` does.
+///
+/// # Safety
+/// The CPU must have AVX-512 F, VL, BW, CD, VBMI and VBMI2 ([`usable`]).
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512vbmi,avx512vbmi2,avx512cd")]
+pub(super) unsafe fn decode(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
+    match (s.lanes, s.precision) {
+        (16, 9) => unsafe { run::<1, 9>(s, w, out) },
+        (32, 9) => unsafe { run::<2, 9>(s, w, out) },
+        (64, 9) => unsafe { run::<4, 9>(s, w, out) },
+        (16, 10) => unsafe { run::<1, 10>(s, w, out) },
+        (32, 10) => unsafe { run::<2, 10>(s, w, out) },
+        (64, 10) => unsafe { run::<4, 10>(s, w, out) },
+        (16, 11) => unsafe { run::<1, 11>(s, w, out) },
+        (32, 11) => unsafe { run::<2, 11>(s, w, out) },
+        (64, 11) => unsafe { run::<4, 11>(s, w, out) },
+        (16, _) => unsafe { run::<1, 12>(s, w, out) },
+        (32, _) => unsafe { run::<2, 12>(s, w, out) },
+        _ => unsafe { run::<4, 12>(s, w, out) },
+    }
+}
+
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512vbmi,avx512vbmi2,avx512cd")]
+unsafe fn run<const G: usize, const P: u32>(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
+    let n = 16 * G;
+    let m = out.len() / w;
+    let first = m / (TILE + 1);
+    let mut work = Work { f: vec![I32x16([0; 16]); 729 * G], mag: vec![U8x16([0; 16]); 729 * G] };
+    let mut st = [_mm512_setzero_si512(); G];
+    for (gi, v) in st.iter_mut().enumerate() {
+        let mut x = I32x16([0; 16]);
+        for (l, x) in x.0.iter_mut().enumerate() {
+            let lane = gi * 16 + l;
+            *x = (u32::from(s.words[2 * lane]) << 16 | u32::from(s.words[2 * lane + 1])) as i32;
+        }
+        *v = unsafe { ld(&x) };
+    }
+    let base = s.words.as_ptr();
+    let mut r = Reader { words: unsafe { base.add(2 * n) }, bits: &s.bits, bits_len: s.bits_len, bp: 0, bad: 0, overrun: false };
+    let max = _mm512_set1_epi32((1 << (8 * w)) - 1);
+    let table = s.table.as_ptr();
+    let outp = out.as_mut_ptr();
+    for g in 0..s.tiles.div_ceil(n) {
+        let present = n.min(s.tiles - g * n);
+        let act: [__mmask16; G] = std::array::from_fn(|gi| ((1u32 << present.saturating_sub(gi * 16).min(16)) - 1) as __mmask16);
+        for row in 0..64 {
+            // A row takes at most 8 words per lane, which the padding after the stream holds.
+            if unsafe { r.words.offset_from(base) } as usize > s.words_len {
+                return Err("runs past the end of its words".into());
+            }
+            let p = padded(row * 8);
+            macro_rules! run {
+                ($first:expr, $rest:expr) => {
+                    unsafe {
+                        step::<{ $first }, G, P>(&mut work, &mut st, &act, p, &mut r, table, max);
+                        for x in 1..8 {
+                            step::<{ $rest }, G, P>(&mut work, &mut st, &act, p + x, &mut r, table, max);
+                        }
+                    }
+                };
+            }
+            match (row >= 8, row % 8 > 0) {
+                (true, true) => run!(6, 7),
+                (false, true) => run!(2, 3),
+                (true, false) => run!(4, 5),
+                (false, false) => run!(0, 1),
+            }
+            if r.bad != 0 || r.overrun {
+                return Err(match r.overrun {
+                    true => "runs past the end of its escape bits".into(),
+                    false => "codes in a context its tables leave empty, or decodes outside the element".into(),
+                });
+            }
+            for gi in 0..present.div_ceil(16) {
+                let lanes = (present - gi * 16).min(16);
+                let at = first + (g * n + gi * 16) * TILE + row * 8;
+                unsafe { put_row::<G, 0>(&work, row, gi, lanes, outp.add(at)) };
+                if w == 2 {
+                    unsafe { put_row::<G, 8>(&work, row, gi, lanes, outp.add(m + at)) };
+                }
+            }
+        }
+    }
+    let mut states = vec![0u32; n];
+    for (gi, v) in st.iter().enumerate() {
+        let mut x = I32x16([0; 16]);
+        unsafe { _mm512_store_si512(x.0.as_mut_ptr() as *mut __m512i, *v) };
+        x.0.iter().enumerate().for_each(|(l, &x)| states[gi * 16 + l] = x as u32);
+    }
+    let wp = unsafe { r.words.offset_from(base) } as usize;
+    finish(s, &states, wp, r.bp)
+}

@@ -1,0 +1,428 @@
+//! Coding scheme 2 (version 11): a tiled atlas's elements, as the `tiles
+//! unpredicted` filter lays them out (each tile's divisor, then its 512
+//! quotients), coded with a static context model and rANS instead of zstd.
+//! Each quotient is predicted from its decoded neighbours in the tile (the
+//! mean of the three 2D Lorenzo predictions), and its residual is coded in a
+//! context made of the tile's face class and the sum of the neighbours'
+//! residual magnitudes, with one frequency table per context for the whole
+//! section. zstd sees bytes; this sees levels and their neighbourhood, and
+//! takes 10–20 % fewer bytes than zstd on the atlases `--optimize disk`
+//! makes. `N` tiles are decoded side by side, each with its own rANS state
+//! over one shared word stream, so that a vector decoder ([`avx512`]) runs
+//! `N` tiles in its lanes; the stream is the same for every decoder.
+//! `docs/format.md`, "Context coding", is the specification.
+
+use rayon::prelude::*;
+
+#[cfg(target_arch = "x86_64")]
+mod avx512;
+
+/// Elements of a tile.
+const TILE: usize = crate::tiles::TILE;
+/// Symbols below it are zigzagged residuals; symbol `ESCAPE + k` is one of
+/// `2^k` residuals told apart by `k` raw bits.
+const ESCAPE: u32 = 16;
+/// The most symbols a context's table row may hold (`ESCAPE` + 32 escapes).
+const MAX_SYMBOLS: usize = 48;
+/// The tile's face classes: whether x, y and z are past the tile's low faces.
+const POSITIONS: usize = 8;
+/// Buckets of the neighbours' residual magnitudes.
+const BUCKETS: usize = 16;
+const CONTEXTS: usize = BUCKETS * POSITIONS;
+/// The rANS states' lower bound; words are 16 bits.
+const RANS_LOW: u32 = 1 << 16;
+/// Tiles decoded side by side, as vdbcook writes them: four vectors of 16 lanes.
+const LANES: usize = 64;
+/// Each used context's frequencies sum to 2^PRECISION, as vdbcook writes
+/// them: decode tables of 512 entries per context stay in the L2 cache.
+const PRECISION: u32 = 9;
+/// Allowed precisions and lane counts.
+const PRECISIONS: std::ops::RangeInclusive<u32> = 9..=12;
+const MAX_LANES: usize = 256;
+/// Bytes of the stream's header.
+const HEAD: usize = 24;
+/// A decode-table entry that no valid stream reaches (rows of contexts
+/// the encoder never used): symbol 63, frequency 0.
+const UNUSED: u32 = 63;
+
+/// A tile's element `v` (x fastest) in the decoder's padded 9³ block:
+/// neighbours below the tile's low faces read as 0.
+#[inline(always)]
+fn padded(v: usize) -> usize {
+    let (x, y, z) = (v & 7, (v >> 3) & 7, v >> 6);
+    (z + 1) * 81 + (y + 1) * 9 + (x + 1)
+}
+
+/// The face class of element `v`: 4·[z > 0] + 2·[y > 0] + [x > 0].
+#[inline(always)]
+fn position(v: usize) -> usize {
+    let (x, y, z) = (v & 7, (v >> 3) & 7, v >> 6);
+    usize::from(z > 0) << 2 | usize::from(y > 0) << 1 | usize::from(x > 0)
+}
+
+/// The prediction of the element at padded index `p` of class `pos` from
+/// the decoded elements `f`: along one axis the neighbour, in a face the 2D
+/// Lorenzo prediction, inside the mean of the three 2D ones (rounded down).
+#[inline(always)]
+fn predict(pos: usize, f: &[i32; 729], p: usize) -> i32 {
+    let (a, b, c) = (f[p - 81], f[p - 9], f[p - 1]);
+    match pos {
+        7 => (2 * (a + b + c) - f[p - 90] - f[p - 82] - f[p - 10] + 1).div_euclid(3),
+        3 => b + c - f[p - 10],
+        5 => a + c - f[p - 82],
+        6 => a + b - f[p - 90],
+        1 => c,
+        2 => b,
+        _ => a,
+    }
+}
+
+/// The bucket of a sum of three residual magnitudes (at most 255).
+#[inline(always)]
+fn bucket(e: u32) -> u32 {
+    match e < 4 {
+        true => e,
+        false => (e * e).ilog2().min(BUCKETS as u32 - 1),
+    }
+}
+
+/// A residual as a symbol and its raw bits: (symbol, bit count, bits).
+#[inline(always)]
+fn token(r: i32) -> (u32, u32, u32) {
+    let z = ((r << 1) ^ (r >> 31)) as u32;
+    if z < ESCAPE {
+        return (z, 0, 0);
+    }
+    let u = z - ESCAPE + 1;
+    let k = u.ilog2();
+    (ESCAPE + k, k, u - (1 << k))
+}
+
+/// The zigzagged residual of symbol `s` before its raw bits are added, and their count.
+#[inline(always)]
+fn base(s: u32) -> (u32, u32) {
+    match s < ESCAPE {
+        true => (s, 0),
+        false => (ESCAPE - 1 + (1 << (s - ESCAPE).min(31)), s - ESCAPE),
+    }
+}
+
+/// One coded residual: its context, symbol and raw bits (the count follows from the symbol).
+#[derive(Clone, Copy)]
+struct Token {
+    ctx: u8,
+    sym: u8,
+    raw: u32,
+}
+
+/// The tokens of one tile's quotients, in element order.
+fn tokens(tile: &[u16]) -> Vec<Token> {
+    let mut f = [0i32; 729];
+    let mut mag = [0u32; 729];
+    let mut out = Vec::with_capacity(TILE);
+    for (v, &q) in tile.iter().enumerate() {
+        let (p, pos) = (padded(v), position(v));
+        let e = (mag[p - 81] + mag[p - 9] + mag[p - 1]).min(255);
+        let r = i32::from(q) - predict(pos, &f, p);
+        let (sym, _, raw) = token(r);
+        out.push(Token { ctx: (bucket(e) as usize * POSITIONS + pos) as u8, sym: sym as u8, raw });
+        mag[p] = r.unsigned_abs();
+        f[p] = i32::from(q);
+    }
+    out
+}
+
+/// Counts per context quantised to a total of 2^`precision` each (every
+/// symbol seen at least 1; a context never seen all 0).
+fn quantise(counts: &[[u64; MAX_SYMBOLS]], precision: u32) -> Vec<[u32; MAX_SYMBOLS]> {
+    let total = 1i64 << precision;
+    counts
+        .iter()
+        .map(|c| {
+            let n: u64 = c.iter().sum();
+            let mut f = [0u32; MAX_SYMBOLS];
+            if n == 0 {
+                return f;
+            }
+            for (f, &c) in f.iter_mut().zip(c) {
+                if c > 0 {
+                    *f = ((c as f64 * total as f64 / n as f64 + 0.5).floor() as u32).max(1);
+                }
+            }
+            // The largest takes the difference; if it cannot give all of it, the next largest gives the rest.
+            let mut sum: i64 = f.iter().map(|&x| i64::from(x)).sum();
+            while sum != total {
+                let s = (0..MAX_SYMBOLS).max_by_key(|&s| (f[s], std::cmp::Reverse(s))).unwrap_or(0);
+                let d = (total - sum).max(1 - i64::from(f[s]));
+                f[s] = (i64::from(f[s]) + d) as u32;
+                sum += d;
+            }
+            f
+        })
+        .collect()
+}
+
+/// The `tiles unpredicted` filter's output `filtered` (`width`-byte elements
+/// shuffled by byte: T divisors, then 512·T quotients) as a scheme-2 stream,
+/// its side frame compressed by zstd at `level`; `None` when it does not
+/// hold whole tiles.
+pub fn encode(filtered: &[u8], width: u32, level: i32) -> std::io::Result<Option<Vec<u8>>> {
+    let w = width as usize;
+    let m = filtered.len() / w.max(1);
+    if !matches!(w, 1 | 2) || m * w != filtered.len() || m == 0 || !m.is_multiple_of(TILE + 1) {
+        return Ok(None);
+    }
+    let tiles = m / (TILE + 1);
+    let element = |i: usize| match w {
+        1 => u16::from(filtered[i]),
+        _ => u16::from_le_bytes([filtered[i], filtered[m + i]]),
+    };
+    let toks: Vec<Vec<Token>> = (0..tiles)
+        .into_par_iter()
+        .map(|t| {
+            let tile: Vec<u16> = (tiles + t * TILE..tiles + (t + 1) * TILE).map(element).collect();
+            tokens(&tile)
+        })
+        .collect();
+    let mut counts = vec![[0u64; MAX_SYMBOLS]; CONTEXTS];
+    let mut symbols = 1;
+    for t in toks.iter().flatten() {
+        counts[usize::from(t.ctx)][usize::from(t.sym)] += 1;
+        symbols = symbols.max(usize::from(t.sym) + 1);
+    }
+    let freq = quantise(&counts, PRECISION);
+    let cum: Vec<[u32; MAX_SYMBOLS]> = freq
+        .iter()
+        .map(|row| {
+            let mut c = [0u32; MAX_SYMBOLS];
+            row.iter().zip(c.iter_mut()).fold(0, |a, (&f, c)| {
+                *c = a;
+                a + f
+            });
+            c
+        })
+        .collect();
+    // Decode order: group of LANES tiles, element, lane.
+    let groups = tiles.div_ceil(LANES);
+    let lanes_of = |g: usize| g * LANES..((g + 1) * LANES).min(tiles);
+    let toks = &toks;
+    let group = |g: usize| (0..TILE).flat_map(move |v| lanes_of(g).map(move |t| toks[t][v]));
+    let mut bits = Vec::new();
+    let (mut acc, mut held) = (0u64, 0u32);
+    for tok in (0..groups).flat_map(group) {
+        acc |= u64::from(tok.raw) << held;
+        held += base(u32::from(tok.sym)).1;
+        while held >= 8 {
+            bits.push(acc as u8);
+            acc >>= 8;
+            held -= 8;
+        }
+    }
+    if held > 0 {
+        bits.push(acc as u8);
+    }
+    // rANS runs backwards: the last symbol decoded is encoded first.
+    let mut states = [RANS_LOW; LANES];
+    let mut words: Vec<u16> = Vec::new();
+    for g in (0..groups).rev() {
+        for v in (0..TILE).rev() {
+            for t in lanes_of(g).rev() {
+                let tok = toks[t][v];
+                let (ctx, sym) = (usize::from(tok.ctx), usize::from(tok.sym));
+                let (f, c) = (freq[ctx][sym], cum[ctx][sym]);
+                let x = &mut states[t % LANES];
+                if u64::from(*x) >= (u64::from(RANS_LOW >> PRECISION) << 16) * u64::from(f) {
+                    words.push(*x as u16);
+                    *x >>= 16;
+                }
+                *x = ((*x / f) << PRECISION) + *x % f + c;
+            }
+        }
+    }
+    for x in states.iter().rev() {
+        words.push(*x as u16);
+        words.push((*x >> 16) as u16);
+    }
+    words.reverse();
+    let mut side = Vec::with_capacity(tiles * w + CONTEXTS * symbols * 2);
+    for t in 0..tiles {
+        side.extend_from_slice(&element(t).to_le_bytes()[..w]);
+    }
+    for row in &freq {
+        row[..symbols].iter().for_each(|&f| side.extend_from_slice(&(f as u16).to_le_bytes()));
+    }
+    let side = zstd::bulk::compress(&side, level)?;
+    let mut out = Vec::with_capacity(HEAD + side.len() + bits.len() + 2 * words.len());
+    for v in [LANES, PRECISION as usize, symbols, side.len(), bits.len(), words.len()] {
+        out.extend_from_slice(&(v as u32).to_le_bytes());
+    }
+    out.extend_from_slice(&side);
+    out.extend_from_slice(&bits);
+    words.iter().for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
+    Ok(Some(out))
+}
+
+/// A stream's parts, checked against each other and the section's shape.
+struct Stream {
+    lanes: usize,
+    precision: u32,
+    tiles: usize,
+    /// The escape bits, then 8 zero bytes (a decoder reads 8 at a time).
+    bits: Vec<u8>,
+    bits_len: usize,
+    /// The rANS words, then zeros: as many as a row of 8 elements can take in every lane.
+    words: Vec<u16>,
+    words_len: usize,
+    /// The decode table: per context 2^precision entries `symbol | freq << 6 | cum << 19`.
+    table: Vec<u32>,
+}
+
+fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Result<Stream, String> {
+    if stored.len() < HEAD {
+        return Err(format!("is {} bytes, shorter than a context stream's {HEAD}-byte header", stored.len()));
+    }
+    let field = |i: usize| u32::from_le_bytes([stored[4 * i], stored[4 * i + 1], stored[4 * i + 2], stored[4 * i + 3]]) as usize;
+    let (lanes, precision, symbols, side_len, bits_len, words_len) = (field(0), field(1) as u32, field(2), field(3), field(4), field(5));
+    if !(1..=MAX_LANES).contains(&lanes) || !PRECISIONS.contains(&precision) || !(1..=MAX_SYMBOLS).contains(&symbols) {
+        return Err(format!("has {lanes} lanes, precision {precision} and {symbols} symbols (1 to {MAX_LANES}, 9 to 12 and 1 to {MAX_SYMBOLS} allowed)"));
+    }
+    let body = stored.len() - HEAD;
+    if side_len as u64 + bits_len as u64 + 2 * words_len as u64 != body as u64 {
+        return Err(format!("states {side_len} + {bits_len} + 2·{words_len} bytes of parts, but {body} follow its header"));
+    }
+    if words_len < 2 * lanes {
+        return Err(format!("has {words_len} words, fewer than its {lanes} lanes' states"));
+    }
+    let side_want = tiles * width + CONTEXTS * symbols * 2;
+    let side = zstd::bulk::decompress(&stored[HEAD..HEAD + side_len], side_want).map_err(|e| format!("has a side frame that does not decompress ({e})"))?;
+    if side.len() != side_want {
+        return Err(format!("has a side frame of {} bytes, not {side_want}", side.len()));
+    }
+    let (div, freqs) = side.split_at(tiles * width);
+    let m = divisors.len() / width.max(1);
+    for (t, d) in div.chunks_exact(width).enumerate() {
+        divisors[t] = d[0];
+        if width == 2 {
+            divisors[m + t] = d[1];
+        }
+    }
+    let size = 1usize << precision;
+    let mut table = vec![UNUSED; CONTEXTS << precision];
+    for (ctx, row) in freqs.chunks_exact(2 * symbols).enumerate() {
+        let freq: Vec<usize> = row.chunks_exact(2).map(|b| usize::from(u16::from_le_bytes([b[0], b[1]]))).collect();
+        let sum: usize = freq.iter().sum();
+        if sum == 0 {
+            continue;
+        }
+        if sum != size {
+            return Err(format!("has context {ctx}'s frequencies summing to {sum}, not 0 or {size}"));
+        }
+        let mut cum = 0;
+        for (s, &f) in freq.iter().enumerate() {
+            table[(ctx << precision) + cum..(ctx << precision) + cum + f].fill(s as u32 | (f as u32) << 6 | (cum as u32) << 19);
+            cum += f;
+        }
+    }
+    let at = HEAD + side_len;
+    let mut bits = Vec::with_capacity(bits_len + 8);
+    bits.extend_from_slice(&stored[at..at + bits_len]);
+    bits.resize(bits_len + 8, 0);
+    let mut words = Vec::with_capacity(words_len + 8 * lanes);
+    words.extend(stored[at + bits_len..].chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])));
+    words.resize(words_len + 8 * lanes, 0);
+    Ok(Stream { lanes, precision, tiles, bits, bits_len, words, words_len, table })
+}
+
+/// Restores a scheme-2 stream `stored` into `out`, the `tiles unpredicted`
+/// filter's output for `width`-byte elements (shuffled by byte), or says
+/// what is wrong with it. Never reads or writes outside what it was given,
+/// whatever the stream holds.
+pub fn decode(stored: &[u8], width: u32, out: &mut [u8]) -> Result<(), String> {
+    let w = width as usize;
+    let m = out.len() / w.max(1);
+    if !matches!(w, 1 | 2) || m * w != out.len() || !m.is_multiple_of(TILE + 1) {
+        return Err(format!("cannot restore {} bytes of {w}-byte tiles", out.len()));
+    }
+    let tiles = m / (TILE + 1);
+    let s = parse(stored, w, tiles, out)?;
+    #[cfg(target_arch = "x86_64")]
+    if avx512::usable(s.lanes) {
+        // SAFETY: `usable` checked the CPU's features.
+        return unsafe { avx512::decode(&s, w, out) };
+    }
+    decode_scalar(&s, w, out)
+}
+
+/// The reference decoder: one lane at a time.
+fn decode_scalar(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
+    let m = out.len() / w;
+    let n = s.lanes;
+    let mask = (1u32 << s.precision) - 1;
+    let max = (1i32 << (8 * w)) - 1;
+    let mut states: Vec<u32> = (0..n).map(|l| u32::from(s.words[2 * l]) << 16 | u32::from(s.words[2 * l + 1])).collect();
+    let (mut wp, mut bp) = (2 * n, 0usize);
+    let mut f = vec![[0i32; 729]; n];
+    let mut mag = vec![[0u32; 729]; n];
+    for g in 0..s.tiles.div_ceil(n) {
+        let present = n.min(s.tiles - g * n);
+        for v in 0..TILE {
+            // A row of 8 elements takes at most 8 words per lane, which the padding holds.
+            if v % 8 == 0 && wp > s.words_len {
+                return Err("runs past the end of its words".into());
+            }
+            let (p, pos) = (padded(v), position(v));
+            for l in 0..present {
+                let (f, mag) = (&mut f[l], &mut mag[l]);
+                let e = (mag[p - 81] + mag[p - 9] + mag[p - 1]).min(255);
+                let ctx = bucket(e) as usize * POSITIONS + pos;
+                let x = states[l];
+                let slot = x & mask;
+                let ent = s.table[(ctx << s.precision) | slot as usize];
+                let sym = ent & 63;
+                if sym as usize >= MAX_SYMBOLS {
+                    return Err(format!("codes in context {ctx}, which its tables leave empty"));
+                }
+                let mut x = ((ent >> 6) & 0x1fff) * (x >> s.precision) + slot - (ent >> 19);
+                if x < RANS_LOW {
+                    x = x << 16 | u32::from(s.words[wp]);
+                    wp += 1;
+                }
+                states[l] = x;
+                let (mut z, nb) = base(sym);
+                if nb > 0 {
+                    if bp >> 3 > s.bits_len {
+                        return Err("runs past the end of its escape bits".into());
+                    }
+                    let at = bp >> 3;
+                    let peek = u64::from_le_bytes(s.bits[at..at + 8].try_into().unwrap_or_default()) >> (bp & 7);
+                    z += (peek & ((1u64 << nb) - 1)) as u32;
+                    bp += nb as usize;
+                }
+                let r = ((z >> 1) as i32) ^ -((z & 1) as i32);
+                let q = predict(pos, f, p).wrapping_add(r);
+                if !(0..=max).contains(&q) {
+                    return Err(format!("decodes to {q}, outside the {w}-byte element"));
+                }
+                mag[p] = r.unsigned_abs();
+                f[p] = q;
+                let i = m / (TILE + 1) + (g * n + l) * TILE + v;
+                out[i] = q as u8;
+                if w == 2 {
+                    out[m + i] = (q >> 8) as u8;
+                }
+            }
+        }
+    }
+    finish(s, &states, wp, bp)
+}
+
+/// A stream decoded to its end: every word read, every state back at its start, no bit past the end.
+fn finish(s: &Stream, states: &[u32], wp: usize, bp: usize) -> Result<(), String> {
+    if wp != s.words_len || states.iter().any(|&x| x != RANS_LOW) || bp > 8 * s.bits_len {
+        return Err("does not end where its coder does (damaged)".into());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

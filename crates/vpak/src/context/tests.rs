@@ -1,0 +1,165 @@
+use super::*;
+
+/// `tiles` tiles of `width`-byte elements as the `tiles unpredicted` filter
+/// lays them out (divisors, then quotients; shuffled by byte): smooth
+/// fields with noise, edges, empty tiles and a few large jumps.
+fn section(tiles: usize, width: usize, seed: u32) -> Vec<u8> {
+    let max = (1u32 << (8 * width)) - 1;
+    let mut rng = seed.wrapping_mul(2_654_435_761).max(1);
+    let mut next = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 17;
+        rng ^= rng << 5;
+        rng
+    };
+    let m = tiles * (TILE + 1);
+    let mut e = vec![0u32; m];
+    for t in 0..tiles {
+        e[t] = next() % 7;
+        let kind = next() % 4;
+        let scale = if width == 1 { 30 } else { 3000 };
+        for v in 0..TILE {
+            let (x, y, z) = ((v & 7) as u32, ((v >> 3) & 7) as u32, (v >> 6) as u32);
+            let q = match kind {
+                0 => 0,
+                1 => (x * 3 + y * 2 + z) * scale / 20 + next() % 3,
+                2 if next() % 97 == 0 => next() % (max + 1),
+                2 => (x * y + z * 5) * scale / 40,
+                _ => u32::from(x + y + z > 9) * scale + next() % 5,
+            };
+            e[tiles + t * TILE + v] = q.min(max);
+        }
+    }
+    let mut out = vec![0u8; m * width];
+    for (i, &v) in e.iter().enumerate() {
+        out[i] = v as u8;
+        if width == 2 {
+            out[m + i] = (v >> 8) as u8;
+        }
+    }
+    out
+}
+
+fn decoded(stored: &[u8], width: usize, len: usize, scalar: bool) -> Result<Vec<u8>, String> {
+    let mut out = vec![0u8; len];
+    match scalar {
+        true => {
+            let tiles = len / width / (TILE + 1);
+            let s = parse(stored, width, tiles, &mut out)?;
+            decode_scalar(&s, width, &mut out)?;
+        }
+        false => decode(stored, width as u32, &mut out)?,
+    }
+    Ok(out)
+}
+
+#[test]
+fn streams_restore_what_was_coded() {
+    for width in [1usize, 2] {
+        for tiles in [1usize, 15, 64, 65, 200] {
+            let raw = section(tiles, width, (tiles * 10 + width) as u32);
+            let stored = encode(&raw, width as u32, 3).unwrap().unwrap();
+            assert!(stored.len() < raw.len(), "{tiles} tiles of {width}: {} bytes coded from {}", stored.len(), raw.len());
+            for scalar in [true, false] {
+                assert_eq!(decoded(&stored, width, raw.len(), scalar).unwrap(), raw, "{tiles} tiles of {width} bytes, scalar {scalar}");
+            }
+        }
+    }
+}
+
+#[test]
+fn what_is_not_whole_tiles_is_not_coded() {
+    assert!(encode(&[0u8; 513 * 2 + 1], 1, 3).unwrap().is_none());
+    assert!(encode(&[0u8; 513 * 3], 2, 3).unwrap().is_none());
+    assert!(encode(&[], 1, 3).unwrap().is_none());
+    let stored = encode(&section(3, 1, 1), 1, 3).unwrap().unwrap();
+    assert!(decode(&stored, 1, &mut vec![0u8; 513 * 3 + 1]).is_err());
+    assert!(decode(&stored, 3, &mut vec![0u8; 513 * 3 * 3]).is_err());
+}
+
+/// Every truncation and many bit flips: an error or (rarely) other bytes,
+/// never a panic or a read outside the stream; the vector decoder says what
+/// the scalar one does.
+#[test]
+fn damaged_streams_are_refused_alike() {
+    for width in [1usize, 2] {
+        let raw = section(70, width, 7);
+        let stored = encode(&raw, width as u32, 3).unwrap().unwrap();
+        for cut in (0..stored.len()).step_by(stored.len() / 97 + 1) {
+            assert!(decoded(&stored[..cut], width, raw.len(), false).is_err(), "cut at {cut}");
+        }
+        let mut flips = 0;
+        for i in (0..stored.len()).step_by(stored.len() / 301 + 1) {
+            for bit in [0, 3, 7] {
+                let mut bad = stored.clone();
+                bad[i] ^= 1 << bit;
+                let (s, v) = (decoded(&bad, width, raw.len(), true), decoded(&bad, width, raw.len(), false));
+                assert_eq!(s.is_ok(), v.is_ok(), "byte {i} bit {bit}: scalar {s:?}");
+                if let (Ok(s), Ok(v)) = (s, v) {
+                    assert_eq!(s, v, "byte {i} bit {bit}");
+                }
+                flips += 1;
+            }
+        }
+        assert!(flips > 300);
+    }
+}
+
+#[test]
+fn lying_headers_are_refused() {
+    let raw = section(5, 1, 3);
+    let stored = encode(&raw, 1, 3).unwrap().unwrap();
+    for (field, value) in [(0, 0u32), (0, 1000), (1, 8), (1, 13), (2, 0), (2, 49), (3, u32::MAX), (4, 1 << 30), (5, 3)] {
+        let mut bad = stored.clone();
+        bad[4 * field..4 * field + 4].copy_from_slice(&value.to_le_bytes());
+        assert!(decoded(&bad, 1, raw.len(), false).is_err(), "field {field} = {value}");
+    }
+}
+
+#[test]
+fn frequencies_quantise_to_their_total() {
+    let mut counts = vec![[0u64; MAX_SYMBOLS]; 3];
+    counts[0][0] = 1_000_000;
+    counts[0][5] = 1;
+    (0..MAX_SYMBOLS).for_each(|s| counts[1][s] = 1 + s as u64 * 1000);
+    let q = quantise(&counts, PRECISION);
+    for (row, c) in q.iter().zip(&counts) {
+        let sum: u32 = row.iter().sum();
+        assert!(sum == 1 << PRECISION || (sum == 0 && c.iter().all(|&c| c == 0)));
+        assert!(row.iter().zip(c).all(|(&f, &c)| (f > 0) == (c > 0)));
+    }
+}
+
+/// Not a check but a measurement: the scalar and the dispatched (vector,
+/// where the CPU has AVX-512) decoders on the context-coded sections of the
+/// asset `VPAK_CONTEXT_BENCH` names, best of 5, one thread:
+/// `VPAK_CONTEXT_BENCH=A.vpak cargo test --release -p vdbcook-vpak context::tests::decoder_speed -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn decoder_speed() {
+    let Ok(path) = std::env::var("VPAK_CONTEXT_BENCH") else { return };
+    let asset = crate::Asset::open(std::path::Path::new(&path)).unwrap();
+    let mut streams = Vec::new();
+    for s in 0..asset.segment_count() {
+        let seg = asset.stored_segment(s).unwrap();
+        let Ok(table) = seg.section(crate::kind::CODING, 0) else { continue };
+        for c in crate::coding::Coding::parse_all(table).unwrap().into_iter().filter(|c| c.scheme == crate::coding::SCHEME_CONTEXT) {
+            let stored = seg.section(c.kind, c.index).unwrap().to_vec();
+            let w = c.filter.code().1 as usize;
+            let n = c.raw_size as usize + c.raw_size as usize / TILE;
+            streams.push((stored, w, n));
+        }
+    }
+    let bytes: usize = streams.iter().map(|s| s.2).sum();
+    for scalar in [true, false] {
+        let mut best = f64::MAX;
+        for _ in 0..5 {
+            let t = std::time::Instant::now();
+            for (stored, w, n) in &streams {
+                std::hint::black_box(decoded(stored, *w, *n, scalar).unwrap());
+            }
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        println!("{} decoder: {} sections, {:.1} MB of filtered elements, {:.0} MB/s", if scalar { "scalar" } else { "dispatched" }, streams.len(), bytes as f64 / 1e6, bytes as f64 / 1e6 / best);
+    }
+}
