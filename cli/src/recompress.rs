@@ -12,8 +12,10 @@ use vdbcook_vpak::Asset;
 Every segment is restored to the GPU bytes the cooker chose and stored again as
 --supercompress says: the nodes, bricks and texels stay as they are, so the asset draws
 the same; only its size on disk changes (and the supercompress setting it records).
-Older assets (version 6 to 8) are read and written as version 9 (one without a frame rate and frame
-numbers gets 24 fps and its frame indices).")]
+An asset cooked with --optimize disk keeps its 8- and 16-bit atlases context-coded where
+that is smaller than zstd (format version 11). Older assets (version 6 to 10) are read and
+written as version 11 (one without a frame rate and frame numbers gets 24 fps and its
+frame indices).")]
 pub struct RecompressArgs {
     /// The asset to read.
     #[arg(value_name = "IN.vpak")]

@@ -465,8 +465,8 @@ fn compress_threaded(data: &[u8], level: i32, workers: u32) -> std::io::Result<V
 
 /// Compresses every section worth it (the smallest of its filters' outputs,
 /// tried at a fast level, then compressed at `level`, or as [`level_for`]
-/// says for a large one; or context-coded when `schemes` allows and that is
-/// smaller) and adds the coding section; sections that do not shrink stay
+/// says for a large one; or context-coded when `schemes` allows and that
+/// takes at most [`CONTEXT_GAIN`] of zstd's bytes) and adds the coding section; sections that do not shrink stay
 /// as they are. Deterministic: each section is one zstd frame or context
 /// stream, the same on any number of threads ([`compress`]).
 pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) -> Result<Vec<Section>, Error> {
