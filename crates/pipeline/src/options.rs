@@ -336,7 +336,7 @@ settings_group! {
         /// format whose texels, filtered, have the least entropy: larger GPU formats, e.g.
         /// unorm8 for BC7, for a smaller file; a longer cook; docs/benchmarks.md). disk also
         /// context-codes unorm8/unorm16 atlases where that beats zstd by 8 % or more (format
-        /// v11; restored at about zstd's speed with AVX-512, a fifth of it without).
+        /// v11; restored at about zstd's speed with AVX-512, half of it with AVX2 alone).
         #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().optimize))]
         pub optimize: Optimize = Optimize::Gpu;
         /// The sequence's frame rate in frames per second (e.g. 24, 30, 23.976), recorded in the

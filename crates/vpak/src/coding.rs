@@ -359,9 +359,9 @@ fn texel_filters(plane: &crate::Plane, bricks: [u32; 3]) -> Vec<Filter> {
 
 /// A context-coded atlas is kept when it takes at most this share of its
 /// zstd frame's bytes. Its decoder runs at about zstd's speed on 8-bit
-/// levels with AVX-512, at about 0.6 times on 16-bit levels and at a fifth
-/// to a quarter without AVX-512 (docs/benchmarks.md): a few percent of bytes
-/// are not worth that.
+/// levels with AVX-512, at about 0.6 times on 16-bit levels or with AVX2
+/// alone, and at a fifth with neither (docs/benchmarks.md): a few percent of
+/// bytes are not worth that.
 const CONTEXT_GAIN: f64 = 0.92;
 
 /// The `tiles unpredicted` filter among `filters` when section `s` is the

@@ -6,14 +6,17 @@
 //! context made of the tile's face class and the sum of the neighbours'
 //! residual magnitudes, with one frequency table per context for the whole
 //! section. zstd sees bytes; this sees levels and their neighbourhood, and
-//! takes 10–20 % fewer bytes than zstd on the atlases `--optimize disk`
+//! takes 10–20 % fewer bytes than zstd:19 on the atlases `--optimize disk`
 //! makes. `N` tiles are decoded side by side, each with its own rANS state
-//! over one shared word stream, so that a vector decoder ([`avx512`]) runs
-//! `N` tiles in its lanes; the stream is the same for every decoder.
+//! over one shared word stream, so that a vector decoder ([`avx512`],
+//! [`avx2`]) runs `N` tiles in its lanes; the stream is the same for every
+//! decoder, and the fastest the CPU has is chosen at run time.
 //! `docs/format.md`, "Context coding", is the specification.
 
 use rayon::prelude::*;
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 
@@ -270,7 +273,8 @@ struct Stream {
     /// The escape bits, then 8 zero bytes (a decoder reads 8 at a time).
     bits: Vec<u8>,
     bits_len: usize,
-    /// The rANS words, then zeros: as many as a row of 8 elements can take in every lane.
+    /// The rANS words, then zeros: as many as a row of 8 elements can take in
+    /// every lane, and the 8 a vector decoder loads past the last it takes.
     words: Vec<u16>,
     words_len: usize,
     /// The decode table: per context 2^precision entries `symbol | freq << 6 | cum << 19`.
@@ -329,7 +333,7 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
     bits.resize(bits_len + 8, 0);
     let mut words = Vec::with_capacity(words_len + 8 * lanes);
     words.extend(stored[at + bits_len..].chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])));
-    words.resize(words_len + 8 * lanes, 0);
+    words.resize(words_len + 8 * lanes + 8, 0);
     Ok(Stream { lanes, precision, tiles, bits, bits_len, words, words_len, table })
 }
 
@@ -345,12 +349,45 @@ pub fn decode(stored: &[u8], width: u32, out: &mut [u8]) -> Result<(), String> {
     }
     let tiles = m / (TILE + 1);
     let s = parse(stored, w, tiles, out)?;
-    #[cfg(target_arch = "x86_64")]
-    if avx512::usable(s.lanes) {
-        // SAFETY: `usable` checked the CPU's features.
-        return unsafe { avx512::decode(&s, w, out) };
+    let decoder = Decoder::ALL.into_iter().find(|d| d.usable(s.lanes)).unwrap_or(Decoder::Scalar);
+    decoder.run(&s, w, out)
+}
+
+/// The decoders, fastest first; each gives the scalar one's output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Decoder {
+    Avx512,
+    Avx2,
+    Scalar,
+}
+
+impl Decoder {
+    const ALL: [Decoder; 3] = [Decoder::Avx512, Decoder::Avx2, Decoder::Scalar];
+
+    /// Whether this CPU runs it on a stream of `lanes` lanes.
+    fn usable(self, lanes: usize) -> bool {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            Decoder::Avx512 => avx512::usable(lanes),
+            #[cfg(target_arch = "x86_64")]
+            Decoder::Avx2 => avx2::usable(lanes),
+            Decoder::Scalar => true,
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
+        }
     }
-    decode_scalar(&s, w, out)
+
+    /// Decodes `s` into `out` (`usable` must hold: it falls back to the scalar decoder otherwise).
+    fn run(self, s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
+        match self {
+            // SAFETY: `usable` checked the CPU's features.
+            #[cfg(target_arch = "x86_64")]
+            Decoder::Avx512 if avx512::usable(s.lanes) => unsafe { avx512::decode(s, w, out) },
+            #[cfg(target_arch = "x86_64")]
+            Decoder::Avx2 if avx2::usable(s.lanes) => unsafe { avx2::decode(s, w, out) },
+            _ => decode_scalar(s, w, out),
+        }
+    }
 }
 
 /// The reference decoder: one lane at a time.
