@@ -7,7 +7,7 @@
 //! 8×8 byte transpose. Same output as `decode_scalar`, which the tests hold
 //! it to, damaged streams included.
 
-use super::{finish, padded, Stream, ESCAPE, MAX_SYMBOLS, RANS_LOW, TILE};
+use super::{finish, padded, Escapes, Stream, ESCAPE, MAX_SYMBOLS, RANS_LOW, TILE};
 use std::arch::x86_64::*;
 
 // Renormalisation is "the state's upper half is zero".
@@ -98,9 +98,7 @@ unsafe fn predict<const POS: usize, const G: usize>(w: &Work, p: usize, gi: usiz
 /// Where the shared streams stand, and what went wrong so far.
 struct Reader<'a> {
     words: *const u16,
-    bits: &'a [u8],
-    bits_len: usize,
-    bp: usize,
+    escapes: Escapes<'a>,
     /// Lanes (all ones) that met an empty context or decoded outside the element.
     bad: __m256i,
     /// An escape ran past the end of the bits.
@@ -157,20 +155,8 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
                 let mut ks = I32x8([0; 8]);
                 _mm256_store_si256(zs.0.as_mut_ptr() as *mut __m256i, z);
                 _mm256_store_si256(ks.0.as_mut_ptr() as *mut __m256i, kk);
-                let mut mm = em as u32;
-                while mm != 0 {
-                    let l = mm.trailing_zeros() as usize;
-                    mm &= mm - 1;
-                    let at = r.bp >> 3;
-                    if at > r.bits_len {
-                        r.overrun = true;
-                        break;
-                    }
-                    // At most 47 bits (no valid symbol has more than 31): within the 64-bit window.
-                    let nb = (ks.0[l] as u32).min(47);
-                    let peek = u64::from_le_bytes(r.bits[at..at + 8].try_into().unwrap_or_default()) >> (r.bp & 7);
-                    zs.0[l] = zs.0[l].wrapping_add((peek & ((1u64 << nb) - 1)) as i32);
-                    r.bp += nb as usize;
+                if !r.escapes.add_lanes(&mut zs.0, &ks.0, em as u32) {
+                    r.overrun = true;
                 }
                 z = _mm256_load_si256(zs.0.as_ptr() as *const __m256i);
             }
@@ -248,17 +234,10 @@ unsafe fn run<const G: usize, const P: i32>(s: &Stream, w: usize, out: &mut [u8]
     let first = m / (TILE + 1);
     let expand = expand_table();
     let mut work = Work { f: vec![I32x8([0; 8]); 729 * G], mag: vec![U8x8([0; 8]); 729 * G] };
-    let mut st = [_mm256_setzero_si256(); G];
-    for (gi, v) in st.iter_mut().enumerate() {
-        let mut x = I32x8([0; 8]);
-        for (l, x) in x.0.iter_mut().enumerate() {
-            let lane = gi * 8 + l;
-            *x = (u32::from(s.words[2 * lane]) << 16 | u32::from(s.words[2 * lane + 1])) as i32;
-        }
-        *v = unsafe { ld(&x) };
-    }
+    let first_states = s.initial_states();
+    let mut st: [__m256i; G] = std::array::from_fn(|gi| unsafe { _mm256_loadu_si256(first_states[gi * 8..].as_ptr() as *const __m256i) });
     let base = s.words.as_ptr();
-    let mut r = Reader { words: unsafe { base.add(2 * n) }, bits: &s.bits, bits_len: s.bits_len, bp: 0, bad: _mm256_setzero_si256(), overrun: false };
+    let mut r = Reader { words: unsafe { base.add(2 * n) }, escapes: s.escapes(), bad: _mm256_setzero_si256(), overrun: false };
     let max = _mm256_set1_epi32((1 << (8 * w)) - 1);
     let table = s.table.as_ptr();
     let outp = out.as_mut_ptr();
@@ -307,10 +286,8 @@ unsafe fn run<const G: usize, const P: i32>(s: &Stream, w: usize, out: &mut [u8]
     }
     let mut states = vec![0u32; n];
     for (gi, v) in st.iter().enumerate() {
-        let mut x = I32x8([0; 8]);
-        unsafe { _mm256_store_si256(x.0.as_mut_ptr() as *mut __m256i, *v) };
-        x.0.iter().enumerate().for_each(|(l, &x)| states[gi * 8 + l] = x as u32);
+        unsafe { _mm256_storeu_si256(states[gi * 8..].as_mut_ptr() as *mut __m256i, *v) };
     }
     let wp = unsafe { r.words.offset_from(base) } as usize;
-    finish(s, &states, wp, r.bp)
+    finish(s, &states, wp, &r.escapes)
 }

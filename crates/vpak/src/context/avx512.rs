@@ -7,7 +7,7 @@
 //! bits are read lane by lane (rare). Same output as `decode_scalar`, which
 //! the tests hold it to, damaged streams included.
 
-use super::{finish, padded, Stream, ESCAPE, MAX_SYMBOLS, RANS_LOW, TILE};
+use super::{finish, padded, Escapes, Stream, ESCAPE, MAX_SYMBOLS, RANS_LOW, TILE};
 use std::arch::x86_64::*;
 
 #[repr(C, align(64))]
@@ -84,9 +84,7 @@ unsafe fn predict<const POS: usize, const G: usize>(w: &Work, p: usize, gi: usiz
 /// Where the shared streams stand, and what went wrong so far.
 struct Reader<'a> {
     words: *const u16,
-    bits: &'a [u8],
-    bits_len: usize,
-    bp: usize,
+    escapes: Escapes<'a>,
     /// Lanes that met an empty context or decoded outside the element.
     bad: u16,
     /// An escape ran past the end of the bits.
@@ -129,20 +127,8 @@ unsafe fn step<const POS: usize, const G: usize, const P: u32>(w: &mut Work, st:
                 let mut ks = I32x16([0; 16]);
                 _mm512_store_si512(zs.0.as_mut_ptr() as *mut __m512i, z);
                 _mm512_store_si512(ks.0.as_mut_ptr() as *mut __m512i, kk);
-                let mut m = esc;
-                while m != 0 {
-                    let l = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    let at = r.bp >> 3;
-                    if at > r.bits_len {
-                        r.overrun = true;
-                        break;
-                    }
-                    // At most 47 bits (no valid symbol has more than 31): within the 64-bit window.
-                    let nb = (ks.0[l] as u32).min(47);
-                    let peek = u64::from_le_bytes(r.bits[at..at + 8].try_into().unwrap_or_default()) >> (r.bp & 7);
-                    zs.0[l] = zs.0[l].wrapping_add((peek & ((1u64 << nb) - 1)) as i32);
-                    r.bp += nb as usize;
+                if !r.escapes.add_lanes(&mut zs.0, &ks.0, esc as u32) {
+                    r.overrun = true;
                 }
                 z = _mm512_load_si512(zs.0.as_ptr() as *const __m512i);
             }
@@ -210,17 +196,10 @@ unsafe fn run<const G: usize, const P: u32>(s: &Stream, w: usize, out: &mut [u8]
     let m = out.len() / w;
     let first = m / (TILE + 1);
     let mut work = Work { f: vec![I32x16([0; 16]); 729 * G], mag: vec![U8x16([0; 16]); 729 * G] };
-    let mut st = [_mm512_setzero_si512(); G];
-    for (gi, v) in st.iter_mut().enumerate() {
-        let mut x = I32x16([0; 16]);
-        for (l, x) in x.0.iter_mut().enumerate() {
-            let lane = gi * 16 + l;
-            *x = (u32::from(s.words[2 * lane]) << 16 | u32::from(s.words[2 * lane + 1])) as i32;
-        }
-        *v = unsafe { ld(&x) };
-    }
+    let first_states = s.initial_states();
+    let mut st: [__m512i; G] = std::array::from_fn(|gi| unsafe { _mm512_loadu_si512(first_states[gi * 16..].as_ptr() as *const __m512i) });
     let base = s.words.as_ptr();
-    let mut r = Reader { words: unsafe { base.add(2 * n) }, bits: &s.bits, bits_len: s.bits_len, bp: 0, bad: 0, overrun: false };
+    let mut r = Reader { words: unsafe { base.add(2 * n) }, escapes: s.escapes(), bad: 0, overrun: false };
     let max = _mm512_set1_epi32((1 << (8 * w)) - 1);
     let table = s.table.as_ptr();
     let outp = out.as_mut_ptr();
@@ -267,10 +246,8 @@ unsafe fn run<const G: usize, const P: u32>(s: &Stream, w: usize, out: &mut [u8]
     }
     let mut states = vec![0u32; n];
     for (gi, v) in st.iter().enumerate() {
-        let mut x = I32x16([0; 16]);
-        unsafe { _mm512_store_si512(x.0.as_mut_ptr() as *mut __m512i, *v) };
-        x.0.iter().enumerate().for_each(|(l, &x)| states[gi * 16 + l] = x as u32);
+        unsafe { _mm512_storeu_si512(states[gi * 16..].as_mut_ptr() as *mut __m512i, *v) };
     }
     let wp = unsafe { r.words.offset_from(base) } as usize;
-    finish(s, &states, wp, r.bp)
+    finish(s, &states, wp, &r.escapes)
 }

@@ -390,14 +390,67 @@ impl Decoder {
     }
 }
 
+impl Stream {
+    /// Each lane's first state, from the front of the words.
+    fn initial_states(&self) -> Vec<u32> {
+        (0..self.lanes).map(|l| u32::from(self.words[2 * l]) << 16 | u32::from(self.words[2 * l + 1])).collect()
+    }
+
+    fn escapes(&self) -> Escapes<'_> {
+        Escapes { bits: &self.bits, len: self.bits_len, at: 0 }
+    }
+}
+
+/// The escape bits as the decoders read them, from the start.
+struct Escapes<'a> {
+    /// The bits, then 8 zero bytes.
+    bits: &'a [u8],
+    len: usize,
+    /// Bits read so far.
+    at: usize,
+}
+
+impl Escapes<'_> {
+    /// The next `nb` bits (least significant first; at most 47 are taken,
+    /// more than any valid symbol has, so that a damaged stream's read stays
+    /// in one 64-bit window), or `None` when the position is past the end.
+    #[inline(always)]
+    fn read(&mut self, nb: u32) -> Option<u32> {
+        let byte = self.at >> 3;
+        if byte > self.len {
+            return None;
+        }
+        let nb = nb.min(47);
+        let peek = u64::from_le_bytes(self.bits[byte..byte + 8].try_into().unwrap_or_default()) >> (self.at & 7);
+        self.at += nb as usize;
+        Some((peek & ((1u64 << nb) - 1)) as u32)
+    }
+
+    /// A vector decoder's escaping lanes (`mask`, lowest lane first, the
+    /// stream's order): each lane's `counts[l]` bits added to `z[l]`; false
+    /// when they run past the end.
+    #[inline(always)]
+    fn add_lanes<const W: usize>(&mut self, z: &mut [i32; W], counts: &[i32; W], mut mask: u32) -> bool {
+        while mask != 0 {
+            let l = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            match self.read(counts[l] as u32) {
+                Some(raw) => z[l] = z[l].wrapping_add(raw as i32),
+                None => return false,
+            }
+        }
+        true
+    }
+}
+
 /// The reference decoder: one lane at a time.
 fn decode_scalar(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
     let m = out.len() / w;
     let n = s.lanes;
     let mask = (1u32 << s.precision) - 1;
     let max = (1i32 << (8 * w)) - 1;
-    let mut states: Vec<u32> = (0..n).map(|l| u32::from(s.words[2 * l]) << 16 | u32::from(s.words[2 * l + 1])).collect();
-    let (mut wp, mut bp) = (2 * n, 0usize);
+    let mut states = s.initial_states();
+    let (mut wp, mut escapes) = (2 * n, s.escapes());
     let mut f = vec![[0i32; 729]; n];
     let mut mag = vec![[0u32; 729]; n];
     for g in 0..s.tiles.div_ceil(n) {
@@ -427,13 +480,7 @@ fn decode_scalar(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
                 states[l] = x;
                 let (mut z, nb) = base(sym);
                 if nb > 0 {
-                    if bp >> 3 > s.bits_len {
-                        return Err("runs past the end of its escape bits".into());
-                    }
-                    let at = bp >> 3;
-                    let peek = u64::from_le_bytes(s.bits[at..at + 8].try_into().unwrap_or_default()) >> (bp & 7);
-                    z += (peek & ((1u64 << nb) - 1)) as u32;
-                    bp += nb as usize;
+                    z += escapes.read(nb).ok_or("runs past the end of its escape bits")?;
                 }
                 let r = ((z >> 1) as i32) ^ -((z & 1) as i32);
                 let q = predict(pos, f, p).wrapping_add(r);
@@ -450,12 +497,12 @@ fn decode_scalar(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
             }
         }
     }
-    finish(s, &states, wp, bp)
+    finish(s, &states, wp, &escapes)
 }
 
 /// A stream decoded to its end: every word read, every state back at its start, no bit past the end.
-fn finish(s: &Stream, states: &[u32], wp: usize, bp: usize) -> Result<(), String> {
-    if wp != s.words_len || states.iter().any(|&x| x != RANS_LOW) || bp > 8 * s.bits_len {
+fn finish(s: &Stream, states: &[u32], wp: usize, escapes: &Escapes) -> Result<(), String> {
+    if wp != s.words_len || states.iter().any(|&x| x != RANS_LOW) || escapes.at > 8 * s.bits_len {
         return Err("does not end where its coder does (damaged)".into());
     }
     Ok(())
