@@ -58,7 +58,7 @@ def make_body(sections):
     return reseal(out)
 
 
-def make_file(bodies, version=8):
+def make_file(bodies, version=11):
     """A file of `bodies` (segments), of the given version."""
     out = bytearray(container(bodies))
     struct.pack_into("<I", out, 8, version)
@@ -256,7 +256,7 @@ def check_refusals(packed, plain, work):
     refused(with_body(packed, rec(lambda r: r.__setitem__(6, (1 << 30) * slab))), "more than a")
     refused(with_body(packed, rec(lambda r: r.__setitem__(7, r[7] ^ 1))), "restored bytes do not match")
     refused(with_body(packed, rec(lambda r: r.__setitem__(2, 3))), "scheme 3")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(2, 2))), "(scheme 2) in a file older than version 11")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(slice(2, 4), [2, 3]))), "context-coded with filter 3")
     refused(with_body(packed, rec(lambda r: r.__setitem__(3, 5))), "filter 5")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [0, 2, 0]))), "filter 0 with width 2")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [1, 3, 0]))), "filter 1 with width 3")
@@ -297,6 +297,8 @@ def check_refusals(packed, plain, work):
     n0 = len(next(d for k, i, d in plain_secs if (k, i) == atlas))
     refused(with_body(plain, unsized(-1)), f"decodes to more than the record's {n0 - 1} bytes")
     refused(with_body(plain, unsized(1)), f"decodes to {n0} bytes, the record says {n0 + 1}")
+    # A supercompressed body packs its sections at multiples of 8 from version 11 on.
+    refused(make_file(bodies_of(packed), version=10), "is not at a 256-byte boundary")
     # Supercompression is version 8 on.
     refused(make_file(bodies_of(packed), version=7), "older than version 8")
     refused(bodies_of(packed)[0], "older than version 8")

@@ -552,9 +552,11 @@ def open_body(buf, head_sum=None, coded=False, version=BODY_VERSION):
             raise VpakError(str(e)) from None
         for kind, index in secs.table:  # restore every compressed section, checking each
             secs.get(kind, index)
-    # Every other section starts at a multiple of 256 bytes.
+    # Every other section starts at a multiple of 256 bytes (in a version-11 body with a
+    # coding section, every section at a multiple of 8, which read_header checked).
+    packed = version >= CONTEXT_VERSION and (K_CODING, 0) in secs.table
     for (kind, index), (offset, _, _) in secs.table.items():
-        if kind != K_CODING and (kind, index) not in secs.coding and offset % SECTION_ALIGN:
+        if not packed and kind != K_CODING and (kind, index) not in secs.coding and offset % SECTION_ALIGN:
             raise VpakError(f"section kind {kind} index {index} is not at a 256-byte boundary")
     m = decode_metadata(secs.get(K_METADATA), version)
     validate(m, secs)

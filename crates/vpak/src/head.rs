@@ -62,13 +62,23 @@ pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: imp
         }
         sections.push(s);
     }
-    // Every section at a multiple of 256 but the coding section and those it names (at a multiple of 8).
+    // Every section at a multiple of 256 but the coding section and those it names (at a multiple
+    // of 8); in a version-11 body with a coding section, every section at a multiple of 8.
     let mut codings = Vec::new();
     for e in sections.iter().filter(|e| e.kind == crate::kind::CODING) {
         codings.push((e.kind, e.index, coding(e)?));
     }
+    // What the file's version allows is said first: a newer body's layout is not a misalignment.
+    if version < segments::VERSION_8 && !codings.is_empty() {
+        return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION_8)));
+    }
+    let context = codings.iter().flat_map(|(_, _, b)| crate::coding::Coding::parse_all(b).unwrap_or_default()).find(|c| c.scheme == crate::coding::SCHEME_CONTEXT);
+    if let Some(c) = context.filter(|_| version < segments::VERSION) {
+        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is context-coded in a version-{version} file (context coding is version {})", segments::VERSION) });
+    }
     let coded_set = crate::coding::coded_sections(codings.iter().map(|(k, i, b)| (*k, *i, b.as_ref())));
-    if let Some(s) = sections.iter().find(|s| !coded_set.contains(&(s.kind, s.index)) && !s.offset.is_multiple_of(ALIGN as u64)) {
+    let packed = version >= segments::VERSION && !codings.is_empty();
+    if let Some(s) = sections.iter().find(|s| !packed && !coded_set.contains(&(s.kind, s.index)) && !s.offset.is_multiple_of(ALIGN as u64)) {
         return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
     }
     // One section per (kind, index): a reader must not have to pick.
@@ -76,13 +86,6 @@ pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: imp
     keys.sort_unstable();
     if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
         return Err(Error::DuplicateSection { kind: w[0].0, index: w[0].1 });
-    }
-    if version < segments::VERSION_8 && sections.iter().any(|s| s.kind == crate::kind::CODING) {
-        return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION_8)));
-    }
-    let context = codings.iter().flat_map(|(_, _, b)| crate::coding::Coding::parse_all(b).unwrap_or_default()).find(|c| c.scheme == crate::coding::SCHEME_CONTEXT);
-    if let Some(c) = context.filter(|_| version < segments::VERSION) {
-        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is context-coded in a version-{version} file (context coding is version {})", segments::VERSION) });
     }
     Ok(sections)
 }

@@ -619,11 +619,23 @@ fn align(n: usize) -> usize {
 }
 
 /// Offsets of each section, the table's end and the file's length: every
-/// section at a multiple of [`ALIGN`], but the coding section and the
-/// sections it names at a multiple of [`CODED_ALIGN`].
+/// section at a multiple of [`ALIGN`], or of [`CODED_ALIGN`] in a body with
+/// a coding section ([`section_align`]).
 fn plan(sections: &[Section]) -> (Vec<usize>, usize, usize) {
-    let coded = coding::coded_sections(sections.iter().map(|s| (s.kind, s.index, &s.data[..])));
-    plan_lens(sections.iter().map(|s| (s.data.len(), if coded.contains(&(s.kind, s.index)) { CODED_ALIGN } else { ALIGN })))
+    let to = section_align(sections);
+    plan_lens(sections.iter().map(|s| (s.data.len(), to)))
+}
+
+/// Where a body's sections start: at multiples of [`ALIGN`], so that each
+/// can be uploaded from a mapping of the file as it is; in a body with a
+/// coding section (version 11), at multiples of [`CODED_ALIGN`], since a
+/// reader restores such a body before use and a small asset would be mostly
+/// padding otherwise.
+fn section_align(sections: &[Section]) -> usize {
+    match sections.iter().any(|s| s.kind == kind::CODING) {
+        true => CODED_ALIGN,
+        false => ALIGN,
+    }
 }
 
 /// [`plan`] of sections of these lengths and alignments.
@@ -654,8 +666,8 @@ pub fn write_to<W: std::io::Write + ?Sized>(w: &mut W, sections: &[Section]) -> 
 
 /// A body's header and section table (every section's checksum computed once, here).
 pub(crate) fn body_head(sections: &[Section]) -> Vec<u8> {
-    let coded = coding::coded_sections(sections.iter().map(|s| (s.kind, s.index, &s.data[..])));
-    let entries: Vec<Entry> = sections.iter().map(|s| (s.kind, s.index, s.data.len(), checksum(&s.data), if coded.contains(&(s.kind, s.index)) { CODED_ALIGN } else { ALIGN })).collect();
+    let to = section_align(sections);
+    let entries: Vec<Entry> = sections.iter().map(|s| (s.kind, s.index, s.data.len(), checksum(&s.data), to)).collect();
     head_of(&entries).0
 }
 

@@ -609,6 +609,27 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn only_a_version_11_body_packs_its_sections() {
+        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        let mut sections = body(&m, 1);
+        sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
+        let coded = crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap();
+        let mut b = assemble_segments(&[(2, coded)]).unwrap();
+        // Every section of the supercompressed body at a multiple of 8, some not of 256.
+        let a = Asset::from_bytes(&b).unwrap();
+        let body = a.stored_segment(0).unwrap();
+        let offsets: Vec<u64> = body.sections.iter().map(|e| e.offset).collect();
+        assert!(offsets.iter().all(|o| o % 8 == 0) && offsets.iter().any(|o| o % ALIGN as u64 != 0), "{offsets:?}");
+        a.segment(0).unwrap();
+        // In a version-10 file, the sections no coding record names must be at multiples of 256.
+        b[8..12].copy_from_slice(&VERSION_10.to_le_bytes());
+        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
+        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
+        assert!(err.contains("misaligned"), "{err}");
+    }
+
+    #[test]
     fn context_coding_is_version_11() {
         use crate::coding::{Coding, Filter, Tiles, SCHEME_CONTEXT};
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
