@@ -46,11 +46,13 @@ pub(crate) fn check_checksum(header: &[u8], table: &[u8]) -> Result<(), Error> {
     Ok(())
 }
 
-/// A body's section table (`table`, of a body of `len` bytes): each
-/// section inside the body after the table, at a multiple of 256 (the
-/// coding section and those it names: of 8), none listed twice, and a coding
-/// section only where `coded` allows one. `coding` gives a coding section's
-/// bytes (which say which sections it names).
+/// A body's section table (`table`, of a body of `len` bytes, of a file of
+/// version `version`): each section inside the body after the table, at a
+/// multiple of 256 (the coding section and those it names: of 8; in a
+/// version-11 body with a coding section, every section: of 8), none listed
+/// twice, a coding section only from version 8 and a context-coded one only
+/// from version 11. `coding` gives a coding section's bytes (which say which
+/// sections it names).
 pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: impl FnMut(&SectionEntry) -> Result<Cow<'a, [u8]>, Error>) -> Result<Vec<SectionEntry>, Error> {
     let table_end = (HEADER_LEN + table.len()) as u64;
     let mut sections = Vec::with_capacity(table.len() / crate::ENTRY_LEN);
