@@ -255,8 +255,13 @@ pub fn encode(filtered: &[u8], width: u32, level: i32) -> std::io::Result<Option
         row[..symbols].iter().for_each(|&f| side.extend_from_slice(&(f as u16).to_le_bytes()));
     }
     let side = zstd::bulk::compress(&side, level)?;
+    let fields = [LANES, PRECISION as usize, symbols, side.len(), bits.len(), words.len()];
+    // The header's fields are 32 bits: a section too large for them stays with zstd.
+    if fields.iter().any(|&v| u32::try_from(v).is_err()) {
+        return Ok(None);
+    }
     let mut out = Vec::with_capacity(HEAD + side.len() + bits.len() + 2 * words.len());
-    for v in [LANES, PRECISION as usize, symbols, side.len(), bits.len(), words.len()] {
+    for v in fields {
         out.extend_from_slice(&(v as u32).to_le_bytes());
     }
     out.extend_from_slice(&side);
