@@ -358,7 +358,8 @@ fn texel_filters(plane: &crate::Plane, bricks: [u32; 3]) -> Vec<Filter> {
 }
 
 /// A context-coded atlas is kept when it takes at most this share of its
-/// zstd frame's bytes. Its decoder runs at about zstd's speed on 8-bit
+/// zstd frame's bytes (and expands at most [`MAX_RATIO`] times, as every
+/// reader allows: a constant atlas codes to almost nothing). Its decoder runs at about zstd's speed on 8-bit
 /// levels with AVX-512, at about 0.6 times on 16-bit levels or with AVX2
 /// alone, and at a fifth with neither (docs/benchmarks.md): a few percent of
 /// bytes are not worth that.
@@ -514,7 +515,8 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) 
                     true => &filtered,
                     false => unpredicted.get_or_insert_with(|| Filter::Tiles(t).apply(&s.data)),
                 };
-                if let Some(coded) = crate::context::encode(input, t.width, level)?.filter(|c| (c.len() as f64) <= CONTEXT_GAIN * data.len() as f64) {
+                let worth = |c: &Vec<u8>| (c.len() as f64) <= CONTEXT_GAIN * data.len() as f64 && input.len() as u64 <= c.len() as u64 * MAX_RATIO;
+                if let Some(coded) = crate::context::encode(input, t.width, level)?.filter(worth) {
                     (data, scheme, filter) = (coded, SCHEME_CONTEXT, Filter::Tiles(t));
                 }
             }
@@ -574,6 +576,10 @@ fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>
         Ok(got) => Err(err(format!("decompresses to {got} bytes, the coding table says {n}"))),
         Err(e) => Err(err(format!("does not decompress to the {n} bytes the coding table says ({e})"))),
     };
+    // One zstd frame and nothing after it (the decompressor would take a second frame on).
+    if c.scheme == SCHEME_ZSTD && zstd::zstd_safe::find_frame_compressed_size(stored) != Ok(stored.len()) {
+        return Err(err("is not one zstd frame with nothing after it".into()));
+    }
     if c.filter == Filter::None && c.scheme == SCHEME_ZSTD {
         check(d.decompress_to_buffer(stored, out))?;
     } else {
@@ -867,6 +873,9 @@ mod tests {
             (Coding { raw_size: 1 << 40, ..good }, stored.clone()),
             (Coding { raw_checksum: 1, ..good }, stored.clone()),
             (good, stored[..stored.len() - 1].to_vec()),
+            // Two frames that decode to the record's bytes together, and a frame with an empty one after it.
+            (good, [zstd::bulk::compress(&raw[..4_000], 3).unwrap(), zstd::bulk::compress(&raw[4_000..], 3).unwrap()].concat()),
+            (good, [stored.clone(), zstd::bulk::compress(&[], 3).unwrap()].concat()),
         ] {
             assert!(matches!(restore(&c, &b), Err(Error::Coding { .. })), "{c:?}");
         }

@@ -7,7 +7,7 @@
 //! 8×8 byte transpose. Same output as `decode_scalar`, which the tests hold
 //! it to, damaged streams included.
 
-use super::{finish, padded, Escapes, Stream, ESCAPE, MAX_SYMBOLS, RANS_LOW, TILE};
+use super::{finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, TILE};
 use std::arch::x86_64::*;
 
 // Renormalisation is "the state's upper half is zero".
@@ -134,11 +134,12 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
             let slot = _mm256_and_si256(x, _mm256_set1_epi32((1 << P) - 1));
             let ent = _mm256_i32gather_epi32::<4>(table as *const i32, _mm256_or_si256(_mm256_slli_epi32::<P>(ctx), slot));
             let sym = _mm256_and_si256(ent, _mm256_set1_epi32(63));
-            r.bad = _mm256_or_si256(r.bad, _mm256_and_si256(act, _mm256_cmpgt_epi32(sym, _mm256_set1_epi32(MAX_SYMBOLS as i32 - 1))));
+            r.bad = _mm256_or_si256(r.bad, _mm256_and_si256(act, _mm256_cmpgt_epi32(sym, _mm256_set1_epi32(LAST_SYMBOL as i32))));
             let fr = _mm256_and_si256(_mm256_srli_epi32::<6>(ent), _mm256_set1_epi32(0x1fff));
             let xn = _mm256_sub_epi32(_mm256_add_epi32(_mm256_mullo_epi32(fr, _mm256_srli_epi32::<P>(x)), slot), _mm256_srli_epi32::<19>(ent));
             let xs = _mm256_blendv_epi8(x, xn, act);
-            let need = _mm256_cmpeq_epi32(_mm256_srli_epi32::<16>(xs), _mm256_setzero_si256());
+            // Only the lanes with a tile renormalise (an absent lane's state is never used).
+            let need = _mm256_and_si256(act, _mm256_cmpeq_epi32(_mm256_srli_epi32::<16>(xs), _mm256_setzero_si256()));
             let m = _mm256_movemask_ps(_mm256_castsi256_ps(need)) as usize;
             let raw = _mm_loadu_si128(r.words as *const __m128i);
             let words = _mm256_cvtepu16_epi32(_mm_shuffle_epi8(raw, _mm_loadu_si128(expand.get_unchecked(m).as_ptr() as *const __m128i)));

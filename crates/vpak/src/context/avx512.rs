@@ -7,7 +7,7 @@
 //! bits are read lane by lane (rare). Same output as `decode_scalar`, which
 //! the tests hold it to, damaged streams included.
 
-use super::{finish, padded, Escapes, Stream, ESCAPE, MAX_SYMBOLS, RANS_LOW, TILE};
+use super::{finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, TILE};
 use std::arch::x86_64::*;
 
 #[repr(C, align(64))]
@@ -109,11 +109,12 @@ unsafe fn step<const POS: usize, const G: usize, const P: u32>(w: &mut Work, st:
             let slot = _mm512_and_si512(x, _mm512_set1_epi32((1 << P) - 1));
             let ent = _mm512_i32gather_epi32::<4>(_mm512_or_si512(_mm512_slli_epi32::<P>(ctx), slot), table as *const i32);
             let sym = _mm512_and_si512(ent, _mm512_set1_epi32(63));
-            r.bad |= _mm512_mask_cmpge_epu32_mask(act, sym, _mm512_set1_epi32(MAX_SYMBOLS as i32));
+            r.bad |= _mm512_mask_cmpgt_epu32_mask(act, sym, _mm512_set1_epi32(LAST_SYMBOL as i32));
             let fr = _mm512_and_si512(_mm512_srli_epi32::<6>(ent), _mm512_set1_epi32(0x1fff));
             let xn = _mm512_sub_epi32(_mm512_add_epi32(_mm512_mullo_epi32(fr, _mm512_srli_epi32::<P>(x)), slot), _mm512_srli_epi32::<19>(ent));
             let xs = _mm512_mask_blend_epi32(act, x, xn);
-            let need = _mm512_cmplt_epu32_mask(xs, _mm512_set1_epi32(RANS_LOW as i32));
+            // Only the lanes with a tile renormalise (an absent lane's state is never used).
+            let need = _mm512_mask_cmplt_epu32_mask(act, xs, _mm512_set1_epi32(RANS_LOW as i32));
             let words = _mm512_cvtepu16_epi32(_mm256_maskz_expandloadu_epi16(need, r.words as *const i16));
             r.words = r.words.add(need.count_ones() as usize);
             st[gi] = _mm512_mask_blend_epi32(need, xs, _mm512_or_si512(_mm512_slli_epi32::<16>(xs), words));
@@ -163,6 +164,10 @@ unsafe fn put_row<const G: usize, const SHIFT: u32>(w: &Work, row: usize, gi: us
             let c = _mm512_permutex2var_epi8(a, _mm512_loadu_si512(idx.as_ptr() as *const __m512i), b);
             let offs = _mm512_setr_epi64(0, 512, 1024, 1536, 2048, 2560, 3072, 3584);
             let m = ((keep >> (half * 8)) & 0xff) as __mmask8;
+            if m == 0 {
+                // No lane there: its tiles lie past the output's end.
+                break;
+            }
             _mm512_mask_i64scatter_epi64::<1>(out.add(half * 8 * 512) as *mut i64, m, offs, c);
         }
     }

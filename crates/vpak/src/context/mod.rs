@@ -27,6 +27,10 @@ const TILE: usize = crate::tiles::TILE;
 const ESCAPE: u32 = 16;
 /// The most symbols a context's table row may hold (`ESCAPE` + 32 escapes).
 const MAX_SYMBOLS: usize = 48;
+/// The largest symbol a decoder takes: the value of `ESCAPE + 31` is at
+/// least 2^31 + 15, outside every element (the spec refuses it there), and
+/// would overflow 32-bit arithmetic; every decoder refuses it as it meets it.
+const LAST_SYMBOL: u32 = ESCAPE + 30;
 /// The tile's face classes: whether x, y and z are past the tile's low faces.
 const POSITIONS: usize = 8;
 /// Buckets of the neighbours' residual magnitudes.
@@ -303,7 +307,11 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
         return Err(format!("has {words_len} words, fewer than its {lanes} lanes' states"));
     }
     let side_want = tiles * width + CONTEXTS * symbols * 2;
-    let side = zstd::bulk::decompress(&stored[HEAD..HEAD + side_len], side_want).map_err(|e| format!("has a side frame that does not decompress ({e})"))?;
+    let side = &stored[HEAD..HEAD + side_len];
+    if zstd::zstd_safe::find_frame_compressed_size(side) != Ok(side.len()) {
+        return Err("has a side part that is not one zstd frame".into());
+    }
+    let side = zstd::bulk::decompress(side, side_want).map_err(|e| format!("has a side frame that does not decompress ({e})"))?;
     if side.len() != side_want {
         return Err(format!("has a side frame of {} bytes, not {side_want}", side.len()));
     }
@@ -474,8 +482,8 @@ fn decode_scalar(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
                 let slot = x & mask;
                 let ent = s.table[(ctx << s.precision) | slot as usize];
                 let sym = ent & 63;
-                if sym as usize >= MAX_SYMBOLS {
-                    return Err(format!("codes in context {ctx}, which its tables leave empty"));
+                if sym > LAST_SYMBOL {
+                    return Err(format!("decodes symbol {sym} in context {ctx}: an empty context, or a value no element holds"));
                 }
                 let mut x = ((ent >> 6) & 0x1fff) * (x >> s.precision) + slot - (ent >> 19);
                 if x < RANS_LOW {

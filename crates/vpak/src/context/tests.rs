@@ -114,6 +114,59 @@ fn damaged_streams_are_refused_alike() {
     }
 }
 
+/// A stream from its parts: `lanes` lanes, every used context's row given
+/// (frequencies summing to 2^9), `divisors` (width 1), escape bits and words.
+fn stream(lanes: usize, rows: &[(usize, Vec<u16>)], divisors: &[u8], bits: &[u8], words: &[u16]) -> Vec<u8> {
+    let symbols = rows.iter().map(|r| r.1.len()).max().unwrap_or(1);
+    let mut side = divisors.to_vec();
+    for ctx in 0..CONTEXTS {
+        let row = rows.iter().find(|r| r.0 == ctx).map(|r| r.1.clone()).unwrap_or_default();
+        (0..symbols).for_each(|s| side.extend_from_slice(&row.get(s).copied().unwrap_or(0).to_le_bytes()));
+    }
+    let side = zstd::bulk::compress(&side, 3).unwrap();
+    let mut out = Vec::new();
+    for v in [lanes, 9, symbols, side.len(), bits.len(), words.len()] {
+        out.extend_from_slice(&(v as u32).to_le_bytes());
+    }
+    out.extend_from_slice(&side);
+    out.extend_from_slice(bits);
+    words.iter().for_each(|w| out.extend_from_slice(&w.to_le_bytes()));
+    out
+}
+
+/// Every decoder refuses what the scalar one and the spec refuse, where a
+/// vector decoder could otherwise go its own way.
+#[test]
+fn what_the_spec_refuses_every_decoder_refuses() {
+    let len = TILE + 1;
+    // A lane with no tile keeps its first state, which must be the coder's: here it is 1,
+    // and a word follows that a lane renormalising it would take (to 2^16).
+    let raw = section(1, 1, 5);
+    let good = encode(&raw, 1, 3).unwrap().unwrap();
+    assert_eq!(decoded(&good, 1, raw.len(), Decoder::Scalar).unwrap(), raw);
+    let lanes = u32::from_le_bytes(good[0..4].try_into().unwrap()) as usize;
+    let words_at = good.len() - 2 * u32::from_le_bytes(good[20..24].try_into().unwrap()) as usize;
+    let mut bad = good[..words_at].to_vec();
+    let mut words: Vec<u16> = good[words_at..].chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
+    (words[2], words[3]) = (0, 1);
+    words.insert(2 * lanes, 0);
+    bad[20..24].copy_from_slice(&(words.len() as u32).to_le_bytes());
+    words.iter().for_each(|w| bad.extend_from_slice(&w.to_le_bytes()));
+    for d in decoders() {
+        assert!(decoded(&bad, 1, raw.len(), d).is_err(), "{d:?} took words for a lane without a tile");
+    }
+    // Symbol 47 (31 escape bits, all ones) in the first element's context (class 0, bucket 0):
+    // its value is 2^32 + 14, outside every element; 32-bit arithmetic would wrap it into one.
+    let mut row = vec![0u16; 48];
+    row[47] = 512;
+    let states: Vec<u16> = (0..16).flat_map(|_| [1u16, 0]).collect();
+    let s = stream(16, &[(0, row)], &[1], &[0xff; 8], &states);
+    for d in decoders() {
+        let got = decoded(&s, 1, len, d);
+        assert!(got.is_err(), "{d:?}: {got:?}");
+    }
+}
+
 #[test]
 fn lying_headers_are_refused() {
     let raw = section(5, 1, 3);
