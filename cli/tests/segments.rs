@@ -216,16 +216,20 @@ fn memory_follows_the_segment_not_the_sequence() {
     // scattered over the pool, and the system maps a large piece of the file
     // around each one read; dropped every few of them, not every 512 (which
     // took 2.2 times the 8 frames' peak here, 2.6 times on 96 frames of 224³).
+    // How many of the file's pages a read maps in depends on what the page
+    // cache holds, so the peak moves from run to run (1.15 to 1.43 times the
+    // 8 frames' in four pairs of runs): the lower of two runs each,
+    // against a bound that still catches the 2.2 times.
     let clustered = |frames: usize| {
         let out = dir.join("clustered.vpak");
         let mut args = vec!["cook", "-q", "--force", "--format", "unorm8", "--clusters", "16", "--variance-threshold", "1", "--spill-above", "8MiB", "-o", s(&out)];
         args.extend(files[..frames].iter().map(String::as_str));
-        let peak = peak_kib(&args);
+        let peak = peak_kib(&args).min(peak_kib(&args));
         std::fs::remove_file(&out).unwrap();
         peak
     };
     let (clustered_eight, clustered_all) = (clustered(8), clustered(32));
-    assert!(clustered_all as f64 <= 1.4 * clustered_eight as f64, "32 frames clustered in one spilled segment took {clustered_all} KiB, 8 frames {clustered_eight} KiB");
+    assert!(clustered_all as f64 <= 1.5 * clustered_eight as f64, "32 frames clustered in one spilled segment took {clustered_all} KiB, 8 frames {clustered_eight} KiB");
     // The report says how much went to the files, and nothing when nothing did.
     let spilled = |spill: &str| {
         let out = dir.join("report.vpak");

@@ -594,16 +594,20 @@ pub(crate) mod tests {
         assert!(err.contains("supercompressed section") && err.contains("coding table says"), "{err}");
     }
 
+    /// A one-segment file `b` relabelled as version `v`, its header checksum made anew.
+    fn set_version(b: &mut [u8], v: u32) {
+        b[8..12].copy_from_slice(&v.to_le_bytes());
+        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
+        b[32..40].copy_from_slice(&sum.to_le_bytes());
+    }
+
     #[test]
     fn a_version_7_file_holds_no_supercompressed_section() {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
         let mut sections = body(&m, 1);
         sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
         let mut b = assemble_segments(&[(2, crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap())]).unwrap();
-        b[8..12].copy_from_slice(&VERSION_7.to_le_bytes());
-        let table_end = HEADER_LEN + SEGMENT_ENTRY_LEN;
-        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..table_end]);
-        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        set_version(&mut b, VERSION_7);
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("older than version 8"), "{err}");
     }
@@ -622,9 +626,7 @@ pub(crate) mod tests {
         assert!(offsets.iter().all(|o| o % 8 == 0) && offsets.iter().any(|o| o % ALIGN as u64 != 0), "{offsets:?}");
         a.segment(0).unwrap();
         // In a version-10 file, the sections no coding record names must be at multiples of 256.
-        b[8..12].copy_from_slice(&VERSION_10.to_le_bytes());
-        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
-        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        set_version(&mut b, VERSION_10);
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("misaligned"), "{err}");
     }
@@ -644,9 +646,7 @@ pub(crate) mod tests {
         let mut b = assemble_segments(&[(2, sections)]).unwrap();
         let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
         assert_eq!(restored.section(kind::L2_ENTRIES, 0).unwrap(), &raw[..]);
-        b[8..12].copy_from_slice(&VERSION_10.to_le_bytes());
-        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
-        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        set_version(&mut b, VERSION_10);
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("context-coded in a version-10 file"), "{err}");
     }
@@ -669,9 +669,7 @@ pub(crate) mod tests {
         assert!(Asset::from_bytes(&b).unwrap().metadata().unwrap_err().to_string().contains("must increase"));
         // A version-8 file (no time): frames numbered from 0 at the default rate.
         let mut b = assemble_segments(&[(2, body(&meta(2, &["a.vdb"], [0.0, 1.0], 0), 1))]).unwrap();
-        b[8..12].copy_from_slice(&VERSION_8.to_le_bytes());
-        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
-        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        set_version(&mut b, VERSION_8);
         let a = Asset::from_bytes(&b).unwrap();
         assert_eq!(a.version(), VERSION_8);
         let m = a.metadata().unwrap();
@@ -685,9 +683,7 @@ pub(crate) mod tests {
         m.resolutions = vec![crate::Resolution { level: 0, half_offset: [1, 0, 0] }; m.channels.len()];
         let mut b = assemble_segments(&[(2, body(&m, 1))]).unwrap();
         assert_eq!(Asset::from_bytes(&b).unwrap().metadata().unwrap().resolutions, m.resolutions);
-        b[8..12].copy_from_slice(&VERSION_9.to_le_bytes());
-        let sum = crate::header_checksum(&b[..32], &b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
-        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        set_version(&mut b, VERSION_9);
         let err = Asset::from_bytes(&b).unwrap().metadata().unwrap_err().to_string();
         assert!(err.contains("channel resolutions in a version-9 file"), "{err}");
     }
