@@ -313,17 +313,6 @@ impl Coding {
     }
 }
 
-/// The sections of a body that start at [`crate::CODED_ALIGN`]: the coding
-/// section and those its records name (none when it has no readable one).
-pub(crate) fn coded_sections<'a>(sections: impl Iterator<Item = (u32, u32, &'a [u8])>) -> std::collections::HashSet<(u32, u32)> {
-    let mut coded = std::collections::HashSet::new();
-    for (k, i, data) in sections.filter(|s| s.0 == kind::CODING) {
-        coded.insert((k, i));
-        coded.extend(Coding::parse_all(data).unwrap_or_default().iter().map(|c| (c.kind, c.index)));
-    }
-    coded
-}
-
 /// The filters worth trying on a section, by what its bytes are: `u32`
 /// tables and node words, `f32` ranges and tiles, and an atlas's texels in
 /// its plane's format (lanes interleaved, so a texel's neighbour along x is

@@ -74,11 +74,13 @@ pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: imp
     if version < segments::VERSION_8 && !codings.is_empty() {
         return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION_8)));
     }
-    let context = codings.iter().flat_map(|(_, _, b)| crate::coding::Coding::parse_all(b).unwrap_or_default()).find(|c| c.scheme == crate::coding::SCHEME_CONTEXT);
-    if let Some(c) = context.filter(|_| version < segments::VERSION) {
+    // The records, parsed once (a table that does not parse is refused when the body is restored).
+    let records: Vec<crate::coding::Coding> = codings.iter().flat_map(|(_, _, b)| crate::coding::Coding::parse_all(b).unwrap_or_default()).collect();
+    if let Some(c) = records.iter().find(|c| c.scheme == crate::coding::SCHEME_CONTEXT && version < segments::VERSION) {
         return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is context-coded in a version-{version} file (context coding is version {})", segments::VERSION) });
     }
-    let coded_set = crate::coding::coded_sections(codings.iter().map(|(k, i, b)| (*k, *i, b.as_ref())));
+    // The sections at multiples of 8 in a version-8 to 10 body: the coding section and those it names.
+    let coded_set: std::collections::HashSet<(u32, u32)> = codings.iter().map(|(k, i, _)| (*k, *i)).chain(records.iter().map(|c| (c.kind, c.index))).collect();
     let packed = version >= segments::VERSION && !codings.is_empty();
     if let Some(s) = sections.iter().find(|s| !packed && !coded_set.contains(&(s.kind, s.index)) && !s.offset.is_multiple_of(ALIGN as u64)) {
         return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
