@@ -344,7 +344,7 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
     let mut bits = Vec::with_capacity(bits_len + 8);
     bits.extend_from_slice(&stored[at..at + bits_len]);
     bits.resize(bits_len + 8, 0);
-    let mut words = Vec::with_capacity(words_len + 8 * lanes);
+    let mut words = Vec::with_capacity(words_len + 8 * lanes + 8);
     words.extend(stored[at + bits_len..].chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])));
     words.resize(words_len + 8 * lanes + 8, 0);
     Ok(Stream { lanes, precision, tiles, bits, bits_len, words, words_len, table })
