@@ -43,12 +43,14 @@ def sections_of(body):
     return out
 
 
-def make_body(sections):
-    """A version-6 body of `sections` [kind, index, bytes], each at the next 256-byte boundary."""
-    at, table = up(64 + 32 * len(sections)), []
+def make_body(sections, align=256):
+    """A version-6 body of `sections` [kind, index, bytes], each at the next multiple of
+    `align` bytes (256, or 8 as a version-11 or 12 writer packs a supercompressed body)."""
+    to = lambda n: -(-n // align) * align
+    at, table = to(64 + 32 * len(sections)), []
     for kind, index, data in sections:
         table.append((kind, index, at, len(data), xxh(data)))
-        at = up(at + len(data))
+        at = to(at + len(data))
     out = bytearray(max([64 + 32 * len(sections)] + [e[2] + e[3] for e in table]))
     out[0:8] = v.MAGIC
     struct.pack_into("<IIIIQ", out, 8, 6, 0, len(sections), 0, len(out))
@@ -58,7 +60,7 @@ def make_body(sections):
     return reseal(out)
 
 
-def make_file(bodies, version=11):
+def make_file(bodies, version=12):
     """A file of `bodies` (segments), of the given version."""
     out = bytearray(container(bodies))
     struct.pack_into("<I", out, 8, version)
@@ -67,7 +69,7 @@ def make_file(bodies, version=11):
 
 def bodies_of(data):
     """The bodies of a segmented file, as the segment table places them (not validated)."""
-    _, table = v.read_table(memoryview(data), (7, 8, 9, 10, 11), "file")
+    _, table = v.read_table(memoryview(data), (7, 8, 9, 10, 11, 12), "file")
     return [bytes(data[e[2]:e[2] + e[3]]) for e in table]
 
 
@@ -112,6 +114,21 @@ def tiles(data, w, x, y, predict=True):
     return shuffle(out.tobytes(), w)
 
 
+def l3_nodes(data):
+    """Forward l3 nodes: the count; per node its brick less the one before (0 before the
+    first), its states, its first word less where the node before's sub-masks end (1 + 3c
+    before the first), as three runs of c words shuffled by byte; the sub-masks as they are."""
+    words = np.frombuffer(data, "<u4").astype(np.int64)
+    c = int(words[0])
+    rec = words[1:1 + 3 * c].reshape(c, 3)
+    states = rec[:, 1]
+    ends = rec[:, 2] + 2 * np.array([bin((int(x) >> 1) & 0x5555).count("1") for x in states], np.int64)
+    steps_b = rec[:, 0] - np.concatenate([[0], rec[:-1, 0]])
+    steps_f = rec[:, 2] - np.concatenate([[1 + 3 * c], ends[:-1]])
+    fields = (np.concatenate([steps_b, states, steps_f]) % 2**32).astype("<u4").tobytes()
+    return data[:4] + shuffle(fields, 4) + data[4 + 12 * c:]
+
+
 def cook(vdbcook, work, tag, flags):
     path = os.path.join(work, f"{tag}.vpak")
     subprocess.run([vdbcook, "cook", "-q", "--force", "-o", path, FIXTURE, *flags], check=True)
@@ -142,7 +159,7 @@ def check_restores(vdbcook, work, flags):
     """A vdbcook zstd asset restores exactly the sections of the same asset uncompressed."""
     packed = cook(vdbcook, work, "z", ["--supercompress", "zstd", *flags])
     plain = recompress(vdbcook, work, packed, "none")
-    assert struct.unpack_from("<I", packed, 8)[0] == 11
+    assert struct.unpack_from("<I", packed, 8)[0] == 12
     z, p = same_asset(packed, plain)
     filters = set()
     for (mz, sz), (_, sp), body in zip(z.bodies, p.bodies, bodies_of(packed)):
@@ -163,8 +180,8 @@ def check_every_filter(plain):
     """Sections compressed here with every allowed filter (forward filters written from the
     page) decode as the plain asset does."""
     # Tiles first: only atlases fit them, and there are few.
-    variants = [(3, 2, 1 | 1 << 16), (3, 1, 1 | 2 << 16), (4, 2, 1 | 1 << 16), (0, 1, 0)] + [(1, w, 0) for w in (1, 2, 4, 8, 16)] \
-        + [(2, w, s) for w in (1, 2, 4) for s in (1, 3, 4096)]
+    variants = [(3, 2, 1 | 1 << 16), (3, 1, 1 | 2 << 16), (4, 2, 1 | 1 << 16), (5, 4, 0), (0, 1, 0)] \
+        + [(1, w, 0) for w in (1, 2, 4, 8, 16)] + [(2, w, s) for w in (1, 2, 4) for s in (1, 3, 4096)]
     # A section fits a filter when it is whole elements (tiles: whole slabs of X x Y tiles).
     unit = lambda filt, w, s: w * 512 * (s % 65536) * (s // 65536) if filt in (3, 4) else w
     bodies, used, k = [], set(), 0
@@ -175,12 +192,12 @@ def check_every_filter(plain):
             if kind == v.K_METADATA or not data:
                 continue
             # The first filter not yet used that fits the section (else any that fits).
-            fits = [x for x in variants if len(data) % unit(*x) == 0]
+            fits = [x for x in variants if len(data) % unit(*x) == 0 and (x[0] == 5) == (kind == v.K_L3)]
             filt, w, s = next((x for x in fits if x not in used), fits[k % len(fits)])
             k += 1
             used.add((filt, w, s))
             f = data if filt == 0 else shuffle(data, w) if filt == 1 else delta(data, w, s) if filt == 2 else \
-                tiles(data, w, s % 65536, s // 65536, filt == 3)
+                l3_nodes(data) if filt == 5 else tiles(data, w, s % 65536, s // 65536, filt == 3)
             # Frames with and without their content size in the header.
             sec[2] = zstandard.ZstdCompressor(level=3, write_content_size=k % 2 == 0).compress(f)
             recs.append((kind, index, 1, filt, w, s, len(data), xxh(data)))
@@ -213,6 +230,16 @@ def edit_record(fn):
         recs = list(records_of(secs).values())
         fn(recs)
         next(s for s in secs if s[0] == K_CODING)[2] = coding_bytes(recs)
+    return edit
+
+
+def l3_as(filtered, filt, w):
+    """An edit that stores the L3 array as the zstd frame of `filtered`, recorded under
+    filter `filt` of width `w` (its restored size and checksum kept)."""
+    def edit(secs):
+        next(x for x in secs if x[0] == v.K_L3)[2] = zstandard.ZstdCompressor().compress(filtered)
+        recs = [r if r[0] != v.K_L3 else r[:3] + [filt, w, 0] + r[6:] for r in records_of(secs).values()]
+        next(x for x in secs if x[0] == K_CODING)[2] = coding_bytes(recs)
     return edit
 
 
@@ -297,8 +324,20 @@ def check_refusals(packed, plain, work):
     n0 = len(next(d for k, i, d in plain_secs if (k, i) == atlas))
     refused(with_body(plain, unsized(-1)), f"decodes to more than the record's {n0 - 1} bytes")
     refused(with_body(plain, unsized(1)), f"decodes to {n0} bytes, the record says {n0 + 1}")
-    # A supercompressed body packs its sections at multiples of 8 from version 11 on.
-    refused(make_file(bodies_of(packed), version=10), "is not at a 256-byte boundary")
+    # The l3 nodes filter is version 12 on, and its count must fit the section.
+    refused(make_file(bodies_of(packed), version=11), "filter 5 (l3 nodes) in a file older than version 12")
+    l3 = next(d for k, i, d in plain_secs if k == v.K_L3)
+    assert records_of(sections_of(bodies_of(packed)[0]))[(v.K_L3, 0)][3] == 5, "vdbcook's L3 array not filtered as l3 nodes"
+
+    lie = l3_nodes(l3)
+    lie = struct.pack("<I", len(l3) // 12 + 1) + lie[4:]
+    refused(with_body(packed, l3_as(lie, 5, 4)), "its l3 nodes filter counts")
+    # A supercompressed body packs its sections at multiples of 8 from version 11 on (its L3
+    # array, shuffled here, as a version-10 writer could have stored it).
+    secs = sections_of(bodies_of(packed)[0])
+    l3_as(shuffle(l3, 4), 1, 4)(secs)
+    ten = make_file([make_body(secs, align=8)] + bodies_of(packed)[1:], version=10)
+    refused(ten, "is not at a 256-byte boundary")
     # Supercompression is version 8 on.
     refused(make_file(bodies_of(packed), version=7), "older than version 8")
     refused(bodies_of(packed)[0], "older than version 8")
@@ -323,11 +362,13 @@ def check_context(vdbcook, work):
     assert coded, "no section context-coded"
     seg, atlas = coded[0]
 
-    def edit(fn, version=11):
+    def edit(fn, version=12):
         bodies = bodies_of(packed)
         secs = sections_of(bodies[seg])
         sec = next(x for x in secs if (x[0], x[1]) == atlas)
         sec[2] = fn(sec[2])
+        if version < 12:  # the L3 array as an older writer stores it
+            l3_as(shuffle(next(d for k, i, d in sections_of(bodies_of(plain)[seg]) if k == v.K_L3), 4), 1, 4)(secs)
         bodies[seg] = make_body(secs)
         return make_file(bodies, version)
 
@@ -338,7 +379,7 @@ def check_context(vdbcook, work):
     recs = [r if (r[0], r[1]) != atlas else r[:3] + [3] + r[4:] for r in records_of(secs).values()]
     next(x for x in secs if x[0] == K_CODING)[2] = coding_bytes(recs)
     bodies[seg] = make_body(secs)
-    refused(make_file(bodies, 11), "context-coded with filter 3")
+    refused(make_file(bodies, 12), "context-coded with filter 3")
     where = f"section kind 10 index {atlas[1]}"
     stored = next(x for x in sections_of(bodies_of(packed)[seg]) if (x[0], x[1]) == atlas)[2]
     for cut in (0, 12, 24, len(stored) // 2, len(stored) - 1):

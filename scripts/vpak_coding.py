@@ -1,9 +1,9 @@
-"""Supercompressed sections of a `.vpak` body (format version 8), for scripts/vpak_read.py.
+"""Supercompressed sections of a `.vpak` body (format version 8 and later), for scripts/vpak_read.py.
 
 Written from docs/format.md ("Supercompression", "Context coding") alone, like the reader:
 the coding section (kind 13) holds one 40-byte record per compressed section; a section is
 restored by decompressing one zstd frame (or, version 11, decoding a context-coded stream)
-and undoing a shuffle, delta or tiles filter, and checked against the record's XXH3-64 of
+and undoing a shuffle, delta, tiles or (version 12) l3 nodes filter, and checked against the record's XXH3-64 of
 the restored bytes. Every rule the page states is
 checked; a failure raises `CodingError` with a one-line message.
 
@@ -17,9 +17,11 @@ import numpy as np
 K_CODING = 13
 RECORD_SIZE = 40
 SCHEME_ZSTD, SCHEME_CONTEXT = 1, 2
-FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA, FILTER_TILES, FILTER_TILES_UNPREDICTED = 0, 1, 2, 3, 4
+FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA, FILTER_TILES, FILTER_TILES_UNPREDICTED, FILTER_L3 = 0, 1, 2, 3, 4, 5
 FILTER_NAMES = {FILTER_NONE: "none", FILTER_SHUFFLE: "shuffle", FILTER_DELTA: "delta", FILTER_TILES: "tiles",
-                FILTER_TILES_UNPREDICTED: "tiles unpredicted"}
+                FILTER_TILES_UNPREDICTED: "tiles unpredicted", FILTER_L3: "l3 nodes"}
+# The first file versions with context coding (scheme 2) and with the l3 nodes filter.
+CONTEXT_FROM, L3_FROM = 11, 12
 TILED = (FILTER_TILES, FILTER_TILES_UNPREDICTED)
 # A zstd frame expands at most 2^15 times: a restored size beyond that is a lie.
 MAX_EXPANSION = 1 << 15
@@ -43,11 +45,11 @@ def filtered_size(filt, w, n):
     return n + w * (n // (512 * w)) if filt in TILED else n
 
 
-def parse_records(data, table, context=True):
+def parse_records(data, table, version):
     """The coding section's records as {(kind, index): (scheme, filter, w, s, n, checksum)},
     each checked against the page's rules; `table` is the body's section table as stored
-    {(kind, index): (offset, size, checksum)}; `context`: whether scheme 2 may appear
-    (a version-11 file)."""
+    {(kind, index): (offset, size, checksum)}; `version`: the file's, which says whether
+    scheme 2 (11 and later) and filter 5 (12 and later) may appear."""
     if len(data) % RECORD_SIZE:
         raise CodingError(f"coding section of {len(data)} bytes is not whole {RECORD_SIZE}-byte records")
     if not data:
@@ -64,7 +66,7 @@ def parse_records(data, table, context=True):
             raise CodingError(f"{name}: the metadata and the coding section are never compressed")
         if scheme not in (SCHEME_ZSTD, SCHEME_CONTEXT):
             raise CodingError(f"{name} has scheme {scheme} (1, zstd, or 2, context coding)")
-        if scheme == SCHEME_CONTEXT and not context:
+        if scheme == SCHEME_CONTEXT and version < CONTEXT_FROM:
             raise CodingError(f"{name} is context-coded (scheme 2) in a file older than version 11")
         if scheme == SCHEME_CONTEXT and filt != FILTER_TILES_UNPREDICTED:
             raise CodingError(f"{name} is context-coded with filter {filt} (tiles unpredicted only)")
@@ -75,6 +77,9 @@ def parse_records(data, table, context=True):
             FILTER_TILES: w in (1, 2) and tiles_of(s)[0] >= 1 and tiles_of(s)[1] >= 1,
         }
         allowed[FILTER_TILES_UNPREDICTED] = allowed[FILTER_TILES]
+        allowed[FILTER_L3] = w == 4 and s == 0 and n >= 4
+        if filt == FILTER_L3 and version < L3_FROM:
+            raise CodingError(f"{name} has filter 5 (l3 nodes) in a file older than version {L3_FROM}")
         if not allowed.get(filt, False):
             raise CodingError(f"{name} has filter {filt} with width {w} and stride {s}, which the page does not allow")
         if n % w:
@@ -149,6 +154,8 @@ def unfilter(f, filt, w, s, n=None):
     """The section (n bytes) from its filtered bytes F (format.md, "Restoring")."""
     if filt == FILTER_NONE or w == 1 and filt == FILTER_SHUFFLE:
         return f
+    if filt == FILTER_L3:
+        return unfilter_l3(f)
     elems = np.ascontiguousarray(unshuffle(f, w))  # [m, w] bytes, element i byte j
     if filt == FILTER_SHUFFLE:
         return elems.tobytes()
@@ -164,6 +171,29 @@ def unfilter(f, filt, w, s, n=None):
     padded[:m] = d
     x = np.cumsum(padded.reshape(rows, s), axis=0, dtype=d.dtype).ravel()[:m]
     return x.astype(dtype).tobytes()
+
+
+def unfilter_l3(f):
+    """The l3 nodes filter undone: the count, the records from their steps (fields shuffled
+    by byte weight), the sub-masks as they are; all arithmetic modulo 2^32 (unsigned numpy
+    integers wrap). Node k's first word is the running sum of the first-word steps, each
+    after the first plus twice the sub-masks of the node before, from 1 + 3c."""
+    c = struct.unpack_from("<I", f, 0)[0]
+    if 4 + 12 * c > len(f):
+        raise CodingError(f"its l3 nodes filter counts {c} nodes in {len(f)} bytes")
+    fields = np.frombuffer(f, dtype=np.uint8, count=12 * c, offset=4).reshape(4, 3 * c).T.copy().view("<u4").ravel()
+    step_b, states, step_f = fields[:c], fields[c:2 * c], fields[2 * c:]
+    bricks = np.cumsum(step_b, dtype=np.uint32)
+    partial = (states >> np.uint32(1)) & np.uint32(0x5555)
+    masks = np.unpackbits(partial.astype("<u4").view(np.uint8).reshape(-1, 4), axis=1).sum(axis=1).astype(np.uint32)
+    inc = step_f.copy()
+    inc[1:] += np.uint32(2) * masks[:-1]
+    if c:
+        inc[0] += np.uint32(1 + 3 * c)
+    firsts = np.cumsum(inc, dtype=np.uint32)
+    words = np.frombuffer(f, dtype="<u4").copy()
+    words[1:1 + 3 * c] = np.stack([bricks, states, firsts], axis=1).ravel()
+    return words.astype("<u4").tobytes()
 
 
 def context_decode(stored, w, size):

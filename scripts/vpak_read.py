@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (versions 11, 10, 9, 8, 7 and 6).
+"""Independent reader for vdbcook's `.vpak` volume asset format (versions 12, 11, 10, 9, 8, 7 and 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -48,7 +48,7 @@ from vpak_decode import (  # noqa: F401 (names the test scripts use as vpak_read
     decode_bc4, decode_bc7, l1_node_len, l1_starts, l3_active, slot_entries, slot_origin, texture_shape,
 )
 from vpak_metadata import (  # noqa: F401
-    BODY_VERSION, CODED_VERSION, CONTEXT_VERSION, DEFAULT_FPS, RESOLVED_VERSION, SEGMENTED_VERSION, TIMED_VERSION,
+    BODY_VERSION, CODED_VERSION, CONTEXT_VERSION, DEFAULT_FPS, L3_VERSION, RESOLVED_VERSION, SEGMENTED_VERSION, TIMED_VERSION,
     VpakError, channel_level, channel_transform, decode_metadata, fps, frame_numbers,
 )
 
@@ -547,7 +547,7 @@ def open_body(buf, head_sum=None, coded=False, version=BODY_VERSION):
         raise VpakError("a coding section (kind 13) of an index other than 0")
     if (K_CODING, 0) in secs.table:
         try:
-            secs.coding = parse_records(secs.get(K_CODING), secs.table, version >= CONTEXT_VERSION)
+            secs.coding = parse_records(secs.get(K_CODING), secs.table, version)
         except CodingError as e:
             raise VpakError(str(e)) from None
         for kind, index in secs.table:  # restore every compressed section, checking each
@@ -633,7 +633,7 @@ class Asset:
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
     def __init__(self, buf):
-        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION), "file")
+        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION, L3_VERSION), "file")
         if self.version == BODY_VERSION:
             self.bodies = [open_body(buf)]
             self.meta = self.bodies[0][0]

@@ -13,8 +13,8 @@ Every segment is restored to the GPU bytes the cooker chose and stored again as
 --supercompress says: the nodes, bricks and texels stay as they are, so the asset draws
 the same; only its size on disk changes (and the supercompress setting it records).
 An asset cooked with --optimize disk keeps its 8- and 16-bit atlases context-coded where
-that is smaller than zstd (format version 11). Older assets (version 6 to 10) are read and
-written as version 11 (one without a frame rate and frame numbers gets 24 fps and its
+that is smaller than zstd (format version 11), and any asset's L3 array takes the l3 nodes
+filter (version 12). Older assets (version 6 to 11) are read and written as version 12 (one without a frame rate and frame numbers gets 24 fps and its
 frame indices).")]
 pub struct RecompressArgs {
     /// The asset to read.

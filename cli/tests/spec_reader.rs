@@ -128,7 +128,7 @@ fn compare_case(dir: &std::path::Path, tag: &str, inputs: &[String], flags: &[&s
         let said = String::from_utf8_lossy(&coded.stdout);
         let fields: Vec<&str> = said.split_whitespace().collect();
         let context = flags.contains(&"disk");
-        if fields.len() != 3 || fields[0] != "11" || fields[1] == "0" || (fields[2] == "0") == context {
+        if fields.len() != 3 || fields[0] != vdbcook_vpak::VERSION.to_string() || fields[1] == "0" || (fields[2] == "0") == context {
             return Err(format!(
                 "{flags:?}: not supercompressed in every segment, or context coding not as expected (version, fewest records, context-coded: {said}) {}",
                 String::from_utf8_lossy(&coded.stderr)

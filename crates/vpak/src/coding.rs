@@ -104,8 +104,12 @@ pub enum Filter {
     /// An atlas of 8×8×8-texel tiles, tile by tile: each tile's divisor,
     /// then its elements divided by it, less their 3D prediction or not ([`Tiles`]).
     Tiles(Tiles),
+    /// An L3 array's node records as steps from the record before, by
+    /// field and byte weight; its sub-masks as they are (version 12).
+    L3Nodes,
 }
 
+pub use crate::context::{predict_hidden, tile_cost};
 pub use crate::tiles::Tiles;
 
 impl Filter {
@@ -115,6 +119,7 @@ impl Filter {
             Filter::Shuffle { width } => (1, width, 0),
             Filter::Delta { width, stride } => (2, width, stride),
             Filter::Tiles(t) => (if t.predict { 3 } else { 4 }, t.width, t.stride()),
+            Filter::L3Nodes => (5, 4, 0),
         }
     }
 
@@ -124,6 +129,7 @@ impl Filter {
             (1, 1 | 2 | 4 | 8 | 16, 0) => Some(Filter::Shuffle { width }),
             (2, 1 | 2 | 4, 1..=4096) => Some(Filter::Delta { width, stride }),
             (3 | 4, _, _) => Tiles::from_record(filter == 3, width, stride).map(Filter::Tiles),
+            (5, 4, 0) => Some(Filter::L3Nodes),
             _ => None,
         }
     }
@@ -134,6 +140,7 @@ impl Filter {
             Filter::Shuffle { width } => format!("shuffle {width}"),
             Filter::Delta { width, stride } => format!("delta {width}/{stride}"),
             Filter::Tiles(t) => format!("tiles{} {}/{}x{}", if t.predict { "" } else { " unpredicted" }, t.width, t.x, t.y),
+            Filter::L3Nodes => "l3 nodes".into(),
         }
     }
 
@@ -146,14 +153,17 @@ impl Filter {
     fn filtered_len(self, raw: usize) -> Option<usize> {
         match self {
             Filter::Tiles(t) => t.filtered_len(raw),
+            Filter::L3Nodes => (raw >= 4 && raw.is_multiple_of(4)).then_some(raw),
             _ => raw.is_multiple_of(self.width()).then_some(raw),
         }
     }
 
     /// The filtered bytes (`raw.len()` as [`Filter::filtered_len`] accepts).
     fn apply(self, raw: &[u8]) -> Vec<u8> {
-        if let Filter::Tiles(t) = self {
-            return t.apply(raw);
+        match self {
+            Filter::Tiles(t) => return t.apply(raw),
+            Filter::L3Nodes => return crate::l3_filter::apply(raw),
+            _ => {}
         }
         let w = self.width();
         let mut src = raw.to_vec();
@@ -178,13 +188,15 @@ impl Filter {
         out
     }
 
-    /// Undoes [`Filter::apply`] on `data` into `out` (`data` the filtered length of `out`).
-    fn undo(self, data: &[u8], out: &mut [u8]) {
+    /// Undoes [`Filter::apply`] on `data` into `out` (`data` the filtered
+    /// length of `out`); refused where the filtered bytes contradict themselves.
+    fn undo(self, data: &[u8], out: &mut [u8]) -> Result<(), String> {
         let w = self.width();
         let n = data.len() / w;
         match self {
             Filter::None => out.copy_from_slice(data),
             Filter::Tiles(t) => t.undo(data, out),
+            Filter::L3Nodes => crate::l3_filter::undo(data, out)?,
             Filter::Shuffle { .. } => unshuffle(data, out, w),
             Filter::Delta { width, stride } => {
                 unshuffle(data, out, w);
@@ -203,6 +215,7 @@ impl Filter {
                 }
             }
         }
+        Ok(())
     }
 }
 
@@ -321,6 +334,7 @@ fn candidates(s: &Section, meta: &Metadata) -> Vec<Filter> {
     let words = vec![Filter::None, Filter::Shuffle { width: 4 }, Filter::Delta { width: 4, stride: 1 }];
     match s.kind {
         kind::METADATA | kind::CODING => Vec::new(),
+        kind::L3_NODES if crate::l3_filter::fits(&s.data) => vec![Filter::L3Nodes],
         kind::ATLAS => atlas_of(meta, s.index).map_or(vec![Filter::None], |(plane, atlas)| texel_filters(plane, atlas.bricks)),
         _ => words,
     }
@@ -583,8 +597,7 @@ fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>
                 }
                 _ => check(d.decompress_to_buffer(stored, &mut buf))?,
             }
-            c.filter.undo(&buf, out);
-            Ok(())
+            c.filter.undo(&buf, out).map_err(err)
         });
         match own {
             true if buf.capacity() <= KEEP_SCRATCH => SCRATCH.set(buf),
@@ -810,7 +823,7 @@ mod tests {
             let filtered = f.apply(&raw);
             assert_eq!(filtered.len(), raw.len());
             let mut back = vec![0u8; raw.len()];
-            f.undo(&filtered, &mut back);
+            f.undo(&filtered, &mut back).unwrap();
             assert_eq!(back, raw, "{f:?}");
             if f != Filter::None {
                 assert_ne!(filtered, raw, "{f:?} changed nothing");

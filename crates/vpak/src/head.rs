@@ -51,7 +51,7 @@ pub(crate) fn check_checksum(header: &[u8], table: &[u8]) -> Result<(), Error> {
 /// multiple of 256 (the coding section and those it names: of 8; in a
 /// version-11 body with a coding section, every section: of 8), none listed
 /// twice, a coding section only from version 8 and a context-coded one only
-/// from version 11. `coding` gives a coding section's bytes (which say which
+/// from version 11, an `l3 nodes` one only from version 12. `coding` gives a coding section's bytes (which say which
 /// sections it names).
 pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: impl FnMut(&SectionEntry) -> Result<Cow<'a, [u8]>, Error>) -> Result<Vec<SectionEntry>, Error> {
     let table_end = (HEADER_LEN + table.len()) as u64;
@@ -76,12 +76,15 @@ pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: imp
     }
     // The records, parsed once (a table that does not parse is refused when the body is restored).
     let records: Vec<crate::coding::Coding> = codings.iter().flat_map(|(_, _, b)| crate::coding::Coding::parse_all(b).unwrap_or_default()).collect();
-    if let Some(c) = records.iter().find(|c| c.scheme == crate::coding::SCHEME_CONTEXT && version < segments::VERSION) {
-        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is context-coded in a version-{version} file (context coding is version {})", segments::VERSION) });
+    if let Some(c) = records.iter().find(|c| c.scheme == crate::coding::SCHEME_CONTEXT && version < segments::VERSION_11) {
+        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is context-coded in a version-{version} file (context coding is version {})", segments::VERSION_11) });
+    }
+    if let Some(c) = records.iter().find(|c| c.filter == crate::coding::Filter::L3Nodes && version < segments::VERSION) {
+        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is filtered as l3 nodes in a version-{version} file (that filter is version {})", segments::VERSION) });
     }
     // The sections at multiples of 8 in a version-8 to 10 body: the coding section and those it names.
     let coded_set: std::collections::HashSet<(u32, u32)> = codings.iter().map(|(k, i, _)| (*k, *i)).chain(records.iter().map(|c| (c.kind, c.index))).collect();
-    let packed = version >= segments::VERSION && !codings.is_empty();
+    let packed = version >= segments::VERSION_11 && !codings.is_empty();
     if let Some(s) = sections.iter().find(|s| !packed && !coded_set.contains(&(s.kind, s.index)) && !s.offset.is_multiple_of(ALIGN as u64)) {
         return Err(Error::SectionBounds { kind: s.kind, index: s.index, offset: s.offset, size: s.size });
     }

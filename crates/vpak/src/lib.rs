@@ -29,6 +29,7 @@ pub mod coding;
 mod context;
 mod direct;
 mod head;
+mod l3_filter;
 pub mod layout;
 pub mod nodes;
 pub mod resolution;

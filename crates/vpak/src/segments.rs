@@ -10,10 +10,12 @@ use crate::{body_head, checksum, file_len, header_checksum, write_sections, Erro
 use std::io::{Seek, SeekFrom, Write};
 
 /// Version of a file with a segment table whose bodies may hold
-/// supercompressed sections ([`crate::coding`], context-coded ones
-/// included), record their frames' time ([`crate::Time`]) and their
-/// channels' voxel sizes ([`crate::Resolution`]).
-pub const VERSION: u32 = 11;
+/// supercompressed sections ([`crate::coding`], context-coded ones and L3
+/// arrays through the `l3 nodes` filter included), record their frames' time
+/// ([`crate::Time`]) and their channels' voxel sizes ([`crate::Resolution`]).
+pub const VERSION: u32 = 12;
+/// Version of a file whose L3 arrays are not filtered as nodes (still read).
+pub const VERSION_11: u32 = 11;
 /// Version of a file whose sections are zstd-compressed only (still read).
 pub const VERSION_10: u32 = 10;
 /// Version of a file whose channels all have the asset's voxels (still read).
@@ -649,6 +651,32 @@ pub(crate) mod tests {
         set_version(&mut b, VERSION_10);
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("context-coded in a version-10 file"), "{err}");
+    }
+
+    #[test]
+    fn the_l3_nodes_filter_is_version_12() {
+        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        let mut sections = body(&m, 1);
+        // 300 nodes in the writer's order: bricks counting up, every other one with two sub-masks.
+        let (n, mut words) = (300u32, vec![300u32]);
+        let mut first = 1 + 3 * n;
+        for k in 0..n {
+            let states = if k % 2 == 0 { 0b1010 } else { 0x5555 };
+            words.extend([k, states, first]);
+            first += if k % 2 == 0 { 4 } else { 0 };
+        }
+        words.extend((0..first - words.len() as u32).map(|i| i.wrapping_mul(2654435761)));
+        let raw: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+        sections.push(Section { kind: kind::L3_NODES, index: 0, data: raw.clone().into() });
+        let coded = crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap();
+        let mut b = assemble_segments(&[(2, coded)]).unwrap();
+        let a = Asset::from_bytes(&b).unwrap();
+        let codings = crate::coding::Coding::parse_all(a.stored_segment(0).unwrap().section(kind::CODING, 0).unwrap()).unwrap();
+        assert_eq!(codings.iter().find(|c| c.kind == kind::L3_NODES).map(|c| c.filter), Some(crate::coding::Filter::L3Nodes));
+        assert_eq!(a.segment(0).unwrap().section(kind::L3_NODES, 0).unwrap(), &raw[..]);
+        set_version(&mut b, VERSION_11);
+        let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
+        assert!(err.contains("filtered as l3 nodes in a version-11 file"), "{err}");
     }
 
     #[test]

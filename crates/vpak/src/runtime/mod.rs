@@ -82,7 +82,7 @@ impl Reader {
         let version = head::version(&header, len)?;
         let bodies = match version {
             segments::BODY_VERSION => vec![io.body(version, 0, len, None)?],
-            segments::VERSION | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
+            segments::VERSION | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
                 let n = head::table_len(&header, segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount, len)?;
                 let table = io.read_vec(HEADER_LEN as u64, n as u64)?;
                 head::check_checksum(&header, &table)?;
