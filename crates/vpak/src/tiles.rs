@@ -219,6 +219,24 @@ impl Tiles {
     }
 }
 
+/// One brick of a plane of levels (1 lane, `unorm8` or `unorm16`; `bytes`
+/// its 512 texels, x fastest) as the tiles filters see it: its texels over
+/// their greatest common divisor. `None` for any other plane or size.
+pub(crate) fn tile_quotients(plane: &crate::Plane, bytes: &[u8]) -> Option<Tile> {
+    let w = plane.format.lane_bytes();
+    let levels = plane.lanes == 1 && plane.z_per_texel == 1 && matches!(plane.format, crate::Format::Unorm8 | crate::Format::Unorm16);
+    if !levels || bytes.len() != TILE * w {
+        return None;
+    }
+    let mut e: Tile = std::array::from_fn(|v| match w {
+        1 => u16::from(bytes[v]),
+        _ => u16::from_le_bytes([bytes[2 * v], bytes[2 * v + 1]]),
+    });
+    let g = tile_gcd(&e).max(1);
+    e.iter_mut().for_each(|x| *x /= g);
+    Some(e)
+}
+
 /// The greatest common divisor of a tile's elements (0 when all are 0):
 /// each element only checked against the divisor so far (a multiply by its
 /// reciprocal), which changes at most 16 times.

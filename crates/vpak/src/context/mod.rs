@@ -113,6 +113,23 @@ pub fn tile_cost(quotients: &[u32; TILE]) -> u32 {
     bits
 }
 
+/// What a tile's quotients cost the coder, roughly, in bits: the order-0
+/// entropy of their symbols after prediction, and the escape bits.
+pub fn tile_bits(tile: &[u16; TILE]) -> f64 {
+    let mut f = [0i32; 729];
+    let mut counts = [0u32; MAX_SYMBOLS];
+    let mut raw_bits = 0u32;
+    for (v, &q) in tile.iter().enumerate() {
+        let p = padded(v);
+        let (sym, bits, _) = token(i32::from(q) - predict(position(v), &f, p));
+        counts[(sym as usize).min(MAX_SYMBOLS - 1)] += 1;
+        raw_bits += bits;
+        f[p] = i32::from(q);
+    }
+    let n = TILE as f64;
+    counts.iter().filter(|&&c| c > 0).map(|&c| f64::from(c) * (n / f64::from(c)).log2()).sum::<f64>() + f64::from(raw_bits)
+}
+
 /// The bucket of a sum of three residual magnitudes (at most 255).
 #[inline(always)]
 fn bucket(e: u32) -> u32 {
