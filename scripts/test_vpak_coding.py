@@ -338,6 +338,18 @@ def check_refusals(packed, plain, work):
     l3_as(shuffle(l3, 4), 1, 4)(secs)
     ten = make_file([make_body(secs, align=8)] + bodies_of(packed)[1:], version=10)
     refused(ten, "is not at a 256-byte boundary")
+    # From version 12 a body with a coding section starts at a multiple of 8 (vdbcook puts the
+    # first right after the segment table), one without at a multiple of 256.
+    _, table = v.read_table(memoryview(packed), (12,), "file")
+    assert table[0][2] == -(-(64 + 32 * len(table)) // 8) * 8 < 256, table[0]
+    eleven = bytearray(packed)
+    struct.pack_into("<I", eleven, 8, 11)
+    refused(reseal(eleven), "segment 0 at")
+    plain_bodies = bodies_of(plain)
+    moved = container(plain_bodies, entries=lambda t: t.__setitem__(0, t[0][:2] + [64 + 32 * len(t)] + t[0][3:]))
+    moved = bytearray(moved)
+    struct.pack_into("<I", moved, 8, 12)
+    refused(reseal(moved), "has no coding section")
     # Supercompression is version 8 on.
     refused(make_file(bodies_of(packed), version=7), "older than version 8")
     refused(bodies_of(packed)[0], "older than version 8")

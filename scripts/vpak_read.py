@@ -23,7 +23,7 @@ body's supercompressed sections are restored (scripts/vpak_coding.py) before use
 each frame's number; older assets number their frames from 0). `--json` gives `fps` and
 `frame_numbers` too (24 and 0, 1, ... when the asset records none).
 
-As a module: `open_segments(path)` opens a version-6 to 10 file (every body validated,
+As a module: `open_segments(path)` opens a version-6 to 12 file (every body validated,
 every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
 `open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
@@ -529,6 +529,11 @@ SHARED = ("tool", "settings", "map_type", "transform", "levels", "first_level", 
 SHARED_CHANNEL = ("name", "grid", "component", "value_type", "class", "group")
 
 
+def body_has_coding(buf):
+    """Whether a body's section table (checked as read_header checks it) names a coding section."""
+    return any(kind == K_CODING for kind, _ in read_header(buf))
+
+
 def open_body(buf, head_sum=None, coded=False, version=BODY_VERSION):
     """(metadata, sections) of a body validated as a version-6 file, every checksum verified;
     `head_sum`: the segment table's checksum of its header and section table; `coded`: a
@@ -563,13 +568,16 @@ def open_body(buf, head_sum=None, coded=False, version=BODY_VERSION):
     return m, secs
 
 
-def check_segment_table(buf, table):
-    """Bodies inside the file at 256-byte boundaries, in order, frames counted on without a gap."""
+def check_segment_table(buf, table, version):
+    """Bodies inside the file at 256-byte boundaries (version 12: at 8-byte ones, a body off a
+    256-byte one having a coding section, which open_body checks), in order, frames counted on
+    without a gap."""
     if not table:
         raise VpakError("a segmented file of 0 segments")
+    align = CODED_ALIGN if version >= L3_VERSION else SECTION_ALIGN
     at, frame = HEADER_SIZE + 32 * len(table), 0
     for s, (first, count, offset, size, _) in enumerate(table):
-        if offset % SECTION_ALIGN or offset < at or offset + size > len(buf):
+        if offset % align or offset < at or offset + size > len(buf):
             raise VpakError(f"segment {s} at {offset}+{size} is outside the file, misaligned or overlaps the one before")
         if first != frame:
             raise VpakError(f"segment {s} starts at frame {first}, the segments before it end at frame {frame}")
@@ -628,7 +636,7 @@ def merged(metas):
 
 
 class Asset:
-    """A version-6 to 10 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
+    """A version-6 to 12 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
     and `bodies` [(metadata, sections)] per segment (frames numbered from 0 in each), `meta`
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
@@ -639,10 +647,12 @@ class Asset:
             self.meta = self.bodies[0][0]
             self.table = [(0, self.meta["frame_count"], 0, len(buf), xxh3_64(buf[:HEADER_SIZE + 32 * len(table)]))]
             return
-        check_segment_table(buf, table)
+        check_segment_table(buf, table, self.version)
         self.table, self.bodies = table, []
         for s, (_, count, offset, size, head_sum) in enumerate(table):
             try:
+                if offset % SECTION_ALIGN and not body_has_coding(buf[offset:offset + size]):
+                    raise VpakError(f"its body at byte {offset} has no coding section (such a body starts at a multiple of 256)")
                 m, secs = open_body(buf[offset:offset + size], head_sum, self.version >= CODED_VERSION, self.version)
                 if m["frame_count"] != count:
                     raise VpakError(f"its metadata has {m['frame_count']} frames, the segment table {count}")

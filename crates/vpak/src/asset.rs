@@ -125,7 +125,7 @@ impl Asset {
     /// the file's version allows one.
     fn body(mut self) -> Result<Asset, Error> {
         let table = self.table_bytes(ENTRY_LEN, MAX_SECTIONS, Error::SectionCount)?;
-        self.sections = crate::head::sections(table, self.len as u64, self.version, |e| Ok(std::borrow::Cow::Borrowed(self.raw(e))))?;
+        self.sections = crate::head::sections(table, self.len as u64, self.version, self.start as u64, |e| Ok(std::borrow::Cow::Borrowed(self.raw(e))))?;
         Ok(self)
     }
 
@@ -133,7 +133,7 @@ impl Asset {
     /// order, inside the file, frames counted on from 0 without a gap.
     fn container(mut self) -> Result<Asset, Error> {
         let table = self.table_bytes(segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount)?;
-        self.table = crate::head::segments(table, self.len as u64)?;
+        self.table = crate::head::segments(table, self.len as u64, self.version)?;
         Ok(self)
     }
 

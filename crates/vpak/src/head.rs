@@ -51,9 +51,11 @@ pub(crate) fn check_checksum(header: &[u8], table: &[u8]) -> Result<(), Error> {
 /// multiple of 256 (the coding section and those it names: of 8; in a
 /// version-11 body with a coding section, every section: of 8), none listed
 /// twice, a coding section only from version 8 and a context-coded one only
-/// from version 11, an `l3 nodes` one only from version 12. `coding` gives a coding section's bytes (which say which
-/// sections it names).
-pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: impl FnMut(&SectionEntry) -> Result<Cow<'a, [u8]>, Error>) -> Result<Vec<SectionEntry>, Error> {
+/// from version 11, an `l3 nodes` one only from version 12; a body at
+/// `at` bytes into its file (0 for a body on its own) off a multiple of 256
+/// only when it has a coding section (version 12). `coding` gives a coding
+/// section's bytes (which say which sections it names).
+pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, at: u64, mut coding: impl FnMut(&SectionEntry) -> Result<Cow<'a, [u8]>, Error>) -> Result<Vec<SectionEntry>, Error> {
     let table_end = (HEADER_LEN + table.len()) as u64;
     let mut sections = Vec::with_capacity(table.len() / crate::ENTRY_LEN);
     for e in table.chunks_exact(crate::ENTRY_LEN) {
@@ -73,6 +75,9 @@ pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: imp
     // What the file's version allows is said first: a newer body's layout is not a misalignment.
     if version < segments::VERSION_8 && !codings.is_empty() {
         return Err(Error::Invalid(format!("a supercompressed section in a file older than version {}", segments::VERSION_8)));
+    }
+    if !at.is_multiple_of(ALIGN as u64) && codings.is_empty() {
+        return Err(Error::Invalid(format!("a body at byte {at} without a coding section (such a body starts at a multiple of {ALIGN})")));
     }
     // The records, parsed once (a table that does not parse is refused when the body is restored).
     let records: Vec<crate::coding::Coding> = codings.iter().flat_map(|(_, _, b)| crate::coding::Coding::parse_all(b).unwrap_or_default()).collect();
@@ -97,19 +102,22 @@ pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, mut coding: imp
     Ok(sections)
 }
 
-/// A file's segment table (`table`, of a file of `len` bytes): at least one
-/// segment, each body in order, inside the file, frames counted on from 0
-/// without a gap.
-pub(crate) fn segments(table: &[u8], len: u64) -> Result<Vec<SegmentEntry>, Error> {
+/// A file's segment table (`table`, of a file of `len` bytes and version
+/// `version`): at least one segment, each body in order, inside the file
+/// after the table at a multiple of 256 (version 12: of 8, [`sections`]
+/// checking that such a body has a coding section), frames counted on from
+/// 0 without a gap.
+pub(crate) fn segments(table: &[u8], len: u64, version: u32) -> Result<Vec<SegmentEntry>, Error> {
     if table.is_empty() {
         return Err(Error::SegmentCount(0));
     }
     let entries: Vec<SegmentEntry> = table.chunks_exact(segments::SEGMENT_ENTRY_LEN).map(SegmentEntry::parse).collect();
-    let mut at = segments::first_offset(entries.len() as u32);
+    let align = segments::body_align(version);
+    let mut at = (HEADER_LEN + table.len()) as u64;
     let mut frame = 0u64;
     for (s, e) in entries.iter().enumerate() {
         let end = e.offset.checked_add(e.size);
-        if !e.offset.is_multiple_of(ALIGN as u64) || e.offset < at || end.is_none_or(|end| end > len) || e.size < HEADER_LEN as u64 {
+        if !e.offset.is_multiple_of(align) || e.offset < at || end.is_none_or(|end| end > len) || e.size < HEADER_LEN as u64 {
             return Err(Error::SegmentBounds { segment: s, offset: e.offset, size: e.size });
         }
         if u64::from(e.first_frame) != frame {

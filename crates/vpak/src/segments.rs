@@ -155,7 +155,7 @@ pub fn join(parts: &[(PartInfo, crate::Asset)], names: &[String], out: std::fs::
         let checked = checked;
         for &(_, _, e) in order {
             let seg = checked.recv().map_err(|_| Error::Join("the segment check stopped".into()))??;
-            w.copy_body(&e, seg.bytes())?;
+            w.copy_body(&e, seg.bytes(), seg.is_coded())?;
             seg.release();
         }
         Ok::<(), Error>(())
@@ -203,13 +203,24 @@ pub(crate) fn head_len(sections: usize) -> usize {
     HEADER_LEN + crate::ENTRY_LEN * sections
 }
 
-fn align(n: u64) -> u64 {
-    n.div_ceil(ALIGN as u64) * ALIGN as u64
+fn align(n: u64, to: u64) -> u64 {
+    n.div_ceil(to) * to
 }
 
-/// Where the first segment of a file of `count` segments starts.
+/// The multiple of which a body starts in a file of version `version`: 256
+/// before version 12; from 12, 8 (and 256 for a body without a coding
+/// section, whose sections a reader may use as they lie in the file).
+pub(crate) fn body_align(version: u32) -> u64 {
+    match version >= VERSION {
+        true => crate::CODED_ALIGN as u64,
+        false => ALIGN as u64,
+    }
+}
+
+/// Where the first segment of a file of `count` segments starts at the
+/// latest (a supercompressed body may start sooner).
 pub fn first_offset(count: u32) -> u64 {
-    align((HEADER_LEN + SEGMENT_ENTRY_LEN * count as usize) as u64)
+    align((HEADER_LEN + SEGMENT_ENTRY_LEN * count as usize) as u64, ALIGN as u64)
 }
 
 /// Writes a version-7 file of a known number of segments to `out`, segment
@@ -236,20 +247,22 @@ impl<W: Write + Seek> Writer<W> {
         if count == 0 || count > MAX_SEGMENTS {
             return Err(Error::Invalid(format!("{count} segments (need 1 to {MAX_SEGMENTS})")));
         }
-        let start = first_offset(count);
+        let start = (HEADER_LEN + SEGMENT_ENTRY_LEN * count as usize) as u64;
         out.seek(SeekFrom::Start(base))?;
         write_zeros(&mut out, start)?;
         Ok(Writer { out, base, count, entries: Vec::new(), end: start })
     }
 
     /// The entry of the next segment (of `size` bytes), the output moved
-    /// to where its body starts; [`Writer::record`] adds it once written.
-    fn place(&mut self, frame_count: u32, size: u64, head_checksum: u64) -> Result<SegmentEntry, Error> {
+    /// to where its body starts (a multiple of 256, or of 8 for a body with
+    /// a coding section: it is restored before use, so a small
+    /// supercompressed asset is not padding); [`Writer::record`] adds it once written.
+    fn place(&mut self, frame_count: u32, size: u64, head_checksum: u64, coded: bool) -> Result<SegmentEntry, Error> {
         if self.entries.len() as u32 >= self.count {
             return Err(Error::Invalid(format!("more than the {} segments announced", self.count)));
         }
         let first_frame = self.entries.last().map_or(0, |e| e.first_frame + e.frame_count);
-        let offset = align(self.end);
+        let offset = align(self.end, if coded { body_align(VERSION) } else { ALIGN as u64 });
         write_zeros(&mut self.out, offset - self.end)?;
         Ok(SegmentEntry { first_frame, frame_count, offset, size, head_checksum })
     }
@@ -264,7 +277,7 @@ impl<W: Write + Seek> Writer<W> {
     /// Writes the next segment, of `frame_count` frames, from its sections (as a version-6 body).
     pub fn add(&mut self, frame_count: u32, sections: &[Section]) -> Result<SegmentEntry, Error> {
         let size = file_len(sections);
-        let mut e = self.place(frame_count, size, 0)?;
+        let mut e = self.place(frame_count, size, 0, sections.iter().any(|s| s.kind == crate::kind::CODING))?;
         let start = self.base + e.offset;
         // The body's head holds every section's checksum: they are computed on
         // a thread beside the copy of the sections (each a pass over a
@@ -287,12 +300,13 @@ impl<W: Write + Seek> Writer<W> {
         Ok(self.record(e))
     }
 
-    /// Writes the next segment as the body `body` of another file's segment `entry` (checked by the caller).
-    pub fn copy_body(&mut self, entry: &SegmentEntry, body: &[u8]) -> Result<SegmentEntry, Error> {
+    /// Writes the next segment as the body `body` of another file's segment
+    /// `entry` (checked by the caller; `coded`: whether it has a coding section).
+    pub fn copy_body(&mut self, entry: &SegmentEntry, body: &[u8], coded: bool) -> Result<SegmentEntry, Error> {
         if body.len() as u64 != entry.size {
             return Err(Error::Invalid(format!("a segment body of {} bytes, its entry says {}", body.len(), entry.size)));
         }
-        let e = self.place(entry.frame_count, entry.size, entry.head_checksum)?;
+        let e = self.place(entry.frame_count, entry.size, entry.head_checksum, coded)?;
         self.out.write_all(body)?;
         Ok(self.record(e))
     }
@@ -596,6 +610,21 @@ pub(crate) mod tests {
         assert!(err.contains("supercompressed section") && err.contains("coding table says"), "{err}");
     }
 
+    /// A one-segment file `b` with its body moved to byte `at`, as an older
+    /// writer placed it (at 256) or a newer one may (at 96, after the table).
+    fn with_body_at(b: &[u8], at: u64) -> Vec<u8> {
+        let e = SegmentEntry::parse(&b[HEADER_LEN..HEADER_LEN + SEGMENT_ENTRY_LEN]);
+        let mut out = b[..HEADER_LEN + SEGMENT_ENTRY_LEN].to_vec();
+        out.resize(at as usize, 0);
+        out.extend_from_slice(&b[e.offset as usize..(e.offset + e.size) as usize]);
+        out[HEADER_LEN + 8..HEADER_LEN + 16].copy_from_slice(&at.to_le_bytes());
+        let len = out.len() as u64;
+        out[24..32].copy_from_slice(&len.to_le_bytes());
+        let v = u32::from_le_bytes(out[8..12].try_into().unwrap());
+        set_version(&mut out, v);
+        out
+    }
+
     /// A one-segment file `b` relabelled as version `v`, its header checksum made anew.
     fn set_version(b: &mut [u8], v: u32) {
         b[8..12].copy_from_slice(&v.to_le_bytes());
@@ -608,7 +637,8 @@ pub(crate) mod tests {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
         let mut sections = body(&m, 1);
         sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
-        let mut b = assemble_segments(&[(2, crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap())]).unwrap();
+        let b = assemble_segments(&[(2, crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap())]).unwrap();
+        let mut b = with_body_at(&b, ALIGN as u64);
         set_version(&mut b, VERSION_7);
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("older than version 8"), "{err}");
@@ -620,7 +650,7 @@ pub(crate) mod tests {
         let mut sections = body(&m, 1);
         sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
         let coded = crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap();
-        let mut b = assemble_segments(&[(2, coded)]).unwrap();
+        let b = assemble_segments(&[(2, coded)]).unwrap();
         // Every section of the supercompressed body at a multiple of 8, some not of 256.
         let a = Asset::from_bytes(&b).unwrap();
         let body = a.stored_segment(0).unwrap();
@@ -628,6 +658,7 @@ pub(crate) mod tests {
         assert!(offsets.iter().all(|o| o % 8 == 0) && offsets.iter().any(|o| o % ALIGN as u64 != 0), "{offsets:?}");
         a.segment(0).unwrap();
         // In a version-10 file, the sections no coding record names must be at multiples of 256.
+        let mut b = with_body_at(&b, ALIGN as u64);
         set_version(&mut b, VERSION_10);
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("misaligned"), "{err}");
@@ -645,12 +676,39 @@ pub(crate) mod tests {
         let record = Coding { kind: kind::L2_ENTRIES, index: 0, scheme: SCHEME_CONTEXT, filter: tiles, raw_size: 4096, raw_checksum: crate::checksum(&raw) };
         sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: stored.into() });
         sections.push(Section { kind: kind::CODING, index: 0, data: record.bytes().to_vec().into() });
-        let mut b = assemble_segments(&[(2, sections)]).unwrap();
+        let b = assemble_segments(&[(2, sections)]).unwrap();
         let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
         assert_eq!(restored.section(kind::L2_ENTRIES, 0).unwrap(), &raw[..]);
+        let mut b = with_body_at(&b, ALIGN as u64);
         set_version(&mut b, VERSION_10);
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("context-coded in a version-10 file"), "{err}");
+    }
+
+    #[test]
+    fn a_supercompressed_body_starts_at_a_multiple_of_8_from_version_12() {
+        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        let sections = || {
+            let mut s = body(&m, 1);
+            s.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
+            s
+        };
+        let plain = assemble_segments(&[(2, sections())]).unwrap();
+        let coded = crate::coding::supercompress(sections(), &m, crate::coding::Schemes { level: 3, context: false }).unwrap();
+        let mut b = assemble_segments(&[(2, coded)]).unwrap();
+        // Right after the table (64 + 32 bytes), where a plain body waits for byte 256.
+        let first = |b: &[u8]| Asset::from_bytes(b).unwrap().segments().unwrap()[0].offset;
+        assert_eq!((first(&b), first(&plain)), (96, ALIGN as u64));
+        Asset::from_bytes(&b).unwrap().verify().unwrap();
+        // A plain body moved there is refused when it is read, and so is the coded one in a version-11 file.
+        let moved = with_body_at(&plain, 96);
+        let err = Asset::from_bytes(&moved).unwrap().segment(0).err().unwrap().to_string();
+        assert!(err.contains("without a coding section"), "{err}");
+        set_version(&mut b, VERSION_11);
+        assert!(matches!(Asset::from_bytes(&b), Err(Error::SegmentBounds { .. })));
+        let mut b = with_body_at(&b, ALIGN as u64);
+        set_version(&mut b, VERSION);
+        Asset::from_bytes(&b).unwrap().segment(0).unwrap();
     }
 
     #[test]
@@ -669,11 +727,12 @@ pub(crate) mod tests {
         let raw: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
         sections.push(Section { kind: kind::L3_NODES, index: 0, data: raw.clone().into() });
         let coded = crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap();
-        let mut b = assemble_segments(&[(2, coded)]).unwrap();
+        let b = assemble_segments(&[(2, coded)]).unwrap();
         let a = Asset::from_bytes(&b).unwrap();
         let codings = crate::coding::Coding::parse_all(a.stored_segment(0).unwrap().section(kind::CODING, 0).unwrap()).unwrap();
         assert_eq!(codings.iter().find(|c| c.kind == kind::L3_NODES).map(|c| c.filter), Some(crate::coding::Filter::L3Nodes));
         assert_eq!(a.segment(0).unwrap().section(kind::L3_NODES, 0).unwrap(), &raw[..]);
+        let mut b = with_body_at(&b, ALIGN as u64);
         set_version(&mut b, VERSION_11);
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
         assert!(err.contains("filtered as l3 nodes in a version-11 file"), "{err}");

@@ -86,7 +86,7 @@ impl Reader {
                 let n = head::table_len(&header, segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount, len)?;
                 let table = io.read_vec(HEADER_LEN as u64, n as u64)?;
                 head::check_checksum(&header, &table)?;
-                let entries = head::segments(&table, len)?;
+                let entries = head::segments(&table, len, version)?;
                 let read = entries.iter().enumerate().map(|(s, e)| io.body(version, e.offset, e.size, Some(e)).map_err(|err| Error::InSegment(s, Box::new(err))));
                 read.collect::<Result<Vec<_>, _>>()?
             }
@@ -332,7 +332,7 @@ impl Io {
         }
         // The coding section is read once: the table's check needs it, and the restore plan.
         let mut coding_bytes = None;
-        let stored = head::sections(&table, size, version, |e| {
+        let stored = head::sections(&table, size, version, offset, |e| {
             let b = self.read_section(offset, e)?;
             if e.index == 0 {
                 coding_bytes = Some(b.clone());
