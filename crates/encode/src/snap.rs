@@ -8,14 +8,13 @@
 
 use crate::choose::{decode_one, single_plane, within};
 use crate::texels::{levels, swap_xz, to_half};
-use crate::{Brick, Format, Optimize};
+use crate::{Brick, Format};
 
 /// The brick's texels in `format` and their range, on the coarsest grid
 /// whose decoded voxels of `mask` stay within `max_error` of `values`;
 /// `None` when no grid coarser than the format's own over `range` does (or
-/// the format has no texels to move). `optimize`: what the levels of the
-/// voxels `mask` leaves out are chosen for ([`stepped`]).
-pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32, optimize: Optimize) -> Option<(Vec<u8>, [f32; 2])> {
+/// the format has no texels to move).
+pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32) -> Option<(Vec<u8>, [f32; 2])> {
     // Non-finite voxels must decode to themselves: leave such bricks as they are.
     if !values.iter().all(|v| v.is_finite()) {
         return None;
@@ -29,8 +28,8 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
         .map(|b| (b, range))
     };
     match format {
-        Format::Unorm8 => stepped(values, range, mask, 255, max_error, optimize, |out, q| out.push(q as u8), &passes),
-        Format::Unorm16 => stepped(values, range, mask, 65535, max_error, optimize, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
+        Format::Unorm8 => stepped(values, range, mask, 255, max_error, |out, q| out.push(q as u8), &passes),
+        Format::Unorm16 => stepped(values, range, mask, 65535, max_error, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
         Format::F16 => {
             // Converted once (the brick-at-once conversion), rounded off per try.
             let halves = to_half(values);
@@ -48,26 +47,9 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
 /// integer k ≥ 2 (k = top / the number of steps the brick spans). Each
 /// brick's texels are then k times a small integer, which the `tiles`
 /// filter divides out, so every brick's residuals are in steps of about 2E.
-/// No bound holds the voxels `mask` leaves out, and no reader looks at them:
-/// they take level 0 (the range's `min`), whose runs zstd codes for next to
-/// nothing; for the smallest file (`Optimize::Disk`, where the context
-/// coder may code the atlas) they take its prediction from the texels before
-/// them instead ([`vdbcook_vpak::coding::predict_hidden`]), where its rough
-/// cost ([`vdbcook_vpak::coding::tile_cost`]) says that is cheaper: a
-/// residual of 0, where level 0 beside a fire's or a level set's active
-/// voxels is a jump. Measured in docs/benchmarks.md: 4–14 % off the sparse
-/// ones' files, within ±0.4 % on dense fogs.
-#[allow(clippy::too_many_arguments)]
-fn stepped(
-    values: &Brick,
-    range: [f32; 2],
-    mask: &[u64; 8],
-    top: u32,
-    max_error: f32,
-    optimize: Optimize,
-    push: fn(&mut Vec<u8>, u32),
-    passes: &dyn Fn(&[u8], [f32; 2]) -> bool,
-) -> Option<(Vec<u8>, [f32; 2])> {
+/// Voxels `mask` leaves out take level 0 (the range's `min`): no bound
+/// holds them, and runs of one level cost next to nothing once compressed.
+fn stepped(values: &Brick, range: [f32; 2], mask: &[u64; 8], top: u32, max_error: f32, push: fn(&mut Vec<u8>, u32), passes: &dyn Fn(&[u8], [f32; 2]) -> bool) -> Option<(Vec<u8>, [f32; 2])> {
     let (lo, span) = (f64::from(range[0]), f64::from(range[1]) - f64::from(range[0]));
     for shrink in [1.0, 0.99, 0.95, 0.85, 0.7, 0.5] {
         let s = 2.0 * f64::from(max_error) * shrink;
@@ -81,19 +63,10 @@ fn stepped(
         }
         let moved = [range[0], hi];
         let last = top / k * k;
-        // Quotients of k in texel order (x fastest, as the tiles filters and the coder see them).
-        let mut q = swap_xz(&levels(values, moved, top as f32).map(|x| ((x / k as f32).round() as u32).min(last / k)));
-        let shown = swap_xz(&std::array::from_fn(|i| mask[i >> 6] >> (i & 63) & 1 == 1));
-        let mut zeros = q;
-        (0..q.len()).filter(|&t| !shown[t]).for_each(|t| zeros[t] = 0);
-        if optimize == Optimize::Disk {
-            vdbcook_vpak::coding::predict_hidden(&mut q, &shown, last / k);
-        }
-        if optimize == Optimize::Gpu || vdbcook_vpak::coding::tile_cost(&zeros) <= vdbcook_vpak::coding::tile_cost(&q) {
-            q = zeros;
-        }
-        let mut out = Vec::with_capacity(2 * q.len());
-        q.into_iter().for_each(|q| push(&mut out, q * k));
+        let mut l = levels(values, moved, top as f32);
+        (0..l.len()).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 0).for_each(|i| l[i] = 0.0);
+        let mut out = Vec::with_capacity(2 * l.len());
+        swap_xz(&l.map(|x| ((x / k as f32).round() as u32 * k).min(last) as f32)).into_iter().for_each(|q| push(&mut out, q as u32));
         if passes(&out, moved) {
             return Some((out, moved));
         }
@@ -147,7 +120,7 @@ mod tests {
         for format in [Format::Unorm8, Format::Unorm16, Format::F16, Format::F32] {
             for e in [0.002f32, 0.01, 0.05] {
                 let plain = crate::choose::encode_one(format, crate::Quality::VeryFast, &v, range, &mask);
-                let Some((snapped, moved)) = coarsest(format, &v, range, &mask, e, Optimize::Gpu) else {
+                let Some((snapped, moved)) = coarsest(format, &v, range, &mask, e) else {
                     // Only where the format's own grid is already as coarse as the bound allows.
                     assert!(format == Format::Unorm8 && e < 0.005, "{format:?} at {e}: nothing coarser");
                     continue;
@@ -171,35 +144,6 @@ mod tests {
                 };
                 assert!(distinct(&snapped) < distinct(&plain), "{format:?} at {e}: {} vs {} values", distinct(&snapped), distinct(&plain));
             }
-        }
-    }
-
-    #[test]
-    fn hidden_voxels_cost_the_coder_least_for_the_disk_and_are_level_0_otherwise() {
-        // A fire's edge: voxels with x + y + z below 9 shown, on a field that keeps rising past them.
-        let v = cloud();
-        let mut mask = [0u64; 8];
-        (0..512).filter(|i| i / 64 + i / 8 % 8 + i % 8 < 9).for_each(|i| mask[i >> 6] |= 1 << (i & 63));
-        let range = crate::range_of(&v);
-        for format in [Format::Unorm8, Format::Unorm16] {
-            let w = format.lane_bytes();
-            let level = |c: &[u8]| c.iter().rev().fold(0u32, |v, &b| v << 8 | u32::from(b));
-            let (gpu, r_gpu) = coarsest(format, &v, range, &mask, 0.01, Optimize::Gpu).unwrap();
-            let (disk, r_disk) = coarsest(format, &v, range, &mask, 0.01, Optimize::Disk).unwrap();
-            assert_eq!(r_gpu, r_disk);
-            let (gpu, disk): (Vec<u32>, Vec<u32>) = (gpu.chunks(w).map(level).collect(), disk.chunks(w).map(level).collect());
-            // Texel t (x fastest) is voxel (t % 8, t / 8 % 8, t / 64).
-            let shown = |t: usize| t % 8 + t / 8 % 8 + t / 64 < 9;
-            let k = gpu.iter().copied().fold(0, gcd);
-            for t in 0..512 {
-                match shown(t) {
-                    true => assert_eq!(gpu[t], disk[t], "{format:?}: shown texel {t} differs"),
-                    false => assert_eq!(gpu[t], 0, "{format:?}: hidden texel {t} not level 0 for the GPU"),
-                }
-            }
-            assert!(disk.iter().all(|d| d % k == 0), "{format:?}: a hidden texel off the brick's step {k}");
-            let cost = |l: &[u32]| vdbcook_vpak::coding::tile_cost(&std::array::from_fn(|t| l[t] / k));
-            assert!(cost(&disk) < cost(&gpu), "{format:?}: {} bits against {}", cost(&disk), cost(&gpu));
         }
     }
 

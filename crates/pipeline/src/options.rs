@@ -328,8 +328,7 @@ settings_group! {
         /// level 5; up to level 5, sections over 8 MiB take level 1, for speed). Each segment's sections are filtered and zstd-compressed: a smaller file,
         /// the same GPU bytes (a reader restores a segment when it loads it, at zstd's speed).
         /// With --max-error the texels are also moved to the coarsest grid within E (ranged
-        /// formats: steps of about 2E; inactive voxels, which no bound holds, at the brick's min,
-        /// or with --optimize disk where cheaper at what the context coder predicts).
+        /// formats: steps of about 2E; inactive voxels, which no bound holds, at the brick's min).
         #[cfg_attr(feature = "clap", arg(long, value_name = "none|zstd[:LEVEL]", default_value_t = CookSettings::default().supercompress))]
         pub supercompress: Supercompress = Supercompress::None;
         /// With --max-error and --supercompress, what each brick's format choice minimises: gpu

@@ -109,7 +109,6 @@ pub enum Filter {
     L3Nodes,
 }
 
-pub use crate::context::{predict_hidden, tile_bits, tile_cost};
 pub use crate::tiles::Tiles;
 
 impl Filter {
@@ -405,14 +404,16 @@ fn tiles_among(filters: &[Filter]) -> Option<(Tiles, Vec<bool>)> {
 /// plane, the cheaper of predicted and not; [`texel_filters`]' last
 /// otherwise), what a coder fitted to the brick would spend (zstd codes a
 /// whole section with one table: a brick compressed alone would be charged
-/// a table of its own), plus its range pair. A brick of levels (a 1-lane
-/// `unorm8` or `unorm16` plane, whose atlas `--optimize disk` may
-/// context-code) costs the lesser of that and what the context coder would
-/// spend on its quotients, roughly ([`crate::context::tile_bits`]): the zstd
-/// view alone missed the coder's prediction and chose 5-9 % larger files on
-/// fogs, 18 % on a level set at E = 0.001 (docs/benchmarks.md); the coder's
-/// alone chose `f16` planes of a few bricks beside `unorm8` ones in a small
-/// asset, whose fixed bytes no brick's estimate holds.
+/// a table of its own), plus its range pair. A brick of 8-bit levels (a
+/// 1-lane `unorm8` plane, whose atlas `--optimize disk` may context-code)
+/// costs the lesser of that and what the context coder would spend on its
+/// quotients, roughly ([`crate::context::tile_bits`]): the zstd view alone
+/// missed the coder's prediction and chose several percent larger files on
+/// fogs (docs/benchmarks.md); the coder's alone chose `f16` planes of a few
+/// bricks beside `unorm8` ones in a small asset, whose fixed bytes no
+/// brick's estimate holds. `unorm16` bricks keep the zstd view: costed as
+/// the coder sees them, they filled atlases that the coder took with mostly
+/// escape bits, which restore at 0.66–0.83× `zstd -d`.
 pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
     let filters = texel_filters(plane, [1, 1, 1]);
     let filtered: Vec<Vec<u8>> = match (tiles_among(&filters), filters.last()) {
@@ -427,7 +428,7 @@ pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
         counts.iter().filter(|&&c| c > 0).map(|&c| f64::from(c) * (n / f64::from(c)).log2()).sum::<f64>()
     };
     let zstd = filtered.iter().map(entropy).fold(f64::INFINITY, f64::min);
-    let bits = crate::tiles::tile_quotients(plane, bytes).map_or(zstd, |q| zstd.min(crate::context::tile_bits(&q)));
+    let bits = crate::tiles::unorm8_quotients(plane, bytes).map_or(zstd, |q| zstd.min(crate::context::tile_bits(&q)));
     (bits.min(8.0 * bytes.len() as f64) / 8.0).ceil() as usize + 8
 }
 

@@ -219,19 +219,15 @@ impl Tiles {
     }
 }
 
-/// One brick of a plane of levels (1 lane, `unorm8` or `unorm16`; `bytes`
-/// its 512 texels, x fastest) as the tiles filters see it: its texels over
-/// their greatest common divisor. `None` for any other plane or size.
-pub(crate) fn tile_quotients(plane: &crate::Plane, bytes: &[u8]) -> Option<Tile> {
-    let w = plane.format.lane_bytes();
-    let levels = plane.lanes == 1 && plane.z_per_texel == 1 && matches!(plane.format, crate::Format::Unorm8 | crate::Format::Unorm16);
-    if !levels || bytes.len() != TILE * w {
+/// One brick of a plane of 8-bit levels (1 lane, `unorm8`; `bytes` its 512
+/// texels, x fastest) as the tiles filters see it: its texels over their
+/// greatest common divisor. `None` for any other plane or size.
+pub(crate) fn unorm8_quotients(plane: &crate::Plane, bytes: &[u8]) -> Option<Tile> {
+    let levels = plane.lanes == 1 && plane.z_per_texel == 1 && plane.format == crate::Format::Unorm8;
+    if !levels || bytes.len() != TILE {
         return None;
     }
-    let mut e: Tile = std::array::from_fn(|v| match w {
-        1 => u16::from(bytes[v]),
-        _ => u16::from_le_bytes([bytes[2 * v], bytes[2 * v + 1]]),
-    });
+    let mut e: Tile = std::array::from_fn(|v| u16::from(bytes[v]));
     let g = tile_gcd(&e).max(1);
     e.iter_mut().for_each(|x| *x /= g);
     Some(e)

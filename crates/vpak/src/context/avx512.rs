@@ -4,8 +4,10 @@
 //! leading-zero count), the table lookup one gather, the renormalising
 //! lanes' words one expand-load from the shared stream, and each row of 8
 //! elements leaves the lanes through a byte permute and a scatter. Escape
-//! bits are read lane by lane (rare). Same output as `decode_scalar`, which
-//! the tests hold it to, damaged streams included.
+//! bits are read for all lanes at once, each lane's position a prefix sum of
+//! the lanes' bit counts (16-bit levels and sharp bricks escape often). Same
+//! output as `decode_scalar`, which the tests hold it to, damaged streams
+//! included.
 
 use super::{finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, TILE};
 use std::arch::x86_64::*;
@@ -91,6 +93,46 @@ struct Reader<'a> {
     overrun: bool,
 }
 
+/// The escape bits of the lanes `esc` (lowest lane first, the stream's
+/// order), `kk` of them each (at most 47, as [`Escapes::read`] takes), all
+/// at once: each lane's position is the bits before it (an exclusive
+/// prefix sum over the lanes), its bits one 64-bit gather from there;
+/// `None`, before anything is read, when a lane's bits start past the end.
+#[inline(always)]
+unsafe fn escape_bits(e: &mut Escapes, kk: __m512i, esc: __mmask16) -> Option<__m512i> {
+    unsafe {
+        let zero = _mm512_setzero_si512();
+        let cnt = _mm512_maskz_min_epi32(esc, kk, _mm512_set1_epi32(47));
+        // Inclusive prefix sum: each lane plus the lanes 1, 2, 4 and 8 below it.
+        let mut incl = cnt;
+        incl = _mm512_add_epi32(incl, _mm512_alignr_epi32::<15>(incl, zero));
+        incl = _mm512_add_epi32(incl, _mm512_alignr_epi32::<14>(incl, zero));
+        incl = _mm512_add_epi32(incl, _mm512_alignr_epi32::<12>(incl, zero));
+        incl = _mm512_add_epi32(incl, _mm512_alignr_epi32::<8>(incl, zero));
+        let start = _mm512_add_epi32(_mm512_sub_epi32(incl, cnt), _mm512_set1_epi32((e.at & 7) as i32));
+        // The last escaping lane starts furthest on: past the bits' end, the stream is refused.
+        let last = _mm512_mask_reduce_max_epu32(esc, start) as usize;
+        if ((e.at & !7) + last) >> 3 > e.len {
+            return None;
+        }
+        let base = e.bits.as_ptr().add(e.at >> 3) as *const i64;
+        let bytes = _mm512_srli_epi32::<3>(start);
+        let (lo, hi) = (_mm512_castsi512_si256(bytes), _mm512_extracti64x4_epi64::<1>(bytes));
+        let words_lo = _mm512_mask_i32gather_epi64::<1>(zero, esc as u8, lo, base);
+        let words_hi = _mm512_mask_i32gather_epi64::<1>(zero, (esc >> 8) as u8, hi, base);
+        let take = |words: __m512i, shift: __m256i, n: __m256i| {
+            let v = _mm512_srlv_epi64(words, _mm512_cvtepu32_epi64(shift));
+            let mask = _mm512_sub_epi64(_mm512_sllv_epi64(_mm512_set1_epi64(1), _mm512_cvtepu32_epi64(n)), _mm512_set1_epi64(1));
+            _mm512_cvtepi64_epi32(_mm512_and_si512(v, mask))
+        };
+        let shift = _mm512_and_si512(start, _mm512_set1_epi32(7));
+        let raw_lo = take(words_lo, _mm512_castsi512_si256(shift), _mm512_castsi512_si256(cnt));
+        let raw_hi = take(words_hi, _mm512_extracti64x4_epi64::<1>(shift), _mm512_extracti64x4_epi64::<1>(cnt));
+        e.at += _mm512_reduce_add_epi32(cnt) as usize;
+        Some(_mm512_inserti64x4::<1>(_mm512_castsi256_si512(raw_lo), raw_hi))
+    }
+}
+
 /// One element of every lane: context, table entry, state update, escape
 /// bits, prediction undone.
 #[inline(always)]
@@ -123,15 +165,10 @@ unsafe fn step<const POS: usize, const G: usize, const P: u32>(w: &mut Work, st:
             let kk = _mm512_sub_epi32(sym, _mm512_set1_epi32(ESCAPE as i32));
             let mut z = _mm512_mask_mov_epi32(sym, esc, _mm512_add_epi32(_mm512_set1_epi32(ESCAPE as i32 - 1), _mm512_sllv_epi32(_mm512_set1_epi32(1), kk)));
             if esc != 0 {
-                // Rare: the raw bits, lane by lane in lane order (the stream's order).
-                let mut zs = I32x16([0; 16]);
-                let mut ks = I32x16([0; 16]);
-                _mm512_store_si512(zs.0.as_mut_ptr() as *mut __m512i, z);
-                _mm512_store_si512(ks.0.as_mut_ptr() as *mut __m512i, kk);
-                if !r.escapes.add_lanes(&mut zs.0, &ks.0, esc as u32) {
-                    r.overrun = true;
+                match escape_bits(&mut r.escapes, kk, esc) {
+                    Some(raw) => z = _mm512_mask_add_epi32(z, esc, z, raw),
+                    None => r.overrun = true,
                 }
-                z = _mm512_load_si512(zs.0.as_ptr() as *const __m512i);
             }
             let z = _mm512_maskz_mov_epi32(act, z);
             let res = _mm512_xor_si512(_mm512_srli_epi32::<1>(z), _mm512_sub_epi32(_mm512_setzero_si512(), _mm512_and_si512(z, _mm512_set1_epi32(1))));

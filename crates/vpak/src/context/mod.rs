@@ -84,38 +84,9 @@ fn predict(pos: usize, f: &[i32; 729], p: usize) -> i32 {
     }
 }
 
-/// A tile's quotients (x fastest) with each one `shown` leaves out replaced,
-/// in decoding order, by the coder's prediction of it from those before
-/// (within 0 to `max`), so that it costs the cheapest symbol: what an
-/// encoder may store where no reader looks (voxels no L3 node shows).
-pub fn predict_hidden(quotients: &mut [u32; TILE], shown: &[bool; TILE], max: u32) {
-    let mut f = [0i32; 729];
-    for v in 0..TILE {
-        let p = padded(v);
-        if !shown[v] {
-            quotients[v] = predict(position(v), &f, p).clamp(0, max.min(i32::MAX as u32) as i32) as u32;
-        }
-        f[p] = quotients[v] as i32;
-    }
-}
-
-/// A rough cost of a tile's quotients to the coder: the bits of each
-/// residual's zigzag value (0 for a residual of 0).
-pub fn tile_cost(quotients: &[u32; TILE]) -> u32 {
-    let mut f = [0i32; 729];
-    let mut bits = 0;
-    for (v, &q) in quotients.iter().enumerate() {
-        let p = padded(v);
-        f[p] = q as i32;
-        let r = f[p] - predict(position(v), &f, p);
-        bits += 32 - (((r << 1) ^ (r >> 31)) as u32).leading_zeros();
-    }
-    bits
-}
-
 /// What a tile's quotients cost the coder, roughly, in bits: the order-0
 /// entropy of their symbols after prediction, and the escape bits.
-pub fn tile_bits(tile: &[u16; TILE]) -> f64 {
+pub(crate) fn tile_bits(tile: &[u16; TILE]) -> f64 {
     let mut f = [0i32; 729];
     let mut counts = [0u32; MAX_SYMBOLS];
     let mut raw_bits = 0u32;
