@@ -3,8 +3,9 @@
 //! AVX-512 does in one instruction is done here by tables and arithmetic:
 //! the words of the renormalising lanes are moved into place by a byte
 //! shuffle chosen by the lanes' mask, the context's bucket is the exponent
-//! of a float, and a row of 8 elements of 8 lanes leaves by packs and an
-//! 8×8 byte transpose. Same output as `decode_scalar`, which the tests hold
+//! of a float, a row of 8 elements of 8 lanes leaves by packs and an 8×8
+//! byte transpose, and the escape bits come by prefix sum and gathers.
+//! Same output as `decode_scalar`, which the tests hold
 //! it to, damaged streams included.
 
 use super::{finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, TILE};
@@ -151,15 +152,10 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
             let mut z = _mm256_blendv_epi8(sym, _mm256_add_epi32(_mm256_set1_epi32(ESCAPE as i32 - 1), _mm256_sllv_epi32(one, kk)), esc);
             let em = _mm256_movemask_ps(_mm256_castsi256_ps(esc));
             if em != 0 {
-                // Rare: the raw bits, lane by lane in lane order (the stream's order).
-                let mut zs = I32x8([0; 8]);
-                let mut ks = I32x8([0; 8]);
-                _mm256_store_si256(zs.0.as_mut_ptr() as *mut __m256i, z);
-                _mm256_store_si256(ks.0.as_mut_ptr() as *mut __m256i, kk);
-                if !r.escapes.add_lanes(&mut zs.0, &ks.0, em as u32) {
-                    r.overrun = true;
+                match escape_bits(&mut r.escapes, kk, esc, em) {
+                    Some(raw) => z = _mm256_add_epi32(z, raw),
+                    None => r.overrun = true,
                 }
-                z = _mm256_load_si256(zs.0.as_ptr() as *const __m256i);
             }
             let z = _mm256_and_si256(act, z);
             let res = _mm256_xor_si256(_mm256_srli_epi32::<1>(z), _mm256_sub_epi32(_mm256_setzero_si256(), _mm256_and_si256(z, one)));
@@ -174,6 +170,47 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
             r.bad = _mm256_or_si256(r.bad, _mm256_and_si256(act, outside));
             _mm256_store_si256(w.f.get_unchecked_mut(p * G + gi).0.as_mut_ptr() as *mut __m256i, q);
         }
+    }
+}
+
+/// The escape bits of the lanes `esc` (all ones where a lane escapes;
+/// `em` its sign bits, lowest lane first, the stream's order), `kk` of them
+/// each (at most 47, as [`Escapes::read`] takes), all at once, as
+/// [`super::avx512`] reads them: each lane's position an exclusive prefix
+/// sum of the lanes' counts, its bits one 64-bit gather from there; 0 in the
+/// other lanes; `None`, before anything is read, when a lane's bits start
+/// past the end.
+#[inline(always)]
+unsafe fn escape_bits(e: &mut Escapes, kk: __m256i, esc: __m256i, em: i32) -> Option<__m256i> {
+    unsafe {
+        let zero = _mm256_setzero_si256();
+        let cnt = _mm256_and_si256(esc, _mm256_min_epi32(kk, _mm256_set1_epi32(47)));
+        // Inclusive prefix sum within each 128-bit half, then the low half's total into the high half.
+        let mut incl = _mm256_add_epi32(cnt, _mm256_slli_si256::<4>(cnt));
+        incl = _mm256_add_epi32(incl, _mm256_slli_si256::<8>(incl));
+        let low_total = _mm256_permutevar8x32_epi32(incl, _mm256_set1_epi32(3));
+        incl = _mm256_add_epi32(incl, _mm256_blend_epi32::<0x0f>(low_total, zero));
+        let start = _mm256_add_epi32(_mm256_sub_epi32(incl, cnt), _mm256_set1_epi32((e.at & 7) as i32));
+        // The last escaping lane starts furthest on: past the bits' end, the stream is refused.
+        let last_lane = 31 - (em as u32).leading_zeros();
+        let last = _mm256_cvtsi256_si32(_mm256_permutevar8x32_epi32(start, _mm256_set1_epi32(last_lane as i32))) as u32 as usize;
+        if ((e.at & !7) + last) >> 3 > e.len {
+            return None;
+        }
+        let base = e.bits.as_ptr().add(e.at >> 3) as *const i64;
+        let bytes = _mm256_srli_epi32::<3>(start);
+        let shift = _mm256_and_si256(start, _mm256_set1_epi32(7));
+        let half = |bytes: __m128i, shift: __m128i, n: __m128i, mask: __m128i| {
+            let words = _mm256_mask_i32gather_epi64::<1>(zero, base, bytes, _mm256_cvtepi32_epi64(mask));
+            let v = _mm256_srlv_epi64(words, _mm256_cvtepu32_epi64(shift));
+            let keep = _mm256_sub_epi64(_mm256_sllv_epi64(_mm256_set1_epi64x(1), _mm256_cvtepu32_epi64(n)), _mm256_set1_epi64x(1));
+            // The low 32 bits of the four 64-bit lanes, in order.
+            _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(_mm256_and_si256(v, keep), _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6)))
+        };
+        let lo = half(_mm256_castsi256_si128(bytes), _mm256_castsi256_si128(shift), _mm256_castsi256_si128(cnt), _mm256_castsi256_si128(esc));
+        let hi = half(_mm256_extracti128_si256::<1>(bytes), _mm256_extracti128_si256::<1>(shift), _mm256_extracti128_si256::<1>(cnt), _mm256_extracti128_si256::<1>(esc));
+        e.at += _mm256_extract_epi32::<7>(incl) as u32 as usize;
+        Some(_mm256_set_m128i(hi, lo))
     }
 }
 

@@ -455,22 +455,6 @@ impl Escapes<'_> {
         self.at += nb as usize;
         Some((peek & ((1u64 << nb) - 1)) as u32)
     }
-
-    /// A vector decoder's escaping lanes (`mask`, lowest lane first, the
-    /// stream's order): each lane's `counts[l]` bits added to `z[l]`; false
-    /// when they run past the end.
-    #[inline(always)]
-    fn add_lanes<const W: usize>(&mut self, z: &mut [i32; W], counts: &[i32; W], mut mask: u32) -> bool {
-        while mask != 0 {
-            let l = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            match self.read(counts[l] as u32) {
-                Some(raw) => z[l] = z[l].wrapping_add(raw as i32),
-                None => return false,
-            }
-        }
-        true
-    }
 }
 
 /// The reference decoder: one lane at a time.
