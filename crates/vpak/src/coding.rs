@@ -479,7 +479,7 @@ fn compress_threaded(data: &[u8], level: i32, workers: u32) -> std::io::Result<V
 /// Compresses every section worth it (the smallest of its filters' outputs,
 /// tried at a fast level, then compressed at `level`, or as [`level_for`]
 /// says for a large one; or context-coded when `schemes` allows and that
-/// takes at most [`CONTEXT_GAIN`] of zstd's bytes) and adds the coding section; sections that do not shrink stay
+/// takes at most [`CONTEXT_GAIN`] of zstd's bytes) and adds the coding section; sections that shrink by no more than their record stay
 /// as they are. Deterministic: each section is one zstd frame or context
 /// stream, the same on any number of threads ([`compress`]).
 pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) -> Result<Vec<Section>, Error> {
@@ -533,7 +533,8 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) 
                 }
             }
             drop((filtered, unpredicted));
-            if data.len() >= s.data.len() {
+            // Stored as it is unless compression saves more than its record costs.
+            if data.len() + RECORD_LEN >= s.data.len() {
                 return Ok((s, None));
             }
             let c = Coding { kind: s.kind, index: s.index, scheme, filter, raw_size: s.data.len() as u64, raw_checksum: checksum(&s.data) };
