@@ -529,17 +529,15 @@ SHARED = ("tool", "settings", "map_type", "transform", "levels", "first_level", 
 SHARED_CHANNEL = ("name", "grid", "component", "value_type", "class", "group")
 
 
-def body_has_coding(buf):
-    """Whether a body's section table (checked as read_header checks it) names a coding section."""
-    return any(kind == K_CODING for kind, _ in read_header(buf))
-
-
-def open_body(buf, head_sum=None, coded=False, version=BODY_VERSION):
+def open_body(buf, head_sum=None, coded=False, version=BODY_VERSION, at=0):
     """(metadata, sections) of a body validated as a version-6 file, every checksum verified;
     `head_sum`: the segment table's checksum of its header and section table; `coded`: a
     version-8 body, whose supercompressed sections are restored and checked here;
-    `version`: the file's (a version-10 file's metadata may record channel resolutions)."""
+    `version`: the file's (a version-10 file's metadata may record channel resolutions);
+    `at`: where the body starts in its file (off a multiple of 256 only with a coding section)."""
     secs = Sections(buf, read_header(buf))
+    if at % SECTION_ALIGN and (K_CODING, 0) not in secs.table:
+        raise VpakError(f"its body at byte {at} has no coding section (such a body starts at a multiple of 256)")
     if head_sum is not None and xxh3_64(buf[:HEADER_SIZE + 32 * len(secs.table)]) != head_sum:
         raise VpakError("its header and section table are not the ones the segment table names")
     # Verify every section up front (in table order) so that a corrupt asset is refused
@@ -651,9 +649,7 @@ class Asset:
         self.table, self.bodies = table, []
         for s, (_, count, offset, size, head_sum) in enumerate(table):
             try:
-                if offset % SECTION_ALIGN and not body_has_coding(buf[offset:offset + size]):
-                    raise VpakError(f"its body at byte {offset} has no coding section (such a body starts at a multiple of 256)")
-                m, secs = open_body(buf[offset:offset + size], head_sum, self.version >= CODED_VERSION, self.version)
+                m, secs = open_body(buf[offset:offset + size], head_sum, self.version >= CODED_VERSION, self.version, offset)
                 if m["frame_count"] != count:
                     raise VpakError(f"its metadata has {m['frame_count']} frames, the segment table {count}")
             except VpakError as e:

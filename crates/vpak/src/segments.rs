@@ -510,6 +510,18 @@ pub(crate) mod tests {
         }
     }
 
+    /// `sections` supercompressed at zstd level 3, without context coding.
+    fn supercompressed(sections: Vec<Section>, m: &Metadata) -> Vec<Section> {
+        crate::coding::supercompress(sections, m, crate::coding::Schemes { level: 3, context: false }).unwrap()
+    }
+
+    /// [`body`] with 4 KiB of zero L2 entries, which compress to a few bytes.
+    fn body_with_zeros(m: &Metadata) -> Vec<Section> {
+        let mut sections = body(m, 1);
+        sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
+        sections
+    }
+
     pub(crate) fn body(m: &Metadata, marker: u32) -> Vec<Section> {
         vec![
             Section { kind: kind::METADATA, index: 0, data: m.to_bytes().unwrap().into() },
@@ -580,10 +592,7 @@ pub(crate) mod tests {
         };
         let (a, b) = (meta(2, &["a.vdb", "b.vdb"], [0.0, 1.0], 0), meta(3, &["c.vdb"], [-1.0, 0.5], -128));
         let plain = [(2, long(&a, 100)), (3, long(&b, 200))];
-        let coded = [
-            (2, crate::coding::supercompress(long(&a, 100), &a, crate::coding::Schemes { level: 3, context: false }).unwrap()),
-            (3, crate::coding::supercompress(long(&b, 200), &b, crate::coding::Schemes { level: 3, context: false }).unwrap()),
-        ];
+        let coded = [(2, supercompressed(long(&a, 100), &a)), (3, supercompressed(long(&b, 200), &b))];
         let (plain, coded) = (assemble_segments(&plain).unwrap(), assemble_segments(&coded).unwrap());
         assert!(coded.len() < plain.len(), "{} vs {} bytes", coded.len(), plain.len());
         let (p, c) = (Asset::from_bytes(&plain).unwrap(), Asset::from_bytes(&coded).unwrap());
@@ -635,9 +644,7 @@ pub(crate) mod tests {
     #[test]
     fn a_version_7_file_holds_no_supercompressed_section() {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
-        let mut sections = body(&m, 1);
-        sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
-        let b = assemble_segments(&[(2, crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap())]).unwrap();
+        let b = assemble_segments(&[(2, supercompressed(body_with_zeros(&m), &m))]).unwrap();
         let mut b = with_body_at(&b, ALIGN as u64);
         set_version(&mut b, VERSION_7);
         let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
@@ -647,10 +654,7 @@ pub(crate) mod tests {
     #[test]
     fn only_a_version_11_body_packs_its_sections() {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
-        let mut sections = body(&m, 1);
-        sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
-        let coded = crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap();
-        let b = assemble_segments(&[(2, coded)]).unwrap();
+        let b = assemble_segments(&[(2, supercompressed(body_with_zeros(&m), &m))]).unwrap();
         // Every section of the supercompressed body at a multiple of 8, some not of 256.
         let a = Asset::from_bytes(&b).unwrap();
         let body = a.stored_segment(0).unwrap();
@@ -688,14 +692,8 @@ pub(crate) mod tests {
     #[test]
     fn a_supercompressed_body_starts_at_a_multiple_of_8_from_version_12() {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
-        let sections = || {
-            let mut s = body(&m, 1);
-            s.push(Section { kind: kind::L2_ENTRIES, index: 0, data: vec![0; 4096].into() });
-            s
-        };
-        let plain = assemble_segments(&[(2, sections())]).unwrap();
-        let coded = crate::coding::supercompress(sections(), &m, crate::coding::Schemes { level: 3, context: false }).unwrap();
-        let mut b = assemble_segments(&[(2, coded)]).unwrap();
+        let plain = assemble_segments(&[(2, body_with_zeros(&m))]).unwrap();
+        let mut b = assemble_segments(&[(2, supercompressed(body_with_zeros(&m), &m))]).unwrap();
         // Right after the table (64 + 32 bytes), where a plain body waits for byte 256.
         let first = |b: &[u8]| Asset::from_bytes(b).unwrap().segments().unwrap()[0].offset;
         assert_eq!((first(&b), first(&plain)), (96, ALIGN as u64));
@@ -726,8 +724,7 @@ pub(crate) mod tests {
         words.extend((0..first - words.len() as u32).map(|i| i.wrapping_mul(2654435761)));
         let raw: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
         sections.push(Section { kind: kind::L3_NODES, index: 0, data: raw.clone().into() });
-        let coded = crate::coding::supercompress(sections, &m, crate::coding::Schemes { level: 3, context: false }).unwrap();
-        let b = assemble_segments(&[(2, coded)]).unwrap();
+        let b = assemble_segments(&[(2, supercompressed(sections, &m))]).unwrap();
         let a = Asset::from_bytes(&b).unwrap();
         let codings = crate::coding::Coding::parse_all(a.stored_segment(0).unwrap().section(kind::CODING, 0).unwrap()).unwrap();
         assert_eq!(codings.iter().find(|c| c.kind == kind::L3_NODES).map(|c| c.filter), Some(crate::coding::Filter::L3Nodes));

@@ -194,7 +194,7 @@ unsafe fn escape_bits(e: &mut Escapes, kk: __m256i, esc: __m256i, em: i32) -> Op
         // The last escaping lane starts furthest on: past the bits' end, the stream is refused.
         let last_lane = 31 - (em as u32).leading_zeros();
         let last = _mm256_cvtsi256_si32(_mm256_permutevar8x32_epi32(start, _mm256_set1_epi32(last_lane as i32))) as u32 as usize;
-        if ((e.at & !7) + last) >> 3 > e.len {
+        if e.past_end(last - (e.at & 7)) {
             return None;
         }
         let base = e.bits.as_ptr().add(e.at >> 3) as *const i64;

@@ -112,7 +112,7 @@ unsafe fn escape_bits(e: &mut Escapes, kk: __m512i, esc: __mmask16) -> Option<__
         let start = _mm512_add_epi32(_mm512_sub_epi32(incl, cnt), _mm512_set1_epi32((e.at & 7) as i32));
         // The last escaping lane starts furthest on: past the bits' end, the stream is refused.
         let last = _mm512_mask_reduce_max_epu32(esc, start) as usize;
-        if ((e.at & !7) + last) >> 3 > e.len {
+        if e.past_end(last - (e.at & 7)) {
             return None;
         }
         let base = e.bits.as_ptr().add(e.at >> 3) as *const i64;

@@ -441,15 +441,22 @@ struct Escapes<'a> {
 }
 
 impl Escapes<'_> {
+    /// Whether a read `ahead` bits on from the position starts past the
+    /// bits' end (the 8 zero bytes after them hold what one read takes).
+    #[inline(always)]
+    fn past_end(&self, ahead: usize) -> bool {
+        (self.at + ahead) >> 3 > self.len
+    }
+
     /// The next `nb` bits (least significant first; at most 47 are taken,
     /// more than any valid symbol has, so that a damaged stream's read stays
     /// in one 64-bit window), or `None` when the position is past the end.
     #[inline(always)]
     fn read(&mut self, nb: u32) -> Option<u32> {
-        let byte = self.at >> 3;
-        if byte > self.len {
+        if self.past_end(0) {
             return None;
         }
+        let byte = self.at >> 3;
         let nb = nb.min(47);
         let peek = u64::from_le_bytes(self.bits[byte..byte + 8].try_into().unwrap_or_default()) >> (self.at & 7);
         self.at += nb as usize;
