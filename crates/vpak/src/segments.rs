@@ -634,6 +634,15 @@ pub(crate) mod tests {
         out
     }
 
+    /// The error reading segment 0 of the one-segment file `b` gives once its
+    /// body sits at byte 256, as an older writer placed it, and the file is
+    /// relabelled as version `v`.
+    fn older_error(b: &[u8], v: u32) -> String {
+        let mut b = with_body_at(b, ALIGN as u64);
+        set_version(&mut b, v);
+        Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string()
+    }
+
     /// A one-segment file `b` relabelled as version `v`, its header checksum made anew.
     fn set_version(b: &mut [u8], v: u32) {
         b[8..12].copy_from_slice(&v.to_le_bytes());
@@ -645,9 +654,7 @@ pub(crate) mod tests {
     fn a_version_7_file_holds_no_supercompressed_section() {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
         let b = assemble_segments(&[(2, supercompressed(body_with_zeros(&m), &m))]).unwrap();
-        let mut b = with_body_at(&b, ALIGN as u64);
-        set_version(&mut b, VERSION_7);
-        let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
+        let err = older_error(&b, VERSION_7);
         assert!(err.contains("older than version 8"), "{err}");
     }
 
@@ -662,9 +669,7 @@ pub(crate) mod tests {
         assert!(offsets.iter().all(|o| o % 8 == 0) && offsets.iter().any(|o| o % ALIGN as u64 != 0), "{offsets:?}");
         a.segment(0).unwrap();
         // In a version-10 file, the sections no coding record names must be at multiples of 256.
-        let mut b = with_body_at(&b, ALIGN as u64);
-        set_version(&mut b, VERSION_10);
-        let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
+        let err = older_error(&b, VERSION_10);
         assert!(err.contains("misaligned"), "{err}");
     }
 
@@ -683,9 +688,7 @@ pub(crate) mod tests {
         let b = assemble_segments(&[(2, sections)]).unwrap();
         let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
         assert_eq!(restored.section(kind::L2_ENTRIES, 0).unwrap(), &raw[..]);
-        let mut b = with_body_at(&b, ALIGN as u64);
-        set_version(&mut b, VERSION_10);
-        let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
+        let err = older_error(&b, VERSION_10);
         assert!(err.contains("context-coded in a version-10 file"), "{err}");
     }
 
@@ -729,9 +732,7 @@ pub(crate) mod tests {
         let codings = crate::coding::Coding::parse_all(a.stored_segment(0).unwrap().section(kind::CODING, 0).unwrap()).unwrap();
         assert_eq!(codings.iter().find(|c| c.kind == kind::L3_NODES).map(|c| c.filter), Some(crate::coding::Filter::L3Nodes));
         assert_eq!(a.segment(0).unwrap().section(kind::L3_NODES, 0).unwrap(), &raw[..]);
-        let mut b = with_body_at(&b, ALIGN as u64);
-        set_version(&mut b, VERSION_11);
-        let err = Asset::from_bytes(&b).unwrap().segment(0).err().unwrap().to_string();
+        let err = older_error(&b, VERSION_11);
         assert!(err.contains("filtered as l3 nodes in a version-11 file"), "{err}");
     }
 
