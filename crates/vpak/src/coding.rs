@@ -497,8 +497,17 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) 
             let (best, filtered, mut unpredicted) = match filters.as_slice() {
                 [only] => (*only, None, None),
                 _ => {
-                    // Tiles span the atlas's rows: every tiles filter made whole in one pass, then sampled.
-                    let mut tiled: Vec<Vec<u8>> = tiles_among(&filters).map(|(t, predicts)| t.apply_each(&s.data, &predicts)).unwrap_or_default();
+                    // Tiles span the atlas's rows: every tiles filter made whole in one pass, then
+                    // sampled, when the sample is the whole section or context coding needs the
+                    // unpredicted tiles whole; else only the tiles the sample shows are filtered.
+                    let tiles = tiles_among(&filters);
+                    let ranges = tiles.as_ref().and_then(|(t, _)| t.filtered_len(s.data.len())).map(sample_ranges).unwrap_or_default();
+                    let make_whole = contextual.is_some() || ranges.len() == 1;
+                    let mut tiled: Vec<Vec<u8>> = match &tiles {
+                        Some((t, predicts)) if make_whole => t.apply_each(&s.data, predicts),
+                        Some((t, predicts)) => t.apply_each_at(&s.data, predicts, &ranges),
+                        None => Vec::new(),
+                    };
                     let mut next_tiled = 0..tiled.len();
                     // Each filter's sample, and where its whole output is kept.
                     let samples: Vec<(Vec<u8>, Option<usize>)> = filters
@@ -506,7 +515,11 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) 
                         .map(|f| match f {
                             Filter::Tiles(_) => {
                                 let j = next_tiled.next().unwrap_or(0);
-                                (sample(tiled.get(j).map_or(&[][..], |w| w)).flatten().copied().collect(), Some(j))
+                                let out = tiled.get(j).map_or(&[][..], |w| w);
+                                match make_whole {
+                                    true => (ranges.iter().flat_map(|r| &out[r.clone()]).copied().collect(), Some(j)),
+                                    false => (out.to_vec(), None),
+                                }
                             }
                             _ => (sample(&s.data).flat_map(|chunk| f.apply(chunk)).collect(), None),
                         })
@@ -633,9 +646,19 @@ pub fn zstd_frame(c: &Coding, restored: &[u8], level: i32) -> std::io::Result<Ve
 /// What a filter is judged on: a section of up to 1 MiB whole, a larger one
 /// by 16 chunks of 64 KiB spread over it (a multiple of every filter's width).
 fn sample(data: &[u8]) -> impl Iterator<Item = &[u8]> {
+    sample_ranges(data.len()).into_iter().map(move |r| &data[r])
+}
+
+/// The byte ranges [`sample`] takes of `len` bytes.
+fn sample_ranges(len: usize) -> Vec<std::ops::Range<usize>> {
     const CHUNK: usize = 64 << 10;
-    let (count, step) = if data.len() <= 1 << 20 { (1, 0) } else { (16, (data.len() - CHUNK) / 15 / CHUNK * CHUNK) };
-    (0..count).map(move |k| if count == 1 { data } else { &data[k * step..k * step + CHUNK] })
+    match len <= 1 << 20 {
+        true => std::iter::once(0..len).collect(),
+        false => {
+            let step = (len - CHUNK) / 15 / CHUNK * CHUNK;
+            (0..16).map(|k| k * step..k * step + CHUNK).collect()
+        }
+    }
 }
 
 /// `n` zeroed items from the allocator's zeroed memory (fresh pages are not

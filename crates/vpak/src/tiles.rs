@@ -62,10 +62,23 @@ impl Tiles {
     /// within the tiles) is the section's row 8·(r mod y) + j of layer
     /// 8·⌊r / y⌋ + k.
     fn row_starts(self, r: usize) -> impl Iterator<Item = usize> {
+        (0..64).map(move |q| self.row_start(r, q))
+    }
+
+    fn row_start(self, r: usize, q: usize) -> usize {
         let (x, y) = (self.x as usize, self.y as usize);
         let (row, layer) = (8 * x, 64 * x * y);
-        let base = row * 8 * (r % y) + layer * 8 * (r / y);
-        (0..64).map(move |q| base + row * (q % 8) + layer * (q / 8))
+        row * 8 * (r % y) + layer * 8 * (r / y) + row * (q % 8) + layer * (q / 8)
+    }
+
+    /// Element `v` (x fastest) of tile `t` in a section of `raw` bytes.
+    fn element(self, raw: &[u8], t: usize, v: usize) -> u16 {
+        let x = self.x as usize;
+        let at = self.row_start(t / x, v / 8) + 8 * (t % x) + v % 8;
+        match self.width {
+            1 => u16::from(raw[at]),
+            _ => u16::from_le_bytes([raw[2 * at], raw[2 * at + 1]]),
+        }
     }
 
     /// The filtered bytes: the tiles' divisors, then each tile's residuals,
@@ -155,14 +168,65 @@ impl Tiles {
         outs
     }
 
+    /// The bytes at `ranges` of each of [`Tiles::apply_each`]'s outputs
+    /// (byte ranges of the filtered form, within it), one after another per
+    /// output, with only the tiles they show filtered: a sample of a large
+    /// section, which the coder judges filters on, costs what it holds, not
+    /// the whole section. The divisors a range shows are found each from
+    /// its tile's elements up to the first that makes it 1.
+    pub fn apply_each_at(self, raw: &[u8], predicts: &[bool], ranges: &[std::ops::Range<usize>]) -> Vec<Vec<u8>> {
+        let w = self.width as usize;
+        let tiles = self.count(raw.len()).unwrap_or(0);
+        let m = tiles * (TILE + 1);
+        // Each range as runs of elements, byte plane by byte plane (low bytes first, as stored).
+        let runs: Vec<(std::ops::Range<usize>, usize)> =
+            ranges.iter().flat_map(|r| (0..w).map(move |p| (r.start.clamp(p * m, (p + 1) * m) - p * m..r.end.clamp(p * m, (p + 1) * m) - p * m, p))).filter(|(r, _)| !r.is_empty()).collect();
+        let divisors_to = runs.iter().map(|(r, _)| r.end.min(tiles)).max().unwrap_or(0);
+        let divisors: Vec<u16> = (0..divisors_to).into_par_iter().map(|t| gcd_of((0..TILE).map(|v| self.element(raw, t, v)))).collect();
+        let mut shown: Vec<usize> = runs.iter().filter(|(r, _)| r.end > tiles).flat_map(|(r, _)| (r.start.max(tiles) - tiles) / TILE..(r.end - tiles).div_ceil(TILE)).collect();
+        shown.sort_unstable();
+        shown.dedup();
+        // Per tile shown, its residuals for each of `predicts`.
+        let filtered: Vec<Vec<Tile>> = shown
+            .par_iter()
+            .map(|&t| {
+                let mut e: Tile = std::array::from_fn(|v| self.element(raw, t, v));
+                let g = tile_gcd(&e);
+                divide(&mut e, g);
+                let mut d = e;
+                difference(&mut d);
+                predicts.iter().map(|&p| if p { d } else { e }).collect()
+            })
+            .collect();
+        let byte = |v: u16, p: usize| (v >> (8 * p)) as u8;
+        (0..predicts.len())
+            .map(|i| {
+                let mut out = Vec::with_capacity(ranges.iter().map(|r| r.len()).sum());
+                for (r, p) in &runs {
+                    out.extend(divisors[r.start.min(tiles)..r.end.min(tiles)].iter().map(|&g| byte(g, *p)));
+                    let mut e = r.start.max(tiles);
+                    while e < r.end {
+                        let (t, v) = ((e - tiles) / TILE, (e - tiles) % TILE);
+                        let end = (r.end - tiles - t * TILE).min(TILE);
+                        let tile = shown.binary_search(&t).map_or(&[0u16; TILE], |k| &filtered[k][i]);
+                        out.extend(tile[v..end].iter().map(|&x| byte(x, *p)));
+                        e += end - v;
+                    }
+                }
+                out
+            })
+            .collect()
+    }
+
     /// Undoes [`Tiles::apply`]: `data` is the filtered form of `out`.
     ///
-    /// A row of tiles along x at a time, in a buffer laid out as `out` is (8
-    /// layers of 8 rows of `8·x` elements): each tile's residuals multiplied
-    /// by its divisor (which commutes with the sums, modulo 2^16) and summed
-    /// along x, then the running sums along y and z over whole rows and
-    /// layers, then 64 contiguous rows written to `out`. Writing tile by tile
-    /// would scatter 64 rows of 16 bytes each across the atlas.
+    /// Tile by tile in one pass: each row of 8 residuals is multiplied by
+    /// the tile's divisor (which commutes with the sums, modulo 2^16) and
+    /// summed along x in a register; a running sum along y and the layer
+    /// below's sums (along z) make the row's elements, written to `out`
+    /// where they belong. A tile's 64 rows lie across the atlas, but the
+    /// next tile along x writes beside them, so the lines they touch stay
+    /// in the cache.
     pub fn undo(self, data: &[u8], out: &mut [u8]) {
         let w = self.width as usize;
         let tiles = self.count(out.len()).unwrap_or(0);
@@ -172,47 +236,30 @@ impl Tiles {
         }
         let (lo, hi) = data.split_at(m);
         let x = self.x as usize;
-        let len = 8 * x;
-        let mut block = vec![0u16; 64 * len];
-        let mut u = [0u16; TILE];
-        for r in 0..tiles / x {
-            for tx in 0..x {
-                let t = r * x + tx;
-                let first = tiles + t * TILE;
-                let lo_res: &[u8; TILE] = lo[first..first + TILE].try_into().unwrap_or(&[0; TILE]);
-                let g = match w {
-                    1 => {
-                        u.iter_mut().zip(lo_res).for_each(|(u, &l)| *u = u16::from(l));
-                        u16::from(lo[t])
+        let no_high = [0u8; TILE];
+        for t in 0..tiles {
+            let first = tiles + t * TILE;
+            let (lo_res, hi_res) = (&lo[first..first + TILE], hi.get(first..first + TILE).unwrap_or(&no_high));
+            let g = u16::from_le_bytes([lo[t], hi.get(t).copied().unwrap_or(0)]);
+            // The layer below's elements, row by row, and the running sum along y in this layer.
+            let (mut below, mut along_y) = ([[0u16; 8]; 8], [0u16; 8]);
+            for (q, ((l, h), at)) in lo_res.chunks_exact(8).zip(hi_res.chunks_exact(8)).zip(self.row_starts(t / x)).enumerate() {
+                let at = at + 8 * (t % x);
+                let mut r = [0u16; 8];
+                for ((r, &l), &h) in r.iter_mut().zip(l).zip(h) {
+                    *r = u16::from_le_bytes([l, h]).wrapping_mul(g);
+                }
+                let v = match self.predict {
+                    true => {
+                        along_y = add(row_sums(r), if q % 8 == 0 { [0; 8] } else { along_y });
+                        below[q % 8] = add(along_y, below[q % 8]);
+                        below[q % 8]
                     }
-                    _ => {
-                        let hi_res: &[u8; TILE] = hi[first..first + TILE].try_into().unwrap_or(&[0; TILE]);
-                        u.iter_mut().zip(lo_res.iter().zip(hi_res)).for_each(|(u, (&l, &h))| *u = u16::from_le_bytes([l, h]));
-                        u16::from_le_bytes([lo[t], hi[t]])
-                    }
+                    false => r,
                 };
-                if g != 1 {
-                    u.iter_mut().for_each(|v| *v = v.wrapping_mul(g));
-                }
-                for (q, src) in u.chunks_exact(8).enumerate() {
-                    let r: [u16; 8] = src.try_into().unwrap_or_default();
-                    let dst = &mut block[q * len + 8 * tx..q * len + 8 * tx + 8];
-                    dst.copy_from_slice(&if self.predict { row_sums(r) } else { r });
-                }
-            }
-            if self.predict {
-                // Along y within each layer, then along z.
-                let rows_y = (1..64).filter(|q| q % 8 != 0).map(|q| (q, q - 1));
-                for (q, from) in rows_y.chain((8..64).map(|q| (q, q - 8))) {
-                    let (before, here) = block.split_at_mut(q * len);
-                    let prev = &before[from * len..from * len + len];
-                    here[..len].iter_mut().zip(prev).for_each(|(v, &p)| *v = v.wrapping_add(p));
-                }
-            }
-            for (src, at) in block.chunks_exact(len).zip(self.row_starts(r)) {
                 match w {
-                    1 => out[at..at + len].iter_mut().zip(src).for_each(|(o, &v)| *o = v as u8),
-                    _ => out[2 * at..2 * (at + len)].chunks_exact_mut(2).zip(src).for_each(|(o, &v)| o.copy_from_slice(&v.to_le_bytes())),
+                    1 => out[at..at + 8].iter_mut().zip(v).for_each(|(o, v)| *o = v as u8),
+                    _ => out[2 * at..2 * at + 16].chunks_exact_mut(2).zip(v).for_each(|(o, v)| o.copy_from_slice(&v.to_le_bytes())),
                 }
             }
         }
@@ -237,9 +284,14 @@ pub(crate) fn unorm8_quotients(plane: &crate::Plane, bytes: &[u8]) -> Option<Til
 /// each element only checked against the divisor so far (a multiply by its
 /// reciprocal), which changes at most 16 times.
 fn tile_gcd(e: &Tile) -> u16 {
+    gcd_of(e.iter().copied())
+}
+
+/// [`tile_gcd`] of elements in order, taking none past the first that makes it 1.
+fn gcd_of(elements: impl IntoIterator<Item = u16>) -> u16 {
     let mut g = 0u32;
     let mut recip = 0u64;
-    for &v in e {
+    for v in elements {
         let v = u32::from(v);
         if g == 1 {
             break;
@@ -326,7 +378,6 @@ fn shifted<const S: usize>(r: [u16; 8]) -> [u16; 8] {
     std::array::from_fn(|i| if i >= S { r[i - S] } else { 0 })
 }
 
-#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
 fn add(a: [u16; 8], b: [u16; 8]) -> [u16; 8] {
     std::array::from_fn(|i| a[i].wrapping_add(b[i]))
 }
@@ -402,6 +453,13 @@ mod tests {
                 let each = t.apply_each(&raw, &[false, true]);
                 for (f, predict) in each.iter().zip([false, true]) {
                     assert!(*f == reference(Tiles { predict, ..t }, &raw), "{t:?}: one pass for both differs (predict {predict})");
+                }
+                // Samples: the divisors' start, across tiles and across the byte planes, the end.
+                let m = f.len() / t.width as usize;
+                let ranges = [0..3, 5..600, m - 700..m + 9, f.len() - 513..f.len()].map(|r| r.start.min(f.len())..r.end.min(f.len()));
+                for (at, (f, predict)) in t.apply_each_at(&raw, &[false, true], &ranges).iter().zip(each.iter().zip([false, true])) {
+                    let want: Vec<u8> = ranges.iter().flat_map(|r| &f[r.clone()]).copied().collect();
+                    assert!(*at == want, "{t:?}: the sample's bytes differ (predict {predict})");
                 }
                 let mut back = vec![0u8; raw.len()];
                 t.undo(&f, &mut back);
