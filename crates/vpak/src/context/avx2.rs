@@ -152,7 +152,7 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
             let mut z = _mm256_blendv_epi8(sym, _mm256_add_epi32(_mm256_set1_epi32(ESCAPE as i32 - 1), _mm256_sllv_epi32(one, kk)), esc);
             let em = _mm256_movemask_ps(_mm256_castsi256_ps(esc));
             if em != 0 {
-                match escape_bits(&mut r.escapes, kk, esc, em) {
+                match escape_bits(&mut r.escapes, kk, esc) {
                     Some(raw) => z = _mm256_add_epi32(z, raw),
                     None => r.overrun = true,
                 }
@@ -173,15 +173,15 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
     }
 }
 
-/// The escape bits of the lanes `esc` (all ones where a lane escapes;
-/// `em` its sign bits, lowest lane first, the stream's order), `kk` of them
+/// The escape bits of the lanes `esc` (all ones where a lane escapes,
+/// lowest lane first, the stream's order), `kk` of them
 /// each (at most 47, as [`Escapes::read`] takes), all at once, as
 /// [`super::avx512`] reads them: each lane's position an exclusive prefix
 /// sum of the lanes' counts, its bits one 64-bit gather from there; 0 in the
-/// other lanes; `None`, before anything is read, when a lane's bits start
-/// past the end.
+/// other lanes; `None`, before anything is read, when the lanes' bits
+/// together run past the end.
 #[inline(always)]
-unsafe fn escape_bits(e: &mut Escapes, kk: __m256i, esc: __m256i, em: i32) -> Option<__m256i> {
+unsafe fn escape_bits(e: &mut Escapes, kk: __m256i, esc: __m256i) -> Option<__m256i> {
     unsafe {
         let zero = _mm256_setzero_si256();
         let cnt = _mm256_and_si256(esc, _mm256_min_epi32(kk, _mm256_set1_epi32(47)));
@@ -191,10 +191,11 @@ unsafe fn escape_bits(e: &mut Escapes, kk: __m256i, esc: __m256i, em: i32) -> Op
         let low_total = _mm256_permutevar8x32_epi32(incl, _mm256_set1_epi32(3));
         incl = _mm256_add_epi32(incl, _mm256_blend_epi32::<0x0f>(low_total, zero));
         let start = _mm256_add_epi32(_mm256_sub_epi32(incl, cnt), _mm256_set1_epi32((e.at & 7) as i32));
-        // The last escaping lane starts furthest on: past the bits' end, the stream is refused.
-        let last_lane = 31 - (em as u32).leading_zeros();
-        let last = _mm256_cvtsi256_si32(_mm256_permutevar8x32_epi32(start, _mm256_set1_epi32(last_lane as i32))) as u32 as usize;
-        if e.past_end(last - (e.at & 7)) {
+        // Every lane starts at most `total` bits on: past the bits' end, the stream is refused
+        // (a read the scalar decoder would still start there leaves its position past the end,
+        // which it refuses once the stream is decoded).
+        let total = _mm256_extract_epi32::<7>(incl) as u32 as usize;
+        if e.past_end(total) {
             return None;
         }
         let base = e.bits.as_ptr().add(e.at >> 3) as *const i64;
@@ -209,7 +210,7 @@ unsafe fn escape_bits(e: &mut Escapes, kk: __m256i, esc: __m256i, em: i32) -> Op
         };
         let lo = half(_mm256_castsi256_si128(bytes), _mm256_castsi256_si128(shift), _mm256_castsi256_si128(cnt), _mm256_castsi256_si128(esc));
         let hi = half(_mm256_extracti128_si256::<1>(bytes), _mm256_extracti128_si256::<1>(shift), _mm256_extracti128_si256::<1>(cnt), _mm256_extracti128_si256::<1>(esc));
-        e.at += _mm256_extract_epi32::<7>(incl) as u32 as usize;
+        e.at += total;
         Some(_mm256_set_m128i(hi, lo))
     }
 }

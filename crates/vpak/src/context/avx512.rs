@@ -97,7 +97,7 @@ struct Reader<'a> {
 /// order), `kk` of them each (at most 47, as [`Escapes::read`] takes), all
 /// at once: each lane's position is the bits before it (an exclusive
 /// prefix sum over the lanes), its bits one 64-bit gather from there;
-/// `None`, before anything is read, when a lane's bits start past the end.
+/// `None`, before anything is read, when the lanes' bits together run past the end.
 #[inline(always)]
 unsafe fn escape_bits(e: &mut Escapes, kk: __m512i, esc: __mmask16) -> Option<__m512i> {
     unsafe {
@@ -110,9 +110,11 @@ unsafe fn escape_bits(e: &mut Escapes, kk: __m512i, esc: __mmask16) -> Option<__
         incl = _mm512_add_epi32(incl, _mm512_alignr_epi32::<12>(incl, zero));
         incl = _mm512_add_epi32(incl, _mm512_alignr_epi32::<8>(incl, zero));
         let start = _mm512_add_epi32(_mm512_sub_epi32(incl, cnt), _mm512_set1_epi32((e.at & 7) as i32));
-        // The last escaping lane starts furthest on: past the bits' end, the stream is refused.
-        let last = _mm512_mask_reduce_max_epu32(esc, start) as usize;
-        if e.past_end(last - (e.at & 7)) {
+        // Every lane starts at most `total` bits on: past the bits' end, the stream is refused
+        // (a read the scalar decoder would still start there leaves its position past the end,
+        // which it refuses once the stream is decoded).
+        let total = _mm_extract_epi32::<3>(_mm512_extracti32x4_epi32::<3>(incl)) as usize;
+        if e.past_end(total) {
             return None;
         }
         let base = e.bits.as_ptr().add(e.at >> 3) as *const i64;
@@ -128,7 +130,7 @@ unsafe fn escape_bits(e: &mut Escapes, kk: __m512i, esc: __mmask16) -> Option<__
         let shift = _mm512_and_si512(start, _mm512_set1_epi32(7));
         let raw_lo = take(words_lo, _mm512_castsi512_si256(shift), _mm512_castsi512_si256(cnt));
         let raw_hi = take(words_hi, _mm512_extracti64x4_epi64::<1>(shift), _mm512_extracti64x4_epi64::<1>(cnt));
-        e.at += _mm512_reduce_add_epi32(cnt) as usize;
+        e.at += total;
         Some(_mm512_inserti64x4::<1>(_mm512_castsi256_si512(raw_lo), raw_hi))
     }
 }
