@@ -179,8 +179,11 @@ impl Tiles {
         let tiles = self.count(raw.len()).unwrap_or(0);
         let m = tiles * (TILE + 1);
         // Each range as runs of elements, byte plane by byte plane (low bytes first, as stored).
-        let runs: Vec<(std::ops::Range<usize>, usize)> =
-            ranges.iter().flat_map(|r| (0..w).map(move |p| (r.start.clamp(p * m, (p + 1) * m) - p * m..r.end.clamp(p * m, (p + 1) * m) - p * m, p))).filter(|(r, _)| !r.is_empty()).collect();
+        let runs: Vec<(std::ops::Range<usize>, usize)> = ranges
+            .iter()
+            .flat_map(|r| (0..w).map(move |p| (r.start.clamp(p * m, (p + 1) * m) - p * m..r.end.clamp(p * m, (p + 1) * m) - p * m, p)))
+            .filter(|(r, _)| !r.is_empty())
+            .collect();
         let divisors_to = runs.iter().map(|(r, _)| r.end.min(tiles)).max().unwrap_or(0);
         let divisors: Vec<u16> = (0..divisors_to).into_par_iter().map(|t| gcd_of((0..TILE).map(|v| self.element(raw, t, v)))).collect();
         let mut shown: Vec<usize> = runs.iter().filter(|(r, _)| r.end > tiles).flat_map(|(r, _)| (r.start.max(tiles) - tiles) / TILE..(r.end - tiles).div_ceil(TILE)).collect();
@@ -220,13 +223,12 @@ impl Tiles {
 
     /// Undoes [`Tiles::apply`]: `data` is the filtered form of `out`.
     ///
-    /// Tile by tile in one pass: each row of 8 residuals is multiplied by
-    /// the tile's divisor (which commutes with the sums, modulo 2^16) and
-    /// summed along x in a register; a running sum along y and the layer
-    /// below's sums (along z) make the row's elements, written to `out`
-    /// where they belong. A tile's 64 rows lie across the atlas, but the
-    /// next tile along x writes beside them, so the lines they touch stay
-    /// in the cache.
+    /// A row of tiles along x at a time, in a buffer laid out as `out` is (8
+    /// layers of 8 rows of `8·x` elements): each tile's residuals multiplied
+    /// by its divisor (which commutes with the sums, modulo 2^16) and summed
+    /// along x, then the running sums along y and z over whole rows and
+    /// layers, then 64 contiguous rows written to `out`. Writing tile by tile
+    /// would scatter 64 rows of 16 bytes each across the atlas.
     pub fn undo(self, data: &[u8], out: &mut [u8]) {
         let w = self.width as usize;
         let tiles = self.count(out.len()).unwrap_or(0);
@@ -236,30 +238,47 @@ impl Tiles {
         }
         let (lo, hi) = data.split_at(m);
         let x = self.x as usize;
-        let no_high = [0u8; TILE];
-        for t in 0..tiles {
-            let first = tiles + t * TILE;
-            let (lo_res, hi_res) = (&lo[first..first + TILE], hi.get(first..first + TILE).unwrap_or(&no_high));
-            let g = u16::from_le_bytes([lo[t], hi.get(t).copied().unwrap_or(0)]);
-            // The layer below's elements, row by row, and the running sum along y in this layer.
-            let (mut below, mut along_y) = ([[0u16; 8]; 8], [0u16; 8]);
-            for (q, ((l, h), at)) in lo_res.chunks_exact(8).zip(hi_res.chunks_exact(8)).zip(self.row_starts(t / x)).enumerate() {
-                let at = at + 8 * (t % x);
-                let mut r = [0u16; 8];
-                for ((r, &l), &h) in r.iter_mut().zip(l).zip(h) {
-                    *r = u16::from_le_bytes([l, h]).wrapping_mul(g);
-                }
-                let v = match self.predict {
-                    true => {
-                        along_y = add(row_sums(r), if q % 8 == 0 { [0; 8] } else { along_y });
-                        below[q % 8] = add(along_y, below[q % 8]);
-                        below[q % 8]
+        let len = 8 * x;
+        let mut block = vec![0u16; 64 * len];
+        let mut u = [0u16; TILE];
+        for r in 0..tiles / x {
+            for tx in 0..x {
+                let t = r * x + tx;
+                let first = tiles + t * TILE;
+                let lo_res: &[u8; TILE] = lo[first..first + TILE].try_into().unwrap_or(&[0; TILE]);
+                let g = match w {
+                    1 => {
+                        u.iter_mut().zip(lo_res).for_each(|(u, &l)| *u = u16::from(l));
+                        u16::from(lo[t])
                     }
-                    false => r,
+                    _ => {
+                        let hi_res: &[u8; TILE] = hi[first..first + TILE].try_into().unwrap_or(&[0; TILE]);
+                        u.iter_mut().zip(lo_res.iter().zip(hi_res)).for_each(|(u, (&l, &h))| *u = u16::from_le_bytes([l, h]));
+                        u16::from_le_bytes([lo[t], hi[t]])
+                    }
                 };
+                if g != 1 {
+                    u.iter_mut().for_each(|v| *v = v.wrapping_mul(g));
+                }
+                for (q, src) in u.chunks_exact(8).enumerate() {
+                    let r: [u16; 8] = src.try_into().unwrap_or_default();
+                    let dst = &mut block[q * len + 8 * tx..q * len + 8 * tx + 8];
+                    dst.copy_from_slice(&if self.predict { row_sums(r) } else { r });
+                }
+            }
+            if self.predict {
+                // Along y within each layer, then along z.
+                let rows_y = (1..64).filter(|q| q % 8 != 0).map(|q| (q, q - 1));
+                for (q, from) in rows_y.chain((8..64).map(|q| (q, q - 8))) {
+                    let (before, here) = block.split_at_mut(q * len);
+                    let prev = &before[from * len..from * len + len];
+                    here[..len].iter_mut().zip(prev).for_each(|(v, &p)| *v = v.wrapping_add(p));
+                }
+            }
+            for (src, at) in block.chunks_exact(len).zip(self.row_starts(r)) {
                 match w {
-                    1 => out[at..at + 8].iter_mut().zip(v).for_each(|(o, v)| *o = v as u8),
-                    _ => out[2 * at..2 * at + 16].chunks_exact_mut(2).zip(v).for_each(|(o, v)| o.copy_from_slice(&v.to_le_bytes())),
+                    1 => out[at..at + len].iter_mut().zip(src).for_each(|(o, &v)| *o = v as u8),
+                    _ => out[2 * at..2 * (at + len)].chunks_exact_mut(2).zip(src).for_each(|(o, &v)| o.copy_from_slice(&v.to_le_bytes())),
                 }
             }
         }
@@ -378,6 +397,7 @@ fn shifted<const S: usize>(r: [u16; 8]) -> [u16; 8] {
     std::array::from_fn(|i| if i >= S { r[i - S] } else { 0 })
 }
 
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
 fn add(a: [u16; 8], b: [u16; 8]) -> [u16; 8] {
     std::array::from_fn(|i| a[i].wrapping_add(b[i]))
 }
