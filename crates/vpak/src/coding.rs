@@ -515,10 +515,10 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) 
                         .map(|f| match f {
                             Filter::Tiles(_) => {
                                 let j = next_tiled.next().unwrap_or(0);
-                                let out = tiled.get(j).map_or(&[][..], |w| w);
                                 match make_whole {
-                                    true => (ranges.iter().flat_map(|r| &out[r.clone()]).copied().collect(), Some(j)),
-                                    false => (out.to_vec(), None),
+                                    true => (ranges.iter().flat_map(|r| tiled.get(j).map_or(&[][..], |w| &w[r.clone()])).copied().collect(), Some(j)),
+                                    // Already the sample.
+                                    false => (tiled.get_mut(j).map(std::mem::take).unwrap_or_default(), None),
                                 }
                             }
                             _ => (sample(&s.data).flat_map(|chunk| f.apply(chunk)).collect(), None),

@@ -179,11 +179,8 @@ impl Tiles {
         let tiles = self.count(raw.len()).unwrap_or(0);
         let m = tiles * (TILE + 1);
         // Each range as runs of elements, byte plane by byte plane (low bytes first, as stored).
-        let runs: Vec<(std::ops::Range<usize>, usize)> = ranges
-            .iter()
-            .flat_map(|r| (0..w).map(move |p| (r.start.clamp(p * m, (p + 1) * m) - p * m..r.end.clamp(p * m, (p + 1) * m) - p * m, p)))
-            .filter(|(r, _)| !r.is_empty())
-            .collect();
+        let runs: Vec<(std::ops::Range<usize>, usize)> =
+            ranges.iter().flat_map(|r| (0..w).map(move |p| (r.start.clamp(p * m, (p + 1) * m) - p * m..r.end.clamp(p * m, (p + 1) * m) - p * m, p))).filter(|(r, _)| !r.is_empty()).collect();
         let divisors_to = runs.iter().map(|(r, _)| r.end.min(tiles)).max().unwrap_or(0);
         let divisors: Vec<u16> = (0..divisors_to).into_par_iter().map(|t| gcd_of((0..TILE).map(|v| self.element(raw, t, v)))).collect();
         let mut shown: Vec<usize> = runs.iter().filter(|(r, _)| r.end > tiles).flat_map(|(r, _)| (r.start.max(tiles) - tiles) / TILE..(r.end - tiles).div_ceil(TILE)).collect();
