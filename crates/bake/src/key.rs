@@ -10,7 +10,7 @@
 //! `allow_missing`).
 
 use crate::CookSettings;
-use xxhash_rust::xxh3::{xxh3_128, Xxh3};
+use twox_hash::XxHash3_128;
 
 /// What a key depends on besides the asset's own settings and files.
 #[derive(Clone, Debug)]
@@ -37,18 +37,18 @@ pub struct FileDigest {
 
 impl FileDigest {
     pub fn of(path: String, bytes: Option<&[u8]>) -> FileDigest {
-        FileDigest { path, content: bytes.map(|b| (b.len() as u64, xxh3_128(b))) }
+        FileDigest { path, content: bytes.map(|b| (b.len() as u64, XxHash3_128::oneshot(b))) }
     }
 }
 
-fn field(h: &mut Xxh3, bytes: &[u8]) {
-    h.update(&(bytes.len() as u64).to_le_bytes());
-    h.update(bytes);
+fn field(h: &mut XxHash3_128, bytes: &[u8]) {
+    h.write(&(bytes.len() as u64).to_le_bytes());
+    h.write(bytes);
 }
 
 /// The key, as 32 hex digits.
 pub fn cache_key(ctx: &KeyContext, settings: &CookSettings, inputs: &[String], files: &[FileDigest]) -> String {
-    let mut h = Xxh3::new();
+    let mut h = XxHash3_128::new();
     field(&mut h, b"vdbcook-bake-key 1");
     field(&mut h, ctx.tool.as_bytes());
     field(&mut h, &ctx.format_version.to_le_bytes());
@@ -72,7 +72,7 @@ pub fn cache_key(ctx: &KeyContext, settings: &CookSettings, inputs: &[String], f
             None => field(&mut h, b"missing"),
         }
     }
-    format!("{:032x}", h.digest128())
+    format!("{:032x}", h.finish_128())
 }
 
 #[cfg(test)]

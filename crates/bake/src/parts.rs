@@ -14,10 +14,10 @@ use crate::report::{ChannelFormats, FormatBricks};
 use crate::{place, PlannedAsset, Record};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use twox_hash::XxHash3_128;
 use vdbcook_pipeline::{Context, Error, Result};
 use vdbcook_vpak::segments::{part_writer, rewrite_metadata, PartInfo};
 use vdbcook_vpak::{Asset, AtomicFile, Metadata};
-use xxhash_rust::xxh3::Xxh3;
 
 /// Part `index` (from 1) of `count`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
@@ -55,12 +55,12 @@ pub fn units(planned: &[PlannedAsset]) -> Vec<Unit> {
 }
 
 fn hash_hex(fields: &[&[u8]]) -> String {
-    let mut h = Xxh3::new();
+    let mut h = XxHash3_128::new();
     for f in fields {
-        h.update(&(f.len() as u64).to_le_bytes());
-        h.update(f);
+        h.write(&(f.len() as u64).to_le_bytes());
+        h.write(f);
     }
-    format!("{:032x}", h.digest128())
+    format!("{:032x}", h.finish_128())
 }
 
 /// The key of an asset cooked in `parts` parts, from its key as one cook.

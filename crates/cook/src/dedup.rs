@@ -121,7 +121,7 @@ fn distinct(n: usize, bytes_of: &(dyn Fn(usize, &mut Vec<u8>) + Sync)) -> Result
             .into_par_iter()
             .map_init(Vec::new, |buf, i| {
                 bytes_of(i, buf);
-                xxhash_rust::xxh3::xxh3_64(buf)
+                twox_hash::XxHash3_64::oneshot(buf)
             })
             .collect();
         for (i, &h) in (first..).zip(&hashes) {

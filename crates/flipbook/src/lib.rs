@@ -201,7 +201,7 @@ impl L3 {
 
     /// Its content hash, for hash-consing.
     fn hash(mask: &[u64; 8], brick: u32) -> u64 {
-        xxhash_rust::xxh3::xxh3_64_with_seed(bytemuck::cast_slice(mask), u64::from(brick))
+        twox_hash::XxHash3_64::oneshot_with_seed(u64::from(brick), bytemuck::cast_slice(mask))
     }
 }
 

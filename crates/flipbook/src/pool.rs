@@ -47,7 +47,7 @@ fn constant_bits(b: &Brick) -> Option<u32> {
 /// A constant channel's hash: by its one value, so that equal content
 /// hashes alike however the brick was made.
 fn constant_hash(bits: u32) -> u64 {
-    xxhash_rust::xxh3::xxh3_64_with_seed(&bits.to_le_bytes(), 0xc5)
+    twox_hash::XxHash3_64::oneshot_with_seed(0xc5, &bits.to_le_bytes())
 }
 
 /// What pooling needs of a channel brick, taken when it is made (while its
@@ -65,7 +65,7 @@ impl Made {
     pub(crate) fn of(b: &Brick, shares_constants: bool) -> Made {
         match shares_constants.then(|| constant_bits(b)).flatten() {
             Some(bits) => Made { hash: constant_hash(bits), constant: Some(bits), range: [0.0; 2] },
-            None => Made { hash: xxhash_rust::xxh3::xxh3_64(bytemuck::cast_slice(b)), constant: None, range: range_of(b) },
+            None => Made { hash: twox_hash::XxHash3_64::oneshot(bytemuck::cast_slice(b)), constant: None, range: range_of(b) },
         }
     }
 
@@ -150,7 +150,7 @@ impl BrickPool {
         };
         match channels {
             [ch] => one(ch),
-            _ => channels.iter().fold(0, |acc, ch| xxhash_rust::xxh3::xxh3_64_with_seed(&one(ch).to_le_bytes(), acc)),
+            _ => channels.iter().fold(0, |acc, ch| twox_hash::XxHash3_64::oneshot_with_seed(acc, &one(ch).to_le_bytes())),
         }
     }
 

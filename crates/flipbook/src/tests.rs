@@ -606,7 +606,7 @@ fn hash_index_tells_apart_items_of_one_hash_and_ignores_other_hashes() {
     assert_eq!(index.find(9, |_| true), Some(2));
     assert_eq!(index.find(8, |_| true), None);
     // Past its reservation it grows and still finds every item.
-    let hash = |id: u32| xxhash_rust::xxh3::xxh3_64(&id.to_le_bytes()) & 0xffff;
+    let hash = |id: u32| twox_hash::XxHash3_64::oneshot(&id.to_le_bytes()) & 0xffff;
     for id in 3..20_000 {
         index.add(hash(id), id);
     }

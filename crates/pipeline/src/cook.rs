@@ -493,25 +493,26 @@ impl Part {
 /// setting recorded, the segment length and each input file's path and size
 /// (the `--with` files' after the main input's).
 fn fingerprint(opts: &CookOptions, segment: Option<usize>, files: &[PathBuf], with: &[Vec<Option<PathBuf>>]) -> u64 {
-    let mut h = xxhash_rust::xxh3::Xxh3::new();
-    h.update(env!("CARGO_PKG_VERSION").as_bytes());
+    use std::hash::Hasher;
+    let mut h = twox_hash::XxHash3_64::new();
+    h.write(env!("CARGO_PKG_VERSION").as_bytes());
     for (k, v) in &opts.settings {
-        h.update(&[0]);
-        h.update(k.as_bytes());
-        h.update(&[1]);
-        h.update(v.as_bytes());
+        h.write(&[0]);
+        h.write(k.as_bytes());
+        h.write(&[1]);
+        h.write(v.as_bytes());
     }
-    h.update(&(segment.unwrap_or(0) as u64).to_le_bytes());
+    h.write(&(segment.unwrap_or(0) as u64).to_le_bytes());
     for f in files.iter().map(Some).chain(with.iter().flatten().map(Option::as_ref)) {
         match f {
             Some(f) => {
-                h.update(f.to_string_lossy().as_bytes());
-                h.update(&std::fs::metadata(f).map_or(u64::MAX, |m| m.len()).to_le_bytes());
+                h.write(f.to_string_lossy().as_bytes());
+                h.write(&std::fs::metadata(f).map_or(u64::MAX, |m| m.len()).to_le_bytes());
             }
-            None => h.update(&[2]),
+            None => h.write(&[2]),
         }
     }
-    h.digest()
+    h.finish()
 }
 
 /// What [`cook_asset`] made: the asset (in memory, or in a file to commit),

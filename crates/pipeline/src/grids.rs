@@ -268,7 +268,7 @@ fn take_part(parts: &mut [Option<Grid>], spec: &ChannelSpec) -> Option<Grid> {
 
 /// A file's record as an asset keeps it.
 fn source_of(vdb: &VdbFile, path: &str) -> SourceFile {
-    SourceFile { path: path.to_string(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(xxhash_rust::xxh3::xxh3_128(vdb.bytes())) }
+    SourceFile { path: path.to_string(), bytes: vdb.bytes().len() as u64, xxh3_128: hash_hex(twox_hash::XxHash3_128::oneshot(vdb.bytes())) }
 }
 
 /// Reads one frame; the channels are resolved by the first frame that has a

@@ -116,14 +116,14 @@ pub fn with_files(meta: &Metadata, path: &Path, files: &[Option<PathBuf>]) -> Re
 fn file_hash(path: &Path) -> std::io::Result<String> {
     use std::io::Read;
     let mut file = std::fs::File::open(path)?;
-    let mut hasher = xxhash_rust::xxh3::Xxh3::new();
+    let mut hasher = twox_hash::XxHash3_128::new();
     let mut buf = vec![0u8; 1 << 20];
     loop {
         let n = file.read(&mut buf)?;
         if n == 0 {
-            return Ok(crate::grids::hash_hex(hasher.digest128()));
+            return Ok(crate::grids::hash_hex(hasher.finish_128()));
         }
-        hasher.update(&buf[..n]);
+        hasher.write(&buf[..n]);
     }
 }
 

@@ -612,7 +612,7 @@ impl std::fmt::Debug for Bytes {
 }
 
 pub(crate) fn checksum(b: &[u8]) -> u64 {
-    xxhash_rust::xxh3::xxh3_64(b)
+    twox_hash::XxHash3_64::oneshot(b)
 }
 
 fn align(n: usize) -> usize {
@@ -731,10 +731,11 @@ pub fn assemble(sections: &[Section]) -> Vec<u8> {
 }
 
 pub(crate) fn header_checksum(head: &[u8], table: &[u8]) -> u64 {
-    let mut h = xxhash_rust::xxh3::Xxh3::new();
-    h.update(head);
-    h.update(table);
-    h.digest()
+    use std::hash::Hasher;
+    let mut h = twox_hash::XxHash3_64::new();
+    h.write(head);
+    h.write(table);
+    h.finish()
 }
 
 /// One entry of the section table.
