@@ -133,16 +133,11 @@ impl Tiles {
                             for (q, dst) in e.chunks_exact_mut(8).enumerate() {
                                 dst.copy_from_slice(&block[q * len + 8 * tx..q * len + 8 * tx + 8]);
                             }
-                            let g = tile_gcd(&e);
-                            divide(&mut e, g);
+                            let (g, e) = divided(e);
                             let mut residuals: Option<Tile> = None;
                             for ((lo, hi), &predict) in slots.iter_mut().zip(predicts) {
                                 let v: &Tile = match predict {
-                                    true => residuals.get_or_insert_with(|| {
-                                        let mut d = e;
-                                        difference(&mut d);
-                                        d
-                                    }),
+                                    true => residuals.get_or_insert_with(|| predicted(&e)),
                                     false => &e,
                                 };
                                 let lo = &mut lo[tx * TILE..(tx + 1) * TILE];
@@ -190,12 +185,8 @@ impl Tiles {
         let filtered: Vec<Vec<Tile>> = shown
             .par_iter()
             .map(|&t| {
-                let mut e: Tile = std::array::from_fn(|v| self.element(raw, t, v));
-                let g = tile_gcd(&e);
-                divide(&mut e, g);
-                let mut d = e;
-                difference(&mut d);
-                predicts.iter().map(|&p| if p { d } else { e }).collect()
+                let (_, e) = divided(std::array::from_fn(|v| self.element(raw, t, v)));
+                predicts.iter().map(|&p| if p { predicted(&e) } else { e }).collect()
             })
             .collect();
         let byte = |v: u16, p: usize| (v >> (8 * p)) as u8;
@@ -290,10 +281,23 @@ pub(crate) fn unorm8_quotients(plane: &crate::Plane, bytes: &[u8]) -> Option<Til
     if !levels || bytes.len() != TILE {
         return None;
     }
-    let mut e: Tile = std::array::from_fn(|v| u16::from(bytes[v]));
-    let g = tile_gcd(&e).max(1);
-    e.iter_mut().for_each(|x| *x /= g);
-    Some(e)
+    Some(divided(std::array::from_fn(|v| u16::from(bytes[v]))).1)
+}
+
+/// A tile's elements over their greatest common divisor, and the divisor
+/// (0, the elements all 0, when they are).
+fn divided(mut e: Tile) -> (u16, Tile) {
+    let g = tile_gcd(&e);
+    divide(&mut e, g);
+    (g, e)
+}
+
+/// A tile's quotients as the predicting `tiles` filter stores them: their
+/// Lorenzo residuals.
+fn predicted(e: &Tile) -> Tile {
+    let mut d = *e;
+    difference(&mut d);
+    d
 }
 
 /// The greatest common divisor of a tile's elements (0 when all are 0):
