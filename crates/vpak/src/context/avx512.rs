@@ -1,15 +1,17 @@
 //! The scheme-2 decoder with its lanes in AVX-512 vectors: G vectors of 16
 //! tiles (a stream of 16·G lanes), every lane at the same element, so a
-//! neighbour is one vector load, the context's bucket arithmetic (a
-//! leading-zero count), the table lookup one gather, the renormalising
+//! neighbour is one vector load, the contexts of all 16·G lanes two byte
+//! permutes of a bucket table, the table lookup one gather, the renormalising
 //! lanes' words one expand-load from the shared stream, and each row of 8
 //! elements leaves the lanes through a byte permute and a scatter. Escape
 //! bits are read for all lanes at once, each lane's position a prefix sum of
-//! the lanes' bit counts (16-bit levels and sharp bricks escape often). Same
+//! the lanes' bit counts (16-bit levels and sharp bricks escape often). On
+//! AMD's cores, which split a 512-bit operation in two, the decoder's speed
+//! is its count of operations, which is why they are few. Same
 //! output as `decode_scalar`, which the tests hold it to, damaged streams
 //! included.
 
-use super::{finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, TILE};
+use super::{bucket, finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, TILE};
 use std::arch::x86_64::*;
 
 #[repr(C, align(64))]
@@ -44,21 +46,19 @@ unsafe fn ld(v: &I32x16) -> __m512i {
     unsafe { _mm512_load_si512(v.0.as_ptr() as *const __m512i) }
 }
 
+/// ⌊(t + 1) / 3⌋, the rounded mean of the three 2D predictions, for the
+/// t that decoded elements give (−3·65535 ≤ t ≤ 6·65535; a row with any
+/// other is refused whatever this gives): t + 1 moved up by 3·2^16 is an
+/// exact float from 0 to below 2^20, and one fused multiply-add of 1/3 and
+/// 1/6 lands within 1/6 of its quotient's fraction, so truncation is exact
+/// (from t = −3·2^16 − 1 to 6,094,849; the tests check the range above).
+/// Five operations where the integer division took a dozen.
 #[inline(always)]
-unsafe fn ld8(v: &U8x16) -> __m512i {
-    unsafe { _mm512_cvtepu8_epi32(_mm_load_si128(v.0.as_ptr() as *const __m128i)) }
-}
-
-/// Floor division by 3 of |t| < 2^22: a float multiply (a correctly rounded
-/// quotient is never on the wrong side of an integer that close), then one
-/// step of correction either way.
-#[inline(always)]
-unsafe fn floor_div3(t: __m512i) -> __m512i {
+pub(super) unsafe fn mean3(t: __m512i) -> __m512i {
     unsafe {
-        let q = _mm512_cvttps_epi32(_mm512_roundscale_ps::<0x09>(_mm512_mul_ps(_mm512_cvtepi32_ps(t), _mm512_set1_ps(1.0 / 3.0))));
-        let r = _mm512_sub_epi32(t, _mm512_add_epi32(_mm512_add_epi32(q, q), q));
-        let q = _mm512_mask_add_epi32(q, _mm512_cmpge_epi32_mask(r, _mm512_set1_epi32(3)), q, _mm512_set1_epi32(1));
-        _mm512_mask_sub_epi32(q, _mm512_cmplt_epi32_mask(r, _mm512_setzero_si512()), q, _mm512_set1_epi32(1))
+        let u = _mm512_cvtepi32_ps(_mm512_add_epi32(t, _mm512_set1_epi32((3 << 16) + 1)));
+        let q = _mm512_cvttps_epi32(_mm512_fmadd_ps(u, _mm512_set1_ps(1.0 / 3.0), _mm512_set1_ps(1.0 / 6.0)));
+        _mm512_sub_epi32(q, _mm512_set1_epi32(1 << 16))
     }
 }
 
@@ -70,8 +70,7 @@ unsafe fn predict<const POS: usize, const G: usize>(w: &Work, p: usize, gi: usiz
         match POS {
             7 => {
                 let s = _mm512_add_epi32(_mm512_add_epi32(a, b), c);
-                let t = _mm512_sub_epi32(_mm512_slli_epi32::<1>(s), _mm512_add_epi32(_mm512_add_epi32(at(p - 90), at(p - 82)), at(p - 10)));
-                floor_div3(_mm512_add_epi32(t, _mm512_set1_epi32(1)))
+                mean3(_mm512_sub_epi32(_mm512_slli_epi32::<1>(s), _mm512_add_epi32(_mm512_add_epi32(at(p - 90), at(p - 82)), at(p - 10))))
             }
             3 => _mm512_sub_epi32(_mm512_add_epi32(b, c), at(p - 10)),
             5 => _mm512_sub_epi32(_mm512_add_epi32(a, c), at(p - 82)),
@@ -87,8 +86,11 @@ unsafe fn predict<const POS: usize, const G: usize>(w: &Work, p: usize, gi: usiz
 struct Reader<'a> {
     words: *const u16,
     escapes: Escapes<'a>,
-    /// Lanes that met an empty context or decoded outside the element.
-    bad: u16,
+    /// The largest symbol and element (unsigned) decoded in a present lane
+    /// since the row began: past `LAST_SYMBOL` (an empty context) or the
+    /// element's largest value, the stream is refused at the row's end.
+    sym_max: __m512i,
+    q_max: __m512i,
     /// An escape ran past the end of the bits.
     overrun: bool,
 }
@@ -96,7 +98,8 @@ struct Reader<'a> {
 /// The escape bits of the lanes `esc` (lowest lane first, the stream's
 /// order), `kk` of them each (at most 47, as [`Escapes::read`] takes), all
 /// at once: each lane's position is the bits before it (an exclusive
-/// prefix sum over the lanes), its bits one 64-bit gather from there;
+/// prefix sum over the lanes), its bits a shift of the 64 bits from the
+/// position's byte when they all lie there, else one 64-bit gather each;
 /// `None`, before anything is read, when the lanes' bits together run past the end.
 #[inline(always)]
 unsafe fn escape_bits(e: &mut Escapes, kk: __m512i, esc: __mmask16) -> Option<__m512i> {
@@ -118,68 +121,139 @@ unsafe fn escape_bits(e: &mut Escapes, kk: __m512i, esc: __mmask16) -> Option<__
             return None;
         }
         let base = e.bits.as_ptr().add(e.at >> 3) as *const i64;
-        let bytes = _mm512_srli_epi32::<3>(start);
-        let (lo, hi) = (_mm512_castsi512_si256(bytes), _mm512_extracti64x4_epi64::<1>(bytes));
-        let words_lo = _mm512_mask_i32gather_epi64::<1>(zero, esc as u8, lo, base);
-        let words_hi = _mm512_mask_i32gather_epi64::<1>(zero, (esc >> 8) as u8, hi, base);
-        let take = |words: __m512i, shift: __m256i, n: __m256i| {
-            let v = _mm512_srlv_epi64(words, _mm512_cvtepu32_epi64(shift));
-            let mask = _mm512_sub_epi64(_mm512_sllv_epi64(_mm512_set1_epi64(1), _mm512_cvtepu32_epi64(n)), _mm512_set1_epi64(1));
-            _mm512_cvtepi64_epi32(_mm512_and_si512(v, mask))
+        // Usually every lane's bits lie in the 64 from the byte the position is in: one load for
+        // all of them, and each lane's 32 bits from its start a funnel shift of that window's
+        // halves; else a 64-bit gather from each lane's byte.
+        let raw = if total + (e.at & 7) <= 64 {
+            let window = base.read_unaligned() as u64;
+            let (low, high) = (_mm512_set1_epi32(window as i32), _mm512_set1_epi32((window >> 32) as i32));
+            let in_low = _mm512_cmplt_epu32_mask(start, _mm512_set1_epi32(32));
+            let bits = _mm512_shrdv_epi32(_mm512_mask_blend_epi32(in_low, high, low), _mm512_maskz_mov_epi32(in_low, high), start);
+            // A count of 32 or more (a damaged stream's) shifts 1 out: the mask is then every bit.
+            _mm512_and_si512(bits, _mm512_sub_epi32(_mm512_sllv_epi32(_mm512_set1_epi32(1), cnt), _mm512_set1_epi32(1)))
+        } else {
+            let take = |words: __m512i, shift: __m256i, n: __m256i| {
+                let v = _mm512_srlv_epi64(words, _mm512_cvtepu32_epi64(shift));
+                let mask = _mm512_sub_epi64(_mm512_sllv_epi64(_mm512_set1_epi64(1), _mm512_cvtepu32_epi64(n)), _mm512_set1_epi64(1));
+                _mm512_cvtepi64_epi32(_mm512_and_si512(v, mask))
+            };
+            let bytes = _mm512_srli_epi32::<3>(start);
+            let (lo, hi) = (_mm512_castsi512_si256(bytes), _mm512_extracti64x4_epi64::<1>(bytes));
+            let words_lo = _mm512_mask_i32gather_epi64::<1>(zero, esc as u8, lo, base);
+            let words_hi = _mm512_mask_i32gather_epi64::<1>(zero, (esc >> 8) as u8, hi, base);
+            let shift = _mm512_and_si512(start, _mm512_set1_epi32(7));
+            let raw_lo = take(words_lo, _mm512_castsi512_si256(shift), _mm512_castsi512_si256(cnt));
+            let raw_hi = take(words_hi, _mm512_extracti64x4_epi64::<1>(shift), _mm512_extracti64x4_epi64::<1>(cnt));
+            _mm512_inserti64x4::<1>(_mm512_castsi256_si512(raw_lo), raw_hi)
         };
-        let shift = _mm512_and_si512(start, _mm512_set1_epi32(7));
-        let raw_lo = take(words_lo, _mm512_castsi512_si256(shift), _mm512_castsi512_si256(cnt));
-        let raw_hi = take(words_hi, _mm512_extracti64x4_epi64::<1>(shift), _mm512_extracti64x4_epi64::<1>(cnt));
         e.at += total;
-        Some(_mm512_inserti64x4::<1>(_mm512_castsi256_si512(raw_lo), raw_hi))
+        Some(raw)
+    }
+}
+
+/// Each byte's context row base `8·bucket(e)` for the saturated sum `e` of
+/// three residual magnitudes, as four 64-byte tables (`e` 0–63, …, 192–255).
+struct Buckets([__m512i; 4]);
+
+impl Buckets {
+    #[target_feature(enable = "avx512f")]
+    fn new() -> Buckets {
+        let table: [u8; 256] = std::array::from_fn(|e| (bucket(e as u32) << 3) as u8);
+        // SAFETY: each load reads 64 of the table's 256 bytes.
+        Buckets(std::array::from_fn(|k| unsafe { _mm512_loadu_si512(table[64 * k..].as_ptr() as *const __m512i) }))
+    }
+}
+
+/// Lanes 16·k to 16·k + 15 of 64 bytes.
+#[inline(always)]
+unsafe fn quarter(v: __m512i, k: usize) -> __m128i {
+    unsafe {
+        match k {
+            0 => _mm512_castsi512_si128(v),
+            1 => _mm512_extracti32x4_epi32::<1>(v),
+            2 => _mm512_extracti32x4_epi32::<2>(v),
+            _ => _mm512_extracti32x4_epi32::<3>(v),
+        }
+    }
+}
+
+/// `v` with lanes 16·k to 16·k + 15 of its bytes replaced by `x`.
+#[inline(always)]
+unsafe fn with_quarter(v: __m512i, k: usize, x: __m128i) -> __m512i {
+    unsafe {
+        match k {
+            0 => _mm512_inserti32x4::<0>(v, x),
+            1 => _mm512_inserti32x4::<1>(v, x),
+            2 => _mm512_inserti32x4::<2>(v, x),
+            _ => _mm512_inserti32x4::<3>(v, x),
+        }
     }
 }
 
 /// One element of every lane: context, table entry, state update, escape
-/// bits, prediction undone.
+/// bits, prediction undone. The contexts of all G vectors come at once from
+/// their magnitudes' bytes (saturating adds and two table permutes); the
+/// magnitudes of the element before along x, `left`, come in a register
+/// (the element's own go out in one, and to memory in one store), so the
+/// step does not wait on the store it just made.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-unsafe fn step<const POS: usize, const G: usize, const P: u32>(w: &mut Work, st: &mut [__m512i; G], act: &[__mmask16; G], p: usize, r: &mut Reader, table: *const u32, max: __m512i) {
+unsafe fn step<const POS: usize, const G: usize, const P: u32>(
+    w: &mut Work,
+    st: &mut [__m512i; G],
+    act: &[__mmask16; G],
+    p: usize,
+    r: &mut Reader,
+    table: *const u32,
+    buckets: &Buckets,
+    left: __m512i,
+) -> __m512i {
     unsafe {
+        let bytes = match G {
+            4 => u64::MAX,
+            _ => (1u64 << (16 * G)) - 1,
+        };
+        let mag = |q: usize| _mm512_maskz_loadu_epi8(bytes, w.mag.as_ptr().add(q * G) as *const i8);
+        let e = _mm512_adds_epu8(_mm512_adds_epu8(mag(p - 81), mag(p - 9)), left);
+        let mut mags = _mm512_setzero_si512();
+        let low = _mm512_permutex2var_epi8(buckets.0[0], e, buckets.0[1]);
+        let high = _mm512_permutex2var_epi8(buckets.0[2], e, buckets.0[3]);
+        let ctxs = _mm512_add_epi8(_mm512_mask_blend_epi8(_mm512_movepi8_mask(e), low, high), _mm512_set1_epi8(POS as i8));
         for gi in 0..G {
             let act = act[gi];
-            let e = _mm512_add_epi32(_mm512_add_epi32(ld8(w.mag.get_unchecked((p - 81) * G + gi)), ld8(w.mag.get_unchecked((p - 9) * G + gi))), ld8(w.mag.get_unchecked((p - 1) * G + gi)));
-            let e = _mm512_min_epu32(e, _mm512_set1_epi32(255));
-            // e below 4 is its own bucket, else ilog2(e²), at most 15.
-            let lg = _mm512_sub_epi32(_mm512_set1_epi32(31), _mm512_lzcnt_epi32(_mm512_mullo_epi32(e, e)));
-            let bucket = _mm512_mask_mov_epi32(_mm512_min_epi32(lg, _mm512_set1_epi32(15)), _mm512_cmplt_epu32_mask(e, _mm512_set1_epi32(4)), e);
-            let ctx = _mm512_add_epi32(_mm512_slli_epi32::<3>(bucket), _mm512_set1_epi32(POS as i32));
+            let ctx = _mm512_cvtepu8_epi32(quarter(ctxs, gi));
             let x = st[gi];
             let slot = _mm512_and_si512(x, _mm512_set1_epi32((1 << P) - 1));
             let ent = _mm512_i32gather_epi32::<4>(_mm512_or_si512(_mm512_slli_epi32::<P>(ctx), slot), table as *const i32);
             let sym = _mm512_and_si512(ent, _mm512_set1_epi32(63));
-            r.bad |= _mm512_mask_cmpgt_epu32_mask(act, sym, _mm512_set1_epi32(LAST_SYMBOL as i32));
+            r.sym_max = _mm512_mask_max_epu32(r.sym_max, act, r.sym_max, sym);
             let fr = _mm512_and_si512(_mm512_srli_epi32::<6>(ent), _mm512_set1_epi32(0x1fff));
-            let xn = _mm512_sub_epi32(_mm512_add_epi32(_mm512_mullo_epi32(fr, _mm512_srli_epi32::<P>(x)), slot), _mm512_srli_epi32::<19>(ent));
-            let xs = _mm512_mask_blend_epi32(act, x, xn);
-            // Only the lanes with a tile renormalise (an absent lane's state is never used).
+            // Only the lanes with a tile move on (an absent lane's state is never used).
+            let xs = _mm512_mask_sub_epi32(x, act, _mm512_add_epi32(_mm512_mullo_epi32(fr, _mm512_srli_epi32::<P>(x)), slot), _mm512_srli_epi32::<19>(ent));
             let need = _mm512_mask_cmplt_epu32_mask(act, xs, _mm512_set1_epi32(RANS_LOW as i32));
             let words = _mm512_cvtepu16_epi32(_mm256_maskz_expandloadu_epi16(need, r.words as *const i16));
             r.words = r.words.add(need.count_ones() as usize);
-            st[gi] = _mm512_mask_blend_epi32(need, xs, _mm512_or_si512(_mm512_slli_epi32::<16>(xs), words));
+            st[gi] = _mm512_mask_or_epi32(xs, need, _mm512_slli_epi32::<16>(xs), words);
             // z: the symbol, or for an escape symbol 16 + k its base 15 + 2^k plus k raw bits.
-            let esc = _mm512_mask_cmpge_epi32_mask(act, sym, _mm512_set1_epi32(ESCAPE as i32));
-            let kk = _mm512_sub_epi32(sym, _mm512_set1_epi32(ESCAPE as i32));
-            let mut z = _mm512_mask_mov_epi32(sym, esc, _mm512_add_epi32(_mm512_set1_epi32(ESCAPE as i32 - 1), _mm512_sllv_epi32(_mm512_set1_epi32(1), kk)));
+            let esc = _mm512_mask_cmpge_epu32_mask(act, sym, _mm512_set1_epi32(ESCAPE as i32));
+            let mut z = sym;
             if esc != 0 {
+                let kk = _mm512_sub_epi32(sym, _mm512_set1_epi32(ESCAPE as i32));
+                z = _mm512_mask_add_epi32(z, esc, _mm512_set1_epi32(ESCAPE as i32 - 1), _mm512_sllv_epi32(_mm512_set1_epi32(1), kk));
                 match escape_bits(&mut r.escapes, kk, esc) {
                     Some(raw) => z = _mm512_mask_add_epi32(z, esc, z, raw),
                     None => r.overrun = true,
                 }
             }
-            let z = _mm512_maskz_mov_epi32(act, z);
             let res = _mm512_xor_si512(_mm512_srli_epi32::<1>(z), _mm512_sub_epi32(_mm512_setzero_si512(), _mm512_and_si512(z, _mm512_set1_epi32(1))));
             let mag = _mm512_srli_epi32::<1>(_mm512_add_epi32(z, _mm512_set1_epi32(1)));
-            _mm_store_si128(w.mag.get_unchecked_mut(p * G + gi).0.as_mut_ptr() as *mut __m128i, _mm512_cvtusepi32_epi8(mag));
+            mags = with_quarter(mags, gi, _mm512_cvtusepi32_epi8(mag));
             let q = _mm512_add_epi32(predict::<POS, G>(w, p, gi), res);
-            r.bad |= _mm512_mask_cmpgt_epu32_mask(act, q, max);
+            r.q_max = _mm512_mask_max_epu32(r.q_max, act, r.q_max, q);
             _mm512_store_si512(w.f.get_unchecked_mut(p * G + gi).0.as_mut_ptr() as *mut __m512i, q);
         }
+        _mm512_mask_storeu_epi8(w.mag.as_mut_ptr().add(p * G) as *mut i8, bytes, mags);
+        mags
     }
 }
 
@@ -243,7 +317,9 @@ unsafe fn run<const G: usize, const P: u32>(s: &Stream, w: usize, out: &mut [u8]
     let first_states = s.initial_states();
     let mut st: [__m512i; G] = std::array::from_fn(|gi| unsafe { _mm512_loadu_si512(first_states[gi * 16..].as_ptr() as *const __m512i) });
     let base = s.words.as_ptr();
-    let mut r = Reader { words: unsafe { base.add(2 * n) }, escapes: s.escapes(), bad: 0, overrun: false };
+    let zero = _mm512_setzero_si512();
+    let mut r = Reader { words: unsafe { base.add(2 * n) }, escapes: s.escapes(), sym_max: zero, q_max: zero, overrun: false };
+    let buckets = Buckets::new();
     let max = _mm512_set1_epi32((1 << (8 * w)) - 1);
     let table = s.table.as_ptr();
     let outp = out.as_mut_ptr();
@@ -259,9 +335,10 @@ unsafe fn run<const G: usize, const P: u32>(s: &Stream, w: usize, out: &mut [u8]
             macro_rules! run {
                 ($first:expr, $rest:expr) => {
                     unsafe {
-                        step::<{ $first }, G, P>(&mut work, &mut st, &act, p, &mut r, table, max);
+                        // The element before x = 0 is the padding, 0.
+                        let mut left = step::<{ $first }, G, P>(&mut work, &mut st, &act, p, &mut r, table, &buckets, _mm512_setzero_si512());
                         for x in 1..8 {
-                            step::<{ $rest }, G, P>(&mut work, &mut st, &act, p + x, &mut r, table, max);
+                            left = step::<{ $rest }, G, P>(&mut work, &mut st, &act, p + x, &mut r, table, &buckets, left);
                         }
                     }
                 };
@@ -272,7 +349,8 @@ unsafe fn run<const G: usize, const P: u32>(s: &Stream, w: usize, out: &mut [u8]
                 (true, false) => run!(4, 5),
                 (false, false) => run!(0, 1),
             }
-            if r.bad != 0 || r.overrun {
+            let bad = _mm512_cmpgt_epu32_mask(r.sym_max, _mm512_set1_epi32(LAST_SYMBOL as i32)) | _mm512_cmpgt_epu32_mask(r.q_max, max);
+            if bad != 0 || r.overrun {
                 return Err(match r.overrun {
                     true => "runs past the end of its escape bits".into(),
                     false => "codes in a context its tables leave empty, or decodes outside the element".into(),

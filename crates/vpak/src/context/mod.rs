@@ -328,10 +328,12 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
     if zstd::zstd_safe::find_frame_compressed_size(side) != Ok(side.len()) {
         return Err("has a side part that is not one zstd frame".into());
     }
-    let side = zstd::bulk::decompress(side, side_want).map_err(|e| format!("has a side frame that does not decompress ({e})"))?;
-    if side.len() != side_want {
-        return Err(format!("has a side frame of {} bytes, not {side_want}", side.len()));
+    let mut side_bytes = Vec::with_capacity(side_want);
+    let got = crate::coding::decompress_into(side, &mut side_bytes).map_err(|e| format!("has a side frame that does not decompress to {side_want} bytes ({e})"))?;
+    if got != side_want {
+        return Err(format!("has a side frame of {got} bytes, not {side_want}"));
     }
+    let side = side_bytes;
     let (div, freqs) = side.split_at(tiles * width);
     let m = divisors.len() / width.max(1);
     for (t, d) in div.chunks_exact(width).enumerate() {
@@ -361,9 +363,11 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
     let mut bits = Vec::with_capacity(bits_len + 8);
     bits.extend_from_slice(&stored[at..at + bits_len]);
     bits.resize(bits_len + 8, 0);
-    let mut words = Vec::with_capacity(words_len + 8 * lanes + 8);
-    words.extend(stored[at + bits_len..].chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])));
-    words.resize(words_len + 8 * lanes + 8, 0);
+    let mut words = vec![0u16; words_len + 8 * lanes + 8];
+    bytemuck::cast_slice_mut::<u16, u8>(&mut words[..words_len]).copy_from_slice(&stored[at + bits_len..]);
+    if cfg!(target_endian = "big") {
+        words.iter_mut().for_each(|w| *w = u16::from_le(*w));
+    }
     Ok(Stream { lanes, precision, tiles, bits, bits_len, words, words_len, table })
 }
 
