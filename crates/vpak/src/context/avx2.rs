@@ -1,12 +1,12 @@
-//! The scheme-2 decoder for CPUs with AVX2 but not AVX-512: G vectors of 8
-//! tiles (a stream of 8·G lanes), as [`super::avx512`] does with 16. What
-//! AVX-512 does in one instruction is done here by tables and arithmetic:
-//! the words of the renormalising lanes are moved into place by a byte
-//! shuffle chosen by the lanes' mask, the context's bucket is the exponent
-//! of a float, a row of 8 elements of 8 lanes leaves by packs and an 8×8
-//! byte transpose, and the escape bits come by prefix sum and gathers.
-//! Same output as `decode_scalar`, which the tests hold
-//! it to, damaged streams included.
+//! The scheme-2 decoder for CPUs with AVX2 (and FMA) but not AVX-512: G
+//! vectors of 8 tiles (a stream of 8·G lanes), as [`super::avx512`] does
+//! with 16. What AVX-512 does in one instruction is done here by tables and
+//! arithmetic: the words of the renormalising lanes are moved into place by
+//! a byte shuffle chosen by the lanes' mask, the context's bucket is the
+//! exponent of a float, a row of 8 elements of 8 lanes leaves by packs and
+//! an 8×8 byte transpose, and the escape bits come by prefix sum and one
+//! shared load (gathers when they spread further). Same output as
+//! `decode_scalar`, which the tests hold it to, damaged streams included.
 
 use super::{finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, TILE};
 use std::arch::x86_64::*;
@@ -31,7 +31,7 @@ struct Work {
 
 /// Whether this CPU runs the AVX2 decoder on a stream of `lanes` lanes.
 pub(super) fn usable(lanes: usize) -> bool {
-    matches!(lanes, 8 | 16 | 32 | 64) && is_x86_feature_detected!("avx2")
+    matches!(lanes, 8 | 16 | 32 | 64) && is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
 }
 
 /// Per 8-bit lane mask: the byte shuffle that puts the t-th next 16-bit word
@@ -63,15 +63,14 @@ unsafe fn ld8(v: &U8x8) -> __m256i {
     unsafe { _mm256_cvtepu8_epi32(_mm_loadl_epi64(v.0.as_ptr() as *const __m128i)) }
 }
 
-/// Floor division by 3 (|t| < 2^22): a float multiply, then one step of
-/// correction either way (a comparison's all-ones lanes are −1).
+/// ⌊(t + 1) / 3⌋ by one fused multiply-add, as [`super::avx512::mean3`]
+/// (exact for the t that decoded elements give).
 #[inline(always)]
-unsafe fn floor_div3(t: __m256i) -> __m256i {
+unsafe fn mean3(t: __m256i) -> __m256i {
     unsafe {
-        let q = _mm256_cvttps_epi32(_mm256_floor_ps(_mm256_mul_ps(_mm256_cvtepi32_ps(t), _mm256_set1_ps(1.0 / 3.0))));
-        let r = _mm256_sub_epi32(t, _mm256_add_epi32(_mm256_add_epi32(q, q), q));
-        let q = _mm256_sub_epi32(q, _mm256_cmpgt_epi32(r, _mm256_set1_epi32(2)));
-        _mm256_add_epi32(q, _mm256_cmpgt_epi32(_mm256_setzero_si256(), r))
+        let u = _mm256_cvtepi32_ps(_mm256_add_epi32(t, _mm256_set1_epi32((3 << 16) + 1)));
+        let q = _mm256_cvttps_epi32(_mm256_fmadd_ps(u, _mm256_set1_ps(1.0 / 3.0), _mm256_set1_ps(1.0 / 6.0)));
+        _mm256_sub_epi32(q, _mm256_set1_epi32(1 << 16))
     }
 }
 
@@ -83,8 +82,7 @@ unsafe fn predict<const POS: usize, const G: usize>(w: &Work, p: usize, gi: usiz
         match POS {
             7 => {
                 let s = _mm256_add_epi32(_mm256_add_epi32(a, b), c);
-                let t = _mm256_sub_epi32(_mm256_slli_epi32::<1>(s), _mm256_add_epi32(_mm256_add_epi32(at(p - 90), at(p - 82)), at(p - 10)));
-                floor_div3(_mm256_add_epi32(t, _mm256_set1_epi32(1)))
+                mean3(_mm256_sub_epi32(_mm256_slli_epi32::<1>(s), _mm256_add_epi32(_mm256_add_epi32(at(p - 90), at(p - 82)), at(p - 10))))
             }
             3 => _mm256_sub_epi32(_mm256_add_epi32(b, c), at(p - 10)),
             5 => _mm256_sub_epi32(_mm256_add_epi32(a, c), at(p - 82)),
@@ -177,8 +175,9 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
 /// lowest lane first, the stream's order), `kk` of them
 /// each (at most 47, as [`Escapes::read`] takes), all at once, as
 /// [`super::avx512`] reads them: each lane's position an exclusive prefix
-/// sum of the lanes' counts, its bits one 64-bit gather from there; 0 in the
-/// other lanes; `None`, before anything is read, when the lanes' bits
+/// sum of the lanes' counts, its bits a shift of the 64 bits from the
+/// position's byte when they all lie there, else one 64-bit gather each; 0 in
+/// the other lanes; `None`, before anything is read, when the lanes' bits
 /// together run past the end.
 #[inline(always)]
 unsafe fn escape_bits(e: &mut Escapes, kk: __m256i, esc: __m256i) -> Option<__m256i> {
@@ -199,17 +198,29 @@ unsafe fn escape_bits(e: &mut Escapes, kk: __m256i, esc: __m256i) -> Option<__m2
             return None;
         }
         let base = e.bits.as_ptr().add(e.at >> 3) as *const i64;
-        let bytes = _mm256_srli_epi32::<3>(start);
-        let shift = _mm256_and_si256(start, _mm256_set1_epi32(7));
-        let half = |bytes: __m128i, shift: __m128i, n: __m128i, mask: __m128i| {
-            let words = _mm256_mask_i32gather_epi64::<1>(zero, base, bytes, _mm256_cvtepi32_epi64(mask));
-            let v = _mm256_srlv_epi64(words, _mm256_cvtepu32_epi64(shift));
+        let keep = |v: __m256i, n: __m128i| {
             let keep = _mm256_sub_epi64(_mm256_sllv_epi64(_mm256_set1_epi64x(1), _mm256_cvtepu32_epi64(n)), _mm256_set1_epi64x(1));
             // The low 32 bits of the four 64-bit lanes, in order.
             _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(_mm256_and_si256(v, keep), _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6)))
         };
-        let lo = half(_mm256_castsi256_si128(bytes), _mm256_castsi256_si128(shift), _mm256_castsi256_si128(cnt), _mm256_castsi256_si128(esc));
-        let hi = half(_mm256_extracti128_si256::<1>(bytes), _mm256_extracti128_si256::<1>(shift), _mm256_extracti128_si256::<1>(cnt), _mm256_extracti128_si256::<1>(esc));
+        let (cnt_lo, cnt_hi) = (_mm256_castsi256_si128(cnt), _mm256_extracti128_si256::<1>(cnt));
+        // Usually every lane's bits lie in the 64 from the position's byte: that one load
+        // serves every lane, each shifted by its start; else a 64-bit gather from each lane's byte.
+        let (lo, hi) = if total + (e.at & 7) <= 64 {
+            let window = _mm256_set1_epi64x(base.read_unaligned());
+            let shifted = |shift: __m128i| _mm256_srlv_epi64(window, _mm256_cvtepu32_epi64(shift));
+            (keep(shifted(_mm256_castsi256_si128(start)), cnt_lo), keep(shifted(_mm256_extracti128_si256::<1>(start)), cnt_hi))
+        } else {
+            let bytes = _mm256_srli_epi32::<3>(start);
+            let shift = _mm256_and_si256(start, _mm256_set1_epi32(7));
+            let half = |bytes: __m128i, shift: __m128i, mask: __m128i| {
+                let words = _mm256_mask_i32gather_epi64::<1>(zero, base, bytes, _mm256_cvtepi32_epi64(mask));
+                _mm256_srlv_epi64(words, _mm256_cvtepu32_epi64(shift))
+            };
+            let lo = half(_mm256_castsi256_si128(bytes), _mm256_castsi256_si128(shift), _mm256_castsi256_si128(esc));
+            let hi = half(_mm256_extracti128_si256::<1>(bytes), _mm256_extracti128_si256::<1>(shift), _mm256_extracti128_si256::<1>(esc));
+            (keep(lo, cnt_lo), keep(hi, cnt_hi))
+        };
         e.at += total;
         Some(_mm256_set_m128i(hi, lo))
     }
@@ -243,8 +254,8 @@ unsafe fn put_row<const G: usize, const SHIFT: i32>(w: &Work, row: usize, gi: us
 /// Decodes `s` into `out` as `decode_scalar` does.
 ///
 /// # Safety
-/// The CPU must have AVX2 ([`usable`]).
-#[target_feature(enable = "avx2")]
+/// The CPU must have AVX2 and FMA ([`usable`]).
+#[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn decode(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
     match (s.lanes, s.precision) {
         (8, 9) => unsafe { run::<1, 9>(s, w, out) },
@@ -266,7 +277,7 @@ pub(super) unsafe fn decode(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), 
     }
 }
 
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 unsafe fn run<const G: usize, const P: i32>(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
     let n = 8 * G;
     let m = out.len() / w;
