@@ -361,10 +361,10 @@ fn texel_filters(plane: &crate::Plane, bricks: [u32; 3]) -> Vec<Filter> {
 
 /// A context-coded atlas is kept when it takes at most this share of its
 /// zstd frame's bytes (and expands at most [`MAX_RATIO`] times, as every
-/// reader allows: a constant atlas codes to almost nothing). Its decoder runs at about zstd's speed on 8-bit
-/// levels with AVX-512, at about 0.6 times on 16-bit levels or with AVX2
-/// alone, and at a fifth with neither (docs/benchmarks.md): a few percent of
-/// bytes are not worth that.
+/// reader allows: a constant atlas codes to almost nothing). A section's
+/// restore runs at 0.8–1.8 times zstd's speed with AVX-512, its decoder at
+/// about half that with AVX2 alone and a seventh with neither
+/// (docs/benchmarks.md): a few percent of bytes are not worth that.
 const CONTEXT_GAIN: f64 = 0.92;
 
 /// The `tiles unpredicted` filter among `filters` when section `s` is the
