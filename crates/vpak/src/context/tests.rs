@@ -5,13 +5,7 @@ use super::*;
 /// fields with noise, edges, empty tiles and a few large jumps.
 fn section(tiles: usize, width: usize, seed: u32) -> Vec<u8> {
     let max = (1u32 << (8 * width)) - 1;
-    let mut rng = seed.wrapping_mul(2_654_435_761).max(1);
-    let mut next = move || {
-        rng ^= rng << 13;
-        rng ^= rng >> 17;
-        rng ^= rng << 5;
-        rng
-    };
+    let mut next = xorshift(seed.wrapping_mul(2_654_435_761));
     let m = tiles * (TILE + 1);
     let mut e = vec![0u32; m];
     for t in 0..tiles {
@@ -23,7 +17,7 @@ fn section(tiles: usize, width: usize, seed: u32) -> Vec<u8> {
             let q = match kind {
                 0 => 0,
                 1 => (x * 3 + y * 2 + z) * scale / 20 + next() % 3,
-                2 if next() % 97 == 0 => next() % (max + 1),
+                2 if next().is_multiple_of(97) => next() % (max + 1),
                 2 => (x * y + z * 5) * scale / 40,
                 _ => u32::from(x + y + z > 9) * scale + next() % 5,
             };
@@ -47,6 +41,31 @@ fn decoded(stored: &[u8], width: usize, len: usize, decoder: Decoder) -> Result<
     let s = parse(stored, width, tiles, &mut out)?;
     decoder.run(&s, width, &mut out)?;
     Ok(out)
+}
+
+/// A xorshift generator started at `seed` (1 for 0).
+fn xorshift(seed: u32) -> impl FnMut() -> u32 {
+    let mut rng = seed.max(1);
+    move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 17;
+        rng ^= rng << 5;
+        rng
+    }
+}
+
+/// `stored` (a damaged stream, `what`) decoded into `len` bytes by every
+/// decoder this CPU runs: refused by each exactly when the scalar decoder
+/// refuses it, and the same bytes where it is taken.
+fn decoded_alike(stored: &[u8], width: usize, len: usize, what: &str) {
+    let s = decoded(stored, width, len, Decoder::Scalar);
+    for d in decoders() {
+        let v = decoded(stored, width, len, d);
+        assert_eq!(s.is_ok(), v.is_ok(), "{what}, {d:?}: scalar {s:?}");
+        if let (Ok(s), Ok(v)) = (&s, v) {
+            assert_eq!(*s, v, "{what}, {d:?}");
+        }
+    }
 }
 
 /// The decoders this CPU runs on vdbcook's streams (the scalar one last).
@@ -99,14 +118,7 @@ fn damaged_streams_are_refused_alike() {
             for bit in [0, 3, 7] {
                 let mut bad = stored.clone();
                 bad[i] ^= 1 << bit;
-                let s = decoded(&bad, width, raw.len(), Decoder::Scalar);
-                for d in decoders() {
-                    let v = decoded(&bad, width, raw.len(), d);
-                    assert_eq!(s.is_ok(), v.is_ok(), "byte {i} bit {bit}, {d:?}: scalar {s:?}");
-                    if let (Ok(s), Ok(v)) = (&s, v) {
-                        assert_eq!(*s, v, "byte {i} bit {bit}, {d:?}");
-                    }
-                }
+                decoded_alike(&bad, width, raw.len(), &format!("byte {i} bit {bit}"));
                 flips += 1;
             }
         }
@@ -123,13 +135,7 @@ fn escape_heavy_streams_restore_alike() {
     for width in [1usize, 2] {
         let max = (1u32 << (8 * width)) - 1;
         let tiles = 130;
-        let mut rng = 0x9e37_79b9u32 + width as u32;
-        let mut next = move || {
-            rng ^= rng << 13;
-            rng ^= rng >> 17;
-            rng ^= rng << 5;
-            rng
-        };
+        let mut next = xorshift(0x9e37_79b9 + width as u32);
         let m = tiles * (TILE + 1);
         let mut raw = vec![0u8; m * width];
         for t in 0..tiles {
@@ -151,14 +157,7 @@ fn escape_heavy_streams_restore_alike() {
         for i in (0..stored.len()).step_by(stored.len() / 101 + 1) {
             let mut bad = stored.clone();
             bad[i] ^= 0x10;
-            let s = decoded(&bad, width, raw.len(), Decoder::Scalar);
-            for d in decoders() {
-                let v = decoded(&bad, width, raw.len(), d);
-                assert_eq!(s.is_ok(), v.is_ok(), "byte {i}, {d:?}: scalar {s:?}");
-                if let (Ok(s), Ok(v)) = (&s, v) {
-                    assert_eq!(*s, v, "byte {i}, {d:?}");
-                }
-            }
+            decoded_alike(&bad, width, raw.len(), &format!("{width}-byte noise, byte {i}"));
         }
     }
 }
