@@ -166,22 +166,46 @@ impl Filter {
         }
         let w = self.width();
         let mut src = raw.to_vec();
+        // x[i] − x[i − s] from i = s on, wrapping at the width, whole elements at a time.
         if let Filter::Delta { width, stride } = self {
-            let s = stride as usize;
-            let n = raw.len() / w;
-            for i in (s..n).rev() {
-                let (a, b) = (element(raw, i, width), element(raw, i - s, width));
-                set_element(&mut src, i, width, a.wrapping_sub(b));
+            let s = (stride as usize).min(raw.len() / w);
+            match width {
+                1 => src[s..].iter_mut().zip(raw).for_each(|(d, &p)| *d = d.wrapping_sub(p)),
+                2 => {
+                    let (d, p): (&mut [[u8; 2]], &[[u8; 2]]) = (bytemuck::cast_slice_mut(&mut src), bytemuck::cast_slice(raw));
+                    d[s..].iter_mut().zip(p).for_each(|(d, p)| *d = u16::from_le_bytes(*d).wrapping_sub(u16::from_le_bytes(*p)).to_le_bytes());
+                }
+                _ => {
+                    let (d, p): (&mut [[u8; 4]], &[[u8; 4]]) = (bytemuck::cast_slice_mut(&mut src), bytemuck::cast_slice(raw));
+                    d[s..].iter_mut().zip(p).for_each(|(d, p)| *d = u32::from_le_bytes(*d).wrapping_sub(u32::from_le_bytes(*p)).to_le_bytes());
+                }
             }
         }
-        if w == 1 {
-            return src;
-        }
+        // Byte j of element i to plane j: out[j·n + i].
         let n = raw.len() / w;
         let mut out = vec![0u8; raw.len()];
-        for (i, e) in src.chunks_exact(w).enumerate() {
-            for (j, &b) in e.iter().enumerate() {
-                out[j * n + i] = b;
+        match w {
+            1 => return src,
+            2 => {
+                let (a, b) = out.split_at_mut(n);
+                for ((a, b), e) in a.iter_mut().zip(b).zip(src.chunks_exact(2)) {
+                    (*a, *b) = (e[0], e[1]);
+                }
+            }
+            4 => {
+                let (a, rest) = out.split_at_mut(n);
+                let (b, rest) = rest.split_at_mut(n);
+                let (c, d) = rest.split_at_mut(n);
+                for ((((a, b), c), d), e) in a.iter_mut().zip(b).zip(c).zip(d).zip(src.chunks_exact(4)) {
+                    (*a, *b, *c, *d) = (e[0], e[1], e[2], e[3]);
+                }
+            }
+            _ => {
+                for (i, e) in src.chunks_exact(w).enumerate() {
+                    for (j, &b) in e.iter().enumerate() {
+                        out[j * n + i] = b;
+                    }
+                }
             }
         }
         out
@@ -257,16 +281,6 @@ fn unshuffle(data: &[u8], out: &mut [u8], w: usize) {
             }
         }
     }
-}
-
-fn element(b: &[u8], i: usize, width: u32) -> u32 {
-    let w = width as usize;
-    b[i * w..(i + 1) * w].iter().rev().fold(0u32, |v, &x| v << 8 | u32::from(x))
-}
-
-fn set_element(b: &mut [u8], i: usize, width: u32, v: u32) {
-    let w = width as usize;
-    b[i * w..(i + 1) * w].copy_from_slice(&v.to_le_bytes()[..w]);
 }
 
 /// One record of the coding section: how section (`kind`, `index`) is stored.
@@ -516,12 +530,12 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) 
                             Filter::Tiles(_) => {
                                 let j = next_tiled.next().unwrap_or(0);
                                 match make_whole {
-                                    true => (ranges.iter().flat_map(|r| tiled.get(j).map_or(&[][..], |w| &w[r.clone()])).copied().collect(), Some(j)),
+                                    true => (ranges.iter().map(|r| tiled.get(j).map_or(&[][..], |w| &w[r.clone()])).collect::<Vec<_>>().concat(), Some(j)),
                                     // Already the sample.
                                     false => (tiled.get_mut(j).map(std::mem::take).unwrap_or_default(), None),
                                 }
                             }
-                            _ => (sample(&s.data).flat_map(|chunk| f.apply(chunk)).collect(), None),
+                            _ => (sample(&s.data).map(|chunk| f.apply(chunk)).collect::<Vec<_>>().concat(), None),
                         })
                         .collect();
                     let sizes: Vec<usize> = samples.par_iter().map(|(x, _)| zstd::bulk::compress(x, 1).map(|c| c.len())).collect::<Result<_, _>>()?;
@@ -867,11 +881,15 @@ mod tests {
         for f in [
             Filter::None,
             Filter::Shuffle { width: 2 },
+            Filter::Shuffle { width: 4 },
+            Filter::Shuffle { width: 8 },
             Filter::Shuffle { width: 16 },
             Filter::Delta { width: 1, stride: 1 },
             Filter::Delta { width: 1, stride: 4 },
             Filter::Delta { width: 2, stride: 2 },
+            Filter::Delta { width: 2, stride: 1 },
             Filter::Delta { width: 4, stride: 1 },
+            Filter::Delta { width: 4, stride: 4096 },
         ] {
             let filtered = f.apply(&raw);
             assert_eq!(filtered.len(), raw.len());

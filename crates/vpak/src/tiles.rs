@@ -71,6 +71,20 @@ impl Tiles {
         row * 8 * (r % y) + layer * 8 * (r / y) + row * (q % 8) + layer * (q / 8)
     }
 
+    /// Tile `t`'s elements in a section of `raw` bytes, a row of 8 at a time.
+    fn tile(self, raw: &[u8], t: usize) -> Tile {
+        let (x, w) = (self.x as usize, self.width as usize);
+        let mut e = [0u16; TILE];
+        for (q, row) in e.chunks_exact_mut(8).enumerate() {
+            let at = self.row_start(t / x, q) + 8 * (t % x);
+            match w {
+                1 => row.iter_mut().zip(&raw[at..at + 8]).for_each(|(e, &b)| *e = u16::from(b)),
+                _ => row.iter_mut().zip(raw[2 * at..2 * (at + 8)].chunks_exact(2)).for_each(|(e, b)| *e = u16::from_le_bytes([b[0], b[1]])),
+            }
+        }
+        e
+    }
+
     /// Element `v` (x fastest) of tile `t` in a section of `raw` bytes.
     fn element(self, raw: &[u8], t: usize, v: usize) -> u16 {
         let x = self.x as usize;
@@ -185,7 +199,7 @@ impl Tiles {
         let filtered: Vec<Vec<Tile>> = shown
             .par_iter()
             .map(|&t| {
-                let (_, e) = divided(std::array::from_fn(|v| self.element(raw, t, v)));
+                let (_, e) = divided(self.tile(raw, t));
                 predicts.iter().map(|&p| if p { predicted(&e) } else { e }).collect()
             })
             .collect();
