@@ -188,9 +188,10 @@ def timings(inputs, fog, disk):
 def restore_row(label, asset, rounds=5):
     """One row of a restore table: `asset` restored on one core against `zstd -d -T1`
     on its supercompressed sections as zstd frames, repeated to about 100 MB so that
-    zstd's start-up does not count. Rounds alternate (the restore's best of its five
-    passes, then the best of three runs of zstd), so that a busy spell weighs on both;
-    the median of the rounds' ratios."""
+    zstd's start-up does not count. Rounds alternate (the restore's best of its three
+    passes, each restoring the asset again until about 100 MB are restored, then the best
+    of three runs of zstd), so that a busy spell weighs on both; the median of the
+    rounds' ratios."""
     env = dict(os.environ, RAYON_NUM_THREADS="1")
     frames = os.path.join(OUT, "r.frames.zst")
     rows = []

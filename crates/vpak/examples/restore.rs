@@ -45,7 +45,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // comparison, each into fresh memory.
     let mut buf = Vec::new();
     let (mut best, mut best_fresh) = (f64::MAX, f64::MAX);
-    let repeats = (100_000_000 / raw.max(1)).max(1);
+    // An asset with nothing supercompressed is timed once (the benchmark says so).
+    let repeats = match raw {
+        0 => 1,
+        _ => (100_000_000 / raw).clamp(1, 100_000),
+    };
     for _ in 0..3 {
         let t = std::time::Instant::now();
         for _ in 0..repeats {

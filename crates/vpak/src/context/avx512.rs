@@ -51,7 +51,7 @@ unsafe fn ld(v: &I32x16) -> __m512i {
 /// other is refused whatever this gives): t + 1 moved up by 3·2^16 is an
 /// exact float from 0 to below 2^20, and one fused multiply-add of 1/3 and
 /// 1/6 lands within 1/6 of its quotient's fraction, so truncation is exact
-/// (from t = −3·2^16 − 1 to 6,094,849; the tests check the range above).
+/// (from t = −3·2^16 − 1 to 6,094,848; the tests check the range above).
 /// Five operations where the integer division took a dozen.
 #[inline(always)]
 pub(super) unsafe fn mean3(t: __m512i) -> __m512i {
@@ -87,8 +87,8 @@ struct Reader<'a> {
     words: *const u16,
     escapes: Escapes<'a>,
     /// The largest symbol and element (unsigned) decoded in a present lane
-    /// since the row began: past `LAST_SYMBOL` (an empty context) or the
-    /// element's largest value, the stream is refused at the row's end.
+    /// so far: past `LAST_SYMBOL` (an empty context) or the element's
+    /// largest value, the stream is refused at the end of the row.
     sym_max: __m512i,
     q_max: __m512i,
     /// An escape ran past the end of the bits.

@@ -191,6 +191,12 @@ fn quantise(counts: &[[u64; MAX_SYMBOLS]], precision: u32) -> Vec<[u32; MAX_SYMB
 /// its side frame compressed by zstd at `level`; `None` when it does not
 /// hold whole tiles.
 pub fn encode(filtered: &[u8], width: u32, level: i32) -> std::io::Result<Option<Vec<u8>>> {
+    encode_lanes(filtered, width, level, LANES)
+}
+
+/// [`encode`] with `lanes` tiles side by side (vdbcook writes [`LANES`];
+/// the tests also make the other counts a reader must take).
+fn encode_lanes(filtered: &[u8], width: u32, level: i32, lanes: usize) -> std::io::Result<Option<Vec<u8>>> {
     let w = width as usize;
     let m = filtered.len() / w.max(1);
     if !matches!(w, 1 | 2) || m * w != filtered.len() || m == 0 || !m.is_multiple_of(TILE + 1) {
@@ -226,9 +232,9 @@ pub fn encode(filtered: &[u8], width: u32, level: i32) -> std::io::Result<Option
             c
         })
         .collect();
-    // Decode order: group of LANES tiles, element, lane.
-    let groups = tiles.div_ceil(LANES);
-    let lanes_of = |g: usize| g * LANES..((g + 1) * LANES).min(tiles);
+    // Decode order: group of `lanes` tiles, element, lane.
+    let groups = tiles.div_ceil(lanes);
+    let lanes_of = |g: usize| g * lanes..((g + 1) * lanes).min(tiles);
     let toks = &toks;
     let group = |g: usize| (0..TILE).flat_map(move |v| lanes_of(g).map(move |t| toks[t][v]));
     let mut bits = Vec::new();
@@ -246,7 +252,7 @@ pub fn encode(filtered: &[u8], width: u32, level: i32) -> std::io::Result<Option
         bits.push(acc as u8);
     }
     // rANS runs backwards: the last symbol decoded is encoded first.
-    let mut states = [RANS_LOW; LANES];
+    let mut states = vec![RANS_LOW; lanes];
     let mut words: Vec<u16> = Vec::new();
     for g in (0..groups).rev() {
         for v in (0..TILE).rev() {
@@ -254,7 +260,7 @@ pub fn encode(filtered: &[u8], width: u32, level: i32) -> std::io::Result<Option
                 let tok = toks[t][v];
                 let (ctx, sym) = (usize::from(tok.ctx), usize::from(tok.sym));
                 let (f, c) = (freq[ctx][sym], cum[ctx][sym]);
-                let x = &mut states[t % LANES];
+                let x = &mut states[t % lanes];
                 if u64::from(*x) >= (u64::from(RANS_LOW >> PRECISION) << 16) * u64::from(f) {
                     words.push(*x as u16);
                     *x >>= 16;
@@ -276,7 +282,7 @@ pub fn encode(filtered: &[u8], width: u32, level: i32) -> std::io::Result<Option
         row[..symbols].iter().for_each(|&f| side.extend_from_slice(&(f as u16).to_le_bytes()));
     }
     let side = zstd::bulk::compress(&side, level)?;
-    let fields = [LANES, PRECISION as usize, symbols, side.len(), bits.len(), words.len()];
+    let fields = [lanes, PRECISION as usize, symbols, side.len(), bits.len(), words.len()];
     // The header's fields are 32 bits: a section too large for them stays with zstd.
     if fields.iter().any(|&v| u32::try_from(v).is_err()) {
         return Ok(None);
