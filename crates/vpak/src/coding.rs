@@ -181,11 +181,13 @@ impl Filter {
                 }
             }
         }
+        if w == 1 {
+            return src;
+        }
         // Byte j of element i to plane j: out[j·n + i].
         let n = raw.len() / w;
         let mut out = vec![0u8; raw.len()];
         match w {
-            1 => return src,
             2 => {
                 let (a, b) = out.split_at_mut(n);
                 for ((a, b), e) in a.iter_mut().zip(b).zip(src.chunks_exact(2)) {
