@@ -66,7 +66,7 @@ unsafe fn ld8(v: &U8x8) -> __m256i {
 /// ⌊(t + 1) / 3⌋ by one fused multiply-add, as [`super::avx512::mean3`]
 /// (exact for the t that decoded elements give).
 #[inline(always)]
-unsafe fn mean3(t: __m256i) -> __m256i {
+pub(super) unsafe fn mean3(t: __m256i) -> __m256i {
     unsafe {
         let u = _mm256_cvtepi32_ps(_mm256_add_epi32(t, _mm256_set1_epi32((3 << 16) + 1)));
         let q = _mm256_cvttps_epi32(_mm256_fmadd_ps(u, _mm256_set1_ps(1.0 / 3.0), _mm256_set1_ps(1.0 / 6.0)));

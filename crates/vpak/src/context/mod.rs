@@ -330,16 +330,15 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
         return Err(format!("has {words_len} words, fewer than its {lanes} lanes' states"));
     }
     let side_want = tiles * width + CONTEXTS * symbols * 2;
-    let side = &stored[HEAD..HEAD + side_len];
-    if zstd::zstd_safe::find_frame_compressed_size(side) != Ok(side.len()) {
+    let frame = &stored[HEAD..HEAD + side_len];
+    if zstd::zstd_safe::find_frame_compressed_size(frame) != Ok(frame.len()) {
         return Err("has a side part that is not one zstd frame".into());
     }
-    let mut side_bytes = Vec::with_capacity(side_want);
-    let got = crate::coding::decompress_into(side, &mut side_bytes).map_err(|e| format!("has a side frame that does not decompress to {side_want} bytes ({e})"))?;
+    let mut side = Vec::with_capacity(side_want);
+    let got = crate::coding::decompress_into(frame, &mut side).map_err(|e| format!("has a side frame that does not decompress to {side_want} bytes ({e})"))?;
     if got != side_want {
         return Err(format!("has a side frame of {got} bytes, not {side_want}"));
     }
-    let side = side_bytes;
     let (div, freqs) = side.split_at(tiles * width);
     let m = divisors.len() / width.max(1);
     for (t, d) in div.chunks_exact(width).enumerate() {

@@ -24,6 +24,13 @@ fn section(tiles: usize, width: usize, seed: u32) -> Vec<u8> {
             e[tiles + t * TILE + v] = q.min(max);
         }
     }
+    laid_out(&e, width)
+}
+
+/// A section's elements (divisors, then quotients) as the `tiles` filters
+/// store them: byte-shuffled, the low bytes first.
+fn laid_out(e: &[u32], width: usize) -> Vec<u8> {
+    let m = e.len();
     let mut out = vec![0u8; m * width];
     for (i, &v) in e.iter().enumerate() {
         out[i] = v as u8;
@@ -154,20 +161,12 @@ fn escape_heavy_streams_restore_alike() {
         let max = (1u32 << (8 * width)) - 1;
         let tiles = 130;
         let mut next = xorshift(0x9e37_79b9 + width as u32);
-        let m = tiles * (TILE + 1);
-        let mut raw = vec![0u8; m * width];
-        for t in 0..tiles {
-            raw[t] = 1;
+        let mut e = vec![1u32; tiles];
+        for _ in 0..tiles {
             let amplitude = 1u32 << (next() % (8 * width as u32));
-            for v in 0..TILE {
-                let q = (max / 2 + next() % amplitude).min(max);
-                let i = tiles + t * TILE + v;
-                raw[i] = q as u8;
-                if width == 2 {
-                    raw[m + i] = (q >> 8) as u8;
-                }
-            }
+            e.extend((0..TILE).map(|_| (max / 2 + next() % amplitude).min(max)));
         }
+        let raw = laid_out(&e, width);
         let stored = encode(&raw, width as u32, 3).unwrap().unwrap();
         for d in decoders() {
             assert_eq!(decoded(&stored, width, raw.len(), d).unwrap(), raw, "{width}-byte noise, {d:?}");
@@ -180,27 +179,39 @@ fn escape_heavy_streams_restore_alike() {
     }
 }
 
-/// The AVX-512 decoder's rounded mean of three predictions is exact for
-/// every t that decoded 8- and 16-bit elements give (−3·65535 to 6·65535),
-/// and a little past.
+/// The vector decoders' rounded mean of three predictions (AVX-512 and
+/// AVX2, where the CPU has them) is exact for every t that decoded 8- and
+/// 16-bit elements give (−3·65535 to 6·65535), and a little past.
 #[cfg(target_arch = "x86_64")]
 #[test]
 fn vector_mean_of_three_is_exact() {
-    if !is_x86_feature_detected!("avx512f") {
-        return;
-    }
+    use std::arch::x86_64::{__m256i, __m512i};
     #[target_feature(enable = "avx512f")]
-    fn means(t: [i32; 16]) -> [i32; 16] {
-        // SAFETY: the CPU has AVX-512 F (checked above); `mean3` touches no memory.
-        unsafe { std::mem::transmute(avx512::mean3(std::mem::transmute::<[i32; 16], std::arch::x86_64::__m512i>(t))) }
+    fn wide(t: [i32; 16]) -> [i32; 16] {
+        // SAFETY: called only where the CPU has AVX-512 F; `mean3` touches no memory.
+        unsafe { std::mem::transmute(avx512::mean3(std::mem::transmute::<[i32; 16], __m512i>(t))) }
+    }
+    #[target_feature(enable = "avx2,fma")]
+    fn narrow(t: [i32; 8]) -> [i32; 8] {
+        // SAFETY: called only where the CPU has AVX2 and FMA; `mean3` touches no memory.
+        unsafe { std::mem::transmute(avx2::mean3(std::mem::transmute::<[i32; 8], __m256i>(t))) }
     }
     let (low, high) = (-3 * 65536 - 1, 6 * 65535 + 4096);
-    for first in (low..=high).step_by(16) {
-        let t: [i32; 16] = std::array::from_fn(|i| first + i as i32);
-        // SAFETY: as above.
-        let got = unsafe { means(t) };
-        for (t, got) in t.iter().zip(got) {
+    let check = |first: i32, got: &[i32]| {
+        for (t, &got) in (first..).zip(got) {
             assert_eq!(got, (t + 1).div_euclid(3), "t = {t}");
+        }
+    };
+    if is_x86_feature_detected!("avx512f") {
+        for first in (low..=high).step_by(16) {
+            // SAFETY: the CPU has AVX-512 F.
+            check(first, &unsafe { wide(std::array::from_fn(|i| first + i as i32)) });
+        }
+    }
+    if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+        for first in (low..=high).step_by(8) {
+            // SAFETY: the CPU has AVX2 and FMA.
+            check(first, &unsafe { narrow(std::array::from_fn(|i| first + i as i32)) });
         }
     }
 }
