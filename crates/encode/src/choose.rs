@@ -106,7 +106,10 @@ fn constant_within(values: &Brick, mask: &[u64; 8], max_error: f32) -> Option<Ch
 fn cheapest_ranged(values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>, mut bc7: Option<Vec<u8>>) -> Choice {
     // Texels (and a ranged format's range) moved to the coarsest grid within the bound.
     let snap = |format: Format, bytes: Vec<u8>, range: [f32; 2]| match disk {
-        Some(_) => crate::snap::coarsest(format, values, range, mask, max_error).unwrap_or((bytes, range)),
+        Some(o) => {
+            let hidden = if o == Optimize::Disk { crate::snap::Hidden::Predicted } else { crate::snap::Hidden::Zero };
+            crate::snap::coarsest(format, values, range, mask, max_error, hidden).unwrap_or((bytes, range))
+        }
         None => (bytes, range),
     };
     // Smallest file: every format within the bound, the one of fewest compressed bytes (the first of equals).

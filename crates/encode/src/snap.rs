@@ -10,11 +10,21 @@ use crate::choose::{decode_one, single_plane, within};
 use crate::texels::{levels, swap_xz, to_half};
 use crate::{Brick, Format};
 
+/// What a ranged format's hidden voxels (those no L3 node shows) are set to.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Hidden {
+    /// Level 0: long runs of one value, for zstd.
+    Zero,
+    /// The context coder's prediction (`--optimize disk`, which offers the
+    /// coder the atlases of levels): a residual of 0.
+    Predicted,
+}
+
 /// The brick's texels in `format` and their range, on the coarsest grid
 /// whose decoded voxels of `mask` stay within `max_error` of `values`;
 /// `None` when no grid coarser than the format's own over `range` does (or
 /// the format has no texels to move).
-pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32) -> Option<(Vec<u8>, [f32; 2])> {
+pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32, hidden: Hidden) -> Option<(Vec<u8>, [f32; 2])> {
     // Non-finite voxels must decode to themselves: leave such bricks as they are.
     if !values.iter().all(|v| v.is_finite()) {
         return None;
@@ -28,8 +38,8 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
         .map(|b| (b, range))
     };
     match format {
-        Format::Unorm8 => stepped(values, range, mask, 255, max_error, |out, q| out.push(q as u8), &passes),
-        Format::Unorm16 => stepped(values, range, mask, 65535, max_error, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
+        Format::Unorm8 => stepped(values, range, mask, 255, max_error, hidden, |out, q| out.push(q as u8), &passes),
+        Format::Unorm16 => stepped(values, range, mask, 65535, max_error, hidden, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
         Format::F16 => {
             // Converted once (the brick-at-once conversion), rounded off per try.
             let halves = to_half(values);
@@ -47,9 +57,20 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
 /// integer k ≥ 2 (k = top / the number of steps the brick spans). Each
 /// brick's texels are then k times a small integer, which the `tiles`
 /// filter divides out, so every brick's residuals are in steps of about 2E.
-/// Voxels `mask` leaves out take level 0 (the range's `min`): no bound
-/// holds them, and runs of one level cost next to nothing once compressed.
-fn stepped(values: &Brick, range: [f32; 2], mask: &[u64; 8], top: u32, max_error: f32, push: fn(&mut Vec<u8>, u32), passes: &dyn Fn(&[u8], [f32; 2]) -> bool) -> Option<(Vec<u8>, [f32; 2])> {
+/// Voxels `mask` leaves out (no bound holds them) take level 0 (the range's
+/// `min`), whose runs cost zstd next to nothing, or with
+/// [`Hidden::Predicted`] what the context coder predicts for them.
+#[allow(clippy::too_many_arguments)]
+fn stepped(
+    values: &Brick,
+    range: [f32; 2],
+    mask: &[u64; 8],
+    top: u32,
+    max_error: f32,
+    hidden: Hidden,
+    push: fn(&mut Vec<u8>, u32),
+    passes: &dyn Fn(&[u8], [f32; 2]) -> bool,
+) -> Option<(Vec<u8>, [f32; 2])> {
     let (lo, span) = (f64::from(range[0]), f64::from(range[1]) - f64::from(range[0]));
     for shrink in [1.0, 0.99, 0.95, 0.85, 0.7, 0.5] {
         let s = 2.0 * f64::from(max_error) * shrink;
@@ -62,11 +83,16 @@ fn stepped(values: &Brick, range: [f32; 2], mask: &[u64; 8], top: u32, max_error
             return None;
         }
         let moved = [range[0], hi];
-        let last = top / k * k;
         let mut l = levels(values, moved, top as f32);
         (0..l.len()).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 0).for_each(|i| l[i] = 0.0);
+        // Multiples of k, as their quotients in texel order.
+        let mut q = swap_xz(&l.map(|x| ((x / k as f32).round() as u32).min(top / k) as u16));
+        if hidden == Hidden::Predicted {
+            let shown = swap_xz(&std::array::from_fn(|i| mask[i >> 6] >> (i & 63) & 1 == 1));
+            vdbcook_vpak::coding::predict_hidden(&mut q, |t| !shown[t], (top / k) as u16);
+        }
         let mut out = Vec::with_capacity(2 * l.len());
-        swap_xz(&l.map(|x| ((x / k as f32).round() as u32 * k).min(last) as f32)).into_iter().for_each(|q| push(&mut out, q as u32));
+        q.into_iter().for_each(|q| push(&mut out, u32::from(q) * k));
         if passes(&out, moved) {
             return Some((out, moved));
         }
@@ -120,7 +146,7 @@ mod tests {
         for format in [Format::Unorm8, Format::Unorm16, Format::F16, Format::F32] {
             for e in [0.002f32, 0.01, 0.05] {
                 let plain = crate::choose::encode_one(format, crate::Quality::VeryFast, &v, range, &mask);
-                let Some((snapped, moved)) = coarsest(format, &v, range, &mask, e) else {
+                let Some((snapped, moved)) = coarsest(format, &v, range, &mask, e, Hidden::Zero) else {
                     // Only where the format's own grid is already as coarse as the bound allows.
                     assert!(format == Format::Unorm8 && e < 0.005, "{format:?} at {e}: nothing coarser");
                     continue;
@@ -144,6 +170,30 @@ mod tests {
                 };
                 assert!(distinct(&snapped) < distinct(&plain), "{format:?} at {e}: {} vs {} values", distinct(&snapped), distinct(&plain));
             }
+        }
+    }
+
+    #[test]
+    fn hidden_voxels_at_the_prediction_leave_the_shown_ones_as_they_were() {
+        let v = cloud();
+        // Half the brick shown: x < 4.
+        let mask: [u64; 8] = std::array::from_fn(|x| if x < 4 { u64::MAX } else { 0 });
+        let range = crate::range_of(&v);
+        for format in [Format::Unorm8, Format::Unorm16] {
+            let (zero, moved) = coarsest(format, &v, range, &mask, 0.01, Hidden::Zero).expect("a coarser grid");
+            let (predicted, moved_too) = coarsest(format, &v, range, &mask, 0.01, Hidden::Predicted).expect("a coarser grid");
+            assert_eq!(moved, moved_too, "{format:?}: the same range");
+            let w = format.lane_bytes();
+            let texel = |b: &[u8], t: usize| b[t * w..(t + 1) * w].to_vec();
+            // Texel t (z·64 + y·8 + x) is shown when x < 4.
+            for t in 0..512 {
+                match t & 7 < 4 {
+                    true => assert_eq!(texel(&zero, t), texel(&predicted, t), "{format:?}: shown texel {t}"),
+                    false => assert!(texel(&zero, t).iter().all(|&b| b == 0), "{format:?}: hidden texel {t} is level 0"),
+                }
+            }
+            assert!((0..512).filter(|t| t & 7 >= 4).any(|t| texel(&predicted, t).iter().any(|&b| b != 0)), "{format:?}: hidden texels continue the shown ones");
+            assert!(within(&v, &decode_one(format, &predicted, moved), &mask, 0.01), "{format:?}");
         }
     }
 

@@ -336,7 +336,8 @@ settings_group! {
         /// format whose texels, filtered, have the least entropy: larger GPU formats, e.g.
         /// unorm8 for BC7, for a smaller file; a longer cook; docs/benchmarks.md). disk also
         /// context-codes unorm8/unorm16 atlases where that beats zstd by 8 % or more (format
-        /// v11 and later; restored at about zstd's speed with AVX-512, half of it with AVX2 alone).
+        /// v11 and later; restored at about zstd's speed with AVX-512, half of it with AVX2 alone),
+        /// and sets those bricks' inactive voxels to what that coder predicts for them, not min.
         #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().optimize))]
         pub optimize: Optimize = Optimize::Gpu;
         /// The sequence's frame rate in frames per second (e.g. 24, 30, 23.976), recorded in the

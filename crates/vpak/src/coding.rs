@@ -448,6 +448,15 @@ pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
     (bits.min(8.0 * bytes.len() as f64) / 8.0).ceil() as usize + 8
 }
 
+/// A brick's quotients (its levels over their common step, 512 of them, x
+/// fastest) with the voxels `hidden` names (no reader uses them) moved to
+/// what the context coder predicts for them, within [0, `max`]: they cost
+/// it next to nothing and do not disturb their shown neighbours'
+/// predictions (`--optimize disk`).
+pub fn predict_hidden(quotients: &mut [u16; crate::BRICK_VOXELS], hidden: impl Fn(usize) -> bool, max: u16) {
+    crate::context::predict_hidden(quotients, hidden, max)
+}
+
 /// Sections of more than this many bytes are compressed at most at
 /// [`LARGE_LEVEL`] when the level asked for is one of the fast ones (at most
 /// [`Supercompress::DEFAULT_LEVEL`]): zstd's greedy levels (5 and up) spend

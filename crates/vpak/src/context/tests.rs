@@ -281,6 +281,27 @@ fn lying_headers_are_refused() {
 }
 
 #[test]
+fn hidden_elements_take_the_prediction_and_cost_the_coder_less() {
+    // A ramp shown in a corner of the tile; the rest hidden, first as 0.
+    let ramp: [u16; TILE] = std::array::from_fn(|v| (10 + 3 * (v & 7) + 2 * ((v >> 3) & 7) + (v >> 6)) as u16);
+    let hidden = |v: usize| (v & 7) >= 4 || (v >> 6) >= 5;
+    let zero: [u16; TILE] = std::array::from_fn(|v| if hidden(v) { 0 } else { ramp[v] });
+    let mut filled = zero;
+    predict_hidden(&mut filled, hidden, 100);
+    // Hidden elements cost a residual of 0, and shown ones are as they were.
+    let t = tokens(&filled);
+    assert!((0..TILE).filter(|&v| hidden(v)).all(|v| t[v].sym == 0));
+    assert!((0..TILE).filter(|&v| !hidden(v)).all(|v| filled[v] == ramp[v]));
+    assert!(tile_bits(&filled) < tile_bits(&zero), "{} against {} bits", tile_bits(&filled), tile_bits(&zero));
+    // The prediction is clamped to the levels the tile may hold; shown elements never move.
+    let mut low = zero;
+    predict_hidden(&mut low, hidden, 20);
+    assert!((0..TILE).filter(|&v| hidden(v)).all(|v| low[v] <= 20));
+    assert!((0..TILE).filter(|&v| hidden(v)).any(|v| low[v] == 20), "the ramp passes 20 in the hidden part");
+    assert!((0..TILE).filter(|&v| !hidden(v)).all(|v| low[v] == ramp[v]));
+}
+
+#[test]
 fn frequencies_quantise_to_their_total() {
     let mut counts = vec![[0u64; MAX_SYMBOLS]; 3];
     counts[0][0] = 1_000_000;
