@@ -420,16 +420,15 @@ fn tiles_among(filters: &[Filter]) -> Option<(Tiles, Vec<bool>)> {
 /// plane, the cheaper of predicted and not; [`texel_filters`]' last
 /// otherwise), what a coder fitted to the brick would spend (zstd codes a
 /// whole section with one table: a brick compressed alone would be charged
-/// a table of its own), plus its range pair. A brick of 8-bit levels (a
-/// 1-lane `unorm8` plane, whose atlas `--optimize disk` may context-code)
-/// costs the lesser of that and what the context coder would spend on its
-/// quotients, roughly ([`crate::context::tile_bits`]): the zstd view alone
-/// missed the coder's prediction and chose several percent larger files on
-/// fogs (docs/benchmarks.md); the coder's alone chose `f16` planes of a few
+/// a table of its own), plus its range pair. A brick of levels (a 1-lane
+/// `unorm8` or `unorm16` plane, whose atlas `--optimize disk` may
+/// context-code) costs the lesser of that and what the context coder would
+/// spend on its quotients, roughly ([`crate::context::tile_bits`]): the
+/// zstd view alone missed the coder's prediction and chose several percent
+/// larger files on fogs, and a fifth larger on a level set at E = 0.001
+/// (docs/benchmarks.md); the coder's alone chose `f16` planes of a few
 /// bricks beside `unorm8` ones in a small asset, whose fixed bytes no
-/// brick's estimate holds. `unorm16` bricks keep the zstd view: costed as
-/// the coder sees them, they filled atlases that the coder took with mostly
-/// escape bits, which restore at 0.66–0.83× `zstd -d`.
+/// brick's estimate holds.
 pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
     let filters = texel_filters(plane, [1, 1, 1]);
     let filtered: Vec<Vec<u8>> = match (tiles_among(&filters), filters.last()) {
@@ -444,7 +443,7 @@ pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
         counts.iter().filter(|&&c| c > 0).map(|&c| f64::from(c) * (n / f64::from(c)).log2()).sum::<f64>()
     };
     let zstd = filtered.iter().map(entropy).fold(f64::INFINITY, f64::min);
-    let bits = crate::tiles::unorm8_quotients(plane, bytes).map_or(zstd, |q| zstd.min(crate::context::tile_bits(&q)));
+    let bits = crate::tiles::level_quotients(plane, bytes).map_or(zstd, |q| zstd.min(crate::context::tile_bits(&q)));
     (bits.min(8.0 * bytes.len() as f64) / 8.0).ceil() as usize + 8
 }
 
@@ -915,33 +914,42 @@ mod tests {
 
     #[test]
     fn a_level_brick_costs_what_the_context_coder_spends_on_it() {
-        // Smooth, smooth with a little noise, noisy: 8-bit levels on a step of 3, x fastest.
+        // Smooth, smooth with a little noise, noisy: 8-bit levels on a step of 3 and 16-bit ones
+        // on a step of 300, x fastest.
         let mut rng = 12345u32;
         let mut noise = move |a: u32| {
             rng = rng.wrapping_mul(1_103_515_245).wrapping_add(12_345);
             (rng >> 16) % (2 * a + 1)
         };
-        let brick = |amp: u32, noise: &mut dyn FnMut(u32) -> u32| -> Vec<u8> { (0..512u32).map(|v| (3 * ((v % 8) * 4 + (v / 8 % 8) * 3 + (v / 64) * 2 + noise(amp)).min(85)) as u8).collect() };
-        let plane = crate::Plane { format: Format::Unorm8, lanes: 1, z_per_texel: 1 };
-        let mut last = 0;
-        for amp in [0, 2, 12] {
-            let b = brick(amp, &mut noise);
-            let cost = brick_cost(&plane, &b);
-            assert!(cost > last, "amplitude {amp}: {cost} bytes, not more than {last}");
-            last = cost;
-            // 64 such bricks (other noise) side by side in an atlas (texel (8a + i, j, k) of brick a at
-            // 8a + i + 512·j + 4096·k), context-coded: the estimate, less its range pair, within a
-            // factor of 2 (and 16 bytes) of the coded bytes per brick.
-            let mut texture = vec![0u8; 64 * 512];
-            for a in 0..64 {
-                for (v, x) in brick(amp, &mut noise).into_iter().enumerate() {
-                    texture[8 * a + v % 8 + 512 * (v / 8 % 8) + 4096 * (v / 64)] = x;
+        for (format, width, step, top) in [(Format::Unorm8, 1usize, 3u32, 85u32), (Format::Unorm16, 2, 300, 218)] {
+            let brick = |amp: u32, noise: &mut dyn FnMut(u32) -> u32| -> Vec<u8> {
+                (0..512u32).flat_map(|v| (step * ((v % 8) * 4 + (v / 8 % 8) * 3 + (v / 64) * 2 + noise(amp)).min(top)).to_le_bytes().into_iter().take(width)).collect()
+            };
+            let plane = crate::Plane { format, lanes: 1, z_per_texel: 1 };
+            let mut last = 0;
+            for amp in [0, 2, 12] {
+                let b = brick(amp, &mut noise);
+                let cost = brick_cost(&plane, &b);
+                assert!(cost > last, "{format:?}, amplitude {amp}: {cost} bytes, not more than {last}");
+                last = cost;
+                // At most what the context coder would spend on the brick's quotients.
+                let q = crate::tiles::level_quotients(&plane, &b).expect("a brick of levels");
+                assert!(cost <= (crate::context::tile_bits(&q) / 8.0).ceil() as usize + 8, "{format:?}, amplitude {amp}");
+                // 64 such bricks (other noise) side by side in an atlas (texel (8a + i, j, k) of brick a at
+                // 8a + i + 512·j + 4096·k), context-coded: the estimate, less its range pair, within a
+                // factor of 2 (and 16 bytes) of the coded bytes per brick.
+                let mut texture = vec![0u8; 64 * 512 * width];
+                for a in 0..64 {
+                    for (v, x) in brick(amp, &mut noise).chunks(width).enumerate() {
+                        let t = 8 * a + v % 8 + 512 * (v / 8 % 8) + 4096 * (v / 64);
+                        texture[t * width..(t + 1) * width].copy_from_slice(x);
+                    }
                 }
+                let t = Tiles { width: width as u32, x: 64, y: 1, predict: false };
+                let coded = crate::context::encode(&t.apply(&texture), width as u32, 5).unwrap().map_or(usize::MAX, |c| c.len()) / 64;
+                let texels = cost - 8;
+                assert!(texels <= 2 * coded + 16 && coded <= 2 * texels + 16, "{format:?}, amplitude {amp}: estimated {texels} bytes a brick, coded {coded}");
             }
-            let t = Tiles { width: 1, x: 64, y: 1, predict: false };
-            let coded = crate::context::encode(&t.apply(&texture), 1, 5).unwrap().map_or(usize::MAX, |c| c.len()) / 64;
-            let texels = cost - 8;
-            assert!(texels <= 2 * coded + 16 && coded <= 2 * texels + 16, "amplitude {amp}: estimated {texels} bytes a brick, coded {coded}");
         }
     }
 

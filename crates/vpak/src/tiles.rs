@@ -287,15 +287,17 @@ impl Tiles {
     }
 }
 
-/// One brick of a plane of 8-bit levels (1 lane, `unorm8`; `bytes` its 512
-/// texels, x fastest) as the tiles filters see it: its texels over their
-/// greatest common divisor. `None` for any other plane or size.
-pub(crate) fn unorm8_quotients(plane: &crate::Plane, bytes: &[u8]) -> Option<Tile> {
-    let levels = plane.lanes == 1 && plane.z_per_texel == 1 && plane.format == crate::Format::Unorm8;
-    if !levels || bytes.len() != TILE {
-        return None;
+/// One brick of a plane of levels (1 lane, `unorm8` or `unorm16`; `bytes`
+/// its 512 texels, x fastest, little-endian) as the tiles filters see it:
+/// its texels over their greatest common divisor. `None` for any other
+/// plane or size.
+pub(crate) fn level_quotients(plane: &crate::Plane, bytes: &[u8]) -> Option<Tile> {
+    let one_lane = plane.lanes == 1 && plane.z_per_texel == 1;
+    match plane.format {
+        crate::Format::Unorm8 if one_lane && bytes.len() == TILE => Some(divided(std::array::from_fn(|v| u16::from(bytes[v]))).1),
+        crate::Format::Unorm16 if one_lane && bytes.len() == 2 * TILE => Some(divided(std::array::from_fn(|v| u16::from_le_bytes([bytes[2 * v], bytes[2 * v + 1]]))).1),
+        _ => None,
     }
-    Some(divided(std::array::from_fn(|v| u16::from(bytes[v]))).1)
 }
 
 /// A tile's elements over their greatest common divisor, and the divisor
