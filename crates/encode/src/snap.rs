@@ -72,6 +72,8 @@ fn stepped(
     passes: &dyn Fn(&[u8], [f32; 2]) -> bool,
 ) -> Option<(Vec<u8>, [f32; 2])> {
     let (lo, span) = (f64::from(range[0]), f64::from(range[1]) - f64::from(range[0]));
+    // Texel t's voxel is hidden (texel order); none is in a full brick.
+    let hidden = (hidden == Hidden::Predicted && mask.iter().any(|&w| w != u64::MAX)).then(|| swap_xz(&std::array::from_fn(|i| mask[i >> 6] >> (i & 63) & 1 == 0)));
     for shrink in [1.0, 0.99, 0.95, 0.85, 0.7, 0.5] {
         let s = 2.0 * f64::from(max_error) * shrink;
         let k = (f64::from(top) / (span / s).ceil().max(1.0)).floor() as u32;
@@ -87,9 +89,8 @@ fn stepped(
         (0..l.len()).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 0).for_each(|i| l[i] = 0.0);
         // Multiples of k, as their quotients in texel order.
         let mut q = swap_xz(&l.map(|x| ((x / k as f32).round() as u32).min(top / k) as u16));
-        if hidden == Hidden::Predicted {
-            let shown = swap_xz(&std::array::from_fn(|i| mask[i >> 6] >> (i & 63) & 1 == 1));
-            vdbcook_vpak::coding::predict_hidden(&mut q, |t| !shown[t], (top / k) as u16);
+        if let Some(hidden) = &hidden {
+            vdbcook_vpak::coding::predict_hidden(&mut q, |t| hidden[t], (top / k) as u16);
         }
         let mut out = Vec::with_capacity(2 * l.len());
         q.into_iter().for_each(|q| push(&mut out, u32::from(q) * k));
