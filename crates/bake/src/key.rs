@@ -41,9 +41,18 @@ impl FileDigest {
     }
 }
 
+/// Adds one field to a key: its length, then its bytes (so that no two
+/// lists of fields hash the same bytes).
 fn field(h: &mut XxHash3_128, bytes: &[u8]) {
     h.write(&(bytes.len() as u64).to_le_bytes());
     h.write(bytes);
+}
+
+/// A key of `fields`, each added as [`field`] adds it, as 32 hex digits.
+pub(crate) fn key_of(fields: &[&[u8]]) -> String {
+    let mut h = XxHash3_128::new();
+    fields.iter().for_each(|f| field(&mut h, f));
+    format!("{:032x}", h.finish_128())
 }
 
 /// The key, as 32 hex digits.

@@ -14,7 +14,6 @@ use crate::report::{ChannelFormats, FormatBricks};
 use crate::{place, PlannedAsset, Record};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-use twox_hash::XxHash3_128;
 use vdbcook_pipeline::{Context, Error, Result};
 use vdbcook_vpak::segments::{part_writer, rewrite_metadata, PartInfo};
 use vdbcook_vpak::{Asset, AtomicFile, Metadata};
@@ -54,19 +53,9 @@ pub fn units(planned: &[PlannedAsset]) -> Vec<Unit> {
     out
 }
 
-fn hash_hex(fields: &[&[u8]]) -> String {
-    let mut h = XxHash3_128::new();
-    for f in fields {
-        h.write(&(f.len() as u64).to_le_bytes());
-        h.write(f);
-    }
-    format!("{:032x}", h.finish_128())
-}
-
-/// The key of an asset cooked in `parts` parts, from its key as one cook.
 /// The cache key of one part of the asset whose key is `asset_key`.
 pub fn part_key(asset_key: &str, part: PartNo) -> String {
-    hash_hex(&[b"vdbcook-bake-part 1", asset_key.as_bytes(), &part.index.to_le_bytes(), &part.count.to_le_bytes()])
+    crate::key::key_of(&[b"vdbcook-bake-part 1", asset_key.as_bytes(), &part.index.to_le_bytes(), &part.count.to_le_bytes()])
 }
 
 /// Where a part file goes, beside the asset's `output`: "smoke.vpak.part1of4".
