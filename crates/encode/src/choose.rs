@@ -107,8 +107,8 @@ fn cheapest_ranged(values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: 
     // Texels (and a ranged format's range) moved to the coarsest grid within the bound.
     let snap = |format: Format, bytes: Vec<u8>, range: [f32; 2]| match disk {
         Some(o) => {
-            let hidden = if o == Optimize::Disk { crate::snap::Hidden::Predicted } else { crate::snap::Hidden::Zero };
-            crate::snap::coarsest(format, values, range, mask, max_error, hidden).unwrap_or((bytes, range))
+            let coder = if o == Optimize::Disk { crate::snap::Coder::Context } else { crate::snap::Coder::Zstd };
+            crate::snap::coarsest(format, values, range, mask, max_error, coder).unwrap_or((bytes, range))
         }
         None => (bytes, range),
     };

@@ -10,21 +10,26 @@ use crate::choose::{decode_one, single_plane, within};
 use crate::texels::{levels, swap_xz, to_half};
 use crate::{Brick, Format};
 
-/// What a ranged format's hidden voxels (those no L3 node shows) are set to.
+/// The coder a ranged format's levels are chosen for.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-pub(crate) enum Hidden {
-    /// Level 0: long runs of one value, for zstd.
-    Zero,
-    /// The context coder's prediction (`--optimize disk`, which offers the
-    /// coder the atlases of levels): a residual of 0.
-    Predicted,
+pub(crate) enum Coder {
+    /// zstd: each shown voxel at its nearest level, the hidden ones (those
+    /// no L3 node shows, which no bound holds) at level 0, whose runs cost
+    /// zstd next to nothing.
+    Zstd,
+    /// The context coder (`--optimize disk`, which offers it the atlases of
+    /// levels): each voxel, in the coder's order, at the level nearest its
+    /// prediction that keeps it within the bound (any level for a hidden
+    /// one), on a step of 2E or of E, whichever the coder is estimated to
+    /// take fewer bytes for.
+    Context,
 }
 
 /// The brick's texels in `format` and their range, on the coarsest grid
 /// whose decoded voxels of `mask` stay within `max_error` of `values`;
 /// `None` when no grid coarser than the format's own over `range` does (or
 /// the format has no texels to move).
-pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32, hidden: Hidden) -> Option<(Vec<u8>, [f32; 2])> {
+pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[u64; 8], max_error: f32, coder: Coder) -> Option<(Vec<u8>, [f32; 2])> {
     // Non-finite voxels must decode to themselves: leave such bricks as they are.
     if !values.iter().all(|v| v.is_finite()) {
         return None;
@@ -38,8 +43,8 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
         .map(|b| (b, range))
     };
     match format {
-        Format::Unorm8 => stepped(values, range, mask, 255, max_error, hidden, |out, q| out.push(q as u8), &passes),
-        Format::Unorm16 => stepped(values, range, mask, 65535, max_error, hidden, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
+        Format::Unorm8 => stepped(values, range, mask, 255, max_error, coder, |out, q| out.push(q as u8), &passes),
+        Format::Unorm16 => stepped(values, range, mask, 65535, max_error, coder, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
         Format::F16 => {
             // Converted once (the brick-at-once conversion), rounded off per try.
             let halves = to_half(values);
@@ -57,9 +62,11 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
 /// integer k ≥ 2 (k = top / the number of steps the brick spans). Each
 /// brick's texels are then k times a small integer, which the `tiles`
 /// filter divides out, so every brick's residuals are in steps of about 2E.
-/// Voxels `mask` leaves out (no bound holds them) take level 0 (the range's
-/// `min`), whose runs cost zstd next to nothing, or with
-/// [`Hidden::Predicted`] what the context coder predicts for them.
+/// For the context coder, also on a step of E, where each voxel has two or
+/// three levels within the bound to choose from ([`Coder::Context`]): a
+/// smooth field (a level set) then follows the coder's prediction with
+/// residuals of 0, where rounding to a step of 2E leaves it ±1 half the
+/// time; a noisy one does not, and keeps the coarser step.
 #[allow(clippy::too_many_arguments)]
 fn stepped(
     values: &Brick,
@@ -67,15 +74,43 @@ fn stepped(
     mask: &[u64; 8],
     top: u32,
     max_error: f32,
-    hidden: Hidden,
+    coder: Coder,
+    push: fn(&mut Vec<u8>, u32),
+    passes: &dyn Fn(&[u8], [f32; 2]) -> bool,
+) -> Option<(Vec<u8>, [f32; 2])> {
+    let on = |fraction: f64| on_step(values, range, mask, top, max_error, coder, fraction, push, passes);
+    let coarse = on(1.0);
+    if coder == Coder::Zstd {
+        return coarse;
+    }
+    let fine = on(0.5);
+    let plane = single_plane(if top == 255 { Format::Unorm8 } else { Format::Unorm16 });
+    let cost = |c: &Option<(Vec<u8>, [f32; 2])>| c.as_ref().map_or(usize::MAX, |(b, _)| vdbcook_vpak::coding::brick_cost(&plane, b));
+    if cost(&fine) < cost(&coarse) {
+        fine
+    } else {
+        coarse
+    }
+}
+
+/// [`stepped`]'s levels on a step of `fraction` · 2E (or a little less).
+#[allow(clippy::too_many_arguments)]
+fn on_step(
+    values: &Brick,
+    range: [f32; 2],
+    mask: &[u64; 8],
+    top: u32,
+    max_error: f32,
+    coder: Coder,
+    fraction: f64,
     push: fn(&mut Vec<u8>, u32),
     passes: &dyn Fn(&[u8], [f32; 2]) -> bool,
 ) -> Option<(Vec<u8>, [f32; 2])> {
     let (lo, span) = (f64::from(range[0]), f64::from(range[1]) - f64::from(range[0]));
-    // Texel t's voxel is hidden (texel order); none is in a full brick.
-    let hidden = (hidden == Hidden::Predicted && mask.iter().any(|&w| w != u64::MAX)).then(|| swap_xz(&std::array::from_fn(|i| mask[i >> 6] >> (i & 63) & 1 == 0)));
+    // Texel t's voxel is hidden (texel order).
+    let hidden: [bool; 512] = swap_xz(&std::array::from_fn(|i| mask[i >> 6] >> (i & 63) & 1 == 0));
     for shrink in [1.0, 0.99, 0.95, 0.85, 0.7, 0.5] {
-        let s = 2.0 * f64::from(max_error) * shrink;
+        let s = 2.0 * f64::from(max_error) * shrink * fraction;
         let k = (f64::from(top) / (span / s).ceil().max(1.0)).floor() as u32;
         if k < 2 {
             return None;
@@ -87,10 +122,21 @@ fn stepped(
         let moved = [range[0], hi];
         let mut l = levels(values, moved, top as f32);
         (0..l.len()).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 0).for_each(|i| l[i] = 0.0);
-        // Multiples of k, as their quotients in texel order.
+        // Multiples of k, as their quotients in texel order: the nearest.
         let mut q = swap_xz(&l.map(|x| ((x / k as f32).round() as u32).min(top / k) as u16));
-        if let Some(hidden) = &hidden {
-            vdbcook_vpak::coding::predict_hidden(&mut q, |t| hidden[t], (top / k) as u16);
+        if coder == Coder::Context {
+            let (max, nearest, l) = ((top / k) as u16, q, swap_xz(&l));
+            // A shown voxel's quotients within the bound: l/k ± E in quotients, a hair
+            // inside (its nearest always); on a step of 2E that is the nearest alone.
+            let reach = if fraction < 1.0 { f64::from(max_error) * f64::from(top) / (f64::from(hi) - lo) / f64::from(k) * (1.0 - 1e-4) } else { 0.0 };
+            vdbcook_vpak::coding::nearest_predicted(&mut q, |t| match hidden[t] {
+                true => (0, max),
+                false => {
+                    let c = f64::from(l[t]) / f64::from(k);
+                    let (a, b) = ((c - reach).ceil().max(0.0) as u16, (c + reach).floor().min(f64::from(max)) as u16);
+                    (a.min(nearest[t]), b.max(nearest[t]))
+                }
+            });
         }
         let mut out = Vec::with_capacity(2 * l.len());
         q.into_iter().for_each(|q| push(&mut out, u32::from(q) * k));
@@ -147,7 +193,7 @@ mod tests {
         for format in [Format::Unorm8, Format::Unorm16, Format::F16, Format::F32] {
             for e in [0.002f32, 0.01, 0.05] {
                 let plain = crate::choose::encode_one(format, crate::Quality::VeryFast, &v, range, &mask);
-                let Some((snapped, moved)) = coarsest(format, &v, range, &mask, e, Hidden::Zero) else {
+                let Some((snapped, moved)) = coarsest(format, &v, range, &mask, e, Coder::Zstd) else {
                     // Only where the format's own grid is already as coarse as the bound allows.
                     assert!(format == Format::Unorm8 && e < 0.005, "{format:?} at {e}: nothing coarser");
                     continue;
@@ -174,15 +220,24 @@ mod tests {
         }
     }
 
+    /// [`on_step`] for `format` (unorm8 or unorm16) as [`coarsest`] calls it.
+    fn levels_on(format: Format, v: &Brick, mask: &[u64; 8], e: f32, coder: Coder, fraction: f64) -> Option<(Vec<u8>, [f32; 2])> {
+        let passes = |bytes: &[u8], range: [f32; 2]| within(v, &decode_one(format, bytes, range), mask, e);
+        let (top, push): (u32, fn(&mut Vec<u8>, u32)) = match format {
+            Format::Unorm8 => (255, |out, q| out.push(q as u8)),
+            _ => (65535, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes())),
+        };
+        on_step(v, crate::range_of(v), mask, top, e, coder, fraction, push, &passes)
+    }
+
     #[test]
     fn hidden_voxels_at_the_prediction_leave_the_shown_ones_as_they_were() {
         let v = cloud();
         // Half the brick shown: x < 4.
         let mask: [u64; 8] = std::array::from_fn(|x| if x < 4 { u64::MAX } else { 0 });
-        let range = crate::range_of(&v);
         for format in [Format::Unorm8, Format::Unorm16] {
-            let (zero, moved) = coarsest(format, &v, range, &mask, 0.01, Hidden::Zero).expect("a coarser grid");
-            let (predicted, moved_too) = coarsest(format, &v, range, &mask, 0.01, Hidden::Predicted).expect("a coarser grid");
+            let (zero, moved) = levels_on(format, &v, &mask, 0.01, Coder::Zstd, 1.0).expect("a coarser grid");
+            let (predicted, moved_too) = levels_on(format, &v, &mask, 0.01, Coder::Context, 1.0).expect("a coarser grid");
             assert_eq!(moved, moved_too, "{format:?}: the same range");
             let w = format.lane_bytes();
             let texel = |b: &[u8], t: usize| b[t * w..(t + 1) * w].to_vec();
@@ -195,6 +250,27 @@ mod tests {
             }
             assert!((0..512).filter(|t| t & 7 >= 4).any(|t| texel(&predicted, t).iter().any(|&b| b != 0)), "{format:?}: hidden texels continue the shown ones");
             assert!(within(&v, &decode_one(format, &predicted, moved), &mask, 0.01), "{format:?}");
+        }
+    }
+
+    #[test]
+    fn a_smooth_brick_takes_the_finer_step_for_the_coder_and_a_noisy_one_does_not() {
+        let smooth = cloud();
+        let mut seed = 99u32;
+        let noisy: Brick = std::array::from_fn(|i| {
+            seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            smooth[i] + 0.05 * ((seed >> 16) % 1000) as f32 / 1000.0
+        });
+        let mask = [u64::MAX; 8];
+        for format in [Format::Unorm8, Format::Unorm16] {
+            let chosen = |v: &Brick| coarsest(format, v, crate::range_of(v), &mask, 0.01, Coder::Context).expect("a coarser grid");
+            let on = |v: &Brick, fraction| levels_on(format, v, &mask, 0.01, Coder::Context, fraction).expect("a grid");
+            let (bytes, range) = chosen(&smooth);
+            assert!(within(&smooth, &decode_one(format, &bytes, range), &mask, 0.01), "{format:?}");
+            // Steps of E: the range's max moved for twice the levels, each as near its prediction as the bound allows.
+            assert_eq!((bytes.clone(), range), on(&smooth, 0.5), "{format:?}: the smooth brick on a step of E");
+            assert_ne!(range, on(&smooth, 1.0).1, "{format:?}");
+            assert_eq!(chosen(&noisy), on(&noisy, 1.0), "{format:?}: the noisy brick on a step of 2E");
         }
     }
 

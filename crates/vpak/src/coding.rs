@@ -448,12 +448,12 @@ pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
 }
 
 /// A brick's quotients (its levels over their common step, 512 of them, x
-/// fastest) with the voxels `hidden` names (no reader uses them) moved to
-/// what the context coder predicts for them, within [0, `max`]: they cost
-/// it next to nothing and do not disturb their shown neighbours'
-/// predictions (`--optimize disk`).
-pub fn predict_hidden(quotients: &mut [u16; crate::BRICK_VOXELS], hidden: impl Fn(usize) -> bool, max: u16) {
-    crate::context::predict_hidden(quotients, hidden, max)
+/// fastest), each the value within its `bounds` nearest what the context
+/// coder predicts for it (`--optimize disk`: a voxel no reader uses may take
+/// any level, a shown one those within the error bound), so that the coder
+/// spends the least on them.
+pub fn nearest_predicted(quotients: &mut [u16; crate::BRICK_VOXELS], bounds: impl Fn(usize) -> (u16, u16)) {
+    crate::context::nearest_predicted(quotients, bounds)
 }
 
 /// Sections of more than this many bytes are compressed at most at

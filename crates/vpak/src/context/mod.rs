@@ -101,17 +101,17 @@ pub(crate) fn tile_bits(tile: &[u16; TILE]) -> f64 {
     counts.iter().filter(|&&c| c > 0).map(|&c| f64::from(c) * (n / f64::from(c)).log2()).sum::<f64>() + f64::from(raw_bits)
 }
 
-/// Sets each element of a tile (quotients, x fastest) that `hidden` names
-/// to the coder's prediction from the elements before it, clamped to
-/// [0, `max`]: its residual is then 0, and its neighbours are predicted
-/// from a smooth continuation of the shown ones rather than from a jump.
-pub(crate) fn predict_hidden(tile: &mut [u16; TILE], hidden: impl Fn(usize) -> bool, max: u16) {
+/// Sets each element of a tile (quotients, x fastest), in order, to the
+/// value within its `bounds` (inclusive) nearest the coder's prediction
+/// from the elements before it: an element whose bounds hold the
+/// prediction costs a residual of 0, and the others the least residual
+/// their bounds allow.
+pub(crate) fn nearest_predicted(tile: &mut [u16; TILE], bounds: impl Fn(usize) -> (u16, u16)) {
     let mut f = [0i32; 729];
     for (v, q) in tile.iter_mut().enumerate() {
         let p = padded(v);
-        if hidden(v) {
-            *q = predict(position(v), &f, p).clamp(0, i32::from(max)) as u16;
-        }
+        let (lo, hi) = bounds(v);
+        *q = predict(position(v), &f, p).clamp(i32::from(lo), i32::from(hi)) as u16;
         f[p] = i32::from(*q);
     }
 }
