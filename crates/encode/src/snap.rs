@@ -4,7 +4,9 @@
 //! formats on a step of about 2E, their range's `max` moved up to make it a
 //! whole number of levels; floats with their lowest mantissa bits rounded
 //! off), so that a supercompressed file spends bits on what the bound asks
-//! and no more. The format and the bound are unchanged.
+//! and no more. With `--optimize disk` the levels are chosen for the
+//! context coder instead: each the one nearest its prediction within the
+//! bound ([`Coder::Context`]). The format and the bound are unchanged.
 
 use crate::choose::{decode_one, single_plane, within};
 use crate::texels::{levels, swap_xz, to_half};
@@ -85,7 +87,7 @@ fn stepped(
     }
     let fine = on(0.5);
     let plane = single_plane(if top == 255 { Format::Unorm8 } else { Format::Unorm16 });
-    let cost = |c: &Option<(Vec<u8>, [f32; 2])>| c.as_ref().map_or(usize::MAX, |(b, _)| vdbcook_vpak::coding::brick_cost(&plane, b));
+    let cost = |c: &Option<(Vec<u8>, [f32; 2])>| c.as_ref().and_then(|(b, _)| vdbcook_vpak::coding::coder_bits(&plane, b)).unwrap_or(f64::INFINITY);
     if cost(&fine) < cost(&coarse) {
         fine
     } else {
@@ -124,18 +126,22 @@ fn on_step(
         (0..l.len()).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 0).for_each(|i| l[i] = 0.0);
         // Multiples of k, as their quotients in texel order: the nearest.
         let mut q = swap_xz(&l.map(|x| ((x / k as f32).round() as u32).min(top / k) as u16));
-        if coder == Coder::Context {
+        if coder == Coder::Context && (fraction < 1.0 || hidden.contains(&true)) {
             let (max, nearest, l) = ((top / k) as u16, q, swap_xz(&l));
             // A shown voxel's quotients within the bound: l/k ± E in quotients, a hair
             // inside (its nearest always); on a step of 2E that is the nearest alone.
-            let reach = if fraction < 1.0 { f64::from(max_error) * f64::from(top) / (f64::from(hi) - lo) / f64::from(k) * (1.0 - 1e-4) } else { 0.0 };
-            vdbcook_vpak::coding::nearest_predicted(&mut q, |t| match hidden[t] {
-                true => (0, max),
-                false => {
-                    let c = f64::from(l[t]) / f64::from(k);
-                    let (a, b) = ((c - reach).ceil().max(0.0) as u16, (c + reach).floor().min(f64::from(max)) as u16);
-                    (a.min(nearest[t]), b.max(nearest[t]))
-                }
+            let reach = f64::from(max_error) * f64::from(top) / (f64::from(hi) - lo) / f64::from(k) * (1.0 - 1e-4);
+            let within_reach = |t: usize| {
+                let c = f64::from(l[t]) / f64::from(k);
+                // Floors and ceilings of non-negative values by truncation (no libm call).
+                let (below, above) = ((c - reach).max(0.0), (c + reach).min(f64::from(max)));
+                let a = below as u16 + u16::from(below > f64::from(below as u16));
+                (a.min(nearest[t]), (above as u16).max(nearest[t]))
+            };
+            vdbcook_vpak::coding::nearest_predicted(&mut q, |t| match (hidden[t], fraction < 1.0) {
+                (true, _) => (0, max),
+                (false, true) => within_reach(t),
+                (false, false) => (nearest[t], nearest[t]),
             });
         }
         let mut out = Vec::with_capacity(2 * l.len());

@@ -328,7 +328,8 @@ settings_group! {
         /// level 5; up to level 5, sections over 8 MiB take level 1, for speed). Each segment's sections are filtered and zstd-compressed: a smaller file,
         /// the same GPU bytes (a reader restores a segment when it loads it, at zstd's speed).
         /// With --max-error the texels are also moved to the coarsest grid within E (ranged
-        /// formats: steps of about 2E; inactive voxels, which no bound holds, at the brick's min).
+        /// formats: steps of about 2E; inactive voxels, which no bound holds, at the brick's min;
+        /// see --optimize disk for what it changes).
         #[cfg_attr(feature = "clap", arg(long, value_name = "none|zstd[:LEVEL]", default_value_t = CookSettings::default().supercompress))]
         pub supercompress: Supercompress = Supercompress::None;
         /// With --max-error and --supercompress, what each brick's format choice minimises: gpu
@@ -337,7 +338,8 @@ settings_group! {
         /// unorm8 for BC7, for a smaller file; a longer cook; docs/benchmarks.md). disk also
         /// context-codes unorm8/unorm16 atlases where that beats zstd by 8 % or more (format
         /// v11 and later; restored at about zstd's speed with AVX-512, half of it with AVX2 alone),
-        /// and sets those bricks' inactive voxels to what that coder predicts for them, not min.
+        /// and gives those bricks' voxels the levels within E nearest what that coder predicts
+        /// (inactive voxels: any level), on a step of 2E or of E, whichever it codes smaller.
         #[cfg_attr(feature = "clap", arg(long, value_enum, default_value_t = CookSettings::default().optimize))]
         pub optimize: Optimize = Optimize::Gpu;
         /// The sequence's frame rate in frames per second (e.g. 24, 30, 23.976), recorded in the

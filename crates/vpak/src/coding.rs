@@ -447,6 +447,13 @@ pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
     (bits.min(8.0 * bytes.len() as f64) / 8.0).ceil() as usize + 8
 }
 
+/// What the context coder would spend on one brick of levels (`bytes`, in
+/// a 1-lane `unorm8` or `unorm16` plane), roughly, in bits
+/// ([`crate::context::tile_bits`]); `None` for any other plane.
+pub fn coder_bits(plane: &crate::Plane, bytes: &[u8]) -> Option<f64> {
+    crate::tiles::level_quotients(plane, bytes).map(|q| crate::context::tile_bits(&q))
+}
+
 /// A brick's quotients (its levels over their common step, 512 of them, x
 /// fastest), each the value within its `bounds` nearest what the context
 /// coder predicts for it (`--optimize disk`: a voxel no reader uses may take
