@@ -44,9 +44,10 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
         })
         .map(|b| (b, range))
     };
+    let levels_for = |top: u32, push: fn(&mut Vec<u8>, u32)| for_coder(format, coder, |fraction| stepped(values, range, mask, top, max_error, coder, fraction, push, &passes));
     match format {
-        Format::Unorm8 => stepped(values, range, mask, 255, max_error, coder, |out, q| out.push(q as u8), &passes),
-        Format::Unorm16 => stepped(values, range, mask, 65535, max_error, coder, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes()), &passes),
+        Format::Unorm8 => levels_for(255, |out, q| out.push(q as u8)),
+        Format::Unorm16 => levels_for(65535, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes())),
         Format::F16 => {
             // Converted once (the brick-at-once conversion), rounded off per try.
             let halves = to_half(values);
@@ -58,35 +59,20 @@ pub(crate) fn coarsest(format: Format, values: &Brick, range: [f32; 2], mask: &[
     .filter(|(b, _)| b.len() == single_plane(format).brick_bytes())
 }
 
-/// Levels of a ranged format on a step of value s (2E, or a little less
-/// where rounding asks): the brick's smallest value stays its range's
-/// `min`, and its `max` is moved so that every level is a multiple of an
-/// integer k ≥ 2 (k = top / the number of steps the brick spans). Each
-/// brick's texels are then k times a small integer, which the `tiles`
-/// filter divides out, so every brick's residuals are in steps of about 2E.
-/// For the context coder, also on a step of E, where each voxel has two or
-/// three levels within the bound to choose from ([`Coder::Context`]): a
-/// smooth field (a level set) then follows the coder's prediction with
-/// residuals of 0, where rounding to a step of 2E leaves it ±1 half the
-/// time; a noisy one does not, and keeps the coarser step.
-#[allow(clippy::too_many_arguments)]
-fn stepped(
-    values: &Brick,
-    range: [f32; 2],
-    mask: &[u64; 8],
-    top: u32,
-    max_error: f32,
-    coder: Coder,
-    push: fn(&mut Vec<u8>, u32),
-    passes: &dyn Fn(&[u8], [f32; 2]) -> bool,
-) -> Option<(Vec<u8>, [f32; 2])> {
-    let on = |fraction: f64| on_step(values, range, mask, top, max_error, coder, fraction, push, passes);
-    let coarse = on(1.0);
+/// A ranged format's levels ([`stepped`] on a step of `fraction` · 2E): on a
+/// step of 2E, and for the context coder also on a step of E, where each
+/// voxel has two or three levels within the bound to choose from
+/// ([`Coder::Context`]), whichever the coder is estimated to take fewer
+/// bytes for. A smooth field (a level set) follows the coder's prediction
+/// with residuals of 0 on the finer step, where rounding to a step of 2E
+/// leaves it ±1 half the time; a noisy one does not, and keeps the coarser.
+fn for_coder(format: Format, coder: Coder, on_step: impl Fn(f64) -> Option<(Vec<u8>, [f32; 2])>) -> Option<(Vec<u8>, [f32; 2])> {
+    let coarse = on_step(1.0);
     if coder == Coder::Zstd {
         return coarse;
     }
-    let fine = on(0.5);
-    let plane = single_plane(if top == 255 { Format::Unorm8 } else { Format::Unorm16 });
+    let fine = on_step(0.5);
+    let plane = single_plane(format);
     let cost = |c: &Option<(Vec<u8>, [f32; 2])>| c.as_ref().and_then(|(b, _)| vdbcook_vpak::coding::coder_bits(&plane, b)).unwrap_or(f64::INFINITY);
     if cost(&fine) < cost(&coarse) {
         fine
@@ -95,9 +81,17 @@ fn stepped(
     }
 }
 
-/// [`stepped`]'s levels on a step of `fraction` · 2E (or a little less).
+/// Levels of a ranged format on a step of value s (`fraction` · 2E, or a
+/// little less where rounding asks): the brick's smallest value stays its
+/// range's `min`, and its `max` is moved so that every level is a multiple
+/// of an integer k ≥ 2 (k = top / the number of steps the brick spans).
+/// Each brick's texels are then k times a small integer, which the `tiles`
+/// filter divides out, so every brick's residuals are in steps of about s.
+/// For [`Coder::Context`] each voxel, in the coder's order, takes the level
+/// of those within the bound nearest its prediction (any level for a voxel
+/// no L3 node shows).
 #[allow(clippy::too_many_arguments)]
-fn on_step(
+fn stepped(
     values: &Brick,
     range: [f32; 2],
     mask: &[u64; 8],
@@ -226,14 +220,14 @@ mod tests {
         }
     }
 
-    /// [`on_step`] for `format` (unorm8 or unorm16) as [`coarsest`] calls it.
+    /// [`stepped`] for `format` (unorm8 or unorm16) as [`coarsest`] calls it.
     fn levels_on(format: Format, v: &Brick, mask: &[u64; 8], e: f32, coder: Coder, fraction: f64) -> Option<(Vec<u8>, [f32; 2])> {
         let passes = |bytes: &[u8], range: [f32; 2]| within(v, &decode_one(format, bytes, range), mask, e);
         let (top, push): (u32, fn(&mut Vec<u8>, u32)) = match format {
             Format::Unorm8 => (255, |out, q| out.push(q as u8)),
             _ => (65535, |out, q| out.extend_from_slice(&(q as u16).to_le_bytes())),
         };
-        on_step(v, crate::range_of(v), mask, top, e, coder, fraction, push, &passes)
+        stepped(v, crate::range_of(v), mask, top, e, coder, fraction, push, &passes)
     }
 
     #[test]
