@@ -103,8 +103,8 @@ fn stepped(
     passes: &dyn Fn(&[u8], [f32; 2]) -> bool,
 ) -> Option<(Vec<u8>, [f32; 2])> {
     let (lo, span) = (f64::from(range[0]), f64::from(range[1]) - f64::from(range[0]));
-    // Texel t's voxel is hidden (texel order).
-    let hidden: [bool; 512] = swap_xz(&std::array::from_fn(|i| mask[i >> 6] >> (i & 63) & 1 == 0));
+    // For the context coder: whether texel t's voxel is hidden (texel order).
+    let hidden: Option<[bool; 512]> = (coder == Coder::Context).then(|| swap_xz(&std::array::from_fn(|i| mask[i >> 6] >> (i & 63) & 1 == 0)));
     for shrink in [1.0, 0.99, 0.95, 0.85, 0.7, 0.5] {
         let s = 2.0 * f64::from(max_error) * shrink * fraction;
         let k = (f64::from(top) / (span / s).ceil().max(1.0)).floor() as u32;
@@ -120,7 +120,7 @@ fn stepped(
         (0..l.len()).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 0).for_each(|i| l[i] = 0.0);
         // Multiples of k, as their quotients in texel order: the nearest.
         let mut q = swap_xz(&l.map(|x| ((x / k as f32).round() as u32).min(top / k) as u16));
-        if coder == Coder::Context && (fraction < 1.0 || hidden.contains(&true)) {
+        if let Some(hidden) = hidden.filter(|h| fraction < 1.0 || h.contains(&true)) {
             let (max, nearest, l) = ((top / k) as u16, q, swap_xz(&l));
             // A shown voxel's quotients within the bound: l/k ± E in quotients, a hair
             // inside (its nearest always); on a step of 2E that is the nearest alone.

@@ -443,7 +443,7 @@ pub fn brick_cost(plane: &crate::Plane, bytes: &[u8]) -> usize {
         counts.iter().filter(|&&c| c > 0).map(|&c| f64::from(c) * (n / f64::from(c)).log2()).sum::<f64>()
     };
     let zstd = filtered.iter().map(entropy).fold(f64::INFINITY, f64::min);
-    let bits = crate::tiles::level_quotients(plane, bytes).map_or(zstd, |q| zstd.min(crate::context::tile_bits(&q)));
+    let bits = coder_bits(plane, bytes).map_or(zstd, |c| zstd.min(c));
     (bits.min(8.0 * bytes.len() as f64) / 8.0).ceil() as usize + 8
 }
 
