@@ -60,17 +60,23 @@ def make_body(sections, align=256):
     return reseal(out)
 
 
-def make_file(bodies, version=12):
+def make_file(bodies, version=13):
     """A file of `bodies` (segments), of the given version."""
     out = bytearray(container(bodies))
     struct.pack_into("<I", out, 8, version)
     return reseal(out)
 
 
-def bodies_of(data):
-    """The bodies of a segmented file, as the segment table places them (not validated)."""
-    _, table = v.read_table(memoryview(data), (7, 8, 9, 10, 11, 12), "file")
+def stored_bodies(data):
+    """The bodies of a segmented file as the segment table places them (not validated):
+    a wrapped one (version 13) as its zstd frame."""
+    _, table = v.read_table(memoryview(data), (7, 8, 9, 10, 11, 12, 13), "file")
     return [bytes(data[e[2]:e[2] + e[3]]) for e in table]
+
+
+def bodies_of(data):
+    """The bodies of a segmented file, a wrapped one decompressed (not validated)."""
+    return [v.inflate(b, v.MAX_WRAPPED) if b[:4] == v.ZSTD_MAGIC else b for b in stored_bodies(data)]
 
 
 def records_of(sections):
@@ -159,7 +165,7 @@ def check_restores(vdbcook, work, flags):
     """A vdbcook zstd asset restores exactly the sections of the same asset uncompressed."""
     packed = cook(vdbcook, work, "z", ["--supercompress", "zstd", *flags])
     plain = recompress(vdbcook, work, packed, "none")
-    assert struct.unpack_from("<I", packed, 8)[0] == 12
+    assert struct.unpack_from("<I", packed, 8)[0] == 13
     z, p = same_asset(packed, plain)
     filters = set()
     for (mz, sz), (_, sp), body in zip(z.bodies, p.bodies, bodies_of(packed)):
@@ -311,7 +317,11 @@ def check_refusals(packed, plain, work):
     same_asset(with_body(packed, lambda secs: secs.append([99, 0, b"y"])), plain)
     # A section no record names is stored as it is: drop a record and the stored zstd
     # frame is taken as the section, which then fails validation (or its use).
-    refused(with_body(packed, edit_record(lambda rs: rs.remove(next(r for r in rs if (r[0], r[1]) == atlas)))), "texture has the wrong size")
+    def unnamed(secs):
+        # (The coding section goes too when the atlas's was its only record, as in a wrapped body.)
+        edit_record(lambda rs: rs.remove(next(r for r in rs if (r[0], r[1]) == atlas)))(secs)
+        secs[:] = [x for x in secs if x[0] != K_CODING or x[2]]
+    refused(with_body(packed, unnamed), "texture has the wrong size")
     # A frame without its content size that decodes to more, or fewer, bytes than the record says.
     def unsized(lie):
         def edit(secs):
@@ -340,7 +350,7 @@ def check_refusals(packed, plain, work):
     refused(ten, "is not at a 256-byte boundary")
     # From version 12 a body with a coding section starts at a multiple of 8 (vdbcook puts the
     # first right after the segment table), one without at a multiple of 256.
-    _, table = v.read_table(memoryview(packed), (12,), "file")
+    _, table = v.read_table(memoryview(packed), (13,), "file")
     assert table[0][2] == -(-(64 + 32 * len(table)) // 8) * 8 < 256, table[0]
     eleven = bytearray(packed)
     struct.pack_into("<I", eleven, 8, 11)
@@ -405,6 +415,41 @@ def check_context(vdbcook, work):
     return len(coded)
 
 
+def check_wrapped(vdbcook, work):
+    """vdbcook wraps the small supercompressed body of a one-segment asset in one zstd frame
+    (version 13): it reads as the uncompressed asset does, so do this writer's own frames,
+    and damaged frames, or a wrapped body among several segments, are refused."""
+    path = os.path.join(work, "wrapped.vpak")
+    subprocess.run([vdbcook, "cook", "-q", "--force", "-o", path, os.path.join(FIXTURE, "smoke_0001.vdb"), "--format", "f16", "--supercompress", "zstd"], check=True)
+    with open(path, "rb") as f:
+        packed = f.read()
+    plain = recompress(vdbcook, work, packed, "none")
+    [frame] = stored_bodies(packed)
+    assert frame[:4] == v.ZSTD_MAGIC, "vdbcook left the small supercompressed body unwrapped"
+    assert v.Asset(memoryview(packed)).wrapped == [True]
+    same_asset(packed, plain, frames=1)
+
+    def wrapped(stored, version=13):
+        """A file of the stored bodies `stored` (frames or bodies) of one frame each, a frame's checksum its own."""
+        sums = lambda t: [e.__setitem__(4, xxh(b) if b[:4] == v.ZSTD_MAGIC else e[4]) for e, b in zip(t, stored)]
+        out = bytearray(container(stored, counts=[1] * len(stored), entries=sums))
+        struct.pack_into("<I", out, 8, version)
+        return reseal(out)
+
+    # A frame of this script's own making (the body inside as vdbcook restores it).
+    same_asset(wrapped([zstandard.ZstdCompressor(level=3).compress(bodies_of(packed)[0])]), plain, frames=1)
+    refused(wrapped([frame + b"\0" * 8]), "bytes follow its zstd frame")
+    refused(wrapped([frame[:-3]]), "its wrapped body")
+    huge = zstandard.ZstdCompressor(level=3).compress(bodies_of(packed)[0] + bytes(v.MAX_WRAPPED))
+    refused(wrapped([huge]), f"decodes to more than {v.MAX_WRAPPED} bytes")
+    flipped = bytearray(packed)
+    flipped[v.read_table(memoryview(packed), (13,), "file")[1][0][2] + len(frame) // 2] ^= 0x10
+    refused(bytes(flipped), "its wrapped body is not the one the segment table names")
+    # Only a file of one segment wraps its body; version 12 wraps none (its frame is no body).
+    refused(wrapped([frame, frame]), "in a file of 2 segments")
+    refused(wrapped([frame], version=12), "segment 0")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vdbcook", default=os.environ.get("VDBCOOK", os.path.join(ROOT, "target", "release", "vdbcook")))
@@ -418,11 +463,12 @@ def main():
             if flags[:2] == ["--format", "f16"]:
                 kept = packed, plain
         check_every_filter(kept[1])
+        check_wrapped(args.vdbcook, work)
         flips = check_refusals(*kept, work)
         contexts = check_context(args.vdbcook, work)
     names = sorted(f"{FILTER_NAMES[f]}/{w}" for f, w in filters)
     print(f"ok: 4 supercompressed cooks restore the uncompressed sections (filter/width used: {', '.join(names)}); "
-          f"every allowed filter decodes; corrupt coding refused ({flips} flipped compressed bytes); "
+          f"every allowed filter decodes; wrapped bodies read, damaged frames refused; corrupt coding refused ({flips} flipped compressed bytes); "
           f"{contexts} context-coded sections restore, damaged ones refused")
 
 

@@ -93,19 +93,21 @@ def parse_records(data, table, version):
     return records
 
 
-def decompress(stored, n):
-    """The one zstd frame `stored` decoded, exactly n bytes, nothing after the frame."""
+def inflate(stored, limit, record=False):
+    """The one zstd frame `stored` decoded (at most `limit` bytes; with `record`, exactly the
+    `limit` a coding record says), nothing after the frame."""
     try:
         import zstandard  # Debian python3-zstandard
     except ImportError:
         raise CodingError("cannot restore supercompressed sections: install python3-zstandard") from None
     stored = bytes(stored)
+    most = f"the record's {limit}" if record else f"{limit}"
     try:
         size = zstandard.get_frame_parameters(stored).content_size
     except zstandard.ZstdError as e:
         raise CodingError(f"not a zstd frame ({e})") from None
-    if size != zstandard.CONTENTSIZE_UNKNOWN and size != n:
-        raise CodingError(f"its zstd frame holds {size} bytes, the record says {n}")
+    if record and size != zstandard.CONTENTSIZE_UNKNOWN and size != limit:
+        raise CodingError(f"its zstd frame holds {size} bytes, the record says {limit}")
     d = zstandard.ZstdDecompressor().decompressobj()
     out, got, fed = [], 0, 0
     try:
@@ -113,8 +115,8 @@ def decompress(stored, n):
             chunk = d.decompress(stored[fed:fed + FEED])
             fed += FEED
             got += len(chunk)
-            if got > n:
-                raise CodingError(f"its zstd frame decodes to more than the record's {n} bytes")
+            if got > limit:
+                raise CodingError(f"its zstd frame decodes to more than {most} bytes")
             out.append(chunk)
     except zstandard.ZstdError as e:
         raise CodingError(f"its zstd frame does not decode ({e})") from None
@@ -122,9 +124,14 @@ def decompress(stored, n):
         raise CodingError("its zstd frame is truncated")
     if d.unused_data or fed < len(stored):
         raise CodingError("bytes follow its zstd frame")
-    if got != n:
-        raise CodingError(f"its zstd frame decodes to {got} bytes, the record says {n}")
+    if record and got != limit:
+        raise CodingError(f"its zstd frame decodes to {got} bytes, the record says {limit}")
     return b"".join(out)
+
+
+def decompress(stored, n):
+    """The one zstd frame `stored` decoded, exactly n bytes, nothing after the frame."""
+    return inflate(stored, n, record=True)
 
 
 def unshuffle(f, w):

@@ -13,7 +13,7 @@ import struct
 
 import numpy as np
 
-BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION, L3_VERSION = 6, 7, 8, 9, 10, 11, 12
+BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION, L3_VERSION, WRAPPED_VERSION = 6, 7, 8, 9, 10, 11, 12, 13
 DEFAULT_FPS = 24.0  # the frame rate of an asset that records none
 MAX_LEVELS = 5
 # Channel resolutions (version 10): a channel's level at most 3 (voxels 8 times the

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (versions 12, 11, 10, 9, 8, 7 and 6).
+"""Independent reader for vdbcook's `.vpak` volume asset format (versions 13, 12, 11, 10, 9, 8, 7 and 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -23,7 +23,7 @@ body's supercompressed sections are restored (scripts/vpak_coding.py) before use
 each frame's number; older assets number their frames from 0). `--json` gives `fps` and
 `frame_numbers` too (24 and 0, 1, ... when the asset records none).
 
-As a module: `open_segments(path)` opens a version-6 to 12 file (every body validated,
+As a module: `open_segments(path)` opens a version-6 to 13 file (every body validated,
 every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
 `open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
@@ -42,13 +42,13 @@ import sys
 
 import numpy as np
 
-from vpak_coding import K_CODING, CodingError, parse_records, restore
+from vpak_coding import K_CODING, CodingError, inflate, parse_records, restore
 from vpak_decode import (  # noqa: F401 (names the test scripts use as vpak_read.NAME)
     BC4, BC7, CONSTANT, F16, F32, FORMAT_NAMES, FORMAT_RULES, L2_MASK_WORDS, L2_WORDS, L3_WORDS, RANGED, UNORM8, UNORM16,
     decode_bc4, decode_bc7, l1_node_len, l1_starts, l3_active, slot_entries, slot_origin, texture_shape,
 )
 from vpak_metadata import (  # noqa: F401
-    BODY_VERSION, CODED_VERSION, CONTEXT_VERSION, DEFAULT_FPS, L3_VERSION, RESOLVED_VERSION, SEGMENTED_VERSION, TIMED_VERSION,
+    BODY_VERSION, CODED_VERSION, CONTEXT_VERSION, DEFAULT_FPS, L3_VERSION, RESOLVED_VERSION, SEGMENTED_VERSION, TIMED_VERSION, WRAPPED_VERSION,
     VpakError, channel_level, channel_transform, decode_metadata, fps, frame_numbers,
 )
 
@@ -57,6 +57,8 @@ MAX_LEVELS = 5
 HEADER_SIZE = 64
 SECTION_ALIGN = 256
 CODED_ALIGN = 8  # the coding section and the sections it names (version 8)
+ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"  # a wrapped body (version 13)
+MAX_WRAPPED = 1 << 20  # the most bytes a wrapped body restores to
 
 # Section kinds (format.md, "Sections").
 K_METADATA, K_FRAMES, K_L1, K_L1_ENTRIES, K_L2, K_L2_ENTRIES, K_L3, K_TILES, K_RANGES, K_ATLAS, K_TABLE, K_CHANNEL_TABLE = range(1, 13)
@@ -634,22 +636,35 @@ def merged(metas):
 
 
 class Asset:
-    """A version-6 to 12 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
+    """A version-6 to 13 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
     and `bodies` [(metadata, sections)] per segment (frames numbered from 0 in each), `meta`
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
     def __init__(self, buf):
-        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION, L3_VERSION), "file")
+        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION, L3_VERSION, WRAPPED_VERSION), "file")
         if self.version == BODY_VERSION:
             self.bodies = [open_body(buf)]
             self.meta = self.bodies[0][0]
             self.table = [(0, self.meta["frame_count"], 0, len(buf), xxh3_64(buf[:HEADER_SIZE + 32 * len(table)]))]
             return
         check_segment_table(buf, table, self.version)
-        self.table, self.bodies = table, []
+        self.table, self.bodies, self.wrapped = table, [], []
         for s, (_, count, offset, size, head_sum) in enumerate(table):
             try:
-                m, secs = open_body(buf[offset:offset + size], head_sum, self.version >= CODED_VERSION, self.version, offset)
+                body = buf[offset:offset + size]
+                self.wrapped.append(self.version >= WRAPPED_VERSION and bytes(body[:4]) == ZSTD_MAGIC)
+                if self.wrapped[-1]:
+                    # A wrapped body (of a file of one segment): the frame checked whole, then the body inside as any body.
+                    if len(table) > 1:
+                        raise VpakError(f"its body is wrapped in a zstd frame in a file of {len(table)} segments")
+                    if xxh3_64(body) != head_sum:
+                        raise VpakError("its wrapped body is not the one the segment table names")
+                    try:
+                        body = memoryview(inflate(body, MAX_WRAPPED))
+                    except CodingError as e:
+                        raise VpakError(f"its wrapped body: {e}") from None
+                    head_sum, offset = None, 0
+                m, secs = open_body(body, head_sum, self.version >= CODED_VERSION, self.version, offset)
                 if m["frame_count"] != count:
                     raise VpakError(f"its metadata has {m['frame_count']} frames, the segment table {count}")
             except VpakError as e:

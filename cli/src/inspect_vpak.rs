@@ -42,6 +42,8 @@ struct Body {
     gpu_bytes: u64,
     /// Where the body lies in the file.
     offset: u64,
+    /// The body's bytes when the file stores it wrapped in one zstd frame (version 13).
+    wrapped: Option<u64>,
 }
 
 /// The figures of a body from its restored sections (`asset`) and its sections as stored.
@@ -87,7 +89,7 @@ fn body(stored: &Asset, asset: &Asset, offset: u64) -> Result<Body, vdbcook_vpak
         })
         .collect::<Vec<_>>();
     let gpu_bytes = sections.iter().filter(|(e, _, _)| kind::uploaded(e.kind)).map(|(_, restored, _)| restored).sum();
-    Ok(Body { meta, nodes, plane_bytes, channel_bytes, level_bytes, sections, gpu_bytes, offset })
+    Ok(Body { meta, nodes, plane_bytes, channel_bytes, level_bytes, sections, gpu_bytes, offset, wrapped: None })
 }
 
 pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
@@ -96,7 +98,14 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let table = asset.segments().with_context(|| name.clone())?;
     let bodies = (0..asset.segment_count())
         .map(|s| {
-            asset.stored_segment(s).and_then(|seg| body(&seg, &seg.restored()?, table[s].offset)).map_err(|e| if asset.is_segmented() { vdbcook_vpak::Error::InSegment(s, Box::new(e)) } else { e })
+            let wrapped = |seg: &Asset| asset.is_wrapped(s).then_some(seg.bytes().len() as u64);
+            asset.stored_segment(s).and_then(|seg| Ok(Body { wrapped: wrapped(&seg), ..body(&seg, &seg.restored()?, table[s].offset)? })).map_err(|e| {
+                if asset.is_segmented() {
+                    vdbcook_vpak::Error::InSegment(s, Box::new(e))
+                } else {
+                    e
+                }
+            })
         })
         .collect::<Result<Vec<Body>, _>>()
         .with_context(|| name.clone())?;
@@ -131,13 +140,13 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     let segments: Vec<Value> = bodies
         .iter()
         .zip(&table)
-        .map(|(b, e)| json!({"first_frame": e.first_frame, "first_number": meta.frame_number(e.first_frame as usize), "frames": e.frame_count, "offset": e.offset, "bytes": e.size, "gpu_bytes": b.gpu_bytes, "bricks": b.meta.brick_count, "format": b.meta.format_names(), "index_offset": b.meta.index_offset}))
+        .map(|(b, e)| json!({"first_frame": e.first_frame, "first_number": meta.frame_number(e.first_frame as usize), "frames": e.frame_count, "offset": e.offset, "bytes": e.size, "wrapped": b.wrapped.is_some(), "body_bytes": b.wrapped.unwrap_or(e.size), "gpu_bytes": b.gpu_bytes, "bricks": b.meta.brick_count, "format": b.meta.format_names(), "index_offset": b.meta.index_offset}))
         .collect();
     let section_json = |b: &Body| {
         b.sections
             .iter()
             .map(|(s, restored, c)| {
-                json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": b.offset + s.offset, "bytes": restored, "disk_bytes": s.size, "checksum": format!("{:016x}", s.checksum),
+                json!({"kind": s.kind, "name": kind::name(s.kind), "index": s.index, "offset": if b.wrapped.is_some() { s.offset } else { b.offset + s.offset }, "bytes": restored, "disk_bytes": s.size, "checksum": format!("{:016x}", s.checksum),
                     "coding": c.map(|c| json!({"scheme": c.scheme_name(), "filter": c.filter.name(), "checksum": format!("{:016x}", c.raw_checksum)}))})
             })
             .collect::<Vec<_>>()
@@ -217,7 +226,7 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
         s,
         "  on the GPU     {gpu_bytes} bytes of sections (the file is {:.3}× that{})",
         file_bytes as f64 / gpu_bytes.max(1) as f64,
-        if bodies.iter().any(|b| b.sections.iter().any(|x| x.2.is_some())) { ", supercompressed" } else { "" }
+        if bodies.iter().any(|b| b.wrapped.is_some() || b.sections.iter().any(|x| x.2.is_some())) { ", supercompressed" } else { "" }
     );
     let _ = writeln!(s, "  {:<16} {:<8} {:>3} {:>8} {:>6} {:>12}  {:<12} {:<24} background", "channel", "format", "lod", "voxel", "plane", "bytes", "class", "values");
     for (i, c) in meta.channels.iter().enumerate() {
@@ -274,10 +283,14 @@ pub fn describe(path: &Path, as_json: bool) -> Result<Described> {
     }
     for (k, b) in bodies.iter().enumerate() {
         let _ = writeln!(s, "  sections{}:", if table.len() > 1 { format!(" of segment {k}") } else { String::new() });
+        if let Some(n) = b.wrapped {
+            let _ = writeln!(s, "    (wrapped: the body's {n} bytes stored as one zstd frame of {} bytes at {}; offsets in the body)", table[k].size, b.offset);
+        }
         for (e, restored, c) in &b.sections {
             let label = kind::label(e.kind, e.index);
             let coding = c.map_or(String::new(), |c| format!("  {}, {}: {restored} bytes restored", c.scheme_name(), c.filter.name()));
-            let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}{coding}", e.size, b.offset + e.offset, e.checksum);
+            let at = if b.wrapped.is_some() { e.offset } else { b.offset + e.offset };
+            let _ = writeln!(s, "    {label:<16} {:>12} bytes at {:>10}  xxh3 {:016x}{coding}", e.size, at, e.checksum);
         }
     }
     for (p, info) in meta.planes.iter().enumerate() {

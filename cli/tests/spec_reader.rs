@@ -86,6 +86,8 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
         // per-brick formats, levels of detail, several segments, a high zstd level.
         (vec![smoke.clone()], vec!["--format", "f32", "--supercompress", "zstd", "--segment-frames", "3"]),
         (vec![smoke.clone()], vec!["--format", "f16", "--supercompress", "zstd:19"]),
+        // One small segment: its body wrapped whole in one zstd frame (version 13).
+        (vec![format!("{smoke}/smoke_0001.vdb")], vec!["--format", "unorm8", "--supercompress", "zstd"]),
         (vec![smoke], vec!["--max-error", "0.004", "--supercompress", "zstd", "--segment-frames", "2", "--lods", "2"]),
         (vec![w.clone()], vec!["--grids", "density,velocity", "--format", "unorm16", "--supercompress", "zstd"]),
         (vec![w], vec!["--grids", "density,temperature,velocity", "--format", "bc4", "--group", "velocity=f32", "--group", "density,temperature=bc7", "--supercompress", "zstd"]),
@@ -102,7 +104,11 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
     }
     let _ = std::fs::remove_dir_all(&dir);
     assert!(total > 500_000, "{total} values compared");
+    assert!(WRAPPED.load(std::sync::atomic::Ordering::Relaxed) > 0, "no case made a wrapped body");
 }
+
+/// Bodies the spec-only reader found wrapped (version 13), over every case.
+static WRAPPED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// Cooks `inputs` with `flags` into `dir/TAG.vpak`, then per frame decodes it with the
 /// spec-only reader and with `vdbcook unpack` (at `lod`, when given) and compares them
@@ -116,27 +122,37 @@ fn compare_case(dir: &std::path::Path, tag: &str, inputs: &[String], flags: &[&s
     if !r.status.success() {
         return Err(format!("{flags:?}: cook failed: {}", String::from_utf8_lossy(&r.stderr)));
     }
+    let mut wrapped_by_reader = None;
     if flags.contains(&"--supercompress") {
         // The reader restored sections in every segment (not a file stored as it is),
         // context-coded ones (scheme 2) among them when the cook optimised for the disk.
         let coded = python(&[
             "-c",
             "import sys; sys.path.insert(0, 'scripts'); import vpak_read as v; a = v.open_segments(sys.argv[1]); \
-             print(a.version, min(len(s.coding) for _, s in a.bodies), sum(r[0] == 2 for _, s in a.bodies for r in s.coding.values()))",
+             print(a.version, min(len(s.coding) + w for (_, s), w in zip(a.bodies, a.wrapped)), sum(r[0] == 2 for _, s in a.bodies for r in s.coding.values()), sum(a.wrapped))",
             s(&asset),
         ]);
         let said = String::from_utf8_lossy(&coded.stdout);
         let fields: Vec<&str> = said.split_whitespace().collect();
         let context = flags.contains(&"disk");
-        if fields.len() != 3 || fields[0] != vdbcook_vpak::VERSION.to_string() || fields[1] == "0" || (fields[2] == "0") == context {
+        if fields.len() != 4 || fields[0] != vdbcook_vpak::VERSION.to_string() || fields[1] == "0" || (fields[2] == "0") == context {
             return Err(format!(
-                "{flags:?}: not supercompressed in every segment, or context coding not as expected (version, fewest records, context-coded: {said}) {}",
+                "{flags:?}: not supercompressed in every segment, or context coding not as expected (version, fewest records or wrapped, context-coded, wrapped: {said}) {}",
                 String::from_utf8_lossy(&coded.stderr)
             ));
         }
+        wrapped_by_reader = fields[3].parse::<usize>().ok();
     }
     let meta: serde_json::Value = serde_json::from_slice(&vdbcook(&["inspect", "--json", s(&asset)]).stdout).unwrap();
     let meta = &meta["files"][0];
+    // Both readers find the same bodies wrapped in one zstd frame (version 13).
+    if let Some(w) = wrapped_by_reader {
+        let said = meta["segments"].as_array().map(|a| a.iter().filter(|s| s["wrapped"] == true).count());
+        if said != Some(w) {
+            return Err(format!("{flags:?}: the reader found {w} wrapped bodies, inspect {said:?}"));
+        }
+        WRAPPED.fetch_add(w, std::sync::atomic::Ordering::Relaxed);
+    }
     let lod_args: Vec<String> = lod.map(|k| vec!["--lod".to_string(), k.to_string()]).unwrap_or_default();
     let lod_args: Vec<&str> = lod_args.iter().map(String::as_str).collect();
     let mut compared = 0;

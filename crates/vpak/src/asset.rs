@@ -96,7 +96,7 @@ impl Asset {
         whole.version = whole.version_field()?;
         match whole.version {
             segments::BODY_VERSION => whole.body(),
-            segments::VERSION | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => whole.container(),
+            segments::VERSION | segments::VERSION_12 | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => whole.container(),
             v => Err(Error::Version(v)),
         }
     }
@@ -278,13 +278,42 @@ impl Asset {
         }
         let e = self.table.get(s).ok_or(Error::NoSegment { segment: s, count: self.table.len() })?;
         let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new(), version: self.version };
-        let body = crate::head::body_version(seg.bytes(), seg.len as u64).and_then(|()| seg.body()).map_err(|err| Error::InSegment(s, Box::new(err)))?;
+        let in_segment = |err| Error::InSegment(s, Box::new(err));
+        if crate::wrap::is_wrapped(seg.bytes()) && self.version >= segments::VERSION {
+            if self.table.len() > 1 {
+                return Err(in_segment(crate::wrap::among_segments(self.table.len())));
+            }
+            // The frame is checked whole before it is decompressed; the body inside, as any body.
+            let computed = checksum(seg.bytes());
+            if computed != e.head_checksum {
+                return Err(in_segment(Error::HeaderChecksum { stored: e.head_checksum, computed }));
+            }
+            let (words, len) = crate::wrap::unwrap(seg.bytes()).map_err(in_segment)?;
+            return Asset::stored_body_from_words(words, len, self.version).map_err(in_segment);
+        }
+        let body = crate::head::body_version(seg.bytes(), seg.len as u64).and_then(|()| seg.body()).map_err(in_segment)?;
         let head = &body.bytes()[..segments::head_len(body.sections.len())];
         let computed = checksum(head);
         if computed != e.head_checksum {
-            return Err(Error::InSegment(s, Box::new(Error::HeaderChecksum { stored: e.head_checksum, computed })));
+            return Err(in_segment(Error::HeaderChecksum { stored: e.head_checksum, computed }));
         }
         Ok(body)
+    }
+
+    /// Segment `s`'s bytes exactly as the file stores them (a wrapped body's
+    /// frame, [`crate::wrap`]), for copying (`join`); check them first with
+    /// [`Asset::stored_segment`].
+    pub fn stored_bytes(&self, s: usize) -> Result<&[u8], Error> {
+        match self.table.get(s) {
+            Some(e) => Ok(&self.bytes()[e.offset as usize..(e.offset + e.size) as usize]),
+            None if !self.is_segmented() && s == 0 => Ok(self.bytes()),
+            None => Err(Error::NoSegment { segment: s, count: self.segment_count() }),
+        }
+    }
+
+    /// Whether segment `s` is stored wrapped in one zstd frame ([`crate::wrap`]).
+    pub fn is_wrapped(&self, s: usize) -> bool {
+        self.stored_bytes(s).is_ok_and(|b| self.version >= segments::VERSION && crate::wrap::is_wrapped(b))
     }
 
     /// Bytes a renderer uploads to draw any frame, summed over the segments:

@@ -38,6 +38,7 @@ pub mod segments;
 pub mod settings;
 mod tiles;
 pub mod time;
+pub mod wrap;
 
 pub use asset::Asset;
 pub use atomic::{directory_of, write_atomic, write_atomic_with, write_file, AtomicFile};

@@ -12,8 +12,11 @@ use std::io::{Seek, SeekFrom, Write};
 /// Version of a file with a segment table whose bodies may hold
 /// supercompressed sections ([`crate::coding`], context-coded ones and L3
 /// arrays through the `l3 nodes` filter included), record their frames' time
-/// ([`crate::Time`]) and their channels' voxel sizes ([`crate::Resolution`]).
-pub const VERSION: u32 = 12;
+/// ([`crate::Time`]) and their channels' voxel sizes ([`crate::Resolution`]),
+/// and small bodies wrapped whole in one zstd frame ([`crate::wrap`]).
+pub const VERSION: u32 = 13;
+/// Version of a file whose bodies are never wrapped (still read).
+pub const VERSION_12: u32 = 12;
 /// Version of a file whose L3 arrays are not filtered as nodes (still read).
 pub const VERSION_11: u32 = 11;
 /// Version of a file whose sections are zstd-compressed only (still read).
@@ -85,7 +88,8 @@ impl PartInfo {
 pub fn part_writer<W: Write + Seek>(mut out: W, info: &PartInfo, count: u32) -> Result<Writer<W>, Error> {
     out.seek(SeekFrom::Start(0))?;
     out.write_all(&info.bytes())?;
-    Writer::at(out, PART_HEADER_LEN as u64, count)
+    // Its body wrapped as one process would wrap it: when the asset is one segment.
+    Ok(Writer { wrap: info.segments == 1, ..Writer::at(out, PART_HEADER_LEN as u64, count)? })
 }
 
 /// Joins parts (in order: each part's header and its segments as an asset)
@@ -153,9 +157,11 @@ pub fn join(parts: &[(PartInfo, crate::Asset)], names: &[String], out: std::fs::
         });
         // Owned here, so that an early return lets the checker go: its next send fails.
         let checked = checked;
-        for &(_, _, e) in order {
+        for &(i, s, e) in order {
             let seg = checked.recv().map_err(|_| Error::Join("the segment check stopped".into()))??;
-            w.copy_body(&e, seg.bytes(), seg.is_coded())?;
+            // As the part stores it: a wrapped body's frame, not the body inside.
+            let asset = &parts[i].1;
+            w.copy_body(&e, asset.stored_bytes(s)?, seg.is_coded() || asset.is_wrapped(s))?;
             seg.release();
         }
         Ok::<(), Error>(())
@@ -211,7 +217,7 @@ fn align(n: u64, to: u64) -> u64 {
 /// before version 12; from 12, 8 (and 256 for a body without a coding
 /// section, whose sections a reader may use as they lie in the file).
 pub(crate) fn body_align(version: u32) -> u64 {
-    match version >= VERSION {
+    match version >= VERSION_12 {
         true => crate::CODED_ALIGN as u64,
         false => ALIGN as u64,
     }
@@ -234,6 +240,10 @@ pub struct Writer<W: Write + Seek> {
     entries: Vec<SegmentEntry>,
     /// Where the next segment starts (unpadded end of the last one).
     end: u64,
+    /// Whether a small supercompressed body is stored wrapped ([`crate::wrap`]):
+    /// only the body of a file of one segment, so that a reader streaming a
+    /// sequence never reads a whole body to open the file.
+    wrap: bool,
 }
 
 impl<W: Write + Seek> Writer<W> {
@@ -250,7 +260,14 @@ impl<W: Write + Seek> Writer<W> {
         let start = (HEADER_LEN + SEGMENT_ENTRY_LEN * count as usize) as u64;
         out.seek(SeekFrom::Start(base))?;
         write_zeros(&mut out, start)?;
-        Ok(Writer { out, base, count, entries: Vec::new(), end: start })
+        Ok(Writer { out, base, count, entries: Vec::new(), end: start, wrap: count == 1 })
+    }
+
+    /// This writer with every body stored as it is, never wrapped in one
+    /// zstd frame (what a version-12 writer wrote).
+    pub fn unwrapped(mut self) -> Writer<W> {
+        self.wrap = false;
+        self
     }
 
     /// The entry of the next segment (of `size` bytes), the output moved
@@ -276,6 +293,23 @@ impl<W: Write + Seek> Writer<W> {
 
     /// Writes the next segment, of `frame_count` frames, from its sections (as a version-6 body).
     pub fn add(&mut self, frame_count: u32, sections: &[Section]) -> Result<SegmentEntry, Error> {
+        self.add_body(frame_count, sections, false)
+    }
+
+    /// [`Writer::add`] of the sections of a body that was stored wrapped
+    /// ([`crate::wrap`]): wrapped again where that is smaller, whether or
+    /// not a coding section is left inside.
+    pub fn add_rewrapped(&mut self, frame_count: u32, sections: &[Section]) -> Result<SegmentEntry, Error> {
+        self.add_body(frame_count, sections, true)
+    }
+
+    fn add_body(&mut self, frame_count: u32, sections: &[Section], was_wrapped: bool) -> Result<SegmentEntry, Error> {
+        if let Some(frame) = self.wrap.then(|| crate::wrap::wrap(sections, was_wrapped)).transpose()?.flatten() {
+            let e = self.place(frame_count, frame.len() as u64, checksum(&frame), true)?;
+            self.out.write_all(&frame)?;
+            self.out.flush()?;
+            return Ok(self.record(e));
+        }
         let size = file_len(sections);
         let mut e = self.place(frame_count, size, 0, sections.iter().any(|s| s.kind == crate::kind::CODING))?;
         let start = self.base + e.offset;
@@ -301,7 +335,8 @@ impl<W: Write + Seek> Writer<W> {
     }
 
     /// Writes the next segment as the body `body` of another file's segment
-    /// `entry` (checked by the caller; `coded`: whether it has a coding section).
+    /// `entry`, as that file stores it (checked by the caller; `coded`:
+    /// whether it has a coding section or is wrapped).
     pub fn copy_body(&mut self, entry: &SegmentEntry, body: &[u8], coded: bool) -> Result<SegmentEntry, Error> {
         if body.len() as u64 != entry.size {
             return Err(Error::Invalid(format!("a segment body of {} bytes, its entry says {}", body.len(), entry.size)));
@@ -362,7 +397,15 @@ fn write_zeros<W: Write>(w: &mut W, mut n: u64) -> std::io::Result<()> {
 
 /// Assembles a version-7 file in memory from segments of (frame count, sections).
 pub fn assemble_segments(segments: &[(u32, Vec<Section>)]) -> Result<Vec<u8>, Error> {
-    let mut w = Writer::new(std::io::Cursor::new(Vec::new()), segments.len() as u32)?;
+    assemble_with(Writer::new(std::io::Cursor::new(Vec::new()), segments.len() as u32)?, segments)
+}
+
+/// [`assemble_segments`] with no body wrapped (the layout of version 12).
+pub fn assemble_unwrapped(segments: &[(u32, Vec<Section>)]) -> Result<Vec<u8>, Error> {
+    assemble_with(Writer::new(std::io::Cursor::new(Vec::new()), segments.len() as u32)?.unwrapped(), segments)
+}
+
+fn assemble_with(mut w: Writer<std::io::Cursor<Vec<u8>>>, segments: &[(u32, Vec<Section>)]) -> Result<Vec<u8>, Error> {
     for (frames, sections) in segments {
         w.add(*frames, sections)?;
     }
@@ -381,7 +424,11 @@ pub fn rewrite_metadata(asset: &crate::Asset, mut edit: impl FnMut(&mut Metadata
         let mut m = Metadata::from_bytes(&meta.data)?;
         edit(&mut m);
         meta.data = m.to_bytes()?.into();
-        w.add(e.frame_count, &sections)?;
+        // A wrapped body is wrapped again, with or without coding records inside.
+        match asset.is_wrapped(s) {
+            true => w.add_rewrapped(e.frame_count, &sections)?,
+            false => w.add(e.frame_count, &sections)?,
+        };
     }
     Ok(w.finish()?.into_inner())
 }
@@ -593,7 +640,7 @@ pub(crate) mod tests {
         let (a, b) = (meta(2, &["a.vdb", "b.vdb"], [0.0, 1.0], 0), meta(3, &["c.vdb"], [-1.0, 0.5], -128));
         let plain = [(2, long(&a, 100)), (3, long(&b, 200))];
         let coded = [(2, supercompressed(long(&a, 100), &a)), (3, supercompressed(long(&b, 200), &b))];
-        let (plain, coded) = (assemble_segments(&plain).unwrap(), assemble_segments(&coded).unwrap());
+        let (plain, coded) = (assemble_unwrapped(&plain).unwrap(), assemble_unwrapped(&coded).unwrap());
         assert!(coded.len() < plain.len(), "{} vs {} bytes", coded.len(), plain.len());
         let (p, c) = (Asset::from_bytes(&plain).unwrap(), Asset::from_bytes(&coded).unwrap());
         c.verify().unwrap();
@@ -612,7 +659,7 @@ pub(crate) mod tests {
         let mut sections = seg.to_sections();
         let coding = sections.iter_mut().find(|x| x.kind == kind::CODING).unwrap();
         coding.data.to_mut()[24] ^= 4; // the restored size of the first record
-        let lied = assemble_segments(&[(3, sections)]).unwrap();
+        let lied = assemble_unwrapped(&[(3, sections)]).unwrap();
         let a = Asset::from_bytes(&lied).unwrap();
         a.verify().unwrap();
         let err = a.segment(0).err().unwrap().to_string();
@@ -653,7 +700,7 @@ pub(crate) mod tests {
     #[test]
     fn a_version_7_file_holds_no_supercompressed_section() {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
-        let b = assemble_segments(&[(2, supercompressed(body_with_zeros(&m), &m))]).unwrap();
+        let b = assemble_unwrapped(&[(2, supercompressed(body_with_zeros(&m), &m))]).unwrap();
         let err = older_error(&b, VERSION_7);
         assert!(err.contains("older than version 8"), "{err}");
     }
@@ -661,7 +708,7 @@ pub(crate) mod tests {
     #[test]
     fn only_a_version_11_body_packs_its_sections() {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
-        let b = assemble_segments(&[(2, supercompressed(body_with_zeros(&m), &m))]).unwrap();
+        let b = assemble_unwrapped(&[(2, supercompressed(body_with_zeros(&m), &m))]).unwrap();
         // Every section of the supercompressed body at a multiple of 8, some not of 256.
         let a = Asset::from_bytes(&b).unwrap();
         let body = a.stored_segment(0).unwrap();
@@ -685,7 +732,7 @@ pub(crate) mod tests {
         let record = Coding { kind: kind::L2_ENTRIES, index: 0, scheme: SCHEME_CONTEXT, filter: tiles, raw_size: 4096, raw_checksum: crate::checksum(&raw) };
         sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: stored.into() });
         sections.push(Section { kind: kind::CODING, index: 0, data: record.bytes().to_vec().into() });
-        let b = assemble_segments(&[(2, sections)]).unwrap();
+        let b = assemble_unwrapped(&[(2, sections)]).unwrap();
         let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
         assert_eq!(restored.section(kind::L2_ENTRIES, 0).unwrap(), &raw[..]);
         let err = older_error(&b, VERSION_10);
@@ -727,7 +774,7 @@ pub(crate) mod tests {
         words.extend((0..first - words.len() as u32).map(|i| i.wrapping_mul(2654435761)));
         let raw: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
         sections.push(Section { kind: kind::L3_NODES, index: 0, data: raw.clone().into() });
-        let b = assemble_segments(&[(2, supercompressed(sections, &m))]).unwrap();
+        let b = assemble_unwrapped(&[(2, supercompressed(sections, &m))]).unwrap();
         let a = Asset::from_bytes(&b).unwrap();
         let codings = crate::coding::Coding::parse_all(a.stored_segment(0).unwrap().section(kind::CODING, 0).unwrap()).unwrap();
         assert_eq!(codings.iter().find(|c| c.kind == kind::L3_NODES).map(|c| c.filter), Some(crate::coding::Filter::L3Nodes));

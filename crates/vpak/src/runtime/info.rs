@@ -74,6 +74,10 @@ pub struct SegmentInfo {
     pub stored_size: u64,
     /// Bytes of its restored body ([`Reader::segment_asset`]).
     pub body_size: u64,
+    /// Whether the source stores the body wrapped in one zstd frame (version
+    /// 13): it was read and decompressed when the asset was opened, and its
+    /// sections are read from memory, not from the source.
+    pub wrapped: bool,
     /// The body's own metadata: its planes, channel placement, index offset
     /// and frames (numbered from 0), which the GPU records of the segment are made from.
     pub metadata: Metadata,

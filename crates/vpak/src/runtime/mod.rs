@@ -30,6 +30,9 @@ struct Inner {
     /// The segment table's checksum of the body's header and section table.
     head_checksum: u64,
     parts: Vec<Part>,
+    /// A wrapped body ([`crate::wrap`]), decompressed when the asset was
+    /// opened: its sections are read from here, not from the source.
+    wrapped: Option<std::sync::Arc<Vec<u8>>>,
 }
 
 /// The source and what has been read of it.
@@ -82,12 +85,12 @@ impl Reader {
         let version = head::version(&header, len)?;
         let bodies = match version {
             segments::BODY_VERSION => vec![io.body(version, 0, len, None)?],
-            segments::VERSION | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
+            segments::VERSION | segments::VERSION_12 | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
                 let n = head::table_len(&header, segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount, len)?;
                 let table = io.read_vec(HEADER_LEN as u64, n as u64)?;
                 head::check_checksum(&header, &table)?;
                 let entries = head::segments(&table, len, version)?;
-                let read = entries.iter().enumerate().map(|(s, e)| io.body(version, e.offset, e.size, Some(e)).map_err(|err| Error::InSegment(s, Box::new(err))));
+                let read = entries.iter().enumerate().map(|(s, e)| io.segment(version, e, entries.len()).map_err(|err| Error::InSegment(s, Box::new(err))));
                 read.collect::<Result<Vec<_>, _>>()?
             }
             v => return Err(Error::Version(v)),
@@ -177,19 +180,28 @@ impl Reader {
         if out.len() != part.size {
             return Err(Error::Invalid(format!("a buffer of {} bytes for section {} of {} bytes", out.len(), kind::label(part.stored.kind, part.stored.index), part.size)));
         }
-        self.read_part(info.offset, part, out, &mut Vec::new(), &mut Vec::new()).map_err(|e| self.in_segment(s, e))
+        self.read_part(info, inner, part, out, &mut Vec::new(), &mut Vec::new()).map_err(|e| self.in_segment(s, e))
     }
 
-    fn read_part(&self, body: u64, part: &Part, out: &mut [u8], stored: &mut Vec<u8>, scratch: &mut Vec<u8>) -> Result<(), Error> {
+    /// Reads bytes `at` of a segment's body: from the source, or from the
+    /// body a wrapped segment was decompressed to.
+    fn read_body(&self, info: &SegmentInfo, inner: &Inner, at: u64, buf: &mut [u8]) -> Result<(), Error> {
+        match &inner.wrapped {
+            Some(body) => Ok(body.read_at(at, buf)?),
+            None => self.io.read(info.offset + at, buf),
+        }
+    }
+
+    fn read_part(&self, info: &SegmentInfo, inner: &Inner, part: &Part, out: &mut [u8], stored: &mut Vec<u8>, scratch: &mut Vec<u8>) -> Result<(), Error> {
         let e = &part.stored;
         if part.coding.is_none() {
-            self.io.read(body + e.offset, out)?;
+            self.read_body(info, inner, e.offset, out)?;
             return check_sum(e, out);
         }
         // Bounded by the source: the section lies inside it.
         stored.clear();
         stored.resize(e.size as usize, 0);
-        self.io.read(body + e.offset, stored)?;
+        self.read_body(info, inner, e.offset, stored)?;
         check_sum(e, stored)?;
         coding::restore_part(part, stored, out, scratch)
     }
@@ -220,7 +232,7 @@ impl Reader {
             || (Vec::new(), Vec::new()),
             |(stored, scratch), (part, o)| match part.stored.kind == kind::METADATA && o.is_empty() {
                 true => Ok(()),
-                false => self.read_part(info.offset, part, o, stored, scratch),
+                false => self.read_part(info, inner, part, o, stored, scratch),
             },
         );
         filled.map_err(|e| self.in_segment(s, e))?;
@@ -256,7 +268,7 @@ impl Reader {
     }
 
     fn body_asset(&self, info: &SegmentInfo, inner: &Inner, buf: Vec<u64>) -> Result<Asset, Error> {
-        let size = info.stored_size as usize;
+        let size = inner.wrapped.as_ref().map_or(info.stored_size as usize, |b| Vec::len(b));
         let coded = info.supercompressed();
         // A plainly stored body is read straight into the caller's buffer; one to restore, into its own.
         let (stored_buf, out_buf) = if coded { (Vec::new(), buf) } else { (buf, Vec::new()) };
@@ -264,7 +276,7 @@ impl Reader {
         let mut words = coding::reuse_words(stored_buf, size.div_ceil(8)).ok_or_else(no_memory)?;
         let bytes = bytemuck::cast_slice_mut::<u64, u8>(&mut words);
         bytes[size..].fill(0);
-        self.io.read(info.offset, &mut bytes[..size])?;
+        self.read_body(info, inner, 0, &mut bytes[..size])?;
         let stored = Asset::stored_body_from_words(words, size, self.version)?;
         let computed = checksum(stored.bytes().get(..segments::head_len(stored.sections.len())).unwrap_or_default());
         if computed != inner.head_checksum {
@@ -316,6 +328,36 @@ impl Reader {
 }
 
 impl Io {
+    /// Segment table entry `e`'s body (of a file of version `version` and
+    /// `count` segments), as [`Io::body`] reads it: a wrapped one (the only
+    /// segment) read whole, its frame checked against the entry and
+    /// decompressed, the body inside read from memory.
+    fn segment(&self, version: u32, e: &SegmentEntry, count: usize) -> Result<(SegmentInfo, Inner), Error> {
+        let mut magic = [0u8; 4];
+        self.read(e.offset, &mut magic)?;
+        if version < segments::VERSION || !crate::wrap::is_wrapped(&magic) {
+            return self.body(version, e.offset, e.size, Some(e));
+        }
+        if count > 1 {
+            return Err(crate::wrap::among_segments(count));
+        }
+        let frame = self.read_vec(e.offset, e.size)?;
+        let computed = checksum(&frame);
+        if computed != e.head_checksum {
+            return Err(Error::HeaderChecksum { stored: e.head_checksum, computed });
+        }
+        let (words, len) = crate::wrap::unwrap(&frame)?;
+        let body = std::sync::Arc::new(bytemuck::cast_slice::<u64, u8>(&words)[..len].to_vec());
+        let io = Io { source: Box::new(body.clone()), bytes_read: AtomicU64::new(0) };
+        let (mut info, mut inner) = io.body(version, 0, len as u64, None)?;
+        if info.frame_count != e.frame_count {
+            return Err(Error::Invalid(format!("its metadata has {} frames, the segment table {}", info.frame_count, e.frame_count)));
+        }
+        (info.first_frame, info.offset, info.stored_size, info.wrapped) = (e.first_frame, e.offset, e.size, true);
+        inner.wrapped = Some(body);
+        Ok((info, inner))
+    }
+
     /// The body at `offset`, `size` bytes, of a file of version `version`,
     /// named by segment table entry `entry` (none for a file that is one
     /// body): its header and table checked, its metadata and coding records
@@ -364,8 +406,8 @@ impl Io {
             .collect();
         let body_size = if plain { size } else { plan.len as u64 };
         let (first_frame, frame_count) = entry.map_or((0, metadata.frame_count), |e| (e.first_frame, e.frame_count));
-        let info = SegmentInfo { first_frame, frame_count, offset, stored_size: size, body_size, metadata, sections };
-        Ok((info, Inner { head_checksum, parts: plan.parts }))
+        let info = SegmentInfo { first_frame, frame_count, offset, stored_size: size, body_size, wrapped: false, metadata, sections };
+        Ok((info, Inner { head_checksum, parts: plan.parts, wrapped: None }))
     }
 
     /// Reads `len` bytes at `offset` into a new buffer, counted; refused

@@ -146,3 +146,30 @@ fn prefetched_segments_are_the_segments_and_errors_reach_the_caller() {
     let mut broken = Prefetcher::new(r, |_: &Reader, _| -> Result<(), Error> { panic!("worker panic (expected by the test)") });
     assert!(broken.take(0).unwrap_err().to_string().contains("prefetch worker stopped"));
 }
+
+#[test]
+fn a_wrapped_segment_is_read_whole_at_open_then_from_memory() {
+    // A file of one segment wraps its small supercompressed body in one zstd frame (version 13).
+    let bytes = segments::assemble_segments(&[(2, crate::wrap::tests::coded())]).unwrap();
+    let asset = Asset::from_bytes(&bytes).unwrap();
+    assert!(asset.is_wrapped(0));
+    let r = Reader::new(bytes.clone()).unwrap();
+    let info = r.segment(0).unwrap();
+    assert!(info.wrapped && info.stored_size == asset.stored_bytes(0).unwrap().len() as u64);
+    // Opening read the header, the table entry, the frame's first four bytes, then the frame.
+    let opened = r.bytes_read();
+    assert_eq!(opened, (HEADER_LEN + segments::SEGMENT_ENTRY_LEN + 4) as u64 + info.stored_size);
+    let got = r.segment_asset(0, Vec::new()).unwrap();
+    assert!(got.bytes() == asset.segment(0).unwrap().bytes());
+    for (sec, b) in info.sections.iter().zip(sections(&r, 0)) {
+        assert_eq!(asset.segment(0).unwrap().section(sec.kind, sec.index).unwrap(), &b[..]);
+    }
+    assert_eq!(r.bytes_read(), opened, "the body is read from memory once opened");
+    // Any flipped byte but the header's reserved ones is caught at open or when read.
+    for i in 0..bytes.len() {
+        let mut c = bytes.clone();
+        c[i] ^= 0x10;
+        let caught = Reader::new(c).and_then(|r| r.segment_asset(0, Vec::new()).map(|_| ()));
+        assert!(caught.is_err() || (40..HEADER_LEN).contains(&i), "flipped byte {i} read without an error");
+    }
+}
