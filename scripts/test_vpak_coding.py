@@ -441,7 +441,10 @@ def check_wrapped(vdbcook, work):
     refused(wrapped([frame + b"\0" * 8]), "bytes follow its zstd frame")
     refused(wrapped([frame[:-3]]), "its wrapped body")
     huge = zstandard.ZstdCompressor(level=3).compress(bodies_of(packed)[0] + bytes(v.MAX_WRAPPED))
-    refused(wrapped([huge]), f"decodes to more than {v.MAX_WRAPPED} bytes")
+    refused(wrapped([huge]), f"bytes of content (at most {v.MAX_WRAPPED})")
+    unsized = zstandard.ZstdCompressor(level=3, write_content_size=False).compress(bodies_of(packed)[0])
+    refused(wrapped([unsized]), "does not state its content size")
+    refused(wrapped([frame + os.urandom(v.MAX_WRAPPED)]), f"bytes (at most {v.MAX_WRAPPED})")
     flipped = bytearray(packed)
     flipped[v.read_table(memoryview(packed), (13,), "file")[1][0][2] + len(frame) // 2] ^= 0x10
     refused(bytes(flipped), "its wrapped body is not the one the segment table names")

@@ -94,8 +94,9 @@ def parse_records(data, table, version):
 
 
 def inflate(stored, limit, record=False):
-    """The one zstd frame `stored` decoded (at most `limit` bytes; with `record`, exactly the
-    `limit` a coding record says), nothing after the frame."""
+    """The one zstd frame `stored` decoded, nothing after the frame: with `record`, exactly
+    the `limit` bytes a coding record says; else (a wrapped body) the content size the frame
+    must state, at most `limit`, checked before anything is decoded."""
     try:
         import zstandard  # Debian python3-zstandard
     except ImportError:
@@ -108,6 +109,10 @@ def inflate(stored, limit, record=False):
         raise CodingError(f"not a zstd frame ({e})") from None
     if record and size != zstandard.CONTENTSIZE_UNKNOWN and size != limit:
         raise CodingError(f"its zstd frame holds {size} bytes, the record says {limit}")
+    if not record and size == zstandard.CONTENTSIZE_UNKNOWN:
+        raise CodingError("its zstd frame does not state its content size")
+    if not record and size > limit:
+        raise CodingError(f"its zstd frame states {size} bytes of content (at most {limit})")
     d = zstandard.ZstdDecompressor().decompressobj()
     out, got, fed = [], 0, 0
     try:
@@ -124,8 +129,8 @@ def inflate(stored, limit, record=False):
         raise CodingError("its zstd frame is truncated")
     if d.unused_data or fed < len(stored):
         raise CodingError("bytes follow its zstd frame")
-    if record and got != limit:
-        raise CodingError(f"its zstd frame decodes to {got} bytes, the record says {limit}")
+    if got != (limit if record else size):
+        raise CodingError(f"its zstd frame decodes to {got} bytes, {'the record says' if record else 'it states'} {limit if record else size}")
     return b"".join(out)
 
 

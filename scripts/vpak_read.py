@@ -577,7 +577,7 @@ def check_segment_table(buf, table, version):
     align = CODED_ALIGN if version >= L3_VERSION else SECTION_ALIGN
     at, frame = HEADER_SIZE + 32 * len(table), 0
     for s, (first, count, offset, size, _) in enumerate(table):
-        if offset % align or offset < at or offset + size > len(buf):
+        if offset % align or offset < at or offset + size > len(buf) or size < HEADER_SIZE:
             raise VpakError(f"segment {s} at {offset}+{size} is outside the file, misaligned or overlaps the one before")
         if first != frame:
             raise VpakError(f"segment {s} starts at frame {first}, the segments before it end at frame {frame}")
@@ -646,6 +646,7 @@ class Asset:
             self.bodies = [open_body(buf)]
             self.meta = self.bodies[0][0]
             self.table = [(0, self.meta["frame_count"], 0, len(buf), xxh3_64(buf[:HEADER_SIZE + 32 * len(table)]))]
+            self.wrapped = [False]
             return
         check_segment_table(buf, table, self.version)
         self.table, self.bodies, self.wrapped = table, [], []
@@ -657,6 +658,8 @@ class Asset:
                     # A wrapped body (of a file of one segment): the frame checked whole, then the body inside as any body.
                     if len(table) > 1:
                         raise VpakError(f"its body is wrapped in a zstd frame in a file of {len(table)} segments")
+                    if size > MAX_WRAPPED:
+                        raise VpakError(f"its body is wrapped in a zstd frame of {size} bytes (at most {MAX_WRAPPED})")
                     if xxh3_64(body) != head_sum:
                         raise VpakError("its wrapped body is not the one the segment table names")
                     try:

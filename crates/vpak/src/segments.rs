@@ -159,8 +159,12 @@ pub fn join(parts: &[(PartInfo, crate::Asset)], names: &[String], out: std::fs::
         let checked = checked;
         for &(i, s, e) in order {
             let seg = checked.recv().map_err(|_| Error::Join("the segment check stopped".into()))??;
-            // As the part stores it: a wrapped body's frame, not the body inside.
+            // As the part stores it: a wrapped body's frame, not the body inside
+            // (which only an asset of one segment holds).
             let asset = &parts[i].1;
+            if asset.is_wrapped(s) && first.segments > 1 {
+                return Err(bad(i, crate::wrap::among_segments(first.segments as usize).to_string()));
+            }
             w.copy_body(&e, asset.stored_bytes(s)?, seg.is_coded() || asset.is_wrapped(s))?;
             seg.release();
         }

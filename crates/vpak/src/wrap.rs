@@ -10,8 +10,8 @@ use crate::{kind, Error, Section, HEADER_LEN};
 pub const ZSTD_MAGIC: [u8; 4] = [0x28, 0xB5, 0x2F, 0xFD];
 /// A body stored in at most this many bytes is tried wrapped.
 pub const WRAP_LIMIT: u64 = 64 << 10;
-/// The most bytes a wrapped body restores to (format.md); more is refused
-/// before it is decompressed.
+/// The most bytes a wrapped body's frame may take, and that it may restore
+/// to (format.md); more is refused before anything is allocated for it.
 pub const MAX_WRAPPED: usize = 1 << 20;
 /// Inside a wrapped body, a zstd-coded section of at most this many restored
 /// bytes is stored as it is (the frame compresses it with the rest); larger
@@ -25,14 +25,15 @@ pub fn is_wrapped(stored: &[u8]) -> bool {
     stored.starts_with(&ZSTD_MAGIC)
 }
 
-/// The body of `sections` (supercompressed: with a coding section, or
-/// `was_wrapped`, the inside of a wrapped body) as one zstd frame, when that
+/// The body of `sections` (supercompressed: with a coding section, and
+/// stored in at most [`WRAP_LIMIT`] bytes; or `was_wrapped`, the inside of a
+/// wrapped body, whose small sections are plain) as one zstd frame, when that
 /// is smaller than the body as it is; `None` for a body stored plainly or
-/// over [`WRAP_LIMIT`].
+/// too large.
 pub(crate) fn wrap(sections: &[Section], was_wrapped: bool) -> Result<Option<Vec<u8>>, Error> {
     let stored = crate::file_len(sections);
     let coding_section = sections.iter().find(|s| s.kind == kind::CODING);
-    if stored > WRAP_LIMIT || (coding_section.is_none() && !was_wrapped) {
+    if !was_wrapped && (stored > WRAP_LIMIT || coding_section.is_none()) {
         return Ok(None);
     }
     let records = coding_section.map_or(Ok(Vec::new()), |c| Coding::parse_all(&c.data))?;
@@ -56,8 +57,17 @@ pub(crate) fn wrap(sections: &[Section], was_wrapped: bool) -> Result<Option<Vec
     if body.len() > MAX_WRAPPED {
         return Ok(None);
     }
+    // The frame states its content size (zstd's default), which readers check before they decompress.
     let frame = zstd::bulk::compress(&body, LEVEL)?;
-    Ok(Some(frame).filter(|f| (f.len() as u64) < stored && f.len() >= HEADER_LEN))
+    Ok(Some(frame).filter(|f| (f.len() as u64) < stored && (HEADER_LEN..=MAX_WRAPPED).contains(&f.len())))
+}
+
+/// Refuses a wrapped body's frame of `len` bytes before it is read: over [`MAX_WRAPPED`].
+pub(crate) fn check_frame_len(len: u64) -> Result<(), Error> {
+    match len <= MAX_WRAPPED as u64 {
+        true => Ok(()),
+        false => Err(Error::Invalid(format!("its body is wrapped in a zstd frame of {len} bytes (at most {MAX_WRAPPED})"))),
+    }
 }
 
 /// The error for a wrapped body in a file of `segments` segments (only a
@@ -68,19 +78,28 @@ pub(crate) fn among_segments(segments: usize) -> Error {
 }
 
 /// A wrapped body's frame decompressed: the body in 8-byte words and its
-/// length. Refused: anything but one zstd frame, or one that restores to
-/// more than [`MAX_WRAPPED`] bytes.
+/// length. Refused before anything is allocated: a frame over
+/// [`MAX_WRAPPED`] bytes, anything but one zstd frame, one that does not
+/// state its content size or states more than [`MAX_WRAPPED`]; then one that
+/// does not decompress to exactly the size it states.
 pub(crate) fn unwrap(stored: &[u8]) -> Result<(Vec<u64>, usize), Error> {
+    check_frame_len(stored.len() as u64)?;
     let bad = |problem: String| Error::Invalid(format!("its body is wrapped in a zstd frame that {problem}"));
     if zstd::zstd_safe::find_frame_compressed_size(stored) != Ok(stored.len()) {
         return Err(bad("is not one frame with nothing after it".into()));
     }
-    let mut words = vec![0u64; MAX_WRAPPED / 8];
-    let out = bytemuck::cast_slice_mut::<u64, u8>(&mut words);
-    let len = coding::decompress_into(stored, out).map_err(|e| bad(format!("does not decompress to at most {MAX_WRAPPED} bytes ({e})")))?;
-    words.truncate(len.div_ceil(8));
-    words.shrink_to_fit();
-    Ok((words, len))
+    let len = match zstd::zstd_safe::get_frame_content_size(stored) {
+        Ok(Some(n)) if n <= MAX_WRAPPED as u64 => n as usize,
+        Ok(Some(n)) => return Err(bad(format!("states {n} bytes of content (at most {MAX_WRAPPED})"))),
+        _ => return Err(bad("does not state its content size".into())),
+    };
+    let mut words = vec![0u64; len.div_ceil(8)];
+    let out = &mut bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..len];
+    match coding::decompress_into(stored, out) {
+        Ok(got) if got == len => Ok((words, len)),
+        Ok(got) => Err(bad(format!("decompresses to {got} bytes, not the {len} it states"))),
+        Err(e) => Err(bad(format!("does not decompress to the {len} bytes it states ({e})"))),
+    }
 }
 
 #[cfg(test)]
@@ -135,10 +154,12 @@ pub(crate) mod tests {
         // Inside, the small sections are stored as they are: the frame compresses them together.
         assert!(!w.stored_segment(0).unwrap().is_coded());
         // A bake's metadata edit keeps the body wrapped, though no coding section is left inside.
-        let edited = crate::segments::rewrite_metadata(&w, |m| m.settings.push(("key".into(), "v".into()))).unwrap();
+        // So does a large one (a bake record's thumbnail): the body inside passes 64 KiB.
+        let thumbnail: String = noise(80 << 10).iter().map(|b| char::from(b'a' + b % 26)).collect();
+        let edited = crate::segments::rewrite_metadata(&w, |m| m.settings.push(("key".into(), thumbnail.clone()))).unwrap();
         let e = Asset::from_bytes(&edited).unwrap();
-        assert!(e.is_wrapped(0));
-        assert_eq!(e.segment(0).unwrap().metadata().unwrap().settings.last(), Some(&("key".to_string(), "v".to_string())));
+        assert!(e.is_wrapped(0) && e.stored_segment(0).unwrap().bytes().len() > WRAP_LIMIT as usize);
+        assert_eq!(e.segment(0).unwrap().metadata().unwrap().settings.last(), Some(&("key".to_string(), thumbnail)));
     }
 
     #[test]
@@ -174,9 +195,16 @@ pub(crate) mod tests {
         assert!(e.contains("wrapped in a zstd frame"), "{e}");
         let mut big = noise(256);
         big.resize(MAX_WRAPPED + 1, 0);
-        let big = zstd::bulk::compress(&big, 3).unwrap();
-        let e = err(file_of(&big));
-        assert!(e.contains(&format!("does not decompress to at most {MAX_WRAPPED} bytes")), "{e}");
+        let e = err(file_of(&zstd::bulk::compress(&big, 3).unwrap()));
+        assert!(e.contains(&format!("states {} bytes of content (at most {MAX_WRAPPED})", MAX_WRAPPED + 1)), "{e}");
+        // A frame that does not state its size, and one larger than 1 MiB, are refused unread.
+        let body = Asset::from_bytes(&b).unwrap().stored_segment(0).unwrap().bytes().to_vec();
+        let mut c = zstd::bulk::Compressor::new(3).unwrap();
+        c.set_parameter(zstd::zstd_safe::CParameter::ContentSizeFlag(false)).unwrap();
+        let e = err(file_of(&c.compress(&body).unwrap()));
+        assert!(e.contains("does not state its content size"), "{e}");
+        let e = err(file_of(&[frame.as_slice(), &noise(MAX_WRAPPED)].concat()));
+        assert!(e.contains(&format!("of {} bytes (at most {MAX_WRAPPED})", frame.len() + MAX_WRAPPED)), "{e}");
         // Only a file of one segment wraps its body.
         let mut w = Writer::new(std::io::Cursor::new(Vec::new()), 2).unwrap();
         for _ in 0..2 {

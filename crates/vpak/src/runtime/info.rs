@@ -15,7 +15,8 @@ pub struct SectionInfo {
     pub offset: u64,
     /// XXH3-64 of the restored bytes.
     pub checksum: u64,
-    /// Bytes the source stores (fewer when it is supercompressed).
+    /// Bytes the source stores (fewer when it is supercompressed; in a
+    /// wrapped segment, what the body inside the frame stores).
     pub stored_size: u64,
     /// Whether it is stored supercompressed (restored on reading).
     pub compressed: bool,

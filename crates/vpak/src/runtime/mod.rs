@@ -341,6 +341,7 @@ impl Io {
         if count > 1 {
             return Err(crate::wrap::among_segments(count));
         }
+        crate::wrap::check_frame_len(e.size)?;
         let frame = self.read_vec(e.offset, e.size)?;
         let computed = checksum(&frame);
         if computed != e.head_checksum {
