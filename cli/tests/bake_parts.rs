@@ -10,8 +10,9 @@ use std::path::{Path, PathBuf};
 use vdbcook_vpak::segments::rewrite_metadata;
 use vdbcook_vpak::Asset;
 
-/// A project of two assets (a still and a 4-frame sequence) in `dir`; the
-/// sequence's table gets `extra` (e.g. "parts = 2").
+/// A project of two assets (a still and a 4-frame sequence, supercompressed:
+/// the still's small body is wrapped) in `dir`; the sequence's table gets
+/// `extra` (e.g. "parts = 2").
 fn project(dir: &Path, file: &str, extra: &str) -> PathBuf {
     let src = dir.join("src");
     std::fs::create_dir_all(&src).unwrap();
@@ -22,7 +23,7 @@ fn project(dir: &Path, file: &str, extra: &str) -> PathBuf {
     }
     let manifest = dir.join(file);
     let text = format!(
-        "[defaults]\nformat = \"bc4\"\nquality = \"ultra-fast\"\n\n[[asset]]\nname = \"fog\"\noutput = \"fog.vpak\"\ninputs = [\"src/fog.vdb\"]\n\n[[asset]]\nname = \"smoke\"\noutput = \"seq/smoke.vpak\"\ninputs = [\"src/smoke_####.vdb\"]\nframes = \"1-4\"\nsegment_frames = 1\n{extra}\n"
+        "[defaults]\nformat = \"bc4\"\nquality = \"ultra-fast\"\nsupercompress = \"zstd\"\n\n[[asset]]\nname = \"fog\"\noutput = \"fog.vpak\"\ninputs = [\"src/fog.vdb\"]\n\n[[asset]]\nname = \"smoke\"\noutput = \"seq/smoke.vpak\"\ninputs = [\"src/smoke_####.vdb\"]\nframes = \"1-4\"\nsegment_frames = 1\n{extra}\n"
     );
     std::fs::write(&manifest, text).unwrap();
     manifest
@@ -111,6 +112,10 @@ fn parts_on_two_shards_merge_into_the_unsplit_asset() {
     assert!(a["voxel_rmse"].as_f64() > Some(0.0) && a["voxel_rmse"] == b["voxel_rmse"] && a["voxel_psnr"] == b["voxel_psnr"], "{:?} vs {:?}", a["voxel_rmse"], b["voxel_rmse"]);
     assert!(std::fs::read(&merged).unwrap() == std::fs::read(&unsplit).unwrap(), "the joined asset differs from the unsplit bake's");
     assert!(without_bake_settings(&merged) == without_bake_settings(&unsplit));
+    // Supercompressed as the manifest says, parts and all; the still's small body wrapped in one zstd frame.
+    let joined = Asset::open(&merged).unwrap();
+    assert!((0..joined.segment_count()).all(|s| joined.stored_segment(s).unwrap().is_coded()));
+    assert!(Asset::open(&out("whole/fog.vpak")).unwrap().is_wrapped(0));
 
     // Baked again: the joined asset is in place, so no part is cooked.
     let (code, v, err) = bake(&[s(&parted), "--out-dir", s(&out("one"))]);

@@ -15,7 +15,7 @@ use crate::{place, PlannedAsset, Record};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use vdbcook_pipeline::{Context, Error, Result};
-use vdbcook_vpak::segments::{part_writer, rewrite_metadata, PartInfo};
+use vdbcook_vpak::segments::{part_writer, rewrite_into, rewrite_metadata, PartInfo};
 use vdbcook_vpak::{Asset, AtomicFile, Metadata};
 
 /// Part `index` (from 1) of `count`.
@@ -92,20 +92,12 @@ pub fn cached_part(path: &Path, key: &str) -> Option<(PartNote, u64)> {
     Some((note, std::fs::metadata(path).ok()?.len()))
 }
 
-/// A part file again (header `info`, the segments of `asset`), every
-/// segment's metadata changed by `edit`, in memory.
-pub fn rewrite_part(info: &PartInfo, asset: &Asset, mut edit: impl FnMut(&mut Metadata)) -> Result<Vec<u8>> {
-    let table = asset.segments()?;
-    let mut w = part_writer(std::io::Cursor::new(Vec::new()), info, table.len() as u32)?;
-    for (s, e) in table.iter().enumerate() {
-        let mut sections = asset.segment(s)?.to_sections();
-        let meta = sections.iter_mut().find(|x| x.kind == vdbcook_vpak::kind::METADATA).ok_or_else(|| Error::Failed("a segment without metadata".into()))?;
-        let mut m = Metadata::from_bytes(&meta.data)?;
-        edit(&mut m);
-        meta.data = m.to_bytes()?.into();
-        w.add(e.frame_count, &sections)?;
-    }
-    Ok(w.finish()?.into_inner())
+/// A part file again (header `info`, the segments of `asset` as it stores
+/// them: supercompressed, as one process's cook would be), every segment's
+/// metadata changed by `edit`, in memory.
+pub fn rewrite_part(info: &PartInfo, asset: &Asset, edit: impl FnMut(&mut Metadata)) -> Result<Vec<u8>> {
+    let w = part_writer(std::io::Cursor::new(Vec::new()), info, asset.segment_count() as u32)?;
+    Ok(rewrite_into(asset, w, edit)?.into_inner())
 }
 
 /// The record of an asset from its parts' records (in order): frames, voxels

@@ -418,9 +418,17 @@ fn assemble_with(mut w: Writer<std::io::Cursor<Vec<u8>>>, segments: &[(u32, Vec<
 
 /// Writes `asset` again with every segment's metadata changed by `edit`
 /// (its other sections as they are): a version-7 file in memory.
-pub fn rewrite_metadata(asset: &crate::Asset, mut edit: impl FnMut(&mut Metadata)) -> Result<Vec<u8>, Error> {
+pub fn rewrite_metadata(asset: &crate::Asset, edit: impl FnMut(&mut Metadata)) -> Result<Vec<u8>, Error> {
+    let w = Writer::new(std::io::Cursor::new(Vec::new()), asset.segment_count() as u32)?;
+    Ok(rewrite_into(asset, w, edit)?.into_inner())
+}
+
+/// Writes `asset`'s segments to `w` (a file's or a part's writer of as
+/// many segments), every segment's metadata changed by `edit` and its
+/// other sections as the file stores them: supercompressed ones stay so,
+/// a wrapped body is wrapped again.
+pub fn rewrite_into<W: Write + Seek>(asset: &crate::Asset, mut w: Writer<W>, mut edit: impl FnMut(&mut Metadata)) -> Result<W, Error> {
     let table = asset.segments()?;
-    let mut w = Writer::new(std::io::Cursor::new(Vec::new()), table.len() as u32)?;
     for (s, e) in table.iter().enumerate() {
         // Stored sections: supercompressed ones stay as they are.
         let mut sections = asset.stored_segment(s)?.to_sections();
@@ -434,7 +442,7 @@ pub fn rewrite_metadata(asset: &crate::Asset, mut edit: impl FnMut(&mut Metadata
             false => w.add(e.frame_count, &sections)?,
         };
     }
-    Ok(w.finish()?.into_inner())
+    w.finish()
 }
 
 /// The whole sequence's metadata from its segments' (in order): the frames,
