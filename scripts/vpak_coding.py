@@ -27,8 +27,9 @@ TILED = (FILTER_TILES, FILTER_TILES_UNPREDICTED)
 MAX_EXPANSION = 1 << 15
 MAX_STRIDE = 4096
 # Input fed to the decompressor at a time, so a frame that decodes to more than its
-# record says is stopped after at most MAX_EXPANSION times this many bytes.
-FEED = 1 << 14
+# record says (or a wrapped body's limit) is stopped after at most MAX_EXPANSION times
+# this many bytes more.
+FEED = 1 << 8
 
 
 class CodingError(Exception):
@@ -115,6 +116,9 @@ def inflate(stored, limit, record=False):
         raise CodingError(f"its zstd frame states {size} bytes of content (at most {limit})")
     d = zstandard.ZstdDecompressor().decompressobj()
     out, got, fed = [], 0, 0
+    # Fed in small pieces (an RLE block's 4 bytes can stand for 128 KiB, and a decoder checks
+    # a stated size only at the frame's end), so that the output is checked against the limit
+    # before it grows more than 8 MiB past it.
     try:
         while fed < len(stored) and not d.eof:
             chunk = d.decompress(stored[fed:fed + FEED])
