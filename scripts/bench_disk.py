@@ -16,9 +16,10 @@ Then `--format bc7` with and without `--supercompress zstd` against the asset's 
 `zstd -19`; the cook time with and without `--supercompress` (and `--optimize disk`;
 median of 3, alternating); and the restore throughput on one core
 (crates/vpak/examples/restore.rs: decompress or context-decode and unfilter every
-supercompressed section, each segment into the memory of the one before as the runtime's
-reader does, and into fresh memory) against `zstd -d -T1` on the same sections as zstd
-frames (a context-coded one as the zstd frame of its filtered bytes at level 19), repeated
+supercompressed section, a wrapped body's frame first, each segment into the memory of the
+one before as the runtime's reader does, and into fresh memory) against `zstd -d -T1` on
+the same sections as zstd frames (a wrapped body's frame and the frames inside it; a
+context-coded one as the zstd frame of its filtered bytes at level 19), repeated
 to about 100 MB for zstd; five alternating rounds, the median of their ratios: for four
 fog assets, and for every `--optimize disk` asset the size tables made in the same run.
 """
