@@ -279,7 +279,7 @@ impl Asset {
         let e = self.table.get(s).ok_or(Error::NoSegment { segment: s, count: self.table.len() })?;
         let seg = Asset { bytes: self.bytes.clone(), start: self.start + e.offset as usize, len: e.size as usize, sections: Vec::new(), table: Vec::new(), version: self.version };
         let in_segment = |err| Error::InSegment(s, Box::new(err));
-        if crate::wrap::is_wrapped(seg.bytes()) && self.version >= segments::VERSION {
+        if self.is_wrapped(s) {
             if self.table.len() > 1 {
                 return Err(in_segment(crate::wrap::among_segments(self.table.len())));
             }

@@ -333,10 +333,10 @@ impl Io {
     /// segment) read whole, its frame checked against the entry and
     /// decompressed, the body inside read from memory.
     fn segment(&self, version: u32, e: &SegmentEntry, count: usize) -> Result<(SegmentInfo, Inner), Error> {
-        let mut magic = [0u8; 4];
-        self.read(e.offset, &mut magic)?;
-        if version < segments::VERSION || !crate::wrap::is_wrapped(&magic) {
-            return self.body(version, e.offset, e.size, Some(e));
+        // The body's header, which tells a wrapped body by its first bytes.
+        let header = self.read_vec(e.offset, HEADER_LEN.min(e.size as usize) as u64)?;
+        if version < segments::VERSION || !crate::wrap::is_wrapped(&header) {
+            return self.body_with(header, version, e.offset, e.size, Some(e));
         }
         if count > 1 {
             return Err(crate::wrap::among_segments(count));
@@ -365,6 +365,12 @@ impl Io {
     /// read, its restored layout planned.
     fn body(&self, version: u32, offset: u64, size: u64, entry: Option<&SegmentEntry>) -> Result<(SegmentInfo, Inner), Error> {
         let header = self.read_vec(offset, HEADER_LEN.min(size as usize) as u64)?;
+        self.body_with(header, version, offset, size, entry)
+    }
+
+    /// [`Io::body`] of a body whose `header` (its first bytes, up to
+    /// [`HEADER_LEN`]) is read already.
+    fn body_with(&self, header: Vec<u8>, version: u32, offset: u64, size: u64, entry: Option<&SegmentEntry>) -> Result<(SegmentInfo, Inner), Error> {
         head::body_version(&header, size)?;
         let n = head::table_len(&header, ENTRY_LEN, MAX_SECTIONS, Error::SectionCount, size)?;
         let table = self.read_vec(offset + HEADER_LEN as u64, n as u64)?;

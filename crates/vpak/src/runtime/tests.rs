@@ -156,9 +156,9 @@ fn a_wrapped_segment_is_read_whole_at_open_then_from_memory() {
     let r = Reader::new(bytes.clone()).unwrap();
     let info = r.segment(0).unwrap();
     assert!(info.wrapped && info.stored_size == asset.stored_bytes(0).unwrap().len() as u64);
-    // Opening read the header, the table entry, the frame's first four bytes, then the frame.
+    // Opening read the header, the table entry, the body's header (where the frame's magic is), then the frame.
     let opened = r.bytes_read();
-    assert_eq!(opened, (HEADER_LEN + segments::SEGMENT_ENTRY_LEN + 4) as u64 + info.stored_size);
+    assert_eq!(opened, (HEADER_LEN + segments::SEGMENT_ENTRY_LEN + HEADER_LEN) as u64 + info.stored_size);
     let got = r.segment_asset(0, Vec::new()).unwrap();
     assert!(got.bytes() == asset.segment(0).unwrap().bytes());
     for (sec, b) in info.sections.iter().zip(sections(&r, 0)) {
