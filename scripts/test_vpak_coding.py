@@ -60,7 +60,7 @@ def make_body(sections, align=256):
     return reseal(out)
 
 
-def make_file(bodies, version=13):
+def make_file(bodies, version=14):
     """A file of `bodies` (segments), of the given version."""
     out = bytearray(container(bodies))
     struct.pack_into("<I", out, 8, version)
@@ -70,7 +70,7 @@ def make_file(bodies, version=13):
 def stored_bodies(data):
     """The bodies of a segmented file as the segment table places them (not validated):
     a wrapped one (version 13) as its zstd frame."""
-    _, table = v.read_table(memoryview(data), (7, 8, 9, 10, 11, 12, 13), "file")
+    _, table = v.read_table(memoryview(data), (7, 8, 9, 10, 11, 12, 13, 14), "file")
     return [bytes(data[e[2]:e[2] + e[3]]) for e in table]
 
 
@@ -165,7 +165,7 @@ def check_restores(vdbcook, work, flags):
     """A vdbcook zstd asset restores exactly the sections of the same asset uncompressed."""
     packed = cook(vdbcook, work, "z", ["--supercompress", "zstd", *flags])
     plain = recompress(vdbcook, work, packed, "none")
-    assert struct.unpack_from("<I", packed, 8)[0] == 13
+    assert struct.unpack_from("<I", packed, 8)[0] == 14
     z, p = same_asset(packed, plain)
     filters = set()
     for (mz, sz), (_, sp), body in zip(z.bodies, p.bodies, bodies_of(packed)):
@@ -288,7 +288,8 @@ def check_refusals(packed, plain, work):
     refused(with_body(packed, rec(lambda r: r.__setitem__(3, 7 - filt))), "restored bytes do not match")
     refused(with_body(packed, rec(lambda r: r.__setitem__(6, (1 << 30) * slab))), "more than a")
     refused(with_body(packed, rec(lambda r: r.__setitem__(7, r[7] ^ 1))), "restored bytes do not match")
-    refused(with_body(packed, rec(lambda r: r.__setitem__(2, 3))), "scheme 3")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(2, 4))), "scheme 4")
+    refused(with_body(packed, rec(lambda r: r.__setitem__(2, 3))), "mask-coded with filter")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(2, 4), [2, 3]))), "context-coded with filter 3")
     refused(with_body(packed, rec(lambda r: r.__setitem__(3, 5))), "filter 5")
     refused(with_body(packed, rec(lambda r: r.__setitem__(slice(3, 6), [0, 2, 0]))), "filter 0 with width 2")
@@ -350,7 +351,7 @@ def check_refusals(packed, plain, work):
     refused(ten, "is not at a 256-byte boundary")
     # From version 12 a body with a coding section starts at a multiple of 8 (vdbcook puts the
     # first right after the segment table), one without at a multiple of 256.
-    _, table = v.read_table(memoryview(packed), (13,), "file")
+    _, table = v.read_table(memoryview(packed), (14,), "file")
     assert table[0][2] == -(-(64 + 32 * len(table)) // 8) * 8 < 256, table[0]
     eleven = bytearray(packed)
     struct.pack_into("<I", eleven, 8, 11)
@@ -415,6 +416,38 @@ def check_context(vdbcook, work):
     return len(coded)
 
 
+def check_masks(vdbcook, work):
+    """An L3 array mask-coded by `--optimize disk` (scheme 3, version 14) restores the
+    uncompressed asset's; damaged streams, and such a stream in a version-13 file, are
+    refused. Returns how many mask-coded sections were read."""
+    packed, plain, _ = check_restores(vdbcook, work, ["--max-error", "0.004", "--optimize", "disk"])
+    coded = [(s, k) for s, body in enumerate(bodies_of(packed)) for k, r in records_of(sections_of(body)).items() if r[2] == 3]
+    assert coded, "no L3 array mask-coded"
+    seg, l3 = coded[0]
+
+    def edit(fn, version=14):
+        bodies = bodies_of(packed)
+        secs = sections_of(bodies[seg])
+        sec = next(x for x in secs if (x[0], x[1]) == l3)
+        sec[2] = fn(sec[2])
+        bodies[seg] = make_body(secs)
+        return make_file(bodies, version)
+
+    same_asset(edit(lambda d: d), plain)
+    refused(edit(lambda d: d, version=13), "older than version 14")
+    where = f"section kind {v.K_L3} index 0"
+    stored = next(x for x in sections_of(bodies_of(packed)[seg]) if (x[0], x[1]) == l3)[2]
+    for cut in (0, 8, 16, len(stored) // 2, len(stored) - 1):
+        refused(edit(lambda d, cut=cut: d[:cut]), where)
+    for i in range(0, len(stored), len(stored) // 40 + 1):
+        def flip(d, i=i):
+            d = bytearray(d)
+            d[i] ^= 0x10
+            return bytes(d)
+        refused(edit(flip), where)
+    return len(coded)
+
+
 def check_wrapped(vdbcook, work):
     """vdbcook wraps the small supercompressed body of a one-segment asset in one zstd frame
     (version 13): it reads as the uncompressed asset does, so do this writer's own frames,
@@ -429,7 +462,7 @@ def check_wrapped(vdbcook, work):
     assert v.Asset(memoryview(packed)).wrapped == [True]
     same_asset(packed, plain, frames=1)
 
-    def wrapped(stored, version=13):
+    def wrapped(stored, version=14):
         """A file of the stored bodies `stored` (frames or bodies) of one frame each, a frame's checksum its own."""
         sums = lambda t: [e.__setitem__(4, xxh(b) if b[:4] == v.ZSTD_MAGIC else e[4]) for e, b in zip(t, stored)]
         out = bytearray(container(stored, counts=[1] * len(stored), entries=sums))
@@ -446,7 +479,7 @@ def check_wrapped(vdbcook, work):
     refused(wrapped([unsized]), "does not state its content size")
     refused(wrapped([frame + os.urandom(v.MAX_WRAPPED)]), f"bytes (at most {v.MAX_WRAPPED})")
     flipped = bytearray(packed)
-    flipped[v.read_table(memoryview(packed), (13,), "file")[1][0][2] + len(frame) // 2] ^= 0x10
+    flipped[v.read_table(memoryview(packed), (14,), "file")[1][0][2] + len(frame) // 2] ^= 0x10
     refused(bytes(flipped), "its wrapped body is not the one the segment table names")
     # Only a file of one segment wraps its body; version 12 wraps none (its frame is no body).
     refused(wrapped([frame, frame]), "in a file of 2 segments")
@@ -469,10 +502,11 @@ def main():
         check_wrapped(args.vdbcook, work)
         flips = check_refusals(*kept, work)
         contexts = check_context(args.vdbcook, work)
+        masks = check_masks(args.vdbcook, work)
     names = sorted(f"{FILTER_NAMES[f]}/{w}" for f, w in filters)
     print(f"ok: 4 supercompressed cooks restore the uncompressed sections (filter/width used: {', '.join(names)}); "
           f"every allowed filter decodes; wrapped bodies read, damaged frames refused; corrupt coding refused ({flips} flipped compressed bytes); "
-          f"{contexts} context-coded sections restore, damaged ones refused")
+          f"{contexts} context-coded sections and {masks} mask-coded L3 arrays restore, damaged ones refused")
 
 
 if __name__ == "__main__":

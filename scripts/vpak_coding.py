@@ -1,8 +1,9 @@
 """Supercompressed sections of a `.vpak` body (format version 8 and later), for scripts/vpak_read.py.
 
-Written from docs/format.md ("Supercompression", "Context coding") alone, like the reader:
-the coding section (kind 13) holds one 40-byte record per compressed section; a section is
-restored by decompressing one zstd frame (or, version 11, decoding a context-coded stream)
+Written from docs/format.md ("Supercompression", "Context coding", "Mask coding") alone, like
+the reader: the coding section (kind 13) holds one 40-byte record per compressed section; a
+section is restored by decompressing one zstd frame (or, version 11, decoding a context-coded
+stream; version 14, a mask-coded one)
 and undoing a shuffle, delta, tiles or (version 12) l3 nodes filter, and checked against the record's XXH3-64 of
 the restored bytes. Every rule the page states is
 checked; a failure raises `CodingError` with a one-line message.
@@ -16,12 +17,12 @@ import numpy as np
 
 K_CODING = 13
 RECORD_SIZE = 40
-SCHEME_ZSTD, SCHEME_CONTEXT = 1, 2
+SCHEME_ZSTD, SCHEME_CONTEXT, SCHEME_MASKS = 1, 2, 3
 FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA, FILTER_TILES, FILTER_TILES_UNPREDICTED, FILTER_L3 = 0, 1, 2, 3, 4, 5
 FILTER_NAMES = {FILTER_NONE: "none", FILTER_SHUFFLE: "shuffle", FILTER_DELTA: "delta", FILTER_TILES: "tiles",
                 FILTER_TILES_UNPREDICTED: "tiles unpredicted", FILTER_L3: "l3 nodes"}
-# The first file versions with context coding (scheme 2) and with the l3 nodes filter.
-CONTEXT_FROM, L3_FROM = 11, 12
+# The first file versions with context coding (scheme 2), the l3 nodes filter and mask coding (scheme 3).
+CONTEXT_FROM, L3_FROM, MASKS_FROM = 11, 12, 14
 TILED = (FILTER_TILES, FILTER_TILES_UNPREDICTED)
 # A zstd frame expands at most 2^15 times: a restored size beyond that is a lie.
 MAX_EXPANSION = 1 << 15
@@ -65,8 +66,12 @@ def parse_records(data, table, version):
             raise CodingError(f"{name} names a section the body does not hold")
         if kind in (1, K_CODING):
             raise CodingError(f"{name}: the metadata and the coding section are never compressed")
-        if scheme not in (SCHEME_ZSTD, SCHEME_CONTEXT):
-            raise CodingError(f"{name} has scheme {scheme} (1, zstd, or 2, context coding)")
+        if scheme not in (SCHEME_ZSTD, SCHEME_CONTEXT, SCHEME_MASKS):
+            raise CodingError(f"{name} has scheme {scheme} (1, zstd, 2, context coding, or 3, mask coding)")
+        if scheme == SCHEME_MASKS and version < MASKS_FROM:
+            raise CodingError(f"{name} is mask-coded (scheme 3) in a file older than version {MASKS_FROM}")
+        if scheme == SCHEME_MASKS and filt != FILTER_L3:
+            raise CodingError(f"{name} is mask-coded with filter {filt} (l3 nodes only)")
         if scheme == SCHEME_CONTEXT and version < CONTEXT_FROM:
             raise CodingError(f"{name} is context-coded (scheme 2) in a file older than version 11")
         if scheme == SCHEME_CONTEXT and filt != FILTER_TILES_UNPREDICTED:
@@ -310,11 +315,107 @@ def context_decode(stored, w, size):
     return b"".join(p.tobytes() for p in planes)
 
 
+MASK_CONTEXTS = 114
+
+
+def mask_context(a, b):
+    """The context of a row whose neighbour rows along x and y are a and b (None: outside the node)."""
+    if a is not None and b is not None:
+        return sum((((a >> z) & 1) + ((b >> z) & 1)) * 3 ** z for z in range(4))
+    if a is not None:
+        return 81 + a
+    if b is not None:
+        return 97 + b
+    return 113
+
+
+def masks_decode(stored, n):
+    """A mask-coded stream (format.md, "Mask coding") decoded into the l3 nodes filter's
+    output F of n bytes: its head from the side frame, its sub-masks row by row."""
+    stored = bytes(stored)
+    if len(stored) < 16:
+        raise CodingError(f"its mask stream is {len(stored)} bytes, shorter than its header")
+    lanes, prec, a_len, words_len = struct.unpack_from("<4I", stored, 0)
+    if not (1 <= lanes <= 64 and 9 <= prec <= 12):
+        raise CodingError(f"its mask stream has N={lanes}, P={prec}")
+    if 16 + a_len + 2 * words_len != len(stored):
+        raise CodingError("its mask stream's parts do not add up to its size")
+    table_len = MASK_CONTEXTS * 16 * 2
+    side = inflate(stored[16:16 + a_len], n + table_len + 4 * lanes)
+    c = struct.unpack_from("<I", side, 0)[0] if len(side) >= 4 else None
+    if c is None or 4 + 12 * c > n or len(side) != 4 + 12 * c + table_len + 4 * lanes:
+        raise CodingError(f"its mask stream's side frame of {len(side)} bytes is not an L3 array's head for {n} bytes, a table and {lanes} runs")
+    head = 4 + 12 * c
+    # Node k's states: field c + k, byte j at 4 + j·3c + c + k.
+    states = [sum(side[4 + j * 3 * c + c + k] << (8 * j) for j in range(4)) for k in range(c)]
+    owners = [(k, b) for k in range(c) for b in range(8) if (states[k] >> (2 * b)) & 3 == 2]
+    if n - head != 8 * len(owners):
+        raise CodingError(f"its L3 array holds {(n - head) / 8} sub-masks where its states name {len(owners)}")
+    table = struct.unpack_from(f"<{MASK_CONTEXTS * 16}H", side, head)
+    runs = struct.unpack_from(f"<{lanes}I", side, head + table_len)
+    total = 1 << prec
+    slots, cums, freqs = {}, {}, {}
+    for ctx in range(MASK_CONTEXTS):
+        f = table[16 * ctx:16 * ctx + 16]
+        if sum(f) == 0:
+            continue
+        if sum(f) != total:
+            raise CodingError(f"its mask context {ctx}'s frequencies sum to {sum(f)}, not 0 or {total}")
+        slots[ctx] = [sym for sym in range(16) for _ in range(f[sym])]
+        cums[ctx] = [sum(f[:sym]) for sym in range(16)]
+        freqs[ctx] = f
+    if any(r < 2 for r in runs) or sum(runs) != words_len:
+        raise CodingError(f"its mask stream's runs {list(runs)} are not its {words_len} words, each at least 2")
+    words = struct.unpack_from(f"<{words_len}H", stored, 16 + a_len)
+    starts = [sum(runs[:l]) for l in range(lanes)]
+    state = [words[starts[l]] * 65536 + words[starts[l] + 1] for l in range(lanes)]
+    at = [starts[l] + 2 for l in range(lanes)]
+    ends = [starts[l] + runs[l] for l in range(lanes)]
+    known = {}  # (node, sub-block): mask
+
+    def sub_mask(k, b):
+        st = (states[k] >> (2 * b)) & 3
+        return 0xFFFFFFFFFFFFFFFF if st == 1 else known.get((k, b), 0) if st == 2 else 0
+
+    out = bytearray(side[:head])
+    for k, b in owners:
+        lane = k % lanes
+        m = 0
+        for t in range(16):
+            row = lambda mask, r: (mask >> (4 * r)) & 15
+            a = row(m, t - 4) if t >= 4 else row(sub_mask(k, b - 4), 12 + t) if b & 4 else None
+            bb = row(m, t - 1) if t % 4 else row(sub_mask(k, b - 2), 4 * (t // 4) + 3) if b & 2 else None
+            ctx = mask_context(a, bb)
+            if ctx not in slots:
+                raise CodingError(f"its mask stream codes in unused context {ctx}")
+            x = state[lane]
+            slot = x % total
+            sym = slots[ctx][slot]
+            x = freqs[ctx][sym] * (x >> prec) + slot - cums[ctx][sym]
+            if x < 65536:
+                if at[lane] >= ends[lane]:
+                    raise CodingError("its mask stream runs past a lane's words")
+                x = x * 65536 + words[at[lane]]
+                at[lane] += 1
+            state[lane] = x
+            m |= sym << (4 * t)
+        known[(k, b)] = m
+        out += struct.pack("<Q", m)
+    if at != ends or any(x != 65536 for x in state):
+        raise CodingError("its mask stream does not end where its coder does")
+    return bytes(out)
+
+
 def restore(stored, record, xxh3_64):
     """A section's bytes from its stored bytes and its coding record."""
     scheme, filt, w, s, n, checksum = record
     size = filtered_size(filt, w, n)
-    f = context_decode(stored, w, size) if scheme == SCHEME_CONTEXT else decompress(stored, size)
+    if scheme == SCHEME_CONTEXT:
+        f = context_decode(stored, w, size)
+    elif scheme == SCHEME_MASKS:
+        f = masks_decode(stored, size)
+    else:
+        f = decompress(stored, size)
     section = unfilter(f, filt, w, s, n)
     if xxh3_64(section) != checksum:
         raise CodingError("restored bytes do not match the coding record's checksum")

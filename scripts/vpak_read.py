@@ -23,7 +23,7 @@ body's supercompressed sections are restored (scripts/vpak_coding.py) before use
 each frame's number; older assets number their frames from 0). `--json` gives `fps` and
 `frame_numbers` too (24 and 0, 1, ... when the asset records none).
 
-As a module: `open_segments(path)` opens a version-6 to 13 file (every body validated,
+As a module: `open_segments(path)` opens a version-6 to 14 file (every body validated,
 every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
 `open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
@@ -49,7 +49,7 @@ from vpak_decode import (  # noqa: F401 (names the test scripts use as vpak_read
 )
 from vpak_metadata import (  # noqa: F401
     BODY_VERSION, CODED_VERSION, CONTEXT_VERSION, DEFAULT_FPS, L3_VERSION, RESOLVED_VERSION, SEGMENTED_VERSION, TIMED_VERSION, WRAPPED_VERSION,
-    VpakError, channel_level, channel_transform, decode_metadata, fps, frame_numbers,
+    MASKED_VERSION, VpakError, channel_level, channel_transform, decode_metadata, fps, frame_numbers,
 )
 
 MAGIC = b"VPAK\r\n\x1a\n"
@@ -636,12 +636,12 @@ def merged(metas):
 
 
 class Asset:
-    """A version-6 to 13 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
+    """A version-6 to 14 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
     and `bodies` [(metadata, sections)] per segment (frames numbered from 0 in each), `meta`
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
     def __init__(self, buf):
-        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION, L3_VERSION, WRAPPED_VERSION), "file")
+        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION, L3_VERSION, WRAPPED_VERSION, MASKED_VERSION), "file")
         if self.version == BODY_VERSION:
             self.bodies = [open_body(buf)]
             self.meta = self.bodies[0][0]

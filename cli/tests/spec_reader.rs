@@ -105,10 +105,13 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
     let _ = std::fs::remove_dir_all(&dir);
     assert!(total > 500_000, "{total} values compared");
     assert!(WRAPPED.load(std::sync::atomic::Ordering::Relaxed) > 0, "no case made a wrapped body");
+    assert!(MASKED.load(std::sync::atomic::Ordering::Relaxed) > 0, "no case made a mask-coded L3 array");
 }
 
 /// Bodies the spec-only reader found wrapped (version 13), over every case.
 static WRAPPED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+/// Mask-coded sections (scheme 3, version 14) the spec-only reader restored, over every case.
+static MASKED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// Cooks `inputs` with `flags` into `dir/TAG.vpak`, then per frame decodes it with the
 /// spec-only reader and with `vdbcook unpack` (at `lod`, when given) and compares them
@@ -125,23 +128,26 @@ fn compare_case(dir: &std::path::Path, tag: &str, inputs: &[String], flags: &[&s
     let mut wrapped_by_reader = None;
     if flags.contains(&"--supercompress") {
         // The reader restored sections in every segment (not a file stored as it is),
-        // context-coded ones (scheme 2) among them when the cook optimised for the disk.
+        // context-coded ones (scheme 2) among them when the cook optimised for the disk; and
+        // how many L3 arrays it found mask-coded (scheme 3).
         let coded = python(&[
             "-c",
             "import sys; sys.path.insert(0, 'scripts'); import vpak_read as v; a = v.open_segments(sys.argv[1]); \
-             print(a.version, min(len(s.coding) + w for (_, s), w in zip(a.bodies, a.wrapped)), sum(r[0] == 2 for _, s in a.bodies for r in s.coding.values()), sum(a.wrapped))",
+             print(a.version, min(len(s.coding) + w for (_, s), w in zip(a.bodies, a.wrapped)), sum(r[0] == 2 for _, s in a.bodies for r in s.coding.values()), sum(a.wrapped), \
+             sum(r[0] == 3 for _, s in a.bodies for r in s.coding.values()))",
             s(&asset),
         ]);
         let said = String::from_utf8_lossy(&coded.stdout);
         let fields: Vec<&str> = said.split_whitespace().collect();
         let context = flags.contains(&"disk");
-        if fields.len() != 4 || fields[0] != vdbcook_vpak::VERSION.to_string() || fields[1] == "0" || (fields[2] == "0") == context {
+        if fields.len() != 5 || fields[0] != vdbcook_vpak::VERSION.to_string() || fields[1] == "0" || (fields[2] == "0") == context {
             return Err(format!(
                 "{flags:?}: not supercompressed in every segment, or context coding not as expected (version, fewest records or wrapped, context-coded, wrapped: {said}) {}",
                 String::from_utf8_lossy(&coded.stderr)
             ));
         }
         wrapped_by_reader = fields[3].parse::<usize>().ok();
+        MASKED.fetch_add(fields[4].parse::<usize>().unwrap_or(0), std::sync::atomic::Ordering::Relaxed);
     }
     let meta: serde_json::Value = serde_json::from_slice(&vdbcook(&["inspect", "--json", s(&asset)]).stdout).unwrap();
     let meta = &meta["files"][0];

@@ -85,13 +85,23 @@ fn constant_of(values: &Brick, mask: &[u64; 8]) -> Option<(f32, Option<[f32; 2]>
 /// (the entropy of each format's filtered texels,
 /// `vdbcook_vpak::coding::brick_cost`) rather than on the GPU.
 pub fn cheapest(values: &Brick, mask: &[u64; 8], max_error: f32, quality: Quality, disk: Option<Optimize>) -> Choice {
-    constant_within(values, mask, max_error).unwrap_or_else(|| cheapest_ranged(values, range_of(values), mask, max_error, quality, disk, None))
+    constant_within(values, mask, max_error, disk.is_some()).unwrap_or_else(|| cheapest_ranged(values, range_of(values), mask, max_error, quality, disk, None))
 }
 
 /// The constant choice (the first of [`Format::BY_COST`]) when it holds
-/// every voxel of `mask` within `max_error`.
-fn constant_within(values: &Brick, mask: &[u64; 8], max_error: f32) -> Option<Choice> {
-    let (v, shown) = constant_of(values, mask)?;
+/// every voxel of `mask` within `max_error`; for a supercompressed asset
+/// (`disk`) its value is the float of fewest mantissa bits that does.
+fn constant_within(values: &Brick, mask: &[u64; 8], max_error: f32, disk: bool) -> Option<Choice> {
+    let (mut v, shown) = constant_of(values, mask)?;
+    if disk {
+        // For the disk: the value of fewest mantissa bits that holds them all.
+        let e = f64::from(max_error);
+        let [lo, hi] = shown.map_or_else(|| range_of(values), |[lo, hi]| [(f64::from(hi) - e) as f32, (f64::from(lo) + e) as f32]);
+        let c = crate::snap::fewest_bits(lo.min(v), hi.max(v));
+        if shown.is_none_or(|[lo, hi]| (f64::from(c) - f64::from(lo)).abs() <= e && (f64::from(hi) - f64::from(c)).abs() <= e) {
+            v = c;
+        }
+    }
     // It decodes to v everywhere, and the shown voxels (all finite) farthest
     // from v are their smallest and largest ([`within`]'s test, there).
     let e = f64::from(max_error);
@@ -230,7 +240,7 @@ impl Choices {
                 .collect();
             // Constants first; the others' BC7 candidates (the next format
             // tried) encoded a batch at a time, then the rest brick by brick.
-            let constant: Vec<Option<Choice>> = items.par_iter().map(|i| constant_within(i.values, &i.mask, max_error)).collect();
+            let constant: Vec<Option<Choice>> = items.par_iter().map(|i| constant_within(i.values, &i.mask, max_error, disk.is_some())).collect();
             let ranged: Vec<usize> = (0..items.len()).filter(|&j| constant[j].is_none()).collect();
             let bb = single_plane(Format::Bc7).brick_bytes();
             let encoded: Vec<Vec<u8>> = ranged.par_chunks(BC7_BATCH).map(|js| bc7_candidates(quality, &js.iter().map(|&j| items[j]).collect::<Vec<_>>())).collect();

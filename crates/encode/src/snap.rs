@@ -1,9 +1,9 @@
 //! Texels for the disk (`cook --max-error E --supercompress`): once a
 //! brick's format is chosen, its texels are moved to the coarsest grid of
 //! values that still keeps every shown voxel within E (levels of the ranged
-//! formats on a step of about 2E, their range's `max` moved up to make it a
-//! whole number of levels; floats with their lowest mantissa bits rounded
-//! off), so that a supercompressed file spends bits on what the bound asks
+//! formats on a step of about 2E, their range's `min` moved down to a float
+//! of few mantissa bits and its `max` up to make it a whole number of levels;
+//! floats with their lowest mantissa bits rounded off), so that a supercompressed file spends bits on what the bound asks
 //! and no more. With `--optimize disk` the levels are chosen for the
 //! context coder instead: each the one nearest its prediction within the
 //! bound ([`Coder::Context`]). The format and the bound are unchanged.
@@ -82,8 +82,9 @@ fn for_coder(format: Format, coder: Coder, on_step: impl Fn(f64) -> Option<(Vec<
 }
 
 /// Levels of a ranged format on a step of value s (`fraction` · 2E, or a
-/// little less where rounding asks): the brick's smallest value stays its
-/// range's `min`, and its `max` is moved so that every level is a multiple
+/// little less where rounding asks): the range's `min` is the float of
+/// fewest mantissa bits at most s below the brick's smallest value, and its
+/// `max` is moved so that every level is a multiple
 /// of an integer k ≥ 2 (k = top / the number of steps the brick spans).
 /// Each brick's texels are then k times a small integer, which the `tiles`
 /// filter divides out, so every brick's residuals are in steps of about s.
@@ -102,20 +103,24 @@ fn stepped(
     push: fn(&mut Vec<u8>, u32),
     passes: &dyn Fn(&[u8], [f32; 2]) -> bool,
 ) -> Option<(Vec<u8>, [f32; 2])> {
-    let (lo, span) = (f64::from(range[0]), f64::from(range[1]) - f64::from(range[0]));
     // For the context coder: whether texel t's voxel is hidden (texel order).
     let hidden: Option<[bool; 512]> = (coder == Coder::Context).then(|| swap_xz(&std::array::from_fn(|i| mask[i >> 6] >> (i & 63) & 1 == 0)));
     for shrink in [1.0, 0.99, 0.95, 0.85, 0.7, 0.5] {
         let s = 2.0 * f64::from(max_error) * shrink * fraction;
+        // The range's min moved down by at most a step, to the float of fewest
+        // mantissa bits there: a level is as cheap to code from any min, a
+        // brick's min of 24 random bits is not.
+        let low = fewest_bits((f64::from(range[0]) - s) as f32, range[0]);
+        let (lo, span) = (f64::from(low), f64::from(range[1]) - f64::from(low));
         let k = (f64::from(top) / (span / s).ceil().max(1.0)).floor() as u32;
         if k < 2 {
             return None;
         }
         let hi = (lo + s * f64::from(top) / f64::from(k)) as f32;
-        if !hi.is_finite() || hi <= range[0] {
+        if !hi.is_finite() || hi <= low {
             return None;
         }
-        let moved = [range[0], hi];
+        let moved = [low, hi];
         let mut l = levels(values, moved, top as f32);
         (0..l.len()).filter(|&i| mask[i >> 6] >> (i & 63) & 1 == 0).for_each(|i| l[i] = 0.0);
         // Multiples of k, as their quotients in texel order: the nearest.
@@ -145,6 +150,20 @@ fn stepped(
         }
     }
     None
+}
+
+/// The float in [lo, hi] with the fewest mantissa bits (0 where the
+/// interval holds it): the end of larger magnitude with its lowest bits
+/// cleared, as many as leave it inside.
+pub(crate) fn fewest_bits(lo: f32, hi: f32) -> f32 {
+    if !lo.is_finite() || !hi.is_finite() || lo > hi {
+        return hi;
+    }
+    if lo <= 0.0 && hi >= 0.0 {
+        return 0.0;
+    }
+    let edge = if lo > 0.0 { hi } else { lo };
+    (0..=23u32).rev().map(|bits| f32::from_bits(edge.to_bits() & !((1u32 << bits) - 1))).find(|c| (lo..=hi).contains(c)).unwrap_or(edge)
 }
 
 /// The texels with the most low mantissa bits (at most `max`) rounded off
@@ -199,8 +218,10 @@ mod tests {
                     continue;
                 };
                 assert!(within(&v, &decode_one(format, &snapped, moved), &mask, e), "{format:?} at {e}");
-                assert_eq!(moved[0], range[0], "{format:?} at {e}: the range starts where it did");
                 if matches!(format, Format::Unorm8 | Format::Unorm16) {
+                    // The range starts at most a step lower, on a float of fewer mantissa bits.
+                    assert!(moved[0] <= range[0] && f64::from(range[0] - moved[0]) <= 2.0 * f64::from(e), "{format:?} at {e}: {moved:?} from {range:?}");
+                    assert!(moved[0].to_bits().trailing_zeros() > range[0].to_bits().trailing_zeros(), "{format:?} at {e}: {} from {}", moved[0], range[0]);
                     // Every level a multiple of one k ≥ 2, and the step in value no more than 2E.
                     let w = format.lane_bytes();
                     let level = |c: &[u8]| c.iter().rev().fold(0u32, |v, &b| v << 8 | u32::from(b));
@@ -271,6 +292,23 @@ mod tests {
             assert_eq!((bytes.clone(), range), on(&smooth, 0.5), "{format:?}: the smooth brick on a step of E");
             assert_ne!(range, on(&smooth, 1.0).1, "{format:?}");
             assert_eq!(chosen(&noisy), on(&noisy, 1.0), "{format:?}: the noisy brick on a step of 2E");
+        }
+    }
+
+    #[test]
+    fn the_float_of_fewest_mantissa_bits_in_an_interval() {
+        assert_eq!(fewest_bits(0.30, 0.32), 0.3125); // 1.01 · 2⁻²
+        assert_eq!(fewest_bits(0.26, 0.30), 0.28125); // the first bit that fits, from the top
+        assert_eq!(fewest_bits(0.2, 0.6), 0.5);
+        assert_eq!(fewest_bits(-0.32, -0.30), -0.3125); // by magnitude, the sign kept
+        assert_eq!(fewest_bits(-0.01, 0.02), 0.0);
+        assert_eq!(fewest_bits(0.7, 0.7), 0.7); // nothing to drop
+        for (lo, hi) in [(0.123_f32, 0.125_f32), (1.0e-6, 1.1e-6), (3.0e5, 3.1e5)] {
+            let c = fewest_bits(lo, hi);
+            assert!((lo..=hi).contains(&c), "{c} outside [{lo}, {hi}]");
+            // No float of the interval has more trailing zero bits.
+            let best = (lo.to_bits()..=hi.to_bits()).map(|b| b.trailing_zeros()).max();
+            assert_eq!(Some(c.to_bits().trailing_zeros()), best, "[{lo}, {hi}]: {c}");
         }
     }
 

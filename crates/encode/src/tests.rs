@@ -372,6 +372,33 @@ fn kind_of_brick(rng: &mut vdbcook_testkit::Rng, kind: u64) -> Brick {
 }
 
 #[test]
+fn supercompressed_choices_keep_the_bound_with_ranges_of_few_mantissa_bits() {
+    // For a supercompressed asset the constant's value and a ranged brick's
+    // min are the floats of fewest mantissa bits the bound allows: never more
+    // bits than the plain choice's, and every shown voxel still within E.
+    let mut rng = vdbcook_testkit::Rng::new(0x5ca1e);
+    let bits = |x: f32| 32 - x.to_bits().trailing_zeros().min(32);
+    let (mut fewer, mut ranged) = (0, 0);
+    for trial in 0..60u64 {
+        let brick = kind_of_brick(&mut rng, trial % 5);
+        let mask: [u64; 8] = if trial % 3 == 0 { std::array::from_fn(|_| rng.next_u64() & rng.next_u64()) } else { [u64::MAX; 8] };
+        let e = 10f32.powf(-4.0 + 3.5 * rng.unit());
+        let plain = cheapest(&brick, &mask, e, Quality::VeryFast, None);
+        for disk in [crate::Optimize::Gpu, crate::Optimize::Disk] {
+            let choice = cheapest(&brick, &mask, e, Quality::VeryFast, Some(disk));
+            let decoded = decode_one(choice.format, &choice.bytes, choice.range);
+            assert!(within(&brick, &decoded, &mask, e), "trial {trial} {disk:?}: {} breaks {e}", choice.format.name());
+            if choice.format == plain.format && matches!(choice.format, Format::Constant | Format::Unorm8 | Format::Unorm16) {
+                assert!(bits(choice.range[0]) <= bits(plain.range[0]), "trial {trial} {disk:?}: {:?} from {:?}", choice.range, plain.range);
+                fewer += usize::from(bits(choice.range[0]) < bits(plain.range[0]));
+                ranged += 1;
+            }
+        }
+    }
+    assert!(ranged >= 20 && fewer * 2 > ranged, "{fewer} of {ranged} choices with a shorter min");
+}
+
+#[test]
 fn per_brick_formats_meet_the_bound_with_the_cheapest_format() {
     // For random bricks (five kinds, fully or partly shown) and random
     // bounds E: every shown voxel, decoded through the plane the choice

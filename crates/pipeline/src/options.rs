@@ -329,7 +329,8 @@ settings_group! {
         /// the same GPU bytes (a reader restores a segment when it loads it, at zstd's speed).
         /// With --max-error the texels are also moved to the coarsest grid within E (ranged
         /// formats: steps of about 2E; inactive voxels, which no bound holds, at the brick's min;
-        /// see --optimize disk for what it changes).
+        /// a range's min and a constant's value floats of few mantissa bits; see --optimize
+        /// disk for what it changes).
         #[cfg_attr(feature = "clap", arg(long, value_name = "none|zstd[:LEVEL]", default_value_t = CookSettings::default().supercompress))]
         pub supercompress: Supercompress = Supercompress::None;
         /// With --max-error and --supercompress, what each brick's format choice minimises: gpu

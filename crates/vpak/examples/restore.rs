@@ -42,8 +42,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 false => (raw, stored) = (raw + c.raw_size, stored + b.len() as u64),
             }
             match c.scheme {
-                // A context-coded section as zstd would store it (level 19, the same filter).
-                coding::SCHEME_CONTEXT => frames.extend_from_slice(&coding::zstd_frame(&c, &coding::restore(&c, b)?, 19)?),
+                // A context- or mask-coded section as zstd would store it (level 19, the same filter).
+                coding::SCHEME_CONTEXT | coding::SCHEME_MASKS => frames.extend_from_slice(&coding::zstd_frame(&c, &coding::restore(&c, b)?, 19)?),
                 _ => frames.extend_from_slice(b),
             }
         }

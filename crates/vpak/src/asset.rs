@@ -96,7 +96,9 @@ impl Asset {
         whole.version = whole.version_field()?;
         match whole.version {
             segments::BODY_VERSION => whole.body(),
-            segments::VERSION | segments::VERSION_12 | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => whole.container(),
+            segments::VERSION | segments::VERSION_13 | segments::VERSION_12 | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
+                whole.container()
+            }
             v => Err(Error::Version(v)),
         }
     }
@@ -313,7 +315,7 @@ impl Asset {
 
     /// Whether segment `s` is stored wrapped in one zstd frame ([`crate::wrap`]).
     pub fn is_wrapped(&self, s: usize) -> bool {
-        self.stored_bytes(s).is_ok_and(|b| self.version >= segments::VERSION && crate::wrap::is_wrapped(b))
+        self.stored_bytes(s).is_ok_and(|b| self.version >= segments::VERSION_13 && crate::wrap::is_wrapped(b))
     }
 
     /// Bytes a renderer uploads to draw any frame, summed over the segments:

@@ -14,6 +14,10 @@ pub const SCHEME_ZSTD: u32 = 1;
 /// Compression scheme 2 (version 11): a `tiles unpredicted` atlas coded
 /// with a context model and rANS ([`crate::context`]).
 pub const SCHEME_CONTEXT: u32 = 2;
+/// Compression scheme 3 (version 14): an L3 array under the `l3 nodes`
+/// filter, its sub-masks coded with a context model and rANS
+/// ([`crate::masks`]).
+pub const SCHEME_MASKS: u32 = 3;
 /// A zstd frame decodes to at most this many times its own size (an RLE
 /// block of 4 bytes stands for up to 128 KiB): a larger claimed size is a lie.
 const MAX_RATIO: u64 = 1 << 15;
@@ -302,6 +306,7 @@ impl Coding {
     pub fn scheme_name(&self) -> &'static str {
         match self.scheme {
             SCHEME_CONTEXT => "context",
+            SCHEME_MASKS => "masks",
             _ => "zstd",
         }
     }
@@ -326,12 +331,15 @@ impl Coding {
             .map(|r| {
                 let u = |i: usize| u32::from_le_bytes(r[i * 4..i * 4 + 4].try_into().unwrap_or([0; 4]));
                 let (kind, index, scheme) = (u(0), u(1), u(2));
-                if !matches!(scheme, SCHEME_ZSTD | SCHEME_CONTEXT) {
+                if !matches!(scheme, SCHEME_ZSTD | SCHEME_CONTEXT | SCHEME_MASKS) {
                     return Err(Error::Coding { kind, index, problem: format!("unknown scheme {scheme}") });
                 }
                 let filter = Filter::from_code(u(3), u(4), u(5)).ok_or_else(|| Error::Coding { kind, index, problem: format!("unknown filter {} (width {}, stride {})", u(3), u(4), u(5)) })?;
                 if scheme == SCHEME_CONTEXT && !matches!(filter, Filter::Tiles(Tiles { predict: false, .. })) {
                     return Err(Error::Coding { kind, index, problem: format!("codes filter {} with context coding, which takes tiles unpredicted only", filter.name()) });
+                }
+                if scheme == SCHEME_MASKS && filter != Filter::L3Nodes {
+                    return Err(Error::Coding { kind, index, problem: format!("codes filter {} with mask coding, which takes l3 nodes only", filter.name()) });
                 }
                 let raw_size = u64::from_le_bytes(r[24..32].try_into().unwrap_or([0; 8]));
                 let raw_checksum = u64::from_le_bytes(r[32..40].try_into().unwrap_or([0; 8]));
@@ -576,6 +584,12 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) 
                     (data, scheme, filter) = (coded, SCHEME_CONTEXT, Filter::Tiles(t));
                 }
             }
+            if schemes.context && best == Filter::L3Nodes {
+                let worth = |c: &Vec<u8>| (c.len() as f64) <= CONTEXT_GAIN * data.len() as f64 && filtered.len() as u64 <= c.len() as u64 * MAX_RATIO;
+                if let Some(coded) = crate::masks::encode(&filtered, level)?.filter(worth) {
+                    (data, scheme) = (coded, SCHEME_MASKS);
+                }
+            }
             drop((filtered, unpredicted));
             // Stored as it is unless compression saves more than its record costs.
             if data.len() + RECORD_LEN >= s.data.len() {
@@ -668,6 +682,10 @@ fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>
                 SCHEME_CONTEXT => {
                     buf.resize(n, 0);
                     crate::context::decode(stored, c.filter.width() as u32, &mut buf).map_err(err)?;
+                }
+                SCHEME_MASKS => {
+                    buf.resize(n, 0);
+                    crate::masks::decode(stored, &mut buf).map_err(err)?;
                 }
                 _ => check(decompress_into(stored, &mut buf))?,
             }

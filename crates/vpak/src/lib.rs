@@ -31,6 +31,7 @@ mod direct;
 mod head;
 mod l3_filter;
 pub mod layout;
+pub mod masks;
 pub mod nodes;
 pub mod resolution;
 pub mod runtime;

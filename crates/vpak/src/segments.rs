@@ -13,8 +13,11 @@ use std::io::{Seek, SeekFrom, Write};
 /// supercompressed sections ([`crate::coding`], context-coded ones and L3
 /// arrays through the `l3 nodes` filter included), record their frames' time
 /// ([`crate::Time`]) and their channels' voxel sizes ([`crate::Resolution`]),
-/// and small bodies wrapped whole in one zstd frame ([`crate::wrap`]).
-pub const VERSION: u32 = 13;
+/// small bodies wrapped whole in one zstd frame ([`crate::wrap`]), and L3
+/// arrays whose sub-masks are mask-coded ([`crate::masks`]).
+pub const VERSION: u32 = 14;
+/// Version of a file whose L3 arrays are never mask-coded (still read).
+pub const VERSION_13: u32 = 13;
 /// Version of a file whose bodies are never wrapped (still read).
 pub const VERSION_12: u32 = 12;
 /// Version of a file whose L3 arrays are not filtered as nodes (still read).
@@ -769,6 +772,29 @@ pub(crate) mod tests {
         let mut b = with_body_at(&b, ALIGN as u64);
         set_version(&mut b, VERSION);
         Asset::from_bytes(&b).unwrap().segment(0).unwrap();
+    }
+
+    #[test]
+    fn mask_coding_is_version_14() {
+        use crate::coding::{Coding, Filter, SCHEME_MASKS};
+        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        let mut sections = body(&m, 1);
+        // 40 nodes, each with two sub-masks of a striped pattern.
+        let (n, mut words) = (40u32, vec![40u32]);
+        for k in 0..n {
+            words.extend([k, 0b1010, 1 + 3 * n + 4 * k]);
+        }
+        words.extend((0..4 * n).map(|i| if i % 2 == 0 { 0x0f0f_0f0f } else { 0x3333_3333 }));
+        let raw: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+        let stored = crate::masks::encode(&crate::l3_filter::apply(&raw), 3).unwrap().unwrap();
+        let record = Coding { kind: kind::L3_NODES, index: 0, scheme: SCHEME_MASKS, filter: Filter::L3Nodes, raw_size: raw.len() as u64, raw_checksum: crate::checksum(&raw) };
+        sections.push(Section { kind: kind::L3_NODES, index: 0, data: stored.into() });
+        sections.push(Section { kind: kind::CODING, index: 0, data: record.bytes().to_vec().into() });
+        let b = assemble_unwrapped(&[(2, sections)]).unwrap();
+        let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
+        assert_eq!(restored.section(kind::L3_NODES, 0).unwrap(), &raw[..]);
+        let err = older_error(&b, VERSION_13);
+        assert!(err.contains("mask-coded in a version-13 file"), "{err}");
     }
 
     #[test]

@@ -173,13 +173,13 @@ fn tokens(tile: &[u16]) -> Vec<Token> {
 
 /// Counts per context quantised to a total of 2^`precision` each (every
 /// symbol seen at least 1; a context never seen all 0).
-fn quantise(counts: &[[u64; MAX_SYMBOLS]], precision: u32) -> Vec<[u32; MAX_SYMBOLS]> {
+pub(crate) fn quantise<const N: usize>(counts: &[[u64; N]], precision: u32) -> Vec<[u32; N]> {
     let total = 1i64 << precision;
     counts
         .iter()
         .map(|c| {
             let n: u64 = c.iter().sum();
-            let mut f = [0u32; MAX_SYMBOLS];
+            let mut f = [0u32; N];
             if n == 0 {
                 return f;
             }
@@ -191,7 +191,7 @@ fn quantise(counts: &[[u64; MAX_SYMBOLS]], precision: u32) -> Vec<[u32; MAX_SYMB
             // The largest takes the difference; if it cannot give all of it, the next largest gives the rest.
             let mut sum: i64 = f.iter().map(|&x| i64::from(x)).sum();
             while sum != total {
-                let s = (0..MAX_SYMBOLS).max_by_key(|&s| (f[s], std::cmp::Reverse(s))).unwrap_or(0);
+                let s = (0..N).max_by_key(|&s| (f[s], std::cmp::Reverse(s))).unwrap_or(0);
                 let d = (total - sum).max(1 - i64::from(f[s]));
                 f[s] = (i64::from(f[s]) + d) as u32;
                 sum += d;
@@ -199,6 +199,18 @@ fn quantise(counts: &[[u64; MAX_SYMBOLS]], precision: u32) -> Vec<[u32; MAX_SYMB
             f
         })
         .collect()
+}
+
+/// Encodes a symbol of frequency `f` and cumulative frequency `c` (of
+/// 2^`precision`) into rANS state `x`, first pushing its low word when the
+/// state would outgrow 32 bits (encoding runs backwards: the words are
+/// reversed once all are pushed).
+pub(crate) fn rans_put(x: &mut u32, f: u32, c: u32, precision: u32, words: &mut Vec<u16>) {
+    if u64::from(*x) >= (u64::from(RANS_LOW >> precision) << 16) * u64::from(f) {
+        words.push(*x as u16);
+        *x >>= 16;
+    }
+    *x = ((*x / f) << precision) + *x % f + c;
 }
 
 /// The `tiles unpredicted` filter's output `filtered` (`width`-byte elements
@@ -274,13 +286,7 @@ fn encode_lanes(filtered: &[u8], width: u32, level: i32, lanes: usize) -> std::i
             for t in lanes_of(g).rev() {
                 let tok = toks[t][v];
                 let (ctx, sym) = (usize::from(tok.ctx), usize::from(tok.sym));
-                let (f, c) = (freq[ctx][sym], cum[ctx][sym]);
-                let x = &mut states[t % lanes];
-                if u64::from(*x) >= (u64::from(RANS_LOW >> PRECISION) << 16) * u64::from(f) {
-                    words.push(*x as u16);
-                    *x >>= 16;
-                }
-                *x = ((*x / f) << PRECISION) + *x % f + c;
+                rans_put(&mut states[t % lanes], freq[ctx][sym], cum[ctx][sym], PRECISION, &mut words);
             }
         }
     }
@@ -554,4 +560,4 @@ fn finish(s: &Stream, states: &[u32], wp: usize, escapes: &Escapes) -> Result<()
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

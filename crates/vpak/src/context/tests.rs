@@ -51,7 +51,7 @@ fn decoded(stored: &[u8], width: usize, len: usize, decoder: Decoder) -> Result<
 }
 
 /// A xorshift generator started at `seed` (1 for 0).
-fn xorshift(seed: u32) -> impl FnMut() -> u32 {
+pub(crate) fn xorshift(seed: u32) -> impl FnMut() -> u32 {
     let mut rng = seed.max(1);
     move || {
         rng ^= rng << 13;

@@ -85,7 +85,7 @@ impl Reader {
         let version = head::version(&header, len)?;
         let bodies = match version {
             segments::BODY_VERSION => vec![io.body(version, 0, len, None)?],
-            segments::VERSION | segments::VERSION_12 | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
+            segments::VERSION | segments::VERSION_13 | segments::VERSION_12 | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
                 let n = head::table_len(&header, segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount, len)?;
                 let table = io.read_vec(HEADER_LEN as u64, n as u64)?;
                 head::check_checksum(&header, &table)?;
@@ -335,7 +335,7 @@ impl Io {
     fn segment(&self, version: u32, e: &SegmentEntry, count: usize) -> Result<(SegmentInfo, Inner), Error> {
         // The body's header, which tells a wrapped body by its first bytes.
         let header = self.read_vec(e.offset, HEADER_LEN.min(e.size as usize) as u64)?;
-        if version < segments::VERSION || !crate::wrap::is_wrapped(&header) {
+        if version < segments::VERSION_13 || !crate::wrap::is_wrapped(&header) {
             return self.body_with(header, version, e.offset, e.size, Some(e));
         }
         if count > 1 {
