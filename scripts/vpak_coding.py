@@ -16,6 +16,7 @@ import struct
 import numpy as np
 
 K_CODING = 13
+K_L3 = 7
 RECORD_SIZE = 40
 SCHEME_ZSTD, SCHEME_CONTEXT, SCHEME_MASKS = 1, 2, 3
 FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA, FILTER_TILES, FILTER_TILES_UNPREDICTED, FILTER_L3 = 0, 1, 2, 3, 4, 5
@@ -70,8 +71,8 @@ def parse_records(data, table, version):
             raise CodingError(f"{name} has scheme {scheme} (1, zstd, 2, context coding, or 3, mask coding)")
         if scheme == SCHEME_MASKS and version < MASKS_FROM:
             raise CodingError(f"{name} is mask-coded (scheme 3) in a file older than version {MASKS_FROM}")
-        if scheme == SCHEME_MASKS and filt != FILTER_L3:
-            raise CodingError(f"{name} is mask-coded with filter {filt} (l3 nodes only)")
+        if scheme == SCHEME_MASKS and (filt != FILTER_L3 or kind != K_L3):
+            raise CodingError(f"{name} is mask-coded with filter {filt} (an L3 array, kind {K_L3}, under l3 nodes only)")
         if scheme == SCHEME_CONTEXT and version < CONTEXT_FROM:
             raise CodingError(f"{name} is context-coded (scheme 2) in a file older than version 11")
         if scheme == SCHEME_CONTEXT and filt != FILTER_TILES_UNPREDICTED:
@@ -349,6 +350,7 @@ def masks_decode(stored, n):
     # Node k's states: field c + k, byte j at 4 + j·3c + c + k.
     states = [sum(side[4 + j * 3 * c + c + k] << (8 * j) for j in range(4)) for k in range(c)]
     owners = [(k, b) for k in range(c) for b in range(8) if (states[k] >> (2 * b)) & 3 == 2]
+    most = [2 + 16 * sum(1 for k, _ in owners if k % lanes == l) for l in range(lanes)]
     if n - head != 8 * len(owners):
         raise CodingError(f"its L3 array holds {(n - head) / 8} sub-masks where its states name {len(owners)}")
     table = struct.unpack_from(f"<{MASK_CONTEXTS * 16}H", side, head)
@@ -364,8 +366,8 @@ def masks_decode(stored, n):
         slots[ctx] = [sym for sym in range(16) for _ in range(f[sym])]
         cums[ctx] = [sum(f[:sym]) for sym in range(16)]
         freqs[ctx] = f
-    if any(r < 2 for r in runs) or sum(runs) != words_len:
-        raise CodingError(f"its mask stream's runs {list(runs)} are not its {words_len} words, each at least 2")
+    if any(r < 2 or r > m for r, m in zip(runs, most)) or sum(runs) != words_len:
+        raise CodingError(f"its mask stream's runs {list(runs)} are not its {words_len} words, each 2 to 2 + 16 per sub-mask of its lane")
     words = struct.unpack_from(f"<{words_len}H", stored, 16 + a_len)
     starts = [sum(runs[:l]) for l in range(lanes)]
     state = [words[starts[l]] * 65536 + words[starts[l] + 1] for l in range(lanes)]

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (versions 13, 12, 11, 10, 9, 8, 7 and 6).
+"""Independent reader for vdbcook's `.vpak` volume asset format (versions 14, 13, 12, 11, 10, 9, 8, 7 and 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.

@@ -110,9 +110,10 @@ fn stepped(
         // The range's min moved down by at most a step, to the float of fewest
         // mantissa bits there: a level is as cheap to code from any min, a
         // brick's min of 24 random bits is not.
-        let low = fewest_bits((f64::from(range[0]) - s) as f32, range[0]);
-        let (lo, span) = (f64::from(low), f64::from(range[1]) - f64::from(low));
-        let k = (f64::from(top) / (span / s).ceil().max(1.0)).floor() as u32;
+        let steps = |low: f32| (f64::from(top) / ((f64::from(range[1]) - f64::from(low)) / s).ceil().max(1.0)).floor() as u32;
+        // Unless the step it may add leaves too few levels for a multiple k ≥ 2.
+        let low = Some(fewest_bits((f64::from(range[0]) - s) as f32, range[0])).filter(|&l| steps(l) >= 2).unwrap_or(range[0]);
+        let (lo, k) = (f64::from(low), steps(low));
         if k < 2 {
             return None;
         }

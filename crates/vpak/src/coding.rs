@@ -338,8 +338,8 @@ impl Coding {
                 if scheme == SCHEME_CONTEXT && !matches!(filter, Filter::Tiles(Tiles { predict: false, .. })) {
                     return Err(Error::Coding { kind, index, problem: format!("codes filter {} with context coding, which takes tiles unpredicted only", filter.name()) });
                 }
-                if scheme == SCHEME_MASKS && filter != Filter::L3Nodes {
-                    return Err(Error::Coding { kind, index, problem: format!("codes filter {} with mask coding, which takes l3 nodes only", filter.name()) });
+                if scheme == SCHEME_MASKS && (filter != Filter::L3Nodes || kind != crate::kind::L3_NODES) {
+                    return Err(Error::Coding { kind, index, problem: format!("codes filter {} with mask coding, which takes an L3 array under l3 nodes only", filter.name()) });
                 }
                 let raw_size = u64::from_le_bytes(r[24..32].try_into().unwrap_or([0; 8]));
                 let raw_checksum = u64::from_le_bytes(r[32..40].try_into().unwrap_or([0; 8]));

@@ -60,7 +60,8 @@ fn shape(filtered_len: usize, head: &[u8]) -> Option<Shape> {
     }
     // Field n + k (the states), byte j at 4 + j·3n + (n + k).
     let states: Vec<u32> = (0..n).map(|k| (0..4).fold(0u32, |s, j| s | u32::from(head[4 + j * 3 * n + n + k]) << (8 * j))).collect();
-    let named: usize = states.iter().map(|&s| ((s >> 1) & 0x5555).count_ones() as usize).sum();
+    // Sub-blocks in state 2 exactly (binary 10).
+    let named: usize = states.iter().map(|&s| ((s >> 1) & !s & 0x5555).count_ones() as usize).sum();
     if named != (filtered_len - head_len) / 8 {
         return None;
     }
@@ -142,10 +143,10 @@ fn context_of(m: u64, t: usize, along_x: &[u8; 4], along_y: &[u8; 4]) -> usize {
     usize::from(CONTEXT[(a << 5 | b) & 1023])
 }
 
-/// Each node's sub-block masks as far as the states tell them (full ones
-/// all ones, the others 0 until decoded).
-fn known_of(states: &[u32]) -> Vec<u64> {
-    states.iter().flat_map(|&s| (0..8).map(move |b| if (s >> (2 * b)) & 3 == FULL { u64::MAX } else { 0 })).collect()
+/// A node's sub-block masks as far as its states tell them (full ones all
+/// ones, the others 0 until decoded).
+fn known_of(states: u32) -> [u64; 8] {
+    std::array::from_fn(|b| if (states >> (2 * b)) & 3 == FULL { u64::MAX } else { 0 })
 }
 
 /// The `l3 nodes` filter's output `filtered` as a scheme-3 stream (side
@@ -160,7 +161,7 @@ pub fn encode(filtered: &[u8], level: i32) -> std::io::Result<Option<Vec<u8>>> {
 fn encode_lanes(filtered: &[u8], level: i32, lanes: usize) -> std::io::Result<Option<Vec<u8>>> {
     let Some(s) = shape(filtered.len(), filtered) else { return Ok(None) };
     let mask = |i: usize| u64::from_le_bytes(filtered[s.head + 8 * i..s.head + 8 * i + 8].try_into().unwrap_or_default());
-    let known: Vec<u64> = s.owners.iter().enumerate().fold(known_of(&s.states), |mut known, (i, &(k, b))| {
+    let known: Vec<u64> = s.owners.iter().enumerate().fold(s.states.iter().flat_map(|&st| known_of(st)).collect(), |mut known, (i, &(k, b))| {
         known[8 * k as usize + usize::from(b)] = mask(i);
         known
     });
@@ -232,14 +233,18 @@ pub fn decode(stored: &[u8], out: &mut [u8]) -> Result<(), String> {
         Ok(Some(size)) if size <= most as u64 => {}
         _ => return Err(format!("has a side frame that does not state a content size of at most {most} bytes")),
     }
-    let mut side = Vec::with_capacity(most);
+    let mut side = Vec::new();
+    side.try_reserve_exact(most).map_err(|_| format!("has a side frame of {most} bytes, more than memory allows"))?;
     let got = crate::coding::decompress_into(frame, &mut side).map_err(|e| format!("has a side frame that does not decompress to at most {most} bytes ({e})"))?;
     let s = shape(out.len(), &side)
         .filter(|s| s.head + TABLE + 4 * lanes == got)
         .ok_or_else(|| format!("has a side frame of {got} bytes that is not the head of an L3 array of {} bytes whose states name its sub-masks, a table and {lanes} run lengths", out.len()))?;
     let runs: Vec<usize> = side[s.head + TABLE..].chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize).collect();
-    if runs.iter().any(|&r| r < 2) || runs.iter().map(|&r| r as u64).sum::<u64>() != words_len as u64 {
-        return Err(format!("has runs of {runs:?} words (each at least 2: its lane's state) for its {words_len} words"));
+    // A row takes at most one word: a lane's run is its state and at most 16 words per sub-mask.
+    let mut most_words = vec![2u64; lanes];
+    s.owners.iter().for_each(|&(k, _)| most_words[k as usize % lanes] += ROWS as u64);
+    if runs.iter().zip(&most_words).any(|(&r, &most)| r < 2 || r as u64 > most) || runs.iter().map(|&r| r as u64).sum::<u64>() != words_len as u64 {
+        return Err(format!("has runs of {runs:?} words (each its lane's state, 2 words, and at most 16 per sub-mask of the lane) for its {words_len} words"));
     }
     // Per context 2^precision entries `symbol | freq << 4 | cum << 17`; unused rows hold frequency 0.
     // The thread's table from the decode before: memory touched already, not fresh pages to fault in.
@@ -304,7 +309,7 @@ struct Lane {
 }
 
 /// Decodes row `t` of the lane's sub-mask (table of precision `P`, every
-/// index inside it: `table.len() == CONTEXTS << P`); a context the table
+/// index inside it: `table.len() == 128 << P`); a context the table
 /// leaves unused, or a word past the lane's run (the last is read again),
 /// sets `bad`.
 #[inline(always)]
@@ -335,23 +340,27 @@ fn rows<const P: u32>(s: &Shape, table: &[u32], bytes: &[u8], runs: &[usize], ou
     let wide = WIDE.get().unwrap_or_else(|| {
         WIDE.set(Some(wide_usable()));
         wide_usable()
-    });
+    }) && words.len() < 1 << 30; // its gathers' indices are 32-bit
     let mut lanes = vec![Lane::default(); runs.len()];
     let mut start = 0;
     for (l, &r) in lanes.iter_mut().zip(runs) {
         (l.x, l.at, l.end) = (u32::from(words[start]) << 16 | u32::from(words[start + 1]), start + 2, start + r);
         start += r;
     }
-    let mut known = known_of(&s.states);
+    // Each lane's node and that node's sub-block masks so far (a node's sub-masks are its lane's, one after the other).
+    let mut known = vec![(usize::MAX, [0u64; 8]); runs.len()];
     let mut bad = false;
     let (order, starts) = rounds(s, runs.len());
     for round in starts.windows(2).map(|w| &order[w[0]..w[1]]) {
         for group in round.chunks(16) {
             let mut g = [Lane::default(); 16];
             for (lane, &(l, i)) in g.iter_mut().zip(group) {
-                let (k, b) = (8 * s.owners[i].0 as usize, usize::from(s.owners[i].1));
+                let (k, b) = (s.owners[i].0 as usize, usize::from(s.owners[i].1));
+                if known[l].0 != k {
+                    known[l] = (k, known_of(s.states[k]));
+                }
                 *lane = Lane { m: 0, ..lanes[l] };
-                (lane.along_x, lane.along_y) = outside(&known[k..k + 8], b);
+                (lane.along_x, lane.along_y) = outside(&known[l].1, b);
             }
             match wide {
                 // SAFETY: `wide_usable` checked the CPU; the table holds 128 << P entries and
@@ -374,9 +383,8 @@ fn rows<const P: u32>(s: &Shape, table: &[u32], bytes: &[u8], runs: &[usize], ou
                 }
             }
             for (lane, &(l, i)) in g.iter().zip(group) {
-                let (k, b) = s.owners[i];
                 lanes[l] = *lane;
-                known[8 * k as usize + usize::from(b)] = lane.m;
+                known[l].1[usize::from(s.owners[i].1)] = lane.m;
                 out[s.head + 8 * i..s.head + 8 * i + 8].copy_from_slice(&lane.m.to_le_bytes());
             }
         }

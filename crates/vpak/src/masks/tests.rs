@@ -178,3 +178,30 @@ fn the_vector_decoder_gives_the_scalar_ones_bytes_and_refusals() {
         }
     }
 }
+
+#[test]
+fn runs_longer_than_their_rows_can_read_are_refused_before_decoding() {
+    let nodes = band();
+    let filtered = crate::l3_filter::apply(&l3_array(4, |k, b| shell(nodes[k], b)));
+    let coded = encode_lanes(&filtered, 3, 2).unwrap().unwrap();
+    let field = |i: usize| u32::from_le_bytes(coded[4 * i..4 * i + 4].try_into().unwrap()) as usize;
+    let (side_len, words) = (field(2), field(3));
+    let mut side = zstd::bulk::decompress(&coded[HEAD..HEAD + side_len], 1 << 20).unwrap();
+    // Lane 0 holds nodes 0 and 2: one word more than 2 + 16 per sub-mask they have.
+    let subs: usize = [0, 2].iter().map(|&k| (0..8).filter(|&b| ![0, u64::MAX].contains(&shell(nodes[k], b))).count()).sum();
+    let runs = side.len() - 8;
+    let r0 = u32::from_le_bytes(side[runs..runs + 4].try_into().unwrap()) as usize;
+    let extra = 2 + 16 * subs + 1 - r0;
+    side[runs..runs + 4].copy_from_slice(&((r0 + extra) as u32).to_le_bytes());
+    let frame = zstd::bulk::compress(&side, 3).unwrap();
+    let mut bad = Vec::new();
+    [2u32, 9, frame.len() as u32, (words + extra) as u32].iter().for_each(|v| bad.extend_from_slice(&v.to_le_bytes()));
+    bad.extend_from_slice(&frame);
+    let lane0 = HEAD + side_len + 2 * r0;
+    bad.extend_from_slice(&coded[HEAD + side_len..lane0]);
+    bad.extend(std::iter::repeat_n(0u8, 2 * extra));
+    bad.extend_from_slice(&coded[lane0..]);
+    let mut out = vec![0u8; filtered.len()];
+    let err = decode(&bad, &mut out).unwrap_err();
+    assert!(err.contains("at most 16 per sub-mask"), "{err}");
+}
