@@ -205,3 +205,41 @@ fn runs_longer_than_their_rows_can_read_are_refused_before_decoding() {
     let err = decode(&bad, &mut out).unwrap_err();
     assert!(err.contains("at most 16 per sub-mask"), "{err}");
 }
+
+/// Not a check but a measurement: the scalar and (where the CPU has it) the vector decoder on
+/// the mask-coded sections of the asset `VPAK_MASKS_BENCH` names, best of 7 passes of about
+/// 20 MB of restored L3 bytes each, one thread:
+/// `VPAK_MASKS_BENCH=A.vpak cargo test --release -p vdbcook-vpak masks::tests::decoder_speed -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn decoder_speed() {
+    let Ok(path) = std::env::var("VPAK_MASKS_BENCH") else { return };
+    let asset = crate::Asset::open(std::path::Path::new(&path)).unwrap();
+    let mut streams = Vec::new();
+    for s in 0..asset.segment_count() {
+        let seg = asset.stored_segment(s).unwrap();
+        let Ok(table) = seg.section(crate::kind::CODING, 0) else { continue };
+        for c in crate::coding::Coding::parse_all(table).unwrap().into_iter().filter(|c| c.scheme == crate::coding::SCHEME_MASKS) {
+            streams.push((seg.section(c.kind, c.index).unwrap().to_vec(), c.raw_size as usize));
+        }
+    }
+    let bytes: usize = streams.iter().map(|s| s.1).sum();
+    let repeats = (20_000_000 / bytes.max(1)).max(1);
+    for wide in [false, true].into_iter().filter(|&w| !w || wide_usable()) {
+        WIDE.set(Some(wide));
+        let mut best = f64::MAX;
+        for _ in 0..7 {
+            let t = std::time::Instant::now();
+            for _ in 0..repeats {
+                for (stored, n) in &streams {
+                    let mut out = vec![0u8; *n];
+                    decode(stored, &mut out).unwrap();
+                    std::hint::black_box(&out);
+                }
+            }
+            best = best.min(t.elapsed().as_secs_f64() / repeats as f64);
+        }
+        println!("{} decoder: {} sections, {:.2} MB of L3 arrays, {:.0} MB/s", if wide { "vector" } else { "scalar" }, streams.len(), bytes as f64 / 1e6, bytes as f64 / 1e6 / best);
+    }
+    WIDE.set(None);
+}
