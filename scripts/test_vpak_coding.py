@@ -376,6 +376,20 @@ def check_refusals(packed, plain, work):
     return flipped
 
 
+def refused_damaged(edit, stored, where, header):
+    """A coded stream `stored` cut short (inside its `header`-byte header, after it, halfway,
+    one byte short) or with a bit flipped every 1/40 of it: `edit(fn)`, the file with the
+    stream through fn, is refused naming `where`."""
+    for cut in (0, header // 2, header, len(stored) // 2, len(stored) - 1):
+        refused(edit(lambda d, cut=cut: d[:cut]), where)
+    for i in range(0, len(stored), len(stored) // 40 + 1):
+        def flip(d, i=i):
+            d = bytearray(d)
+            d[i] ^= 0x10
+            return bytes(d)
+        refused(edit(flip), where)
+
+
 def check_context(vdbcook, work):
     """Atlases context-coded by `--optimize disk` (scheme 2, version 11) restore the
     uncompressed asset's sections; damaged streams, and such a stream in a file older than
@@ -403,16 +417,8 @@ def check_context(vdbcook, work):
     next(x for x in secs if x[0] == K_CODING)[2] = coding_bytes(recs)
     bodies[seg] = make_body(secs)
     refused(make_file(bodies, 12), "context-coded with filter 3")
-    where = f"section kind 10 index {atlas[1]}"
     stored = next(x for x in sections_of(bodies_of(packed)[seg]) if (x[0], x[1]) == atlas)[2]
-    for cut in (0, 12, 24, len(stored) // 2, len(stored) - 1):
-        refused(edit(lambda d, cut=cut: d[:cut]), where)
-    for i in range(0, len(stored), len(stored) // 40 + 1):
-        def flip(d, i=i):
-            d = bytearray(d)
-            d[i] ^= 0x10
-            return bytes(d)
-        refused(edit(flip), where)
+    refused_damaged(edit, stored, f"section kind 10 index {atlas[1]}", header=24)
     return len(coded)
 
 
@@ -435,16 +441,8 @@ def check_masks(vdbcook, work):
 
     same_asset(edit(lambda d: d), plain)
     refused(edit(lambda d: d, version=13), "older than version 14")
-    where = f"section kind {v.K_L3} index 0"
     stored = next(x for x in sections_of(bodies_of(packed)[seg]) if (x[0], x[1]) == l3)[2]
-    for cut in (0, 8, 16, len(stored) // 2, len(stored) - 1):
-        refused(edit(lambda d, cut=cut: d[:cut]), where)
-    for i in range(0, len(stored), len(stored) // 40 + 1):
-        def flip(d, i=i):
-            d = bytearray(d)
-            d[i] ^= 0x10
-            return bytes(d)
-        refused(edit(flip), where)
+    refused_damaged(edit, stored, f"section kind {v.K_L3} index 0", header=16)
     return len(coded)
 
 

@@ -218,6 +218,32 @@ def unfilter_l3(f):
     return words.astype("<u4").tobytes()
 
 
+def rans_tables(table, contexts, nsym, prec, what):
+    """Per used context of a frequency table (`contexts` rows of `nsym` frequencies): the
+    symbol of each slot, each symbol's cum and its frequency; a row summing to neither 0 nor
+    2^prec is refused."""
+    total = 1 << prec
+    tables = {}
+    for c in range(contexts):
+        f = table[c * nsym:(c + 1) * nsym]
+        if sum(f) == 0:
+            continue
+        if sum(f) != total:
+            raise CodingError(f"its {what} context {c}'s frequencies sum to {sum(f)}, not 0 or {total}")
+        tables[c] = ([s for s in range(nsym) for _ in range(f[s])], [sum(f[:s]) for s in range(nsym)], f)
+    return tables
+
+
+def rans_symbol(x, ctx, tables, prec, what):
+    """One symbol of state x in context ctx: (symbol, the state before renormalising)."""
+    if ctx not in tables:
+        raise CodingError(f"its {what} stream codes in unused context {ctx}")
+    slots, cums, freqs = tables[ctx]
+    slot = x % (1 << prec)
+    sym = slots[slot]
+    return sym, freqs[sym] * (x >> prec) + slot - cums[sym]
+
+
 def context_decode(stored, w, size):
     """A context-coded stream (format.md, "Context coding") decoded into the filtered bytes
     F of `size` bytes: T divisors and 512·T quotients of w bytes, shuffled by byte."""
@@ -236,21 +262,7 @@ def context_decode(stored, w, size):
     words = struct.unpack_from(f"<{words_len}H", stored, 24 + a_len + b_len)
     divisors = [int.from_bytes(side[w * t:w * t + w], "little") for t in range(t_count)]
     table = struct.unpack_from(f"<{128 * nsym}H", side, w * t_count)
-    total = 1 << prec
-    # Per context, the symbol of each slot, and each symbol's cum.
-    slots, cums, freqs = {}, {}, {}
-    for c in range(128):
-        f = table[c * nsym:(c + 1) * nsym]
-        if sum(f) == 0:
-            continue
-        if sum(f) != total:
-            raise CodingError(f"its context {c}'s frequencies sum to {sum(f)}, not 0 or {total}")
-        cum, acc = [], 0
-        for x in f:
-            cum.append(acc)
-            acc += x
-        slots[c] = [s for s in range(nsym) for _ in range(f[s])]
-        cums[c], freqs[c] = cum, f
+    tables = rans_tables(table, 128, nsym, prec, "context")
     elems = divisors + [0] * (512 * t_count)
     states = [words[2 * l] * 65536 + words[2 * l + 1] for l in range(lanes)]
     wp, bp = 2 * lanes, 0
@@ -278,12 +290,7 @@ def context_decode(stored, w, size):
                 e = min(255, val(1, 0, 0)[1] + val(0, 1, 0)[1] + val(0, 0, 1)[1])
                 bucket = e if e < 4 else min(15, (e * e).bit_length() - 1)
                 ctx = 8 * bucket + cls
-                if ctx not in slots:
-                    raise CodingError(f"its context stream codes in unused context {ctx}")
-                x = states[lane]
-                slot = x % total
-                sym = slots[ctx][slot]
-                x = freqs[ctx][sym] * (x >> prec) + slot - cums[ctx][sym]
+                sym, x = rans_symbol(states[lane], ctx, tables, prec, "context")
                 if x < 65536:
                     if wp >= words_len:
                         raise CodingError("its context stream runs past its words")
@@ -355,17 +362,7 @@ def masks_decode(stored, n):
         raise CodingError(f"its L3 array holds {(n - head) / 8} sub-masks where its states name {len(owners)}")
     table = struct.unpack_from(f"<{MASK_CONTEXTS * 16}H", side, head)
     runs = struct.unpack_from(f"<{lanes}I", side, head + table_len)
-    total = 1 << prec
-    slots, cums, freqs = {}, {}, {}
-    for ctx in range(MASK_CONTEXTS):
-        f = table[16 * ctx:16 * ctx + 16]
-        if sum(f) == 0:
-            continue
-        if sum(f) != total:
-            raise CodingError(f"its mask context {ctx}'s frequencies sum to {sum(f)}, not 0 or {total}")
-        slots[ctx] = [sym for sym in range(16) for _ in range(f[sym])]
-        cums[ctx] = [sum(f[:sym]) for sym in range(16)]
-        freqs[ctx] = f
+    tables = rans_tables(table, MASK_CONTEXTS, 16, prec, "mask")
     if any(r < 2 or r > m for r, m in zip(runs, most)) or sum(runs) != words_len:
         raise CodingError(f"its mask stream's runs {list(runs)} are not its {words_len} words, each 2 to 2 + 16 per sub-mask of its lane")
     words = struct.unpack_from(f"<{words_len}H", stored, 16 + a_len)
@@ -388,12 +385,7 @@ def masks_decode(stored, n):
             a = row(m, t - 4) if t >= 4 else row(sub_mask(k, b - 4), 12 + t) if b & 4 else None
             bb = row(m, t - 1) if t % 4 else row(sub_mask(k, b - 2), 4 * (t // 4) + 3) if b & 2 else None
             ctx = mask_context(a, bb)
-            if ctx not in slots:
-                raise CodingError(f"its mask stream codes in unused context {ctx}")
-            x = state[lane]
-            slot = x % total
-            sym = slots[ctx][slot]
-            x = freqs[ctx][sym] * (x >> prec) + slot - cums[ctx][sym]
+            sym, x = rans_symbol(state[lane], ctx, tables, prec, "mask")
             if x < 65536:
                 if at[lane] >= ends[lane]:
                     raise CodingError("its mask stream runs past a lane's words")
