@@ -84,7 +84,7 @@ fn rounds(s: &Shape, lanes: usize) -> (Vec<(usize, usize)>, Vec<usize>) {
         nth.push(count[l]);
         count[l] += 1;
     }
-    // Sub-masks by round (a counting sort, lanes in order within a round: the array's order).
+    // Sub-masks by round (a counting sort; within a round, in the array's order, each lane once).
     let rounds = count.iter().copied().max().unwrap_or(0);
     let mut starts = vec![0usize; rounds + 1];
     nth.iter().for_each(|&r| starts[r + 1] += 1);
@@ -267,15 +267,35 @@ pub fn decode(stored: &[u8], out: &mut [u8]) -> Result<(), String> {
 
 thread_local! {
     static TABLES: std::cell::Cell<Vec<u32>> = const { std::cell::Cell::new(Vec::new()) };
-    /// Whether rows are decoded in vectors, once asked (the tests set it to compare).
-    static WIDE: std::cell::Cell<Option<bool>> = const { std::cell::Cell::new(None) };
+    /// The decoder rows take, once asked (the tests set it to compare).
+    static DECODER: std::cell::Cell<Option<Decoder>> = const { std::cell::Cell::new(None) };
 }
 
-fn wide_usable() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return avx512::usable();
-    #[cfg(not(target_arch = "x86_64"))]
-    false
+/// The decoders, fastest first; each gives the scalar one's output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Decoder {
+    Avx2,
+    Scalar,
+}
+
+impl Decoder {
+    const ALL: [Decoder; 2] = [Decoder::Avx2, Decoder::Scalar];
+
+    /// Whether this CPU runs it.
+    fn usable(self) -> bool {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            Decoder::Avx2 => avx2::usable(),
+            Decoder::Scalar => true,
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
+        }
+    }
+
+    /// The fastest this CPU runs.
+    fn best() -> Decoder {
+        Decoder::ALL.into_iter().find(|d| d.usable()).unwrap_or(Decoder::Scalar)
+    }
 }
 
 /// Fills the decode table from the side frame's frequencies.
@@ -337,10 +357,12 @@ fn rows<const P: u32>(s: &Shape, table: &[u32], bytes: &[u8], runs: &[usize], ou
     // One word more than any run reaches: the vector decoder's gathers read 32 bits.
     let mut words = vec![0u16; bytes.len() / 2 + 1];
     words.iter_mut().zip(bytes.chunks_exact(2)).for_each(|(w, b)| *w = u16::from_le_bytes([b[0], b[1]]));
-    let wide = WIDE.get().unwrap_or_else(|| {
-        WIDE.set(Some(wide_usable()));
-        wide_usable()
-    }) && words.len() < 1 << 30; // its gathers' indices are 32-bit
+    let decoder = DECODER.get().unwrap_or_else(|| {
+        DECODER.set(Some(Decoder::best()));
+        Decoder::best()
+    });
+    // The vector decoders' gather indices are 32-bit.
+    let decoder = if words.len() < 1 << 30 { decoder } else { Decoder::Scalar };
     let mut lanes = vec![Lane::default(); runs.len()];
     let mut start = 0;
     for (l, &r) in lanes.iter_mut().zip(runs) {
@@ -362,11 +384,11 @@ fn rows<const P: u32>(s: &Shape, table: &[u32], bytes: &[u8], runs: &[usize], ou
                 *lane = Lane { m: 0, ..lanes[l] };
                 (lane.along_x, lane.along_y) = outside(&known[l].1, b);
             }
-            match wide {
-                // SAFETY: `wide_usable` checked the CPU; the table holds 128 << P entries and
-                // `words` one past every run.
+            match decoder {
+                // SAFETY: `Decoder::best` (or a test) checked the CPU; the table holds 128 << P
+                // entries, `words` one past every run, every run ends below 2^30.
                 #[cfg(target_arch = "x86_64")]
-                true => unsafe { avx512::group(&mut g[..group.len()], P, table, &words, &mut bad) },
+                Decoder::Avx2 => unsafe { avx2::group(&mut g[..group.len()], P, table, &words, &mut bad) },
                 _ => {
                     for t in 0..ROWS {
                         let mut quads = g[..group.len()].chunks_exact_mut(4);
@@ -399,6 +421,6 @@ fn rows<const P: u32>(s: &Shape, table: &[u32], bytes: &[u8], runs: &[usize], ou
 }
 
 #[cfg(target_arch = "x86_64")]
-mod avx512;
+mod avx2;
 #[cfg(test)]
 mod tests;

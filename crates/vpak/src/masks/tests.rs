@@ -147,34 +147,37 @@ fn contexts_take_each_neighbour_voxel_count() {
 
 #[test]
 fn the_vector_decoder_gives_the_scalar_ones_bytes_and_refusals() {
-    if !wide_usable() {
-        eprintln!("no AVX-512 here: the scalar decoder alone");
-        return;
-    }
     let nodes = band();
     let filtered = crate::l3_filter::apply(&l3_array(nodes.len(), |k, b| shell(nodes[k], b)));
-    let both = |stored: &[u8], len: usize| {
-        let run = |wide: bool| {
-            WIDE.set(Some(wide));
-            let mut out = vec![0u8; len];
-            decode(stored, &mut out).map(|()| out)
-        };
-        let (scalar, vector) = (run(false), run(true));
-        WIDE.set(None);
-        assert_eq!(scalar.as_ref().err(), vector.as_ref().err(), "one decoder refuses, the other not");
-        (scalar.ok(), vector.ok())
+    let run = |d: Decoder, stored: &[u8], len: usize| {
+        DECODER.set(Some(d));
+        let mut out = vec![0u8; len];
+        let r = decode(stored, &mut out).map(|()| out);
+        DECODER.set(None);
+        r
     };
+    let vectors: Vec<Decoder> = [Decoder::Avx2].into_iter().filter(|d| d.usable()).collect();
+    if vectors.is_empty() {
+        eprintln!("no AVX2 here: the scalar decoder alone");
+    }
     for lanes in [1, 5, 16, 64] {
         let coded = encode_lanes(&filtered, 3, lanes).unwrap().unwrap();
-        let (scalar, vector) = both(&coded, filtered.len());
-        assert_eq!(scalar.as_deref(), Some(&filtered[..]), "{lanes} lanes");
-        assert_eq!(vector, scalar, "{lanes} lanes");
-        // Every word of the rANS runs flipped in turn: the same bytes or the same refusal.
-        for i in (coded.len() - 2 * 40..coded.len()).step_by(2) {
-            let mut bad = coded.clone();
-            bad[i] ^= 0x5a;
-            let (scalar, vector) = both(&bad, filtered.len());
-            assert_eq!(vector, scalar, "{lanes} lanes, byte {i}");
+        let scalar = run(Decoder::Scalar, &coded, filtered.len());
+        assert_eq!(scalar.as_deref(), Ok(&filtered[..]), "{lanes} lanes");
+        // Every word near the end of the rANS runs damaged in turn: the same bytes or the same refusal.
+        let damaged: Vec<Vec<u8>> = (coded.len() - 2 * 40..coded.len())
+            .step_by(2)
+            .map(|i| {
+                let mut bad = coded.clone();
+                bad[i] ^= 0x5a;
+                bad
+            })
+            .collect();
+        for &d in &vectors {
+            assert_eq!(run(d, &coded, filtered.len()), scalar, "{d:?}, {lanes} lanes");
+            for (i, bad) in damaged.iter().enumerate() {
+                assert_eq!(run(d, bad, filtered.len()), run(Decoder::Scalar, bad, filtered.len()), "{d:?}, {lanes} lanes, damage {i}");
+            }
         }
     }
 }
@@ -225,8 +228,8 @@ fn decoder_speed() {
     }
     let bytes: usize = streams.iter().map(|s| s.1).sum();
     let repeats = (20_000_000 / bytes.max(1)).max(1);
-    for wide in [false, true].into_iter().filter(|&w| !w || wide_usable()) {
-        WIDE.set(Some(wide));
+    for d in Decoder::ALL.into_iter().filter(|d| d.usable()) {
+        DECODER.set(Some(d));
         let mut best = f64::MAX;
         for _ in 0..7 {
             let t = std::time::Instant::now();
@@ -239,7 +242,7 @@ fn decoder_speed() {
             }
             best = best.min(t.elapsed().as_secs_f64() / repeats as f64);
         }
-        println!("{} decoder: {} sections, {:.2} MB of L3 arrays, {:.0} MB/s", if wide { "vector" } else { "scalar" }, streams.len(), bytes as f64 / 1e6, bytes as f64 / 1e6 / best);
+        println!("{d:?} decoder: {} sections, {:.2} MB of L3 arrays, {:.0} MB/s", streams.len(), bytes as f64 / 1e6, bytes as f64 / 1e6 / best);
     }
-    WIDE.set(None);
+    DECODER.set(None);
 }
