@@ -376,6 +376,19 @@ def check_refusals(packed, plain, work):
     return flipped
 
 
+def with_section(packed, seg, key, fn, version, also=None):
+    """`packed` with section `key` (kind, index) of segment `seg` through fn, and the other
+    sections through `also` when given, as a file of `version`."""
+    bodies = bodies_of(packed)
+    secs = sections_of(bodies[seg])
+    sec = next(x for x in secs if (x[0], x[1]) == key)
+    sec[2] = fn(sec[2])
+    if also:
+        also(secs)
+    bodies[seg] = make_body(secs)
+    return make_file(bodies, version)
+
+
 def refused_damaged(edit, stored, where, header):
     """A coded stream `stored` cut short (inside its `header`-byte header, after it, halfway,
     one byte short) or with a bit flipped every 1/40 of it: `edit(fn)`, the file with the
@@ -400,14 +413,9 @@ def check_context(vdbcook, work):
     seg, atlas = coded[0]
 
     def edit(fn, version=12):
-        bodies = bodies_of(packed)
-        secs = sections_of(bodies[seg])
-        sec = next(x for x in secs if (x[0], x[1]) == atlas)
-        sec[2] = fn(sec[2])
-        if version < 12:  # the L3 array as an older writer stores it
-            l3_as(shuffle(next(d for k, i, d in sections_of(bodies_of(plain)[seg]) if k == v.K_L3), 4), 1, 4)(secs)
-        bodies[seg] = make_body(secs)
-        return make_file(bodies, version)
+        # Older than 12: the L3 array as an older writer stores it.
+        older = l3_as(shuffle(next(d for k, i, d in sections_of(bodies_of(plain)[seg]) if k == v.K_L3), 4), 1, 4) if version < 12 else None
+        return with_section(packed, seg, atlas, fn, version, older)
 
     same_asset(edit(lambda d: d), plain)
     refused(edit(lambda d: d, version=10), "older than version 11")
@@ -432,12 +440,7 @@ def check_masks(vdbcook, work):
     seg, l3 = coded[0]
 
     def edit(fn, version=14):
-        bodies = bodies_of(packed)
-        secs = sections_of(bodies[seg])
-        sec = next(x for x in secs if (x[0], x[1]) == l3)
-        sec[2] = fn(sec[2])
-        bodies[seg] = make_body(secs)
-        return make_file(bodies, version)
+        return with_section(packed, seg, l3, fn, version)
 
     same_asset(edit(lambda d: d), plain)
     refused(edit(lambda d: d, version=13), "older than version 14")

@@ -9,7 +9,7 @@
 //! zstd, in the stream's side frame. `docs/format.md`, "Mask coding", is the
 //! specification.
 
-use crate::context::{quantise, rans_put};
+use crate::context::{fill_table, quantise, rans_put, RANS_LOW, UNUSED};
 
 /// Rows of a sub-mask, and the symbols a row can be (four voxels).
 const ROWS: usize = 16;
@@ -21,8 +21,6 @@ pub(crate) const CONTEXTS: usize = 81 + 16 + 16 + 1;
 /// Each used context's frequencies sum to 2^PRECISION, as vdbcook writes them.
 const PRECISION: u32 = 9;
 const PRECISIONS: std::ops::RangeInclusive<u32> = 9..=12;
-/// The rANS states' lower bound; words are 16 bits.
-const RANS_LOW: u32 = 1 << 16;
 /// Bytes of the stream's header: lanes, precision, side frame bytes, words.
 const HEAD: usize = 16;
 /// Lanes, as vdbcook writes them (sub-masks of 16 nodes decoded side by
@@ -169,11 +167,17 @@ fn encode_lanes(filtered: &[u8], level: i32, lanes: usize) -> std::io::Result<Op
     let mut tokens: Vec<(u8, u8, u8)> = Vec::with_capacity(16 * s.owners.len());
     let (order, starts) = rounds(&s, lanes);
     for round in starts.windows(2).map(|w| &order[w[0]..w[1]]) {
-        let sides: Vec<([u8; 4], [u8; 4])> = round.iter().map(|&(_, i)| outside(&known[8 * s.owners[i].0 as usize..][..8], usize::from(s.owners[i].1))).collect();
+        // Each sub-mask of the round with its rows outside it.
+        let subs: Vec<(u8, u64, [u8; 4], [u8; 4])> = round
+            .iter()
+            .map(|&(lane, i)| {
+                let (along_x, along_y) = outside(&known[8 * s.owners[i].0 as usize..][..8], usize::from(s.owners[i].1));
+                (lane as u8, mask(i), along_x, along_y)
+            })
+            .collect();
         for t in 0..ROWS {
-            for (&(lane, i), (along_x, along_y)) in round.iter().zip(&sides) {
-                let m = mask(i);
-                tokens.push((lane as u8, context_of(m, t, along_x, along_y) as u8, row(m, t) as u8));
+            for (lane, m, along_x, along_y) in &subs {
+                tokens.push((*lane, context_of(*m, t, along_x, along_y) as u8, row(*m, t) as u8));
             }
         }
     }
@@ -246,12 +250,12 @@ pub fn decode(stored: &[u8], out: &mut [u8]) -> Result<(), String> {
     if runs.iter().zip(&most_words).any(|(&r, &most)| r < 2 || r as u64 > most) || runs.iter().map(|&r| r as u64).sum::<u64>() != words_len as u64 {
         return Err(format!("has runs of {runs:?} words (each its lane's state, 2 words, and at most 16 per sub-mask of the lane) for its {words_len} words"));
     }
-    // Per context 2^precision entries `symbol | freq << 4 | cum << 17`; unused rows hold frequency 0.
-    // The thread's table from the decode before: memory touched already, not fresh pages to fault in.
+    // Per context 2^precision entries `symbol | freq << 6 | cum << 19` (unused contexts' of frequency 0),
+    // in the thread's table from the decode before: memory touched already, not fresh pages to fault in.
     let mut table = TABLES.take();
     table.clear();
-    table.resize(128 << precision, 0);
-    let result = fill(&mut table, &side[s.head..s.head + TABLE], precision).and_then(|()| {
+    table.resize(128 << precision, UNUSED);
+    let result = fill_table(&mut table, &side[s.head..s.head + TABLE], SYMBOLS, precision).and_then(|()| {
         out[..s.head].copy_from_slice(&side[..s.head]);
         let words = &stored[HEAD + side_len..];
         match precision {
@@ -298,24 +302,6 @@ impl Decoder {
     }
 }
 
-/// Fills the decode table from the side frame's frequencies.
-fn fill(table: &mut [u32], freqs: &[u8], precision: u32) -> Result<(), String> {
-    let size = 1usize << precision;
-    for (ctx, freqs) in freqs.chunks_exact(2 * SYMBOLS).enumerate() {
-        let freq: Vec<usize> = freqs.chunks_exact(2).map(|b| usize::from(u16::from_le_bytes([b[0], b[1]]))).collect();
-        let sum: usize = freq.iter().sum();
-        if sum != 0 && sum != size {
-            return Err(format!("has context {ctx}'s frequencies summing to {sum}, not 0 or {size}"));
-        }
-        let mut cum = 0;
-        for (sym, &f) in freq.iter().enumerate().filter(|(_, &f)| f > 0) {
-            table[(ctx << precision) + cum..(ctx << precision) + cum + f].fill(sym as u32 | (f as u32) << 4 | (cum as u32) << 17);
-            cum += f;
-        }
-    }
-    Ok(())
-}
-
 /// One lane's decoding: its rANS state, next word and the end of its run,
 /// and the sub-mask it is decoding with that sub-mask's rows outside it.
 #[derive(Clone, Copy, Default)]
@@ -339,8 +325,8 @@ fn step<const P: u32>(l: &mut Lane, t: usize, table: &[u32], words: &[u16], bad:
     let ctx = CONTEXT[((a << 5 | b) & 1023) as usize] as usize;
     let slot = l.x & ((1 << P) - 1);
     let e = table[(ctx << P) | slot as usize];
-    let f = e >> 4 & 0x1fff;
-    let x = (f * (l.x >> P) + slot).wrapping_sub(e >> 17);
+    let f = e >> 6 & 0x1fff;
+    let x = (f * (l.x >> P) + slot).wrapping_sub(e >> 19);
     let renormalise = x < RANS_LOW;
     *bad |= (f == 0) | (renormalise & (l.at == l.end));
     let w = u32::from(words[l.at.min(l.end - 1)]);

@@ -37,7 +37,7 @@ const POSITIONS: usize = 8;
 const BUCKETS: usize = 16;
 const CONTEXTS: usize = BUCKETS * POSITIONS;
 /// The rANS states' lower bound; words are 16 bits.
-const RANS_LOW: u32 = 1 << 16;
+pub(crate) const RANS_LOW: u32 = 1 << 16;
 /// Tiles decoded side by side, as vdbcook writes them: four vectors of 16 lanes.
 const LANES: usize = 64;
 /// Each used context's frequencies sum to 2^PRECISION, as vdbcook writes
@@ -50,7 +50,7 @@ const MAX_LANES: usize = 256;
 const HEAD: usize = 24;
 /// A decode-table entry that no valid stream reaches (rows of contexts
 /// the encoder never used): symbol 63, frequency 0.
-const UNUSED: u32 = 63;
+pub(crate) const UNUSED: u32 = 63;
 
 /// A tile's element `v` (x fastest) in the decoder's padded 9³ block:
 /// neighbours below the tile's low faces read as 0.
@@ -368,8 +368,27 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
             divisors[m + t] = d[1];
         }
     }
-    let size = 1usize << precision;
     let mut table = vec![UNUSED; CONTEXTS << precision];
+    fill_table(&mut table, freqs, symbols, precision)?;
+    let at = HEAD + side_len;
+    let mut bits = Vec::with_capacity(bits_len + 8);
+    bits.extend_from_slice(&stored[at..at + bits_len]);
+    bits.resize(bits_len + 8, 0);
+    let mut words = vec![0u16; words_len + 8 * lanes + 8];
+    bytemuck::cast_slice_mut::<u16, u8>(&mut words[..words_len]).copy_from_slice(&stored[at + bits_len..]);
+    if cfg!(target_endian = "big") {
+        words.iter_mut().for_each(|w| *w = u16::from_le(*w));
+    }
+    Ok(Stream { lanes, precision, tiles, bits, bits_len, words, words_len, table })
+}
+
+/// Fills a decode table (2^`precision` entries per context, `symbol | freq
+/// << 6 | cum << 19`) from `freqs`, one row of `symbols` `u16` frequencies
+/// per context; a row summing to 0 (an unused context) leaves its entries as
+/// they were ([`UNUSED`] where the caller filled them so), and one summing
+/// to neither 0 nor 2^`precision` is refused. Shared by schemes 2 and 3.
+pub(crate) fn fill_table(table: &mut [u32], freqs: &[u8], symbols: usize, precision: u32) -> Result<(), String> {
+    let size = 1usize << precision;
     for (ctx, row) in freqs.chunks_exact(2 * symbols).enumerate() {
         let freq: Vec<usize> = row.chunks_exact(2).map(|b| usize::from(u16::from_le_bytes([b[0], b[1]]))).collect();
         let sum: usize = freq.iter().sum();
@@ -385,16 +404,7 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
             cum += f;
         }
     }
-    let at = HEAD + side_len;
-    let mut bits = Vec::with_capacity(bits_len + 8);
-    bits.extend_from_slice(&stored[at..at + bits_len]);
-    bits.resize(bits_len + 8, 0);
-    let mut words = vec![0u16; words_len + 8 * lanes + 8];
-    bytemuck::cast_slice_mut::<u16, u8>(&mut words[..words_len]).copy_from_slice(&stored[at + bits_len..]);
-    if cfg!(target_endian = "big") {
-        words.iter_mut().for_each(|w| *w = u16::from_le(*w));
-    }
-    Ok(Stream { lanes, precision, tiles, bits, bits_len, words, words_len, table })
+    Ok(())
 }
 
 /// Restores a scheme-2 stream `stored` into `out`, the `tiles unpredicted`

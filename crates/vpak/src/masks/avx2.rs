@@ -95,9 +95,9 @@ impl Eight {
             let p = _mm_cvtsi32_si128(precision as i32);
             let slot = _mm256_and_si256(self.x, _mm256_set1_epi32((1 << precision) - 1));
             let e = _mm256_mask_i32gather_epi32::<4>(zero, table.as_ptr() as *const i32, _mm256_or_si256(_mm256_sll_epi32(ctx, p), slot), self.active);
-            let f = _mm256_and_si256(_mm256_srli_epi32::<4>(e), _mm256_set1_epi32(0x1fff));
+            let f = _mm256_and_si256(_mm256_srli_epi32::<6>(e), _mm256_set1_epi32(0x1fff));
             let unused = _mm256_and_si256(_mm256_cmpeq_epi32(f, zero), self.active);
-            let x = _mm256_sub_epi32(_mm256_add_epi32(_mm256_mullo_epi32(f, _mm256_srl_epi32(self.x, p)), slot), _mm256_srli_epi32::<17>(e));
+            let x = _mm256_sub_epi32(_mm256_add_epi32(_mm256_mullo_epi32(f, _mm256_srl_epi32(self.x, p)), slot), _mm256_srli_epi32::<19>(e));
             let renormalise = _mm256_and_si256(_mm256_cmpeq_epi32(_mm256_srli_epi32::<16>(x), zero), self.active);
             let overrun = _mm256_and_si256(renormalise, _mm256_cmpeq_epi32(self.at, self.end));
             self.x = _mm256_blendv_epi8(x, _mm256_or_si256(_mm256_slli_epi32::<16>(x), _mm256_and_si256(next, _mm256_set1_epi32(0xffff))), renormalise);
