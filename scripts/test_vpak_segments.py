@@ -113,7 +113,7 @@ def cook(vdbcook, work, name, frames, flags):
         data = f.read()
     # vdbcook writes a segmented file (version 7 or later) even of one segment: its body,
     # uncompressed, is the version-6 file this test wraps.
-    version, table = v.read_table(memoryview(data), (6, 7, 8, 9, 10, 11, 12, 13, 14), "file")
+    version, table = v.read_table(memoryview(data), (6, 7, 8, 9, 10, 11, 12, 13, 14, 15), "file")
     if version == 6:
         return data
     assert len(table) == 1, table

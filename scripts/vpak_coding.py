@@ -3,7 +3,7 @@
 Written from docs/format.md ("Supercompression", "Context coding", "Mask coding") alone, like
 the reader: the coding section (kind 13) holds one 40-byte record per compressed section; a
 section is restored by decompressing one zstd frame (or, version 11, decoding a context-coded
-stream; version 14, a mask-coded one)
+stream; version 14, a mask-coded one; version 15, a context-coded one over the shown voxels)
 and undoing a shuffle, delta, tiles or (version 12) l3 nodes filter, and checked against the record's XXH3-64 of
 the restored bytes. Every rule the page states is
 checked; a failure raises `CodingError` with a one-line message.
@@ -18,12 +18,14 @@ import numpy as np
 K_CODING = 13
 K_L3 = 7
 RECORD_SIZE = 40
-SCHEME_ZSTD, SCHEME_CONTEXT, SCHEME_MASKS = 1, 2, 3
+SCHEME_ZSTD, SCHEME_CONTEXT, SCHEME_MASKS, SCHEME_SHOWN = 1, 2, 3, 4
+K_ATLAS = 10
 FILTER_NONE, FILTER_SHUFFLE, FILTER_DELTA, FILTER_TILES, FILTER_TILES_UNPREDICTED, FILTER_L3 = 0, 1, 2, 3, 4, 5
 FILTER_NAMES = {FILTER_NONE: "none", FILTER_SHUFFLE: "shuffle", FILTER_DELTA: "delta", FILTER_TILES: "tiles",
                 FILTER_TILES_UNPREDICTED: "tiles unpredicted", FILTER_L3: "l3 nodes"}
-# The first file versions with context coding (scheme 2), the l3 nodes filter and mask coding (scheme 3).
-CONTEXT_FROM, L3_FROM, MASKS_FROM = 11, 12, 14
+# The first file versions with context coding (scheme 2), the l3 nodes filter, mask coding (scheme 3)
+# and context coding over the shown voxels (scheme 4).
+CONTEXT_FROM, L3_FROM, MASKS_FROM, SHOWN_FROM = 11, 12, 14, 15
 TILED = (FILTER_TILES, FILTER_TILES_UNPREDICTED)
 # A zstd frame expands at most 2^15 times: a restored size beyond that is a lie.
 MAX_EXPANSION = 1 << 15
@@ -67,8 +69,12 @@ def parse_records(data, table, version):
             raise CodingError(f"{name} names a section the body does not hold")
         if kind in (1, K_CODING):
             raise CodingError(f"{name}: the metadata and the coding section are never compressed")
-        if scheme not in (SCHEME_ZSTD, SCHEME_CONTEXT, SCHEME_MASKS):
-            raise CodingError(f"{name} has scheme {scheme} (1, zstd, 2, context coding, or 3, mask coding)")
+        if scheme not in (SCHEME_ZSTD, SCHEME_CONTEXT, SCHEME_MASKS, SCHEME_SHOWN):
+            raise CodingError(f"{name} has scheme {scheme} (1, zstd, 2, context coding, 3, mask coding, or 4, context coding over the shown voxels)")
+        if scheme == SCHEME_SHOWN and version < SHOWN_FROM:
+            raise CodingError(f"{name} is context-coded over its shown voxels (scheme 4) in a file older than version {SHOWN_FROM}")
+        if scheme == SCHEME_SHOWN and (filt != FILTER_TILES_UNPREDICTED or kind != K_ATLAS):
+            raise CodingError(f"{name} is context-coded over its shown voxels with filter {filt} (an atlas, kind {K_ATLAS}, under tiles unpredicted only)")
         if scheme == SCHEME_MASKS and version < MASKS_FROM:
             raise CodingError(f"{name} is mask-coded (scheme 3) in a file older than version {MASKS_FROM}")
         if scheme == SCHEME_MASKS and (filt != FILTER_L3 or kind != K_L3):
@@ -244,9 +250,10 @@ def rans_symbol(x, ctx, tables, prec, what):
     return sym, freqs[sym] * (x >> prec) + slot - cums[sym]
 
 
-def context_decode(stored, w, size):
+def context_decode(stored, w, size, shown=None):
     """A context-coded stream (format.md, "Context coding") decoded into the filtered bytes
-    F of `size` bytes: T divisors and 512·T quotients of w bytes, shuffled by byte."""
+    F of `size` bytes: T divisors and 512·T quotients of w bytes, shuffled by byte. `shown`
+    (scheme 4): per tile, a boolean array of its 512 elements (x fastest) that some node shows."""
     stored = bytes(stored)
     m = size // w
     t_count = m // 513
@@ -257,16 +264,28 @@ def context_decode(stored, w, size):
         raise CodingError(f"its context stream has N={lanes}, P={prec}, S={nsym}")
     if 24 + a_len + b_len + 2 * words_len != len(stored) or words_len < 2 * lanes:
         raise CodingError("its context stream's parts do not add up to its size")
-    side = decompress(stored[24:24 + a_len], w * t_count + 256 * nsym)
+    n_flags = 0 if shown is None else -(-t_count // 8)
+    side = decompress(stored[24:24 + a_len], w * t_count + n_flags + 256 * nsym)
     bits = stored[24 + a_len:24 + a_len + b_len]
     words = struct.unpack_from(f"<{words_len}H", stored, 24 + a_len + b_len)
     divisors = [int.from_bytes(side[w * t:w * t + w], "little") for t in range(t_count)]
-    table = struct.unpack_from(f"<{128 * nsym}H", side, w * t_count)
+    flags = side[w * t_count:w * t_count + n_flags]
+    if t_count % 8 and n_flags and flags[-1] >> (t_count % 8):
+        raise CodingError("its context stream has a flag set past its last tile")
+    limit = 1 << (8 * w)
+    if shown is not None and len(shown) != t_count:
+        raise CodingError(f"its context stream is given {len(shown)} tiles' shown voxels for {t_count} tiles")
+    # Scheme 4: a flagged tile leaves out its elements no node shows; every prediction within the tile's levels.
+    left_out = [shown is not None and (flags[t // 8] >> (t % 8)) & 1 == 1 for t in range(t_count)]
+    for t in range(t_count):
+        if left_out[t] and all(shown[t]):
+            raise CodingError(f"its context stream has tile {t}'s flag set, but its every voxel is shown")
+    top = [((limit - 1) // g if g else 0) for g in divisors]
+    table = struct.unpack_from(f"<{128 * nsym}H", side, w * t_count + n_flags)
     tables = rans_tables(table, 128, nsym, prec, "context")
     elems = divisors + [0] * (512 * t_count)
     states = [words[2 * l] * 65536 + words[2 * l + 1] for l in range(lanes)]
     wp, bp = 2 * lanes, 0
-    limit = 1 << (8 * w)
 
     def bit(b):
         return (bits[b >> 3] >> (b & 7)) & 1 if b >> 3 < len(bits) else None
@@ -287,6 +306,12 @@ def context_decode(stored, w, size):
                         6: a + b - val(0, 1, 1)[0]}.get(cls)
                 if pred is None:
                     pred = (2 * (a + b + c) - val(0, 1, 1)[0] - val(1, 0, 1)[0] - val(1, 1, 0)[0] + 1) // 3
+                if shown is not None:
+                    pred = min(max(pred, 0), top[t])
+                    if left_out[t] and not shown[t][v]:
+                        u[(t, i, j, k)] = (pred, 0)
+                        elems[t_count + 512 * t + v] = pred
+                        continue
                 e = min(255, val(1, 0, 0)[1] + val(0, 1, 0)[1] + val(0, 0, 1)[1])
                 bucket = e if e < 4 else min(15, (e * e).bit_length() - 1)
                 ctx = 8 * bucket + cls
@@ -400,11 +425,14 @@ def masks_decode(stored, n):
     return bytes(out)
 
 
-def restore(stored, record, xxh3_64):
-    """A section's bytes from its stored bytes and its coding record."""
+def restore(stored, record, xxh3_64, shown=None):
+    """A section's bytes from its stored bytes and its coding record; `shown` (scheme 4):
+    its tiles' shown voxels (vpak_read.shown_tiles)."""
     scheme, filt, w, s, n, checksum = record
     size = filtered_size(filt, w, n)
-    if scheme == SCHEME_CONTEXT:
+    if scheme == SCHEME_SHOWN:
+        f = context_decode(stored, w, size, shown)
+    elif scheme == SCHEME_CONTEXT:
         f = context_decode(stored, w, size)
     elif scheme == SCHEME_MASKS:
         f = masks_decode(stored, size)

@@ -42,14 +42,14 @@ import sys
 
 import numpy as np
 
-from vpak_coding import K_CODING, CodingError, inflate, parse_records, restore
+from vpak_coding import K_CODING, SCHEME_SHOWN, CodingError, inflate, parse_records, restore
 from vpak_decode import (  # noqa: F401 (names the test scripts use as vpak_read.NAME)
     BC4, BC7, CONSTANT, F16, F32, FORMAT_NAMES, FORMAT_RULES, L2_MASK_WORDS, L2_WORDS, L3_WORDS, RANGED, UNORM8, UNORM16,
     decode_bc4, decode_bc7, l1_node_len, l1_starts, l3_active, slot_entries, slot_origin, texture_shape,
 )
 from vpak_metadata import (  # noqa: F401
     BODY_VERSION, CODED_VERSION, CONTEXT_VERSION, DEFAULT_FPS, L3_VERSION, RESOLVED_VERSION, SEGMENTED_VERSION, TIMED_VERSION, WRAPPED_VERSION,
-    MASKED_VERSION, VpakError, channel_level, channel_transform, decode_metadata, fps, frame_numbers,
+    MASKED_VERSION, SHOWN_VERSION, VpakError, channel_level, channel_transform, decode_metadata, fps, frame_numbers,
 )
 
 MAGIC = b"VPAK\r\n\x1a\n"
@@ -127,8 +127,9 @@ class Sections:
     """Section bytes by (kind, index), checksum verified on first use; a supercompressed
     section (named in `coding`) restored, and its restored checksum verified, on first use."""
 
-    def __init__(self, buf, table):
+    def __init__(self, buf, table, version=BODY_VERSION):
         self.buf, self.table, self.checked, self.coding, self.restored = buf, table, set(), {}, {}
+        self.version = version
 
     def get(self, kind, index=0):
         if (kind, index) not in self.table:
@@ -141,8 +142,13 @@ class Sections:
             self.checked.add((kind, index))
         if (kind, index) in self.coding:
             if (kind, index) not in self.restored:
+                record = self.coding[(kind, index)]
+                shown = None
+                if record[0] == SCHEME_SHOWN:
+                    # The atlas's shown voxels, from the body's metadata, L3 array and tables.
+                    shown = shown_tiles(decode_metadata(self.get(K_METADATA), self.version), self, index, record[4] // (512 * record[2]))
                 try:
-                    self.restored[(kind, index)] = restore(data, self.coding[(kind, index)], xxh3_64)
+                    self.restored[(kind, index)] = restore(data, record, xxh3_64, shown)
                 except CodingError as e:
                     raise VpakError(f"section kind {kind} index {index}: {e}") from None
             return self.restored[(kind, index)]
@@ -159,6 +165,76 @@ class Sections:
         if len(data) % 4:
             raise VpakError(f"section kind {kind} is not whole f32 words")
         return np.frombuffer(data, dtype="<f4")
+
+
+def node_voxels(l3):
+    """Each node's active voxels [n, 512] in tile order (x + 8y + 64z) from the L3 array's
+    words; a node whose record or sub-masks lie outside the array shows nothing."""
+    n = int(l3[0]) if len(l3) else 0
+    n = min(n, (len(l3) - 1) // 3)
+    recs = l3[1:1 + 3 * n].reshape(n, 3).astype(np.int64)
+    states, first = recs[:, 1], recs[:, 2]
+    out = np.zeros((n, 512), dtype=bool)
+    ok = np.ones(n, dtype=bool)
+    x, y, z = np.meshgrid(np.arange(8), np.arange(8), np.arange(8), indexing="ij")
+    x, y, z = x.ravel(), y.ravel(), z.ravel()
+    sub, bit = (x // 4) * 4 + (y // 4) * 2 + z // 4, (x % 4) * 16 + (y % 4) * 4 + z % 4
+    tile = x + 8 * y + 64 * z
+    rank = np.zeros(n, dtype=np.int64)
+    for b in range(8):
+        st = (states >> (2 * b)) & 3
+        sel = sub == b
+        if (st == 1).any():
+            out[np.ix_(st == 1, tile[sel])] = True
+        part = st == 2
+        at = first + 2 * rank
+        fits = part & (at >= 0) & (at + 1 < len(l3))
+        ok &= ~part | fits
+        idx = np.nonzero(fits)[0]
+        if len(idx):
+            words = l3[at[idx]].astype(np.uint64) | (l3[at[idx] + 1].astype(np.uint64) << np.uint64(32))
+            on = ((words[:, None] >> bit[sel].astype(np.uint64)[None, :]) & np.uint64(1)) == 1
+            out[np.ix_(idx, tile[sel])] = on
+        rank += part
+    out[~ok] = False
+    return recs[:, 0], out
+
+
+def shown_tiles(m, secs, index, tiles):
+    """Atlas section `index` (of a 1-lane plane): per tile, its 512 elements (x fastest) that
+    some L3 node shows (format.md, "Shown voxels"): the union over the nodes whose brick's
+    plane brick, for a channel stored in the atlas's plane, is the tile's."""
+    out = np.zeros((tiles, 512), dtype=bool)
+    place = next(((p, a) for p in range(len(m["planes"])) for a in range(len(m["planes"][p]["atlases"]))
+                  if atlas_section(m, p, a) == index), None)
+    if place is None or (K_L3, 0) not in secs.table:
+        return out
+    p, a = place
+    first, count = m["planes"][p]["atlases"][a]["first_brick"], m["planes"][p]["atlases"][a]["count"]
+    bricks, voxels = node_voxels(secs.u32(K_L3))
+    bricks = bricks.astype(np.int64)
+    for c, ch in enumerate(m["channels"]):
+        planes = channel_planes(ch)
+        if p not in planes:
+            continue
+        if ch["alternates"]:
+            if (K_CHANNEL_TABLE, c) not in secs.table:
+                continue
+            t = secs.u32(K_CHANNEL_TABLE, c).astype(np.int64)
+            inside = bricks < len(t)
+            e = np.where(inside, t[np.minimum(bricks, len(t) - 1)] if len(t) else 0, 0)
+            pb = np.where(inside & ((e >> CHOICE_SHIFT) == planes.index(p)), e & PLANE_BRICK_MASK, -1)
+        elif m["planes"][p]["bricks"] != m["brick_count"] and not mixed_plane(m, p):
+            if (K_TABLE, p) not in secs.table:
+                continue
+            t = secs.u32(K_TABLE, p).astype(np.int64)
+            pb = np.where(bricks < len(t), t[np.minimum(bricks, len(t) - 1)] if len(t) else 0, -1)
+        else:
+            pb = bricks
+        local = pb - first
+        sel = np.nonzero((pb >= 0) & (local >= 0) & (local < count) & (local < tiles))[0]
+        np.logical_or.at(out, local[sel], voxels[sel])
+    return out
 
 
 # ---------------------------------------------------------------------------
@@ -537,7 +613,7 @@ def open_body(buf, head_sum=None, coded=False, version=BODY_VERSION, at=0):
     version-8 body, whose supercompressed sections are restored and checked here;
     `version`: the file's (a version-10 file's metadata may record channel resolutions);
     `at`: where the body starts in its file (off a multiple of 256 only with a coding section)."""
-    secs = Sections(buf, read_header(buf))
+    secs = Sections(buf, read_header(buf), version)
     if at % SECTION_ALIGN and (K_CODING, 0) not in secs.table:
         raise VpakError(f"its body at byte {at} has no coding section (such a body starts at a multiple of 256)")
     if head_sum is not None and xxh3_64(buf[:HEADER_SIZE + 32 * len(secs.table)]) != head_sum:
@@ -641,7 +717,7 @@ class Asset:
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
     def __init__(self, buf):
-        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION, L3_VERSION, WRAPPED_VERSION, MASKED_VERSION), "file")
+        self.version, table = read_table(buf, (BODY_VERSION, SEGMENTED_VERSION, CODED_VERSION, TIMED_VERSION, RESOLVED_VERSION, CONTEXT_VERSION, L3_VERSION, WRAPPED_VERSION, MASKED_VERSION, SHOWN_VERSION), "file")
         if self.version == BODY_VERSION:
             self.bodies = [open_body(buf)]
             self.meta = self.bodies[0][0]

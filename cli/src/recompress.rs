@@ -13,11 +13,12 @@ Every segment is restored to the GPU bytes the cooker chose and stored again as
 --supercompress says: the nodes, bricks and texels stay as they are, so the asset draws
 the same; only its size on disk changes (and the supercompress setting it records).
 An asset cooked with --optimize disk keeps its 8- and 16-bit atlases context-coded where
-that is smaller than zstd (format version 11) and its L3 array's sub-masks mask-coded where
+that is smaller than zstd (format version 11; over the voxels its nodes show where that is
+smaller still, version 15) and its L3 array's sub-masks mask-coded where
 that is smaller (version 14), and any asset's L3 array takes the l3 nodes
 filter (version 12); an asset of one supercompressed segment of at most 64 KiB is wrapped
-whole in one zstd frame where that is smaller (version 13). Older assets (version 6 to 13) are read and
-written as version 14 (one without a frame rate and frame numbers gets 24 fps and its
+whole in one zstd frame where that is smaller (version 13). Older assets (version 6 to 14) are read and
+written as version 15 (one without a frame rate and frame numbers gets 24 fps and its
 frame indices).")]
 pub struct RecompressArgs {
     /// The asset to read.

@@ -93,7 +93,7 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
         (vec![w], vec!["--grids", "density,temperature,velocity", "--format", "bc4", "--group", "velocity=f32", "--group", "density,temperature=bc7", "--supercompress", "zstd"]),
         (e.clone(), vec!["--grids", "all", "--format", "unorm8", "--group", "flames=bc4", "--supercompress", "zstd:19", "--segment-frames", "2"]),
         (e.clone(), vec!["--grids", "all", "--max-error", "0.02", "--supercompress", "zstd", "--segment-frames", "2"]),
-        // Atlases context-coded (scheme 2): per-brick formats, several channels, segments.
+        // Atlases context-coded over their shown voxels (scheme 4): per-brick formats, several channels, segments.
         (e, vec!["--grids", "all", "--max-error", "0.004", "--supercompress", "zstd", "--optimize", "disk", "--segment-frames", "2"]),
         (vec![wide], vec!["--format", "bc4", "--lods", "3", "--supercompress", "zstd"]),
     ];
@@ -106,12 +106,15 @@ for k, far in enumerate([(700, 5, 5), (1600, 9, 3), (4000, 1, 1)]):
     assert!(total > 500_000, "{total} values compared");
     assert!(WRAPPED.load(std::sync::atomic::Ordering::Relaxed) > 0, "no case made a wrapped body");
     assert!(MASKED.load(std::sync::atomic::Ordering::Relaxed) > 0, "no case made a mask-coded L3 array");
+    assert!(SHOWN.load(std::sync::atomic::Ordering::Relaxed) > 0, "no case made an atlas coded over its shown voxels");
 }
 
 /// Bodies the spec-only reader found wrapped (version 13), over every case.
 static WRAPPED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 /// Mask-coded sections (scheme 3, version 14) the spec-only reader restored, over every case.
 static MASKED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+/// Atlases context-coded over their shown voxels (scheme 4, version 15) the spec-only reader restored.
+static SHOWN: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// Cooks `inputs` with `flags` into `dir/TAG.vpak`, then per frame decodes it with the
 /// spec-only reader and with `vdbcook unpack` (at `lod`, when given) and compares them
@@ -128,19 +131,19 @@ fn compare_case(dir: &std::path::Path, tag: &str, inputs: &[String], flags: &[&s
     let mut wrapped_by_reader = None;
     if flags.contains(&"--supercompress") {
         // The reader restored sections in every segment (not a file stored as it is),
-        // context-coded ones (scheme 2) among them when the cook optimised for the disk; and
-        // how many L3 arrays it found mask-coded (scheme 3).
+        // context-coded ones (scheme 2 or 4) among them when the cook optimised for the disk; and
+        // how many L3 arrays it found mask-coded (scheme 3) and atlases coded over their shown voxels (4).
         let coded = python(&[
             "-c",
             "import sys; sys.path.insert(0, 'scripts'); import vpak_read as v; a = v.open_segments(sys.argv[1]); \
-             print(a.version, min(len(s.coding) + w for (_, s), w in zip(a.bodies, a.wrapped)), sum(r[0] == 2 for _, s in a.bodies for r in s.coding.values()), sum(a.wrapped), \
-             sum(r[0] == 3 for _, s in a.bodies for r in s.coding.values()))",
+             print(a.version, min(len(s.coding) + w for (_, s), w in zip(a.bodies, a.wrapped)), sum(r[0] in (2, 4) for _, s in a.bodies for r in s.coding.values()), sum(a.wrapped), \
+             sum(r[0] == 3 for _, s in a.bodies for r in s.coding.values()), sum(r[0] == 4 for _, s in a.bodies for r in s.coding.values()))",
             s(&asset),
         ]);
         let said = String::from_utf8_lossy(&coded.stdout);
         let fields: Vec<&str> = said.split_whitespace().collect();
         let context = flags.contains(&"disk");
-        if fields.len() != 5 || fields[0] != vdbcook_vpak::VERSION.to_string() || fields[1] == "0" || (fields[2] == "0") == context {
+        if fields.len() != 6 || fields[0] != vdbcook_vpak::VERSION.to_string() || fields[1] == "0" || (fields[2] == "0") == context {
             return Err(format!(
                 "{flags:?}: not supercompressed in every segment, or context coding not as expected (version, fewest records or wrapped, context-coded, wrapped: {said}) {}",
                 String::from_utf8_lossy(&coded.stderr)
@@ -148,6 +151,7 @@ fn compare_case(dir: &std::path::Path, tag: &str, inputs: &[String], flags: &[&s
         }
         wrapped_by_reader = fields[3].parse::<usize>().ok();
         MASKED.fetch_add(fields[4].parse::<usize>().unwrap_or(0), std::sync::atomic::Ordering::Relaxed);
+        SHOWN.fetch_add(fields[5].parse::<usize>().unwrap_or(0), std::sync::atomic::Ordering::Relaxed);
     }
     let meta: serde_json::Value = serde_json::from_slice(&vdbcook(&["inspect", "--json", s(&asset)]).stdout).unwrap();
     let meta = &meta["files"][0];

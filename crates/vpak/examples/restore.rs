@@ -34,6 +34,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             frames.extend_from_slice(frame);
         }
         let Ok(table) = seg.section(kind::CODING, 0) else { continue };
+        // The segment restored, for the coded sections' bytes (a scheme-4 atlas takes the others').
+        let restored = seg.restored()?;
         for c in Coding::parse_all(table)? {
             let b = seg.section(c.kind, c.index)?;
             // Inside a wrapped body, the frame's bytes are counted already.
@@ -43,7 +45,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             match c.scheme {
                 // A context- or mask-coded section as zstd would store it (level 19, the same filter).
-                coding::SCHEME_CONTEXT | coding::SCHEME_MASKS => frames.extend_from_slice(&coding::zstd_frame(&c, &coding::restore(&c, b)?, 19)?),
+                coding::SCHEME_CONTEXT | coding::SCHEME_MASKS | coding::SCHEME_SHOWN => frames.extend_from_slice(&coding::zstd_frame(&c, restored.section(c.kind, c.index)?, 19)?),
                 _ => frames.extend_from_slice(b),
             }
         }

@@ -4,6 +4,7 @@
 //! coding section lists each compressed section with its filter and its
 //! restored size and checksum; [`restore`] gives back the exact GPU bytes.
 
+use crate::shown::TileMask;
 use crate::{checksum, kind, Error, Format, Metadata, Section};
 use rayon::prelude::*;
 
@@ -18,6 +19,11 @@ pub const SCHEME_CONTEXT: u32 = 2;
 /// filter, its sub-masks coded with a context model and rANS
 /// ([`crate::masks`]).
 pub const SCHEME_MASKS: u32 = 3;
+/// Compression scheme 4 (version 15): a `tiles unpredicted` atlas coded as
+/// scheme 2 is, leaving out the elements no L3 node shows
+/// ([`crate::shown`]), which the decoder takes from the body's restored
+/// node arrays and tables.
+pub const SCHEME_SHOWN: u32 = 4;
 /// A zstd frame decodes to at most this many times its own size (an RLE
 /// block of 4 bytes stands for up to 128 KiB): a larger claimed size is a lie.
 const MAX_RATIO: u64 = 1 << 15;
@@ -307,6 +313,7 @@ impl Coding {
         match self.scheme {
             SCHEME_CONTEXT => "context",
             SCHEME_MASKS => "masks",
+            SCHEME_SHOWN => "context, shown",
             _ => "zstd",
         }
     }
@@ -331,12 +338,19 @@ impl Coding {
             .map(|r| {
                 let u = |i: usize| u32::from_le_bytes(r[i * 4..i * 4 + 4].try_into().unwrap_or([0; 4]));
                 let (kind, index, scheme) = (u(0), u(1), u(2));
-                if !matches!(scheme, SCHEME_ZSTD | SCHEME_CONTEXT | SCHEME_MASKS) {
+                if !matches!(scheme, SCHEME_ZSTD | SCHEME_CONTEXT | SCHEME_MASKS | SCHEME_SHOWN) {
                     return Err(Error::Coding { kind, index, problem: format!("unknown scheme {scheme}") });
                 }
                 let filter = Filter::from_code(u(3), u(4), u(5)).ok_or_else(|| Error::Coding { kind, index, problem: format!("unknown filter {} (width {}, stride {})", u(3), u(4), u(5)) })?;
                 if scheme == SCHEME_CONTEXT && !matches!(filter, Filter::Tiles(Tiles { predict: false, .. })) {
                     return Err(Error::Coding { kind, index, problem: format!("codes filter {} with context coding, which takes tiles unpredicted only", filter.name()) });
+                }
+                if scheme == SCHEME_SHOWN && (!matches!(filter, Filter::Tiles(Tiles { predict: false, .. })) || kind != crate::kind::ATLAS) {
+                    return Err(Error::Coding {
+                        kind,
+                        index,
+                        problem: format!("codes filter {} with context coding of shown voxels, which takes an atlas under tiles unpredicted only", filter.name()),
+                    });
                 }
                 if scheme == SCHEME_MASKS && (filter != Filter::L3Nodes || kind != crate::kind::L3_NODES) {
                     return Err(Error::Coding { kind, index, problem: format!("codes filter {} with mask coding, which takes an L3 array under l3 nodes only", filter.name()) });
@@ -390,6 +404,14 @@ fn texel_filters(plane: &crate::Plane, bricks: [u32; 3]) -> Vec<Filter> {
 /// about half that with AVX2 alone and a seventh with neither
 /// (docs/benchmarks.md): a few percent of bytes are not worth that.
 const CONTEXT_GAIN: f64 = 0.92;
+
+/// A context-coded atlas is coded over its shown voxels (scheme 4) when
+/// that takes at most this share of the stream over all of them (scheme 2):
+/// its reader first works out every node's voxels and lays them out for the
+/// decoder, which cost a smooth fog's restore about a tenth for 4–6 % of
+/// its bytes (docs/benchmarks.md); flames and level sets, whose bricks are
+/// mostly hidden, save a fifth.
+const SHOWN_GAIN: f64 = 0.93;
 
 /// The `tiles unpredicted` filter among `filters` when section `s` is the
 /// atlas of a plane of levels (`unorm8`, `unorm16`), which context coding
@@ -523,6 +545,18 @@ fn compress_threaded(data: &[u8], level: i32, workers: u32) -> std::io::Result<V
 /// stream, the same on any number of threads ([`compress`]).
 pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) -> Result<Vec<Section>, Error> {
     let level = schemes.level;
+    // The shown voxels of each atlas context coding may take (scheme 4 leaves the others out).
+    let coder_atlases: Vec<crate::shown::Wanted> = sections
+        .iter()
+        .filter(|s| schemes.context && s.kind == kind::ATLAS)
+        .filter_map(|s| {
+            let filters = candidates(s, meta);
+            let t = contextual(s, meta, &filters)?;
+            Some(crate::shown::Wanted { section: s.index, tiles: s.data.len() / (crate::BRICK_VOXELS * t.width as usize) })
+        })
+        .collect();
+    let shown = crate::shown::shown_tiles(meta, &coder_atlases, &|k, i| sections.iter().find(|s| (s.kind, s.index) == (k, i)).map(|s| &s.data[..]));
+    let shown_of = |s: &Section| coder_atlases.iter().position(|w| s.kind == kind::ATLAS && w.section == s.index).map(|j| &shown[j][..]);
     let coded: Vec<(Section, Option<Coding>)> = sections
         .into_par_iter()
         .map(|s| {
@@ -580,8 +614,21 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) 
                     false => unpredicted.get_or_insert_with(|| Filter::Tiles(t).apply(&s.data)),
                 };
                 let worth = |c: &Vec<u8>| (c.len() as f64) <= CONTEXT_GAIN * data.len() as f64 && input.len() as u64 <= c.len() as u64 * MAX_RATIO;
-                if let Some(coded) = crate::context::encode(input, t.width, level)?.filter(worth) {
-                    (data, scheme, filter) = (coded, SCHEME_CONTEXT, Filter::Tiles(t));
+                // Over the shown voxels where that saves enough of the stream over all of them.
+                let over_all = crate::context::encode(input, t.width, level, None)?;
+                // Tried only where the nodes leave out a twentieth of the texels or more (a fog's
+                // atlas, nearly all shown, is not coded twice).
+                let hidden = |shown: &[TileMask]| shown.iter().flatten().map(|w| w.count_zeros() as usize).sum::<usize>();
+                let over_shown = match (shown_of(&s).filter(|m| 20 * hidden(m) >= m.len() * crate::BRICK_VOXELS), &over_all) {
+                    (Some(shown), Some(all)) => crate::context::encode(input, t.width, level, Some(shown))?.filter(|c| c.len() as f64 <= SHOWN_GAIN * all.len() as f64),
+                    _ => None,
+                };
+                let best = match over_shown {
+                    Some(c) => Some((c, SCHEME_SHOWN)),
+                    None => over_all.map(|c| (c, SCHEME_CONTEXT)),
+                };
+                if let Some((coded, coded_as)) = best.filter(|(c, _)| worth(c)) {
+                    (data, scheme, filter) = (coded, coded_as, Filter::Tiles(t));
                 }
             }
             if schemes.context && best == Filter::L3Nodes {
@@ -658,7 +705,8 @@ pub(crate) fn decompress_into<C: zstd::zstd_safe::WriteBuf + ?Sized>(stored: &[u
 /// restored size): decompressed in place when it has no filter, else into
 /// `scratch` (when it has room, else the thread's own buffer) and
 /// unfiltered from there; then checked against its checksum.
-fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>) -> Result<(), Error> {
+/// A scheme-4 section takes `shown`, its tiles' shown voxels ([`shown_of`]).
+fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>, shown: Option<&[TileMask]>) -> Result<(), Error> {
     let err = |problem: String| Error::Coding { kind: c.kind, index: c.index, problem };
     let n = c.filter.filtered_len(out.len()).ok_or_else(|| err(format!("restores {} bytes, which its filter cannot", out.len())))?;
     // Exactly the n bytes the record implies.
@@ -676,12 +724,20 @@ fn restore_into(c: &Coding, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>
     } else {
         let own = scratch.capacity() < n;
         let mut buf = if own { SCRATCH.take() } else { std::mem::take(scratch) };
-        buf.clear();
-        let undone = buf.try_reserve_exact(n).map_err(|_| err(format!("no memory for its {n} filtered bytes"))).and_then(|()| {
+        // The context decoders write every byte: memory an earlier restore left need not be zeroed again.
+        if !matches!(c.scheme, SCHEME_CONTEXT | SCHEME_SHOWN) {
+            buf.clear();
+        }
+        buf.truncate(n);
+        let undone = buf.try_reserve_exact(n - buf.len()).map_err(|_| err(format!("no memory for its {n} filtered bytes"))).and_then(|()| {
             match c.scheme {
-                SCHEME_CONTEXT => {
+                SCHEME_CONTEXT | SCHEME_SHOWN => {
+                    let shown = match c.scheme {
+                        SCHEME_SHOWN => Some(shown.ok_or_else(|| err("is coded over its shown voxels, which it was not given".into()))?),
+                        _ => None,
+                    };
                     buf.resize(n, 0);
-                    crate::context::decode(stored, c.filter.width() as u32, &mut buf).map_err(err)?;
+                    crate::context::decode(stored, c.filter.width() as u32, &mut buf, shown).map_err(err)?;
                 }
                 SCHEME_MASKS => {
                     buf.resize(n, 0);
@@ -746,14 +802,34 @@ pub(crate) fn zeroed<T: bytemuck::Zeroable>(n: usize) -> Option<Vec<T>> {
     }
 }
 
-/// Restores one section's GPU bytes from its stored bytes.
+/// Restores one section's GPU bytes from its stored bytes (a scheme-4
+/// section needs its body's: [`restore_body`]).
 pub fn restore(c: &Coding, stored: &[u8]) -> Result<Vec<u8>, Error> {
     plausible(c, stored.len())?;
     let mut out = Vec::new();
     out.try_reserve_exact(c.raw_size as usize).map_err(|_| Error::Coding { kind: c.kind, index: c.index, problem: format!("no memory for its {} restored bytes", c.raw_size) })?;
     out.resize(c.raw_size as usize, 0);
-    restore_into(c, stored, &mut out, &mut Vec::new())?;
+    restore_into(c, stored, &mut out, &mut Vec::new(), None)?;
     Ok(out)
+}
+
+/// The shown voxels of the scheme-4 atlases `coded` (one list of tile
+/// masks each, in order) from a body's restored sections (`section`): its
+/// metadata (`meta`, or parsed from the body's), L3 array and tables.
+pub(crate) fn shown_of<'a>(coded: &[Coding], meta: Option<&Metadata>, section: &dyn Fn(u32, u32) -> Option<&'a [u8]>) -> Result<Vec<Vec<TileMask>>, Error> {
+    if coded.is_empty() {
+        return Ok(Vec::new());
+    }
+    let parsed;
+    let meta = match meta {
+        Some(m) => m,
+        None => {
+            parsed = Metadata::from_bytes(section(kind::METADATA, 0).ok_or(Error::Missing { kind: kind::METADATA, index: 0 })?)?;
+            &parsed
+        }
+    };
+    let wanted: Vec<crate::shown::Wanted> = coded.iter().map(|c| crate::shown::Wanted { section: c.index, tiles: c.raw_size as usize / (crate::BRICK_VOXELS * c.filter.width()) }).collect();
+    Ok(crate::shown::shown_tiles(meta, &wanted, section))
 }
 
 /// How a body's sections are restored: the restored body's header and
@@ -778,6 +854,11 @@ pub(crate) struct Part {
 }
 
 impl Part {
+    /// Whether restoring it takes the body's other sections (scheme 4).
+    pub fn needs_shown(&self) -> bool {
+        self.coding.is_some_and(|c| c.scheme == SCHEME_SHOWN)
+    }
+
     /// The restored section's checksum.
     pub fn checksum(&self) -> u64 {
         self.coding.map_or(self.stored.checksum, |c| c.raw_checksum)
@@ -819,9 +900,10 @@ pub(crate) fn plan(sections: &[crate::SectionEntry], coding: Option<&[u8]>) -> R
 
 /// Restores `part`'s section from its stored bytes into `out` (its restored
 /// size): decompressed and unfiltered (through `scratch`), or copied.
-pub(crate) fn restore_part(part: &Part, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>) -> Result<(), Error> {
+/// A scheme-4 section takes `shown`, its tiles' shown voxels ([`shown_of`]).
+pub(crate) fn restore_part(part: &Part, stored: &[u8], out: &mut [u8], scratch: &mut Vec<u8>, shown: Option<&[TileMask]>) -> Result<(), Error> {
     match &part.coding {
-        Some(c) => restore_into(c, stored, out, scratch),
+        Some(c) => restore_into(c, stored, out, scratch, shown),
         None => {
             out.copy_from_slice(stored);
             Ok(())
@@ -856,7 +938,16 @@ pub(crate) fn restore_body(sections: &[(crate::SectionEntry, &[u8])], buf: Vec<u
         at = part.offset + part.size;
     }
     rest.fill(0);
-    slots.into_par_iter().try_for_each_init(Vec::new, |scratch, (part, slot, stored)| restore_part(part, stored, slot, scratch))?;
+    // Scheme-4 atlases last: they take the shown voxels from the others, restored.
+    let (later, mut first): (Vec<_>, Vec<_>) = slots.into_iter().partition(|(part, _, _)| part.needs_shown());
+    first.par_iter_mut().try_for_each_init(Vec::new, |scratch, (part, slot, stored)| restore_part(part, stored, slot, scratch, None))?;
+    if !later.is_empty() {
+        let done: Vec<(&Part, &[u8])> = first.into_iter().map(|(part, slot, _)| (part, &*slot)).collect();
+        let find = |k: u32, i: u32| done.iter().find(|(p, _)| (p.stored.kind, p.stored.index) == (k, i)).map(|(_, b)| *b);
+        let coded: Vec<Coding> = later.iter().filter_map(|(part, _, _)| part.coding).collect();
+        let shown = shown_of(&coded, None, &find)?;
+        later.into_par_iter().zip(shown).try_for_each_init(Vec::new, |scratch, ((part, slot, stored), shown)| restore_part(part, stored, slot, scratch, Some(&shown)))?;
+    }
     Ok((words, len))
 }
 
@@ -970,7 +1061,7 @@ mod tests {
                     }
                 }
                 let t = Tiles { width: width as u32, x: 64, y: 1, predict: false };
-                let coded = crate::context::encode(&t.apply(&texture), width as u32, 5).unwrap().map_or(usize::MAX, |c| c.len()) / 64;
+                let coded = crate::context::encode(&t.apply(&texture), width as u32, 5, None).unwrap().map_or(usize::MAX, |c| c.len()) / 64;
                 let texels = cost - 8;
                 assert!(texels <= 2 * coded + 16 && coded <= 2 * texels + 16, "{format:?}, amplitude {amp}: estimated {texels} bytes a brick, coded {coded}");
             }

@@ -87,8 +87,11 @@ pub(crate) fn sections<'a>(table: &[u8], len: u64, version: u32, at: u64, mut co
     if let Some(c) = records.iter().find(|c| c.filter == crate::coding::Filter::L3Nodes && version < segments::VERSION_12) {
         return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is filtered as l3 nodes in a version-{version} file (that filter is version {})", segments::VERSION_12) });
     }
-    if let Some(c) = records.iter().find(|c| c.scheme == crate::coding::SCHEME_MASKS && version < segments::VERSION) {
-        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is mask-coded in a version-{version} file (mask coding is version {})", segments::VERSION) });
+    if let Some(c) = records.iter().find(|c| c.scheme == crate::coding::SCHEME_MASKS && version < segments::VERSION_14) {
+        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is mask-coded in a version-{version} file (mask coding is version {})", segments::VERSION_14) });
+    }
+    if let Some(c) = records.iter().find(|c| c.scheme == crate::coding::SCHEME_SHOWN && version < segments::VERSION) {
+        return Err(Error::Coding { kind: c.kind, index: c.index, problem: format!("is coded over its shown voxels in a version-{version} file (that coding is version {})", segments::VERSION) });
     }
     // The sections at multiples of 8 in a version-8 to 10 body: the coding section and those it names.
     let coded_set: std::collections::HashSet<(u32, u32)> = codings.iter().map(|(k, i, _)| (*k, *i)).chain(records.iter().map(|c| (c.kind, c.index))).collect();

@@ -37,6 +37,7 @@ pub mod resolution;
 pub mod runtime;
 pub mod segments;
 pub mod settings;
+mod shown;
 mod tiles;
 pub mod time;
 pub mod wrap;

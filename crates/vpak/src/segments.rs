@@ -13,9 +13,12 @@ use std::io::{Seek, SeekFrom, Write};
 /// supercompressed sections ([`crate::coding`], context-coded ones and L3
 /// arrays through the `l3 nodes` filter included), record their frames' time
 /// ([`crate::Time`]) and their channels' voxel sizes ([`crate::Resolution`]),
-/// small bodies wrapped whole in one zstd frame ([`crate::wrap`]), and L3
-/// arrays whose sub-masks are mask-coded ([`crate::masks`]).
-pub const VERSION: u32 = 14;
+/// small bodies wrapped whole in one zstd frame ([`crate::wrap`]), L3
+/// arrays whose sub-masks are mask-coded ([`crate::masks`]), and atlases
+/// context-coded over the voxels their nodes show ([`crate::shown`]).
+pub const VERSION: u32 = 15;
+/// Version of a file whose atlases are never coded over their shown voxels (still read).
+pub const VERSION_14: u32 = 14;
 /// Version of a file whose L3 arrays are never mask-coded (still read).
 pub const VERSION_13: u32 = 13;
 /// Version of a file whose bodies are never wrapped (still read).
@@ -742,7 +745,7 @@ pub(crate) mod tests {
         let mut sections = body(&m, 1);
         // Eight tiles of zeros: their divisors and quotients (the tiles filters' output) are zeros too.
         let raw = vec![0u8; 4096];
-        let stored = crate::context::encode(&[0u8; 8 + 4096], 1, 3).unwrap().unwrap();
+        let stored = crate::context::encode(&[0u8; 8 + 4096], 1, 3, None).unwrap().unwrap();
         let tiles = Filter::Tiles(Tiles { width: 1, x: 8, y: 1, predict: false });
         let record = Coding { kind: kind::L2_ENTRIES, index: 0, scheme: SCHEME_CONTEXT, filter: tiles, raw_size: 4096, raw_checksum: crate::checksum(&raw) };
         sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: stored.into() });
@@ -772,6 +775,25 @@ pub(crate) mod tests {
         let mut b = with_body_at(&b, ALIGN as u64);
         set_version(&mut b, VERSION);
         Asset::from_bytes(&b).unwrap().segment(0).unwrap();
+    }
+
+    #[test]
+    fn coding_over_shown_voxels_is_version_15() {
+        use crate::coding::{Coding, Filter, Tiles, SCHEME_SHOWN};
+        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
+        let mut sections = body(&m, 1);
+        // Eight tiles of zeros that no node shows (the body has no L3 array): every element left out.
+        let raw = vec![0u8; 4096];
+        let stored = crate::context::encode(&[0u8; 8 + 4096], 1, 3, Some(&[[0u64; 8]; 8])).unwrap().unwrap();
+        let tiles = Filter::Tiles(Tiles { width: 1, x: 8, y: 1, predict: false });
+        let record = Coding { kind: kind::ATLAS, index: 0, scheme: SCHEME_SHOWN, filter: tiles, raw_size: 4096, raw_checksum: crate::checksum(&raw) };
+        sections.push(Section { kind: kind::ATLAS, index: 0, data: stored.into() });
+        sections.push(Section { kind: kind::CODING, index: 0, data: record.bytes().to_vec().into() });
+        let b = assemble_unwrapped(&[(2, sections)]).unwrap();
+        let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
+        assert_eq!(restored.section(kind::ATLAS, 0).unwrap(), &raw[..]);
+        let err = older_error(&b, VERSION_14);
+        assert!(err.contains("coded over its shown voxels in a version-14 file"), "{err}");
     }
 
     #[test]

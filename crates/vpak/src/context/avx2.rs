@@ -8,7 +8,7 @@
 //! shared load (gathers when they spread further). Same output as
 //! `decode_scalar`, which the tests hold it to, damaged streams included.
 
-use super::{finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, TILE};
+use super::{finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, SKIPPED, TILE};
 use std::arch::x86_64::*;
 
 // Renormalisation is "the state's upper half is zero".
@@ -105,7 +105,9 @@ struct Reader<'a> {
 }
 
 /// One element of every lane: context, table entry, state update, escape
-/// bits, prediction undone.
+/// bits, prediction undone (held within each lane's `bounds`). Lane l of
+/// vector gi leaves element x out (a scheme-4 stream's, in the [`SKIPPED`]
+/// context) when bit x of its `skips` is set.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 unsafe fn step<const POS: usize, const G: usize, const P: i32>(
@@ -117,6 +119,9 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
     table: *const u32,
     expand: &[[u8; 16]],
     max: __m256i,
+    x: i32,
+    skips: &[__m256i; G],
+    bounds: &[(__m256i, __m256i); G],
 ) {
     unsafe {
         let one = _mm256_set1_epi32(1);
@@ -129,6 +134,8 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
             let small = _mm256_cmpgt_epi32(_mm256_set1_epi32(4), e);
             let bucket = _mm256_blendv_epi8(_mm256_min_epi32(lg, _mm256_set1_epi32(15)), e, small);
             let ctx = _mm256_add_epi32(_mm256_slli_epi32::<3>(bucket), _mm256_set1_epi32(POS as i32));
+            let bit = _mm256_set1_epi32(1 << x);
+            let ctx = _mm256_blendv_epi8(ctx, _mm256_set1_epi32(SKIPPED as i32), _mm256_cmpeq_epi32(_mm256_and_si256(skips[gi], bit), bit));
             let x = st[gi];
             let slot = _mm256_and_si256(x, _mm256_set1_epi32((1 << P) - 1));
             let ent = _mm256_i32gather_epi32::<4>(table as *const i32, _mm256_or_si256(_mm256_slli_epi32::<P>(ctx), slot));
@@ -162,7 +169,8 @@ unsafe fn step<const POS: usize, const G: usize, const P: i32>(
             let b = _mm256_shuffle_epi8(mag, _mm256_setr_epi8(0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, 0, 4, 8, 12, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1));
             let b8 = _mm_unpacklo_epi32(_mm256_castsi256_si128(b), _mm256_extracti128_si256::<1>(b));
             _mm_storel_epi64(w.mag.get_unchecked_mut(p * G + gi).0.as_mut_ptr() as *mut __m128i, b8);
-            let q = _mm256_add_epi32(predict::<POS, G>(w, p, gi), res);
+            let (lo, hi) = bounds[gi];
+            let q = _mm256_add_epi32(_mm256_min_epi32(_mm256_max_epi32(predict::<POS, G>(w, p, gi), lo), hi), res);
             // Outside [0, max]: below 0 or above max, as signed numbers (|q| < 2^31 here).
             let outside = _mm256_or_si256(_mm256_cmpgt_epi32(_mm256_setzero_si256(), q), _mm256_cmpgt_epi32(q, max));
             r.bad = _mm256_or_si256(r.bad, _mm256_and_si256(act, outside));
@@ -292,9 +300,15 @@ unsafe fn run<const G: usize, const P: i32>(s: &Stream, w: usize, out: &mut [u8]
     let table = s.table.as_ptr();
     let outp = out.as_mut_ptr();
     let lane_ids = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    let zeros = vec![0u8; 64 * n];
     for g in 0..s.tiles.div_ceil(n) {
         let present = n.min(s.tiles - g * n);
         let act: [__m256i; G] = std::array::from_fn(|gi| _mm256_cmpgt_epi32(_mm256_set1_epi32(present as i32 - (gi * 8) as i32), lane_ids));
+        let bounds: [(__m256i, __m256i); G] = std::array::from_fn(|gi| {
+            let b: [super::Bounds; 8] = std::array::from_fn(|l| s.bounds_of(g * n + gi * 8 + l));
+            (_mm256_loadu_si256(b.map(|b| b.lo).as_ptr() as *const __m256i), _mm256_loadu_si256(b.map(|b| b.hi).as_ptr() as *const __m256i))
+        });
+        let rows = s.skip_rows(g, &zeros);
         for row in 0..64 {
             // A row takes at most 8 words per lane, which the padding after the stream holds
             // (and a 16-byte load of words at the end reads 8 words: within it too).
@@ -302,12 +316,14 @@ unsafe fn run<const G: usize, const P: i32>(s: &Stream, w: usize, out: &mut [u8]
                 return Err("runs past the end of its words".into());
             }
             let p = padded(row * 8);
+            // Per vector, each lane's row of left-out elements (bit x).
+            let skips: [__m256i; G] = std::array::from_fn(|gi| unsafe { _mm256_cvtepu8_epi32(_mm_loadl_epi64(rows.as_ptr().add(row * n + gi * 8) as *const __m128i)) });
             macro_rules! run {
                 ($first:expr, $rest:expr) => {
                     unsafe {
-                        step::<{ $first }, G, P>(&mut work, &mut st, &act, p, &mut r, table, &expand, max);
+                        step::<{ $first }, G, P>(&mut work, &mut st, &act, p, &mut r, table, &expand, max, 0, &skips, &bounds);
                         for x in 1..8 {
-                            step::<{ $rest }, G, P>(&mut work, &mut st, &act, p + x, &mut r, table, &expand, max);
+                            step::<{ $rest }, G, P>(&mut work, &mut st, &act, p + x, &mut r, table, &expand, max, x as i32, &skips, &bounds);
                         }
                     }
                 };

@@ -11,7 +11,7 @@
 //! output as `decode_scalar`, which the tests hold it to, damaged streams
 //! included.
 
-use super::{bucket, finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, TILE};
+use super::{bucket, finish, padded, Escapes, Stream, ESCAPE, LAST_SYMBOL, RANS_LOW, SKIPPED, TILE};
 use std::arch::x86_64::*;
 
 #[repr(C, align(64))]
@@ -191,8 +191,10 @@ unsafe fn with_quarter(v: __m512i, k: usize, x: __m128i) -> __m512i {
 }
 
 /// One element of every lane: context, table entry, state update, escape
-/// bits, prediction undone. The contexts of all G vectors come at once from
-/// their magnitudes' bytes (saturating adds and two table permutes); the
+/// bits, prediction undone (held within each lane's `bounds`). The contexts
+/// of all G vectors come at once from their magnitudes' bytes (saturating
+/// adds and two table permutes; the lanes of `skip`, elements a scheme-4
+/// stream leaves out, in the [`SKIPPED`] context); the
 /// magnitudes of the element before along x, `left`, come in a register
 /// (the element's own go out in one, and to memory in one store), so the
 /// step does not wait on the store it just made.
@@ -207,6 +209,8 @@ unsafe fn step<const POS: usize, const G: usize, const P: u32>(
     table: *const u32,
     buckets: &Buckets,
     left: __m512i,
+    skip: __mmask64,
+    bounds: &[(__m512i, __m512i); G],
 ) -> __m512i {
     unsafe {
         let bytes = match G {
@@ -219,6 +223,7 @@ unsafe fn step<const POS: usize, const G: usize, const P: u32>(
         let low = _mm512_permutex2var_epi8(buckets.0[0], e, buckets.0[1]);
         let high = _mm512_permutex2var_epi8(buckets.0[2], e, buckets.0[3]);
         let ctxs = _mm512_add_epi8(_mm512_mask_blend_epi8(_mm512_movepi8_mask(e), low, high), _mm512_set1_epi8(POS as i8));
+        let ctxs = _mm512_mask_blend_epi8(skip, ctxs, _mm512_set1_epi8(SKIPPED as u8 as i8));
         for gi in 0..G {
             let act = act[gi];
             let ctx = _mm512_cvtepu8_epi32(quarter(ctxs, gi));
@@ -248,7 +253,8 @@ unsafe fn step<const POS: usize, const G: usize, const P: u32>(
             let res = _mm512_xor_si512(_mm512_srli_epi32::<1>(z), _mm512_sub_epi32(_mm512_setzero_si512(), _mm512_and_si512(z, _mm512_set1_epi32(1))));
             let mag = _mm512_srli_epi32::<1>(_mm512_add_epi32(z, _mm512_set1_epi32(1)));
             mags = with_quarter(mags, gi, _mm512_cvtusepi32_epi8(mag));
-            let q = _mm512_add_epi32(predict::<POS, G>(w, p, gi), res);
+            let (lo, hi) = bounds[gi];
+            let q = _mm512_add_epi32(_mm512_min_epi32(_mm512_max_epi32(predict::<POS, G>(w, p, gi), lo), hi), res);
             r.q_max = _mm512_mask_max_epu32(r.q_max, act, r.q_max, q);
             _mm512_store_si512(w.f.get_unchecked_mut(p * G + gi).0.as_mut_ptr() as *mut __m512i, q);
         }
@@ -323,22 +329,35 @@ unsafe fn run<const G: usize, const P: u32>(s: &Stream, w: usize, out: &mut [u8]
     let max = _mm512_set1_epi32((1 << (8 * w)) - 1);
     let table = s.table.as_ptr();
     let outp = out.as_mut_ptr();
+    let zeros = vec![0u8; 64 * n];
+    let lane_bytes = match G {
+        4 => u64::MAX,
+        _ => (1u64 << (16 * G)) - 1,
+    };
     for g in 0..s.tiles.div_ceil(n) {
         let present = n.min(s.tiles - g * n);
         let act: [__mmask16; G] = std::array::from_fn(|gi| ((1u32 << present.saturating_sub(gi * 16).min(16)) - 1) as __mmask16);
+        let bounds: [(__m512i, __m512i); G] = std::array::from_fn(|gi| {
+            let b: [super::Bounds; 16] = std::array::from_fn(|l| s.bounds_of(g * n + gi * 16 + l));
+            (_mm512_loadu_si512(b.map(|b| b.lo).as_ptr() as *const __m512i), _mm512_loadu_si512(b.map(|b| b.hi).as_ptr() as *const __m512i))
+        });
+        let rows = s.skip_rows(g, &zeros);
         for row in 0..64 {
             // A row takes at most 8 words per lane, which the padding after the stream holds.
             if unsafe { r.words.offset_from(base) } as usize > s.words_len {
                 return Err("runs past the end of its words".into());
             }
             let p = padded(row * 8);
+            // Byte l: lane l's row of left-out elements, bit x.
+            let skips = unsafe { _mm512_maskz_loadu_epi8(lane_bytes, rows.as_ptr().add(row * n) as *const i8) };
+            let skip = |x: usize| _mm512_test_epi8_mask(skips, _mm512_set1_epi8((1u8 << x) as i8));
             macro_rules! run {
                 ($first:expr, $rest:expr) => {
                     unsafe {
                         // The element before x = 0 is the padding, 0.
-                        let mut left = step::<{ $first }, G, P>(&mut work, &mut st, &act, p, &mut r, table, &buckets, _mm512_setzero_si512());
+                        let mut left = step::<{ $first }, G, P>(&mut work, &mut st, &act, p, &mut r, table, &buckets, _mm512_setzero_si512(), skip(0), &bounds);
                         for x in 1..8 {
-                            left = step::<{ $rest }, G, P>(&mut work, &mut st, &act, p + x, &mut r, table, &buckets, left);
+                            left = step::<{ $rest }, G, P>(&mut work, &mut st, &act, p + x, &mut r, table, &buckets, left, skip(x), &bounds);
                         }
                     }
                 };

@@ -11,8 +11,17 @@
 //! over one shared word stream, so that a vector decoder ([`avx512`],
 //! [`avx2`]) runs `N` tiles in its lanes; the stream is the same for every
 //! decoder, and the fastest the CPU has is chosen at run time.
+//!
+//! Scheme 4 (version 15) is the same stream told which voxels of each tile
+//! some L3 node shows ([`crate::shown`]): a tile whose flag is set leaves
+//! its other elements out of the stream, each the prediction there, and
+//! every prediction is held to the tile's levels `[0, ⌊max / divisor⌋]`. An
+//! element left out decodes in a context of its own whose one symbol (0)
+//! has all the frequency: the rANS step leaves the state as it was, so the
+//! decoders run every lane alike.
 //! `docs/format.md`, "Context coding", is the specification.
 
+use crate::shown::TileMask;
 use rayon::prelude::*;
 
 #[cfg(target_arch = "x86_64")]
@@ -36,6 +45,9 @@ const POSITIONS: usize = 8;
 /// Buckets of the neighbours' residual magnitudes.
 const BUCKETS: usize = 16;
 const CONTEXTS: usize = BUCKETS * POSITIONS;
+/// The decode tables' context of an element a scheme-4 stream leaves out:
+/// one symbol, 0, of frequency 2^precision (a step that changes nothing).
+const SKIPPED: usize = CONTEXTS;
 /// The rANS states' lower bound; words are 16 bits.
 pub(crate) const RANS_LOW: u32 = 1 << 16;
 /// Tiles decoded side by side, as vdbcook writes them: four vectors of 16 lanes.
@@ -154,21 +166,67 @@ struct Token {
     raw: u32,
 }
 
-/// The tokens of one tile's quotients, in element order.
-fn tokens(tile: &[u16]) -> Vec<Token> {
+/// Whether bit `v` (an element of a tile) of `mask` is set.
+#[inline(always)]
+fn bit(mask: &TileMask, v: usize) -> bool {
+    mask[v >> 6] >> (v & 63) & 1 == 1
+}
+
+/// A tile's predictions held within `[lo, hi]` (scheme 4: the tile's levels;
+/// scheme 2: no bound).
+#[derive(Clone, Copy)]
+struct Bounds {
+    lo: i32,
+    hi: i32,
+}
+
+const UNBOUNDED: Bounds = Bounds { lo: i32::MIN, hi: i32::MAX };
+
+impl Bounds {
+    /// A scheme-4 tile's: its levels, `[0, ⌊(2^(8w) − 1) / divisor⌋]` (`[0, 0]` for divisor 0).
+    fn levels(divisor: u16, width: usize) -> Bounds {
+        let top = (1i32 << (8 * width)) - 1;
+        Bounds { lo: 0, hi: if divisor == 0 { 0 } else { top / i32::from(divisor) } }
+    }
+}
+
+/// The tokens of one tile's quotients, in element order; the elements of
+/// `skip` (which must each be their prediction: [`skippable`]) in the
+/// [`SKIPPED`] context.
+fn tokens(tile: &[u16], skip: &TileMask, bounds: Bounds) -> Vec<Token> {
     let mut f = [0i32; 729];
     let mut mag = [0u32; 729];
     let mut out = Vec::with_capacity(TILE);
     for (v, &q) in tile.iter().enumerate() {
         let (p, pos) = (padded(v), position(v));
+        f[p] = i32::from(q);
+        if bit(skip, v) {
+            out.push(Token { ctx: SKIPPED as u8, sym: 0, raw: 0 });
+            continue;
+        }
         let e = (mag[p - 81] + mag[p - 9] + mag[p - 1]).min(255);
-        let r = i32::from(q) - predict(pos, &f, p);
+        let r = i32::from(q) - predict(pos, &f, p).clamp(bounds.lo, bounds.hi);
         let (sym, _, raw) = token(r);
         out.push(Token { ctx: (bucket(e) as usize * POSITIONS + pos) as u8, sym: sym as u8, raw });
         mag[p] = r.unsigned_abs();
-        f[p] = i32::from(q);
     }
     out
+}
+
+/// Whether a scheme-4 tile may leave out the elements `shown` does not
+/// hold: there are some, and each is its prediction (within `bounds`)
+/// from the elements before it.
+fn skippable(tile: &[u16], shown: &TileMask, bounds: Bounds) -> bool {
+    if shown.iter().all(|&w| w == u64::MAX) {
+        return false;
+    }
+    let mut f = [0i32; 729];
+    tile.iter().enumerate().all(|(v, &q)| {
+        let p = padded(v);
+        let keep = bit(shown, v) || predict(position(v), &f, p).clamp(bounds.lo, bounds.hi) == i32::from(q);
+        f[p] = i32::from(q);
+        keep
+    })
 }
 
 /// Counts per context quantised to a total of 2^`precision` each (every
@@ -214,40 +272,61 @@ pub(crate) fn rans_put(x: &mut u32, f: u32, c: u32, precision: u32, words: &mut 
 }
 
 /// The `tiles unpredicted` filter's output `filtered` (`width`-byte elements
-/// shuffled by byte: T divisors, then 512·T quotients) as a scheme-2 stream,
-/// its side frame compressed by zstd at `level`; `None` when it does not
-/// hold whole tiles.
-pub fn encode(filtered: &[u8], width: u32, level: i32) -> std::io::Result<Option<Vec<u8>>> {
-    encode_lanes(filtered, width, level, LANES)
+/// shuffled by byte: T divisors, then 512·T quotients) as a context-coded
+/// stream, its side frame compressed by zstd at `level`: scheme 4 when
+/// `shown` gives each tile's shown voxels ([`crate::shown`]), else scheme 2;
+/// `None` when it does not hold whole tiles (or `shown` is not one mask per tile).
+pub fn encode(filtered: &[u8], width: u32, level: i32, shown: Option<&[TileMask]>) -> std::io::Result<Option<Vec<u8>>> {
+    encode_lanes(filtered, width, level, LANES, shown)
 }
 
 /// [`encode`] with `lanes` tiles side by side (vdbcook writes [`LANES`];
 /// the tests also make the other counts a reader must take).
-fn encode_lanes(filtered: &[u8], width: u32, level: i32, lanes: usize) -> std::io::Result<Option<Vec<u8>>> {
+fn encode_lanes(filtered: &[u8], width: u32, level: i32, lanes: usize, shown: Option<&[TileMask]>) -> std::io::Result<Option<Vec<u8>>> {
     let w = width as usize;
     let m = filtered.len() / w.max(1);
     if !matches!(w, 1 | 2) || m * w != filtered.len() || m == 0 || !m.is_multiple_of(TILE + 1) {
         return Ok(None);
     }
     let tiles = m / (TILE + 1);
+    if shown.is_some_and(|s| s.len() != tiles) {
+        return Ok(None);
+    }
     let element = |i: usize| match w {
         1 => u16::from(filtered[i]),
         _ => u16::from_le_bytes([filtered[i], filtered[m + i]]),
     };
-    let toks: Vec<Vec<Token>> = (0..tiles)
+    // Per tile (scheme 4): whether it leaves out what no node shows, and its tokens.
+    let coded: Vec<(bool, Vec<Token>)> = (0..tiles)
         .into_par_iter()
         .map(|t| {
             let tile: Vec<u16> = (tiles + t * TILE..tiles + (t + 1) * TILE).map(element).collect();
-            tokens(&tile)
+            match shown {
+                Some(shown) => {
+                    let bounds = Bounds::levels(element(t), w);
+                    let skips = skippable(&tile, &shown[t], bounds);
+                    let skip = match skips {
+                        true => shown[t].map(|m| !m),
+                        false => [0; 8],
+                    };
+                    (skips, tokens(&tile, &skip, bounds))
+                }
+                None => (false, tokens(&tile, &[0; 8], UNBOUNDED)),
+            }
         })
         .collect();
+    let (flags, toks): (Vec<bool>, Vec<Vec<Token>>) = coded.into_iter().unzip();
     let mut counts = vec![[0u64; MAX_SYMBOLS]; CONTEXTS];
     let mut symbols = 1;
-    for t in toks.iter().flatten() {
+    for t in toks.iter().flatten().filter(|t| usize::from(t.ctx) < CONTEXTS) {
         counts[usize::from(t.ctx)][usize::from(t.sym)] += 1;
         symbols = symbols.max(usize::from(t.sym) + 1);
     }
-    let freq = quantise(&counts, PRECISION);
+    let mut freq = quantise(&counts, PRECISION);
+    // The left-out elements' context: a step that changes no state.
+    let mut null = [0u32; MAX_SYMBOLS];
+    null[0] = 1 << PRECISION;
+    freq.push(null);
     let cum: Vec<[u32; MAX_SYMBOLS]> = freq
         .iter()
         .map(|row| {
@@ -295,11 +374,14 @@ fn encode_lanes(filtered: &[u8], width: u32, level: i32, lanes: usize) -> std::i
         words.push((*x >> 16) as u16);
     }
     words.reverse();
-    let mut side = Vec::with_capacity(tiles * w + CONTEXTS * symbols * 2);
+    let mut side = Vec::with_capacity(tiles * w + tiles.div_ceil(8) + CONTEXTS * symbols * 2);
     for t in 0..tiles {
         side.extend_from_slice(&element(t).to_le_bytes()[..w]);
     }
-    for row in &freq {
+    if shown.is_some() {
+        side.extend(flags.chunks(8).map(|c| c.iter().enumerate().fold(0u8, |b, (i, &f)| b | u8::from(f) << i)));
+    }
+    for row in &freq[..CONTEXTS] {
         row[..symbols].iter().for_each(|&f| side.extend_from_slice(&(f as u16).to_le_bytes()));
     }
     let side = zstd::bulk::compress(&side, level)?;
@@ -330,11 +412,73 @@ struct Stream {
     /// every lane, and the 8 a vector decoder loads past the last it takes.
     words: Vec<u16>,
     words_len: usize,
-    /// The decode table: per context 2^precision entries `symbol | freq << 6 | cum << 19`.
+    /// The decode table: per context 2^precision entries `symbol | freq << 6 | cum << 19`,
+    /// the last context [`SKIPPED`]'s.
     table: Vec<u32>,
+    /// Scheme 4: the elements left out, as the vector decoders take them: byte
+    /// `(64·g + row)·N + l` is row `row` (y + 8z) of lane l's tile of group g,
+    /// bit x set when element x of the row is left out; and each tile's
+    /// predictions' bounds (both empty for scheme 2: none left out, no bounds).
+    skip: Vec<u8>,
+    bounds: Vec<Bounds>,
 }
 
-fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Result<Stream, String> {
+/// The left-out elements of the tiles whose flag is set (those `shown`
+/// does not hold) laid out for the decoders ([`Stream::skip`]): per group
+/// of `lanes` tiles, row by row, each lane's byte. By 8×8 byte transposes:
+/// eight tiles' words `r` (their rows 8r to 8r + 7) become rows 8r to 8r + 7
+/// of those eight lanes.
+/// A flag must leave something out: one on a tile whose every voxel is
+/// shown is refused (a writer never sets it).
+// Word r of eight tiles' masks at once: the loop index is the word, not one mask's position.
+#[allow(clippy::needless_range_loop)]
+fn skip_layout(shown: &[TileMask], flagged: impl Fn(usize) -> bool, lanes: usize) -> Result<Vec<u8>, String> {
+    let mut out = vec![0u8; shown.len().div_ceil(lanes) * 64 * lanes];
+    for t0 in (0..shown.len()).step_by(8.min(lanes)) {
+        let width = 8.min(lanes).min(shown.len() - t0);
+        let (g, l0) = (t0 / lanes, t0 % lanes);
+        let on: [bool; 8] = std::array::from_fn(|i| i < width && flagged(t0 + i));
+        let mut hidden = [0u64; 8];
+        for r in 0..8 {
+            let mut m: [u64; 8] = std::array::from_fn(|i| if on[i] { !shown[t0 + i][r] } else { 0 });
+            hidden.iter_mut().zip(m).for_each(|(h, m)| *h |= m);
+            if m.iter().all(|&w| w == 0) {
+                continue;
+            }
+            transpose8(&mut m);
+            for (k, row) in m.iter().enumerate() {
+                let at = (g * 64 + 8 * r + k) * lanes + l0;
+                match width {
+                    8 => out[at..at + 8].copy_from_slice(&row.to_le_bytes()),
+                    _ => out[at..at + width].copy_from_slice(&row.to_le_bytes()[..width]),
+                }
+            }
+        }
+        if let Some(i) = (0..8).find(|&i| on[i] && hidden[i] == 0) {
+            return Err(format!("has tile {}'s flag set, but its every voxel is shown", t0 + i));
+        }
+    }
+    Ok(out)
+}
+
+/// An 8×8 matrix of bytes (byte j of word i) transposed in place: byte i of word j.
+fn transpose8(m: &mut [u64; 8]) {
+    // Swap the off-diagonal 4×4, 2×2 and 1×1 blocks of bytes.
+    for (half, mask) in [(4usize, 0x0000_0000_ffff_ffffu64), (2, 0x0000_ffff_0000_ffff), (1, 0x00ff_00ff_00ff_00ff)] {
+        let shift = 8 * half as u32;
+        for i in (0..8).filter(|i| i & half == 0) {
+            let (a, b) = (m[i], m[i + half]);
+            let t = ((a >> shift) ^ b) & mask;
+            m[i] = a ^ (t << shift);
+            m[i + half] = b ^ t;
+        }
+    }
+}
+
+/// `stored` parsed as a scheme-2 stream, or as a scheme-4 one when `shown`
+/// gives each tile's shown voxels; the divisors written to `divisors` (the
+/// filtered bytes' first `width`·T).
+fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8], shown: Option<&[TileMask]>) -> Result<Stream, String> {
     if stored.len() < HEAD {
         return Err(format!("is {} bytes, shorter than a context stream's {HEAD}-byte header", stored.len()));
     }
@@ -350,7 +494,8 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
     if words_len < 2 * lanes {
         return Err(format!("has {words_len} words, fewer than its {lanes} lanes' states"));
     }
-    let side_want = tiles * width + CONTEXTS * symbols * 2;
+    let flag_bytes = if shown.is_some() { tiles.div_ceil(8) } else { 0 };
+    let side_want = tiles * width + flag_bytes + CONTEXTS * symbols * 2;
     let frame = &stored[HEAD..HEAD + side_len];
     if zstd::zstd_safe::find_frame_compressed_size(frame) != Ok(frame.len()) {
         return Err("has a side part that is not one zstd frame".into());
@@ -360,7 +505,8 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
     if got != side_want {
         return Err(format!("has a side frame of {got} bytes, not {side_want}"));
     }
-    let (div, freqs) = side.split_at(tiles * width);
+    let (div, rest) = side.split_at(tiles * width);
+    let (flags, freqs) = rest.split_at(flag_bytes);
     let m = divisors.len() / width.max(1);
     for (t, d) in div.chunks_exact(width).enumerate() {
         divisors[t] = d[0];
@@ -368,8 +514,20 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
             divisors[m + t] = d[1];
         }
     }
-    let mut table = vec![UNUSED; CONTEXTS << precision];
+    let (mut skip, mut bounds) = (Vec::new(), Vec::new());
+    if let Some(shown) = shown {
+        if shown.len() != tiles {
+            return Err(format!("is given {} tiles' shown voxels for its {tiles} tiles", shown.len()));
+        }
+        if !tiles.is_multiple_of(8) && flags.last().is_some_and(|&b| b >> (tiles % 8) != 0) {
+            return Err("has a flag set past its last tile".into());
+        }
+        skip = skip_layout(shown, |t| flags[t / 8] >> (t % 8) & 1 == 1, lanes)?;
+        bounds = div.chunks_exact(width).map(|d| Bounds::levels(if width == 2 { u16::from_le_bytes([d[0], d[1]]) } else { u16::from(d[0]) }, width)).collect();
+    }
+    let mut table = vec![UNUSED; (CONTEXTS + 1) << precision];
     fill_table(&mut table, freqs, symbols, precision)?;
+    table[SKIPPED << precision..].fill(1 << (6 + precision));
     let at = HEAD + side_len;
     let mut bits = Vec::with_capacity(bits_len + 8);
     bits.extend_from_slice(&stored[at..at + bits_len]);
@@ -379,7 +537,7 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8]) -> Resu
     if cfg!(target_endian = "big") {
         words.iter_mut().for_each(|w| *w = u16::from_le(*w));
     }
-    Ok(Stream { lanes, precision, tiles, bits, bits_len, words, words_len, table })
+    Ok(Stream { lanes, precision, tiles, bits, bits_len, words, words_len, table, skip, bounds })
 }
 
 /// Fills a decode table (2^`precision` entries per context, `symbol | freq
@@ -407,18 +565,18 @@ pub(crate) fn fill_table(table: &mut [u32], freqs: &[u8], symbols: usize, precis
     Ok(())
 }
 
-/// Restores a scheme-2 stream `stored` into `out`, the `tiles unpredicted`
-/// filter's output for `width`-byte elements (shuffled by byte), or says
-/// what is wrong with it. Never reads or writes outside what it was given,
-/// whatever the stream holds.
-pub fn decode(stored: &[u8], width: u32, out: &mut [u8]) -> Result<(), String> {
+/// Restores a scheme-2 stream `stored` (or scheme 4, given each tile's
+/// shown voxels) into `out`, the `tiles unpredicted` filter's output for
+/// `width`-byte elements (shuffled by byte), or says what is wrong with it.
+/// Never reads or writes outside what it was given, whatever the stream holds.
+pub fn decode(stored: &[u8], width: u32, out: &mut [u8], shown: Option<&[TileMask]>) -> Result<(), String> {
     let w = width as usize;
     let m = out.len() / w.max(1);
     if !matches!(w, 1 | 2) || m * w != out.len() || !m.is_multiple_of(TILE + 1) {
         return Err(format!("cannot restore {} bytes of {w}-byte tiles", out.len()));
     }
     let tiles = m / (TILE + 1);
-    let s = parse(stored, w, tiles, out)?;
+    let s = parse(stored, w, tiles, out, shown)?;
     let decoder = Decoder::ALL.into_iter().find(|d| d.usable(s.lanes)).unwrap_or(Decoder::Scalar);
     decoder.run(&s, w, out)
 }
@@ -469,6 +627,19 @@ impl Stream {
     fn escapes(&self) -> Escapes<'_> {
         Escapes { bits: &self.bits, len: self.bits_len, at: 0 }
     }
+
+    /// Group `g`'s left-out elements (64 rows of N lanes' bytes), or 64·N zeros.
+    #[inline(always)]
+    fn skip_rows<'a>(&'a self, g: usize, zeros: &'a [u8]) -> &'a [u8] {
+        let n = 64 * self.lanes;
+        self.skip.get(g * n..(g + 1) * n).unwrap_or(zeros)
+    }
+
+    /// Tile `t`'s prediction bounds.
+    #[inline(always)]
+    fn bounds_of(&self, t: usize) -> Bounds {
+        self.bounds.get(t).copied().unwrap_or(UNBOUNDED)
+    }
 }
 
 /// The escape bits as the decoders read them, from the start.
@@ -514,8 +685,10 @@ fn decode_scalar(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
     let (mut wp, mut escapes) = (2 * n, s.escapes());
     let mut f = vec![[0i32; 729]; n];
     let mut mag = vec![[0u32; 729]; n];
+    let zeros = vec![0u8; 64 * n];
     for g in 0..s.tiles.div_ceil(n) {
         let present = n.min(s.tiles - g * n);
+        let skip = s.skip_rows(g, &zeros);
         for v in 0..TILE {
             // A row of 8 elements takes at most 8 words per lane, which the padding holds.
             if v % 8 == 0 && wp > s.words_len {
@@ -524,8 +697,12 @@ fn decode_scalar(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
             let (p, pos) = (padded(v), position(v));
             for l in 0..present {
                 let (f, mag) = (&mut f[l], &mut mag[l]);
+                let t = g * n + l;
                 let e = (mag[p - 81] + mag[p - 9] + mag[p - 1]).min(255);
-                let ctx = bucket(e) as usize * POSITIONS + pos;
+                let ctx = match skip[(v >> 3) * n + l] >> (v & 7) & 1 {
+                    1 => SKIPPED,
+                    _ => bucket(e) as usize * POSITIONS + pos,
+                };
                 let x = states[l];
                 let slot = x & mask;
                 let ent = s.table[(ctx << s.precision) | slot as usize];
@@ -544,7 +721,8 @@ fn decode_scalar(s: &Stream, w: usize, out: &mut [u8]) -> Result<(), String> {
                     z += escapes.read(nb).ok_or("runs past the end of its escape bits")?;
                 }
                 let r = ((z >> 1) as i32) ^ -((z & 1) as i32);
-                let q = predict(pos, f, p).wrapping_add(r);
+                let b = s.bounds_of(t);
+                let q = predict(pos, f, p).clamp(b.lo, b.hi).wrapping_add(r);
                 if !(0..=max).contains(&q) {
                     return Err(format!("decodes to {q}, outside the {w}-byte element"));
                 }

@@ -43,9 +43,14 @@ fn laid_out(e: &[u32], width: usize) -> Vec<u8> {
 
 /// `stored` decoded by `decoder` into `len` bytes.
 fn decoded(stored: &[u8], width: usize, len: usize, decoder: Decoder) -> Result<Vec<u8>, String> {
+    decoded_shown(stored, width, len, decoder, None)
+}
+
+/// [`decoded`] as scheme 4 with `shown`, or as scheme 2.
+fn decoded_shown(stored: &[u8], width: usize, len: usize, decoder: Decoder, shown: Option<&[TileMask]>) -> Result<Vec<u8>, String> {
     let mut out = vec![0u8; len];
     let tiles = len / width / (TILE + 1);
-    let s = parse(stored, width, tiles, &mut out)?;
+    let s = parse(stored, width, tiles, &mut out, shown)?;
     decoder.run(&s, width, &mut out)?;
     Ok(out)
 }
@@ -65,9 +70,14 @@ pub(crate) fn xorshift(seed: u32) -> impl FnMut() -> u32 {
 /// decoder this CPU runs: refused by each exactly when the scalar decoder
 /// refuses it, and the same bytes where it is taken.
 fn decoded_alike(stored: &[u8], width: usize, len: usize, what: &str) {
-    let s = decoded(stored, width, len, Decoder::Scalar);
+    decoded_alike_shown(stored, width, len, what, None)
+}
+
+/// [`decoded_alike`] as scheme 4 with `shown`, or as scheme 2.
+fn decoded_alike_shown(stored: &[u8], width: usize, len: usize, what: &str, shown: Option<&[TileMask]>) {
+    let s = decoded_shown(stored, width, len, Decoder::Scalar, shown);
     for d in decoders() {
-        let v = decoded(stored, width, len, d);
+        let v = decoded_shown(stored, width, len, d, shown);
         assert_eq!(s.is_ok(), v.is_ok(), "{what}, {d:?}: scalar {s:?}");
         if let (Ok(s), Ok(v)) = (&s, v) {
             assert_eq!(*s, v, "{what}, {d:?}");
@@ -85,26 +95,121 @@ fn streams_restore_what_was_coded() {
     for width in [1usize, 2] {
         for tiles in [1usize, 15, 64, 65, 200] {
             let raw = section(tiles, width, (tiles * 10 + width) as u32);
-            let stored = encode(&raw, width as u32, 3).unwrap().unwrap();
+            let stored = encode(&raw, width as u32, 3, None).unwrap().unwrap();
             assert!(stored.len() < raw.len(), "{tiles} tiles of {width}: {} bytes coded from {}", stored.len(), raw.len());
             for d in decoders() {
                 assert_eq!(decoded(&stored, width, raw.len(), d).unwrap(), raw, "{tiles} tiles of {width} bytes, {d:?}");
             }
             let mut out = vec![0u8; raw.len()];
-            decode(&stored, width as u32, &mut out).unwrap();
+            decode(&stored, width as u32, &mut out, None).unwrap();
             assert_eq!(out, raw);
         }
     }
 }
 
+/// [`section`]'s tiles with the voxels some node shows (every fourth tile
+/// all, the next none, then random bits, then half), the others at their
+/// prediction within the tile's levels, as the cooker leaves them; but one
+/// element of tile 2 that no node shows is off its prediction, so that
+/// tile must code all its elements.
+fn shown_section(tiles: usize, width: usize, seed: u32) -> (Vec<u8>, Vec<TileMask>) {
+    let raw = section(tiles, width, seed);
+    let m = tiles * (TILE + 1);
+    let mut e: Vec<u32> = (0..m).map(|i| u32::from(raw[i]) | if width == 2 { u32::from(raw[m + i]) << 8 } else { 0 }).collect();
+    let mut next = xorshift(seed ^ 0x5bd1_e995);
+    let mut shown = Vec::with_capacity(tiles);
+    for t in 0..tiles {
+        let mask: TileMask = match t % 4 {
+            0 => [u64::MAX; 8],
+            1 => [0; 8],
+            2 => std::array::from_fn(|_| u64::from(next()) << 32 | u64::from(next())),
+            _ => [0x0f0f_0f0f_0f0f_0f0f; 8],
+        };
+        let bounds = Bounds::levels(e[t] as u16, width);
+        let mut f = [0i32; 729];
+        for v in 0..TILE {
+            let p = padded(v);
+            let q = &mut e[tiles + t * TILE + v];
+            if !bit(&mask, v) {
+                *q = predict(position(v), &f, p).clamp(bounds.lo, bounds.hi) as u32;
+                if t == 2 && v == 100 && !bit(&mask, v) {
+                    *q = (*q + 1) % (bounds.hi as u32 + 1);
+                }
+            }
+            f[p] = *q as i32;
+        }
+        shown.push(mask);
+    }
+    (laid_out(&e, width), shown)
+}
+
+#[test]
+fn streams_over_shown_voxels_restore_what_was_coded_in_fewer_bytes() {
+    for width in [1usize, 2] {
+        for tiles in [1usize, 7, 65, 130] {
+            let (raw, shown) = shown_section(tiles, width, (tiles * 7 + width) as u32);
+            let plain = encode(&raw, width as u32, 3, None).unwrap().unwrap();
+            let stored = encode(&raw, width as u32, 3, Some(&shown)).unwrap().unwrap();
+            if tiles > 1 {
+                assert!(stored.len() < plain.len(), "{tiles} tiles of {width}: {} bytes over the shown voxels, {} over all", stored.len(), plain.len());
+            }
+            for d in decoders() {
+                assert_eq!(decoded_shown(&stored, width, raw.len(), d, Some(&shown)).unwrap(), raw, "{tiles} tiles of {width} bytes, {d:?}");
+            }
+            for lanes in [8usize, 16, 32] {
+                let stored = encode_lanes(&raw, width as u32, 3, lanes, Some(&shown)).unwrap().unwrap();
+                for d in Decoder::ALL.into_iter().filter(|d| d.usable(lanes)) {
+                    assert_eq!(decoded_shown(&stored, width, raw.len(), d, Some(&shown)).unwrap(), raw, "{lanes} lanes, {tiles} tiles of {width} bytes, {d:?}");
+                }
+            }
+            // Masks of another count than the tiles': not coded, and refused.
+            assert!(encode(&raw, width as u32, 3, Some(&shown[1..])).unwrap().is_none());
+            assert!(decoded_shown(&stored, width, raw.len(), Decoder::Scalar, Some(&shown[1..])).is_err());
+        }
+    }
+}
+
+#[test]
+fn damaged_streams_over_shown_voxels_are_refused_alike() {
+    for width in [1usize, 2] {
+        let (raw, shown) = shown_section(70, width, 9);
+        let stored = encode(&raw, width as u32, 3, Some(&shown)).unwrap().unwrap();
+        for cut in (0..stored.len()).step_by(stored.len() / 61 + 1) {
+            for d in decoders() {
+                assert!(decoded_shown(&stored[..cut], width, raw.len(), d, Some(&shown)).is_err(), "cut at {cut}, {d:?}");
+            }
+        }
+        for i in (0..stored.len()).step_by(stored.len() / 201 + 1) {
+            for bit in [0, 5] {
+                let mut bad = stored.clone();
+                bad[i] ^= 1 << bit;
+                decoded_alike_shown(&bad, width, raw.len(), &format!("byte {i} bit {bit}"), Some(&shown));
+            }
+        }
+    }
+    // A flag set past the last tile (the side frame's flag byte of 3 tiles, all set).
+    let (raw, shown) = shown_section(3, 1, 4);
+    let stored = encode(&raw, 1, 3, Some(&shown)).unwrap().unwrap();
+    let a = u32::from_le_bytes(stored[12..16].try_into().unwrap()) as usize;
+    let mut side = zstd::bulk::decompress(&stored[HEAD..HEAD + a], 1 << 16).unwrap();
+    side[3] |= 0x80;
+    let side = zstd::bulk::compress(&side, 3).unwrap();
+    let mut bad = stored[..HEAD].to_vec();
+    bad[12..16].copy_from_slice(&(side.len() as u32).to_le_bytes());
+    bad.extend_from_slice(&side);
+    bad.extend_from_slice(&stored[HEAD + a..]);
+    let err = decoded_shown(&bad, 1, raw.len(), Decoder::Scalar, Some(&shown)).unwrap_err();
+    assert!(err.contains("past its last tile"), "{err}");
+}
+
 #[test]
 fn what_is_not_whole_tiles_is_not_coded() {
-    assert!(encode(&[0u8; 513 * 2 + 1], 1, 3).unwrap().is_none());
-    assert!(encode(&[0u8; 513 * 3], 2, 3).unwrap().is_none());
-    assert!(encode(&[], 1, 3).unwrap().is_none());
-    let stored = encode(&section(3, 1, 1), 1, 3).unwrap().unwrap();
-    assert!(decode(&stored, 1, &mut vec![0u8; 513 * 3 + 1]).is_err());
-    assert!(decode(&stored, 3, &mut vec![0u8; 513 * 3 * 3]).is_err());
+    assert!(encode(&[0u8; 513 * 2 + 1], 1, 3, None).unwrap().is_none());
+    assert!(encode(&[0u8; 513 * 3], 2, 3, None).unwrap().is_none());
+    assert!(encode(&[], 1, 3, None).unwrap().is_none());
+    let stored = encode(&section(3, 1, 1), 1, 3, None).unwrap().unwrap();
+    assert!(decode(&stored, 1, &mut vec![0u8; 513 * 3 + 1], None).is_err());
+    assert!(decode(&stored, 3, &mut vec![0u8; 513 * 3 * 3], None).is_err());
 }
 
 /// Every truncation and many bit flips: an error or (rarely) other bytes,
@@ -114,7 +219,7 @@ fn what_is_not_whole_tiles_is_not_coded() {
 fn damaged_streams_are_refused_alike() {
     for width in [1usize, 2] {
         let raw = section(70, width, 7);
-        let stored = encode(&raw, width as u32, 3).unwrap().unwrap();
+        let stored = encode(&raw, width as u32, 3, None).unwrap().unwrap();
         for cut in (0..stored.len()).step_by(stored.len() / 97 + 1) {
             for d in decoders() {
                 assert!(decoded(&stored[..cut], width, raw.len(), d).is_err(), "cut at {cut}, {d:?}");
@@ -141,7 +246,7 @@ fn every_lane_count_a_decoder_takes_restores_alike() {
     for width in [1usize, 2] {
         let raw = section(75, width, 11);
         for lanes in [8usize, 16, 32] {
-            let stored = encode_lanes(&raw, width as u32, 3, lanes).unwrap().unwrap();
+            let stored = encode_lanes(&raw, width as u32, 3, lanes, None).unwrap().unwrap();
             let takers: Vec<Decoder> = Decoder::ALL.into_iter().filter(|d| d.usable(lanes)).collect();
             assert!(takers.contains(&Decoder::Scalar));
             for d in takers {
@@ -167,7 +272,7 @@ fn escape_heavy_streams_restore_alike() {
             e.extend((0..TILE).map(|_| (max / 2 + next() % amplitude).min(max)));
         }
         let raw = laid_out(&e, width);
-        let stored = encode(&raw, width as u32, 3).unwrap().unwrap();
+        let stored = encode(&raw, width as u32, 3, None).unwrap().unwrap();
         for d in decoders() {
             assert_eq!(decoded(&stored, width, raw.len(), d).unwrap(), raw, "{width}-byte noise, {d:?}");
         }
@@ -244,7 +349,7 @@ fn what_the_spec_refuses_every_decoder_refuses() {
     // A lane with no tile keeps its first state, which must be the coder's: here it is 1,
     // and a word follows that a lane renormalising it would take (to 2^16).
     let raw = section(1, 1, 5);
-    let good = encode(&raw, 1, 3).unwrap().unwrap();
+    let good = encode(&raw, 1, 3, None).unwrap().unwrap();
     assert_eq!(decoded(&good, 1, raw.len(), Decoder::Scalar).unwrap(), raw);
     let lanes = u32::from_le_bytes(good[0..4].try_into().unwrap()) as usize;
     let words_at = good.len() - 2 * u32::from_le_bytes(good[20..24].try_into().unwrap()) as usize;
@@ -272,7 +377,7 @@ fn what_the_spec_refuses_every_decoder_refuses() {
 #[test]
 fn lying_headers_are_refused() {
     let raw = section(5, 1, 3);
-    let stored = encode(&raw, 1, 3).unwrap().unwrap();
+    let stored = encode(&raw, 1, 3, None).unwrap().unwrap();
     for (field, value) in [(0, 0u32), (0, 1000), (1, 8), (1, 13), (2, 0), (2, 49), (3, u32::MAX), (4, 1 << 30), (5, 3)] {
         let mut bad = stored.clone();
         bad[4 * field..4 * field + 4].copy_from_slice(&value.to_le_bytes());
@@ -289,7 +394,7 @@ fn elements_take_the_prediction_within_their_bounds_and_cost_the_coder_less() {
     let mut filled = zero;
     nearest_predicted(&mut filled, |v| if hidden(v) { (0, 100) } else { (ramp[v], ramp[v]) });
     // Hidden elements cost a residual of 0, and shown ones are as they were.
-    let t = tokens(&filled);
+    let t = tokens(&filled, &[0; 8], UNBOUNDED);
     assert!((0..TILE).filter(|&v| hidden(v)).all(|v| t[v].sym == 0));
     assert!((0..TILE).filter(|&v| !hidden(v)).all(|v| filled[v] == ramp[v]));
     assert!(tile_bits(&filled) < tile_bits(&zero), "{} against {} bits", tile_bits(&filled), tile_bits(&zero));
@@ -337,11 +442,14 @@ fn decoder_speed() {
     for s in 0..asset.segment_count() {
         let seg = asset.stored_segment(s).unwrap();
         let Ok(table) = seg.section(crate::kind::CODING, 0) else { continue };
-        for c in crate::coding::Coding::parse_all(table).unwrap().into_iter().filter(|c| c.scheme == crate::coding::SCHEME_CONTEXT) {
+        let restored = seg.restored().unwrap();
+        let find = |k: u32, i: u32| restored.section(k, i).ok();
+        for c in crate::coding::Coding::parse_all(table).unwrap().into_iter().filter(|c| matches!(c.scheme, crate::coding::SCHEME_CONTEXT | crate::coding::SCHEME_SHOWN)) {
             let stored = seg.section(c.kind, c.index).unwrap().to_vec();
             let w = c.filter.code().1 as usize;
             let n = c.raw_size as usize + c.raw_size as usize / TILE;
-            streams.push((stored, w, n));
+            let shown = (c.scheme == crate::coding::SCHEME_SHOWN).then(|| crate::coding::shown_of(&[c], None, &find).unwrap().remove(0));
+            streams.push((stored, w, n, shown));
         }
     }
     let bytes: usize = streams.iter().map(|s| s.2).sum();
@@ -351,8 +459,8 @@ fn decoder_speed() {
         for _ in 0..7 {
             let t = std::time::Instant::now();
             for _ in 0..repeats {
-                for (stored, w, n) in &streams {
-                    std::hint::black_box(decoded(stored, *w, *n, d).unwrap());
+                for (stored, w, n, shown) in &streams {
+                    std::hint::black_box(decoded_shown(stored, *w, *n, d, shown.as_deref()).unwrap());
                 }
             }
             best = best.min(t.elapsed().as_secs_f64() / repeats as f64);

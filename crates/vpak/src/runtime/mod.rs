@@ -85,7 +85,15 @@ impl Reader {
         let version = head::version(&header, len)?;
         let bodies = match version {
             segments::BODY_VERSION => vec![io.body(version, 0, len, None)?],
-            segments::VERSION | segments::VERSION_13 | segments::VERSION_12 | segments::VERSION_11 | segments::VERSION_10 | segments::VERSION_9 | segments::VERSION_8 | segments::VERSION_7 => {
+            segments::VERSION
+            | segments::VERSION_14
+            | segments::VERSION_13
+            | segments::VERSION_12
+            | segments::VERSION_11
+            | segments::VERSION_10
+            | segments::VERSION_9
+            | segments::VERSION_8
+            | segments::VERSION_7 => {
                 let n = head::table_len(&header, segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount, len)?;
                 let table = io.read_vec(HEADER_LEN as u64, n as u64)?;
                 head::check_checksum(&header, &table)?;
@@ -180,7 +188,26 @@ impl Reader {
         if out.len() != part.size {
             return Err(Error::Invalid(format!("a buffer of {} bytes for section {} of {} bytes", out.len(), kind::label(part.stored.kind, part.stored.index), part.size)));
         }
-        self.read_part(info, inner, part, out, &mut Vec::new(), &mut Vec::new()).map_err(|e| self.in_segment(s, e))
+        let shown = match (part.needs_shown(), part.coding) {
+            (true, Some(c)) => Some(self.shown_from_source(info, inner, c).map_err(|e| self.in_segment(s, e))?),
+            _ => None,
+        };
+        self.read_part(info, inner, part, out, &mut Vec::new(), &mut Vec::new(), shown.as_deref()).map_err(|e| self.in_segment(s, e))
+    }
+
+    /// The shown voxels of scheme-4 atlas `c`, from the segment's L3 array
+    /// and tables read (and restored) for it.
+    fn shown_from_source(&self, info: &SegmentInfo, inner: &Inner, c: coding::Coding) -> Result<Vec<crate::shown::TileMask>, Error> {
+        let mut read = Vec::new();
+        for part in inner.parts.iter().filter(|p| matches!(p.stored.kind, kind::L3_NODES | kind::BRICK_TABLE | kind::CHANNEL_TABLE)) {
+            let mut buf = Vec::new();
+            buf.try_reserve_exact(part.size).map_err(|_| Error::Invalid(format!("no memory for a section of {} bytes", part.size)))?;
+            buf.resize(part.size, 0);
+            self.read_part(info, inner, part, &mut buf, &mut Vec::new(), &mut Vec::new(), None)?;
+            read.push(((part.stored.kind, part.stored.index), buf));
+        }
+        let find = |k: u32, i: u32| read.iter().find(|(key, _)| *key == (k, i)).map(|(_, b)| &b[..]);
+        Ok(coding::shown_of(&[c], Some(&info.metadata), &find)?.pop().unwrap_or_default())
     }
 
     /// Reads bytes `at` of a segment's body: from the source, or from the
@@ -192,7 +219,8 @@ impl Reader {
         }
     }
 
-    fn read_part(&self, info: &SegmentInfo, inner: &Inner, part: &Part, out: &mut [u8], stored: &mut Vec<u8>, scratch: &mut Vec<u8>) -> Result<(), Error> {
+    #[allow(clippy::too_many_arguments)]
+    fn read_part(&self, info: &SegmentInfo, inner: &Inner, part: &Part, out: &mut [u8], stored: &mut Vec<u8>, scratch: &mut Vec<u8>, shown: Option<&[crate::shown::TileMask]>) -> Result<(), Error> {
         let e = &part.stored;
         if part.coding.is_none() {
             self.read_body(info, inner, e.offset, out)?;
@@ -203,7 +231,7 @@ impl Reader {
         stored.resize(e.size as usize, 0);
         self.read_body(info, inner, e.offset, stored)?;
         check_sum(e, stored)?;
-        coding::restore_part(part, stored, out, scratch)
+        coding::restore_part(part, stored, out, scratch, shown)
     }
 
     /// Fills `out`, one buffer per section of segment `s` in
@@ -228,14 +256,27 @@ impl Reader {
                 return Err(Error::Invalid(format!("the buffer for section {} does not start at a multiple of 4 bytes", sec.label())));
             }
         }
-        let filled = inner.parts.par_iter().zip(out.par_iter_mut()).try_for_each_init(
+        // Scheme-4 atlases last: they take the shown voxels from the other sections, restored.
+        let (later, mut first): (Vec<_>, Vec<_>) = inner.parts.iter().zip(out.iter_mut()).partition(|(part, _)| part.needs_shown());
+        let filled = first.par_iter_mut().try_for_each_init(
             || (Vec::new(), Vec::new()),
             |(stored, scratch), (part, o)| match part.stored.kind == kind::METADATA && o.is_empty() {
                 true => Ok(()),
-                false => self.read_part(info, inner, part, o, stored, scratch),
+                false => self.read_part(info, inner, part, o, stored, scratch, None),
             },
         );
         filled.map_err(|e| self.in_segment(s, e))?;
+        if !later.is_empty() {
+            let done: Vec<(&Part, &[u8])> = first.into_iter().map(|(part, o)| (part, &**o)).collect();
+            let find = |k: u32, i: u32| done.iter().find(|(p, _)| (p.stored.kind, p.stored.index) == (k, i)).map(|(_, b)| *b);
+            let coded: Vec<coding::Coding> = later.iter().filter_map(|(part, _)| part.coding).collect();
+            let shown = coding::shown_of(&coded, Some(&info.metadata), &find).map_err(|e| self.in_segment(s, e))?;
+            let filled = later
+                .into_par_iter()
+                .zip(shown)
+                .try_for_each_init(|| (Vec::new(), Vec::new()), |(stored, scratch), ((part, o), shown)| self.read_part(info, inner, part, o, stored, scratch, Some(&shown)));
+            filled.map_err(|e| self.in_segment(s, e))?;
+        }
         let find = |k: u32, i: u32| -> Result<&[u8], Error> { info.section(k, i).and_then(|j| out.get(j)).map(|b| &b[..]).ok_or(Error::Missing { kind: k, index: i }) };
         Checked::from_sections(info.metadata.clone(), find).map(|_| ()).map_err(|e| self.in_segment(s, e))
     }
