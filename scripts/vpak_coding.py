@@ -54,7 +54,8 @@ def parse_records(data, table, version):
     """The coding section's records as {(kind, index): (scheme, filter, w, s, n, checksum)},
     each checked against the page's rules; `table` is the body's section table as stored
     {(kind, index): (offset, size, checksum)}; `version`: the file's, which says whether
-    scheme 2 (11 and later) and filter 5 (12 and later) may appear."""
+    scheme 2 (11 and later), filter 5 (12 and later), scheme 3 (14 and later) and scheme 4
+    (15 and later) may appear."""
     if len(data) % RECORD_SIZE:
         raise CodingError(f"coding section of {len(data)} bytes is not whole {RECORD_SIZE}-byte records")
     if not data:
@@ -285,6 +286,8 @@ def context_decode(stored, w, size, shown=None):
     tables = rans_tables(table, 128, nsym, prec, "context")
     elems = divisors + [0] * (512 * t_count)
     states = [words[2 * l] * 65536 + words[2 * l + 1] for l in range(lanes)]
+    if shown is not None and min(states) < 65536:
+        raise CodingError("its context stream has a lane's first state below 2^16")
     wp, bp = 2 * lanes, 0
 
     def bit(b):
@@ -431,6 +434,8 @@ def restore(stored, record, xxh3_64, shown=None):
     scheme, filt, w, s, n, checksum = record
     size = filtered_size(filt, w, n)
     if scheme == SCHEME_SHOWN:
+        if shown is None:
+            raise CodingError("is context-coded over its shown voxels, which were not given")
         f = context_decode(stored, w, size, shown)
     elif scheme == SCHEME_CONTEXT:
         f = context_decode(stored, w, size)

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reader for vdbcook's `.vpak` volume asset format (versions 14, 13, 12, 11, 10, 9, 8, 7 and 6).
+"""Independent reader for vdbcook's `.vpak` volume asset format (versions 15, 14, 13, 12, 11, 10, 9, 8, 7 and 6).
 
 Written from docs/format.md alone (no Rust code, shaders or tests were read), to show
 that the document is a complete specification: it decodes every channel of a frame.
@@ -23,7 +23,7 @@ body's supercompressed sections are restored (scripts/vpak_coding.py) before use
 each frame's number; older assets number their frames from 0). `--json` gives `fps` and
 `frame_numbers` too (24 and 0, 1, ... when the asset records none).
 
-As a module: `open_segments(path)` opens a version-6 to 14 file (every body validated,
+As a module: `open_segments(path)` opens a version-6 to 15 file (every body validated,
 every checksum verified; `.locate(N)`, `.read_frame(N)`, `.meta` of the whole sequence);
 `open_asset(path)` gives `(metadata, sections)` of a file of one body.
 
@@ -712,7 +712,7 @@ def merged(metas):
 
 
 class Asset:
-    """A version-6 to 14 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
+    """A version-6 to 15 file: `table` [(first_frame, frame_count, offset, size, head checksum)]
     and `bodies` [(metadata, sections)] per segment (frames numbered from 0 in each), `meta`
     the whole sequence's metadata (a version-6 file: its own, one segment of all its frames)."""
 
@@ -781,7 +781,7 @@ class Asset:
 
 
 def open_segments(path):
-    """A version-6 to 10 file as an `Asset`, every body validated (and restored)."""
+    """A version-6 to 15 file as an `Asset`, every body validated (and restored)."""
     try:
         with open(path, "rb") as f:
             buf = memoryview(f.read())

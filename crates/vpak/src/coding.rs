@@ -65,9 +65,10 @@ impl std::str::FromStr for Supercompress {
 
 /// How a writer stores sections: each as one zstd frame at `level` (after
 /// the filter that makes it smallest) and, with `context`, the atlases of
-/// level planes (`unorm8`, `unorm16`) context-coded (scheme 2) where that
-/// is smaller still: what `--optimize disk` asks for, the smallest file at
-/// the cost of some cook time.
+/// level planes (`unorm8`, `unorm16`) context-coded (scheme 2, or 4 over
+/// their shown voxels) and the L3 array mask-coded (scheme 3) where that is
+/// smaller still: what `--optimize disk` asks for, the smallest file at the
+/// cost of some cook time.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Schemes {
     pub level: i32,
@@ -408,9 +409,9 @@ const CONTEXT_GAIN: f64 = 0.92;
 /// A context-coded atlas is coded over its shown voxels (scheme 4) when
 /// that takes at most this share of the stream over all of them (scheme 2):
 /// its reader first works out every node's voxels and lays them out for the
-/// decoder, which cost a smooth fog's restore about a tenth for 4–6 % of
-/// its bytes (docs/benchmarks.md); flames and level sets, whose bricks are
-/// mostly hidden, save a fifth.
+/// decoder, which cost a smooth fog's restore several percent (a tenth on
+/// the Arnold smoke at E = 0.01) for 4–6 % of its bytes (docs/benchmarks.md);
+/// flames and level sets, whose bricks are mostly hidden, save a fifth.
 const SHOWN_GAIN: f64 = 0.93;
 
 /// The `tiles unpredicted` filter among `filters` when section `s` is the

@@ -4,7 +4,7 @@
 //! context-coded stream that knows which texels those are need not code
 //! them: the decoder puts the prediction there itself. The masks come from
 //! the body's own node arrays and tables, restored before the atlases.
-//! `docs/format.md`, "Shown texels", is the specification.
+//! `docs/format.md`, "Shown voxels", is the specification.
 
 use crate::{kind, Metadata, CHOICE_SHIFT, PLANE_BRICK_MASK};
 
@@ -13,14 +13,16 @@ use crate::{kind, Metadata, CHOICE_SHIFT, PLANE_BRICK_MASK};
 pub(crate) type TileMask = [u64; 8];
 
 fn word(b: &[u8], i: usize) -> Option<u32> {
-    b.get(4 * i..4 * i + 4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
+    let at = i.checked_mul(4)?;
+    b.get(at..at.checked_add(4)?).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
 }
 
 /// Node `k`'s active voxels in tile order, from the L3 array `l3`; `None`
 /// when its record or a sub-mask it names lies outside the array. A
 /// sub-block of state 3 (invalid; the validator refuses it) shows nothing.
 fn node_mask(l3: &[u8], k: usize) -> Option<TileMask> {
-    let (states, first) = (word(l3, 2 + 3 * k)?, word(l3, 3 + 3 * k)? as usize);
+    let record = k.checked_mul(3)?.checked_add(1)?;
+    let (states, first) = (word(l3, record + 1)?, word(l3, record.checked_add(2)?)? as usize);
     let mut out = [0u64; 8];
     let mut r = 0;
     for b in 0..8 {
@@ -35,7 +37,7 @@ fn node_mask(l3: &[u8], k: usize) -> Option<TileMask> {
             2 => {
                 let at = first.checked_add(2 * r)?;
                 r += 1;
-                u64::from(word(l3, at)?) | u64::from(word(l3, at + 1)?) << 32
+                u64::from(word(l3, at)?) | u64::from(word(l3, at.checked_add(1)?)?) << 32
             }
             _ => 0,
         };
@@ -101,6 +103,11 @@ pub(crate) fn shown_tiles<'a>(meta: &Metadata, wanted: &[Wanted], section: &dyn 
         })
         .collect();
     let Some(l3) = section(kind::L3_NODES, 0) else { return out };
+    // A body the validator would refuse for them (after restoring): nothing shown, rather
+    // than work by what a file claims.
+    if meta.channels.len() > crate::check::MAX_CHANNELS || meta.planes.len() > crate::check::MAX_CHANNELS {
+        return out;
+    }
     let nodes = word(l3, 0).unwrap_or(0) as usize;
     // Per channel of a wanted plane: how a brick reaches its plane brick there.
     enum Route<'b> {
@@ -108,34 +115,42 @@ pub(crate) fn shown_tiles<'a>(meta: &Metadata, wanted: &[Wanted], section: &dyn 
         Bricks(&'b [u8]),
         Same,
     }
-    let mut routes: Vec<(usize, Route)> = Vec::new();
-    for (c, ch) in meta.channels.iter().enumerate() {
-        let planes = meta.channel_planes(c);
-        for &(p, _, _) in places.iter().flatten() {
-            let Some(choice) = planes.iter().position(|&q| q as usize == p) else { continue };
+    // Each wanted plane once; per route, the wanted atlases of its plane.
+    let mut planes: Vec<usize> = places.iter().flatten().map(|&(p, _, _)| p).collect();
+    planes.sort_unstable();
+    planes.dedup();
+    let mut routes: Vec<(Route, Vec<usize>)> = Vec::new();
+    for &p in &planes {
+        let atlases: Vec<usize> = (0..wanted.len()).filter(|&w| places[w].is_some_and(|(q, _, _)| q == p)).collect();
+        // The channels of a plane without alternates reach it alike: one route for them all.
+        let mut shared = false;
+        for (c, ch) in meta.channels.iter().enumerate() {
+            let Some(choice) = meta.channel_planes(c).iter().position(|&q| q as usize == p) else { continue };
             let route = match (ch.alternates.is_empty(), meta.plane_has_table(p)) {
                 (false, _) => section(kind::CHANNEL_TABLE, c as u32).map(|t| Route::Table(t, choice as u32)),
+                (true, _) if shared => None,
                 (true, true) => section(kind::BRICK_TABLE, p as u32).map(Route::Bricks),
                 (true, false) => Some(Route::Same),
             };
+            shared |= ch.alternates.is_empty();
             if let Some(r) = route {
-                routes.push((p, r));
+                routes.push((r, atlases.clone()));
             }
         }
     }
     for k in 0..nodes {
-        let Some(brick) = word(l3, 1 + 3 * k) else { break };
+        let Some(brick) = k.checked_mul(3).and_then(|r| word(l3, r + 1)) else { break };
         let mut mask = None;
-        for (p, route) in &routes {
+        for (route, atlases) in &routes {
             let pb = match route {
                 Route::Table(t, choice) => word(t, brick as usize).filter(|e| e >> CHOICE_SHIFT == *choice).map(|e| e & PLANE_BRICK_MASK),
                 Route::Bricks(t) => word(t, brick as usize),
                 Route::Same => Some(brick),
             };
             let Some(pb) = pb else { continue };
-            for (w, place) in places.iter().enumerate() {
-                let Some((q, first, count)) = *place else { continue };
-                if q != *p || pb < first || pb - first >= count || (pb - first) as usize >= wanted[w].tiles {
+            for &w in atlases {
+                let Some((_, first, count)) = places[w] else { continue };
+                if pb < first || pb - first >= count || (pb - first) as usize >= wanted[w].tiles {
                     continue;
                 }
                 let Some(m) = *mask.get_or_insert_with(|| node_mask(l3, k)) else { continue };

@@ -434,8 +434,10 @@ struct Stream {
 #[allow(clippy::needless_range_loop)]
 fn skip_layout(shown: &[TileMask], flagged: impl Fn(usize) -> bool, lanes: usize) -> Result<Vec<u8>, String> {
     let mut out = vec![0u8; shown.len().div_ceil(lanes) * 64 * lanes];
-    for t0 in (0..shown.len()).step_by(8.min(lanes)) {
-        let width = 8.min(lanes).min(shown.len() - t0);
+    // Runs of at most 8 lanes within each group (a group of 12 lanes: 8, then 4).
+    let runs = (0..shown.len()).step_by(lanes).flat_map(|g0| (g0..(g0 + lanes).min(shown.len())).step_by(8).map(move |t0| (t0, 8.min(g0 + lanes - t0))));
+    for (t0, run) in runs {
+        let width = run.min(shown.len() - t0);
         let (g, l0) = (t0 / lanes, t0 % lanes);
         let on: [bool; 8] = std::array::from_fn(|i| i < width && flagged(t0 + i));
         let mut hidden = [0u64; 8];
@@ -516,6 +518,10 @@ fn parse(stored: &[u8], width: usize, tiles: usize, divisors: &mut [u8], shown: 
     }
     let (mut skip, mut bounds) = (Vec::new(), Vec::new());
     if let Some(shown) = shown {
+        // Every state stays at 2^16 or more, so a left-out element's step (the state as it is) never takes a word.
+        if let Some(l) = (0..lanes).find(|&l| stored[HEAD + side_len + bits_len + 4 * l..][..2] == [0, 0]) {
+            return Err(format!("has lane {l}'s first state below 2^16"));
+        }
         if shown.len() != tiles {
             return Err(format!("is given {} tiles' shown voxels for its {tiles} tiles", shown.len()));
         }

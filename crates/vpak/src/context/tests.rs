@@ -156,7 +156,7 @@ fn streams_over_shown_voxels_restore_what_was_coded_in_fewer_bytes() {
             for d in decoders() {
                 assert_eq!(decoded_shown(&stored, width, raw.len(), d, Some(&shown)).unwrap(), raw, "{tiles} tiles of {width} bytes, {d:?}");
             }
-            for lanes in [8usize, 16, 32] {
+            for lanes in [3usize, 8, 12, 16, 32] {
                 let stored = encode_lanes(&raw, width as u32, 3, lanes, Some(&shown)).unwrap().unwrap();
                 for d in Decoder::ALL.into_iter().filter(|d| d.usable(lanes)) {
                     assert_eq!(decoded_shown(&stored, width, raw.len(), d, Some(&shown)).unwrap(), raw, "{lanes} lanes, {tiles} tiles of {width} bytes, {d:?}");
@@ -200,6 +200,12 @@ fn damaged_streams_over_shown_voxels_are_refused_alike() {
     bad.extend_from_slice(&stored[HEAD + a..]);
     let err = decoded_shown(&bad, 1, raw.len(), Decoder::Scalar, Some(&shown)).unwrap_err();
     assert!(err.contains("past its last tile"), "{err}");
+    // A lane's first state below 2^16 (its high word 0; scheme 2 takes such a state, scheme 4 does not).
+    let words_at = stored.len() - 2 * u32::from_le_bytes(stored[20..24].try_into().unwrap()) as usize;
+    let mut low = stored.clone();
+    low[words_at..words_at + 2].copy_from_slice(&[0, 0]);
+    let err = decoded_shown(&low, 1, raw.len(), Decoder::Scalar, Some(&shown)).unwrap_err();
+    assert!(err.contains("first state below 2^16"), "{err}");
 }
 
 #[test]

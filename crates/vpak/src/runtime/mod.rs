@@ -180,8 +180,10 @@ impl Reader {
 
     /// Reads section `section` (its position in [`SegmentInfo::sections`])
     /// of segment `s` into `out` (its restored size), restored and its
-    /// checksums (stored and restored) checked. The sections are not
-    /// validated against each other: [`Reader::fill_segment`] does that.
+    /// checksums (stored and restored) checked (an atlas coded over its
+    /// shown voxels reads and restores the segment's L3 array and tables
+    /// for them first). The sections are not validated against each other:
+    /// [`Reader::fill_segment`] does that.
     pub fn read_section_into(&self, s: usize, section: usize, out: &mut [u8]) -> Result<(), Error> {
         let (info, inner) = self.segments.get(s).ok_or(Error::NoSegment { segment: s, count: self.segments.len() })?;
         let part = inner.parts.get(section).ok_or_else(|| Error::Invalid(format!("segment {s} has {} sections, not {}", inner.parts.len(), section + 1)))?;
