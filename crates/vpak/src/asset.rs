@@ -96,15 +96,7 @@ impl Asset {
         whole.version = whole.version_field()?;
         match whole.version {
             segments::BODY_VERSION => whole.body(),
-            segments::VERSION
-            | segments::VERSION_14
-            | segments::VERSION_13
-            | segments::VERSION_12
-            | segments::VERSION_11
-            | segments::VERSION_10
-            | segments::VERSION_9
-            | segments::VERSION_8
-            | segments::VERSION_7 => whole.container(),
+            v if segments::is_container_version(v) => whole.container(),
             v => Err(Error::Version(v)),
         }
     }

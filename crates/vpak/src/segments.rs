@@ -19,6 +19,11 @@ use std::io::{Seek, SeekFrom, Write};
 pub const VERSION: u32 = 15;
 /// Version of a file whose atlases are never coded over their shown voxels (still read).
 pub const VERSION_14: u32 = 14;
+
+/// Whether `v` is the version of a file of segments this crate reads (7 to [`VERSION`]).
+pub fn is_container_version(v: u32) -> bool {
+    (VERSION_7..=VERSION).contains(&v)
+}
 /// Version of a file whose L3 arrays are never mask-coded (still read).
 pub const VERSION_13: u32 = 13;
 /// Version of a file whose bodies are never wrapped (still read).

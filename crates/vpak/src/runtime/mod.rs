@@ -85,15 +85,7 @@ impl Reader {
         let version = head::version(&header, len)?;
         let bodies = match version {
             segments::BODY_VERSION => vec![io.body(version, 0, len, None)?],
-            segments::VERSION
-            | segments::VERSION_14
-            | segments::VERSION_13
-            | segments::VERSION_12
-            | segments::VERSION_11
-            | segments::VERSION_10
-            | segments::VERSION_9
-            | segments::VERSION_8
-            | segments::VERSION_7 => {
+            v if segments::is_container_version(v) => {
                 let n = head::table_len(&header, segments::SEGMENT_ENTRY_LEN, segments::MAX_SEGMENTS, Error::SegmentCount, len)?;
                 let table = io.read_vec(HEADER_LEN as u64, n as u64)?;
                 head::check_checksum(&header, &table)?;
