@@ -556,7 +556,14 @@ pub fn supercompress(sections: Vec<Section>, meta: &Metadata, schemes: Schemes) 
             Some(crate::shown::Wanted { section: s.index, tiles: s.data.len() / (crate::BRICK_VOXELS * t.width as usize) })
         })
         .collect();
-    let shown = crate::shown::shown_tiles(meta, &coder_atlases, &|k, i| sections.iter().find(|s| (s.kind, s.index) == (k, i)).map(|s| &s.data[..]));
+    // From the metadata the body holds, as its readers take it (no scheme 4 without one).
+    let find = |k: u32, i: u32| sections.iter().find(|s| (s.kind, s.index) == (k, i)).map(|s| &s.data[..]);
+    let coder_atlases = match find(kind::METADATA, 0).map(Metadata::from_bytes) {
+        Some(Ok(body)) if !coder_atlases.is_empty() => Some((body, coder_atlases)),
+        _ => None,
+    };
+    let shown = coder_atlases.as_ref().map_or_else(Vec::new, |(body, wanted)| crate::shown::shown_tiles(body, wanted, &find));
+    let coder_atlases = coder_atlases.map_or_else(Vec::new, |(_, wanted)| wanted);
     let shown_of = |s: &Section| coder_atlases.iter().position(|w| s.kind == kind::ATLAS && w.section == s.index).map(|j| &shown[j][..]);
     let coded: Vec<(Section, Option<Coding>)> = sections
         .into_par_iter()
