@@ -428,14 +428,8 @@ fn contextual(s: &Section, meta: &Metadata, filters: &[Filter]) -> Option<Tiles>
 }
 
 fn atlas_of(meta: &Metadata, section: u32) -> Option<(&crate::Plane, &crate::AtlasInfo)> {
-    let mut first = 0usize;
-    for p in &meta.planes {
-        if (section as usize) < first + p.atlases.len() {
-            return Some((&p.plane, &p.atlases[section as usize - first]));
-        }
-        first += p.atlases.len();
-    }
-    None
+    let (p, a) = meta.section_atlas(section)?;
+    Some((&meta.planes[p].plane, &meta.planes[p].atlases[a]))
 }
 
 /// The tiles filters among `filters` (they share their geometry): the first,
@@ -946,17 +940,31 @@ pub(crate) fn restore_body(sections: &[(crate::SectionEntry, &[u8])], buf: Vec<u
         at = part.offset + part.size;
     }
     rest.fill(0);
-    // Scheme-4 atlases last: they take the shown voxels from the others, restored.
-    let (later, mut first): (Vec<_>, Vec<_>) = slots.into_iter().partition(|(part, _, _)| part.needs_shown());
-    first.par_iter_mut().try_for_each_init(Vec::new, |scratch, (part, slot, stored)| restore_part(part, stored, slot, scratch, None))?;
-    if !later.is_empty() {
-        let done: Vec<(&Part, &[u8])> = first.into_iter().map(|(part, slot, _)| (part, &*slot)).collect();
-        let find = |k: u32, i: u32| done.iter().find(|(p, _)| (p.stored.kind, p.stored.index) == (k, i)).map(|(_, b)| *b);
-        let coded: Vec<Coding> = later.iter().filter_map(|(part, _, _)| part.coding).collect();
-        let shown = shown_of(&coded, None, &find)?;
-        later.into_par_iter().zip(shown).try_for_each_init(Vec::new, |scratch, ((part, slot, stored), shown)| restore_part(part, stored, slot, scratch, Some(&shown)))?;
-    }
+    restore_parts(slots, None, Vec::new, |scratch, part, slot, stored, shown| restore_part(part, stored, slot, scratch, shown))?;
     Ok((words, len))
+}
+
+/// Restores each of a body's `parts` (its plan entry, its restored place and
+/// what `restore` needs of it) in parallel, with `restore` and a state per
+/// worker that `init` makes; scheme-4 atlases last, given the shown voxels
+/// ([`shown_of`], the body's metadata `meta` or its own) that the other
+/// sections say once restored. Shared by [`restore_body`] and the runtime reader.
+pub(crate) fn restore_parts<P: Sync + Send, S>(
+    parts: Vec<(&Part, &mut [u8], P)>,
+    meta: Option<&Metadata>,
+    init: impl Fn() -> S + Sync + Send,
+    restore: impl Fn(&mut S, &Part, &mut [u8], &P, Option<&[TileMask]>) -> Result<(), Error> + Sync + Send,
+) -> Result<(), Error> {
+    let (later, mut first): (Vec<_>, Vec<_>) = parts.into_iter().partition(|(part, _, _)| part.needs_shown());
+    first.par_iter_mut().try_for_each_init(&init, |state, (part, out, p)| restore(state, part, out, p, None))?;
+    if later.is_empty() {
+        return Ok(());
+    }
+    let done: Vec<(&Part, &[u8])> = first.into_iter().map(|(part, out, _)| (part, &*out)).collect();
+    let find = |k: u32, i: u32| done.iter().find(|(p, _)| (p.stored.kind, p.stored.index) == (k, i)).map(|(_, b)| *b);
+    let coded: Vec<Coding> = later.iter().filter_map(|(part, _, _)| part.coding).collect();
+    let shown = shown_of(&coded, meta, &find)?;
+    later.into_par_iter().zip(shown).try_for_each_init(&init, |state, ((part, out, p), shown)| restore(state, part, out, &p, Some(&shown)))
 }
 
 /// `buf` made `n` words long when it has room for them (its contents left

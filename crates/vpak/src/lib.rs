@@ -418,6 +418,18 @@ impl Metadata {
         (before + atlas) as u32
     }
 
+    /// The plane and atlas of atlas section `section` ([`Metadata::atlas_section`]'s inverse).
+    pub fn section_atlas(&self, section: u32) -> Option<(usize, usize)> {
+        let mut first = 0usize;
+        for (p, info) in self.planes.iter().enumerate() {
+            if (section as usize) < first + info.atlases.len() {
+                return Some((p, section as usize - first));
+            }
+            first += info.atlases.len();
+        }
+        None
+    }
+
     /// Atlas textures over all planes.
     pub fn texture_count(&self) -> usize {
         self.planes.iter().map(|p| p.atlases.len()).sum()

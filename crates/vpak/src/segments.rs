@@ -743,22 +743,28 @@ pub(crate) mod tests {
         assert!(err.contains("misaligned"), "{err}");
     }
 
-    #[test]
-    fn context_coding_is_version_11() {
-        use crate::coding::{Coding, Filter, Tiles, SCHEME_CONTEXT};
+    /// A file of one body holding one section of kind `coded`, coded as `scheme` with `filter`
+    /// (`stored`, restoring to `raw`): it restores `raw`; relabelled as
+    /// version `older`, the error it is refused with.
+    fn one_coded_section(coded: u32, scheme: u32, filter: crate::coding::Filter, stored: Vec<u8>, raw: &[u8], older: u32) -> String {
         let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
         let mut sections = body(&m, 1);
-        // Eight tiles of zeros: their divisors and quotients (the tiles filters' output) are zeros too.
-        let raw = vec![0u8; 4096];
-        let stored = crate::context::encode(&[0u8; 8 + 4096], 1, 3, None).unwrap().unwrap();
-        let tiles = Filter::Tiles(Tiles { width: 1, x: 8, y: 1, predict: false });
-        let record = Coding { kind: kind::L2_ENTRIES, index: 0, scheme: SCHEME_CONTEXT, filter: tiles, raw_size: 4096, raw_checksum: crate::checksum(&raw) };
-        sections.push(Section { kind: kind::L2_ENTRIES, index: 0, data: stored.into() });
+        let record = crate::coding::Coding { kind: coded, index: 0, scheme, filter, raw_size: raw.len() as u64, raw_checksum: crate::checksum(raw) };
+        sections.push(Section { kind: coded, index: 0, data: stored.into() });
         sections.push(Section { kind: kind::CODING, index: 0, data: record.bytes().to_vec().into() });
         let b = assemble_unwrapped(&[(2, sections)]).unwrap();
         let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
-        assert_eq!(restored.section(kind::L2_ENTRIES, 0).unwrap(), &raw[..]);
-        let err = older_error(&b, VERSION_10);
+        assert_eq!(restored.section(coded, 0).unwrap(), raw);
+        older_error(&b, older)
+    }
+
+    #[test]
+    fn context_coding_is_version_11() {
+        use crate::coding::{Filter, Tiles, SCHEME_CONTEXT};
+        // Eight tiles of zeros: their divisors and quotients (the tiles filters' output) are zeros too.
+        let stored = crate::context::encode(&[0u8; 8 + 4096], 1, 3, None).unwrap().unwrap();
+        let tiles = Filter::Tiles(Tiles { width: 1, x: 8, y: 1, predict: false });
+        let err = one_coded_section(kind::L2_ENTRIES, SCHEME_CONTEXT, tiles, stored, &[0u8; 4096], VERSION_10);
         assert!(err.contains("context-coded in a version-10 file"), "{err}");
     }
 
@@ -784,28 +790,17 @@ pub(crate) mod tests {
 
     #[test]
     fn coding_over_shown_voxels_is_version_15() {
-        use crate::coding::{Coding, Filter, Tiles, SCHEME_SHOWN};
-        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
-        let mut sections = body(&m, 1);
+        use crate::coding::{Filter, Tiles, SCHEME_SHOWN};
         // Eight tiles of zeros that no node shows (the body has no L3 array): every element left out.
-        let raw = vec![0u8; 4096];
         let stored = crate::context::encode(&[0u8; 8 + 4096], 1, 3, Some(&[[0u64; 8]; 8])).unwrap().unwrap();
         let tiles = Filter::Tiles(Tiles { width: 1, x: 8, y: 1, predict: false });
-        let record = Coding { kind: kind::ATLAS, index: 0, scheme: SCHEME_SHOWN, filter: tiles, raw_size: 4096, raw_checksum: crate::checksum(&raw) };
-        sections.push(Section { kind: kind::ATLAS, index: 0, data: stored.into() });
-        sections.push(Section { kind: kind::CODING, index: 0, data: record.bytes().to_vec().into() });
-        let b = assemble_unwrapped(&[(2, sections)]).unwrap();
-        let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
-        assert_eq!(restored.section(kind::ATLAS, 0).unwrap(), &raw[..]);
-        let err = older_error(&b, VERSION_14);
+        let err = one_coded_section(kind::ATLAS, SCHEME_SHOWN, tiles, stored, &[0u8; 4096], VERSION_14);
         assert!(err.contains("coded over its shown voxels in a version-14 file"), "{err}");
     }
 
     #[test]
     fn mask_coding_is_version_14() {
-        use crate::coding::{Coding, Filter, SCHEME_MASKS};
-        let m = meta(2, &["a.vdb"], [0.0, 1.0], 0);
-        let mut sections = body(&m, 1);
+        use crate::coding::{Filter, SCHEME_MASKS};
         // 40 nodes, each with two sub-masks of a striped pattern.
         let (n, mut words) = (40u32, vec![40u32]);
         for k in 0..n {
@@ -814,13 +809,7 @@ pub(crate) mod tests {
         words.extend((0..4 * n).map(|i| if i % 2 == 0 { 0x0f0f_0f0f } else { 0x3333_3333 }));
         let raw: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
         let stored = crate::masks::encode(&crate::l3_filter::apply(&raw), 3).unwrap().unwrap();
-        let record = Coding { kind: kind::L3_NODES, index: 0, scheme: SCHEME_MASKS, filter: Filter::L3Nodes, raw_size: raw.len() as u64, raw_checksum: crate::checksum(&raw) };
-        sections.push(Section { kind: kind::L3_NODES, index: 0, data: stored.into() });
-        sections.push(Section { kind: kind::CODING, index: 0, data: record.bytes().to_vec().into() });
-        let b = assemble_unwrapped(&[(2, sections)]).unwrap();
-        let restored = Asset::from_bytes(&b).unwrap().segment(0).unwrap();
-        assert_eq!(restored.section(kind::L3_NODES, 0).unwrap(), &raw[..]);
-        let err = older_error(&b, VERSION_13);
+        let err = one_coded_section(kind::L3_NODES, SCHEME_MASKS, Filter::L3Nodes, stored, &raw, VERSION_13);
         assert!(err.contains("mask-coded in a version-13 file"), "{err}");
     }
 

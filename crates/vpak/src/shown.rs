@@ -91,15 +91,9 @@ pub(crate) fn shown_tiles<'a>(meta: &Metadata, wanted: &[Wanted], section: &dyn 
     let places: Vec<Option<(usize, u32, u32)>> = wanted
         .iter()
         .map(|w| {
-            let mut before = 0u32;
-            meta.planes.iter().enumerate().find_map(|(p, info)| {
-                let hit = (w.section >= before && w.section - before < info.atlases.len() as u32).then(|| {
-                    let a = info.atlases[(w.section - before) as usize];
-                    (p, a.first_brick, a.count)
-                });
-                before += info.atlases.len() as u32;
-                hit
-            })
+            let (p, a) = meta.section_atlas(w.section)?;
+            let atlas = meta.planes[p].atlases[a];
+            Some((p, atlas.first_brick, atlas.count))
         })
         .collect();
     let Some(l3) = section(kind::L3_NODES, 0) else { return out };

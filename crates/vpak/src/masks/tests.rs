@@ -227,22 +227,16 @@ fn decoder_speed() {
         }
     }
     let bytes: usize = streams.iter().map(|s| s.1).sum();
-    let repeats = (20_000_000 / bytes.max(1)).max(1);
     for d in Decoder::ALL.into_iter().filter(|d| d.usable()) {
         DECODER.set(Some(d));
-        let mut best = f64::MAX;
-        for _ in 0..7 {
-            let t = std::time::Instant::now();
-            for _ in 0..repeats {
-                for (stored, n) in &streams {
-                    let mut out = vec![0u8; *n];
-                    decode(stored, &mut out).unwrap();
-                    std::hint::black_box(&out);
-                }
+        let rate = crate::context::tests::best_rate(bytes, || {
+            for (stored, n) in &streams {
+                let mut out = vec![0u8; *n];
+                decode(stored, &mut out).unwrap();
+                std::hint::black_box(&out);
             }
-            best = best.min(t.elapsed().as_secs_f64() / repeats as f64);
-        }
-        println!("{d:?} decoder: {} sections, {:.2} MB of L3 arrays, {:.0} MB/s", streams.len(), bytes as f64 / 1e6, bytes as f64 / 1e6 / best);
+        });
+        println!("{d:?} decoder: {} sections, {:.2} MB of L3 arrays, {rate:.0} MB/s", streams.len(), bytes as f64 / 1e6);
     }
     DECODER.set(None);
 }

@@ -21,7 +21,6 @@ pub use source::{FileSource, Source};
 use crate::coding::{self, Part};
 use crate::segments::{self, SegmentEntry};
 use crate::{checksum, head, kind, Asset, Checked, Error, Metadata, SectionEntry, ENTRY_LEN, HEADER_LEN, MAX_SECTIONS};
-use rayon::prelude::*;
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -250,27 +249,17 @@ impl Reader {
                 return Err(Error::Invalid(format!("the buffer for section {} does not start at a multiple of 4 bytes", sec.label())));
             }
         }
-        // Scheme-4 atlases last: they take the shown voxels from the other sections, restored.
-        let (later, mut first): (Vec<_>, Vec<_>) = inner.parts.iter().zip(out.iter_mut()).partition(|(part, _)| part.needs_shown());
-        let filled = first.par_iter_mut().try_for_each_init(
+        let parts: Vec<(&Part, &mut [u8], ())> = inner.parts.iter().zip(out.iter_mut()).map(|(part, o)| (part, &mut **o, ())).collect();
+        let filled = coding::restore_parts(
+            parts,
+            Some(&info.metadata),
             || (Vec::new(), Vec::new()),
-            |(stored, scratch), (part, o)| match part.stored.kind == kind::METADATA && o.is_empty() {
+            |(stored, scratch), part, o, _, shown| match part.stored.kind == kind::METADATA && o.is_empty() {
                 true => Ok(()),
-                false => self.read_part(info, inner, part, o, stored, scratch, None),
+                false => self.read_part(info, inner, part, o, stored, scratch, shown),
             },
         );
         filled.map_err(|e| self.in_segment(s, e))?;
-        if !later.is_empty() {
-            let done: Vec<(&Part, &[u8])> = first.into_iter().map(|(part, o)| (part, &**o)).collect();
-            let find = |k: u32, i: u32| done.iter().find(|(p, _)| (p.stored.kind, p.stored.index) == (k, i)).map(|(_, b)| *b);
-            let coded: Vec<coding::Coding> = later.iter().filter_map(|(part, _)| part.coding).collect();
-            let shown = coding::shown_of(&coded, Some(&info.metadata), &find).map_err(|e| self.in_segment(s, e))?;
-            let filled = later
-                .into_par_iter()
-                .zip(shown)
-                .try_for_each_init(|| (Vec::new(), Vec::new()), |(stored, scratch), ((part, o), shown)| self.read_part(info, inner, part, o, stored, scratch, Some(&shown)));
-            filled.map_err(|e| self.in_segment(s, e))?;
-        }
         let find = |k: u32, i: u32| -> Result<&[u8], Error> { info.section(k, i).and_then(|j| out.get(j)).map(|b| &b[..]).ok_or(Error::Missing { kind: k, index: i }) };
         Checked::from_sections(info.metadata.clone(), find).map(|_| ()).map_err(|e| self.in_segment(s, e))
     }
